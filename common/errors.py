@@ -1,0 +1,49 @@
+"""The one exception tree of the stack.
+
+    StackError                   base of everything we raise on purpose
+    ├── ConfigError              bad settings or stack config: exit non-zero with one line
+    ├── DecodeError              bytes on a Zenoh key that are not a valid message
+    ├── ImageError               a missing, unreadable or corrupt image
+    ├── ModelError               a file that is not a usable model
+    │   ├── UnknownModelFamily   an output shape that matches no known YOLO family
+    │   └── ModelFetchError      the default model could not be fetched or converted
+    └── BackendUnavailable       a runtime (TensorRT, CUDA, ...) that this machine lacks
+
+Library errors are translated at the boundary (``raise ModelError(...) from exc``) so callers
+only ever catch these. Command-line entry points print ``str(error)`` as one line and exit
+non-zero; they never show a traceback for a StackError.
+"""
+
+from __future__ import annotations
+
+
+class StackError(Exception):
+    """Base class of every error the stack raises on purpose."""
+
+
+class ConfigError(StackError):
+    """Invalid settings or stack configuration."""
+
+
+class DecodeError(StackError):
+    """A payload that does not decode to the expected message."""
+
+
+class ImageError(StackError):
+    """An image that is missing, unreadable or corrupt."""
+
+
+class ModelError(StackError):
+    """A file that is not a usable detection model."""
+
+
+class UnknownModelFamily(ModelError):
+    """A model whose outputs match none of the known YOLO families."""
+
+
+class ModelFetchError(ModelError):
+    """The default model could not be fetched, verified or converted."""
+
+
+class BackendUnavailable(StackError):
+    """An inference backend whose runtime or device is missing on this machine."""
