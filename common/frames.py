@@ -1,0 +1,50 @@
+"""Conversions between OpenCV images (BGR uint8, HxWx3) and Frame messages. No I/O."""
+
+from __future__ import annotations
+
+from typing import cast
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from common.errors import ImageError
+from common.messages import Frame, Header
+
+Image = npt.NDArray[np.uint8]
+
+
+def image_to_frame(image: Image, header: Header, *, jpeg_quality: int = 0) -> Frame:
+    """Wrap a BGR (HxWx3) or grey (HxW) image as a Frame: raw, or JPEG when quality > 0."""
+    h, w = image.shape[:2]
+    if jpeg_quality > 0:
+        ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality])
+        if not ok:
+            raise ImageError(f"cannot JPEG-encode a {w}x{h} image")
+        return Frame(header=header, encoding="jpeg", width=w, height=h, data=buf.tobytes())
+    encoding = "mono8" if image.ndim == 2 else "bgr8"
+    data = np.ascontiguousarray(image).tobytes()
+    return Frame(header=header, encoding=encoding, width=w, height=h, data=data)
+
+
+def frame_to_bgr(frame: Frame) -> Image:
+    """The frame's pixels as a BGR uint8 image; raises ImageError for a corrupt JPEG."""
+    if frame.encoding == "jpeg":
+        buf = np.frombuffer(frame.data, dtype=np.uint8)
+        image = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+        if image is None:
+            raise ImageError(f"frame {frame.header.seq}: corrupt JPEG ({len(frame.data)} bytes)")
+        if image.shape[:2] != (frame.height, frame.width):
+            raise ImageError(
+                f"frame {frame.header.seq}: JPEG is {image.shape[1]}x{image.shape[0]}, "
+                f"header says {frame.width}x{frame.height}"
+            )
+        return cast(Image, image)
+    pixels = np.frombuffer(frame.data, dtype=np.uint8)
+    if frame.encoding == "mono8":
+        grey = pixels.reshape(frame.height, frame.width)
+        return cast(Image, cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR))
+    image = pixels.reshape(frame.height, frame.width, 3)
+    if frame.encoding == "rgb8":
+        return np.ascontiguousarray(image[:, :, ::-1])
+    return image

@@ -1,0 +1,294 @@
+"""Typed, frozen settings for every service, read from the stack's TOML file plus overrides.
+
+One file (``deploy/stack.toml`` by default) configures the whole stack, one table per service.
+Environment variables override single fields: ``STACK__<TABLE>__<FIELD>=<TOML value>``, e.g.
+``STACK__DETECTOR__BACKEND=cuda`` or ``STACK__CONTROLLER__TARGET_CLASSES='["cup"]'``.
+Unknown tables or fields, wrong types and out-of-range values raise ConfigError at start-up,
+so a typo stops the service with one line instead of being silently ignored.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tomllib
+import types
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from common.errors import ConfigError
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
+ENV_PREFIX = "STACK__"
+
+
+def _positive(name: str, value: float) -> None:
+    if not (value > 0 and math.isfinite(value)):
+        raise ConfigError(f"{name} must be a positive number, got {value}")
+
+
+def _fraction(name: str, value: float) -> None:
+    if not 0 <= value <= 1:
+        raise ConfigError(f"{name} must be within 0..1, got {value}")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ZenohSettings:
+    """How every process joins the bus.
+
+    The supervisor listens on ``endpoint``; services connect to it and to ``connect`` (other
+    hosts), and listen on ``listen`` (port 0: any free port) so that peers mesh directly.
+    Multicast scouting is off by default: robots share networks, and tests must stay private.
+    """
+
+    mode: str = "peer"
+    endpoint: str = "tcp/127.0.0.1:7447"
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
+    multicast_scouting: bool = False
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("peer", "client"):
+            raise ConfigError(f"zenoh.mode must be 'peer' or 'client', got {self.mode!r}")
+        for ep in (self.endpoint, *self.connect, *self.listen):
+            if "/" not in ep:
+                raise ConfigError(f"zenoh endpoint {ep!r} must look like tcp/<host>:<port>")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StackSettings:
+    """Names shared by all services: the key prefix and the camera they work on."""
+
+    prefix: str = "stack"
+    camera: str = "front"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CameraSettings:
+    """The frame source.
+
+    ``source`` is one of: ``sample:<name>`` (a scikit-image photo: astronaut, chelsea, coffee,
+    camera, rocket, motorcycle), a path to an image (repeated), a folder of images (looped), a
+    video file (looped when ``loop``), or ``device:<index or /dev/videoN>`` (webcam / V4L2).
+    ``resize`` is (width, height), or (0, 0) to keep the source size. ``jpeg_quality`` 0 sends
+    raw bgr8; 1..100 sends JPEG at that quality.
+    """
+
+    source: str = "sample:astronaut"
+    rate_hz: float = 10.0
+    resize: tuple[int, int] = (0, 0)
+    jpeg_quality: int = 0
+    frame_id: str = "camera"
+    loop: bool = True
+
+    def __post_init__(self) -> None:
+        _positive("camera.rate_hz", self.rate_hz)
+        if min(self.resize) < 0 or (0 in self.resize and self.resize != (0, 0)):
+            raise ConfigError(f"camera.resize must be [w, h] > 0 or [0, 0], got {self.resize}")
+        if not 0 <= self.jpeg_quality <= 100:
+            raise ConfigError(f"camera.jpeg_quality must be 0..100, got {self.jpeg_quality}")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DetectorSettings:
+    """The model, its backend and the post-processing thresholds.
+
+    ``model`` empty means the default COCO model (fetched at setup). ``classes`` empty keeps
+    every class.
+    """
+
+    model: str = ""
+    backend: str = "onnx"
+    conf: float = 0.25
+    iou: float = 0.45
+    max_det: int = 100
+    classes: tuple[str, ...] = ()
+    counters_period_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        _fraction("detector.conf", self.conf)
+        _fraction("detector.iou", self.iou)
+        if self.max_det < 1:
+            raise ConfigError(f"detector.max_det must be at least 1, got {self.max_det}")
+        _positive("detector.counters_period_s", self.counters_period_s)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ControllerSettings:
+    """The reaction policy. Speeds in m/s and rad/s, angles in degrees, times in seconds.
+
+    track:  turn towards the most central confident detection of ``target_classes``; drive
+            forward at ``forward_speed`` only while it is within ``center_tolerance`` (a
+            fraction of the image width) of the image centre.
+    follow: follow the largest detection of ``target_classes[0]``; drive forward only while
+            it is centred, smaller than ``stop_box_height`` (fraction of image height: the
+            follow distance) and the laser sector of ``sector_width_deg`` straight ahead is
+            clear beyond ``safety_distance_m``.
+    Either mode commands zero whenever detections are older than ``detection_timeout_s``.
+    """
+
+    mode: str = "track"
+    target_classes: tuple[str, ...] = ("person",)
+    min_score: float = 0.4
+    control_rate_hz: float = 20.0
+    detection_timeout_s: float = 0.5
+    scan_timeout_s: float = 0.5
+    angular_gain: float = 1.5
+    max_angular: float = 1.0
+    max_linear: float = 0.5
+    forward_speed: float = 0.3
+    center_tolerance: float = 0.1
+    stop_box_height: float = 0.6
+    safety_distance_m: float = 0.5
+    sector_width_deg: float = 30.0
+    counters_period_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("track", "follow"):
+            raise ConfigError(f"controller.mode must be 'track' or 'follow', got {self.mode!r}")
+        if not self.target_classes:
+            raise ConfigError("controller.target_classes needs at least one class name")
+        for name in (
+            "control_rate_hz",
+            "detection_timeout_s",
+            "scan_timeout_s",
+            "max_angular",
+            "max_linear",
+            "safety_distance_m",
+            "sector_width_deg",
+            "counters_period_s",
+        ):
+            _positive(f"controller.{name}", getattr(self, name))
+        for name in ("min_score", "center_tolerance", "stop_box_height"):
+            _fraction(f"controller.{name}", getattr(self, name))
+        if not 0 <= self.forward_speed <= self.max_linear:
+            raise ConfigError("controller.forward_speed must be within 0..max_linear")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MetricsSettings:
+    """The sliding window the percentiles cover and how often the report is logged."""
+
+    window_s: float = 10.0
+    report_period_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        _positive("metrics.window_s", self.window_s)
+        _positive("metrics.report_period_s", self.report_period_s)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SupervisorSettings:
+    """Which services to run and how to restart them (exponential backoff, capped)."""
+
+    services: tuple[str, ...] = ("camera", "detector", "controller", "metrics")
+    restart_backoff_s: float = 0.5
+    restart_backoff_max_s: float = 10.0
+    stop_timeout_s: float = 5.0
+    status_period_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in (
+            "restart_backoff_s",
+            "restart_backoff_max_s",
+            "stop_timeout_s",
+            "status_period_s",
+        ):
+            _positive(f"supervisor.{name}", getattr(self, name))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Config:
+    """The whole stack configuration; each service reads its own table."""
+
+    path: str = ""
+    zenoh: ZenohSettings = field(default_factory=ZenohSettings)
+    stack: StackSettings = field(default_factory=StackSettings)
+    camera: CameraSettings = field(default_factory=CameraSettings)
+    detector: DetectorSettings = field(default_factory=DetectorSettings)
+    controller: ControllerSettings = field(default_factory=ControllerSettings)
+    metrics: MetricsSettings = field(default_factory=MetricsSettings)
+    supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)
+
+
+_T = TypeVar("_T")
+
+
+def _coerce(where: str, value: Any, hint: Any) -> Any:
+    """Check ``value`` against a field's type hint, converting TOML lists to tuples."""
+    origin = typing.get_origin(hint)
+    if origin is tuple:
+        args = typing.get_args(hint)
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{where} must be a list, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_coerce(where, v, args[0]) for v in value)
+        if len(value) != len(args):
+            raise ConfigError(f"{where} must have {len(args)} items, got {value!r}")
+        return tuple(_coerce(where, v, a) for v, a in zip(value, args, strict=True))
+    if origin in (types.UnionType, typing.Union):
+        raise ConfigError(f"{where}: unions are not supported in settings")
+    if hint is float and isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    if hint in (int, str, bool) and type(value) is hint:
+        return value
+    raise ConfigError(f"{where} must be {getattr(hint, '__name__', hint)}, got {value!r}")
+
+
+def _build(cls: type[_T], table: str, values: Mapping[str, Any]) -> _T:
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(set(values) - names)
+    if unknown:
+        raise ConfigError(f"[{table}] has unknown setting(s) {unknown}; known: {sorted(names)}")
+    kwargs = {k: _coerce(f"{table}.{k}", v, hints[k]) for k, v in values.items()}
+    return cls(**kwargs)
+
+
+def _env_overrides(environ: Mapping[str, str]) -> dict[str, dict[str, Any]]:
+    """Collect ``STACK__TABLE__FIELD=value`` overrides; values are TOML, else plain strings."""
+    out: dict[str, dict[str, Any]] = {}
+    for name, raw in environ.items():
+        if not name.startswith(ENV_PREFIX):
+            continue
+        parts = name[len(ENV_PREFIX) :].lower().split("__")
+        if len(parts) != 2:
+            raise ConfigError(f"{name}: overrides look like {ENV_PREFIX}<TABLE>__<FIELD>")
+        try:
+            value = tomllib.loads(f"v = {raw}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw
+        out.setdefault(parts[0], {})[parts[1]] = value
+    return out
+
+
+def load_config(path: str | Path | None = None, environ: Mapping[str, str] | None = None) -> Config:
+    """Read the stack config (default ``deploy/stack.toml``), apply env overrides, validate."""
+    cfg_path = Path(path) if path else DEFAULT_CONFIG
+    try:
+        data = tomllib.loads(cfg_path.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise ConfigError(f"{cfg_path}: config file not found") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{cfg_path}: cannot read config ({exc})") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{cfg_path}: not valid TOML ({exc})") from exc
+    for table, values in _env_overrides(os.environ if environ is None else environ).items():
+        data.setdefault(table, {}).update(values)
+    hints = typing.get_type_hints(Config)
+    tables = {f.name for f in dataclasses.fields(Config)} - {"path"}
+    unknown = sorted(set(data) - tables)
+    if unknown:
+        raise ConfigError(f"{cfg_path}: unknown table(s) {unknown}; known: {sorted(tables)}")
+    built: dict[str, Any] = {}
+    for table in tables:
+        values = data.get(table, {})
+        if not isinstance(values, dict):
+            raise ConfigError(f"{cfg_path}: [{table}] must be a table")
+        built[table] = _build(hints[table], table, values)
+    return Config(path=str(cfg_path), **built)

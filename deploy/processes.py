@@ -1,0 +1,104 @@
+"""Child processes of the supervisor: how each service is started, watched and restarted."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+
+from common.settings import SupervisorSettings
+
+EXIT_CONFIG_ERROR = 2  # what run_main returns for a StackError: restarting will not help
+
+# Extra arguments some services need before the shared ones.
+SERVICE_ARGS: dict[str, tuple[str, ...]] = {"detector": ("serve",), "metrics": ("serve",)}
+
+
+def service_command(name: str, config_path: str) -> list[str]:
+    return [sys.executable, "-m", f"services.{name}", *SERVICE_ARGS.get(name, ()),
+            "--config", config_path]  # fmt: skip
+
+
+@dataclass
+class Backoff:
+    """Exponential restart delay: doubles on each crash, resets after a long enough run."""
+
+    initial_s: float
+    max_s: float
+    current_s: float = 0.0
+
+    def next_delay(self, ran_for_s: float) -> float:
+        if ran_for_s >= self.max_s or self.current_s == 0.0:
+            self.current_s = self.initial_s
+        else:
+            self.current_s = min(self.current_s * 2, self.max_s)
+        return self.current_s
+
+
+@dataclass
+class ServiceProcess:
+    """One service: its process, state, restart count and backoff."""
+
+    name: str
+    command: list[str]
+    settings: SupervisorSettings
+    proc: subprocess.Popen[bytes] | None = None
+    state: str = "stopped"  # starting | running | ready | backoff | failed | exited
+    restarts: int = 0
+    last_exit: int | None = None
+    started_at: float = 0.0
+    restart_at: float = 0.0
+    backoff: Backoff = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.backoff = Backoff(self.settings.restart_backoff_s, self.settings.restart_backoff_max_s)
+
+    @property
+    def pid(self) -> int | None:
+        return self.proc.pid if self.proc else None
+
+    def start(self) -> None:
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        # A session of its own: a Ctrl-C at the terminal reaches the supervisor only, which then
+        # stops the services in order instead of all of them dying at once.
+        self.proc = subprocess.Popen(self.command, env=env, start_new_session=True)
+        self.started_at = time.monotonic()
+        self.state = "starting"
+
+    def poll(self, now: float) -> str | None:
+        """Check the process; on an exit, schedule the restart and return a log line."""
+        if self.state == "backoff" and now >= self.restart_at:
+            self.restarts += 1
+            self.start()
+            return f"{self.name}: restarted (restart #{self.restarts})"
+        if self.proc is None or self.state in ("backoff", "failed", "exited"):
+            return None
+        code = self.proc.poll()
+        if code is None:
+            return None
+        self.last_exit = code
+        if code == EXIT_CONFIG_ERROR:
+            self.state = "failed"
+            return f"{self.name}: exited with a configuration error; not restarting"
+        delay = self.backoff.next_delay(now - self.started_at)
+        self.state, self.restart_at = "backoff", now + delay
+        return f"{self.name}: exited with code {code}; restarting in {delay:.1f} s"
+
+    def signal_stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+
+    def wait_stopped(self, deadline: float) -> None:
+        """Wait for the process to exit by ``deadline``, then kill it."""
+        if self.proc is None:
+            self.state = "exited"
+            return
+        try:
+            self.last_exit = self.proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.last_exit = self.proc.wait()
+        self.state = "exited"

@@ -1,0 +1,154 @@
+"""python -m deploy.supervisor [--config FILE] [--duration S]
+
+Starts every service of the stack config as its own process, shows their state and the stack's
+live figures, restarts a service that crashes (with backoff), and stops everything cleanly on
+Ctrl-C or SIGTERM. With --duration it runs headless for S seconds and ends with a JSON summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import threading
+import time
+from typing import Any
+
+import zenoh
+
+from common.bus import open_session
+from common.errors import DecodeError
+from common.keys import Keys
+from common.lifecycle import run_main, setup_logging, stop_event
+from common.messages import ControllerStatus, Twist
+from common.settings import Config, load_config
+from deploy.processes import ServiceProcess, service_command
+
+
+class LiveView:
+    """What the supervisor shows: readiness from liveliness tokens, the latest command/status."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys) -> None:
+        self.keys = keys
+        self.ready: set[str] = set()
+        self.status: ControllerStatus | None = None
+        self.twist: Twist | None = None
+        self._lock = threading.Lock()
+        self._subs = [
+            session.liveliness().declare_subscriber(
+                keys.all_health(), self._on_health, history=True
+            ),
+            session.declare_subscriber(keys.controller_status(), self._on_status),
+            session.declare_subscriber(keys.cmd_vel(), self._on_twist),
+        ]
+
+    def _on_health(self, sample: zenoh.Sample) -> None:
+        service = str(sample.key_expr).rsplit("/", 1)[-1]
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.ready.add(service)
+            else:
+                self.ready.discard(service)
+
+    def _on_status(self, sample: zenoh.Sample) -> None:
+        try:
+            self.status = ControllerStatus.decode(sample.payload.to_bytes())
+        except DecodeError:
+            return  # the controller and metrics count garbage; the view just skips it
+
+    def _on_twist(self, sample: zenoh.Sample) -> None:
+        try:
+            self.twist = Twist.decode(sample.payload.to_bytes())
+        except DecodeError:
+            return
+
+    def is_ready(self, service: str) -> bool:
+        with self._lock:
+            return service in self.ready
+
+
+def _metrics(session: zenoh.Session, keys: Keys) -> dict[str, Any] | None:
+    for reply in session.get(keys.metrics(), timeout=0.5):
+        if reply.ok is not None:
+            answer: dict[str, Any] = json.loads(reply.ok.payload.to_string())
+            return answer
+    return None
+
+
+def status_line(procs: list[ServiceProcess], view: LiveView, metrics: dict[str, Any] | None) -> str:
+    parts = []
+    for p in procs:
+        state = "ready" if p.state == "starting" and view.is_ready(p.name) else p.state
+        if state == "ready":
+            p.state = "ready"
+        parts.append(f"{p.name}:{state}" + (f"(r{p.restarts})" if p.restarts else ""))
+    line = " ".join(parts)
+    if metrics:
+        lat = metrics["latency_ms"]
+        line += (
+            f" | fps {metrics['fps']:.1f} det/frame {metrics['detections_per_frame']:.1f}"
+            f" e2e p50 {lat['end_to_end']['p50']:.0f} ms"
+        )
+    if view.status is not None:
+        s, t = view.status, view.twist
+        cmd = f" v={t.linear[0]:+.2f} w={t.angular[2]:+.2f}" if t else ""
+        line += f" | {s.mode} {s.state} {s.target}{cmd}"
+    return line
+
+
+def supervise(config: Config, stop: threading.Event, duration_s: float | None) -> int:
+    log = setup_logging("supervisor")
+    s = config.supervisor
+    keys = Keys(config.stack.prefix)
+    session = open_session(config.zenoh, hub=True)
+    view = LiveView(session, keys)
+    procs = [ServiceProcess(n, service_command(n, config.path), s) for n in s.services]
+    log.info("hub on %s; starting %s", config.zenoh.endpoint, ", ".join(s.services))
+    for p in procs:
+        p.start()
+    end = time.monotonic() + duration_s if duration_s else None
+    next_status = time.monotonic()
+    last_metrics: dict[str, Any] | None = None
+    try:
+        while not stop.wait(0.1):
+            now = time.monotonic()
+            if end is not None and now >= end:
+                break
+            for p in procs:
+                event = p.poll(now)
+                if event:
+                    log.warning("%s", event)
+            if now >= next_status:
+                next_status = now + s.status_period_s
+                last_metrics = _metrics(session, keys) or last_metrics
+                print(status_line(procs, view, last_metrics), flush=True)
+    finally:
+        log.info("stopping")
+        for p in reversed(procs):
+            p.signal_stop()
+        deadline = time.monotonic() + s.stop_timeout_s
+        for p in procs:
+            p.wait_stopped(deadline)
+        session.close()
+    summary = {
+        "services": {p.name: {"exit_code": p.last_exit, "restarts": p.restarts} for p in procs},
+        "metrics": last_metrics,
+    }
+    if duration_s:
+        print(json.dumps(summary, indent=2), flush=True)
+    clean = all(p.last_exit == 0 for p in procs)
+    log.info("stopped; %s", "all services exited cleanly" if clean else f"exit codes {summary}")
+    return 0 if clean else 1
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(prog="python -m deploy.supervisor", description=__doc__)
+    parser.add_argument("--config", help="stack config (default deploy/stack.toml)")
+    parser.add_argument("--duration", type=float, help="run headless for S seconds, then stop")
+    args = parser.parse_args()
+    stop = stop_event()
+    config = load_config(args.config)
+    return supervise(config, stop, args.duration)
+
+
+if __name__ == "__main__":
+    run_main(main, "supervisor")

@@ -1,0 +1,54 @@
+"""The camera service: read a source at a fixed rate and publish Frame messages."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from common.errors import ImageError
+from common.frames import image_to_frame
+from common.messages import now_ns
+from common.node import Node
+from common.settings import Config
+from services.camera.sources import open_source, resize
+
+
+def run(config: Config, stop: threading.Event) -> int:
+    """Publish frames until ``stop`` is set or the source ends; returns the exit code."""
+    settings = config.camera
+    with Node("camera", config) as node:
+
+        def on_bad(exc: ImageError) -> None:
+            node.counters.add("bad_images")
+            node.log.warning("%s", exc)
+
+        source = open_source(settings.source, loop=settings.loop, on_bad=on_bad)
+        key = node.keys.frame(config.stack.camera)
+        publisher = node.session.declare_publisher(key)
+        node.log.info("publishing %s on %s at %.1f Hz", source.description, key, settings.rate_hz)
+        node.ready()
+        period = 1.0 / settings.rate_hz
+        next_t = time.monotonic()
+        try:
+            while not stop.is_set():
+                image = source.read()
+                if image is None:
+                    node.log.info("source ended")
+                    break
+                stamp = now_ns()  # the capture stamp every later latency is measured from
+                image = resize(image, settings.resize)
+                frame = image_to_frame(
+                    image,
+                    node.header(stamp, settings.frame_id),
+                    jpeg_quality=settings.jpeg_quality,
+                )
+                publisher.put(frame.encode())
+                node.counters.add("frames_out")
+                node.publish_counters()
+                next_t += period
+                # Never burst to catch up after a stall: a late frame is better than a flood.
+                next_t = max(next_t, time.monotonic())
+                stop.wait(next_t - time.monotonic())
+        finally:
+            source.close()
+    return 0

@@ -1,0 +1,113 @@
+"""The controller service: latest detections and scan in, Twist and ControllerStatus out."""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Generic, TypeVar
+
+import zenoh
+
+from common.errors import DecodeError
+from common.messages import ControllerStatus, Detections, LaserScan, Twist
+from common.node import Node
+from common.settings import Config
+from services.controller.policy import Command, decide
+
+_M = TypeVar("_M")
+
+
+class Latest(Generic[_M]):
+    """The newest decoded message of one key and when it arrived (monotonic seconds)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._msg: _M | None = None
+        self._t = 0.0
+
+    def set(self, msg: _M) -> None:
+        with self._lock:
+            self._msg, self._t = msg, time.monotonic()
+
+    def get(self) -> tuple[_M | None, float]:
+        """The message and its age in seconds (inf when none has arrived)."""
+        with self._lock:
+            if self._msg is None:
+                return None, float("inf")
+            return self._msg, time.monotonic() - self._t
+
+
+def run(config: Config, stop: threading.Event) -> int:
+    """Run the control loop at ``control_rate_hz`` until ``stop`` is set."""
+    s = config.controller
+    with Node("controller", config, counters_period_s=s.counters_period_s) as node:
+        dets: Latest[Detections] = Latest()
+        scan: Latest[LaserScan] = Latest()
+        det_key = node.keys.detections(config.stack.camera)
+
+        def on_detections(sample: zenoh.Sample) -> None:
+            try:
+                dets.set(Detections.decode(sample.payload.to_bytes()))
+                node.counters.add("detections_in")
+            except DecodeError as exc:
+                node.bad_input(det_key, exc)
+
+        def on_scan(sample: zenoh.Sample) -> None:
+            try:
+                scan.set(LaserScan.decode(sample.payload.to_bytes()))
+                node.counters.add("scans_in")
+            except DecodeError as exc:
+                node.bad_input(node.keys.scan(), exc)
+
+        subs = [
+            node.session.declare_subscriber(det_key, on_detections),
+            node.session.declare_subscriber(node.keys.scan(), on_scan),
+        ]
+        cmd_pub = node.session.declare_publisher(node.keys.cmd_vel())
+        status_pub = node.session.declare_publisher(node.keys.controller_status())
+        node.log.info("mode %s on %s, targets %s", s.mode, det_key, list(s.target_classes))
+        node.ready()
+        period = 1.0 / s.control_rate_hz
+        last_state = ""
+        try:
+            while not stop.is_set():
+                tick = time.monotonic()
+                d, d_age = dets.get()
+                sc, sc_age = scan.get()
+                cmd = decide(d, d_age, sc, sc_age, s)
+                _publish(node, cmd_pub, status_pub, cmd, s.mode)
+                if cmd.state != last_state:
+                    node.log.info("state %s: %s", cmd.state, cmd.reason)
+                    last_state = cmd.state
+                node.publish_counters()
+                stop.wait(max(0.0, period - (time.monotonic() - tick)))
+            # Leave the robot still: the last word on cmd_vel is always a stop.
+            _publish(node, cmd_pub, status_pub, Command(0.0, 0.0, "stopped", "shutdown"), s.mode)
+        finally:
+            for sub in subs:
+                sub.undeclare()
+    return 0
+
+
+def _publish(
+    node: Node, cmd_pub: zenoh.Publisher, status_pub: zenoh.Publisher, cmd: Command, mode: str
+) -> None:
+    twist = Twist(
+        header=node.header(frame_id="base_link"),
+        linear=(cmd.linear_x, 0.0, 0.0),
+        angular=(0.0, 0.0, cmd.angular_z),
+        input_stamp_ns=cmd.input_stamp_ns,
+    )
+    cmd_pub.put(twist.encode())
+    node.counters.add("commands_out")
+    if not cmd.is_zero:
+        node.counters.add("commands_nonzero")
+    status = ControllerStatus(
+        header=twist.header,
+        mode=mode,
+        target=cmd.target,
+        state=cmd.state,
+        reason=cmd.reason,
+        track_id=cmd.track_id,
+    )
+    status_pub.put(status.encode())

@@ -1,0 +1,42 @@
+"""A one-slot mailbox: the newest payload wins, and every overwritten one is counted as dropped.
+
+The detector is often slower than the camera. Queueing frames would make every detection
+later than the last; keeping only the newest keeps latency bounded, and counting the drops
+keeps them visible.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+
+class Mailbox:
+    """Holds at most one payload, with its arrival time (``time.time_ns()``)."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._payload: bytes | None = None
+        self._received_ns = 0
+        self.received = 0
+        self.dropped = 0
+
+    def put(self, payload: bytes) -> None:
+        with self._cond:
+            if self._payload is not None:
+                self.dropped += 1
+            self._payload = payload
+            self._received_ns = time.time_ns()
+            self.received += 1
+            self._cond.notify()
+
+    def take(self, timeout: float) -> tuple[bytes, int] | None:
+        """The newest payload and when it arrived, or None after ``timeout`` seconds."""
+        with self._cond:
+            if self._payload is None and not self._cond.wait_for(
+                lambda: self._payload is not None, timeout
+            ):
+                return None
+            payload, self._payload = self._payload, None
+            assert payload is not None
+            return payload, self._received_ns

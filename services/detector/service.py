@@ -1,0 +1,95 @@
+"""The detector service: newest frame in, Detections out, with the frame's header."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import zenoh
+
+from common.errors import DecodeError, ImageError
+from common.frames import frame_to_bgr
+from common.messages import Detections, Frame, now_ns
+from common.node import Node
+from common.settings import Config, DetectorSettings
+from services.detector.mailbox import Mailbox
+from services.detector.pipeline import Detector
+from services.detector.types import DetectionResult, DetectorParams
+
+_WAIT_S = 0.2  # how often the idle loop looks at the stop flag
+
+
+def open_detector(s: DetectorSettings) -> Detector:
+    """Load the configured model (the default one, fetched if needed, when none is named)."""
+    from services.detector.model_store import ensure_default_model
+
+    model = s.model or str(ensure_default_model())
+    params = DetectorParams(conf=s.conf, iou=s.iou, max_det=s.max_det, classes=s.classes or None)
+    return Detector.open(model, backend=s.backend, params=params)
+
+
+def to_message(
+    frame: Frame, result: DetectionResult, det: Detector, received_ns: int
+) -> Detections:
+    t = result.timing
+    return Detections(
+        header=frame.header,
+        image_width=frame.width,
+        image_height=frame.height,
+        class_ids=result.class_ids,
+        class_names=tuple(result.class_names),
+        scores=result.scores,
+        xyxy=result.xyxy,
+        track_ids=None,
+        timing_ms={
+            "preprocess": t.preprocess_ms,
+            "inference": t.inference_ms,
+            "postprocess": t.postprocess_ms,
+        },
+        model=det.model_path.name,
+        backend=f"{det.backend.name}/{det.backend.device}/{det.backend.precision}",
+        received_ns=received_ns,
+        published_ns=now_ns(),
+    )
+
+
+def run(config: Config, stop: threading.Event) -> int:
+    """Detect on the newest frame until ``stop`` is set."""
+    s = config.detector
+    with Node("detector", config, counters_period_s=s.counters_period_s) as node:
+        detector = open_detector(s)
+        b = detector.backend
+        node.log.info("model %s on %s (%s, %s)", detector.model_path, b.name, b.device, b.precision)
+        frame_key = node.keys.frame(config.stack.camera)
+        mailbox = Mailbox()
+
+        def on_frame(sample: zenoh.Sample) -> None:
+            mailbox.put(sample.payload.to_bytes())
+
+        sub = node.session.declare_subscriber(frame_key, on_frame)
+        pub = node.session.declare_publisher(node.keys.detections(config.stack.camera))
+        # Warm the backend up before announcing readiness: the first run allocates.
+        detector.detect(np.full((480, 640, 3), 114, np.uint8))
+        node.ready()
+        try:
+            while not stop.is_set():
+                node.counters.add("dropped", mailbox.dropped - node.counters.get("dropped"))
+                node.publish_counters()
+                item = mailbox.take(_WAIT_S)
+                if item is None:
+                    continue
+                payload, received_ns = item
+                node.counters.add("frames_in")
+                try:
+                    frame = Frame.decode(payload)
+                    image = frame_to_bgr(frame)
+                except (DecodeError, ImageError) as exc:
+                    node.bad_input(frame_key, exc)
+                    continue
+                result = detector.detect(image)
+                pub.put(to_message(frame, result, detector, received_ns).encode())
+                node.counters.add("detections_out")
+        finally:
+            sub.undeclare()
+            detector.close()
+    return 0

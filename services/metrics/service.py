@@ -1,0 +1,91 @@
+"""The metrics service: listens to detections, commands and counters; answers queries in JSON."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from common.bus import open_session
+from common.errors import DecodeError
+from common.keys import Keys
+from common.messages import Detections, ServiceCounters, Twist
+from common.node import Node
+from common.settings import Config
+from services.metrics.aggregate import Aggregator, report_line
+
+
+def run(config: Config, stop: threading.Event) -> int:
+    """Serve metrics until ``stop`` is set."""
+    s = config.metrics
+    agg = Aggregator(s.window_s)
+    lock = threading.Lock()  # Zenoh calls back on its own threads
+    with Node("metrics", config) as node:
+
+        def handler(key: str, decode: Callable[[bytes], Any], feed: Callable[[Any], None]) -> Any:
+            def on_sample(sample: zenoh.Sample) -> None:
+                try:
+                    msg = decode(sample.payload.to_bytes())
+                except DecodeError as exc:
+                    node.bad_input(key, exc)
+                    with lock:
+                        agg.count("bad_input")
+                    return
+                with lock:
+                    feed(msg)
+
+            return on_sample
+
+        now = time.monotonic
+        keys = node.keys
+        subs = [
+            node.session.declare_subscriber(
+                keys.all_detections(),
+                handler("detections", Detections.decode, lambda m: agg.on_detections(m, now())),
+            ),
+            node.session.declare_subscriber(
+                keys.cmd_vel(), handler("cmd_vel", Twist.decode, lambda m: agg.on_twist(m, now()))
+            ),
+            node.session.declare_subscriber(
+                keys.all_counters(),
+                handler("counters", ServiceCounters.decode, agg.on_counters),
+            ),
+        ]
+
+        def on_query(query: zenoh.Query) -> None:
+            with lock:
+                snap = agg.snapshot(node.header(), now())
+            query.reply(keys.metrics(), json.dumps(snap.to_json_dict()))
+
+        queryable = node.session.declare_queryable(keys.metrics(), on_query)
+        node.ready()
+        try:
+            while not stop.wait(s.report_period_s):
+                with lock:
+                    snap = agg.snapshot(node.header(), now())
+                node.log.info("%s", report_line(snap))
+        finally:
+            queryable.undeclare()
+            for sub in subs:
+                sub.undeclare()
+    return 0
+
+
+def query(config: Config, timeout_s: float) -> dict[str, Any] | None:
+    """Ask the metrics service for its snapshot; None if nobody answered within the timeout."""
+    session = open_session(config.zenoh)
+    try:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            for reply in session.get(Keys(config.stack.prefix).metrics(), timeout=1.0):
+                if reply.ok is not None:
+                    answer: dict[str, Any] = json.loads(reply.ok.payload.to_string())
+                    return answer
+            time.sleep(0.2)  # the peer mesh may still be forming; ask again
+        return None
+    finally:
+        session.close()

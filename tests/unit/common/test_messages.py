@@ -1,0 +1,144 @@
+"""Every message round-trips, and every kind of garbage raises DecodeError and nothing else."""
+
+from __future__ import annotations
+
+import msgpack
+import numpy as np
+import pytest
+
+from common.codec import SCHEMA_VERSION
+from common.errors import DecodeError
+from common.messages import (
+    ControllerStatus,
+    Detections,
+    Frame,
+    Header,
+    LaserScan,
+    MetricsSnapshot,
+    ServiceCounters,
+    Twist,
+)
+
+HEADER = Header(stamp_ns=1_700_000_000_123_456_789, frame_id="camera", seq=42, source="test")
+
+
+def _detections(n: int = 3, tracks: bool = True) -> Detections:
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 300, (n, 2)).astype(np.float32)
+    return Detections(
+        header=HEADER, image_width=640, image_height=480,
+        class_ids=np.arange(n, dtype=np.int32), class_names=tuple(f"c{i}" for i in range(n)),
+        scores=rng.uniform(0, 1, n).astype(np.float32), xyxy=np.hstack([xy, xy + 20]),
+        track_ids=np.arange(n, dtype=np.int32) if tracks else None,
+        timing_ms={"inference": 80.5}, model="m.onnx", backend="onnx/cpu/fp32",
+        received_ns=HEADER.stamp_ns + 5, published_ns=HEADER.stamp_ns + 90,
+    )
+
+
+MESSAGES = [
+    Frame(header=HEADER, encoding="bgr8", width=4, height=2, data=bytes(range(24))),
+    Frame(header=HEADER, encoding="mono8", width=3, height=1, data=b"\x00\x01\x02"),
+    Frame(header=HEADER, encoding="jpeg", width=640, height=480, data=b"\xff\xd8fakejpeg"),
+    _detections(),
+    _detections(0, tracks=False),
+    Twist(header=HEADER, linear=(0.3, 0.0, 0.0), angular=(0.0, 0.0, -0.5), input_stamp_ns=7),
+    LaserScan(header=HEADER, angle_min=-1.0, angle_increment=0.01, range_min=0.1,
+              range_max=10.0, ranges=np.array([1.0, np.inf, np.nan], np.float32)),
+    ControllerStatus(header=HEADER, mode="follow", target="person", state="following",
+                     reason="offset +0.01", track_id=3),
+    ServiceCounters(header=HEADER, service="detector", counters={"dropped": 3, "bad_input": 1}),
+    MetricsSnapshot(header=HEADER, window_s=10.0, fps=9.5, frames=100, detections=120,
+                    detections_per_frame=1.2, dropped_frames=4,
+                    latency_ms={"end_to_end": {"p50": 90.0, "p95": 120.0}},
+                    counters={"detector.bad_input": 2}, class_counts={"person": 100}),
+]
+
+
+def _equal(a: object, b: object) -> bool:
+    if isinstance(a, np.ndarray):
+        return isinstance(b, np.ndarray) and a.dtype == b.dtype and np.array_equal(a, b, True)
+    if a is None or b is None:
+        return a is b
+    if hasattr(a, "__slots__") and hasattr(a, "__dataclass_fields__"):
+        return type(a) is type(b) and all(
+            _equal(getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__
+        )
+    return a == b
+
+
+@pytest.mark.parametrize("msg", MESSAGES, ids=lambda m: type(m).__name__)
+def test_round_trip(msg: object) -> None:
+    decoded = type(msg).decode(msg.encode())  # type: ignore[attr-defined]
+    assert _equal(decoded, msg)
+
+
+def test_detections_carry_centre_and_size() -> None:
+    d = _detections()
+    body = msgpack.unpackb(d.encode())["d"]
+    cs = np.frombuffer(body["center_size"], "<f4").reshape(-1, 4)
+    np.testing.assert_allclose(cs[:, :2], (d.xyxy[:, :2] + d.xyxy[:, 2:]) / 2)
+    np.testing.assert_allclose(cs[:, 2:], d.xyxy[:, 2:] - d.xyxy[:, :2])
+
+
+@pytest.mark.parametrize("cls", [type(m) for m in MESSAGES[::2]] + [Twist, LaserScan])
+def test_random_bytes_raise_decode_error(cls: type) -> None:
+    rng = np.random.default_rng(1)
+    for size in (0, 1, 7, 64, 4096):
+        for _ in range(20):
+            with pytest.raises(DecodeError):
+                cls.decode(rng.bytes(size))
+
+
+def _rewrite(payload: bytes, **changes: object) -> bytes:
+    env = msgpack.unpackb(payload)
+    body = env["d"]
+    for key, value in changes.items():
+        if key in ("v", "t"):
+            env[key] = value
+        else:
+            body[key] = value
+    return msgpack.packb(env)
+
+
+def test_wrong_schema_version() -> None:
+    payload = _rewrite(MESSAGES[0].encode(), v=SCHEMA_VERSION + 1)
+    with pytest.raises(DecodeError, match="schema version"):
+        Frame.decode(payload)
+
+
+def test_wrong_message_type() -> None:
+    with pytest.raises(DecodeError, match="expected a Frame"):
+        Frame.decode(MESSAGES[5].encode())
+
+
+def test_truncated_frame() -> None:
+    good = MESSAGES[0].encode()
+    with pytest.raises(DecodeError):
+        Frame.decode(good[: len(good) // 2])
+    short_pixels = _rewrite(good, data=bytes(10))
+    with pytest.raises(DecodeError, match="needs 24 bytes"):
+        Frame.decode(short_pixels)
+
+
+@pytest.mark.parametrize("w,h", [(0, 2), (-4, 2), (100_000, 100_000), (2**40, 1)])
+def test_absurd_dimensions(w: int, h: int) -> None:
+    with pytest.raises(DecodeError):
+        Frame.decode(_rewrite(MESSAGES[0].encode(), width=w, height=h))
+
+
+def test_wrong_field_types() -> None:
+    good = MESSAGES[3].encode()
+    for change in ({"n": "three"}, {"n": 5}, {"xyxy": b"\x00" * 7}, {"class_names": [1, 2, 3]},
+                   {"header": "nope"}, {"timing_ms": {"x": "slow"}}):
+        with pytest.raises(DecodeError):
+            Detections.decode(_rewrite(good, **change))
+    for bad in ([0.1, 0.2], [float("nan"), 0, 0], ["a", 0, 0]):
+        with pytest.raises(DecodeError):
+            Twist.decode(_rewrite(MESSAGES[5].encode(), linear=bad))
+
+
+def test_constructor_validates_shapes() -> None:
+    with pytest.raises(ValueError, match="xyxy"):
+        Detections(header=HEADER, image_width=10, image_height=10,
+                   class_ids=np.zeros(2, np.int32), class_names=("a", "b"),
+                   scores=np.zeros(2, np.float32), xyxy=np.zeros((3, 4), np.float32))
