@@ -72,14 +72,14 @@ class StackSettings:
 class CameraSettings:
     """The frame source.
 
-    ``source`` is one of: ``sample:<name>`` (a scikit-image photo: astronaut, chelsea, coffee,
-    camera, rocket, motorcycle), a path to an image (repeated), a folder of images (looped), a
+    ``source`` is one of: ``sample:<name>`` (a scikit-image photo: astronaut, cameraman, chelsea,
+    coffee, rocket, motorcycle), a path to an image (repeated), a folder of images (looped), a
     video file (looped when ``loop``), or ``device:<index or /dev/videoN>`` (webcam / V4L2).
     ``resize`` is (width, height), or (0, 0) to keep the source size. ``jpeg_quality`` 0 sends
     raw bgr8; 1..100 sends JPEG at that quality.
     """
 
-    source: str = "sample:astronaut"
+    source: str = "sample:cameraman"
     rate_hz: float = 10.0
     resize: tuple[int, int] = (0, 0)
     jpeg_quality: int = 0
@@ -134,7 +134,7 @@ class ControllerSettings:
 
     mode: str = "track"
     target_classes: tuple[str, ...] = ("person",)
-    min_score: float = 0.4
+    min_score: float = 0.3
     control_rate_hz: float = 20.0
     detection_timeout_s: float = 0.5
     scan_timeout_s: float = 0.5

@@ -9,9 +9,8 @@ import sys
 import time
 from dataclasses import dataclass, field
 
+from common.lifecycle import PERMANENT_FAILURES
 from common.settings import SupervisorSettings
-
-EXIT_CONFIG_ERROR = 2  # what run_main returns for a StackError: restarting will not help
 
 # Extra arguments some services need before the shared ones.
 SERVICE_ARGS: dict[str, tuple[str, ...]] = {"detector": ("serve",), "metrics": ("serve",)}
@@ -80,9 +79,9 @@ class ServiceProcess:
         if code is None:
             return None
         self.last_exit = code
-        if code == EXIT_CONFIG_ERROR:
+        if code in PERMANENT_FAILURES:
             self.state = "failed"
-            return f"{self.name}: exited with a configuration error; not restarting"
+            return f"{self.name}: exited with code {code} (config, model or backend); no restart"
         delay = self.backoff.next_delay(now - self.started_at)
         self.state, self.restart_at = "backoff", now + delay
         return f"{self.name}: exited with code {code}; restarting in {delay:.1f} s"

@@ -19,7 +19,7 @@ from common.frames import Image
 IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"})
 
 # scikit-image ships these public-domain photos, so the stack runs with no camera and no download.
-SAMPLES = ("astronaut", "camera", "chelsea", "coffee", "rocket", "motorcycle")
+SAMPLES = ("astronaut", "cameraman", "chelsea", "coffee", "rocket", "motorcycle")
 
 
 class FrameSource(Protocol):
@@ -35,12 +35,15 @@ class FrameSource(Protocol):
 
 
 def load_sample(name: str) -> Image:
-    """A scikit-image sample photo as BGR uint8 (``motorcycle`` is stereo_motorcycle's left)."""
+    """A scikit-image sample photo as BGR uint8.
+
+    ``cameraman`` is ``data.camera()`` (grey); ``motorcycle`` is ``stereo_motorcycle``'s left view.
+    """
     from skimage import data  # heavy import, only for sample sources
 
     loaders: dict[str, Callable[[], object]] = {
         "astronaut": data.astronaut,
-        "camera": data.camera,
+        "cameraman": data.camera,
         "chelsea": data.chelsea,
         "coffee": data.coffee,
         "rocket": data.rocket,

@@ -24,10 +24,12 @@ class Latest(Generic[_M]):
         self._lock = threading.Lock()
         self._msg: _M | None = None
         self._t = 0.0
+        self.arrived = threading.Event()  # set on every new message; the loop clears it
 
     def set(self, msg: _M) -> None:
         with self._lock:
             self._msg, self._t = msg, time.monotonic()
+        self.arrived.set()
 
     def get(self) -> tuple[_M | None, float]:
         """The message and its age in seconds (inf when none has arrived)."""
@@ -38,7 +40,11 @@ class Latest(Generic[_M]):
 
 
 def run(config: Config, stop: threading.Event) -> int:
-    """Run the control loop at ``control_rate_hz`` until ``stop`` is set."""
+    """Run the control loop until ``stop`` is set.
+
+    A command goes out at least ``control_rate_hz`` times a second, and at once when new
+    detections arrive: waiting for the next tick would add up to a whole period of latency.
+    """
     s = config.controller
     with Node("controller", config, counters_period_s=s.counters_period_s) as node:
         dets: Latest[Detections] = Latest()
@@ -72,6 +78,7 @@ def run(config: Config, stop: threading.Event) -> int:
         try:
             while not stop.is_set():
                 tick = time.monotonic()
+                dets.arrived.clear()  # before reading, so a message arriving now wakes us
                 d, d_age = dets.get()
                 sc, sc_age = scan.get()
                 cmd = decide(d, d_age, sc, sc_age, s)
@@ -80,7 +87,7 @@ def run(config: Config, stop: threading.Event) -> int:
                     node.log.info("state %s: %s", cmd.state, cmd.reason)
                     last_state = cmd.state
                 node.publish_counters()
-                stop.wait(max(0.0, period - (time.monotonic() - tick)))
+                dets.arrived.wait(max(0.0, period - (time.monotonic() - tick)))
             # Leave the robot still: the last word on cmd_vel is always a stop.
             _publish(node, cmd_pub, status_pub, Command(0.0, 0.0, "stopped", "shutdown"), s.mode)
         finally:

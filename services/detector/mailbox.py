@@ -1,4 +1,4 @@
-"""A one-slot mailbox: the newest payload wins, and every overwritten one is counted as dropped.
+"""A one-slot mailbox: the newest item wins, and every overwritten one is counted as dropped.
 
 The detector is often slower than the camera. Queueing frames would make every detection
 later than the last; keeping only the newest keeps latency bounded, and counting the drops
@@ -9,19 +9,22 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import Generic, TypeVar
+
+_T = TypeVar("_T")
 
 
-class Mailbox:
-    """Holds at most one payload, with its arrival time (``time.time_ns()``)."""
+class Mailbox(Generic[_T]):
+    """Holds at most one item, with its arrival time (``time.time_ns()``)."""
 
     def __init__(self) -> None:
         self._cond = threading.Condition()
-        self._payload: bytes | None = None
+        self._payload: _T | None = None
         self._received_ns = 0
         self.received = 0
         self.dropped = 0
 
-    def put(self, payload: bytes) -> None:
+    def put(self, payload: _T) -> None:
         with self._cond:
             if self._payload is not None:
                 self.dropped += 1
@@ -30,8 +33,8 @@ class Mailbox:
             self.received += 1
             self._cond.notify()
 
-    def take(self, timeout: float) -> tuple[bytes, int] | None:
-        """The newest payload and when it arrived, or None after ``timeout`` seconds."""
+    def take(self, timeout: float) -> tuple[_T, int] | None:
+        """The newest item and when it arrived, or None after ``timeout`` seconds."""
         with self._cond:
             if self._payload is None and not self._cond.wait_for(
                 lambda: self._payload is not None, timeout

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import threading
+from typing import Any
 
 import numpy as np
 import zenoh
@@ -61,10 +63,16 @@ def run(config: Config, stop: threading.Event) -> int:
         b = detector.backend
         node.log.info("model %s on %s (%s, %s)", detector.model_path, b.name, b.device, b.precision)
         frame_key = node.keys.frame(config.stack.camera)
-        mailbox = Mailbox()
+        mailbox: Mailbox[Frame] = Mailbox()
 
         def on_frame(sample: zenoh.Sample) -> None:
-            mailbox.put(sample.payload.to_bytes())
+            # Decode here, not in the loop: garbage must be counted even when a newer frame
+            # would have replaced it in the mailbox before the loop looked at it.
+            node.counters.add("frames_in")
+            try:
+                mailbox.put(Frame.decode(sample.payload.to_bytes()))
+            except DecodeError as exc:
+                node.bad_input(frame_key, exc)
 
         sub = node.session.declare_subscriber(frame_key, on_frame)
         pub = node.session.declare_publisher(node.keys.detections(config.stack.camera))
@@ -78,12 +86,10 @@ def run(config: Config, stop: threading.Event) -> int:
                 item = mailbox.take(_WAIT_S)
                 if item is None:
                     continue
-                payload, received_ns = item
-                node.counters.add("frames_in")
+                frame, received_ns = item
                 try:
-                    frame = Frame.decode(payload)
                     image = frame_to_bgr(frame)
-                except (DecodeError, ImageError) as exc:
+                except ImageError as exc:
                     node.bad_input(frame_key, exc)
                     continue
                 result = detector.detect(image)
@@ -93,3 +99,27 @@ def run(config: Config, stop: threading.Event) -> int:
             sub.undeclare()
             detector.close()
     return 0
+
+
+def _run_serve(args: Any) -> int:
+    from common.lifecycle import setup_logging, stop_event
+    from common.settings import load_config
+
+    stop = stop_event()
+    config = load_config(args.config)
+    overrides = {k: v for k, v in (("backend", args.backend), ("model", args.model)) if v}
+    if overrides:
+        config = dataclasses.replace(
+            config, detector=dataclasses.replace(config.detector, **overrides)
+        )
+    setup_logging("detector")
+    return run(config, stop)
+
+
+def add_serve_command(subparsers: Any) -> None:
+    """Register ``serve``: run the detector service on the bus (the supervisor uses this)."""
+    p = subparsers.add_parser("serve", help="run the detector service on the Zenoh bus")
+    p.add_argument("--config", help="stack config (default deploy/stack.toml)")
+    p.add_argument("--backend", help="override detector.backend")
+    p.add_argument("--model", help="override detector.model")
+    p.set_defaults(handler=_run_serve)

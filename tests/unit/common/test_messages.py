@@ -26,12 +26,19 @@ def _detections(n: int = 3, tracks: bool = True) -> Detections:
     rng = np.random.default_rng(0)
     xy = rng.uniform(0, 300, (n, 2)).astype(np.float32)
     return Detections(
-        header=HEADER, image_width=640, image_height=480,
-        class_ids=np.arange(n, dtype=np.int32), class_names=tuple(f"c{i}" for i in range(n)),
-        scores=rng.uniform(0, 1, n).astype(np.float32), xyxy=np.hstack([xy, xy + 20]),
+        header=HEADER,
+        image_width=640,
+        image_height=480,
+        class_ids=np.arange(n, dtype=np.int32),
+        class_names=tuple(f"c{i}" for i in range(n)),
+        scores=rng.uniform(0, 1, n).astype(np.float32),
+        xyxy=np.hstack([xy, xy + 20]),
         track_ids=np.arange(n, dtype=np.int32) if tracks else None,
-        timing_ms={"inference": 80.5}, model="m.onnx", backend="onnx/cpu/fp32",
-        received_ns=HEADER.stamp_ns + 5, published_ns=HEADER.stamp_ns + 90,
+        timing_ms={"inference": 80.5},
+        model="m.onnx",
+        backend="onnx/cpu/fp32",
+        received_ns=HEADER.stamp_ns + 5,
+        published_ns=HEADER.stamp_ns + 90,
     )
 
 
@@ -42,15 +49,35 @@ MESSAGES = [
     _detections(),
     _detections(0, tracks=False),
     Twist(header=HEADER, linear=(0.3, 0.0, 0.0), angular=(0.0, 0.0, -0.5), input_stamp_ns=7),
-    LaserScan(header=HEADER, angle_min=-1.0, angle_increment=0.01, range_min=0.1,
-              range_max=10.0, ranges=np.array([1.0, np.inf, np.nan], np.float32)),
-    ControllerStatus(header=HEADER, mode="follow", target="person", state="following",
-                     reason="offset +0.01", track_id=3),
+    LaserScan(
+        header=HEADER,
+        angle_min=-1.0,
+        angle_increment=0.01,
+        range_min=0.1,
+        range_max=10.0,
+        ranges=np.array([1.0, np.inf, np.nan], np.float32),
+    ),
+    ControllerStatus(
+        header=HEADER,
+        mode="follow",
+        target="person",
+        state="following",
+        reason="offset +0.01",
+        track_id=3,
+    ),
     ServiceCounters(header=HEADER, service="detector", counters={"dropped": 3, "bad_input": 1}),
-    MetricsSnapshot(header=HEADER, window_s=10.0, fps=9.5, frames=100, detections=120,
-                    detections_per_frame=1.2, dropped_frames=4,
-                    latency_ms={"end_to_end": {"p50": 90.0, "p95": 120.0}},
-                    counters={"detector.bad_input": 2}, class_counts={"person": 100}),
+    MetricsSnapshot(
+        header=HEADER,
+        window_s=10.0,
+        fps=9.5,
+        frames=100,
+        detections=120,
+        detections_per_frame=1.2,
+        dropped_frames=4,
+        latency_ms={"end_to_end": {"p50": 90.0, "p95": 120.0}},
+        counters={"detector.bad_input": 2},
+        class_counts={"person": 100},
+    ),
 ]
 
 
@@ -128,8 +155,14 @@ def test_absurd_dimensions(w: int, h: int) -> None:
 
 def test_wrong_field_types() -> None:
     good = MESSAGES[3].encode()
-    for change in ({"n": "three"}, {"n": 5}, {"xyxy": b"\x00" * 7}, {"class_names": [1, 2, 3]},
-                   {"header": "nope"}, {"timing_ms": {"x": "slow"}}):
+    for change in (
+        {"n": "three"},
+        {"n": 5},
+        {"xyxy": b"\x00" * 7},
+        {"class_names": [1, 2, 3]},
+        {"header": "nope"},
+        {"timing_ms": {"x": "slow"}},
+    ):
         with pytest.raises(DecodeError):
             Detections.decode(_rewrite(good, **change))
     for bad in ([0.1, 0.2], [float("nan"), 0, 0], ["a", 0, 0]):
@@ -139,6 +172,12 @@ def test_wrong_field_types() -> None:
 
 def test_constructor_validates_shapes() -> None:
     with pytest.raises(ValueError, match="xyxy"):
-        Detections(header=HEADER, image_width=10, image_height=10,
-                   class_ids=np.zeros(2, np.int32), class_names=("a", "b"),
-                   scores=np.zeros(2, np.float32), xyxy=np.zeros((3, 4), np.float32))
+        Detections(
+            header=HEADER,
+            image_width=10,
+            image_height=10,
+            class_ids=np.zeros(2, np.int32),
+            class_names=("a", "b"),
+            scores=np.zeros(2, np.float32),
+            xyxy=np.zeros((3, 4), np.float32),
+        )

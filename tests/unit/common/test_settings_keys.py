@@ -20,8 +20,11 @@ def test_default_config_loads() -> None:
 
 
 def test_env_override_is_typed(tmp_path: Path) -> None:
-    env = {"STACK__DETECTOR__CONF": "0.5", "STACK__CONTROLLER__TARGET_CLASSES": '["cup"]',
-           "STACK__CAMERA__SOURCE": "device:0"}
+    env = {
+        "STACK__DETECTOR__CONF": "0.5",
+        "STACK__CONTROLLER__TARGET_CLASSES": '["cup"]',
+        "STACK__CAMERA__SOURCE": "device:0",
+    }
     cfg = load_config(DEFAULT_CONFIG, environ=env)
     assert cfg.detector.conf == 0.5
     assert cfg.controller.target_classes == ("cup",)

@@ -18,12 +18,18 @@ W, H = 640, 480
 def dets(*boxes: tuple[str, float, float, float, float, float], width: int = W) -> Detections:
     """Boxes as (class, score, cx, cy, w, h) in pixels."""
     n = len(boxes)
-    xyxy = np.array([[cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2]
-                     for _, _, cx, cy, w, h in boxes], np.float32).reshape(n, 4)
+    xyxy = np.array(
+        [[cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2] for _, _, cx, cy, w, h in boxes],
+        np.float32,
+    ).reshape(n, 4)
     return Detections(
-        header=HEADER, image_width=width, image_height=H,
-        class_ids=np.zeros(n, np.int32), class_names=tuple(b[0] for b in boxes),
-        scores=np.array([b[1] for b in boxes], np.float32), xyxy=xyxy,
+        header=HEADER,
+        image_width=width,
+        image_height=H,
+        class_ids=np.zeros(n, np.int32),
+        class_names=tuple(b[0] for b in boxes),
+        scores=np.array([b[1] for b in boxes], np.float32),
+        xyxy=xyxy,
     )
 
 
@@ -31,9 +37,14 @@ def scan(front_range: float, *, rays: int = 181, fov_deg: float = 180.0) -> Lase
     angles = np.linspace(-np.radians(fov_deg / 2), np.radians(fov_deg / 2), rays)
     ranges = np.full(rays, 10.0, np.float32)
     ranges[np.abs(angles) < np.radians(5)] = front_range
-    return LaserScan(header=HEADER, angle_min=float(angles[0]),
-                     angle_increment=float(angles[1] - angles[0]), range_min=0.05,
-                     range_max=20.0, ranges=ranges)
+    return LaserScan(
+        header=HEADER,
+        angle_min=float(angles[0]),
+        angle_increment=float(angles[1] - angles[0]),
+        range_min=0.05,
+        range_max=20.0,
+        ranges=ranges,
+    )
 
 
 TRACK = ControllerSettings(mode="track", target_classes=("person",))
@@ -41,8 +52,12 @@ FOLLOW = dataclasses.replace(TRACK, mode="follow")
 
 
 def test_track_turns_towards_most_central_confident_target() -> None:
-    d = dets(("person", 0.9, 600, 240, 50, 100), ("person", 0.8, 400, 240, 50, 100),
-             ("cup", 0.99, 320, 240, 50, 50), ("person", 0.2, 330, 240, 50, 50))
+    d = dets(
+        ("person", 0.9, 600, 240, 50, 100),
+        ("person", 0.8, 400, 240, 50, 100),
+        ("cup", 0.99, 320, 240, 50, 50),
+        ("person", 0.2, 330, 240, 50, 50),
+    )
     cmd = track(d, TRACK)
     # the cup is not a target, the 0.2 person is below min_score: the x=400 person is chosen
     assert cmd.target == "person"

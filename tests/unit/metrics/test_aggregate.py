@@ -13,17 +13,23 @@ MS = 1_000_000
 def _dets(stamp: int, n: int) -> Detections:
     return Detections(
         header=Header(stamp_ns=stamp, frame_id="c", seq=stamp, source="camera"),
-        image_width=640, image_height=480, class_ids=np.zeros(n, np.int32),
-        class_names=("person",) * n, scores=np.ones(n, np.float32),
+        image_width=640,
+        image_height=480,
+        class_ids=np.zeros(n, np.int32),
+        class_names=("person",) * n,
+        scores=np.ones(n, np.float32),
         xyxy=np.tile(np.array([0, 0, 10, 10], np.float32), (n, 1)),
         timing_ms={"preprocess": 2.0, "inference": 80.0, "postprocess": 1.0},
-        received_ns=stamp + 5 * MS, published_ns=stamp + 90 * MS,
+        received_ns=stamp + 5 * MS,
+        published_ns=stamp + 90 * MS,
     )
 
 
 def _twist(stamp: int, input_stamp: int) -> Twist:
-    return Twist(header=Header(stamp_ns=stamp, frame_id="b", seq=1, source="controller"),
-                 input_stamp_ns=input_stamp)
+    return Twist(
+        header=Header(stamp_ns=stamp, frame_id="b", seq=1, source="controller"),
+        input_stamp_ns=input_stamp,
+    )
 
 
 def test_percentiles_match_numpy() -> None:
@@ -65,8 +71,9 @@ def test_latency_chain_from_capture_to_command() -> None:
 def test_counters_are_namespaced_and_drops_surface() -> None:
     agg = Aggregator(window_s=5.0)
     hdr = Header(stamp_ns=0, frame_id="", seq=0, source="detector")
-    agg.on_counters(ServiceCounters(header=hdr, service="detector",
-                                    counters={"dropped": 7, "bad_input": 2}))
+    agg.on_counters(
+        ServiceCounters(header=hdr, service="detector", counters={"dropped": 7, "bad_input": 2})
+    )
     agg.count("bad_input")
     snap = agg.snapshot(hdr, now=0.0)
     assert snap.dropped_frames == 7

@@ -1,0 +1,149 @@
+"""Fixtures that run the real stack: a private Zenoh endpoint, real processes, real model."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from common.bus import open_session
+from common.keys import Keys
+from common.settings import ZenohSettings, load_config
+
+REPO = Path(__file__).resolve().parents[2]
+STARTUP_S = 120.0  # model load and warm-up on a loaded 2-core CI machine
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_for(
+    condition: Callable[[], Any], timeout: float, what: str | Callable[[], str], poll: float = 0.05
+) -> Any:
+    """Poll ``condition`` until it returns something truthy; fail naming ``what``."""
+    deadline = time.monotonic() + timeout
+    pause = threading.Event()  # never set: wait() is the poll interval
+    while time.monotonic() < deadline:
+        result = condition()
+        if result:
+            return result
+        pause.wait(poll)
+    pytest.fail(
+        f"timed out after {timeout:.0f} s waiting for {what if isinstance(what, str) else what()}"
+    )
+
+
+def write_config(tmp: Path, **tables: dict[str, Any]) -> Path:
+    """A stack config on a free port, with a unique key prefix, multicast off."""
+    base: dict[str, dict[str, Any]] = {
+        "zenoh": {"endpoint": f"tcp/127.0.0.1:{free_port()}", "multicast_scouting": False},
+        "stack": {"prefix": f"test/{uuid.uuid4().hex[:8]}", "camera": "front"},
+        "camera": {"source": "sample:cameraman", "rate_hz": 5.0},
+        "supervisor": {"status_period_s": 1.0, "restart_backoff_s": 0.2},
+    }
+    for name, values in tables.items():
+        base.setdefault(name, {}).update(values)
+    lines = []
+    for name, values in base.items():
+        lines.append(f"[{name}]")
+        lines += [f"{k} = {json.dumps(v)}" for k, v in values.items()]
+    path = tmp / "stack.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+class Stack:
+    """A supervisor process and a test session on the same private endpoint."""
+
+    def __init__(self, config_path: Path, log_path: Path) -> None:
+        self.config_path = config_path
+        self.config = load_config(config_path, environ={})
+        self.keys = Keys(self.config.stack.prefix)
+        self.log_path = log_path
+        self._log = log_path.open("wb")
+        env = {k: v for k, v in os.environ.items() if not k.startswith("STACK__")}
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "deploy.supervisor", "--config", str(config_path)],
+            cwd=REPO,
+            env={**env, "PYTHONUNBUFFERED": "1"},
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        self.session = open_session(ZenohSettings(endpoint=self.config.zenoh.endpoint))
+
+    def ready_services(self) -> set[str]:
+        replies = self.session.liveliness().get(self.keys.all_health(), timeout=1.0)
+        return {str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None}
+
+    def wait_ready(self, services: set[str], timeout: float = STARTUP_S) -> None:
+        wait_for(
+            lambda: services <= self.ready_services() or self._died(),
+            timeout,
+            f"services {sorted(services)} to be ready",
+        )
+        assert self.proc.poll() is None, f"supervisor died:\n{self.log()}"
+
+    def _died(self) -> bool:
+        return self.proc.poll() is not None
+
+    def subscribe(self, key: str) -> tuple[zenoh.Subscriber[Any], list[bytes]]:
+        received: list[bytes] = []
+        sub = self.session.declare_subscriber(key, lambda s: received.append(s.payload.to_bytes()))
+        return sub, received
+
+    def metrics(self) -> dict[str, Any] | None:
+        for reply in self.session.get(self.keys.metrics(), timeout=2.0):
+            if reply.ok is not None:
+                answer: dict[str, Any] = json.loads(reply.ok.payload.to_string())
+                return answer
+        return None
+
+    def log(self) -> str:
+        if not self._log.closed:
+            self._log.flush()
+        return self.log_path.read_text(errors="replace")[-6000:]
+
+    def stop(self, timeout: float = 20.0) -> int:
+        """SIGINT the supervisor as Ctrl-C would and return its exit code."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+        try:
+            code = self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+            pytest.fail(f"supervisor did not stop within {timeout} s:\n{self.log()}")
+        self.session.close()
+        self._log.close()
+        return code
+
+
+@pytest.fixture
+def make_stack(tmp_path: Path) -> Iterator[Callable[..., Stack]]:
+    stacks: list[Stack] = []
+
+    def make(**tables: dict[str, Any]) -> Stack:
+        stack = Stack(write_config(tmp_path, **tables), tmp_path / "supervisor.log")
+        stacks.append(stack)
+        return stack
+
+    yield make
+    for stack in stacks:
+        if stack.proc.poll() is None:
+            stack.stop()
