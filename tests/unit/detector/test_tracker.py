@@ -1,0 +1,69 @@
+"""The tracker keeps ids across frames, across a weak frame, and apart for two people."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.detector.tracker import Tracker, TrackerParams, iou_matrix
+
+
+def _frame(
+    tracker: Tracker,
+    boxes: list[list[float]],
+    scores: list[float],
+    t: float,
+    classes: list[int] | None = None,
+) -> list[int]:
+    ids = tracker.update(
+        np.array(boxes, np.float32).reshape(-1, 4),
+        np.array(scores, np.float32),
+        np.array(classes or [0] * len(scores), np.int32),
+        t,
+    )
+    return ids.tolist()
+
+
+def test_iou_matrix_against_hand_values() -> None:
+    a = np.array([[0, 0, 10, 10], [20, 20, 30, 30]], np.float32)
+    b = np.array([[5, 0, 15, 10], [0, 0, 10, 10], [100, 100, 101, 101]], np.float32)
+    expected = np.array([[50 / 150, 1.0, 0.0], [0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(iou_matrix(a, b), expected)
+    assert iou_matrix(a[:0], b).shape == (0, 3)
+
+
+def test_ids_persist_while_the_box_moves() -> None:
+    tr = Tracker()
+    ids = [_frame(tr, [[10 + 8 * i, 10, 60 + 8 * i, 110]], [0.9], t=0.1 * i)[0] for i in range(20)]
+    assert len(set(ids)) == 1 and ids[0] > 0
+
+
+def test_two_people_crossing_keep_their_ids() -> None:
+    tr = Tracker()
+    left, right = [], []
+    for i in range(25):  # two boxes approach each other and pass; velocity keeps them apart
+        a = [50 + 10 * i, 100, 110 + 10 * i, 250]
+        b = [400 - 10 * i, 100, 460 - 10 * i, 250]
+        ids = _frame(tr, [a, b], [0.9, 0.8], t=0.1 * i)
+        left.append(ids[0])
+        right.append(ids[1])
+    assert len(set(left)) == 1 and len(set(right)) == 1 and left[0] != right[0]
+
+
+def test_weak_detection_extends_but_never_starts_a_track() -> None:
+    tr = Tracker(TrackerParams(high_score=0.5, low_score=0.1))
+    first = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0)[0]
+    assert _frame(tr, [[2, 0, 52, 100]], [0.2], t=0.1) == [first]  # a dip keeps the id
+    assert _frame(tr, [[300, 0, 350, 100]], [0.2], t=0.2) == [-1]  # weak and new: no track
+
+
+def test_lost_track_expires_and_a_new_id_is_given() -> None:
+    tr = Tracker(TrackerParams(max_age_s=0.5))
+    first = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0)[0]
+    assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.4) == [first]
+    assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=1.5) != [first]
+
+
+def test_classes_never_share_a_track() -> None:
+    tr = Tracker()
+    person = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0, classes=[0])[0]
+    assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.1, classes=[15]) != [person]
