@@ -96,6 +96,12 @@ class Body:
             raise DecodeError(f"{self._tag}.{key}: {v} is outside [{lo}, {hi}]")
         return v
 
+    def get_bool(self, key: str) -> bool:
+        v = self._get(key)
+        if not isinstance(v, bool):
+            raise self._fail(key, "bool")
+        return v
+
     def get_float(self, key: str) -> float:
         v = self._get(key)
         if isinstance(v, bool) or not isinstance(v, int | float):

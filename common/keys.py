@@ -8,6 +8,7 @@ runs can share one network without hearing each other:
     <prefix>/scan                             LaserScan       robot/sim -> controller
     <prefix>/controller/cmd_vel               Twist           controller -> robot/sim, metrics
     <prefix>/controller/status                ControllerStatus
+    <prefix>/controller/estop                 EStop           anyone -> controller (latching)
     <prefix>/counters/<service>               ServiceCounters each service -> metrics
     <prefix>/metrics                          queryable       metrics -> JSON snapshot
     <prefix>/health/<service>                 liveliness      present while a service is ready
@@ -58,6 +59,9 @@ class Keys:
 
     def controller_status(self) -> str:
         return f"{self.prefix}/controller/status"
+
+    def estop(self) -> str:
+        return f"{self.prefix}/controller/estop"
 
     def counters(self, service: str) -> str:
         return f"{self.prefix}/counters/{_check_chunks('service name', service)}"

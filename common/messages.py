@@ -356,6 +356,27 @@ class ControllerStatus(_Message):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class EStop(_Message):
+    """The emergency stop: ``engaged`` latches zero velocity until an EStop with False."""
+
+    TAG: ClassVar[str] = "EStop"
+    header: Header
+    engaged: bool
+    reason: str = ""
+
+    def _body(self) -> dict[str, Any]:
+        return {"header": self.header.to_wire(), "engaged": self.engaged, "reason": self.reason}
+
+    @classmethod
+    def _from_body(cls, b: Body) -> EStop:
+        return cls(
+            header=Header.from_wire(b.get_map("header")),
+            engaged=b.get_bool("engaged"),
+            reason=b.get_str("reason"),
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class ServiceCounters(_Message):
     """A service's own counters (frames in, dropped, bad input ...), published periodically."""
 

@@ -76,7 +76,8 @@ class CameraSettings:
     coffee, rocket, motorcycle), a path to an image (repeated), a folder of images (looped), a
     video file (looped when ``loop``), or ``device:<index or /dev/videoN>`` (webcam / V4L2).
     ``resize`` is (width, height), or (0, 0) to keep the source size. ``jpeg_quality`` 0 sends
-    raw bgr8; 1..100 sends JPEG at that quality.
+    raw bgr8; 1..100 sends JPEG at that quality. ``hfov_deg`` is the horizontal field of view,
+    which turns a pixel column into a bearing (the controller and the simulator use it).
     """
 
     source: str = "sample:cameraman"
@@ -85,6 +86,7 @@ class CameraSettings:
     jpeg_quality: int = 0
     frame_id: str = "camera"
     loop: bool = True
+    hfov_deg: float = 60.0
 
     def __post_init__(self) -> None:
         _positive("camera.rate_hz", self.rate_hz)
@@ -92,18 +94,26 @@ class CameraSettings:
             raise ConfigError(f"camera.resize must be [w, h] > 0 or [0, 0], got {self.resize}")
         if not 0 <= self.jpeg_quality <= 100:
             raise ConfigError(f"camera.jpeg_quality must be 0..100, got {self.jpeg_quality}")
+        if not 1 <= self.hfov_deg <= 179:
+            raise ConfigError(f"camera.hfov_deg must be within 1..179, got {self.hfov_deg}")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DetectorSettings:
     """The model, its backend and the post-processing thresholds.
 
-    ``model`` empty means the default COCO model (fetched at setup). ``classes`` empty keeps
-    every class.
+    ``model`` empty means the default COCO model (fetched at setup). ``backend`` is onnx,
+    tensorrt, cuda or auto (auto picks tensorrt, then cuda, then onnx: docs/tensorrt.md).
+    ``precision`` empty leaves the backend's default (fp32 on the CPU, fp16 on a GPU); GPU
+    backends take fp32 or fp16, TensorRT also int8. ``batch_profile`` is the (min, opt, max)
+    batch a TensorRT engine is built for; the service sends single frames, so (1, 1, 1).
+    ``classes`` empty keeps every class.
     """
 
     model: str = ""
     backend: str = "onnx"
+    precision: str = ""
+    batch_profile: tuple[int, int, int] = (1, 1, 1)
     conf: float = 0.25
     iou: float = 0.45
     max_det: int = 100
@@ -111,11 +121,51 @@ class DetectorSettings:
     counters_period_s: float = 1.0
 
     def __post_init__(self) -> None:
+        # Mirrors services.detector.backends.BACKEND_CHOICES: common must not import services,
+        # and a unit test keeps the two equal.
+        backends = ("cuda", "onnx", "tensorrt", "auto")
+        if self.backend not in backends:
+            raise ConfigError(
+                f"detector.backend must be one of {', '.join(backends)}, got {self.backend!r}"
+            )
+        if self.precision not in ("", "fp32", "fp16", "int8"):
+            raise ConfigError(
+                f"detector.precision must be one of fp32, fp16, int8 (or empty for the "
+                f"backend's default), got {self.precision!r}"
+            )
+        lo, opt, hi = self.batch_profile
+        if not 1 <= lo <= opt <= hi:
+            raise ConfigError(
+                f"detector.batch_profile must be [min, opt, max] with 1 <= min <= opt <= max, "
+                f"got {list(self.batch_profile)}"
+            )
         _fraction("detector.conf", self.conf)
         _fraction("detector.iou", self.iou)
         if self.max_det < 1:
             raise ConfigError(f"detector.max_det must be at least 1, got {self.max_det}")
         _positive("detector.counters_period_s", self.counters_period_s)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TrackerSettings:
+    """The detector's multi-object tracker, which gives Detections their track ids.
+
+    ``high_score`` starts a track, ``low_score`` may only extend one, ``iou`` is the least
+    overlap with a track's predicted box, and a track unseen for ``max_age_s`` is dropped.
+    """
+
+    enabled: bool = True
+    high_score: float = 0.4
+    low_score: float = 0.15
+    iou: float = 0.25
+    max_age_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("high_score", "low_score", "iou"):
+            _fraction(f"tracker.{name}", getattr(self, name))
+        if self.low_score > self.high_score:
+            raise ConfigError("tracker.low_score must not be above tracker.high_score")
+        _positive("tracker.max_age_s", self.max_age_s)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -125,25 +175,37 @@ class ControllerSettings:
     track:  turn towards the most central confident detection of ``target_classes``; drive
             forward at ``forward_speed`` only while it is within ``center_tolerance`` (a
             fraction of the image width) of the image centre.
-    follow: follow the largest detection of ``target_classes[0]``; drive forward only while
-            it is centred, smaller than ``stop_box_height`` (fraction of image height: the
-            follow distance) and the laser sector of ``sector_width_deg`` straight ahead is
-            clear beyond ``safety_distance_m``.
-    Either mode commands zero whenever detections are older than ``detection_timeout_s``.
+    follow: lock onto the largest detection of ``target_classes[0]`` (by track id, so it does
+            not jump to another person) and keep it at ``follow_distance_m``, measured from the
+            box height (``distance_source = "box"``, for a target ``target_height_m`` tall) or
+            by the laser in the target's bearing (``"laser"``). Forward only while centred and
+            while the laser sector of ``sector_width_deg`` straight ahead is clear beyond
+            ``safety_distance_m``. A target unseen for ``target_lost_timeout_s`` is dropped.
+    Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
+    acceleration limits. Stale detections (older than ``detection_timeout_s``) and the e-stop
+    command zero at once, bypassing the acceleration limit.
     """
 
     mode: str = "track"
     target_classes: tuple[str, ...] = ("person",)
     min_score: float = 0.3
     control_rate_hz: float = 20.0
-    detection_timeout_s: float = 0.5
+    detection_timeout_s: float = 0.8
     scan_timeout_s: float = 0.5
-    angular_gain: float = 1.5
+    target_lost_timeout_s: float = 1.5
+    bearing_kp: float = 1.5
+    bearing_ki: float = 0.0
+    bearing_kd: float = 0.05
     max_angular: float = 1.0
     max_linear: float = 0.5
+    max_angular_accel: float = 3.0
+    max_linear_accel: float = 1.0
     forward_speed: float = 0.3
     center_tolerance: float = 0.1
-    stop_box_height: float = 0.6
+    distance_source: str = "box"
+    follow_distance_m: float = 1.0
+    distance_gain: float = 0.6
+    target_height_m: float = 1.7
     safety_distance_m: float = 0.5
     sector_width_deg: float = 30.0
     counters_period_s: float = 1.0
@@ -151,20 +213,32 @@ class ControllerSettings:
     def __post_init__(self) -> None:
         if self.mode not in ("track", "follow"):
             raise ConfigError(f"controller.mode must be 'track' or 'follow', got {self.mode!r}")
+        if self.distance_source not in ("box", "laser"):
+            raise ConfigError(
+                f"controller.distance_source must be 'box' or 'laser', got {self.distance_source!r}"
+            )
         if not self.target_classes:
             raise ConfigError("controller.target_classes needs at least one class name")
         for name in (
             "control_rate_hz",
             "detection_timeout_s",
             "scan_timeout_s",
+            "target_lost_timeout_s",
             "max_angular",
             "max_linear",
+            "max_angular_accel",
+            "max_linear_accel",
+            "follow_distance_m",
+            "target_height_m",
             "safety_distance_m",
             "sector_width_deg",
             "counters_period_s",
         ):
             _positive(f"controller.{name}", getattr(self, name))
-        for name in ("min_score", "center_tolerance", "stop_box_height"):
+        for name in ("bearing_kp", "bearing_ki", "bearing_kd", "distance_gain"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"controller.{name} must not be negative")
+        for name in ("min_score", "center_tolerance"):
             _fraction(f"controller.{name}", getattr(self, name))
         if not 0 <= self.forward_speed <= self.max_linear:
             raise ConfigError("controller.forward_speed must be within 0..max_linear")
@@ -211,6 +285,7 @@ class Config:
     stack: StackSettings = field(default_factory=StackSettings)
     camera: CameraSettings = field(default_factory=CameraSettings)
     detector: DetectorSettings = field(default_factory=DetectorSettings)
+    tracker: TrackerSettings = field(default_factory=TrackerSettings)
     controller: ControllerSettings = field(default_factory=ControllerSettings)
     metrics: MetricsSettings = field(default_factory=MetricsSettings)
     supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)

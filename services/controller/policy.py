@@ -1,8 +1,9 @@
-"""The controller's decisions, as pure functions of the latest inputs. No bus, no clock.
+"""The controller's decisions: pure functions and one stateful Controller. No bus, no clock.
 
-Conventions (REP 103): +x forward, +angular z turns left (counter-clockwise). A target to the
-right of the image centre therefore gives a negative angular velocity. Image x grows to the
-right; the horizontal offset of a box is normalised to -1 (left edge) .. +1 (right edge).
+Conventions (REP 103): +x forward, +angular z turns left (counter-clockwise). Image x grows to
+the right, so a target right of the image centre has a negative bearing and gives a negative
+angular velocity. The camera looks along +x; its horizontal field of view turns a pixel column
+into a bearing with the pinhole model.
 """
 
 from __future__ import annotations
@@ -11,9 +12,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from common.messages import Detections, LaserScan
 from common.settings import ControllerSettings
+from services.controller.limits import Limits, limit
+from services.controller.pid import PID, PIDGains
 
 
 @dataclass(frozen=True, slots=True)
@@ -33,111 +37,209 @@ class Command:
         return self.linear_x == 0.0 and self.angular_z == 0.0
 
 
+@dataclass(frozen=True, slots=True)
+class Inputs:
+    """The newest inputs and their ages in seconds (inf when none has arrived)."""
+
+    dets: Detections | None
+    dets_age_s: float
+    scan: LaserScan | None = None
+    scan_age_s: float = float("inf")
+    estop: bool = False
+
+
 def stop(state: str, reason: str, input_stamp_ns: int = 0) -> Command:
     return Command(0.0, 0.0, state, reason, input_stamp_ns=input_stamp_ns)
 
 
-def candidates(dets: Detections, classes: tuple[str, ...], min_score: float) -> np.ndarray:
+def candidates(
+    dets: Detections, classes: tuple[str, ...], min_score: float
+) -> npt.NDArray[np.intp]:
     """Indices of detections of one of ``classes`` with at least ``min_score``."""
     if len(dets) == 0:
         return np.empty(0, dtype=np.intp)
-    names = np.asarray(dets.class_names, dtype=object)
-    mask = np.isin(names, classes) & (dets.scores >= min_score)
-    return np.flatnonzero(mask)
+    mask = np.isin(np.asarray(dets.class_names, dtype=object), classes)
+    return np.flatnonzero(mask & (dets.scores >= min_score))
 
 
-def horizontal_offset(dets: Detections, i: int) -> float:
-    """Box centre offset from the image centre, -1 (left edge) .. +1 (right edge)."""
-    half = dets.image_width / 2.0
-    return float((dets.centers[i, 0] - half) / half)
+def focal_px(image_width: int, hfov_deg: float) -> float:
+    """The pinhole focal length in pixels for this width and horizontal field of view."""
+    return (image_width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
 
 
-def steer(offset: float, s: ControllerSettings) -> float:
-    """Proportional turn towards the target, limited to ``max_angular``."""
-    return float(np.clip(-s.angular_gain * offset, -s.max_angular, s.max_angular))
+def bearing(dets: Detections, i: int, hfov_deg: float) -> float:
+    """Bearing of box ``i``'s centre in radians, counter-clockwise positive (left of centre)."""
+    dx = float(dets.centers[i, 0]) - dets.image_width / 2.0
+    return -math.atan2(dx, focal_px(dets.image_width, hfov_deg))
+
+
+def box_distance(dets: Detections, i: int, hfov_deg: float, target_height_m: float) -> float:
+    """Distance to a target of known height from its box height (pinhole, square pixels)."""
+    height_px = max(float(dets.sizes[i, 1]), 1.0)
+    return target_height_m * focal_px(dets.image_width, hfov_deg) / height_px
+
+
+def sector_range(scan: LaserScan, center_rad: float, width_deg: float) -> float:
+    """The nearest valid range within +-width/2 of ``center_rad``, in metres.
+
+    NaN rays and rays below ``range_min`` are invalid and ignored; +inf (nothing within range)
+    counts as clear. A sector with no valid ray returns 0.0: what cannot be seen is treated as
+    blocked.
+    """
+    half = math.radians(width_deg) / 2.0
+    offset = np.angle(np.exp(1j * (scan.angles - center_rad)))  # wrapped to -pi..pi
+    ranges = scan.ranges[np.abs(offset) <= half].astype(np.float64)
+    valid = ranges[~np.isnan(ranges) & (ranges >= scan.range_min)]
+    return float(valid.min()) if valid.size else 0.0
 
 
 def sector_clearance(scan: LaserScan, width_deg: float) -> float:
-    """The nearest valid range within +-width/2 of straight ahead, in metres.
+    """The nearest valid range straight ahead (see :func:`sector_range`)."""
+    return sector_range(scan, 0.0, width_deg)
 
-    Rays that are NaN or below ``range_min`` are invalid and ignored; +inf (nothing within
-    range) counts as clear. A sector with no valid ray returns 0.0: what we cannot see is
-    treated as blocked.
+
+class Controller:
+    """Turns the newest inputs into one command per control tick, with memory.
+
+    Memory: the PID's history, the locked target's track id and when it was last seen, and the
+    previous command (for the acceleration limits).
     """
-    half = math.radians(width_deg) / 2.0
-    angles = np.arctan2(np.sin(scan.angles), np.cos(scan.angles))  # wrap to -pi..pi
-    ranges = scan.ranges[np.abs(angles) <= half].astype(np.float64)
-    valid = ranges[~np.isnan(ranges) & (ranges >= scan.range_min)]
-    if valid.size == 0:
-        return 0.0
-    return float(valid.min())
 
+    def __init__(self, s: ControllerSettings, hfov_deg: float) -> None:
+        self.s = s
+        self.hfov_deg = hfov_deg
+        self.pid = PID(
+            PIDGains(s.bearing_kp, s.bearing_ki, s.bearing_kd, s.max_angular, s.max_angular)
+        )
+        self.limits = Limits(s.max_linear, s.max_angular, s.max_linear_accel, s.max_angular_accel)
+        self.locked_id = -1
+        self.last_seen = -math.inf
+        self.last_aim: Command | None = None
+        self.previous = (0.0, 0.0)
+        self.last_step: float | None = None
 
-def track(dets: Detections, s: ControllerSettings) -> Command:
-    """Turn towards the most central confident target; drive forward only when it is centred."""
-    idx = candidates(dets, s.target_classes, s.min_score)
-    stamp = dets.header.stamp_ns
-    if idx.size == 0:
-        return stop("searching", f"no {'/'.join(s.target_classes)} in view", stamp)
-    offsets = np.array([horizontal_offset(dets, int(i)) for i in idx])
-    best = int(idx[int(np.argmin(np.abs(offsets)))])
-    offset = horizontal_offset(dets, best)
-    centred = abs(offset) <= 2 * s.center_tolerance  # tolerance is of the full width
-    return Command(
-        linear_x=s.forward_speed if centred else 0.0,
-        angular_z=steer(offset, s),
-        state="tracking" if centred else "turning",
-        reason=f"offset {offset:+.2f}",
-        target=dets.class_names[best],
-        track_id=-1 if dets.track_ids is None else int(dets.track_ids[best]),
-        input_stamp_ns=stamp,
-    )
+    def step(self, inp: Inputs, now: float) -> Command:
+        """The command for this tick; ``now`` is a monotonic time in seconds."""
+        # The first tick may accelerate for one nominal period, like every later one.
+        dt = 1.0 / self.s.control_rate_hz if self.last_step is None else now - self.last_step
+        self.last_step = now
+        if inp.estop:
+            return self._halt(stop("estop", "emergency stop latched"))
+        if inp.dets is None:
+            return self._halt(stop("stale", "no detections received yet"))
+        if inp.dets_age_s > self.s.detection_timeout_s:
+            return self._halt(stop("stale", f"detections are {inp.dets_age_s:.2f} s old"))
+        scan = inp.scan if inp.scan_age_s <= self.s.scan_timeout_s else None
+        aim = self._aim(inp.dets, scan, now, dt)
+        v, w = limit(self.previous, (aim.linear_x, aim.angular_z), dt, self.limits)
+        self.previous = (v, w)
+        return Command(v, w, aim.state, aim.reason, aim.target, aim.track_id, aim.input_stamp_ns)
 
+    def _halt(self, cmd: Command) -> Command:
+        """Zero at once (safety stops bypass the acceleration limit) and forget the target."""
+        self.previous = (0.0, 0.0)
+        self.pid.reset()
+        self.locked_id, self.last_aim = -1, None
+        return cmd
 
-def follow(dets: Detections, scan: LaserScan | None, s: ControllerSettings) -> Command:
-    """Follow the largest detection of the first target class, with the obstacle stop."""
-    cls = s.target_classes[0]
-    idx = candidates(dets, (cls,), s.min_score)
-    stamp = dets.header.stamp_ns
-    if idx.size == 0:
-        return stop("searching", f"no {cls} in view", stamp)
-    areas = np.prod(dets.sizes[idx], axis=1)
-    best = int(idx[int(np.argmax(areas))])
-    offset = horizontal_offset(dets, best)
-    angular = steer(offset, s)
-    height = float(dets.sizes[best, 1]) / dets.image_height
-    track_id = -1 if dets.track_ids is None else int(dets.track_ids[best])
+    def _pick(self, dets: Detections, idx: npt.NDArray[np.intp]) -> int | None:
+        """The target: the most central (track) or the locked / largest (follow) candidate."""
+        if idx.size == 0:
+            return None
+        if self.s.mode == "track":
+            offsets = np.abs(dets.centers[idx, 0] - dets.image_width / 2.0)
+            return int(idx[int(np.argmin(offsets))])
+        if dets.track_ids is not None and self.locked_id >= 0:
+            locked = idx[dets.track_ids[idx] == self.locked_id]
+            if locked.size:
+                return int(locked[0])
+            return None  # the locked target is out of view: never jump to another one
+        return int(idx[int(np.argmax(np.prod(dets.sizes[idx], axis=1)))])
 
-    def turn_only(state: str, reason: str) -> Command:
-        return Command(0.0, angular, state, reason, cls, track_id, stamp)
+    def _aim(self, dets: Detections, scan: LaserScan | None, now: float, dt: float) -> Command:
+        s = self.s
+        classes = s.target_classes if s.mode == "track" else s.target_classes[:1]
+        stamp = dets.header.stamp_ns
+        best = self._pick(dets, candidates(dets, classes, s.min_score))
+        if best is None:
+            if self.last_aim is not None and now - self.last_seen <= s.target_lost_timeout_s:
+                # A brief dropout (a missed detection): keep the last aim, but drive on only
+                # while the way ahead is still seen to be clear.
+                held = self.last_aim
+                clear = scan is not None and sector_clearance(scan, s.sector_width_deg) > (
+                    s.safety_distance_m
+                )
+                linear = held.linear_x if clear or s.mode == "track" else 0.0
+                return Command(
+                    linear,
+                    held.angular_z,
+                    "holding",
+                    f"target unseen for {now - self.last_seen:.1f} s",
+                    held.target,
+                    held.track_id,
+                    stamp,
+                )
+            self.locked_id, self.last_aim = -1, None
+            self.pid.reset()
+            return stop("searching", f"no {'/'.join(classes)} in view", stamp)
+        track_id = -1 if dets.track_ids is None else int(dets.track_ids[best])
+        if s.mode == "follow" and self.locked_id < 0 and track_id >= 0:
+            self.locked_id = track_id
+        self.last_seen = now
+        err = bearing(dets, best, self.hfov_deg)
+        angular = self.pid.update(err, dt)
+        centred = abs(math.tan(err)) * focal_px(dets.image_width, self.hfov_deg) <= (
+            s.center_tolerance * dets.image_width
+        )
+        name = dets.class_names[best]
+        if s.mode == "track":
+            aim = Command(
+                s.forward_speed if centred else 0.0,
+                angular,
+                "tracking" if centred else "turning",
+                f"bearing {math.degrees(err):+.1f} deg",
+                name,
+                track_id,
+                stamp,
+            )
+        else:
+            aim = self._follow(dets, best, scan, err, angular, centred, name, track_id)
+        self.last_aim = aim
+        return aim
 
-    if abs(offset) > 2 * s.center_tolerance:
-        return turn_only("turning", f"offset {offset:+.2f}")
-    if height >= s.stop_box_height:
-        return turn_only("arrived", f"box height {height:.2f} of image")
-    if scan is None:
-        return turn_only("blocked", "no recent laser scan")
-    clearance = sector_clearance(scan, s.sector_width_deg)
-    if clearance <= s.safety_distance_m:
-        return turn_only("blocked", f"obstacle at {clearance:.2f} m")
-    return Command(
-        s.forward_speed, angular, "following", f"offset {offset:+.2f}", cls, track_id, stamp
-    )
+    def _follow(
+        self,
+        dets: Detections,
+        i: int,
+        scan: LaserScan | None,
+        err: float,
+        angular: float,
+        centred: bool,
+        name: str,
+        track_id: int,
+    ) -> Command:
+        s = self.s
+        stamp = dets.header.stamp_ns
 
+        def turn_only(state: str, reason: str) -> Command:
+            return Command(0.0, angular, state, reason, name, track_id, stamp)
 
-def decide(
-    dets: Detections | None,
-    dets_age_s: float,
-    scan: LaserScan | None,
-    scan_age_s: float,
-    s: ControllerSettings,
-) -> Command:
-    """The command for this control tick. Zero whenever detections are missing or stale."""
-    if dets is None:
-        return stop("stale", "no detections received yet")
-    if dets_age_s > s.detection_timeout_s:
-        return stop("stale", f"detections are {dets_age_s:.2f} s old")
-    if s.mode == "track":
-        return track(dets, s)
-    fresh_scan = scan if scan is not None and scan_age_s <= s.scan_timeout_s else None
-    return follow(dets, fresh_scan, s)
+        if s.distance_source == "laser":
+            if scan is None:
+                return turn_only("blocked", "no recent laser scan for the distance")
+            distance = sector_range(scan, err, s.sector_width_deg / 3.0)
+        else:
+            distance = box_distance(dets, i, self.hfov_deg, s.target_height_m)
+        if not centred:
+            return turn_only("turning", f"bearing {math.degrees(err):+.1f} deg")
+        if distance <= s.follow_distance_m:
+            return turn_only("arrived", f"target at {distance:.2f} m")
+        if scan is None:
+            return turn_only("blocked", "no recent laser scan")
+        clearance = sector_clearance(scan, s.sector_width_deg)
+        if clearance <= s.safety_distance_m:
+            return turn_only("blocked", f"obstacle at {clearance:.2f} m")
+        speed = min(s.max_linear, s.distance_gain * (distance - s.follow_distance_m))
+        return Command(
+            speed, angular, "following", f"target at {distance:.2f} m", name, track_id, stamp
+        )

@@ -8,11 +8,13 @@ from typing import Generic, TypeVar
 
 import zenoh
 
-from common.errors import DecodeError
-from common.messages import ControllerStatus, Detections, LaserScan, Twist
+from common.bus import open_session
+from common.errors import DecodeError, StackError
+from common.keys import Keys
+from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist, now_ns
 from common.node import Node
 from common.settings import Config
-from services.controller.policy import Command, decide
+from services.controller.policy import Command, Controller, Inputs
 
 _M = TypeVar("_M")
 
@@ -58,6 +60,27 @@ def run(config: Config, stop: threading.Event) -> int:
             except DecodeError as exc:
                 node.bad_input(det_key, exc)
 
+        estop = threading.Event()  # latched: only an explicit release clears it
+
+        def on_estop(sample: zenoh.Sample) -> None:
+            try:
+                msg = EStop.decode(sample.payload.to_bytes())
+            except DecodeError as exc:
+                # Garbage on the e-stop key is treated as a press: fail safe, not open.
+                node.bad_input(node.keys.estop(), exc)
+                estop.set()
+                return
+            if msg.engaged:
+                estop.set()
+            else:
+                estop.clear()
+            node.log.warning(
+                "e-stop %s by %s: %s",
+                "ENGAGED" if msg.engaged else "released",
+                msg.header.source,
+                msg.reason or "-",
+            )
+
         def on_scan(sample: zenoh.Sample) -> None:
             try:
                 scan.set(LaserScan.decode(sample.payload.to_bytes()))
@@ -68,7 +91,9 @@ def run(config: Config, stop: threading.Event) -> int:
         subs = [
             node.session.declare_subscriber(det_key, on_detections),
             node.session.declare_subscriber(node.keys.scan(), on_scan),
+            node.session.declare_subscriber(node.keys.estop(), on_estop),
         ]
+        controller = Controller(s, config.camera.hfov_deg)
         cmd_pub = node.session.declare_publisher(node.keys.cmd_vel())
         status_pub = node.session.declare_publisher(node.keys.controller_status())
         node.log.info("mode %s on %s, targets %s", s.mode, det_key, list(s.target_classes))
@@ -81,7 +106,7 @@ def run(config: Config, stop: threading.Event) -> int:
                 dets.arrived.clear()  # before reading, so a message arriving now wakes us
                 d, d_age = dets.get()
                 sc, sc_age = scan.get()
-                cmd = decide(d, d_age, sc, sc_age, s)
+                cmd = controller.step(Inputs(d, d_age, sc, sc_age, estop.is_set()), tick)
                 _publish(node, cmd_pub, status_pub, cmd, s.mode)
                 if cmd.state != last_state:
                     node.log.info("state %s: %s", cmd.state, cmd.reason)
@@ -118,3 +143,33 @@ def _publish(
         track_id=cmd.track_id,
     )
     status_pub.put(status.encode())
+
+
+def send_estop(config: Config, engaged: bool, reason: str) -> int:
+    """Publish one EStop and wait until the controller has seen it (its status says so)."""
+    keys = Keys(config.stack.prefix)
+    session = open_session(config.zenoh)
+    seen = threading.Event()
+
+    def on_status(sample: zenoh.Sample) -> None:
+        try:
+            state = ControllerStatus.decode(sample.payload.to_bytes()).state
+        except DecodeError:
+            return
+        if (state == "estop") == engaged:
+            seen.set()
+
+    sub = session.declare_subscriber(keys.controller_status(), on_status)
+    pub = session.declare_publisher(keys.estop())
+    header = Header(stamp_ns=now_ns(), frame_id="", seq=1, source="estop-cli")
+    try:
+        # Repeat until acknowledged: the first put may race the peer mesh being formed.
+        for _ in range(50):
+            pub.put(EStop(header=header, engaged=engaged, reason=reason).encode())
+            if seen.wait(0.2):
+                print("e-stop engaged" if engaged else "e-stop released")
+                return 0
+        raise StackError("no controller acknowledged the e-stop within 10 s")
+    finally:
+        sub.undeclare()
+        session.close()

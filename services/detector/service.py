@@ -7,6 +7,7 @@ import threading
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import zenoh
 
 from common.errors import DecodeError, ImageError
@@ -16,6 +17,7 @@ from common.node import Node
 from common.settings import Config, DetectorSettings
 from services.detector.mailbox import Mailbox
 from services.detector.pipeline import Detector
+from services.detector.tracker import Tracker, TrackerParams
 from services.detector.types import DetectionResult, DetectorParams
 
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag
@@ -31,8 +33,13 @@ def open_detector(s: DetectorSettings) -> Detector:
 
 
 def to_message(
-    frame: Frame, result: DetectionResult, det: Detector, received_ns: int
+    frame: Frame,
+    result: DetectionResult,
+    det: Detector,
+    received_ns: int,
+    track_ids: npt.NDArray[np.int32] | None,
 ) -> Detections:
+    """The Detections message for ``frame``: its header, the result, the detector's stamps."""
     t = result.timing
     return Detections(
         header=frame.header,
@@ -42,7 +49,7 @@ def to_message(
         class_names=tuple(result.class_names),
         scores=result.scores,
         xyxy=result.xyxy,
-        track_ids=None,
+        track_ids=track_ids,
         timing_ms={
             "preprocess": t.preprocess_ms,
             "inference": t.inference_ms,
@@ -64,6 +71,16 @@ def run(config: Config, stop: threading.Event) -> int:
         node.log.info("model %s on %s (%s, %s)", detector.model_path, b.name, b.device, b.precision)
         frame_key = node.keys.frame(config.stack.camera)
         mailbox: Mailbox[Frame] = Mailbox()
+        t = config.tracker
+        tracker = (
+            Tracker(
+                TrackerParams(
+                    high_score=t.high_score, low_score=t.low_score, iou=t.iou, max_age_s=t.max_age_s
+                )
+            )
+            if t.enabled
+            else None
+        )
 
         def on_frame(sample: zenoh.Sample) -> None:
             # Decode here, not in the loop: garbage must be counted even when a newer frame
@@ -93,7 +110,14 @@ def run(config: Config, stop: threading.Event) -> int:
                     node.bad_input(frame_key, exc)
                     continue
                 result = detector.detect(image)
-                pub.put(to_message(frame, result, detector, received_ns).encode())
+                track_ids = (
+                    None
+                    if tracker is None
+                    else tracker.update(
+                        result.xyxy, result.scores, result.class_ids, frame.header.stamp_ns / 1e9
+                    )
+                )
+                pub.put(to_message(frame, result, detector, received_ns, track_ids).encode())
                 node.counters.add("detections_out")
         finally:
             sub.undeclare()

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from common.messages import ControllerStatus, Detections, Twist
-from tests.integration.conftest import Stack, wait_for
+from tests.integration.conftest import REPO, Stack, wait_for
 
 pytestmark = pytest.mark.integration
 
@@ -68,3 +70,48 @@ def test_killed_detector_stops_robot_and_is_restarted(make_stack) -> None:  # ty
     assert all(t.is_zero for t in stale_cmds)
     assert stack.stop() == 0, stack.log()
     assert "detector: exited with code" in stack.log()
+
+
+def test_estop_latches_zero_until_released(make_stack) -> None:  # type: ignore[no-untyped-def]
+    stack: Stack = make_stack()
+    stack.wait_ready({"camera", "detector", "controller"})
+    _, cmds = stack.subscribe(stack.keys.cmd_vel())
+    _, statuses = stack.subscribe(stack.keys.controller_status())
+    wait_for(lambda: any(not Twist.decode(c).is_zero for c in list(cmds)), 60, "motion")
+
+    def estop(action: str) -> None:
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "services.controller",
+                "estop",
+                action,
+                "--config",
+                str(stack.config_path),
+                "--reason",
+                "test",
+            ],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 0, done.stderr
+
+    estop("engage")
+    engaged_at = len(statuses)
+    # Let several control ticks pass; every one of them must be a latched zero.
+    wait_for(lambda: len(statuses) > engaged_at + 20, 10, "control ticks while e-stopped")
+    latched = [ControllerStatus.decode(s) for s in list(statuses)[engaged_at + 2 :]]
+    seqs = {st.header.seq for st in latched}
+    assert all(st.state == "estop" for st in latched)
+    assert all(t.is_zero for t in map(Twist.decode, list(cmds)) if t.header.seq in seqs)
+    estop("release")
+    released_at = len(cmds)
+    wait_for(
+        lambda: any(not Twist.decode(c).is_zero for c in list(cmds)[released_at:]),
+        30,
+        "motion after the release",
+    )
+    assert stack.stop() == 0, stack.log()

@@ -1,21 +1,38 @@
-"""The controller's decisions on hand-built detections and scans."""
+"""The controller's decisions on hand-built detections and scans, with an explicit clock."""
 
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
 
 from common.messages import Detections, Header, LaserScan
 from common.settings import ControllerSettings
-from services.controller.policy import decide, follow, sector_clearance, track
+from services.controller.policy import (
+    Controller,
+    Inputs,
+    bearing,
+    box_distance,
+    focal_px,
+    sector_clearance,
+    sector_range,
+)
 
 HEADER = Header(stamp_ns=123, frame_id="camera", seq=1, source="test")
-W, H = 640, 480
+W, H, HFOV = 640, 480, 60.0
+# No acceleration limit and a pure P term: a single tick shows the policy's intent.
+FREE = dict(max_linear_accel=1e9, max_angular_accel=1e9, bearing_kd=0.0)
+TRACK = ControllerSettings(mode="track", target_classes=("person",), **FREE)  # type: ignore[arg-type]
+FOLLOW = dataclasses.replace(TRACK, mode="follow")
 
 
-def dets(*boxes: tuple[str, float, float, float, float, float], width: int = W) -> Detections:
+def dets(
+    *boxes: tuple[str, float, float, float, float, float],
+    width: int = W,
+    tracks: list[int] | None = None,
+) -> Detections:
     """Boxes as (class, score, cx, cy, w, h) in pixels."""
     n = len(boxes)
     xyxy = np.array(
@@ -30,6 +47,7 @@ def dets(*boxes: tuple[str, float, float, float, float, float], width: int = W) 
         class_names=tuple(b[0] for b in boxes),
         scores=np.array([b[1] for b in boxes], np.float32),
         xyxy=xyxy,
+        track_ids=None if tracks is None else np.array(tracks, np.int32),
     )
 
 
@@ -47,8 +65,27 @@ def scan(front_range: float, *, rays: int = 181, fov_deg: float = 180.0) -> Lase
     )
 
 
-TRACK = ControllerSettings(mode="track", target_classes=("person",))
-FOLLOW = dataclasses.replace(TRACK, mode="follow")
+def step(
+    s: ControllerSettings,
+    d: Detections | None,
+    sc: LaserScan | None = None,
+    *,
+    age: float = 0.0,
+    now: float = 1.0,
+    ctl: Controller | None = None,
+):  # type: ignore[no-untyped-def]
+    ctl = ctl or Controller(s, HFOV)
+    return ctl.step(Inputs(d, age, sc, 0.0 if sc is not None else math.inf), now)
+
+
+# A box tall enough for a 1.7 m person at 2.5 m: beyond the 1.0 m follow distance.
+FAR = 1.7 * focal_px(W, HFOV) / 2.5
+
+
+def test_pinhole_geometry() -> None:
+    d = dets(("person", 0.9, W, 240, 50, FAR))  # centre at the right image edge
+    assert bearing(d, 0, HFOV) == pytest.approx(-math.radians(HFOV / 2))
+    assert box_distance(d, 0, HFOV, 1.7) == pytest.approx(2.5, rel=1e-3)
 
 
 def test_track_turns_towards_most_central_confident_target() -> None:
@@ -58,54 +95,105 @@ def test_track_turns_towards_most_central_confident_target() -> None:
         ("cup", 0.99, 320, 240, 50, 50),
         ("person", 0.2, 330, 240, 50, 50),
     )
-    cmd = track(d, TRACK)
+    cmd = step(TRACK, d)
     # the cup is not a target, the 0.2 person is below min_score: the x=400 person is chosen
-    assert cmd.target == "person"
-    assert cmd.angular_z < 0  # right of centre -> clockwise
+    assert cmd.target == "person" and cmd.angular_z < 0  # right of centre -> clockwise
+    assert cmd.angular_z == pytest.approx(TRACK.bearing_kp * bearing(d, 1, HFOV))
     assert cmd.linear_x == 0.0 and cmd.state == "turning"
     assert cmd.input_stamp_ns == HEADER.stamp_ns
 
 
 def test_track_drives_forward_only_when_centred() -> None:
-    cmd = track(dets(("person", 0.9, W / 2 + 10, 240, 50, 100)), TRACK)
+    cmd = step(TRACK, dets(("person", 0.9, W / 2 + 10, 240, 50, 100)))
     assert cmd.linear_x == TRACK.forward_speed and cmd.state == "tracking"
-    left = track(dets(("person", 0.9, 100, 240, 50, 100)), TRACK)
+    left = step(TRACK, dets(("person", 0.9, 100, 240, 50, 100)))
     assert left.angular_z > 0 and left.linear_x == 0.0
 
 
 def test_uses_the_image_width_from_the_message() -> None:
     # x=600 is right of centre in a 640 image but left of centre in a 1280 one
-    assert track(dets(("person", 0.9, 600, 240, 50, 100), width=1280), TRACK).angular_z > 0
+    assert step(TRACK, dets(("person", 0.9, 600, 240, 50, 100), width=1280)).angular_z > 0
 
 
-def test_angular_is_limited() -> None:
-    s = dataclasses.replace(TRACK, angular_gain=100.0, max_angular=0.7)
-    assert track(dets(("person", 0.9, 630, 240, 10, 10)), s).angular_z == pytest.approx(-0.7)
+def test_angular_speed_is_limited() -> None:
+    s = dataclasses.replace(TRACK, bearing_kp=100.0, max_angular=0.7)
+    assert step(s, dets(("person", 0.9, 630, 240, 10, 10))).angular_z == pytest.approx(-0.7)
+
+
+def test_acceleration_is_limited_between_ticks() -> None:
+    s = dataclasses.replace(TRACK, max_linear_accel=1.0, max_angular_accel=2.0)
+    ctl = Controller(s, HFOV)
+    d = dets(("person", 0.9, 330, 240, 50, 100))
+    first = ctl.step(Inputs(d, 0.0), now=0.0)  # first tick: one nominal period (1/20 s)
+    second = ctl.step(Inputs(d, 0.0), now=0.1)
+    assert first.linear_x == pytest.approx(0.05) and second.linear_x == pytest.approx(0.15)
 
 
 def test_no_target_means_zero() -> None:
-    for policy in (lambda d: track(d, TRACK), lambda d: follow(d, scan(5.0), FOLLOW)):
-        cmd = policy(dets(("cup", 0.9, 320, 240, 50, 50)))
+    for s, sc in ((TRACK, None), (FOLLOW, scan(5.0))):
+        cmd = step(s, dets(("cup", 0.9, 320, 240, 50, 50)), sc)
         assert cmd.is_zero and cmd.state == "searching"
 
 
-def test_follow_picks_the_largest_target() -> None:
-    d = dets(("person", 0.9, 200, 240, 40, 80), ("person", 0.6, 330, 240, 100, 200))
-    cmd = follow(d, scan(5.0), FOLLOW)
-    assert cmd.state == "following" and cmd.linear_x > 0
+def test_follow_keeps_the_distance() -> None:
+    far = step(FOLLOW, dets(("person", 0.9, 320, 240, 60, FAR)), scan(5.0))
+    assert far.state == "following"
+    assert far.linear_x == pytest.approx(min(FOLLOW.max_linear, FOLLOW.distance_gain * 1.5))
+    near = step(
+        FOLLOW, dets(("person", 0.9, 320, 240, 200, 1.7 * focal_px(W, HFOV) / 0.9)), scan(5.0)
+    )
+    assert near.linear_x == 0.0 and near.state == "arrived"
+
+
+def test_follow_by_laser_measures_in_the_target_bearing() -> None:
+    s = dataclasses.replace(FOLLOW, distance_source="laser")
+    d = dets(("person", 0.9, 320, 240, 60, 20))  # a tiny box: "far" by its height
+    assert step(s, d, scan(0.9)).state == "arrived"  # but the laser says 0.9 m
+    assert step(s, d, scan(3.0)).state == "following"
+    assert step(s, d, None).state == "blocked"
 
 
 def test_follow_stops_for_an_obstacle_ahead() -> None:
-    d = dets(("person", 0.9, 320, 240, 100, 200))
-    assert follow(d, scan(0.3), FOLLOW).linear_x == 0.0
-    assert follow(d, scan(0.3), FOLLOW).state == "blocked"
-    assert follow(d, None, FOLLOW).state == "blocked"  # no scan: cannot tell it is clear
-    assert follow(d, scan(0.8), FOLLOW).linear_x > 0
+    d = dets(("person", 0.9, 320, 240, 60, FAR))
+    assert step(FOLLOW, d, scan(0.3)).state == "blocked"
+    assert step(FOLLOW, d, scan(0.3)).linear_x == 0.0
+    assert step(FOLLOW, d, None).state == "blocked"  # no scan: cannot tell it is clear
+    assert step(FOLLOW, d, scan(0.8)).linear_x > 0
 
 
-def test_follow_stops_at_the_follow_distance() -> None:
-    cmd = follow(dets(("person", 0.9, 320, 240, 200, 0.7 * H)), scan(5.0), FOLLOW)
-    assert cmd.linear_x == 0.0 and cmd.state == "arrived"
+def test_follow_locks_onto_one_track() -> None:
+    ctl = Controller(FOLLOW, HFOV)
+    big_a = ("person", 0.9, 250.0, 240.0, 80.0, FAR)
+    bigger_b = ("person", 0.9, 420.0, 240.0, 120.0, FAR * 1.1)
+    first = ctl.step(Inputs(dets(big_a, tracks=[7]), 0.0, scan(5.0), 0.0), now=0.0)
+    assert first.track_id == 7
+    # another, larger person appears: the lock holds on track 7
+    second = ctl.step(Inputs(dets(big_a, bigger_b, tracks=[7, 8]), 0.0, scan(5.0), 0.0), 0.1)
+    assert second.track_id == 7 and second.angular_z > 0
+
+
+def test_lost_target_is_held_briefly_then_dropped() -> None:
+    ctl = Controller(FOLLOW, HFOV)
+    seen = dets(("person", 0.9, 320, 240, 60, FAR), tracks=[3])
+    empty = dets()
+    ctl.step(Inputs(seen, 0.0, scan(5.0), 0.0), now=0.0)
+    held = ctl.step(Inputs(empty, 0.0, scan(5.0), 0.0), now=FOLLOW.target_lost_timeout_s / 2)
+    assert held.state == "holding" and held.linear_x > 0
+    lost = ctl.step(Inputs(empty, 0.0, scan(5.0), 0.0), now=FOLLOW.target_lost_timeout_s + 0.1)
+    assert lost.is_zero and lost.state == "searching"
+    # unlocked: a new person is followed
+    other = ctl.step(
+        Inputs(dets(("person", 0.9, 320, 240, 60, FAR), tracks=[9]), 0.0, scan(5.0), 0.0),
+        now=FOLLOW.target_lost_timeout_s + 0.2,
+    )
+    assert other.track_id == 9
+
+
+def test_held_target_does_not_drive_into_an_obstacle() -> None:
+    ctl = Controller(FOLLOW, HFOV)
+    ctl.step(Inputs(dets(("person", 0.9, 320, 240, 60, FAR)), 0.0, scan(5.0), 0.0), now=0.0)
+    held = ctl.step(Inputs(dets(), 0.0, scan(0.2), 0.0), now=0.1)
+    assert held.state == "holding" and held.linear_x == 0.0
 
 
 def test_sector_checks_a_sector_not_one_ray() -> None:
@@ -115,23 +203,22 @@ def test_sector_checks_a_sector_not_one_ray() -> None:
     off_axis = dataclasses.replace(s, ranges=ranges)
     assert sector_clearance(off_axis, 30.0) == pytest.approx(0.2)
     assert sector_clearance(off_axis, 10.0) == pytest.approx(10.0)
+    assert sector_range(off_axis, np.radians(10), 4.0) == pytest.approx(0.2)
 
 
 def test_sector_ignores_invalid_rays_and_blind_is_blocked() -> None:
-    s = scan(np.nan)
-    assert sector_clearance(s, 8.0) == 0.0  # every ray in the sector is NaN: blocked
+    assert sector_clearance(scan(np.nan), 8.0) == 0.0  # every ray in the sector is NaN
     assert sector_clearance(scan(0.01), 8.0) == 0.0  # below range_min: invalid -> blind
 
 
-def test_stale_or_missing_detections_command_zero() -> None:
+def test_stale_or_missing_detections_and_estop_command_zero_at_once() -> None:
+    ctl = Controller(dataclasses.replace(TRACK, max_linear_accel=0.1), HFOV)
     d = dets(("person", 0.9, 320, 240, 50, 100))
-    assert decide(None, float("inf"), None, float("inf"), TRACK).is_zero
-    stale = decide(d, TRACK.detection_timeout_s + 0.01, None, 0.0, TRACK)
-    assert stale.is_zero and stale.state == "stale"
-    assert not decide(d, 0.0, None, 0.0, TRACK).is_zero
-
-
-def test_follow_treats_an_old_scan_as_missing() -> None:
-    d = dets(("person", 0.9, 320, 240, 100, 200))
-    assert decide(d, 0.0, scan(5.0), 0.0, FOLLOW).linear_x > 0
-    assert decide(d, 0.0, scan(5.0), FOLLOW.scan_timeout_s + 1, FOLLOW).linear_x == 0.0
+    for t in range(20):
+        moving = ctl.step(Inputs(d, 0.0), now=t * 0.1)
+    assert moving.linear_x > 0
+    stale = ctl.step(Inputs(d, TRACK.detection_timeout_s + 0.01), now=2.1)
+    assert stale.is_zero and stale.state == "stale"  # no deceleration ramp for a stop
+    assert ctl.step(Inputs(None, math.inf), now=2.2).state == "stale"
+    estop = ctl.step(Inputs(d, 0.0, estop=True), now=2.3)
+    assert estop.is_zero and estop.state == "estop"
