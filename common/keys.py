@@ -9,6 +9,7 @@ runs can share one network without hearing each other:
     <prefix>/controller/cmd_vel               Twist           controller -> robot/sim, metrics
     <prefix>/controller/status                ControllerStatus
     <prefix>/controller/estop                 EStop           anyone -> controller (latching)
+    <prefix>/sim/truth                        GroundTruth     simulator -> scenario scoring
     <prefix>/counters/<service>               ServiceCounters each service -> metrics
     <prefix>/metrics                          queryable       metrics -> JSON snapshot
     <prefix>/health/<service>                 liveliness      present while a service is ready
@@ -59,6 +60,9 @@ class Keys:
 
     def controller_status(self) -> str:
         return f"{self.prefix}/controller/status"
+
+    def sim_truth(self) -> str:
+        return f"{self.prefix}/sim/truth"
 
     def estop(self) -> str:
         return f"{self.prefix}/controller/estop"

@@ -356,6 +356,55 @@ class ControllerStatus(_Message):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class GroundTruth(_Message):
+    """The simulator's truth: the robot's pose and every target's position, in the world frame.
+
+    ``robot`` is (x, y, theta) in metres and radians; ``targets_xy`` is (n, 2) float64 metres;
+    ``target_names`` the class of each target (e.g. "person") and ``target_ids`` its scenario
+    id, so a run can be scored against what really happened.
+    """
+
+    TAG: ClassVar[str] = "GroundTruth"
+    header: Header
+    robot: tuple[float, float, float]
+    robot_velocity: tuple[float, float] = (0.0, 0.0)
+    targets_xy: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2)))
+    target_names: tuple[str, ...] = ()
+    target_ids: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        n = len(self.target_names)
+        if self.targets_xy.shape != (n, 2) or len(self.target_ids) != n:
+            raise ValueError(f"targets_xy must be ({n}, 2) with {n} ids")
+
+    def _body(self) -> dict[str, Any]:
+        return {
+            "header": self.header.to_wire(),
+            "robot": list(self.robot),
+            "robot_velocity": list(self.robot_velocity),
+            "n": len(self.target_names),
+            "targets_xy": array_bytes(self.targets_xy, np.float64),
+            "target_names": list(self.target_names),
+            "target_ids": list(self.target_ids),
+        }
+
+    @classmethod
+    def _from_body(cls, b: Body) -> GroundTruth:
+        n = b.get_int("n", 0, MAX_DETECTIONS)
+        vel = b.floats("robot_velocity")
+        if len(vel) != 2:
+            raise DecodeError(f"{b.tag}.robot_velocity: expected 2 numbers")
+        return cls(
+            header=Header.from_wire(b.get_map("header")),
+            robot=_vec3(b, "robot"),
+            robot_velocity=(vel[0], vel[1]),
+            targets_xy=b.array("targets_xy", np.float64, (n, 2)),
+            target_names=b.str_list("target_names"),
+            target_ids=b.str_list("target_ids"),
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class EStop(_Message):
     """The emergency stop: ``engaged`` latches zero velocity until an EStop with False."""
 

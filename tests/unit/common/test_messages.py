@@ -11,7 +11,9 @@ from common.errors import DecodeError
 from common.messages import (
     ControllerStatus,
     Detections,
+    EStop,
     Frame,
+    GroundTruth,
     Header,
     LaserScan,
     MetricsSnapshot,
@@ -66,6 +68,15 @@ MESSAGES = [
         track_id=3,
     ),
     ServiceCounters(header=HEADER, service="detector", counters={"dropped": 3, "bad_input": 1}),
+    EStop(header=HEADER, engaged=True, reason="operator"),
+    GroundTruth(
+        header=HEADER,
+        robot=(1.0, -2.0, 0.5),
+        robot_velocity=(0.2, 0.1),
+        targets_xy=np.array([[3.0, 1.0], [4.0, -1.0]]),
+        target_names=("person", "cat"),
+        target_ids=("alice", "tom"),
+    ),
     MetricsSnapshot(
         header=HEADER,
         window_s=10.0,
