@@ -359,6 +359,7 @@ class ControllerStatus(_Message):
 class GroundTruth(_Message):
     """The simulator's truth: the robot's pose and every target's position, in the world frame.
 
+    ``sim_time_s`` is the scenario clock, which starts once the detector and controller are up.
     ``robot`` is (x, y, theta) in metres and radians; ``targets_xy`` is (n, 2) float64 metres;
     ``target_names`` the class of each target (e.g. "person") and ``target_ids`` its scenario
     id, so a run can be scored against what really happened.
@@ -366,6 +367,7 @@ class GroundTruth(_Message):
 
     TAG: ClassVar[str] = "GroundTruth"
     header: Header
+    sim_time_s: float
     robot: tuple[float, float, float]
     robot_velocity: tuple[float, float] = (0.0, 0.0)
     targets_xy: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2)))
@@ -380,6 +382,7 @@ class GroundTruth(_Message):
     def _body(self) -> dict[str, Any]:
         return {
             "header": self.header.to_wire(),
+            "sim_time_s": self.sim_time_s,
             "robot": list(self.robot),
             "robot_velocity": list(self.robot_velocity),
             "n": len(self.target_names),
@@ -396,6 +399,7 @@ class GroundTruth(_Message):
             raise DecodeError(f"{b.tag}.robot_velocity: expected 2 numbers")
         return cls(
             header=Header.from_wire(b.get_map("header")),
+            sim_time_s=b.get_float("sim_time_s"),
             robot=_vec3(b, "robot"),
             robot_velocity=(vel[0], vel[1]),
             targets_xy=b.array("targets_xy", np.float64, (n, 2)),

@@ -179,8 +179,10 @@ class ControllerSettings:
             not jump to another person) and keep it at ``follow_distance_m``, measured from the
             box height (``distance_source = "box"``, for a target ``target_height_m`` tall) or
             by the laser in the target's bearing (``"laser"``). Forward only while centred and
-            while the laser sector of ``sector_width_deg`` straight ahead is clear beyond
-            ``safety_distance_m``. A target unseen for ``target_lost_timeout_s`` is dropped.
+            while the laser sector of ``sector_width_deg`` straight ahead, and the corridor
+            ``robot_width_m`` wide that the body sweeps, are clear beyond ``safety_distance_m``
+            plus the room needed to brake. A box cut by the image edge counts as arrived.
+            A target unseen for ``target_lost_timeout_s`` is dropped.
     Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
     acceleration limits. Stale detections (older than ``detection_timeout_s``) and the e-stop
     command zero at once, bypassing the acceleration limit.
@@ -190,7 +192,7 @@ class ControllerSettings:
     target_classes: tuple[str, ...] = ("person",)
     min_score: float = 0.3
     control_rate_hz: float = 20.0
-    detection_timeout_s: float = 0.8
+    detection_timeout_s: float = 1.0
     scan_timeout_s: float = 0.5
     target_lost_timeout_s: float = 1.5
     bearing_kp: float = 1.5
@@ -208,6 +210,7 @@ class ControllerSettings:
     target_height_m: float = 1.7
     safety_distance_m: float = 0.5
     sector_width_deg: float = 30.0
+    robot_width_m: float = 0.6
     counters_period_s: float = 1.0
 
     def __post_init__(self) -> None:
@@ -232,6 +235,7 @@ class ControllerSettings:
             "target_height_m",
             "safety_distance_m",
             "sector_width_deg",
+            "robot_width_m",
             "counters_period_s",
         ):
             _positive(f"controller.{name}", getattr(self, name))
@@ -245,15 +249,71 @@ class ControllerSettings:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class SimSettings:
+    """The simulated robot and world (services/sim), standing in for a camera and a base.
+
+    ``scenario`` names a world in services/sim/scenarios.py. The scenario clock starts once
+    every service in ``wait_for`` is ready, so start-up time does not eat into the scenario.
+    The camera uses camera.hfov_deg; the image is ``width`` x ``height``.
+    """
+
+    scenario: str = "demo"
+    wait_for: tuple[str, ...] = ("detector", "controller")
+    physics_hz: float = 50.0
+    camera_rate_hz: float = 5.0
+    scan_rate_hz: float = 10.0
+    truth_rate_hz: float = 20.0
+    width: int = 640
+    height: int = 480
+    camera_height_m: float = 0.6
+    laser_fov_deg: float = 270.0
+    laser_rays: int = 541
+    laser_range_max_m: float = 12.0
+    laser_noise_m: float = 0.01
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in (
+            "physics_hz",
+            "camera_rate_hz",
+            "scan_rate_hz",
+            "truth_rate_hz",
+            "camera_height_m",
+            "laser_fov_deg",
+            "laser_range_max_m",
+        ):
+            _positive(f"sim.{name}", getattr(self, name))
+        if not (16 <= self.width <= 4096 and 16 <= self.height <= 4096):
+            raise ConfigError(f"sim image size {self.width}x{self.height} is out of range")
+        if self.laser_rays < 2 or self.laser_noise_m < 0:
+            raise ConfigError("sim.laser_rays must be >= 2 and sim.laser_noise_m >= 0")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class MetricsSettings:
-    """The sliding window the percentiles cover and how often the report is logged."""
+    """The sliding window the percentiles cover, how often the report is logged, how much
+    per-second history (FPS over time) is kept, and the optional Prometheus endpoint.
+
+    ``prometheus_port`` 0 turns the endpoint off; it listens on ``prometheus_host`` (loopback by
+    default, so that nothing is exposed to the network unless asked for).
+    """
 
     window_s: float = 10.0
     report_period_s: float = 5.0
+    history_s: float = 600.0
+    prometheus_port: int = 0
+    prometheus_host: str = "127.0.0.1"
 
     def __post_init__(self) -> None:
         _positive("metrics.window_s", self.window_s)
         _positive("metrics.report_period_s", self.report_period_s)
+        _positive("metrics.history_s", self.history_s)
+        if not 0 <= self.prometheus_port <= 65535:
+            raise ConfigError(
+                f"metrics.prometheus_port must be 0..65535 (0 = off), got {self.prometheus_port}"
+            )
+        if not self.prometheus_host:
+            raise ConfigError("metrics.prometheus_host must not be empty")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -287,6 +347,7 @@ class Config:
     detector: DetectorSettings = field(default_factory=DetectorSettings)
     tracker: TrackerSettings = field(default_factory=TrackerSettings)
     controller: ControllerSettings = field(default_factory=ControllerSettings)
+    sim: SimSettings = field(default_factory=SimSettings)
     metrics: MetricsSettings = field(default_factory=MetricsSettings)
     supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)
 
@@ -367,3 +428,31 @@ def load_config(path: str | Path | None = None, environ: Mapping[str, str] | Non
             raise ConfigError(f"{cfg_path}: [{table}] must be a table")
         built[table] = _build(hints[table], table, values)
     return Config(path=str(cfg_path), **built)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, tuple | list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, float) and not math.isfinite(value):
+        return "inf" if value > 0 else "-inf"
+    return repr(value)
+
+
+def to_toml(config: Config) -> str:
+    """The whole config as TOML that :func:`load_config` reads back to an equal Config."""
+    lines: list[str] = []
+    for table in dataclasses.fields(Config):
+        if table.name == "path":
+            continue
+        lines.append(f"[{table.name}]")
+        section = getattr(config, table.name)
+        lines += [
+            f"{f.name} = {_toml_value(getattr(section, f.name))}"
+            for f in dataclasses.fields(section)
+        ]
+        lines.append("")
+    return "\n".join(lines)

@@ -79,6 +79,12 @@ def box_distance(dets: Detections, i: int, hfov_deg: float, target_height_m: flo
     return target_height_m * focal_px(dets.image_width, hfov_deg) / height_px
 
 
+def box_clipped(dets: Detections, i: int, margin_px: float = 2.0) -> bool:
+    """Whether box ``i`` touches the top or bottom image edge (its height is then cut)."""
+    y1, y2 = float(dets.xyxy[i, 1]), float(dets.xyxy[i, 3])
+    return y1 <= margin_px or y2 >= dets.image_height - margin_px
+
+
 def sector_range(scan: LaserScan, center_rad: float, width_deg: float) -> float:
     """The nearest valid range within +-width/2 of ``center_rad``, in metres.
 
@@ -93,9 +99,25 @@ def sector_range(scan: LaserScan, center_rad: float, width_deg: float) -> float:
     return float(valid.min()) if valid.size else 0.0
 
 
-def sector_clearance(scan: LaserScan, width_deg: float) -> float:
-    """The nearest valid range straight ahead (see :func:`sector_range`)."""
-    return sector_range(scan, 0.0, width_deg)
+def corridor_clearance(scan: LaserScan, half_width_m: float) -> float:
+    """How far the robot can drive straight on: the nearest valid hit in the corridor its body
+    sweeps (``|y| <= half_width_m`` ahead of the laser), in metres along x.
+
+    An angular sector alone misses things beside the nose that the body would still hit.
+    """
+    r = scan.ranges.astype(np.float64)
+    valid = ~np.isnan(r) & (r >= scan.range_min) & np.isfinite(r)
+    x = r * np.cos(scan.angles)
+    y = r * np.sin(scan.angles)
+    hit = valid & (x > 0) & (np.abs(y) <= half_width_m)
+    return float(x[hit].min()) if hit.any() else math.inf
+
+
+def sector_clearance(scan: LaserScan, width_deg: float, half_width_m: float = 0.0) -> float:
+    """The room straight ahead: the nearest valid range within the sector (see
+    :func:`sector_range`) or, with ``half_width_m``, in the robot's corridor if that is nearer."""
+    sector = sector_range(scan, 0.0, width_deg)
+    return min(sector, corridor_clearance(scan, half_width_m)) if half_width_m > 0 else sector
 
 
 class Controller:
@@ -117,6 +139,7 @@ class Controller:
         self.last_aim: Command | None = None
         self.previous = (0.0, 0.0)
         self.last_step: float | None = None
+        self.stopping_m = 0.0
 
     def step(self, inp: Inputs, now: float) -> Command:
         """The command for this tick; ``now`` is a monotonic time in seconds."""
@@ -130,10 +153,18 @@ class Controller:
         if inp.dets_age_s > self.s.detection_timeout_s:
             return self._halt(stop("stale", f"detections are {inp.dets_age_s:.2f} s old"))
         scan = inp.scan if inp.scan_age_s <= self.s.scan_timeout_s else None
+        # Room the robot needs to stop from its current speed: braking at the acceleration
+        # limit, plus the distance covered while the scan ages and the next tick comes.
+        v = self.previous[0]
+        latency = (inp.scan_age_s if scan is not None else 0.0) + 1.0 / self.s.control_rate_hz
+        self.stopping_m = v * v / (2 * self.s.max_linear_accel) + v * latency
         aim = self._aim(inp.dets, scan, now, dt)
         v, w = limit(self.previous, (aim.linear_x, aim.angular_z), dt, self.limits)
         self.previous = (v, w)
         return Command(v, w, aim.state, aim.reason, aim.target, aim.track_id, aim.input_stamp_ns)
+
+    def _clearance(self, scan: LaserScan) -> float:
+        return sector_clearance(scan, self.s.sector_width_deg, self.s.robot_width_m / 2)
 
     def _halt(self, cmd: Command) -> Command:
         """Zero at once (safety stops bypass the acceleration limit) and forget the target."""
@@ -166,8 +197,8 @@ class Controller:
                 # A brief dropout (a missed detection): keep the last aim, but drive on only
                 # while the way ahead is still seen to be clear.
                 held = self.last_aim
-                clear = scan is not None and sector_clearance(scan, s.sector_width_deg) > (
-                    s.safety_distance_m
+                clear = scan is not None and self._clearance(scan) > (
+                    s.safety_distance_m + self.stopping_m
                 )
                 linear = held.linear_x if clear or s.mode == "track" else 0.0
                 return Command(
@@ -228,6 +259,10 @@ class Controller:
             if scan is None:
                 return turn_only("blocked", "no recent laser scan for the distance")
             distance = sector_range(scan, err, s.sector_width_deg / 3.0)
+        elif box_clipped(dets, i):
+            # A box cut by the image edge is shorter than the target: its distance would be
+            # overestimated. Close enough to fill the frame is close enough: stop advancing.
+            return turn_only("arrived", "target fills the image height")
         else:
             distance = box_distance(dets, i, self.hfov_deg, s.target_height_m)
         if not centred:
@@ -236,8 +271,8 @@ class Controller:
             return turn_only("arrived", f"target at {distance:.2f} m")
         if scan is None:
             return turn_only("blocked", "no recent laser scan")
-        clearance = sector_clearance(scan, s.sector_width_deg)
-        if clearance <= s.safety_distance_m:
+        clearance = self._clearance(scan)
+        if clearance <= s.safety_distance_m + self.stopping_m:
             return turn_only("blocked", f"obstacle at {clearance:.2f} m")
         speed = min(s.max_linear, s.distance_gain * (distance - s.follow_distance_m))
         return Command(

@@ -71,6 +71,7 @@ MESSAGES = [
     EStop(header=HEADER, engaged=True, reason="operator"),
     GroundTruth(
         header=HEADER,
+        sim_time_s=1.5,
         robot=(1.0, -2.0, 0.5),
         robot_velocity=(0.2, 0.1),
         targets_xy=np.array([[3.0, 1.0], [4.0, -1.0]]),

@@ -93,3 +93,18 @@ def test_corrupt_jpeg_is_an_image_error() -> None:
     frame = Frame(header=HEADER, encoding="jpeg", width=10, height=10, data=b"\xff\xd8garbage")
     with pytest.raises(ImageError, match="corrupt JPEG"):
         frame_to_bgr(frame)
+
+
+def test_to_toml_round_trips(tmp_path: Path) -> None:
+    import dataclasses
+
+    from common.settings import to_toml
+
+    cfg = load_config(DEFAULT_CONFIG, environ={})
+    cfg = dataclasses.replace(
+        cfg, camera=dataclasses.replace(cfg.camera, source='C:\\videos\\"quoted".mp4')
+    )
+    path = tmp_path / "out.toml"
+    path.write_text(to_toml(cfg))
+    again = load_config(path, environ={})
+    assert dataclasses.replace(again, path=cfg.path) == cfg

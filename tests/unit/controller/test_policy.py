@@ -15,6 +15,7 @@ from services.controller.policy import (
     Inputs,
     bearing,
     box_distance,
+    corridor_clearance,
     focal_px,
     sector_clearance,
     sector_range,
@@ -222,3 +223,35 @@ def test_stale_or_missing_detections_and_estop_command_zero_at_once() -> None:
     assert ctl.step(Inputs(None, math.inf), now=2.2).state == "stale"
     estop = ctl.step(Inputs(d, 0.0, estop=True), now=2.3)
     assert estop.is_zero and estop.state == "estop"
+
+
+def test_obstacle_stop_leaves_room_to_brake() -> None:
+    s = dataclasses.replace(FOLLOW, max_linear_accel=0.5)
+    ctl = Controller(s, HFOV)
+    d = dets(("person", 0.9, 320, 240, 60, FAR))
+    for t in range(40):  # reach cruising speed with a clear way
+        ctl.step(Inputs(d, 0.0, scan(8.0), 0.0), now=t * 0.05)
+    v = ctl.previous[0]
+    assert v > 0.4
+    # 0.6 m ahead is beyond the 0.5 m safety distance but within it plus the braking distance
+    cmd = ctl.step(Inputs(d, 0.0, scan(0.5 + v * v / (2 * 0.5)), 0.0), now=2.0)
+    assert cmd.state == "blocked"
+
+
+def test_corridor_catches_what_the_sector_misses() -> None:
+    # A box 0.6 m ahead and 0.25 m to the side: 22 degrees off-axis, outside a 30 degree sector,
+    # but inside the corridor of a 0.6 m wide robot.
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 361)
+    ranges = np.full(angles.size, np.inf, np.float32)
+    ranges[np.argmin(np.abs(angles - math.atan2(0.25, 0.6)))] = math.hypot(0.6, 0.25)
+    s = LaserScan(
+        header=HEADER,
+        angle_min=float(angles[0]),
+        angle_increment=float(angles[1] - angles[0]),
+        range_min=0.05,
+        range_max=20.0,
+        ranges=ranges,
+    )
+    assert sector_clearance(s, 30.0) == math.inf
+    assert sector_clearance(s, 30.0, half_width_m=0.3) == pytest.approx(0.6, abs=0.01)
+    assert corridor_clearance(s, 0.2) == math.inf

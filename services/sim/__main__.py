@@ -1,0 +1,81 @@
+"""python -m services.sim [serve] [--config FILE]
+python -m services.sim scenario NAME [--json] [--config FILE]
+python -m services.sim list
+
+serve (the default) runs the simulator as the stack's camera, laser and base. scenario runs the
+real stack (every service over Zenoh) against a scripted world and prints its figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from common.lifecycle import run_main, setup_logging, stop_event
+from common.settings import load_config
+
+
+def _print_text(r: dict[str, Any]) -> None:
+    def fmt(v: Any) -> str:
+        return "-" if v is None else f"{v:.2f}" if isinstance(v, float) else str(v)
+
+    print(f"scenario {r['scenario']}: {'PASS' if r['success'] else 'FAIL'}")
+    for key in (
+        "time_to_reach_s",
+        "final_distance_m",
+        "min_clearance_m",
+        "mean_bearing_error_deg",
+        "stale_commands",
+        "stop_after_kill_s",
+        "distance_travelled_m",
+        "duration_s",
+    ):
+        print(f"  {key:24} {fmt(r.get(key))}")
+    for check, ok in r.get("checks", {}).items():
+        print(f"  [{'x' if ok else ' '}] {check}")
+    print(f"  log: {r['log']}")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m services.sim",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "command", nargs="?", default="serve", choices=["serve", "scenario", "list"]
+    )
+    parser.add_argument("name", nargs="?", help="scenario name (see 'list')")
+    parser.add_argument("--config", help="stack config (default deploy/stack.toml)")
+    parser.add_argument("--json", action="store_true", help="scenario: print one JSON object")
+    args = parser.parse_args()
+    from services.sim.scenarios import SCENARIOS
+
+    if args.command == "list":
+        for name, sc in SCENARIOS.items():
+            print(f"{name:14} {sc.description}")
+        return 0
+    stop = stop_event()
+    config = load_config(args.config)
+    if args.command == "scenario":
+        if not args.name:
+            parser.error("scenario needs a NAME (see 'python -m services.sim list')")
+        setup_logging("scenario", "WARNING")
+        from services.sim.runner import run_scenario
+
+        result = run_scenario(config, args.name, log=lambda m: print(m, file=sys.stderr))
+        if args.json:
+            print(json.dumps(result))
+        else:
+            _print_text(result)
+        return 0 if result["success"] else 1
+    setup_logging("sim")
+    from services.sim.service import run
+
+    return run(config, stop)
+
+
+if __name__ == "__main__":
+    run_main(main, "sim")

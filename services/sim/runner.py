@@ -1,0 +1,164 @@
+"""``python -m services.sim scenario NAME``: run the real stack against a scripted world.
+
+The runner writes a private stack config (a free port, a unique key prefix, the simulator in
+place of the camera, the controller in follow mode), starts it under the supervisor, records
+the truth, the commands and the detections, stops it, and scores the run (services/sim/score.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from common.bus import open_session
+from common.errors import DecodeError, StackError
+from common.keys import Keys
+from common.messages import Detections, GroundTruth, Twist
+from common.settings import REPO_ROOT, Config, to_toml
+from deploy.pids import service_pids
+from services.sim.scenarios import SCENARIOS, Scenario
+from services.sim.score import Recording, score
+
+STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def scenario_config(base: Config, scenario: Scenario) -> Config:
+    """``base`` made private to one run of ``scenario``."""
+    zenoh_s = dataclasses.replace(
+        base.zenoh,
+        endpoint=f"tcp/127.0.0.1:{_free_port()}",
+        connect=(),
+        listen=("tcp/127.0.0.1:0",),
+    )
+    controller = dataclasses.replace(
+        base.controller, mode="follow", target_classes=("person",), **scenario.controller
+    )
+    return dataclasses.replace(
+        base,
+        zenoh=zenoh_s,
+        stack=dataclasses.replace(base.stack, prefix=f"sim/{uuid.uuid4().hex[:8]}"),
+        controller=controller,
+        sim=dataclasses.replace(base.sim, scenario=scenario.name),
+        supervisor=dataclasses.replace(
+            base.supervisor, services=("sim", "detector", "controller", "metrics")
+        ),
+    )
+
+
+def _record(session: zenoh.Session, keys: Keys, camera: str, rec: Recording) -> list[Any]:
+    lock = threading.Lock()
+
+    def recorder(decode: Any, into: list[Any]) -> Any:
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                msg = decode(sample.payload.to_bytes())
+            except DecodeError:
+                return  # the services count garbage; the recorder only scores real messages
+            with lock:
+                into.append(msg)
+
+        return on_sample
+
+    return [
+        session.declare_subscriber(keys.sim_truth(), recorder(GroundTruth.decode, rec.truths)),
+        session.declare_subscriber(keys.cmd_vel(), recorder(Twist.decode, rec.twists)),
+        session.declare_subscriber(
+            keys.detections(camera), recorder(Detections.decode, rec.detections)
+        ),
+    ]
+
+
+def run_scenario(base: Config, name: str, log: Any = None) -> dict[str, Any]:
+    """Run scenario ``name`` on the real stack; returns its figures (see score.py)."""
+    if name not in SCENARIOS or name == "demo":
+        known = ", ".join(n for n in SCENARIOS if n != "demo")
+        raise StackError(f"unknown scenario {name!r}; choose one of {known}")
+    scenario = SCENARIOS[name]
+    config = scenario_config(base, scenario)
+    workdir = Path(tempfile.mkdtemp(prefix=f"scenario-{name}-"))
+    config_path = workdir / "stack.toml"
+    config_path.write_text(to_toml(config))
+    rec = Recording()
+    with (workdir / "stack.log").open("wb") as stack_log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "deploy.supervisor", "--config", str(config_path)],
+            cwd=REPO_ROOT,
+            stdout=stack_log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
+        session = open_session(config.zenoh)
+        subs = _record(session, Keys(config.stack.prefix), config.stack.camera, rec)
+        try:
+            _drive(proc, scenario, rec, config_path, log)
+        finally:
+            for sub in subs:
+                sub.undeclare()
+            session.close()
+            _stop(proc)
+    result = score(scenario, rec, scenario.build(), config.controller, config.camera.hfov_deg)
+    result["log"] = str(workdir / "stack.log")
+    result["supervisor_exit_code"] = proc.returncode
+    return result
+
+
+def _sim_time(rec: Recording) -> float:
+    return rec.truths[-1].sim_time_s if rec.truths else 0.0
+
+
+def _drive(
+    proc: subprocess.Popen[bytes], scenario: Scenario, rec: Recording, config_path: Path, log: Any
+) -> None:
+    """Wait for the scenario clock to run its course, killing the detector when scripted."""
+    start = time.monotonic()
+    pause = threading.Event()
+    while _sim_time(rec) <= 0:
+        if proc.poll() is not None:
+            raise StackError(
+                f"the stack exited during start-up (see {config_path.parent}/stack.log)"
+            )
+        if time.monotonic() - start > STARTUP_TIMEOUT_S:
+            raise StackError(f"the stack did not start within {STARTUP_TIMEOUT_S:.0f} s")
+        pause.wait(0.1)
+    if log:
+        log(f"{scenario.name}: running for {scenario.duration_s:.0f} s of scenario time")
+    while _sim_time(rec) < scenario.duration_s:
+        if proc.poll() is not None:
+            raise StackError("the stack exited during the scenario")
+        kill_at = scenario.kill_detector_at_s
+        if kill_at is not None and rec.kill_ns is None and _sim_time(rec) >= kill_at:
+            for pid in service_pids("detector", config_path):
+                os.kill(pid, signal.SIGKILL)
+            rec.kill_ns = time.time_ns()
+            if log:
+                log(f"{scenario.name}: killed the detector at t={_sim_time(rec):.1f} s")
+        pause.wait(0.05)
+
+
+def _stop(proc: subprocess.Popen[bytes]) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()

@@ -1,0 +1,146 @@
+"""The simulator service: the robot's camera, laser and base, driven by cmd_vel over Zenoh."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import zenoh
+
+from common.errors import ConfigError, DecodeError
+from common.frames import image_to_frame
+from common.messages import GroundTruth, LaserScan, Twist
+from common.node import Node
+from common.settings import Config
+from services.sim.laser import LaserSpec, cast
+from services.sim.render import CameraSpec, render
+from services.sim.scenarios import SCENARIOS
+from services.sim.world import World
+
+
+class Clock:
+    """Fires every ``period`` seconds of scenario time."""
+
+    def __init__(self, rate_hz: float) -> None:
+        self.period = 1.0 / rate_hz
+        self.next = 0.0
+
+    def due(self, t: float) -> bool:
+        if t + 1e-9 < self.next:
+            return False
+        self.next = max(self.next + self.period, t)
+        return True
+
+
+def build_world(config: Config) -> World:
+    name = config.sim.scenario
+    if name not in SCENARIOS:
+        raise ConfigError(f"unknown sim.scenario {name!r}; known: {', '.join(SCENARIOS)}")
+    return SCENARIOS[name].build()
+
+
+def run(config: Config, stop: threading.Event) -> int:
+    """Simulate in real time until ``stop`` is set."""
+    s = config.sim
+    world = build_world(config)
+    lock = threading.Lock()
+    camera = CameraSpec(s.width, s.height, config.camera.hfov_deg, s.camera_height_m)
+    laser = LaserSpec(s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m)
+    rng = np.random.default_rng(s.seed)
+    with Node("sim", config) as node:
+        keys = node.keys
+
+        def on_cmd(sample: zenoh.Sample) -> None:
+            try:
+                twist = Twist.decode(sample.payload.to_bytes())
+            except DecodeError as exc:
+                node.bad_input(keys.cmd_vel(), exc)
+                return
+            with lock:
+                world.command(twist.linear[0], twist.angular[2])
+
+        sub = node.session.declare_subscriber(keys.cmd_vel(), on_cmd)
+        pubs = {
+            "frame": node.session.declare_publisher(keys.frame(config.stack.camera)),
+            "scan": node.session.declare_publisher(keys.scan()),
+            "truth": node.session.declare_publisher(keys.sim_truth()),
+        }
+        clocks = {
+            "frame": Clock(s.camera_rate_hz),
+            "scan": Clock(s.scan_rate_hz),
+            "truth": Clock(s.truth_rate_hz),
+        }
+        node.log.info("scenario %r: %s", s.scenario, SCENARIOS[s.scenario].description)
+        node.ready()
+        dt = 1.0 / s.physics_hz
+        started = False
+        next_tick = time.monotonic()
+        try:
+            while not stop.is_set():
+                if not started:
+                    # Frames flow from t=0 so the detector warms up; time starts once it and
+                    # the controller are ready.
+                    started = _ready(node, s.wait_for)
+                    if started:
+                        node.log.info("scenario clock started")
+                with lock:
+                    if started:
+                        world.advance(dt)
+                    _publish_due(node, world, clocks, pubs, camera, laser, rng, config)
+                node.publish_counters()
+                next_tick = max(next_tick + dt, time.monotonic() - dt)
+                stop.wait(max(0.0, next_tick - time.monotonic()))
+        finally:
+            sub.undeclare()
+    return 0
+
+
+def _ready(node: Node, services: tuple[str, ...]) -> bool:
+    for service in services:
+        replies = list(node.session.liveliness().get(node.keys.health(service), timeout=0.2))
+        if not any(r.ok is not None for r in replies):
+            return False
+    return True
+
+
+def _publish_due(
+    node: Node,
+    world: World,
+    clocks: dict[str, Clock],
+    pubs: dict[str, zenoh.Publisher],
+    camera: CameraSpec,
+    laser: LaserSpec,
+    rng: np.random.Generator,
+    config: Config,
+) -> None:
+    r = world.robot
+    pose = (r.x, r.y, r.theta)
+    if clocks["frame"].due(world.t):
+        header = node.header(frame_id=config.camera.frame_id)
+        frame = image_to_frame(
+            render(world, camera), header, jpeg_quality=config.camera.jpeg_quality
+        )
+        pubs["frame"].put(frame.encode())
+        node.counters.add("frames_out")
+    if clocks["scan"].due(world.t):
+        scan = LaserScan(
+            header=node.header(frame_id="laser"),
+            angle_min=laser.angle_min,
+            angle_increment=laser.angle_increment,
+            range_min=laser.range_min,
+            range_max=laser.range_max,
+            ranges=cast(pose, world.circles(), laser, rng),
+        )
+        pubs["scan"].put(scan.encode())
+    if clocks["truth"].due(world.t):
+        truth = GroundTruth(
+            header=node.header(frame_id="world"),
+            sim_time_s=world.t,
+            robot=pose,
+            robot_velocity=(r.v, r.w),
+            targets_xy=world.target_positions(),
+            target_names=tuple(t.name for t in world.targets),
+            target_ids=tuple(t.id for t in world.targets),
+        )
+        pubs["truth"].put(truth.encode())
