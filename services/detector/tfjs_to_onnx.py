@@ -33,40 +33,66 @@ Translator = Callable[[GraphBuilder, TfNode], None]
 _FUSED_ACTIVATIONS = {"Relu": "Relu", "Elu": "Elu"}  # TF fused_ops name -> ONNX op (same maths)
 
 
-def convert_tfjs_to_onnx(model_json: Path, out_path: Path, *, names: Sequence[str],
-                         metadata: Mapping[str, str],
-                         box_scale: Sequence[float] | None = None) -> None:
+def convert_tfjs_to_onnx(
+    model_json: Path,
+    out_path: Path,
+    *,
+    names: Sequence[str],
+    metadata: Mapping[str, str],
+    box_scale: Sequence[float] | None = None,
+) -> None:
     """Convert ``model_json`` (+ shards) into ``out_path``; see convert_tfjs_graph."""
-    convert_tfjs_graph(load_tfjs_graph(model_json), out_path, names=names, metadata=metadata,
-                       box_scale=box_scale)
+    convert_tfjs_graph(
+        load_tfjs_graph(model_json), out_path, names=names, metadata=metadata, box_scale=box_scale
+    )
 
 
-def convert_tfjs_graph(graph: TfGraph, out_path: Path, *, names: Sequence[str],
-                       metadata: Mapping[str, str], box_scale: Sequence[float] | None = None,
-                       input_name: str = "images", output_name: str = "output0") -> None:
+def convert_tfjs_graph(
+    graph: TfGraph,
+    out_path: Path,
+    *,
+    names: Sequence[str],
+    metadata: Mapping[str, str],
+    box_scale: Sequence[float] | None = None,
+    input_name: str = "images",
+    output_name: str = "output0",
+) -> None:
     """Write the ONNX translation of ``graph``.
 
     ``names`` becomes the Ultralytics-style ``names`` metadata ("{0: 'person', ...}").
     ``box_scale`` (4 factors) multiplies channels 0..3 of the output's last axis, turning the
     TF.js normalised cx, cy, w, h into input pixels like Ultralytics' own ONNX export.
     """
-    model = build_onnx_model(graph, names=names, metadata=metadata, box_scale=box_scale,
-                             input_name=input_name, output_name=output_name)
+    model = build_onnx_model(
+        graph,
+        names=names,
+        metadata=metadata,
+        box_scale=box_scale,
+        input_name=input_name,
+        output_name=output_name,
+    )
     try:
         onnx.save(model, str(out_path))
     except OSError as exc:
         raise ModelError(f"cannot write {out_path}: {exc.strerror or exc}") from exc
 
 
-def build_onnx_model(graph: TfGraph, *, names: Sequence[str], metadata: Mapping[str, str],
-                     box_scale: Sequence[float] | None = None, input_name: str = "images",
-                     output_name: str = "output0") -> onnx.ModelProto:
+def build_onnx_model(
+    graph: TfGraph,
+    *,
+    names: Sequence[str],
+    metadata: Mapping[str, str],
+    box_scale: Sequence[float] | None = None,
+    input_name: str = "images",
+    output_name: str = "output0",
+) -> onnx.ModelProto:
     """Translate ``graph`` into a checked in-memory ONNX model."""
     if len(graph.inputs) != 1 or len(graph.outputs) != 1:
-        raise ModelError(f"expected one input and one output, got {list(graph.inputs)} "
-                         f"and {list(graph.outputs)}")
+        raise ModelError(
+            f"expected one input and one output, got {list(graph.inputs)} and {list(graph.outputs)}"
+        )
     builder = GraphBuilder(graph.constants)
-    (tf_input, shape), = graph.inputs.items()
+    ((tf_input, shape),) = graph.inputs.items()
     graph_input = builder.define_input(tf_input, input_name, shape)
     for node in _reachable_nodes(graph):
         translator = _TRANSLATORS.get(node.op)
@@ -74,10 +100,14 @@ def build_onnx_model(graph: TfGraph, *, names: Sequence[str], metadata: Mapping[
             raise ModelError(f"unsupported TF.js op {node.op} (node {node.name})")
         translator(builder, node)
     graph_output = _finish_output(builder, graph.outputs[0], output_name, box_scale)
-    onnx_graph = helper.make_graph(builder.nodes, "tfjs_graph", [graph_input], [graph_output],
-                                   initializer=builder.initializers)
-    model = helper.make_model(onnx_graph, opset_imports=[helper.make_opsetid("", OPSET)],
-                              producer_name="services.detector.tfjs_to_onnx")
+    onnx_graph = helper.make_graph(
+        builder.nodes, "tfjs_graph", [graph_input], [graph_output], initializer=builder.initializers
+    )
+    model = helper.make_model(
+        onnx_graph,
+        opset_imports=[helper.make_opsetid("", OPSET)],
+        producer_name="services.detector.tfjs_to_onnx",
+    )
     model.ir_version = IR_VERSION
     props = {"names": str(dict(enumerate(names))), **metadata}
     helper.set_model_props(model, props)
@@ -109,21 +139,27 @@ def _reachable_nodes(graph: TfGraph) -> list[TfNode]:
             raise ModelError(f"graph has a cycle through {name}")
         state[name] = False
         stack.append((name, True))
-        stack.extend((producer, False) for producer in reversed(by_name[name].inputs)
-                     if state.get(producer) is not True)
+        stack.extend(
+            (producer, False)
+            for producer in reversed(by_name[name].inputs)
+            if state.get(producer) is not True
+        )
     return ordered
 
 
-def _finish_output(builder: GraphBuilder, tf_name: str, output_name: str,
-                   box_scale: Sequence[float] | None) -> onnx.ValueInfoProto:
+def _finish_output(
+    builder: GraphBuilder, tf_name: str, output_name: str, box_scale: Sequence[float] | None
+) -> onnx.ValueInfoProto:
     value = builder.value(tf_name)
     source = builder.in_layout(value, Layout.NATIVE)
     if box_scale is None:
         builder.emit("Identity", [source], output_name, output=output_name)
     else:
         if len(box_scale) != 4 or value.shape[-1] < 4:
-            raise ModelError(f"box_scale needs 4 factors and >= 4 output channels, got "
-                             f"{list(box_scale)} for shape {value.shape}")
+            raise ModelError(
+                f"box_scale needs 4 factors and >= 4 output channels, got "
+                f"{list(box_scale)} for shape {value.shape}"
+            )
         factors = np.ones(value.shape[-1], dtype=np.float32)
         factors[:4] = np.asarray(box_scale, dtype=np.float32)
         scale = builder.initializer(factors, "box_scale")
@@ -157,10 +193,16 @@ def _fused_conv2d(builder: GraphBuilder, node: TfNode) -> None:
     if x.shape[3] % cin_per_group:
         raise ModelError(f"conv {node.name}: {x.shape[3]} input channels, kernel {kernel.shape}")
     weight = builder.initializer(kernel.transpose(3, 2, 0, 1), f"{node.name}/weight")  # OIHW
-    out = builder.emit("Conv", [builder.in_layout(x, Layout.NCHW), weight,
-                                builder.initializer(bias, f"{node.name}/bias")], node.name,
-                       kernel_shape=[kh, kw], strides=list(strides), dilations=list(dilations),
-                       pads=pads, group=x.shape[3] // cin_per_group)
+    out = builder.emit(
+        "Conv",
+        [builder.in_layout(x, Layout.NCHW), weight, builder.initializer(bias, f"{node.name}/bias")],
+        node.name,
+        kernel_shape=[kh, kw],
+        strides=list(strides),
+        dilations=list(dilations),
+        pads=pads,
+        group=x.shape[3] // cin_per_group,
+    )
     if len(fused) == 2:
         out = builder.emit(_FUSED_ACTIVATIONS[fused[1]], [out], f"{node.name}/{fused[1]}")
     builder.define(node.name, out, (x.shape[0], *out_hw, cout), Layout.NCHW)
@@ -170,10 +212,17 @@ def _max_pool(builder: GraphBuilder, node: TfNode) -> None:
     _expect(node, "data_format", ("NHWC", None))
     x = builder.value(node.inputs[0])
     kernel, strides = _hw_attr(node, "ksize"), _hw_attr(node, "strides")
-    pads, out_hw = _spatial_pads(node, x.shape[1:3], kernel, strides, (1, 1),
-                                 str(node.attrs.get("padding")))
-    out = builder.emit("MaxPool", [builder.in_layout(x, Layout.NCHW)], node.name,
-                       kernel_shape=list(kernel), strides=list(strides), pads=pads)
+    pads, out_hw = _spatial_pads(
+        node, x.shape[1:3], kernel, strides, (1, 1), str(node.attrs.get("padding"))
+    )
+    out = builder.emit(
+        "MaxPool",
+        [builder.in_layout(x, Layout.NCHW)],
+        node.name,
+        kernel_shape=list(kernel),
+        strides=list(strides),
+        pads=pads,
+    )
     builder.define(node.name, out, (x.shape[0], *out_hw, x.shape[3]), Layout.NCHW)
 
 
@@ -198,8 +247,9 @@ def _concat(builder: GraphBuilder, node: TfNode) -> None:
     shape = list(shapes[0])
     shape[axis] = sum(s[axis] for s in shapes)
     onnx_axis = NHWC_TO_NCHW.index(axis) if layout is Layout.NCHW else axis
-    out = builder.emit("Concat", [builder.operand(name, layout) for name in parts], node.name,
-                       axis=onnx_axis)
+    out = builder.emit(
+        "Concat", [builder.operand(name, layout) for name in parts], node.name, axis=onnx_axis
+    )
     builder.define(node.name, out, tuple(shape), layout)
 
 
@@ -209,8 +259,9 @@ def _resize_nearest(builder: GraphBuilder, node: TfNode) -> None:
     scale_h, scale_w = out_h / x.shape[1], out_w / x.shape[2]
     if node.attrs.get("align_corners"):
         mode, rounding = "align_corners", "round_prefer_ceil"
-    elif node.attrs.get("half_pixel_centers") and not (scale_h.is_integer()
-                                                       and scale_w.is_integer()):
+    elif node.attrs.get("half_pixel_centers") and not (
+        scale_h.is_integer() and scale_w.is_integer()
+    ):
         mode, rounding = "half_pixel", "round_prefer_ceil"  # == TF floor((i + 0.5) / scale)
     else:
         # For an integer upscale, TF's half-pixel floor((i + .5) / s) equals floor(i / s).
@@ -221,8 +272,14 @@ def _resize_nearest(builder: GraphBuilder, node: TfNode) -> None:
     else:  # float scales could round the output size down (5 * 9/5 -> 8.999)
         sizes = np.array([x.shape[0], x.shape[3], out_h, out_w], np.int64)
         size_inputs = ["", "", builder.initializer(sizes, "sizes")]
-    out = builder.emit("Resize", [builder.in_layout(x, Layout.NCHW), *size_inputs], node.name,
-                       mode="nearest", coordinate_transformation_mode=mode, nearest_mode=rounding)
+    out = builder.emit(
+        "Resize",
+        [builder.in_layout(x, Layout.NCHW), *size_inputs],
+        node.name,
+        mode="nearest",
+        coordinate_transformation_mode=mode,
+        nearest_mode=rounding,
+    )
     builder.define(node.name, out, (x.shape[0], out_h, out_w, x.shape[3]), Layout.NCHW)
 
 
@@ -250,14 +307,17 @@ def _transpose(builder: GraphBuilder, node: TfNode) -> None:
 def _strided_slice(builder: GraphBuilder, node: TfNode) -> None:
     x = builder.value(node.inputs[0])
     begin, end, strides = (builder.constant(node, i) for i in (1, 2, 3))
-    masks = {key: node.attr_int(key) for key in
-             ("begin_mask", "end_mask", "ellipsis_mask", "new_axis_mask", "shrink_axis_mask")}
+    masks = {
+        key: node.attr_int(key)
+        for key in ("begin_mask", "end_mask", "ellipsis_mask", "new_axis_mask", "shrink_axis_mask")
+    }
     plan = strided_slice_plan(x.shape, begin, end, strides, **masks)
     out = builder.in_layout(x, Layout.NATIVE)
     if plan.axes:
         inputs = [np.array(v, np.int64) for v in (plan.starts, plan.ends, plan.axes, plan.steps)]
-        out = builder.emit("Slice", [out, *(builder.initializer(v, "slice") for v in inputs)],
-                           node.name)
+        out = builder.emit(
+            "Slice", [out, *(builder.initializer(v, "slice") for v in inputs)], node.name
+        )
     if plan.needs_reshape:
         shape = builder.initializer(np.array(plan.out_shape, np.int64), "shape")
         out = builder.emit("Reshape", [out, shape], f"{node.name}/reshape")
@@ -268,8 +328,9 @@ def _elementwise(onnx_op: str) -> Translator:
     def translate(builder: GraphBuilder, node: TfNode) -> None:
         layout = pick_layout(builder, node.inputs)
         shape = np.broadcast_shapes(*(builder.shape_of(name) for name in node.inputs))
-        out = builder.emit(onnx_op, [builder.operand(name, layout) for name in node.inputs],
-                           node.name)
+        out = builder.emit(
+            onnx_op, [builder.operand(name, layout) for name in node.inputs], node.name
+        )
         builder.define(node.name, out, tuple(int(d) for d in shape), layout)
 
     return translate
@@ -319,9 +380,14 @@ def _hw_attr(node: TfNode, key: str) -> tuple[int, int]:
     return values[1], values[2]
 
 
-def _spatial_pads(node: TfNode, in_hw: Sequence[int], kernel: Sequence[int],
-                  strides: Sequence[int], dilations: Sequence[int],
-                  padding: str) -> tuple[list[int], tuple[int, int]]:
+def _spatial_pads(
+    node: TfNode,
+    in_hw: Sequence[int],
+    kernel: Sequence[int],
+    strides: Sequence[int],
+    dilations: Sequence[int],
+    padding: str,
+) -> tuple[list[int], tuple[int, int]]:
     """Explicit ONNX pads [h0, w0, h1, w1] and the output H, W for TF SAME/VALID padding.
 
     Explicit pads rather than auto_pad: TF's SAME puts the odd pixel at the end, and spelling
