@@ -9,6 +9,7 @@ into a bearing with the pinhole model.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,13 +40,18 @@ class Command:
 
 @dataclass(frozen=True, slots=True)
 class Inputs:
-    """The newest inputs and their ages in seconds (inf when none has arrived)."""
+    """The newest inputs and their ages in seconds (inf when none has arrived).
+
+    ``dets_age_s`` is how long ago the detections arrived (the dead-man timer);
+    ``capture_age_s`` how long ago their frame was captured (the latency to compensate).
+    """
 
     dets: Detections | None
     dets_age_s: float
     scan: LaserScan | None = None
     scan_age_s: float = float("inf")
     estop: bool = False
+    capture_age_s: float = 0.0
 
 
 def stop(state: str, reason: str, input_stamp_ns: int = 0) -> Command:
@@ -123,8 +129,14 @@ def sector_clearance(scan: LaserScan, width_deg: float, half_width_m: float = 0.
 class Controller:
     """Turns the newest inputs into one command per control tick, with memory.
 
-    Memory: the PID's history, the locked target's track id and when it was last seen, and the
-    previous command (for the acceleration limits).
+    Memory: the PID's history, the locked target's track id and when it was last seen, the
+    previous command (for the acceleration limits), and the recent turn rates it commanded.
+
+    Latency compensation: a detection describes the world when its frame was captured, which
+    on a CPU detector is a few hundred milliseconds ago. The robot has turned since, by the
+    turn rates this controller itself commanded. Subtracting that rotation from the measured
+    bearing keeps the turn from overshooting; without it a slow detector makes the robot
+    swing past its target and lose it.
     """
 
     def __init__(self, s: ControllerSettings, hfov_deg: float) -> None:
@@ -140,6 +152,8 @@ class Controller:
         self.previous = (0.0, 0.0)
         self.last_step: float | None = None
         self.stopping_m = 0.0
+        self.turns: deque[tuple[float, float]] = deque(maxlen=1024)  # (time, w) commanded
+        self.last_bearing: tuple[float, float] | None = None  # (bearing, when captured)
 
     def step(self, inp: Inputs, now: float) -> Command:
         """The command for this tick; ``now`` is a monotonic time in seconds."""
@@ -158,9 +172,10 @@ class Controller:
         v = self.previous[0]
         latency = (inp.scan_age_s if scan is not None else 0.0) + 1.0 / self.s.control_rate_hz
         self.stopping_m = v * v / (2 * self.s.max_linear_accel) + v * latency
-        aim = self._aim(inp.dets, scan, now, dt)
+        aim = self._aim(inp.dets, scan, now, dt, now - inp.capture_age_s)
         v, w = limit(self.previous, (aim.linear_x, aim.angular_z), dt, self.limits)
         self.previous = (v, w)
+        self.turns.append((now, w))
         return Command(v, w, aim.state, aim.reason, aim.target, aim.track_id, aim.input_stamp_ns)
 
     def _clearance(self, scan: LaserScan) -> float:
@@ -170,8 +185,23 @@ class Controller:
         """Zero at once (safety stops bypass the acceleration limit) and forget the target."""
         self.previous = (0.0, 0.0)
         self.pid.reset()
-        self.locked_id, self.last_aim = -1, None
+        self.locked_id, self.last_aim, self.last_bearing = -1, None, None
+        self.turns.clear()
         return cmd
+
+    def rotation_since(self, t0: float, now: float) -> float:
+        """How far the robot turned (rad) from ``t0`` to ``now``, by the rates it commanded.
+
+        Each command holds until the next one; the newest holds until ``now``.
+        """
+        total = 0.0
+        entries = list(self.turns)
+        ends = [t for t, _ in entries[1:]] + [now]
+        for (t, w), end_t in zip(entries, ends[: len(entries)], strict=True):
+            start, end = max(t, t0), min(end_t, now)
+            if end > start:
+                total += w * (end - start)
+        return total
 
     def _pick(self, dets: Detections, idx: npt.NDArray[np.intp]) -> int | None:
         """The target: the most central (track) or the locked / largest (follow) candidate."""
@@ -187,23 +217,29 @@ class Controller:
             return None  # the locked target is out of view: never jump to another one
         return int(idx[int(np.argmax(np.prod(dets.sizes[idx], axis=1)))])
 
-    def _aim(self, dets: Detections, scan: LaserScan | None, now: float, dt: float) -> Command:
+    def _aim(
+        self, dets: Detections, scan: LaserScan | None, now: float, dt: float, captured: float
+    ) -> Command:
         s = self.s
         classes = s.target_classes if s.mode == "track" else s.target_classes[:1]
         stamp = dets.header.stamp_ns
         best = self._pick(dets, candidates(dets, classes, s.min_score))
         if best is None:
             if self.last_aim is not None and now - self.last_seen <= s.target_lost_timeout_s:
-                # A brief dropout (a missed detection): keep the last aim, but drive on only
-                # while the way ahead is still seen to be clear.
+                # A brief dropout (a missed detection): keep turning towards where the target
+                # was, net of our own turning since; drive on only while the way is clear.
                 held = self.last_aim
                 clear = scan is not None and self._clearance(scan) > (
                     s.safety_distance_m + self.stopping_m
                 )
                 linear = held.linear_x if clear or s.mode == "track" else 0.0
+                angular = 0.0
+                if self.last_bearing is not None:
+                    seen, when = self.last_bearing
+                    angular = self.pid.update(seen - self.rotation_since(when, now), dt)
                 return Command(
                     linear,
-                    held.angular_z,
+                    angular,
                     "holding",
                     f"target unseen for {now - self.last_seen:.1f} s",
                     held.target,
@@ -217,7 +253,9 @@ class Controller:
         if s.mode == "follow" and self.locked_id < 0 and track_id >= 0:
             self.locked_id = track_id
         self.last_seen = now
-        err = bearing(dets, best, self.hfov_deg)
+        measured = bearing(dets, best, self.hfov_deg)
+        self.last_bearing = (measured, captured)
+        err = measured - self.rotation_since(captured, now)
         angular = self.pid.update(err, dt)
         centred = abs(math.tan(err)) * focal_px(dets.image_width, self.hfov_deg) <= (
             s.center_tolerance * dets.image_width
@@ -255,15 +293,22 @@ class Controller:
         def turn_only(state: str, reason: str) -> Command:
             return Command(0.0, angular, state, reason, name, track_id, stamp)
 
+        distance = math.inf
         if s.distance_source == "laser":
             if scan is None:
                 return turn_only("blocked", "no recent laser scan for the distance")
-            distance = sector_range(scan, err, s.sector_width_deg / 3.0)
-        elif box_clipped(dets, i):
-            # A box cut by the image edge is shorter than the target: its distance would be
-            # overestimated. Close enough to fill the frame is close enough: stop advancing.
-            return turn_only("arrived", "target fills the image height")
-        else:
+            # The laser rays across the middle 60% of the box's width, in the bearing ``err``
+            # (already net of our turning since the frame was captured).
+            f = focal_px(dets.image_width, self.hfov_deg)
+            half_width = math.atan(float(dets.sizes[i, 0]) / 2 / f)
+            distance = sector_range(scan, err, math.degrees(1.2 * half_width))
+            if distance == 0.0:
+                return turn_only("blocked", "the laser sees nothing valid towards the target")
+        if not math.isfinite(distance):  # by box height, or the laser saw nothing in range
+            if box_clipped(dets, i):
+                # A box cut by the image edge is shorter than the target: its distance would
+                # be overestimated. Close enough to fill the frame is close enough.
+                return turn_only("arrived", "target fills the image height")
             distance = box_distance(dets, i, self.hfov_deg, s.target_height_m)
         if not centred:
             return turn_only("turning", f"bearing {math.degrees(err):+.1f} deg")

@@ -106,7 +106,9 @@ def run(config: Config, stop: threading.Event) -> int:
                 dets.arrived.clear()  # before reading, so a message arriving now wakes us
                 d, d_age = dets.get()
                 sc, sc_age = scan.get()
-                cmd = controller.step(Inputs(d, d_age, sc, sc_age, estop.is_set()), tick)
+                captured = (time.time_ns() - d.header.stamp_ns) / 1e9 if d is not None else 0.0
+                inputs = Inputs(d, d_age, sc, sc_age, estop.is_set(), max(0.0, captured))
+                cmd = controller.step(inputs, tick)
                 _publish(node, cmd_pub, status_pub, cmd, s.mode)
                 if cmd.state != last_state:
                     node.log.info("state %s: %s", cmd.state, cmd.reason)

@@ -23,7 +23,7 @@ Image = npt.NDArray[np.uint8]
 
 # Crops (x1, y1, x2, y2) of the scikit-image photos, around the object each one shows.
 SPRITES: dict[str, tuple[str, tuple[int, int, int, int]]] = {
-    "person": ("cameraman", (0, 65, 300, 512)),
+    "person": ("cameraman", (0, 65, 330, 512)),
     "cat": ("chelsea", (0, 0, 395, 300)),
     "cup": ("coffee", (172, 17, 406, 296)),
     "motorcycle": ("motorcycle", (83, 28, 689, 454)),

@@ -64,7 +64,7 @@ SCENARIOS: dict[str, Scenario] = {
                  lambda: World(Robot(), obstacles=[Obstacle(3.0, 1.0, 0.3)]), 15.0,
                  followed=None, must_reach=False),
         Scenario("detector_dies", "the detector is killed mid-run: the robot must stop in time",
-                 lambda: World(Robot(), targets=[person("alice", (0, 6.0, 0.0))]), 20.0,
-                 must_reach=False, kill_detector_at_s=5.0),
+                 lambda: World(Robot(), targets=[person("alice", (0, 7.0, 0.0))]), 20.0,
+                 must_reach=False, kill_detector_at_s=6.0),
     )
 }  # fmt: skip

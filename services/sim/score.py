@@ -11,7 +11,8 @@ Figures:
     mean_bearing_error_deg  mean |bearing of the followed target| while it was in view
     stale_commands          non-zero commands sent when the newest detections were older
                             than the detection timeout (must be 0)
-    stop_after_kill_s       detector_dies: kill -> first zero command (None otherwise)
+    stop_after_kill_s       detector_dies: kill -> first zero command (None otherwise); the
+                            robot must have been moving in the second before the kill
 """
 
 from __future__ import annotations
@@ -113,6 +114,8 @@ def score(
         out["mean_bearing_error_deg"] = sum(in_view) / len(in_view) if in_view else None
     if rec.kill_ns is not None:
         kill_ns = rec.kill_ns
+        before = [t for t in rec.twists if kill_ns - 1e9 <= t.header.stamp_ns < kill_ns]
+        out["moving_at_kill"] = any(not t.is_zero for t in before)
         after = [t for t in rec.twists if t.header.stamp_ns >= kill_ns and t.is_zero]
         if after:
             out["stop_after_kill_s"] = (min(t.header.stamp_ns for t in after) - kill_ns) / 1e9
@@ -136,6 +139,7 @@ def verdict(
         checks["stayed still"] = f["nonzero_commands"] == 0 and f["distance_travelled_m"] < 0.05
     if scenario.kill_detector_at_s is not None:
         stop = f["stop_after_kill_s"]
+        checks["was moving when the detector died"] = bool(f.get("moving_at_kill"))
         checks["stopped in time after the detector died"] = (
             stop is not None and stop <= s.detection_timeout_s + STOP_MARGIN_S
         )

@@ -255,3 +255,21 @@ def test_corridor_catches_what_the_sector_misses() -> None:
     assert sector_clearance(s, 30.0) == math.inf
     assert sector_clearance(s, 30.0, half_width_m=0.3) == pytest.approx(0.6, abs=0.01)
     assert corridor_clearance(s, 0.2) == math.inf
+
+
+def test_rotation_since_integrates_the_commanded_turns() -> None:
+    ctl = Controller(TRACK, HFOV)
+    ctl.turns.extend([(0.0, 0.5), (1.0, -0.2), (2.0, 0.0)])
+    assert ctl.rotation_since(0.0, 3.0) == pytest.approx(0.5 - 0.2)
+    assert ctl.rotation_since(0.5, 1.5) == pytest.approx(0.25 - 0.1)
+
+
+def test_bearing_is_compensated_for_the_turn_since_capture() -> None:
+    ctl = Controller(TRACK, HFOV)
+    ctl.turns.append((0.0, 0.5))  # turning left at 0.5 rad/s for the last second
+    d = dets(("person", 0.9, 200, 240, 50, 100))  # seen left of centre a second ago
+    measured = bearing(d, 0, HFOV)
+    assert measured > 0
+    cmd = ctl.step(Inputs(d, 0.0, capture_age_s=1.0), now=1.0)
+    # The robot already turned 0.5 rad left: the target is now to the right.
+    assert cmd.angular_z == pytest.approx(TRACK.bearing_kp * (measured - 0.5), abs=1e-6)

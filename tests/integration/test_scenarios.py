@@ -1,0 +1,86 @@
+"""Every scenario runs the real stack (sim, detector, controller, metrics over Zenoh) through
+``python -m services.sim scenario NAME --json``, and states its own pass condition here."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from typing import Any
+
+import pytest
+
+from common.settings import ControllerSettings
+from services.sim.score import REACH_TOLERANCE_M, STOP_MARGIN_S
+from tests.integration.conftest import REPO
+
+pytestmark = pytest.mark.integration
+
+DEFAULTS = ControllerSettings()
+
+
+def run(name: str) -> dict[str, Any]:
+    done = subprocess.run(
+        [sys.executable, "-m", "services.sim", "scenario", name, "--json"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=400,
+    )
+    assert "Traceback" not in done.stderr, done.stderr
+    result: dict[str, Any] = json.loads(done.stdout)
+    required = {
+        "success",
+        "time_to_reach_s",
+        "final_distance_m",
+        "min_clearance_m",
+        "mean_bearing_error_deg",
+        "stale_commands",
+    }
+    assert required <= result.keys()
+    assert result["supervisor_exit_code"] == 0, result["log"]
+    # Every scenario: never a moving command on stale inputs.
+    assert result["stale_commands"] == 0, result
+    assert done.returncode == (0 if result["success"] else 1)
+    return result
+
+
+def reached(result: dict[str, Any]) -> bool:
+    """At the stop distance, within the tolerance."""
+    final = result["final_distance_m"]
+    return final is not None and abs(final - DEFAULTS.follow_distance_m) <= REACH_TOLERANCE_M
+
+
+@pytest.mark.parametrize("name", ["ahead", "side", "crossing"])
+def test_reaches_the_stop_distance(name: str) -> None:
+    result = run(name)
+    assert reached(result), result
+    assert result["time_to_reach_s"] is not None
+    assert result["success"], result
+
+
+def test_two_people_lock_holds_on_alice() -> None:
+    # bob walks in nearer (and so bigger) than alice: a follower without a lock turns to bob
+    # and ends up by him; with the lock the robot ends at alice's stop distance.
+    result = run("two_people")
+    assert reached(result), result
+    assert result["success"], result
+
+
+def test_obstacle_is_never_closer_than_the_safety_distance() -> None:
+    result = run("obstacle")
+    assert result["min_clearance_m"] >= DEFAULTS.safety_distance_m, result
+    assert result["success"], result
+
+
+def test_no_target_means_standing_still() -> None:
+    result = run("no_target")
+    assert result["nonzero_commands"] == 0 and result["distance_travelled_m"] < 0.05, result
+    assert result["success"], result
+
+
+def test_robot_stops_in_time_when_the_detector_dies() -> None:
+    result = run("detector_dies")
+    stop = result["stop_after_kill_s"]
+    assert stop is not None and stop <= DEFAULTS.detection_timeout_s + STOP_MARGIN_S, result
+    assert result["success"], result

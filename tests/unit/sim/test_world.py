@@ -1,0 +1,145 @@
+"""The simulator's pure parts: kinematics, the laser, the camera's geometry, the scoring."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from common.messages import Detections, GroundTruth, Header, Twist
+from common.settings import ControllerSettings
+from services.sim.laser import LaserSpec, cast
+from services.sim.render import CameraSpec, render
+from services.sim.scenarios import SCENARIOS, person
+from services.sim.score import Recording, score, stale_commands
+from services.sim.world import BaseLimits, Obstacle, Robot, World
+
+FREE = BaseLimits(max_linear=9, max_angular=9, max_linear_accel=1e9, max_angular_accel=1e9)
+
+
+def test_straight_line_and_arc() -> None:
+    r = Robot()
+    for _ in range(100):
+        r.step((0.5, 0.0), 0.01, FREE)
+    assert (r.x, r.y) == pytest.approx((0.5, 0.0))
+    r = Robot()
+    for _ in range(1000):  # v = 1, w = pi/2 for 1 s: a quarter circle of radius 2/pi
+        r.step((1.0, math.pi / 2), 0.001, FREE)
+    radius = 2 / math.pi
+    assert (r.x, r.y, r.theta) == pytest.approx((radius, radius, math.pi / 2), abs=1e-6)
+
+
+def test_base_limits_and_watchdog() -> None:
+    w = World(Robot(), limits=BaseLimits(max_linear=0.6, max_linear_accel=1.0, watchdog_s=0.5))
+    w.command(5.0, 0.0)
+    w.advance(0.1)
+    assert w.robot.v == pytest.approx(0.1)  # acceleration limit
+    for _ in range(20):
+        w.advance(0.1)
+    assert w.robot.v == pytest.approx(0.0)  # no command for 0.5 s: the base stopped itself
+
+
+def test_laser_hits_the_nearest_surface() -> None:
+    spec = LaserSpec(fov_deg=180.0, rays=181, noise_std_m=0.0)
+    circles = np.array([[2.0, 0.0, 0.5], [5.0, 0.0, 0.5]])
+    ranges = cast((0.0, 0.0, 0.0), circles, spec)
+    assert ranges[90] == pytest.approx(1.5)  # straight ahead: the near circle's surface
+    assert np.isinf(ranges[0]) and np.isinf(ranges[-1])  # to the sides: nothing
+    turned = cast((0.0, 0.0, math.pi / 2), circles, spec)
+    assert turned[0] == pytest.approx(1.5)  # facing +y, the circle is on the right ray
+
+
+def test_person_is_rendered_where_the_pinhole_model_says() -> None:
+    spec = CameraSpec(width=640, height=480, hfov_deg=60.0, height_m=0.6)
+    world = World(Robot(), targets=[person("a", (0, 3.0, 0.0))])
+    img = render(world, spec)
+    empty = render(World(Robot()), spec)
+    changed = np.any(img != empty, axis=2)
+    ys, xs = np.nonzero(changed)
+    f = spec.focal_px
+    sprite_h = f * 1.7 / 3.0
+    assert xs.mean() == pytest.approx(320, abs=5)
+    assert ys.max() == pytest.approx(240 + f * 0.6 / 3.0, abs=2)  # feet on the floor
+    assert ys.max() - ys.min() == pytest.approx(min(sprite_h, ys.max()), abs=3)
+
+
+def test_every_scenario_builds() -> None:
+    for sc in SCENARIOS.values():
+        world = sc.build()
+        assert sc.followed is None or sc.followed in [t.id for t in world.targets]
+
+
+HDR = Header(stamp_ns=0, frame_id="", seq=0, source="t")
+
+
+def _twist(t_ns: int, v: float) -> Twist:
+    return Twist(header=Header(stamp_ns=t_ns, frame_id="", seq=0, source="c"), linear=(v, 0, 0))
+
+
+def _dets(published_ns: int) -> Detections:
+    z = np.zeros(0)
+    return Detections(
+        header=HDR,
+        image_width=10,
+        image_height=10,
+        class_ids=z.astype(np.int32),
+        class_names=(),
+        scores=z.astype(np.float32),
+        xyxy=np.zeros((0, 4), np.float32),
+        published_ns=published_ns,
+    )
+
+
+def test_stale_commands_counts_only_moving_commands_on_old_detections() -> None:
+    s = 1_000_000_000
+    rec = Recording(
+        detections=[_dets(1 * s)],
+        twists=[
+            _twist(int(1.5 * s), 0.3),
+            _twist(3 * s, 0.0),
+            _twist(3 * s, 0.3),
+            _twist(int(0.5 * s), 0.3),
+        ],
+    )
+    # 1.5 s: fresh; 3 s zero: fine; 3 s moving on 2 s old detections: stale; before any: stale
+    assert stale_commands(rec, timeout_s=1.0) == 2
+
+
+def test_score_reach_and_verdict() -> None:
+    sc = SCENARIOS["ahead"]
+    s = ControllerSettings(mode="follow")
+    truths = [
+        GroundTruth(
+            header=HDR,
+            sim_time_s=t,
+            robot=(x, 0.0, 0.0),
+            targets_xy=np.array([[4.0, 0.0]]),
+            target_names=("person",),
+            target_ids=("alice",),
+        )
+        for t, x in ((0.5, 0.0), (5.0, 2.0), (9.0, 2.8))
+    ]
+    result = score(sc, Recording(truths=truths), sc.build(), s, 60.0)
+    assert result["final_distance_m"] == pytest.approx(4.0 - 2.8 - 0.25)
+    assert result["time_to_reach_s"] == 9.0
+    assert result["success"] and result["checks"]["reached the stop distance"]
+    far = score(sc, Recording(truths=truths[:2]), sc.build(), s, 60.0)
+    assert not far["success"]
+
+
+def test_min_clearance_is_to_the_obstacle_surface() -> None:
+    sc = SCENARIOS["obstacle"]
+    truths = [
+        GroundTruth(
+            header=HDR,
+            sim_time_s=1.0,
+            robot=(1.7, 0.0, 0.0),
+            targets_xy=np.array([[5.5, 0.3]]),
+            target_names=("person",),
+            target_ids=("alice",),
+        )
+    ]
+    world = World(Robot(), obstacles=[Obstacle(2.5, 0.0, 0.3)], targets=sc.build().targets)
+    result = score(sc, Recording(truths=truths), world, ControllerSettings(), 60.0)
+    assert result["min_clearance_m"] == pytest.approx(0.5)
