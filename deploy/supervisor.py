@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import threading
 import time
 from typing import Any
@@ -19,7 +20,7 @@ from common.bus import open_session
 from common.errors import DecodeError
 from common.keys import Keys
 from common.lifecycle import run_main, setup_logging, stop_event
-from common.messages import ControllerStatus, Twist
+from common.messages import ControllerStatus, GroundTruth, Twist
 from common.settings import Config, load_config
 from deploy.processes import ServiceProcess, service_command
 
@@ -32,6 +33,7 @@ class LiveView:
         self.ready: set[str] = set()
         self.status: ControllerStatus | None = None
         self.twist: Twist | None = None
+        self.truth: GroundTruth | None = None
         self._lock = threading.Lock()
         self._subs = [
             session.liveliness().declare_subscriber(
@@ -39,6 +41,7 @@ class LiveView:
             ),
             session.declare_subscriber(keys.controller_status(), self._on_status),
             session.declare_subscriber(keys.cmd_vel(), self._on_twist),
+            session.declare_subscriber(keys.sim_truth(), self._on_truth),
         ]
 
     def _on_health(self, sample: zenoh.Sample) -> None:
@@ -58,6 +61,12 @@ class LiveView:
     def _on_twist(self, sample: zenoh.Sample) -> None:
         try:
             self.twist = Twist.decode(sample.payload.to_bytes())
+        except DecodeError:
+            return
+
+    def _on_truth(self, sample: zenoh.Sample) -> None:
+        try:
+            self.truth = GroundTruth.decode(sample.payload.to_bytes())
         except DecodeError:
             return
 
@@ -91,7 +100,11 @@ def status_line(procs: list[ServiceProcess], view: LiveView, metrics: dict[str, 
     if view.status is not None:
         s, t = view.status, view.twist
         cmd = f" v={t.linear[0]:+.2f} w={t.angular[2]:+.2f}" if t else ""
-        line += f" | {s.mode} {s.state} {s.target}{cmd}"
+        target = f" {s.target}#{s.track_id}" if s.track_id >= 0 else f" {s.target}"
+        line += f" | {s.mode} {s.state}{target if s.target else ''}{cmd}"
+    if view.truth is not None:
+        x, y, theta = view.truth.robot
+        line += f" | pose x={x:+.2f} y={y:+.2f} th={math.degrees(theta):+.0f}deg"
     return line
 
 
