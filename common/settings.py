@@ -123,7 +123,7 @@ class DetectorSettings:
     def __post_init__(self) -> None:
         # Mirrors services.detector.backends.BACKEND_CHOICES: common must not import services,
         # and a unit test keeps the two equal.
-        backends = ("cuda", "onnx", "tensorrt", "auto")
+        backends = ("onnx", "tensorrt", "cuda", "auto")
         if self.backend not in backends:
             raise ConfigError(
                 f"detector.backend must be one of {', '.join(backends)}, got {self.backend!r}"

@@ -1,4 +1,4 @@
-"""Command line of the detector: ``detect``, ``benchmark`` and ``fetch-model``.
+"""Command line of the detector: ``detect``, ``benchmark``, ``fetch-model`` and ``export``.
 
 Each subcommand is registered by one function in :data:`SUBCOMMANDS`; a new one (``serve``)
 adds its register function there. Handlers take the parsed arguments and return an exit code.
@@ -12,10 +12,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
+import logging
 import sys
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -26,7 +24,7 @@ import numpy.typing as npt
 
 from common.errors import BackendUnavailable, ConfigError, ImageError, ModelError, StackError
 from services.detector.annotate import annotate
-from services.detector.backends import BACKENDS
+from services.detector.backends import BACKEND_CHOICES
 from services.detector.images import list_images, load_image
 from services.detector.pipeline import Detector
 from services.detector.types import (
@@ -71,9 +69,25 @@ def _parse_classes(raw: str | None) -> tuple[str, ...] | None:
     return names
 
 
+def _show_backend_log() -> None:
+    """Show the backends' INFO lines (auto's choice, engine cache and build progress).
+
+    Only on this logger: ``serve`` configures the root logger itself, later.
+    """
+    logger = logging.getLogger("services.detector.backends")
+    if not logger.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
+        logger.propagate = False
+
+
 def _add_model_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
-    parser.add_argument("--backend", default="onnx", help=f"one of: {', '.join(sorted(BACKENDS))}")
+    parser.add_argument(
+        "--backend", default="onnx", help=f"one of: {', '.join(BACKEND_CHOICES)} (default onnx)"
+    )
 
 
 # --- detect -------------------------------------------------------------------------------------
@@ -151,6 +165,7 @@ def run_detect(args: argparse.Namespace) -> int:
     if save_dir is not None:
         save_dir.mkdir(parents=True, exist_ok=True)
     failed = 0
+    _show_backend_log()
     with Detector.open(_resolve_model(args.model), backend=args.backend, params=params) as det:
         for path in paths:
             try:
@@ -180,128 +195,58 @@ def _add_detect(subparsers: Any) -> None:
     p.set_defaults(handler=run_detect)
 
 
-# --- benchmark ----------------------------------------------------------------------------------
-
-
-def _cpu_model() -> str:
-    try:
-        cpuinfo = Path("/proc/cpuinfo").read_text()
-    except OSError:  # not Linux: platform.processor() is the best we have
-        cpuinfo = ""
-    for line in cpuinfo.splitlines():
-        if line.startswith("model name"):
-            return line.split(":", 1)[1].strip()
-    return platform.processor() or "unknown"
-
-
-def _machine() -> dict[str, Any]:
-    return {
-        "cpu_model": _cpu_model(),
-        "cpu_count": os.cpu_count(),
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-    }
-
-
-def _percentiles(samples: dict[str, list[float]], q: float) -> dict[str, float]:
-    return {k: round(float(np.percentile(v, q)), 3) for k, v in samples.items()}
-
-
-def _benchmark_image(path: str | None) -> npt.NDArray[np.uint8]:
-    if path is not None:
-        return load_image(path)
-    from skimage import data  # slow import, only for the default image
-
-    return np.ascontiguousarray(data.chelsea()[:, :, ::-1])  # RGB -> BGR
+# --- benchmark (services/detector/bench.py) ----------------------------------------------------
 
 
 def run_benchmark(args: argparse.Namespace) -> int:
-    """Time each stage, interleaving full detect calls with bare backend runs on one input."""
-    if args.runs < 1 or args.warmup < 0:
-        raise ConfigError(f"--runs must be >= 1 and --warmup >= 0, got {args.runs}, {args.warmup}")
-    image = _benchmark_image(args.image)
-    model = _resolve_model(args.model)
-    stages = ("preprocess", "inference", "postprocess", "total")
-    samples: dict[str, list[float]] = {k: [] for k in stages}
-    bare: list[float] = []
-    with Detector.open(model, backend=args.backend) as det:
-        bare_input = det.preprocess([image])[0].copy()  # same tensor the detect call builds
+    """Time each stage on each ``--backend`` and score their agreement (see bench.py)."""
+    from services.detector import bench
 
-        def timed_detect() -> tuple[DetectionResult, float]:
-            t0 = time.perf_counter()
-            result = det.detect(image)
-            return result, (time.perf_counter() - t0) * 1e3
-
-        def timed_bare() -> float:
-            t0 = time.perf_counter()
-            det.backend.infer(bare_input)
-            return (time.perf_counter() - t0) * 1e3
-
-        for i in range(args.warmup + args.runs):
-            # Alternate which goes first so that neither always runs on the warmer cache.
-            if i % 2 == 0:
-                result, total_ms = timed_detect()
-                bare_ms = timed_bare()
-            else:
-                bare_ms = timed_bare()
-                result, total_ms = timed_detect()
-            if i < args.warmup:
-                continue
-            bare.append(bare_ms)
-            samples["preprocess"].append(result.timing.preprocess_ms)
-            samples["inference"].append(result.timing.inference_ms)
-            samples["postprocess"].append(result.timing.postprocess_ms)
-            samples["total"].append(total_ms)
-        p50 = _percentiles(samples, 50)
-        report = {
-            "p50_ms": p50,
-            "p95_ms": _percentiles(samples, 95),
-            "bare_run_p50_ms": round(float(np.median(bare)), 3),
-            "ratio_to_bare_run": round(p50["total"] / float(np.median(bare)), 4),
-            "pre_post_fraction_of_inference": round(
-                (p50["preprocess"] + p50["postprocess"]) / p50["inference"], 4
-            ),
-            "runs": args.runs,
-            "warmup": args.warmup,
-            "backend": {
-                "name": det.backend.name,
-                "device": det.backend.device,
-                "precision": det.backend.precision,
-                "threads": getattr(det.backend, "threads", None),
-            },
-            "model": {
-                "path": str(model),
-                "family": det.info.family.value,
-                "input": [det.info.input_height, det.info.input_width],
-            },
-            "image": {
-                "path": args.image or "skimage:chelsea",
-                "width": image.shape[1],
-                "height": image.shape[0],
-            },
-            "machine": _machine(),
-        }
-    if args.json:
-        print(json.dumps(report))
-    else:
-        for key in ("p50_ms", "p95_ms"):
-            print(f"{key[:3]}: " + ", ".join(f"{k} {v:.2f} ms" for k, v in report[key].items()))
-        print(
-            f"bare run p50 {report['bare_run_p50_ms']:.2f} ms; detect/bare "
-            f"{report['ratio_to_bare_run']:.3f}; (pre+post)/inference "
-            f"{report['pre_post_fraction_of_inference']:.3f}"
-        )
-    return EXIT_OK
+    _show_backend_log()
+    return bench.run(args, _resolve_model)
 
 
 def _add_benchmark(subparsers: Any) -> None:
-    p = subparsers.add_parser("benchmark", help="time each stage against a bare backend run")
-    _add_model_arguments(p)
-    p.add_argument("--runs", type=int, default=50, help="timed runs (default 50)")
-    p.add_argument("--warmup", type=int, default=5, help="untimed runs first (default 5)")
-    p.add_argument("--image", help="image to time on (default: scikit-image chelsea)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    from services.detector import bench
+
+    p = subparsers.add_parser("benchmark", help="time each stage on one or more backends")
+    p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
+    bench.add_arguments(p)
     p.set_defaults(handler=run_benchmark)
+
+
+# --- export -------------------------------------------------------------------------------------
+
+
+def run_export(args: argparse.Namespace) -> int:
+    """Build (or reuse) and cache an engine for ``--backend``, printing the engine's path."""
+    from services.detector.backends import import_backend
+
+    module = import_backend(args.backend)  # BackendUnavailable here on a machine without it
+    model = _resolve_model(args.model)
+    path = module.export_engine(
+        model,
+        _progress,
+        precision=args.precision,
+        batch_profile=(1, args.batch, args.batch),
+        calib_dir=Path(args.calib) if args.calib else None,
+        cache_dir=Path(args.cache_dir) if args.cache_dir else None,
+        workspace_gb=args.workspace_gb,
+    )
+    print(path)
+    return EXIT_OK
+
+
+def _add_export(subparsers: Any) -> None:
+    p = subparsers.add_parser("export", help="build and cache a TensorRT engine for a model")
+    p.add_argument("--backend", choices=["tensorrt"], default="tensorrt", help="engine kind")
+    p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
+    p.add_argument("--precision", choices=["fp32", "fp16", "int8"], default="fp16")
+    p.add_argument("--calib", help="folder of calibration images (needed to build int8)")
+    p.add_argument("--batch", type=int, default=1, help="largest batch served (profile 1/N/N)")
+    p.add_argument("--workspace-gb", type=float, default=4.0, help="builder scratch memory")
+    p.add_argument("--cache-dir", help="engine cache folder (default: <models>/engines)")
+    p.set_defaults(handler=run_export)
 
 
 # --- fetch-model --------------------------------------------------------------------------------
@@ -333,6 +278,7 @@ SUBCOMMANDS: list[Callable[[Any], None]] = [
     _add_detect,
     _add_benchmark,
     _add_fetch_model,
+    _add_export,
     _add_serve,
 ]
 

@@ -25,11 +25,12 @@ _WAIT_S = 0.2  # how often the idle loop looks at the stop flag
 
 def open_detector(s: DetectorSettings) -> Detector:
     """Load the configured model (the default one, fetched if needed, when none is named)."""
+    from services.detector.backends.select import backend_options
     from services.detector.model_store import ensure_default_model
 
     model = s.model or str(ensure_default_model())
     params = DetectorParams(conf=s.conf, iou=s.iou, max_det=s.max_det, classes=s.classes or None)
-    return Detector.open(model, backend=s.backend, params=params)
+    return Detector.open(model, backend=s.backend, params=params, **backend_options(s))
 
 
 def to_message(
@@ -144,6 +145,8 @@ def add_serve_command(subparsers: Any) -> None:
     """Register ``serve``: run the detector service on the bus (the supervisor uses this)."""
     p = subparsers.add_parser("serve", help="run the detector service on the Zenoh bus")
     p.add_argument("--config", help="stack config (default deploy/stack.toml)")
-    p.add_argument("--backend", help="override detector.backend")
+    p.add_argument(
+        "--backend", help="override detector.backend: onnx, tensorrt, cuda or auto (CPU fallback)"
+    )
     p.add_argument("--model", help="override detector.model")
     p.set_defaults(handler=_run_serve)

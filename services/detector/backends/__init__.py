@@ -2,16 +2,20 @@
 
 A backend module exposes ``load(model_path, **options) -> Backend``. It imports its runtime at
 module level, so importing the module is what fails on a machine without that runtime; the
-table below is what lets CPU-only machines import the detector cleanly. To add a runtime
-(``tensorrt``, ``cuda``), write its module and add one row: pre- and post-processing do not
-change.
+table below is what lets CPU-only machines import the detector cleanly. To add a runtime,
+write its module and add one row: pre- and post-processing do not change.
+
+``auto`` is not a row: :func:`open_backend` hands it to :mod:`.select`, which probes the rows
+in order of speed (tensorrt, cuda, onnx) and loads the first that works here.
 """
 
 from __future__ import annotations
 
 import importlib
+import inspect
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from types import ModuleType
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -24,7 +28,15 @@ Dim = int | None  # None: a dynamic dimension (named or unknown in the model)
 #: Backend name -> module, imported only when that backend is asked for.
 BACKENDS: dict[str, str] = {
     "onnx": "services.detector.backends.onnx",
+    "tensorrt": "services.detector.backends.tensorrt",
+    "cuda": "services.detector.backends.cuda",
 }
+
+#: The name that picks the best backend this machine can run (see :mod:`.select`).
+AUTO = "auto"
+
+#: Every name ``--backend`` and ``detector.backend`` accept.
+BACKEND_CHOICES: tuple[str, ...] = (*BACKENDS, AUTO)  # the default first, then by speed
 
 
 @runtime_checkable
@@ -75,20 +87,53 @@ class Backend(Protocol):
         ...
 
 
-def open_backend(name: str, model_path: str | Path, **options: Any) -> Backend:
-    """Load ``model_path`` with the backend called ``name``.
+def import_backend(name: str) -> ModuleType:
+    """Import the module of the backend called ``name``.
 
-    Raises ConfigError for a name not in :data:`BACKENDS`, BackendUnavailable when its
-    runtime cannot be imported here, and ModelError (from the backend) for a bad model file.
+    Raises ConfigError for a name not in :data:`BACKENDS`, and BackendUnavailable when its
+    runtime cannot be imported here (a module may also raise BackendUnavailable itself, with
+    a better reason than the bare ImportError).
     """
     module_name = BACKENDS.get(name)
     if module_name is None:
-        raise ConfigError(
-            f"unknown backend {name!r}; valid backends: {', '.join(sorted(BACKENDS))}"
-        )
+        raise ConfigError(f"unknown backend {name!r}; valid backends: {', '.join(BACKEND_CHOICES)}")
     try:
-        module = importlib.import_module(module_name)
+        return importlib.import_module(module_name)
     except ImportError as exc:
         raise BackendUnavailable(f"backend {name!r} is unavailable on this machine: {exc}") from exc
-    load: Callable[..., Backend] = module.load
+
+
+def load_function(name: str) -> Callable[..., Backend]:
+    """The ``load`` function of backend ``name`` (see :func:`import_backend` for errors)."""
+    load: Callable[..., Backend] = import_backend(name).load
+    return load
+
+
+def supported_options(load: Callable[..., Backend]) -> frozenset[str] | None:
+    """The keyword options ``load`` takes; None when it takes any (``**options``)."""
+    params = list(inspect.signature(load).parameters.values())[1:]  # [0] is the model path
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    return frozenset(p.name for p in params)
+
+
+def open_backend(name: str, model_path: str | Path, **options: Any) -> Backend:
+    """Load ``model_path`` with the backend called ``name``, or the best one for ``auto``.
+
+    Raises ConfigError for an unknown name or an option that backend does not take,
+    BackendUnavailable when its runtime cannot be imported here, and ModelError (from the
+    backend) for a bad model file. ``auto`` drops options its choice does not take.
+    """
+    if name == AUTO:
+        from services.detector.backends.select import open_auto  # select imports this module
+
+        return open_auto(Path(model_path), options)
+    load = load_function(name)
+    taken = supported_options(load)
+    unknown = sorted(set(options) - taken) if taken is not None else []
+    if unknown:
+        raise ConfigError(
+            f"backend {name!r} takes no option(s) {', '.join(unknown)}; "
+            f"it takes: {', '.join(sorted(taken or ())) or 'none'}"
+        )
     return load(Path(model_path), **options)
