@@ -22,7 +22,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from common.errors import BackendUnavailable, ConfigError, ImageError, ModelError, StackError
+from common.errors import ConfigError, ImageError, StackError
+from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code
 from services.detector.annotate import annotate
 from services.detector.backends import BACKEND_CHOICES
 from services.detector.images import list_images, load_image
@@ -35,12 +36,8 @@ from services.detector.types import (
     DetectorParams,
 )
 
-EXIT_OK = 0
-EXIT_IMAGE_FAILED = 1
-EXIT_USAGE = 2
-EXIT_MODEL = 3
-EXIT_BACKEND = 4
-EXIT_INTERRUPTED = 130
+# The stack's shared exit codes (common/lifecycle.py); a failed image is the generic failure.
+EXIT_IMAGE_FAILED = EXIT_FAILED
 
 
 def _error(message: str) -> None:
@@ -292,17 +289,6 @@ def build_parser() -> argparse.ArgumentParser:
     for register in SUBCOMMANDS:
         register(subparsers)
     return parser
-
-
-def exit_code(error: StackError) -> int:
-    """The exit code documented above for ``error``."""
-    if isinstance(error, ConfigError):
-        return EXIT_USAGE
-    if isinstance(error, ModelError):
-        return EXIT_MODEL
-    if isinstance(error, BackendUnavailable):
-        return EXIT_BACKEND
-    return EXIT_IMAGE_FAILED
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 from skimage import data
 
-from common.errors import ModelFetchError
 from services.detector.backends.select import probe_cuda, probe_tensorrt
 from tests.integration.conftest import REPO, write_config
 
@@ -31,19 +30,6 @@ NO_TRT_LINE = (
 needs_no_tensorrt = pytest.mark.skipif(
     probe_tensorrt() is None, reason="TensorRT and a GPU are present here: nothing to refuse"
 )
-
-
-@pytest.fixture(scope="module")
-def default_model() -> Path:
-    from services.detector.model_store import default_model_path, ensure_default_model
-
-    path = default_model_path()
-    if path.is_file():
-        return path
-    try:
-        return ensure_default_model()
-    except ModelFetchError as exc:
-        pytest.skip(f"default model not present and cannot be fetched here: {exc}")
 
 
 @pytest.fixture(scope="module")

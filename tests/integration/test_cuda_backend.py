@@ -15,7 +15,6 @@ import pytest
 import torch
 from skimage import data
 
-from common.errors import ModelFetchError
 from services.detector.backends import BACKENDS
 from services.detector.backends import cuda as cuda_backend
 from services.detector.backends.onnx import OnnxBackend
@@ -38,19 +37,6 @@ gpu = pytest.mark.skipif(not torch.cuda.is_available(), reason=f"no CUDA GPU: {_
 
 def bgr(name: str) -> npt.NDArray[np.uint8]:
     return np.ascontiguousarray(getattr(data, name)()[:, :, ::-1])
-
-
-@pytest.fixture(scope="module")
-def default_model() -> Path:
-    from services.detector.model_store import default_model_path, ensure_default_model
-
-    path = default_model_path()
-    if path.is_file():
-        return path
-    try:
-        return ensure_default_model()
-    except ModelFetchError as exc:
-        pytest.skip(f"default model not present and cannot be fetched here: {exc}")
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,6 @@ import pytest
 from onnx import TensorProto, helper, numpy_helper
 from skimage import data
 
-from common.errors import ModelFetchError
 from services.detector.decode import Family
 from services.detector.pipeline import Detector
 
@@ -44,19 +43,6 @@ def box_iou(a: tuple[float, ...] | list[float], b: tuple[float, ...] | list[floa
 
 def bgr(name: str) -> npt.NDArray[np.uint8]:
     return np.ascontiguousarray(getattr(data, name)()[:, :, ::-1])
-
-
-@pytest.fixture(scope="module")
-def default_model() -> Path:
-    from services.detector.model_store import default_model_path, ensure_default_model
-
-    path = default_model_path()
-    if path.is_file():
-        return path
-    try:
-        return ensure_default_model()
-    except ModelFetchError as exc:
-        pytest.skip(f"default model not present and cannot be fetched here: {exc}")
 
 
 @pytest.fixture(scope="module")

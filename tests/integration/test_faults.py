@@ -6,29 +6,14 @@ import os
 import signal
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
 from common.messages import ControllerStatus, Detections, Twist
+from deploy.pids import service_pids
 from tests.integration.conftest import REPO, Stack, wait_for
 
 pytestmark = pytest.mark.integration
-
-
-def service_pids(service: str, config_path: Path) -> list[int]:
-    """PIDs of ``python -m services.<service> ... --config <config_path>`` (Linux /proc)."""
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            argv = (entry / "cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue  # the process ended while we looked
-        if f"services.{service}".encode() in argv and str(config_path).encode() in argv:
-            pids.append(int(entry.name))
-    return pids
 
 
 def test_killed_detector_stops_robot_and_is_restarted(make_stack) -> None:  # type: ignore[no-untyped-def]
