@@ -10,14 +10,20 @@ Latency stages, all in ms, measured from the camera's capture stamp (``header.st
 
 Cross-process figures compare wall clocks, so across hosts they need synchronised clocks (PTP
 or chrony); on one host they are exact.
+
+Besides the snapshot (``common.messages.MetricsSnapshot``), :meth:`Aggregator.extras` adds what
+the message does not carry: the drop rate (frames the detector skipped because a newer one had
+arrived, over the frames offered to it) and a per-second timeline (FPS over time) for plots.
 """
 
 from __future__ import annotations
 
 from collections import Counter, OrderedDict
+from collections.abc import Callable
+from typing import Any
 
 from common.messages import Detections, Header, MetricsSnapshot, ServiceCounters, Twist
-from services.metrics.window import Window, percentiles
+from services.metrics.window import Timeline, Window, percentiles
 
 NS_PER_MS = 1e6
 DETECTOR_STAGES = ("preprocess", "inference", "postprocess")
@@ -29,34 +35,62 @@ STAGES = (
     "end_to_end",
 )
 _RECENT = 512  # capture stamps remembered to pair Twists with the detections they react to
+#: Per-second timeline columns: detections messages, boxes, frames offered to the detector
+#: (its frames_in counter) and frames it dropped.
+TIMELINE_COLUMNS = ("frames", "detections", "offered", "dropped")
+#: The timeline stops this far behind now: counters arrive about once a second (slower while
+#: inference is slow), so the latest seconds may still be missing their share of them.
+TIMELINE_SETTLE_S = 2.0
+_DETECTOR_DELTAS = {"frames_in": "offered", "dropped": "dropped"}
+
+#: Called with (stage, milliseconds) for every latency sample, e.g. to feed a histogram.
+LatencyListener = Callable[[str, float], None]
 
 
 class Aggregator:
     """Accumulates per-stage latencies, rates and counters over a sliding window."""
 
-    def __init__(self, window_s: float) -> None:
+    def __init__(
+        self,
+        window_s: float,
+        history_s: float = 600.0,
+        on_latency: LatencyListener | None = None,
+    ) -> None:
         self.window_s = window_s
         self._lat = {stage: Window(window_s) for stage in STAGES}
         self._frames = Window(window_s)  # one sample per Detections message: value = n boxes
+        self._timeline = Timeline(history_s)
+        self._on_latency = on_latency
         self._classes: Counter[str] = Counter()
         self._published: OrderedDict[int, int] = OrderedDict()  # capture stamp -> published_ns
         self._counters: dict[str, int] = {}
         self.frames_total = 0
         self.detections_total = 0
+        self._detector_counters_at: float | None = None  # when its counters last came
+        self._detector_counters_since: float | None = None  # ... and first came
+        self.model = ""  # as the latest Detections named them
+        self.backend = ""
+
+    def _record(self, stage: str, now: float, ms: float) -> None:
+        self._lat[stage].add(now, ms)
+        if self._on_latency is not None:
+            self._on_latency(stage, ms)
 
     def on_detections(self, msg: Detections, now: float) -> None:
         stamp = msg.header.stamp_ns
         self.frames_total += 1
         self.detections_total += len(msg)
+        self.model, self.backend = msg.model, msg.backend
         self._frames.add(now, float(len(msg)))
+        self._timeline.add(now, frames=1.0, detections=float(len(msg)))
         self._classes.update(msg.class_names)
         for stage in DETECTOR_STAGES:
             if stage in msg.timing_ms:
-                self._lat[stage].add(now, msg.timing_ms[stage])
+                self._record(stage, now, msg.timing_ms[stage])
         if msg.received_ns:
-            self._lat["capture_to_detector"].add(now, (msg.received_ns - stamp) / NS_PER_MS)
+            self._record("capture_to_detector", now, (msg.received_ns - stamp) / NS_PER_MS)
         if msg.published_ns:
-            self._lat["capture_to_detections"].add(now, (msg.published_ns - stamp) / NS_PER_MS)
+            self._record("capture_to_detections", now, (msg.published_ns - stamp) / NS_PER_MS)
             self._published[stamp] = msg.published_ns
             while len(self._published) > _RECENT:
                 self._published.popitem(last=False)
@@ -66,12 +100,26 @@ class Aggregator:
         published = self._published.pop(msg.input_stamp_ns, None)
         if published is None:
             return
-        self._lat["detections_to_command"].add(now, (msg.header.stamp_ns - published) / NS_PER_MS)
-        self._lat["end_to_end"].add(now, (msg.header.stamp_ns - msg.input_stamp_ns) / NS_PER_MS)
+        self._record("detections_to_command", now, (msg.header.stamp_ns - published) / NS_PER_MS)
+        self._record("end_to_end", now, (msg.header.stamp_ns - msg.input_stamp_ns) / NS_PER_MS)
 
-    def on_counters(self, msg: ServiceCounters) -> None:
+    def on_counters(self, msg: ServiceCounters, now: float) -> None:
+        """Keep each service's totals; put the detector's new offered/dropped frames on the
+        timeline. A counter that went down means the service restarted and counts from zero."""
+        deltas: dict[str, float] = {}
         for name, value in msg.counters.items():
-            self._counters[f"{msg.service}.{name}"] = value
+            key = f"{msg.service}.{name}"
+            previous = self._counters.get(key)
+            self._counters[key] = value
+            column = _DETECTOR_DELTAS.get(name) if msg.service == "detector" else None
+            if column is not None and previous is not None:
+                deltas[column] = float(value - previous if value >= previous else value)
+        if msg.service == "detector":
+            if self._detector_counters_since is None:
+                self._detector_counters_since = now  # a baseline: the drops before are unknown
+            since, self._detector_counters_at = self._detector_counters_at, now
+            if deltas and since is not None:
+                self._timeline.spread(since, now, **deltas)
 
     def count(self, name: str, n: int = 1) -> None:
         """Count something the metrics service itself saw (e.g. its own bad input)."""
@@ -92,6 +140,49 @@ class Aggregator:
             counters=dict(sorted(self._counters.items())),
             class_counts=dict(self._classes.most_common()),
         )
+
+    def extras(self, now: float, clock_to_unix: float = 0.0) -> dict[str, Any]:
+        """What the query answers beyond the snapshot: drop rates and the per-second timeline.
+
+        ``drop_rate`` covers the window (dropped / offered frames, 0 when none were offered);
+        ``drop_rate_total`` the detector's counters since it started. The timeline's ``t`` is
+        the caller's clock plus ``clock_to_unix`` (pass ``time.time() - time.monotonic()`` for
+        Unix seconds), from the detector's first counters (before them, offered and dropped
+        frames are unknown) to :data:`TIMELINE_SETTLE_S` ago; ``fps`` and ``offered_fps`` are
+        per second, ``dropped`` a count per period.
+        """
+        recent = self._timeline.totals(now, self.window_s)
+        offered_total = self._counters.get("detector.frames_in", 0)
+        series = self._timeline.series(
+            now - TIMELINE_SETTLE_S, TIMELINE_COLUMNS, since=self._detector_counters_since
+        )
+        period = self._timeline.period_s
+        frames, boxes = series["frames"], series["detections"]
+        return {
+            "drop_rate": _ratio(recent.get("dropped", 0.0), recent.get("offered", 0.0)),
+            "drop_rate_total": _ratio(self._counters.get("detector.dropped", 0), offered_total),
+            "frames_offered": offered_total,
+            "timeline": {
+                "period_s": period,
+                "t": [t + clock_to_unix for t in series["t"]],
+                "fps": [f / period for f in frames],
+                "offered_fps": [f / period for f in series["offered"]],
+                "dropped": series["dropped"],
+                "detections_per_frame": [_ratio(b, f) for b, f in zip(boxes, frames, strict=True)],
+            },
+        }
+
+    def answer(self, header: Header, now: float, clock_to_unix: float = 0.0) -> dict[str, Any]:
+        """The metrics query's JSON: the snapshot plus :meth:`extras`."""
+        return {**self.snapshot(header, now).to_json_dict(), **self.extras(now, clock_to_unix)}
+
+    def latency_samples(self, now: float) -> dict[str, list[float]]:
+        """Every latency sample still in the window, per stage, in arrival order (ms)."""
+        return {stage: w.values(now).tolist() for stage, w in self._lat.items()}
+
+
+def _ratio(part: float, whole: float) -> float:
+    return float(part) / float(whole) if whole > 0 else 0.0
 
 
 def report_line(snap: MetricsSnapshot) -> str:

@@ -1,4 +1,9 @@
-"""The metrics service: listens to detections, commands and counters; answers queries in JSON."""
+"""The metrics service: listens to detections, commands and counters; answers queries in JSON.
+
+The answer is ``MetricsSnapshot.to_json_dict()`` plus :meth:`Aggregator.extras` (drop rates and
+the per-second timeline), so the message schema stays as it is. With ``prometheus_port`` set the
+same figures are also served to Prometheus.
+"""
 
 from __future__ import annotations
 
@@ -16,15 +21,27 @@ from common.keys import Keys
 from common.messages import Detections, ServiceCounters, Twist
 from common.node import Node
 from common.settings import Config
-from services.metrics.aggregate import Aggregator, report_line
+from services.metrics.aggregate import Aggregator, LatencyListener, report_line
 
 
 def run(config: Config, stop: threading.Event) -> int:
     """Serve metrics until ``stop`` is set."""
     s = config.metrics
-    agg = Aggregator(s.window_s)
     lock = threading.Lock()  # Zenoh calls back on its own threads
+    now = time.monotonic
+    exporter = None
+    listener: LatencyListener | None = None
+    if s.prometheus_port:
+        from services.metrics.prometheus import PrometheusExporter  # only when asked for
+
+        exporter = PrometheusExporter()
+        listener = exporter.observe
+    agg = Aggregator(s.window_s, s.history_s, on_latency=listener)
     with Node("metrics", config) as node:
+
+        def answer() -> dict[str, Any]:
+            with lock:
+                return agg.answer(node.header(), now(), time.time() - time.monotonic())
 
         def handler(key: str, decode: Callable[[bytes], Any], feed: Callable[[Any], None]) -> Any:
             def on_sample(sample: zenoh.Sample) -> None:
@@ -40,7 +57,6 @@ def run(config: Config, stop: threading.Event) -> int:
 
             return on_sample
 
-        now = time.monotonic
         keys = node.keys
         subs = [
             node.session.declare_subscriber(
@@ -52,16 +68,17 @@ def run(config: Config, stop: threading.Event) -> int:
             ),
             node.session.declare_subscriber(
                 keys.all_counters(),
-                handler("counters", ServiceCounters.decode, agg.on_counters),
+                handler("counters", ServiceCounters.decode, lambda m: agg.on_counters(m, now())),
             ),
         ]
 
         def on_query(query: zenoh.Query) -> None:
-            with lock:
-                snap = agg.snapshot(node.header(), now())
-            query.reply(keys.metrics(), json.dumps(snap.to_json_dict()))
+            query.reply(keys.metrics(), json.dumps(answer()))
 
         queryable = node.session.declare_queryable(keys.metrics(), on_query)
+        if exporter is not None:
+            port = exporter.start(answer, s.prometheus_host, s.prometheus_port)
+            node.log.info("prometheus metrics on http://%s:%d/metrics", s.prometheus_host, port)
         node.ready()
         try:
             while not stop.wait(s.report_period_s):
@@ -69,6 +86,8 @@ def run(config: Config, stop: threading.Event) -> int:
                     snap = agg.snapshot(node.header(), now())
                 node.log.info("%s", report_line(snap))
         finally:
+            if exporter is not None:
+                exporter.close()
             queryable.undeclare()
             for sub in subs:
                 sub.undeclare()

@@ -10,7 +10,6 @@ from pathlib import Path
 import pytest
 from faster_coco_eval import COCO, COCOeval_faster
 
-from services.detector.model_store import ensure_default_model
 from services.detector.pipeline import Detector
 from services.detector.types import DetectorParams
 from services.metrics.datasets import load_dataset
@@ -38,10 +37,10 @@ def _silent(*_args: object) -> None:
     """The evaluator prints its tables; the test compares numbers."""
 
 
-def test_evaluate_command_on_the_labelled_photos(images: Path) -> None:
+def test_evaluate_command_on_the_labelled_photos(images: Path, default_model: Path) -> None:
     proc = subprocess.run(
         [sys.executable, "-m", "services.metrics", "evaluate", "--dataset", str(ANNOTATIONS),
-         "--images", str(images), "--json"],
+         "--images", str(images), "--model", str(default_model), "--json"],
         cwd=REPO, capture_output=True, text=True, timeout=300, check=False,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
@@ -55,10 +54,12 @@ def test_evaluate_command_on_the_labelled_photos(images: Path) -> None:
         assert report["per_class"][name]["recall"] == 1.0, (name, report["per_class"][name])
 
 
-def test_evaluate_agrees_with_the_evaluator_on_the_same_detections(images: Path) -> None:
+def test_evaluate_agrees_with_the_evaluator_on_the_same_detections(
+    images: Path, default_model: Path
+) -> None:
     dataset = load_dataset(ANNOTATIONS, images)
     params = DetectorParams(conf=DEFAULT_EVAL_CONF, max_det=EVAL_MAX_DET)
-    with Detector.open(ensure_default_model(), params=params) as detector:
+    with Detector.open(default_model, params=params) as detector:
         detections = detect_dataset(detector, dataset)
         names = detector.names
     ours = score(dataset, names, detections)

@@ -72,9 +72,65 @@ def test_counters_are_namespaced_and_drops_surface() -> None:
     agg = Aggregator(window_s=5.0)
     hdr = Header(stamp_ns=0, frame_id="", seq=0, source="detector")
     agg.on_counters(
-        ServiceCounters(header=hdr, service="detector", counters={"dropped": 7, "bad_input": 2})
+        ServiceCounters(header=hdr, service="detector", counters={"dropped": 7, "bad_input": 2}),
+        now=0.0,
     )
     agg.count("bad_input")
     snap = agg.snapshot(hdr, now=0.0)
     assert snap.dropped_frames == 7
     assert snap.counters == {"detector.bad_input": 2, "detector.dropped": 7, "metrics.bad_input": 1}
+
+
+def _counters(frames_in: int, dropped: int) -> ServiceCounters:
+    hdr = Header(stamp_ns=0, frame_id="", seq=0, source="detector")
+    return ServiceCounters(
+        header=hdr, service="detector", counters={"frames_in": frames_in, "dropped": dropped}
+    )
+
+
+def test_drop_rate_over_the_window_and_since_start() -> None:
+    agg = Aggregator(window_s=5.0)
+    agg.on_counters(_counters(100, 50), now=0.0)  # a baseline: what came before is not in it
+    agg.on_counters(_counters(110, 52), now=1.0)
+    agg.on_counters(_counters(120, 58), now=2.0)
+    extras = agg.extras(now=2.5)
+    assert extras["drop_rate"] == pytest.approx(8 / 20)
+    assert extras["drop_rate_total"] == pytest.approx(58 / 120)
+    assert extras["frames_offered"] == 120
+    # A restarted detector counts from zero again; its new counts are deltas, not negatives.
+    agg.on_counters(_counters(10, 1), now=3.0)
+    assert agg.extras(now=3.5)["drop_rate"] == pytest.approx(9 / 30)
+    assert agg.extras(now=20.0)["drop_rate"] == 0.0  # everything has left the window
+
+
+def test_timeline_gives_fps_and_boxes_per_second() -> None:
+    agg = Aggregator(window_s=10.0, history_s=60.0)
+    for i in range(30):  # 10 frames per second for 3 s, 2 boxes each
+        agg.on_detections(_dets(1_000 * MS + i * 100 * MS, n=2), now=10.0 + i * 0.1)
+    agg.on_counters(_counters(0, 0), now=10.0)
+    agg.on_counters(_counters(60, 30), now=13.0)  # 20 offered/s, 10 dropped/s, over 3 s
+    tl = agg.extras(now=15.5, clock_to_unix=1000.0)["timeline"]
+    assert tl["t"] == [1010.0, 1011.0, 1012.0]  # up to 2 s ago: counters may still come
+    assert tl["fps"] == [10.0, 10.0, 10.0]
+    assert tl["detections_per_frame"] == [2.0, 2.0, 2.0]
+    assert tl["offered_fps"] == pytest.approx([20.0, 20.0, 20.0])
+    assert tl["dropped"] == pytest.approx([10.0, 10.0, 10.0])
+
+
+def test_latency_listener_sees_every_sample() -> None:
+    seen: list[tuple[str, float]] = []
+    agg = Aggregator(window_s=10.0, on_latency=lambda stage, ms: seen.append((stage, ms)))
+    agg.on_detections(_dets(1_000 * MS, n=1), now=0.0)
+    agg.on_twist(_twist(1_000 * MS + 95 * MS, 1_000 * MS), now=0.1)
+    stages = dict(seen)
+    assert stages["inference"] == 80.0 and stages["end_to_end"] == pytest.approx(95.0)
+    assert len(seen) == 7  # three detector stages, two transport figures, two command figures
+
+
+def test_answer_is_the_snapshot_plus_extras() -> None:
+    agg = Aggregator(window_s=10.0)
+    agg.on_detections(_dets(1_000 * MS, n=1), now=0.0)
+    answer = agg.answer(Header(stamp_ns=5, frame_id="", seq=0, source="metrics"), now=0.5)
+    assert answer["frames"] == 1 and answer["stamp_ns"] == 5
+    assert {"drop_rate", "drop_rate_total", "timeline"} <= answer.keys()
+    assert agg.latency_samples(0.5)["inference"] == [80.0]

@@ -1,0 +1,237 @@
+"""Record a session for the report: run the stack under the supervisor and listen to it.
+
+The recorder subscribes to the same keys as the metrics service (detections, commands,
+counters) and feeds its own :class:`Aggregator`, with a window as long as the session, so the
+report gets every latency sample (histograms need samples, not percentiles) and the whole
+per-second timeline. At the end it also asks the metrics service for its answer, kept in the
+session as the service saw it. Recording starts once every service is ready, so model loading
+and warm-up stay out of the figures.
+
+A session is plain JSON (``session.json``) that ``report --from`` reads back.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from common.bus import open_session
+from common.errors import ConfigError, DecodeError, StackError
+from common.keys import Keys
+from common.messages import Detections, Header, ServiceCounters, Twist
+from common.settings import REPO_ROOT, Config, load_config
+from services.metrics.aggregate import Aggregator
+from services.metrics.machine import machine_info
+
+SESSION_VERSION = 1
+#: The recorder's window outlasts the session by this much, so no sample ever leaves it.
+_WINDOW_MARGIN_S = 60.0
+_STOP_MARGIN_S = 15.0  # on top of the supervisor's own stop_timeout_s
+_REQUIRED = {"version": int, "duration_s": float, "summary": dict, "latency_samples_ms": dict}
+
+Progress = Callable[[str], None]
+
+
+def _frames_source(config: Config) -> str:
+    """Where the frames come from: the simulator or the camera service, with its settings."""
+    services = config.supervisor.services
+    if "sim" in services:
+        sim = config.sim
+        return (
+            f"simulator, scenario {sim.scenario!r}, {sim.width}x{sim.height} "
+            f"at {sim.camera_rate_hz:g} Hz"
+        )
+    if "camera" in services:
+        c = config.camera
+        size = "source size" if c.resize == (0, 0) else f"{c.resize[0]}x{c.resize[1]}"
+        encoding = f"JPEG q{c.jpeg_quality}" if c.jpeg_quality else "raw bgr8"
+        return f"camera {c.source!r} at {c.rate_hz:g} Hz, {size}, {encoding}"
+    return "from outside this stack (no sim or camera service)"
+
+
+def _config_summary(config: Config) -> dict[str, Any]:
+    d, path = config.detector, Path(config.path).resolve()
+    return {
+        "config": str(path.relative_to(REPO_ROOT) if path.is_relative_to(REPO_ROOT) else path),
+        "services": ", ".join(config.supervisor.services),
+        "frames": _frames_source(config),
+        "detector_model": d.model or "default (YOLOv5s COCO)",
+        "detector_backend": d.backend,
+        "detector_conf": d.conf,
+        "controller_mode": config.controller.mode,
+        "target_classes": ", ".join(config.controller.target_classes),
+    }
+
+
+def _ready(session: zenoh.Session, keys: Keys) -> set[str]:
+    replies = session.liveliness().get(keys.all_health(), timeout=1.0)
+    return {str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None}
+
+
+def _wait_ready(
+    session: zenoh.Session,
+    keys: Keys,
+    services: set[str],
+    proc: subprocess.Popen[bytes],
+    timeout_s: float,
+    stop: threading.Event,
+    log_path: Path,
+) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not services <= _ready(session, keys):
+        if proc.poll() is not None:
+            raise StackError(
+                f"the stack exited ({proc.returncode}) before it was ready; see {log_path}"
+            )
+        if time.monotonic() > deadline:
+            raise StackError(f"the stack was not ready within {timeout_s:.0f} s; see {log_path}")
+        if stop.wait(0.2):
+            raise KeyboardInterrupt
+
+
+def _stop_supervisor(proc: subprocess.Popen[bytes], timeout_s: float) -> int:
+    """SIGINT, as Ctrl-C would; SIGKILL to the whole group if it does not stop in time."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        return proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        return proc.wait()
+
+
+def _query_metrics(session: zenoh.Session, keys: Keys) -> dict[str, Any] | None:
+    for reply in session.get(keys.metrics(), timeout=2.0):
+        if reply.ok is not None:
+            answer: dict[str, Any] = json.loads(reply.ok.payload.to_string())
+            answer.pop("timeline", None)  # the recorder has its own, from the same messages
+            return answer
+    return None
+
+
+def _listen(session: zenoh.Session, keys: Keys, agg: Aggregator, lock: threading.Lock) -> list[Any]:
+    """Feed ``agg`` from the bus; garbage is skipped (the metrics service counts it)."""
+
+    def handler(decode: Callable[[bytes], Any], feed: Callable[[Any, float], None]) -> Any:
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                msg = decode(sample.payload.to_bytes())
+            except DecodeError:
+                return
+            with lock:
+                feed(msg, time.monotonic())
+
+        return on_sample
+
+    return [
+        session.declare_subscriber(
+            keys.all_detections(), handler(Detections.decode, agg.on_detections)
+        ),
+        session.declare_subscriber(keys.cmd_vel(), handler(Twist.decode, agg.on_twist)),
+        session.declare_subscriber(
+            keys.all_counters(), handler(ServiceCounters.decode, agg.on_counters)
+        ),
+    ]
+
+
+def record(
+    config_path: str | None,
+    duration_s: float,
+    log_path: Path,
+    stop: threading.Event,
+    progress: Progress,
+    startup_timeout_s: float = 180.0,
+) -> dict[str, Any]:
+    """Start the stack, wait until it is ready, record ``duration_s`` seconds, stop it.
+
+    The supervisor's output goes to ``log_path``. Ctrl-C (``stop``) during the recording ends
+    it early and keeps what was recorded.
+    """
+    if duration_s <= 0:
+        raise ConfigError(f"--duration must be positive, got {duration_s}")
+    config = load_config(config_path)
+    keys = Keys(config.stack.prefix)
+    with log_path.open("wb") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "deploy.supervisor", "--config", config.path],
+            cwd=REPO_ROOT,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,  # our Ctrl-C is forwarded as one SIGINT, not twice
+        )
+    try:
+        session = open_session(config.zenoh)
+        try:
+            progress(f"report: starting the stack ({config.path}); log in {log_path}")
+            services = set(config.supervisor.services)
+            _wait_ready(session, keys, services, proc, startup_timeout_s, stop, log_path)
+            progress(f"report: recording {duration_s:.0f} s")
+            lock = threading.Lock()
+            agg = Aggregator(duration_s + _WINDOW_MARGIN_S, duration_s + _WINDOW_MARGIN_S)
+            subs = _listen(session, keys, agg, lock)
+            start = time.monotonic()
+            stop.wait(duration_s)
+            with lock:
+                session_data = snapshot_session(agg, start, time.monotonic())
+            for sub in subs:
+                sub.undeclare()
+            has_metrics = "metrics" in config.supervisor.services
+            service_answer = _query_metrics(session, keys) if has_metrics else None
+        finally:
+            session.close()
+    finally:
+        exit_code = _stop_supervisor(proc, config.supervisor.stop_timeout_s + _STOP_MARGIN_S)
+    return {
+        **session_data,
+        "config": _config_summary(config),
+        "machine": machine_info(),
+        "metrics_service": service_answer,
+        "supervisor_exit_code": exit_code,
+    }
+
+
+def snapshot_session(agg: Aggregator, start: float, now: float) -> dict[str, Any]:
+    """The recorded part of a session: ``agg``'s answer and samples between ``start`` and
+    ``now`` (its clock), timeline times in seconds since ``start``."""
+    header = Header(stamp_ns=time.time_ns(), frame_id="", seq=0, source="report")
+    samples = agg.latency_samples(now)
+    return {
+        "version": SESSION_VERSION,
+        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "duration_s": round(now - start, 3),
+        "detector": {"model": agg.model, "backend": agg.backend},
+        "summary": agg.answer(header, now, clock_to_unix=-start),
+        "latency_samples_ms": {k: [round(v, 3) for v in vs] for k, vs in samples.items()},
+    }
+
+
+def check_session(data: Any, source: str) -> dict[str, Any]:
+    """``data`` if it looks like a session (version and the keys the report reads)."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: not a session file (expected a JSON object)")
+    for key, kind in _REQUIRED.items():
+        value = data.get(key)
+        ok = isinstance(value, int | float) if kind is float else isinstance(value, kind)
+        if not ok or isinstance(value, bool):
+            raise ConfigError(
+                f"{source}: not a session file ('{key}' missing or not a {kind.__name__})"
+            )
+    if data["version"] != SESSION_VERSION:
+        raise ConfigError(
+            f"{source}: session version {data['version']}; this code reads {SESSION_VERSION}"
+        )
+    for key in ("latency_ms", "timeline"):
+        if not isinstance(data["summary"].get(key), dict):
+            raise ConfigError(f"{source}: not a session file (summary has no '{key}')")
+    return data

@@ -1,0 +1,94 @@
+"""The Prometheus endpoint, scraped over loopback like Prometheus would."""
+
+from __future__ import annotations
+
+import urllib.request
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from prometheus_client.parser import text_string_to_metric_families
+
+from common.messages import Detections, Header, ServiceCounters
+from services.metrics.aggregate import Aggregator
+from services.metrics.prometheus import PrometheusExporter
+
+MS = 1_000_000
+HEADER = Header(stamp_ns=0, frame_id="", seq=0, source="metrics")
+
+
+@pytest.fixture
+def served() -> Iterator[tuple[Aggregator, int]]:
+    exporter = PrometheusExporter()
+    agg = Aggregator(window_s=10.0, on_latency=exporter.observe)
+    port = exporter.start(lambda: agg.answer(HEADER, now=1.0), "127.0.0.1", 0)
+    yield agg, port
+    exporter.close()
+
+
+def _scrape(port: int) -> dict[str, list[tuple[dict[str, str], float]]]:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=10) as reply:
+        return _samples(reply.read().decode())
+
+
+def _samples(text: str) -> dict[str, list[tuple[dict[str, str], float]]]:
+    out: dict[str, list[tuple[dict[str, str], float]]] = {}
+    for family in text_string_to_metric_families(text):
+        for s in family.samples:
+            out.setdefault(s.name, []).append((s.labels, s.value))
+    return out
+
+
+Samples = dict[str, list[tuple[dict[str, str], float]]]
+
+
+def _value(samples: Samples, name: str, **labels: str) -> float:
+    return next(v for lab, v in samples[name] if labels.items() <= lab.items())
+
+
+def test_scrape_shows_gauges_counters_and_latency_histogram(
+    served: tuple[Aggregator, int],
+) -> None:
+    agg, port = served
+    for i in range(5):
+        stamp = 1_000 * MS + i * 100 * MS
+        agg.on_detections(
+            Detections(
+                header=Header(stamp_ns=stamp, frame_id="c", seq=i, source="camera"),
+                image_width=64,
+                image_height=48,
+                class_ids=np.zeros(1, np.int32),
+                class_names=("person",),
+                scores=np.ones(1, np.float32),
+                xyxy=np.array([[0, 0, 10, 10]], np.float32),
+                timing_ms={"preprocess": 2.0, "inference": 80.0, "postprocess": 1.0},
+                received_ns=stamp + 5 * MS,
+                published_ns=stamp + 90 * MS,
+            ),
+            now=i * 0.1,
+        )
+    agg.on_counters(
+        ServiceCounters(header=HEADER, service="detector", counters={"dropped": 3}), now=0.5
+    )
+    samples = _scrape(port)
+    assert _value(samples, "stack_fps") == pytest.approx(10.0)
+    assert _value(samples, "stack_detections_per_frame") == 1.0
+    assert _value(samples, "stack_frames_total") == 5
+    assert _value(samples, "stack_class_detections_total", class_name="person") == 5
+    events = "stack_service_events_total"
+    assert _value(samples, events, service="detector", counter="dropped") == 3
+    assert _value(samples, "stack_latency_window_ms", stage="inference", quantile="p50") == 80.0
+    # Every sample went into the histogram, in seconds: 80 ms falls in the 0.1 s bucket.
+    assert _value(samples, "stack_latency_seconds_count", stage="inference") == 5
+    assert _value(samples, "stack_latency_seconds_bucket", stage="inference", le="0.075") == 0
+    assert _value(samples, "stack_latency_seconds_bucket", stage="inference", le="0.1") == 5
+    assert "stack_drop_rate" in samples
+
+
+def test_a_port_in_use_is_a_config_error(served: tuple[Aggregator, int]) -> None:
+    from common.errors import ConfigError
+
+    _, port = served
+    other = PrometheusExporter()
+    with pytest.raises(ConfigError, match=f"cannot listen on 127.0.0.1:{port}"):
+        other.start(dict, "127.0.0.1", port)
