@@ -63,6 +63,9 @@ class Aggregator:
         self._on_latency = on_latency
         self._classes: Counter[str] = Counter()
         self._published: OrderedDict[int, int] = OrderedDict()  # capture stamp -> published_ns
+        # The command can reach us before the detections it reacts to (they travel different
+        # paths): capture stamp -> the first such command's stamp, paired when they arrive.
+        self._early: OrderedDict[int, int] = OrderedDict()
         self._counters: dict[str, int] = {}
         self.frames_total = 0
         self.detections_total = 0
@@ -91,17 +94,29 @@ class Aggregator:
             self._record("capture_to_detector", now, (msg.received_ns - stamp) / NS_PER_MS)
         if msg.published_ns:
             self._record("capture_to_detections", now, (msg.published_ns - stamp) / NS_PER_MS)
+            early = self._early.pop(stamp, None)
+            if early is not None:
+                self._record_reaction(now, stamp, msg.published_ns, early)
+                return
             self._published[stamp] = msg.published_ns
             while len(self._published) > _RECENT:
                 self._published.popitem(last=False)
 
     def on_twist(self, msg: Twist, now: float) -> None:
         """Score the first command that reacts to each frame; later repeats are ignored."""
+        if msg.input_stamp_ns <= 0:
+            return  # a stop that reacts to no frame
         published = self._published.pop(msg.input_stamp_ns, None)
         if published is None:
+            self._early.setdefault(msg.input_stamp_ns, msg.header.stamp_ns)
+            while len(self._early) > _RECENT:
+                self._early.popitem(last=False)
             return
-        self._record("detections_to_command", now, (msg.header.stamp_ns - published) / NS_PER_MS)
-        self._record("end_to_end", now, (msg.header.stamp_ns - msg.input_stamp_ns) / NS_PER_MS)
+        self._record_reaction(now, msg.input_stamp_ns, published, msg.header.stamp_ns)
+
+    def _record_reaction(self, now: float, captured: int, published: int, commanded: int) -> None:
+        self._record("detections_to_command", now, (commanded - published) / NS_PER_MS)
+        self._record("end_to_end", now, (commanded - captured) / NS_PER_MS)
 
     def on_counters(self, msg: ServiceCounters, now: float) -> None:
         """Keep each service's totals; put the detector's new offered/dropped frames on the

@@ -134,3 +134,15 @@ def test_answer_is_the_snapshot_plus_extras() -> None:
     assert answer["frames"] == 1 and answer["stamp_ns"] == 5
     assert {"drop_rate", "drop_rate_total", "timeline"} <= answer.keys()
     assert agg.latency_samples(0.5)["inference"] == [80.0]
+
+
+def test_a_command_that_overtakes_its_detections_is_still_paired() -> None:
+    agg = Aggregator(window_s=10.0)
+    stamp = 1_000 * MS
+    agg.on_twist(_twist(stamp + 95 * MS, stamp), now=0.0)  # arrives first
+    agg.on_twist(_twist(stamp + 145 * MS, stamp), now=0.0)  # a repeat: ignored
+    agg.on_detections(_dets(stamp, n=1), now=0.0)
+    snap = agg.snapshot(Header(stamp_ns=0, frame_id="", seq=0, source="metrics"), now=0.1)
+    assert snap.latency_ms["end_to_end"]["count"] == 1
+    assert snap.latency_ms["end_to_end"]["p50"] == pytest.approx(95.0)
+    assert snap.latency_ms["detections_to_command"]["p50"] == pytest.approx(5.0)
