@@ -73,6 +73,8 @@ def load_benchmarks(paths: Sequence[str]) -> list[dict[str, Any]]:
             for one in side_by_side.values() if isinstance(side_by_side, dict) else [item]:
                 if not isinstance(one, dict) or not isinstance(one.get("p50_ms"), dict):
                     raise ConfigError(f"{path}: not `services.detector benchmark --json` output")
+                if isinstance(item.get("machine"), dict):
+                    one = {"machine": item["machine"], **one}  # where it ran, for the report
                 out.append(one)
     return out
 
@@ -166,8 +168,17 @@ def render_markdown(session: Mapping[str, Any], plots: Mapping[str, Path]) -> st
             agree = b.get("agreement", {})
             agreement = f"{agree['map50_95']:.3f}" if "map50_95" in agree else "-"
             p95 = _ms(b.get("p95_ms", {}).get("total", 0.0))
-            rows.append([benchmark_label(b), *p50, p95, agreement])
-        lines += _table(["backend", *stages, "total p95", "mAP50-95 vs onnx fp32"], rows)
+            m = b.get("machine") or {}
+            where = f"{m.get('cpu_model', '?')}, {m.get('cpu_count', '?')} cores" if m else "-"
+            rows.append([benchmark_label(b), *p50, p95, agreement, where])
+        lines += [
+            "Benchmarks can come from another machine than the run above: the last column "
+            "says where each one ran.",
+            "",
+        ]
+        lines += _table(
+            ["backend", *stages, "total p95", "mAP50-95 vs onnx fp32", "measured on"], rows
+        )
     lines += ["", "## Setup", ""]
     lines += _table(["setting", "value"], [[f"`{k}`", f"`{v}`"] for k, v in cfg.items()])
     lines += ["", "## Machine", ""]

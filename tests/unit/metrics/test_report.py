@@ -97,8 +97,15 @@ def test_report_from_a_saved_session(tmp_path: Path) -> None:
         if path.suffix == ".png":
             _check_png(path)
     md = (tmp_path / "out" / "report.md").read_text()
-    for needle in ("## Summary", "## Latency per stage", "## Machine", "Test CPU",
-                   "![Throughput over time](fps_over_time.png)", "onnx/cpu/fp32", "tensorrt"):
+    for needle in (
+        "## Summary",
+        "## Latency per stage",
+        "## Machine",
+        "Test CPU",
+        "![Throughput over time](fps_over_time.png)",
+        "onnx/cpu/fp32",
+        "tensorrt",
+    ):
         assert needle in md, needle  # fmt: skip
     # The saved copy reads back, and the timeline has one point per recorded second.
     saved = check_session(json.loads((tmp_path / "out" / "session.json").read_text()), "saved")
@@ -167,3 +174,17 @@ def test_a_side_by_side_benchmark_gives_one_entry_per_backend(tmp_path: Path) ->
     path = tmp_path / "b.json"
     path.write_text(json.dumps({**onnx, "backends": {"onnx": onnx, "cuda": cuda}}))
     assert [b["backend"]["name"] for b in load_benchmarks([str(path)])] == ["onnx", "cuda"]
+
+
+def test_the_report_says_where_each_benchmark_ran(tmp_path: Path) -> None:
+    onnx, cuda = _bench("onnx", 240.0), _bench("cuda", 9.0)
+    machine = {"cpu_model": "Some GPU Box CPU", "cpu_count": 16}
+    path = tmp_path / "b.json"
+    path.write_text(
+        json.dumps({**onnx, "machine": machine, "backends": {"onnx": onnx, "cuda": cuda}})
+    )
+    benchmarks = load_benchmarks([str(path)])
+    assert all(b["machine"] == machine for b in benchmarks)
+    session = {**_session(seconds=3), "benchmarks": benchmarks}
+    write_report(session, tmp_path / "out")
+    assert "Some GPU Box CPU, 16 cores" in (tmp_path / "out" / "report.md").read_text()
