@@ -1,30 +1,19 @@
-"""Typed, frozen settings for every service, read from the stack's TOML file plus overrides.
+"""Typed, frozen settings for every service: one table of the stack's TOML file each.
 
-One file (``deploy/stack.toml`` by default) configures the whole stack, one table per service.
-Environment variables override single fields: ``STACK__<TABLE>__<FIELD>=<TOML value>``, e.g.
-``STACK__DETECTOR__BACKEND=cuda`` or ``STACK__CONTROLLER__TARGET_CLASSES='["cup"]'``.
-Unknown tables or fields, wrong types and out-of-range values raise ConfigError at start-up,
-so a typo stops the service with one line instead of being silently ignored.
+Each dataclass validates itself and raises ConfigError with one line for an out-of-range value.
+Reading the file and the environment overrides is in common/config_file.py.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import os
-import tomllib
-import types
-import typing
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
 
 from common.errors import ConfigError
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
-ENV_PREFIX = "STACK__"
 
 
 def _positive(name: str, value: float) -> None:
@@ -350,109 +339,3 @@ class Config:
     sim: SimSettings = field(default_factory=SimSettings)
     metrics: MetricsSettings = field(default_factory=MetricsSettings)
     supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)
-
-
-_T = TypeVar("_T")
-
-
-def _coerce(where: str, value: Any, hint: Any) -> Any:
-    """Check ``value`` against a field's type hint, converting TOML lists to tuples."""
-    origin = typing.get_origin(hint)
-    if origin is tuple:
-        args = typing.get_args(hint)
-        if not isinstance(value, list | tuple):
-            raise ConfigError(f"{where} must be a list, got {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_coerce(where, v, args[0]) for v in value)
-        if len(value) != len(args):
-            raise ConfigError(f"{where} must have {len(args)} items, got {value!r}")
-        return tuple(_coerce(where, v, a) for v, a in zip(value, args, strict=True))
-    if origin in (types.UnionType, typing.Union):
-        raise ConfigError(f"{where}: unions are not supported in settings")
-    if hint is float and isinstance(value, int | float) and not isinstance(value, bool):
-        return float(value)
-    if hint in (int, str, bool) and type(value) is hint:
-        return value
-    raise ConfigError(f"{where} must be {getattr(hint, '__name__', hint)}, got {value!r}")
-
-
-def _build(cls: type[_T], table: str, values: Mapping[str, Any]) -> _T:
-    hints = typing.get_type_hints(cls)
-    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(values) - names)
-    if unknown:
-        raise ConfigError(f"[{table}] has unknown setting(s) {unknown}; known: {sorted(names)}")
-    kwargs = {k: _coerce(f"{table}.{k}", v, hints[k]) for k, v in values.items()}
-    return cls(**kwargs)
-
-
-def _env_overrides(environ: Mapping[str, str]) -> dict[str, dict[str, Any]]:
-    """Collect ``STACK__TABLE__FIELD=value`` overrides; values are TOML, else plain strings."""
-    out: dict[str, dict[str, Any]] = {}
-    for name, raw in environ.items():
-        if not name.startswith(ENV_PREFIX):
-            continue
-        parts = name[len(ENV_PREFIX) :].lower().split("__")
-        if len(parts) != 2:
-            raise ConfigError(f"{name}: overrides look like {ENV_PREFIX}<TABLE>__<FIELD>")
-        try:
-            value = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = raw
-        out.setdefault(parts[0], {})[parts[1]] = value
-    return out
-
-
-def load_config(path: str | Path | None = None, environ: Mapping[str, str] | None = None) -> Config:
-    """Read the stack config (default ``deploy/stack.toml``), apply env overrides, validate."""
-    cfg_path = Path(path) if path else DEFAULT_CONFIG
-    try:
-        data = tomllib.loads(cfg_path.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise ConfigError(f"{cfg_path}: config file not found") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{cfg_path}: cannot read config ({exc})") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{cfg_path}: not valid TOML ({exc})") from exc
-    for table, values in _env_overrides(os.environ if environ is None else environ).items():
-        data.setdefault(table, {}).update(values)
-    hints = typing.get_type_hints(Config)
-    tables = {f.name for f in dataclasses.fields(Config)} - {"path"}
-    unknown = sorted(set(data) - tables)
-    if unknown:
-        raise ConfigError(f"{cfg_path}: unknown table(s) {unknown}; known: {sorted(tables)}")
-    built: dict[str, Any] = {}
-    for table in tables:
-        values = data.get(table, {})
-        if not isinstance(values, dict):
-            raise ConfigError(f"{cfg_path}: [{table}] must be a table")
-        built[table] = _build(hints[table], table, values)
-    return Config(path=str(cfg_path), **built)
-
-
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, tuple | list):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, float) and not math.isfinite(value):
-        return "inf" if value > 0 else "-inf"
-    return repr(value)
-
-
-def to_toml(config: Config) -> str:
-    """The whole config as TOML that :func:`load_config` reads back to an equal Config."""
-    lines: list[str] = []
-    for table in dataclasses.fields(Config):
-        if table.name == "path":
-            continue
-        lines.append(f"[{table.name}]")
-        section = getattr(config, table.name)
-        lines += [
-            f"{f.name} = {_toml_value(getattr(section, f.name))}"
-            for f in dataclasses.fields(section)
-        ]
-        lines.append("")
-    return "\n".join(lines)

@@ -17,11 +17,12 @@ from typing import Any
 import zenoh
 
 from common.bus import open_session
+from common.config_file import load_config
 from common.errors import DecodeError
 from common.keys import Keys
 from common.lifecycle import run_main, setup_logging, stop_event
 from common.messages import ControllerStatus, GroundTruth, Twist
-from common.settings import Config, load_config
+from common.settings import Config
 from deploy.processes import ServiceProcess, service_command
 
 

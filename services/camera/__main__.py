@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
+from common.config_file import load_config
 from common.lifecycle import run_main, setup_logging, stop_event
-from common.settings import load_config
 
 
 def main() -> int:

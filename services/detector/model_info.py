@@ -43,17 +43,22 @@ class ModelInfo:
         return self.layout.family
 
 
+def _literal(raw: str | None) -> object:
+    """A metadata value as a Python literal, or None when absent or not a literal."""
+    if not raw:
+        return None
+    try:
+        return ast.literal_eval(raw)
+    except (ValueError, SyntaxError, MemoryError, RecursionError):
+        return None
+
+
 def parse_names(raw: str | None) -> dict[int, str] | None:
     """Parse Ultralytics' ``names`` metadata (``"{0: 'person', ...}"`` or a list literal).
 
     Returns ``None`` when absent or not a dict/list of names.
     """
-    if not raw:
-        return None
-    try:
-        value = ast.literal_eval(raw)
-    except (ValueError, SyntaxError, MemoryError, RecursionError):
-        return None
+    value = _literal(raw)
     if isinstance(value, (list, tuple)):
         value = dict(enumerate(value))
     if not isinstance(value, dict) or not value:
@@ -65,12 +70,7 @@ def parse_names(raw: str | None) -> dict[int, str] | None:
 
 def parse_imgsz(raw: str | None) -> tuple[int, int] | None:
     """Parse ``imgsz`` metadata (``"640"`` or ``"[384, 640]"``) into ``(height, width)``."""
-    if not raw:
-        return None
-    try:
-        value = ast.literal_eval(raw)
-    except (ValueError, SyntaxError, MemoryError, RecursionError):
-        return None
+    value = _literal(raw)
     if isinstance(value, int) and value > 0:
         return value, value
     if (

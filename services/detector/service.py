@@ -127,8 +127,8 @@ def run(config: Config, stop: threading.Event) -> int:
 
 
 def _run_serve(args: Any) -> int:
+    from common.config_file import load_config
     from common.lifecycle import setup_logging, stop_event
-    from common.settings import load_config
 
     stop = stop_event()
     config = load_config(args.config)

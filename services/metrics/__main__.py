@@ -12,9 +12,9 @@ import json
 import sys
 from collections.abc import Sequence
 
+from common.config_file import load_config
 from common.errors import StackError
 from common.lifecycle import run_main, setup_logging, stop_event
-from common.settings import load_config
 
 COMMANDS = ("serve", "query", "evaluate", "report")
 

@@ -27,10 +27,11 @@ from typing import Any
 import zenoh
 
 from common.bus import open_session
+from common.config_file import load_config
 from common.errors import ConfigError, DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, Header, ServiceCounters, Twist
-from common.settings import REPO_ROOT, Config, load_config
+from common.settings import REPO_ROOT, Config
 from services.metrics.aggregate import Aggregator
 from services.metrics.machine import machine_info
 

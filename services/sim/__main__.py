@@ -13,8 +13,8 @@ import json
 import sys
 from typing import Any
 
+from common.config_file import load_config
 from common.lifecycle import run_main, setup_logging, stop_event
-from common.settings import load_config
 
 
 def _print_text(r: dict[str, Any]) -> None:

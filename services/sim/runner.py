@@ -23,10 +23,11 @@ from typing import Any
 import zenoh
 
 from common.bus import open_session
+from common.config_file import to_toml
 from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, GroundTruth, Twist
-from common.settings import REPO_ROOT, Config, to_toml
+from common.settings import REPO_ROOT, Config
 from deploy.pids import service_pids
 from services.sim.scenarios import SCENARIOS, Scenario
 from services.sim.score import Recording, score

@@ -19,8 +19,9 @@ import pytest
 import zenoh
 
 from common.bus import open_session
+from common.config_file import load_config
 from common.keys import Keys
-from common.settings import ZenohSettings, load_config
+from common.settings import ZenohSettings
 
 REPO = Path(__file__).resolve().parents[2]
 STARTUP_S = 120.0  # model load and warm-up on a loaded 2-core CI machine

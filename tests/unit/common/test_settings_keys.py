@@ -5,11 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from common.config_file import load_config
 from common.errors import ConfigError, ImageError
 from common.frames import frame_to_bgr, image_to_frame
 from common.keys import Keys
 from common.messages import Frame, Header
-from common.settings import DEFAULT_CONFIG, load_config
+from common.settings import DEFAULT_CONFIG
 
 
 def test_default_config_loads() -> None:
@@ -98,7 +99,7 @@ def test_corrupt_jpeg_is_an_image_error() -> None:
 def test_to_toml_round_trips(tmp_path: Path) -> None:
     import dataclasses
 
-    from common.settings import to_toml
+    from common.config_file import to_toml
 
     cfg = load_config(DEFAULT_CONFIG, environ={})
     cfg = dataclasses.replace(
