@@ -9,6 +9,7 @@ subscriber needs a single ``except DecodeError`` to drop garbage.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -129,10 +130,13 @@ class Body:
     def float_map(self, key: str) -> dict[str, float]:
         v = self._get(key)
         if not isinstance(v, dict) or not all(
-            isinstance(k, str) and isinstance(x, int | float) and not isinstance(x, bool)
+            isinstance(k, str)
+            and isinstance(x, int | float)
+            and not isinstance(x, bool)
+            and math.isfinite(x)
             for k, x in v.items()
         ):
-            raise self._fail(key, "map of str to float")
+            raise self._fail(key, "map of str to finite float")
         return {k: float(x) for k, x in v.items()}
 
     def int_map(self, key: str) -> dict[str, int]:

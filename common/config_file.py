@@ -88,7 +88,10 @@ def load_config(path: str | Path | None = None, environ: Mapping[str, str] | Non
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{cfg_path}: not valid TOML ({exc})") from exc
     for table, values in _env_overrides(os.environ if environ is None else environ).items():
-        data.setdefault(table, {}).update(values)
+        current = data.setdefault(table, {})
+        if not isinstance(current, dict):
+            raise ConfigError(f"{cfg_path}: [{table}] must be a table")
+        current.update(values)
     hints = typing.get_type_hints(Config)
     tables = {f.name for f in dataclasses.fields(Config)} - {"path"}
     unknown = sorted(set(data) - tables)

@@ -11,6 +11,7 @@ y down; angles are radians, counter-clockwise positive (REP 103); ranges are met
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Self
@@ -171,6 +172,10 @@ class Detections(_Message):
             raise ValueError(f"scores and class_names must have {n} entries")
         if self.track_ids is not None and self.track_ids.shape != (n,):
             raise ValueError(f"track_ids must be ({n},), got {self.track_ids.shape}")
+        if not (np.isfinite(self.xyxy).all() and np.isfinite(self.scores).all()):
+            raise ValueError("boxes and scores must be finite")
+        if ((self.xyxy[:, 2] < self.xyxy[:, 0]) | (self.xyxy[:, 3] < self.xyxy[:, 1])).any():
+            raise ValueError("boxes must have x2 >= x1 and y2 >= y1")
 
     def __len__(self) -> int:
         return len(self.class_ids)
@@ -239,6 +244,11 @@ class Twist(_Message):
     linear: tuple[float, float, float] = (0.0, 0.0, 0.0)
     angular: tuple[float, float, float] = (0.0, 0.0, 0.0)
     input_stamp_ns: int = 0
+
+    def __post_init__(self) -> None:
+        # A NaN reaching a motor driver that does not check is a runaway: refuse to build one.
+        if not all(math.isfinite(v) for v in (*self.linear, *self.angular)):
+            raise ValueError(f"velocities must be finite, got {self.linear} {self.angular}")
 
     @property
     def is_zero(self) -> bool:

@@ -11,14 +11,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from common.errors import ConfigError
+from common.messages import MAX_DETECTIONS, MAX_IMAGE_SIDE
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
+SERVICES = ("camera", "sim", "detector", "controller", "metrics")  # runnable by the supervisor
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
 
 
 def _positive(name: str, value: float) -> None:
     if not (value > 0 and math.isfinite(value)):
         raise ConfigError(f"{name} must be a positive number, got {value}")
+
+
+def _non_negative(name: str, value: float) -> None:
+    if not (value >= 0 and math.isfinite(value)):
+        raise ConfigError(f"{name} must be a finite number >= 0, got {value}")
 
 
 def _fraction(name: str, value: float) -> None:
@@ -79,8 +86,15 @@ class CameraSettings:
 
     def __post_init__(self) -> None:
         _positive("camera.rate_hz", self.rate_hz)
-        if min(self.resize) < 0 or (0 in self.resize and self.resize != (0, 0)):
-            raise ConfigError(f"camera.resize must be [w, h] > 0 or [0, 0], got {self.resize}")
+        if (
+            min(self.resize) < 0
+            or max(self.resize) > MAX_IMAGE_SIDE
+            or (0 in self.resize and self.resize != (0, 0))
+        ):
+            raise ConfigError(
+                f"camera.resize must be [w, h] within 1..{MAX_IMAGE_SIDE} or [0, 0], "
+                f"got {list(self.resize)}"
+            )
         if not 0 <= self.jpeg_quality <= 100:
             raise ConfigError(f"camera.jpeg_quality must be 0..100, got {self.jpeg_quality}")
         if not 1 <= self.hfov_deg <= 179:
@@ -130,8 +144,10 @@ class DetectorSettings:
             )
         _fraction("detector.conf", self.conf)
         _fraction("detector.iou", self.iou)
-        if self.max_det < 1:
-            raise ConfigError(f"detector.max_det must be at least 1, got {self.max_det}")
+        if not 1 <= self.max_det <= MAX_DETECTIONS:
+            raise ConfigError(
+                f"detector.max_det must be within 1..{MAX_DETECTIONS}, got {self.max_det}"
+            )
         _positive("detector.counters_period_s", self.counters_period_s)
 
 
@@ -229,8 +245,7 @@ class ControllerSettings:
         ):
             _positive(f"controller.{name}", getattr(self, name))
         for name in ("bearing_kp", "bearing_ki", "bearing_kd", "distance_gain"):
-            if getattr(self, name) < 0:
-                raise ConfigError(f"controller.{name} must not be negative")
+            _non_negative(f"controller.{name}", getattr(self, name))
         for name in ("min_score", "center_tolerance"):
             _fraction(f"controller.{name}", getattr(self, name))
         if not 0 <= self.forward_speed <= self.max_linear:
@@ -274,8 +289,11 @@ class SimSettings:
             _positive(f"sim.{name}", getattr(self, name))
         if not (16 <= self.width <= 4096 and 16 <= self.height <= 4096):
             raise ConfigError(f"sim image size {self.width}x{self.height} is out of range")
-        if self.laser_rays < 2 or self.laser_noise_m < 0:
-            raise ConfigError("sim.laser_rays must be >= 2 and sim.laser_noise_m >= 0")
+        if self.laser_rays < 2:
+            raise ConfigError(f"sim.laser_rays must be >= 2, got {self.laser_rays}")
+        _non_negative("sim.laser_noise_m", self.laser_noise_m)
+        if self.seed < 0:
+            raise ConfigError(f"sim.seed must be >= 0, got {self.seed}")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -316,6 +334,12 @@ class SupervisorSettings:
     status_period_s: float = 2.0
 
     def __post_init__(self) -> None:
+        unknown = sorted(set(self.services) - set(SERVICES))
+        if unknown or len(set(self.services)) != len(self.services) or not self.services:
+            raise ConfigError(
+                f"supervisor.services must name each of {', '.join(SERVICES)} at most once, "
+                f"got {list(self.services)}"
+            )
         for name in (
             "restart_backoff_s",
             "restart_backoff_max_s",

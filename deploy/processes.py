@@ -79,6 +79,10 @@ class ServiceProcess:
         if code is None:
             return None
         self.last_exit = code
+        if code == 0:
+            # It finished on purpose (a video that ended with loop = false): leave it be.
+            self.state = "exited"
+            return f"{self.name}: finished (exit code 0); not restarting"
         if code in PERMANENT_FAILURES:
             self.state = "failed"
             return f"{self.name}: exited with code {code} (config, model or backend); no restart"

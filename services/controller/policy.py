@@ -173,6 +173,11 @@ class Controller:
         latency = (inp.scan_age_s if scan is not None else 0.0) + 1.0 / self.s.control_rate_hz
         self.stopping_m = v * v / (2 * self.s.max_linear_accel) + v * latency
         aim = self._aim(inp.dets, scan, now, dt, now - inp.capture_age_s)
+        if aim.state == "searching":
+            return self._halt(aim)  # the target is gone: stop now, not at the braking rate
+        if not (math.isfinite(aim.linear_x) and math.isfinite(aim.angular_z)):
+            # Unreachable with validated inputs; if it ever happens, stop and start afresh.
+            return self._halt(stop("fault", "non-finite command computed", aim.input_stamp_ns))
         v, w = limit(self.previous, (aim.linear_x, aim.angular_z), dt, self.limits)
         self.previous = (v, w)
         self.turns.append((now, w))
@@ -232,7 +237,7 @@ class Controller:
                 clear = scan is not None and self._clearance(scan) > (
                     s.safety_distance_m + self.stopping_m
                 )
-                linear = held.linear_x if clear or s.mode == "track" else 0.0
+                linear = held.linear_x if clear else 0.0
                 angular = 0.0
                 if self.last_bearing is not None:
                     seen, when = self.last_bearing

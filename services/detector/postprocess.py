@@ -68,12 +68,29 @@ def _take(c: Candidates, idx: npt.NDArray[np.intp]) -> Candidates:
     return Candidates(c.xyxy[idx], c.scores[idx], c.class_ids[idx])
 
 
+def drop_invalid(c: Candidates) -> Candidates:
+    """Drop boxes with a non-finite coordinate or score, or with x2 < x1 or y2 < y1.
+
+    A model can emit such rows (an fp16 overflow on a GPU, say). Left in, one NaN coordinate
+    poisons OpenCV's per-class offsets and NMS then keeps nothing else in the frame.
+    """
+    xyxy = c.xyxy
+    ok = (
+        np.isfinite(xyxy).all(axis=1)
+        & np.isfinite(c.scores)
+        & (xyxy[:, 2] >= xyxy[:, 0])
+        & (xyxy[:, 3] >= xyxy[:, 1])
+    )
+    return c if bool(ok.all()) else _take(c, np.flatnonzero(ok))
+
+
 def select(candidates: Candidates, *, iou: float, max_det: int, apply_nms: bool) -> Candidates:
     """Keep the best ``max_det`` candidates, after class-aware NMS when ``apply_nms``.
 
     End-to-end models already ran NMS in the graph, so they pass ``apply_nms=False``.
     The result is sorted by descending score.
     """
+    candidates = drop_invalid(candidates)
     n = candidates.scores.shape[0]
     if n == 0:
         return candidates

@@ -41,11 +41,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not argv or (argv[0] not in COMMANDS and argv[0] not in ("-h", "--help")):
         argv.insert(0, "serve")  # `python -m services.metrics --config X` still serves
     args = build_parser().parse_args(argv)
-    stop = stop_event()
     if args.command == "evaluate":
         from services.metrics import evaluate
 
-        return evaluate.run(args)
+        return evaluate.run(args)  # Ctrl-C: KeyboardInterrupt, exit 130
+    stop = stop_event()
     if args.command == "report":
         from services.metrics import report
 

@@ -34,6 +34,8 @@ STAGES = (
     "detections_to_command",
     "end_to_end",
 )
+MAX_CLASSES = 1000  # distinct class names counted (COCO has 80)
+MAX_COUNTERS = 2000  # distinct "<service>.<counter>" names kept
 _RECENT = 512  # capture stamps remembered to pair Twists with the detections they react to
 #: Per-second timeline columns: detections messages, boxes, frames offered to the detector
 #: (its frames_in counter) and frames it dropped.
@@ -86,7 +88,10 @@ class Aggregator:
         self.model, self.backend = msg.model, msg.backend
         self._frames.add(now, float(len(msg)))
         self._timeline.add(now, frames=1.0, detections=float(len(msg)))
-        self._classes.update(msg.class_names)
+        # Bounded: garbage that decodes can still name thousands of made-up classes.
+        self._classes.update(
+            n for n in msg.class_names if n in self._classes or len(self._classes) < MAX_CLASSES
+        )
         for stage in DETECTOR_STAGES:
             if stage in msg.timing_ms:
                 self._record(stage, now, msg.timing_ms[stage])
@@ -125,6 +130,8 @@ class Aggregator:
         for name, value in msg.counters.items():
             key = f"{msg.service}.{name}"
             previous = self._counters.get(key)
+            if previous is None and len(self._counters) >= MAX_COUNTERS:
+                continue  # bounded, like the class counts
             self._counters[key] = value
             column = _DETECTOR_DELTAS.get(name) if msg.service == "detector" else None
             if column is not None and previous is not None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 from typing import Any
 
@@ -38,6 +39,10 @@ def _print_text(r: dict[str, Any]) -> None:
     print(f"  log: {r['log']}")
 
 
+def _interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(
         prog="python -m services.sim",
@@ -57,7 +62,10 @@ def main() -> int:
         for name, sc in SCENARIOS.items():
             print(f"{name:14} {sc.description}")
         return 0
-    stop = stop_event()
+    if args.command == "scenario":
+        # Ctrl-C or SIGTERM interrupt the run; the runner then stops the stack it started.
+        signal.signal(signal.SIGTERM, _interrupt)
+    stop = stop_event() if args.command == "serve" else None
     config = load_config(args.config)
     if args.command == "scenario":
         if not args.name:
@@ -74,6 +82,7 @@ def main() -> int:
     setup_logging("sim")
     from services.sim.service import run
 
+    assert stop is not None
     return run(config, stop)
 
 

@@ -107,15 +107,17 @@ def run_scenario(base: Config, name: str, log: Any = None) -> dict[str, Any]:
             start_new_session=True,
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
-        session = open_session(config.zenoh)
-        subs = _record(session, Keys(config.stack.prefix), config.stack.camera, rec)
         try:
-            _drive(proc, scenario, rec, config_path, log)
+            session = open_session(config.zenoh)
+            try:
+                subs = _record(session, Keys(config.stack.prefix), config.stack.camera, rec)
+                _drive(proc, scenario, rec, config_path, log)
+                for sub in subs:
+                    sub.undeclare()
+            finally:
+                session.close()
         finally:
-            for sub in subs:
-                sub.undeclare()
-            session.close()
-            _stop(proc)
+            _stop(proc)  # whatever happened, never leave the stack running
     result = score(scenario, rec, scenario.build(), config.controller, config.camera.hfov_deg)
     result["log"] = str(workdir / "stack.log")
     result["supervisor_exit_code"] = proc.returncode

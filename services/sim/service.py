@@ -66,28 +66,37 @@ def run(config: Config, stop: threading.Event) -> int:
             "scan": node.session.declare_publisher(keys.scan()),
             "truth": node.session.declare_publisher(keys.sim_truth()),
         }
-        clocks = {
-            "frame": Clock(s.camera_rate_hz),
-            "scan": Clock(s.scan_rate_hz),
-            "truth": Clock(s.truth_rate_hz),
-        }
+
+        def new_clocks() -> dict[str, Clock]:
+            return {
+                "frame": Clock(s.camera_rate_hz),
+                "scan": Clock(s.scan_rate_hz),
+                "truth": Clock(s.truth_rate_hz),
+            }
+
+        clocks = new_clocks()
         node.log.info("scenario %r: %s", s.scenario, SCENARIOS[s.scenario].description)
         node.ready()
         dt = 1.0 / s.physics_hz
         started = False
-        next_tick = time.monotonic()
+        boot = next_tick = next_check = time.monotonic()
         try:
             while not stop.is_set():
-                if not started:
-                    # Frames flow from t=0 so the detector warms up; time starts once it and
-                    # the controller are ready.
+                now = time.monotonic()
+                if not started and now >= next_check:
+                    # Until the detector and controller are ready the world stands still at
+                    # t=0 but its sensors publish on the wall clock, so the detector warms up
+                    # on real frames; then the scenario clock starts from 0.
+                    next_check = now + 0.5
                     started = _ready(node, s.wait_for)
                     if started:
+                        clocks = new_clocks()
                         node.log.info("scenario clock started")
                 with lock:
                     if started:
                         world.advance(dt)
-                    _publish_due(node, world, clocks, pubs, camera, laser, rng, config)
+                    t = world.t if started else now - boot
+                    _publish_due(node, world, t, clocks, pubs, camera, laser, rng, config)
                 node.publish_counters()
                 next_tick = max(next_tick + dt, time.monotonic() - dt)
                 stop.wait(max(0.0, next_tick - time.monotonic()))
@@ -107,6 +116,7 @@ def _ready(node: Node, services: tuple[str, ...]) -> bool:
 def _publish_due(
     node: Node,
     world: World,
+    t: float,
     clocks: dict[str, Clock],
     pubs: dict[str, zenoh.Publisher],
     camera: CameraSpec,
@@ -116,14 +126,14 @@ def _publish_due(
 ) -> None:
     r = world.robot
     pose = (r.x, r.y, r.theta)
-    if clocks["frame"].due(world.t):
+    if clocks["frame"].due(t):
         header = node.header(frame_id=config.camera.frame_id)
         frame = image_to_frame(
             render(world, camera), header, jpeg_quality=config.camera.jpeg_quality
         )
         pubs["frame"].put(frame.encode())
         node.counters.add("frames_out")
-    if clocks["scan"].due(world.t):
+    if clocks["scan"].due(t):
         scan = LaserScan(
             header=node.header(frame_id="laser"),
             angle_min=laser.angle_min,
@@ -133,7 +143,7 @@ def _publish_due(
             ranges=cast(pose, world.circles(), laser, rng),
         )
         pubs["scan"].put(scan.encode())
-    if clocks["truth"].due(world.t):
+    if clocks["truth"].due(t):
         truth = GroundTruth(
             header=node.header(frame_id="world"),
             sim_time_s=world.t,

@@ -193,3 +193,27 @@ def test_constructor_validates_shapes() -> None:
             scores=np.zeros(2, np.float32),
             xyxy=np.zeros((3, 4), np.float32),
         )
+
+
+def test_detections_and_twists_refuse_non_finite_or_inverted_values() -> None:
+    good = _detections(2)
+    for bad in (
+        np.array([[0, 0, np.nan, 1], [0, 0, 1, 1]], np.float32),
+        np.array([[0, 0, 1, 1], [5, 5, 1, 1]], np.float32),
+    ):
+        with pytest.raises(ValueError):
+            Detections(
+                header=HEADER,
+                image_width=640,
+                image_height=480,
+                class_ids=good.class_ids,
+                class_names=good.class_names,
+                scores=good.scores,
+                xyxy=bad,
+            )
+    body = msgpack.unpackb(good.encode())
+    body["d"]["timing_ms"] = {"inference": float("nan")}
+    with pytest.raises(DecodeError):
+        Detections.decode(msgpack.packb(body))
+    with pytest.raises(ValueError):
+        Twist(header=HEADER, linear=(float("nan"), 0.0, 0.0))

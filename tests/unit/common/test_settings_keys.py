@@ -109,3 +109,57 @@ def test_to_toml_round_trips(tmp_path: Path) -> None:
     path.write_text(to_toml(cfg))
     again = load_config(path, environ={})
     assert dataclasses.replace(again, path=cfg.path) == cfg
+
+
+def test_jpeg_size_is_read_without_decoding_and_a_lying_header_is_refused() -> None:
+    import cv2
+
+    from common.frames import jpeg_size
+
+    ok, buf = cv2.imencode(".jpg", np.zeros((24, 32, 3), np.uint8))
+    assert ok
+    data = buf.tobytes()
+    assert jpeg_size(data) == (32, 24)
+    assert jpeg_size(b"not a jpeg") is None
+    # Patch the frame header to claim 20000x20000: refused before any decoding.
+    sof = data.index(b"\xff\xc0")
+    huge = data[: sof + 5] + (20000).to_bytes(2, "big") * 2 + data[sof + 9 :]
+    frame = Frame(header=HEADER, encoding="jpeg", width=32, height=24, data=huge)
+    with pytest.raises(ImageError, match="header says"):
+        frame_to_bgr(frame)
+
+
+def test_truncated_jpeg_is_an_image_error() -> None:
+    import cv2
+
+    ok, buf = cv2.imencode(".jpg", np.full((24, 32, 3), 128, np.uint8))
+    assert ok
+    data = buf.tobytes()
+    frame = Frame(header=HEADER, encoding="jpeg", width=32, height=24, data=data[: len(data) // 3])
+    with pytest.raises(ImageError):
+        frame_to_bgr(frame)
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ({"STACK__CONTROLLER__BEARING_KP": "nan"}, "finite"),
+        ({"STACK__CONTROLLER__DISTANCE_GAIN": "inf"}, "finite"),
+        ({"STACK__SIM__SEED": "-1"}, "sim.seed"),
+        ({"STACK__SIM__LASER_NOISE_M": "nan"}, "finite"),
+        ({"STACK__CAMERA__RESIZE": "[20000, 10]"}, "camera.resize"),
+        ({"STACK__DETECTOR__MAX_DET": "100000"}, "max_det"),
+        ({"STACK__SUPERVISOR__SERVICES": '["bogus"]'}, "supervisor.services"),
+        ({"STACK__SUPERVISOR__SERVICES": '["camera", "camera"]'}, "at most once"),
+    ],
+)
+def test_unsafe_values_are_refused_at_start_up(override: dict[str, str], message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        load_config(DEFAULT_CONFIG, environ=override)
+
+
+def test_an_override_into_a_non_table_is_a_config_error(tmp_path: Path) -> None:
+    path = tmp_path / "stack.toml"
+    path.write_text("camera = 5\n")
+    with pytest.raises(ConfigError, match="must be a table"):
+        load_config(path, environ={"STACK__CAMERA__RATE_HZ": "3"})

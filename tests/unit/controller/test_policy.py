@@ -273,3 +273,21 @@ def test_bearing_is_compensated_for_the_turn_since_capture() -> None:
     cmd = ctl.step(Inputs(d, 0.0, capture_age_s=1.0), now=1.0)
     # The robot already turned 0.5 rad left: the target is now to the right.
     assert cmd.angular_z == pytest.approx(TRACK.bearing_kp * (measured - 0.5), abs=1e-6)
+
+
+def test_losing_the_target_stops_at_once_after_the_hold() -> None:
+    s = dataclasses.replace(FOLLOW, max_linear_accel=0.5)
+    ctl = Controller(s, HFOV)
+    seen = dets(("person", 0.9, 320, 240, 60, FAR))
+    for t in range(60):
+        ctl.step(Inputs(seen, 0.0, scan(8.0), 0.0), now=t * 0.05)
+    assert ctl.previous[0] > 0.4
+    lost = ctl.step(Inputs(dets(), 0.0, scan(8.0), 0.0), now=3.0 + s.target_lost_timeout_s + 0.1)
+    assert lost.is_zero and lost.state == "searching"  # no braking ramp
+
+
+def test_track_mode_does_not_hold_forward_speed_blind() -> None:
+    ctl = Controller(TRACK, HFOV)
+    ctl.step(Inputs(dets(("person", 0.9, 320, 240, 50, 100)), 0.0), now=0.0)
+    held = ctl.step(Inputs(dets(), 0.0), now=0.1)  # no scan in track mode
+    assert held.state == "holding" and held.linear_x == 0.0

@@ -73,3 +73,10 @@ def test_stop_escalates_to_kill() -> None:
     proc.wait_stopped(time.monotonic() + 0.5)
     assert proc.state == "exited" and proc.last_exit is not None and proc.last_exit < 0
     assert time.monotonic() - time_started < 5
+
+
+def test_a_clean_exit_is_not_restarted() -> None:
+    proc = ServiceProcess("done", [sys.executable, "-c", "raise SystemExit(0)"], SETTINGS)
+    proc.start()
+    events = _poll_until(proc, "exited")
+    assert "not restarting" in events[-1] and proc.restarts == 0

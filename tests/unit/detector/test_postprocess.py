@@ -124,3 +124,19 @@ def test_detection_result_validates_shapes_saying_what_was_expected() -> None:
 def test_detector_params_validation(kwargs: dict[str, object], message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         DetectorParams(**kwargs)  # type: ignore[arg-type]
+
+
+def test_a_non_finite_or_inverted_box_does_not_wipe_out_the_frame() -> None:
+    from services.detector.decode import Candidates
+    from services.detector.postprocess import select
+
+    good = np.array([[75, 270, 125, 370], [475, 270, 525, 370]], np.float32)
+    bad = np.array([[np.nan, 260, np.inf, 340], [300, 300, 200, 200]], np.float32)
+    cands = Candidates(
+        np.vstack([good, bad]),
+        np.array([0.9, 0.8, 0.99, 0.95], np.float32),
+        np.array([0, 2, 0, 9], np.int32),
+    )
+    kept = select(cands, iou=0.45, max_det=10, apply_nms=True)
+    np.testing.assert_array_equal(kept.xyxy, good)
+    assert kept.class_ids.tolist() == [0, 2]

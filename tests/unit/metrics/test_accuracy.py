@@ -115,8 +115,9 @@ def test_agrees_with_the_evaluator_called_directly() -> None:
         for name, score, (x1, y1, x2, y2) in zip(d.class_names, d.scores, d.xyxy, strict=True):
             xywh = [float(x1), float(y1), float(x2 - x1), float(y2 - y1)]
             cid = MAP[name]
-            results.append({"image_id": d.image_id, "category_id": cid, "bbox": xywh,
-                            "score": float(score)})
+            results.append(
+                {"image_id": d.image_id, "category_id": cid, "bbox": xywh, "score": float(score)}
+            )
     direct = COCOeval_faster(coco_gt, coco_gt.loadRes(results), "bbox", print_function=_silent)
     direct.evaluate()
     direct.accumulate()
