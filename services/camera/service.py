@@ -31,19 +31,22 @@ def run(config: Config, stop: threading.Event) -> int:
         next_t = time.monotonic()
         try:
             while not stop.is_set():
-                image = source.read()
-                if image is None:
-                    node.log.info("source ended")
-                    break
-                stamp = now_ns()  # the capture stamp every later latency is measured from
-                image = resize(image, settings.resize)
-                frame = image_to_frame(
-                    image,
-                    node.header(stamp, settings.frame_id),
-                    jpeg_quality=settings.jpeg_quality,
-                )
-                publisher.put(frame.encode())
-                node.counters.add("frames_out")
+                try:
+                    image = source.read()
+                    if image is None:
+                        node.log.info("source ended")
+                        break
+                    stamp = now_ns()  # the capture stamp every later latency is measured from
+                    frame = image_to_frame(
+                        resize(image, settings.resize),
+                        node.header(stamp, settings.frame_id),
+                        jpeg_quality=settings.jpeg_quality,
+                    )
+                    publisher.put(frame.encode())
+                    node.counters.add("frames_out")
+                except (ImageError, ValueError) as exc:
+                    # An unreadable file, or an image larger than a Frame may carry: skip it.
+                    on_bad(ImageError(f"{source.description}: {exc}"))
                 node.publish_counters()
                 next_t += period
                 # Never burst to catch up after a stall: a late frame is better than a flood.
