@@ -87,10 +87,7 @@ def _metrics(session: zenoh.Session, keys: Keys) -> dict[str, Any] | None:
 def status_line(procs: list[ServiceProcess], view: LiveView, metrics: dict[str, Any] | None) -> str:
     parts = []
     for p in procs:
-        state = "ready" if p.state == "starting" and view.is_ready(p.name) else p.state
-        if state == "ready":
-            p.state = "ready"
-        parts.append(f"{p.name}:{state}" + (f"(r{p.restarts})" if p.restarts else ""))
+        parts.append(f"{p.name}:{p.state}" + (f"(r{p.restarts})" if p.restarts else ""))
     line = " ".join(parts)
     if metrics:
         lat = metrics["latency_ms"]
@@ -131,6 +128,8 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
                 event = p.poll(now)
                 if event:
                     log.warning("%s", event)
+                if p.state == "starting" and view.is_ready(p.name):
+                    p.state = "ready"
             if now >= next_status:
                 next_status = now + s.status_period_s
                 last_metrics = _metrics(session, keys) or last_metrics

@@ -21,17 +21,15 @@ class Mailbox(Generic[_T]):
         self._cond = threading.Condition()
         self._payload: _T | None = None
         self._received_ns = 0
-        self.received = 0
-        self.dropped = 0
 
-    def put(self, payload: _T) -> None:
+    def put(self, payload: _T) -> bool:
+        """Store ``payload``; True when it replaced one nobody took (a dropped item)."""
         with self._cond:
-            if self._payload is not None:
-                self.dropped += 1
+            dropped = self._payload is not None
             self._payload = payload
             self._received_ns = time.time_ns()
-            self.received += 1
             self._cond.notify()
+        return dropped
 
     def take(self, timeout: float) -> tuple[_T, int] | None:
         """The newest item and when it arrived, or None after ``timeout`` seconds."""

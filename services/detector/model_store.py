@@ -74,8 +74,8 @@ def ensure_default_model(
     Idempotent: a model whose stamp matches the pinned tarball, the converter version and the
     file's own hash is returned as is. Raises ModelFetchError with one line on any failure.
     """
-    folder = _resolve(models_dir)
-    target = folder / DEFAULT_MODEL_FILENAME
+    target = default_model_path(models_dir)
+    folder = target.parent
     if _stamp_is_current(target):
         return target
     try:

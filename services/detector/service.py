@@ -88,7 +88,8 @@ def run(config: Config, stop: threading.Event) -> int:
             # would have replaced it in the mailbox before the loop looked at it.
             node.counters.add("frames_in")
             try:
-                mailbox.put(Frame.decode(sample.payload.to_bytes()))
+                if mailbox.put(Frame.decode(sample.payload.to_bytes())):
+                    node.counters.add("dropped")
             except DecodeError as exc:
                 node.bad_input(frame_key, exc)
 
@@ -99,7 +100,6 @@ def run(config: Config, stop: threading.Event) -> int:
         node.ready()
         try:
             while not stop.is_set():
-                node.counters.add("dropped", mailbox.dropped - node.counters.get("dropped"))
                 node.publish_counters()
                 item = mailbox.take(_WAIT_S)
                 if item is None:
