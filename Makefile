@@ -6,7 +6,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup model run test lint unit integration benchmark clean
+.PHONY: setup model run credentials test lint unit integration benchmark clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,7 +20,10 @@ model: $(STAMP)
 	$(PY) -m services.detector fetch-model
 
 run: setup
-	$(PY) -m deploy.supervisor $(ARGS)
+	$(PY) -m deploy.supervisor $(if $(CONFIG),--config $(CONFIG)) $(ARGS)
+
+credentials: $(STAMP)
+	$(PY) -m deploy.credentials $(ARGS)
 
 lint: $(STAMP)
 	$(PY) -m ruff check .

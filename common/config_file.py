@@ -5,7 +5,8 @@ One file (``deploy/stack.toml`` by default) configures the whole stack, one tabl
 ``STACK__<TABLE>__<FIELD>=<TOML value>``, e.g. ``STACK__DETECTOR__BACKEND=cuda`` or
 ``STACK__CONTROLLER__TARGET_CLASSES='["cup"]'``. Unknown tables or fields, wrong types and
 out-of-range values raise ConfigError at start-up, so a typo stops the service with one line
-instead of being silently ignored.
+instead of being silently ignored. A profile can start with ``extends = "stack.toml"`` and
+state only the fields it changes (``deploy/secure.toml`` does).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from common.errors import ConfigError
 from common.settings import DEFAULT_CONFIG, Config
 
 ENV_PREFIX = "STACK__"
+EXTENDS = "extends"  # top-level key: the config file this one changes
 
 _T = TypeVar("_T")
 
@@ -76,9 +78,9 @@ def _env_overrides(environ: Mapping[str, str]) -> dict[str, dict[str, Any]]:
     return out
 
 
-def load_config(path: str | Path | None = None, environ: Mapping[str, str] | None = None) -> Config:
-    """Read the stack config (default ``deploy/stack.toml``), apply env overrides, validate."""
-    cfg_path = Path(path) if path else DEFAULT_CONFIG
+def _read(cfg_path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """The TOML tables of ``cfg_path``, laid over those of the file its ``extends`` names
+    (relative to it), field by field: a profile states only what it changes."""
     try:
         data = tomllib.loads(cfg_path.read_text(encoding="utf-8"))
     except FileNotFoundError as exc:
@@ -87,6 +89,27 @@ def load_config(path: str | Path | None = None, environ: Mapping[str, str] | Non
         raise ConfigError(f"{cfg_path}: cannot read config ({exc})") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{cfg_path}: not valid TOML ({exc})") from exc
+    base = data.pop(EXTENDS, None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ConfigError(f"{cfg_path}: {EXTENDS} must be a file name")
+    base_path = (cfg_path.parent / base).resolve()
+    if base_path in seen or len(seen) > 8:
+        raise ConfigError(f"{cfg_path}: {EXTENDS} loops back to {base_path}")
+    merged = _read(base_path, (*seen, base_path))
+    for table, values in data.items():
+        current = merged.setdefault(table, {})
+        if not (isinstance(values, dict) and isinstance(current, dict)):
+            raise ConfigError(f"{cfg_path}: [{table}] must be a table")
+        current.update(values)
+    return merged
+
+
+def load_config(path: str | Path | None = None, environ: Mapping[str, str] | None = None) -> Config:
+    """Read the stack config (default ``deploy/stack.toml``), apply env overrides, validate."""
+    cfg_path = Path(path) if path else DEFAULT_CONFIG
+    data = _read(cfg_path, (cfg_path.resolve(),))
     for table, values in _env_overrides(os.environ if environ is None else environ).items():
         current = data.setdefault(table, {})
         if not isinstance(current, dict):

@@ -13,6 +13,8 @@ runs can share one network without hearing each other:
     <prefix>/counters/<service>               ServiceCounters each service -> metrics
     <prefix>/metrics                          queryable       metrics -> JSON snapshot
     <prefix>/health/<service>                 liveliness      present while a service is ready
+
+Who may put on which key under the secure profile is in common/security.py.
 """
 
 from __future__ import annotations

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
 import signal
@@ -42,8 +43,20 @@ def setup_logging(service: str, level: str | None = None) -> logging.Logger:
     return logging.getLogger(service)
 
 
+# Set by the supervisor in each service's environment: the PID the service must not outlive.
+SUPERVISOR_PID_ENV = "STACK_SUPERVISOR_PID"
+ORPHAN_POLL_S = 0.1  # how often a service checks that its supervisor is still its parent
+ORPHAN_GRACE_S = 1.0  # time to stop cleanly (the controller: command zero) before a hard exit
+_PR_SET_PDEATHSIG = 1
+
+
 def stop_event() -> threading.Event:
-    """An event set on SIGINT or SIGTERM, so loops end cleanly and the process exits 0."""
+    """An event set on SIGINT or SIGTERM, so loops end cleanly and the process exits 0.
+
+    A service started by the supervisor also stops when the supervisor dies, however it dies:
+    the kernel sends it SIGTERM (Linux), and a watcher thread sees that its parent changed
+    (anywhere). It then has ``ORPHAN_GRACE_S`` to stop cleanly before it exits hard.
+    """
     event = threading.Event()
 
     def _handler(signum: int, _frame: object) -> None:
@@ -51,7 +64,28 @@ def stop_event() -> threading.Event:
 
     signal.signal(signal.SIGINT, _handler)
     signal.signal(signal.SIGTERM, _handler)
+    supervisor = os.environ.get(SUPERVISOR_PID_ENV, "")
+    if supervisor.isdigit():
+        _die_with(int(supervisor), event)
     return event
+
+
+def _die_with(supervisor_pid: int, event: threading.Event) -> None:
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+    def watch() -> None:
+        while os.getppid() == supervisor_pid:
+            if event.wait(ORPHAN_POLL_S):
+                return  # stopping anyway; the supervisor waits for us
+        logging.getLogger().error("the supervisor (pid %d) is gone: stopping", supervisor_pid)
+        event.set()
+        threading.Event().wait(ORPHAN_GRACE_S)
+        os._exit(EXIT_FAILED)  # the main thread did not finish in time: leave now
+
+    # The check in the loop also covers a supervisor that died before prctl took effect.
+    threading.Thread(target=watch, name="supervisor-watch", daemon=True).start()
 
 
 def run_main(main: Callable[[], int], prog: str) -> None:

@@ -37,12 +37,19 @@ def now_ns() -> int:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Header:
-    """Who produced a message, when the data it describes was captured, and its sequence."""
+    """Who produced a message, when the data it describes was captured, and its sequence.
+
+    ``stamp_ns`` is wall-clock time. ``mono_ns`` is the same instant on the producer's
+    monotonic clock and ``boot_id`` names that clock (the host's boot); 0 and "" when unknown.
+    A receiver on the same boot judges age on both clocks (common/freshness.py).
+    """
 
     stamp_ns: int
     frame_id: str
     seq: int
     source: str
+    mono_ns: int = 0
+    boot_id: str = ""
 
     def to_wire(self) -> dict[str, Any]:
         return {
@@ -50,6 +57,8 @@ class Header:
             "frame_id": self.frame_id,
             "seq": self.seq,
             "source": self.source,
+            "mono_ns": self.mono_ns,
+            "boot_id": self.boot_id,
         }
 
     @classmethod
@@ -59,6 +68,9 @@ class Header:
             frame_id=b.get_str("frame_id"),
             seq=b.get_int("seq", 0),
             source=b.get_str("source"),
+            # Absent from headers written before these fields existed: unknown.
+            mono_ns=b.get_int("mono_ns", 0) if "mono_ns" in b.fields() else 0,
+            boot_id=b.get_str("boot_id") if "boot_id" in b.fields() else "",
         )
 
 

@@ -9,10 +9,11 @@ from typing import Self
 
 import zenoh
 
-from common.bus import open_session
+from common.bus import Publisher, QoS, open_session
+from common.clock import BOOT_ID, Stamp, now
 from common.counters import Counters
 from common.keys import Keys
-from common.messages import Header, ServiceCounters, now_ns
+from common.messages import Header, ServiceCounters
 from common.settings import Config
 
 
@@ -30,9 +31,9 @@ class Node:
         self.keys = Keys(config.stack.prefix)
         self.counters = Counters()
         self.log = logging.getLogger(service)
-        self.session = open_session(config.zenoh)
+        self.session = open_session(config.zenoh, service)
         self._token: zenoh.LivelinessToken | None = None
-        self._counters_pub = self.session.declare_publisher(self.keys.counters(service))
+        self._counters_pub = self.publisher(self.keys.counters(service), QoS.TELEMETRY)
         self._counters_period_s = counters_period_s
         self._counters_next = 0.0
         self._seq = 0
@@ -42,14 +43,22 @@ class Node:
         self._token = self.session.liveliness().declare_token(self.keys.health(self.service))
         self.log.info("ready (zenoh id %s)", self.session.info.zid())
 
-    def header(self, stamp_ns: int | None = None, frame_id: str = "") -> Header:
-        """A header for a message this service originates, with its own sequence number."""
+    def publisher(self, key: str, qos: QoS) -> Publisher:
+        """Declare a publisher with the QoS profile of its role (common/bus.py)."""
+        return Publisher(self.session, key, qos)
+
+    def header(self, stamp: Stamp | None = None, frame_id: str = "") -> Header:
+        """A header for a message this service originates, stamped on both clocks (now, unless
+        ``stamp`` is given), with its own sequence number."""
         self._seq += 1
+        at = now() if stamp is None else stamp
         return Header(
-            stamp_ns=now_ns() if stamp_ns is None else stamp_ns,
+            stamp_ns=at.wall_ns,
             frame_id=frame_id,
             seq=self._seq,
             source=self.service,
+            mono_ns=at.mono_ns,
+            boot_id=BOOT_ID,
         )
 
     def publish_counters(self, *, force: bool = False) -> None:
@@ -67,6 +76,15 @@ class Node:
         self.counters.add("bad_input")
         self.counters.add(f"bad_input.{key.rsplit('/', 1)[-1]}")
         self.log.warning("dropped bad input on %s: %s", key, error)
+
+    def reject(self, counter: str, message: str) -> None:
+        """Count one message that was fine as bytes but unfit to act on (stale, replayed, from
+        a foreign source ...). Logged at the 1st, 2nd, 4th, 8th ... and every 1024th, so that a
+        flood cannot fill the log while the count stays exact."""
+        self.counters.add(counter)
+        n = self.counters.get(counter)
+        if n & (n - 1) == 0 or n % 1024 == 0:
+            self.log.warning("%s (%s: %d so far)", message, counter, n)
 
     def close(self) -> None:
         self.publish_counters(force=True)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from common.errors import ConfigError
 from common.messages import MAX_DETECTIONS, MAX_IMAGE_SIDE
+from common.security import AUTH_MODES
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SERVICES = ("camera", "sim", "detector", "controller", "metrics")  # runnable by the supervisor
@@ -40,6 +41,13 @@ class ZenohSettings:
     The supervisor listens on ``endpoint``; services connect to it and to ``connect`` (other
     hosts), and listen on ``listen`` (port 0: any free port) so that peers mesh directly.
     Multicast scouting is off by default: robots share networks, and tests must stay private.
+
+    ``mode = "client"`` makes the supervisor a Zenoh router that every service joins, so that
+    all traffic passes through it. ``auth`` ("none", "password" or "certificate") turns on
+    authentication and access control there, with the credentials that
+    ``python -m deploy.credentials`` writes to ``credentials_dir`` (relative to the repo root);
+    it needs client mode. An endpoint ``tls/<host>:<port>`` encrypts the links with the same
+    credentials; "certificate" needs one (mutual TLS). See docs/security.md.
     """
 
     mode: str = "peer"
@@ -47,6 +55,8 @@ class ZenohSettings:
     connect: tuple[str, ...] = ()
     listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
     multicast_scouting: bool = False
+    auth: str = "none"
+    credentials_dir: str = "secrets"
 
     def __post_init__(self) -> None:
         if self.mode not in ("peer", "client"):
@@ -54,14 +64,44 @@ class ZenohSettings:
         for ep in (self.endpoint, *self.connect, *self.listen):
             if "/" not in ep:
                 raise ConfigError(f"zenoh endpoint {ep!r} must look like tcp/<host>:<port>")
+        if self.auth not in AUTH_MODES:
+            modes = ", ".join(AUTH_MODES)
+            raise ConfigError(f"zenoh.auth must be one of {modes}, got {self.auth!r}")
+        if self.auth != "none" and self.mode != "client":
+            raise ConfigError(
+                'zenoh.auth needs zenoh.mode = "client": access control runs on the supervisor\'s '
+                "router, which must see every message"
+            )
+        if self.auth == "certificate" and not self.uses_tls:
+            raise ConfigError('zenoh.auth = "certificate" needs a tls/<host>:<port> endpoint')
+        if not self.credentials_dir:
+            raise ConfigError("zenoh.credentials_dir must not be empty")
+
+    @property
+    def uses_tls(self) -> bool:
+        return any(ep.startswith("tls/") for ep in (self.endpoint, *self.connect))
+
+    @property
+    def credentials_path(self) -> Path:
+        path = Path(self.credentials_dir).expanduser()
+        return path if path.is_absolute() else REPO_ROOT / path
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class StackSettings:
-    """Names shared by all services: the key prefix and the camera they work on."""
+    """Names shared by all services (the key prefix and the camera they work on), and how far
+    ahead of the receiver's clock a stamp may be before it counts as from the future
+    (``clock_tolerance_s``: the clock offset allowed between hosts; see docs/security.md)."""
 
     prefix: str = "stack"
     camera: str = "front"
+    clock_tolerance_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.clock_tolerance_s <= 5:
+            raise ConfigError(
+                f"stack.clock_tolerance_s must be within 0..5 s, got {self.clock_tolerance_s}"
+            )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -110,7 +150,8 @@ class DetectorSettings:
     ``precision`` empty leaves the backend's default (fp32 on the CPU, fp16 on a GPU); GPU
     backends take fp32 or fp16, TensorRT also int8. ``batch_profile`` is the (min, opt, max)
     batch a TensorRT engine is built for; the service sends single frames, so (1, 1, 1).
-    ``classes`` empty keeps every class.
+    ``classes`` empty keeps every class. A frame captured more than ``max_frame_age_s`` ago,
+    stamped in the future or replayed is not detected on (counted, see common/freshness.py).
     """
 
     model: str = ""
@@ -121,9 +162,11 @@ class DetectorSettings:
     iou: float = 0.45
     max_det: int = 100
     classes: tuple[str, ...] = ()
+    max_frame_age_s: float = 1.0
     counters_period_s: float = 1.0
 
     def __post_init__(self) -> None:
+        _positive("detector.max_frame_age_s", self.max_frame_age_s)
         # Mirrors services.detector.backends.BACKEND_CHOICES: common must not import services,
         # and a unit test keeps the two equal.
         backends = ("onnx", "tensorrt", "cuda", "auto")
@@ -157,6 +200,8 @@ class TrackerSettings:
 
     ``high_score`` starts a track, ``low_score`` may only extend one, ``iou`` is the least
     overlap with a track's predicted box, and a track unseen for ``max_age_s`` is dropped.
+    A frame whose stamp moved by more than ``max_stamp_jump_s`` beyond the time that really
+    passed between arrivals (or went back) is ignored, not allowed to age every track out.
     """
 
     enabled: bool = True
@@ -164,6 +209,7 @@ class TrackerSettings:
     low_score: float = 0.15
     iou: float = 0.25
     max_age_s: float = 1.0
+    max_stamp_jump_s: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("high_score", "low_score", "iou"):
@@ -171,6 +217,7 @@ class TrackerSettings:
         if self.low_score > self.high_score:
             raise ConfigError("tracker.low_score must not be above tracker.high_score")
         _positive("tracker.max_age_s", self.max_age_s)
+        _positive("tracker.max_stamp_jump_s", self.max_stamp_jump_s)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -189,8 +236,11 @@ class ControllerSettings:
             plus the room needed to brake. A box cut by the image edge counts as arrived.
             A target unseen for ``target_lost_timeout_s`` is dropped.
     Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
-    acceleration limits. Stale detections (older than ``detection_timeout_s``) and the e-stop
-    command zero at once, bypassing the acceleration limit.
+    acceleration limits. Stale detections (captured or received longer than
+    ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the
+    acceleration limit. The latched e-stop is kept in ``estop_file`` (relative to the repo
+    root; empty: ``state/estop-<prefix>.json``), so that it survives every restart; a release
+    captured more than ``estop_release_max_age_s`` ago is refused.
     """
 
     mode: str = "track"
@@ -216,6 +266,8 @@ class ControllerSettings:
     safety_distance_m: float = 0.5
     sector_width_deg: float = 30.0
     robot_width_m: float = 0.6
+    estop_file: str = ""
+    estop_release_max_age_s: float = 2.0
     counters_period_s: float = 1.0
 
     def __post_init__(self) -> None:
@@ -241,6 +293,7 @@ class ControllerSettings:
             "safety_distance_m",
             "sector_width_deg",
             "robot_width_m",
+            "estop_release_max_age_s",
             "counters_period_s",
         ):
             _positive(f"controller.{name}", getattr(self, name))
@@ -258,7 +311,8 @@ class SimSettings:
 
     ``scenario`` names a world in services/sim/scenarios.py. The scenario clock starts once
     every service in ``wait_for`` is ready, so start-up time does not eat into the scenario.
-    The camera uses camera.hfov_deg; the image is ``width`` x ``height``.
+    The camera uses camera.hfov_deg; the image is ``width`` x ``height``. Commands from more
+    than one publisher within ``command_sources_window_s`` are counted and warned about.
     """
 
     scenario: str = "demo"
@@ -275,6 +329,7 @@ class SimSettings:
     laser_range_max_m: float = 12.0
     laser_noise_m: float = 0.01
     seed: int = 0
+    command_sources_window_s: float = 1.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -292,6 +347,7 @@ class SimSettings:
         if self.laser_rays < 2:
             raise ConfigError(f"sim.laser_rays must be >= 2, got {self.laser_rays}")
         _non_negative("sim.laser_noise_m", self.laser_noise_m)
+        _positive("sim.command_sources_window_s", self.command_sources_window_s)
         if self.seed < 0:
             raise ConfigError(f"sim.seed must be >= 0, got {self.seed}")
 
@@ -325,13 +381,18 @@ class MetricsSettings:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SupervisorSettings:
-    """Which services to run and how to restart them (exponential backoff, capped)."""
+    """Which services to run and how to restart them (exponential backoff, capped).
+
+    One supervisor per stack (endpoint and prefix) on a host: its lock file lives in
+    ``lock_dir`` (empty: the system's temporary folder).
+    """
 
     services: tuple[str, ...] = ("camera", "detector", "controller", "metrics")
     restart_backoff_s: float = 0.5
     restart_backoff_max_s: float = 10.0
     stop_timeout_s: float = 5.0
     status_period_s: float = 2.0
+    lock_dir: str = ""
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.services) - set(SERVICES))
@@ -363,3 +424,11 @@ class Config:
     sim: SimSettings = field(default_factory=SimSettings)
     metrics: MetricsSettings = field(default_factory=MetricsSettings)
     supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)
+
+    @property
+    def estop_path(self) -> Path:
+        """Where the controller keeps the latched e-stop (one file per stack prefix)."""
+        default = f"state/estop-{self.stack.prefix.replace('/', '_')}.json"
+        name = self.controller.estop_file or default
+        path = Path(name).expanduser()
+        return path if path.is_absolute() else REPO_ROOT / path

@@ -9,7 +9,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 
-from common.lifecycle import PERMANENT_FAILURES
+from common.lifecycle import PERMANENT_FAILURES, SUPERVISOR_PID_ENV
 from common.settings import SupervisorSettings
 
 # Extra arguments some services need before the shared ones.
@@ -60,7 +60,8 @@ class ServiceProcess:
         return self.proc.pid if self.proc else None
 
     def start(self) -> None:
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        # The PID tells the service whom it must not outlive (common/lifecycle.py).
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", SUPERVISOR_PID_ENV: str(os.getpid())}
         # A session of its own: a Ctrl-C at the terminal reaches the supervisor only, which then
         # stops the services in order instead of all of them dying at once.
         self.proc = subprocess.Popen(self.command, env=env, start_new_session=True)

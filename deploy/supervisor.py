@@ -16,13 +16,14 @@ from typing import Any
 
 import zenoh
 
-from common.bus import open_session
+from common.bus import open_hub
 from common.config_file import load_config
 from common.errors import DecodeError
 from common.keys import Keys
 from common.lifecycle import run_main, setup_logging, stop_event
 from common.messages import ControllerStatus, GroundTruth, Twist
 from common.settings import Config
+from deploy.lock import acquire
 from deploy.processes import ServiceProcess, service_command
 
 
@@ -110,7 +111,8 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
     log = setup_logging("supervisor")
     s = config.supervisor
     keys = Keys(config.stack.prefix)
-    session = open_session(config.zenoh, hub=True)
+    lock = acquire(s.lock_dir, config.zenoh.endpoint, config.stack.prefix)
+    session = open_hub(config)
     view = LiveView(session, keys)
     procs = [ServiceProcess(n, service_command(n, config.path), s) for n in s.services]
     log.info("hub on %s; starting %s", config.zenoh.endpoint, ", ".join(s.services))
@@ -142,6 +144,7 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
         for p in procs:
             p.wait_stopped(deadline)
         session.close()
+        lock.close()
     summary = {
         "services": {p.name: {"exit_code": p.last_exit, "restarts": p.restarts} for p in procs},
         "metrics": last_metrics,

@@ -5,9 +5,9 @@ from __future__ import annotations
 import threading
 import time
 
+from common.bus import QoS
 from common.errors import ImageError
 from common.frames import image_to_frame
-from common.messages import now_ns
 from common.node import Node
 from common.settings import Config
 from services.camera.sources import open_source, resize
@@ -24,7 +24,7 @@ def run(config: Config, stop: threading.Event) -> int:
 
         source = open_source(settings.source, loop=settings.loop, on_bad=on_bad)
         key = node.keys.frame(config.stack.camera)
-        publisher = node.session.declare_publisher(key)
+        publisher = node.publisher(key, QoS.SENSOR)
         node.log.info("publishing %s on %s at %.1f Hz", source.description, key, settings.rate_hz)
         node.ready()
         period = 1.0 / settings.rate_hz
@@ -36,10 +36,12 @@ def run(config: Config, stop: threading.Event) -> int:
                     if image is None:
                         node.log.info("source ended")
                         break
-                    stamp = now_ns()  # the capture stamp every later latency is measured from
+                    # The header's stamp is the capture stamp every later latency is measured
+                    # from: taken as the image is read, before resizing and encoding.
+                    header = node.header(frame_id=settings.frame_id)
                     frame = image_to_frame(
                         resize(image, settings.resize),
-                        node.header(stamp, settings.frame_id),
+                        header,
                         jpeg_quality=settings.jpeg_quality,
                     )
                     publisher.put(frame.encode())

@@ -172,7 +172,9 @@ class Controller:
         v = self.previous[0]
         latency = (inp.scan_age_s if scan is not None else 0.0) + 1.0 / self.s.control_rate_hz
         self.stopping_m = v * v / (2 * self.s.max_linear_accel) + v * latency
-        aim = self._aim(inp.dets, scan, now, dt, now - inp.capture_age_s)
+        # The compensation trusts the capture stamp no further than the dead-man does.
+        captured = now - min(inp.capture_age_s, self.s.detection_timeout_s)
+        aim = self._aim(inp.dets, scan, now, dt, captured)
         if aim.state == "searching":
             return self._halt(aim)  # the target is gone: stop now, not at the braking rate
         if not (math.isfinite(aim.linear_x) and math.isfinite(aim.angular_z)):

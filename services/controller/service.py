@@ -8,12 +8,15 @@ from typing import Generic, TypeVar
 
 import zenoh
 
-from common.bus import open_session
+from common.bus import Publisher, QoS, open_session
+from common.clock import BOOT_ID, Stamp, now
 from common.errors import DecodeError, StackError
+from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.keys import Keys
-from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist, now_ns
+from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
 from common.node import Node
 from common.settings import Config
+from services.controller.estop import EStopLatch
 from services.controller.policy import Command, Controller, Inputs
 
 _M = TypeVar("_M")
@@ -41,52 +44,60 @@ class Latest(Generic[_M]):
             return self._msg, time.monotonic() - self._t
 
 
+def _age(msg: Header | None, arrival_age_s: float, at: Stamp) -> float:
+    """How old an input is for the dead-man: the later of its capture and its arrival."""
+    if msg is None:
+        return float("inf")
+    return max(arrival_age_s, capture_age_s(msg, at, BOOT_ID))
+
+
 def run(config: Config, stop: threading.Event) -> int:
     """Run the control loop until ``stop`` is set.
 
     A command goes out at least ``control_rate_hz`` times a second, and at once when new
     detections arrive: waiting for the next tick would add up to a whole period of latency.
+    Inputs are judged on arrival (common/freshness.py): stale, future-stamped or replayed
+    detections and scans are counted and never acted on.
     """
     s = config.controller
+    tolerance = config.stack.clock_tolerance_s
     with Node("controller", config, counters_period_s=s.counters_period_s) as node:
+        latch = EStopLatch(config.estop_path)
+        (node.log.warning if latch.engaged else node.log.info)("%s", latch.note)
         dets: Latest[Detections] = Latest()
         scan: Latest[LaserScan] = Latest()
         det_key = node.keys.detections(config.stack.camera)
+        det_gate = FreshnessGate(s.detection_timeout_s, tolerance, BOOT_ID)
+        scan_gate = FreshnessGate(s.scan_timeout_s, tolerance, BOOT_ID)
 
         def on_detections(sample: zenoh.Sample) -> None:
             try:
-                dets.set(Detections.decode(sample.payload.to_bytes()))
-                node.counters.add("detections_in")
+                msg = Detections.decode(sample.payload.to_bytes())
             except DecodeError as exc:
                 node.bad_input(det_key, exc)
-
-        estop = threading.Event()  # latched: only an explicit release clears it
+                return
+            verdict, age = det_gate.check(msg.header, now())
+            if verdict is Verdict.FRESH:
+                dets.set(msg)
+                node.counters.add("detections_in")
+            else:
+                node.reject(f"detections_{verdict}", f"{verdict} detections ({age:.2f} s) ignored")
 
         def on_estop(sample: zenoh.Sample) -> None:
-            try:
-                msg = EStop.decode(sample.payload.to_bytes())
-            except DecodeError as exc:
-                # Garbage on the e-stop key is treated as a press: fail safe, not open.
-                node.bad_input(node.keys.estop(), exc)
-                estop.set()
-                return
-            if msg.engaged:
-                estop.set()
-            else:
-                estop.clear()
-            node.log.warning(
-                "e-stop %s by %s: %s",
-                "ENGAGED" if msg.engaged else "released",
-                msg.header.source,
-                msg.reason or "-",
-            )
+            _on_estop(node, latch, sample, s.estop_release_max_age_s, tolerance)
 
         def on_scan(sample: zenoh.Sample) -> None:
             try:
-                scan.set(LaserScan.decode(sample.payload.to_bytes()))
-                node.counters.add("scans_in")
+                msg = LaserScan.decode(sample.payload.to_bytes())
             except DecodeError as exc:
                 node.bad_input(node.keys.scan(), exc)
+                return
+            verdict, age = scan_gate.check(msg.header, now())
+            if verdict is Verdict.FRESH:
+                scan.set(msg)
+                node.counters.add("scans_in")
+            else:
+                node.reject(f"scans_{verdict}", f"{verdict} scan ({age:.2f} s) ignored")
 
         subs = [
             node.session.declare_subscriber(det_key, on_detections),
@@ -94,40 +105,80 @@ def run(config: Config, stop: threading.Event) -> int:
             node.session.declare_subscriber(node.keys.estop(), on_estop),
         ]
         controller = Controller(s, config.camera.hfov_deg)
-        cmd_pub = node.session.declare_publisher(node.keys.cmd_vel())
-        status_pub = node.session.declare_publisher(node.keys.controller_status())
+        cmd_pub = node.publisher(node.keys.cmd_vel(), QoS.CONTROL)
+        status_pub = node.publisher(node.keys.controller_status(), QoS.TELEMETRY)
         node.log.info("mode %s on %s, targets %s", s.mode, det_key, list(s.target_classes))
         node.ready()
         period = 1.0 / s.control_rate_hz
         last_state = ""
         try:
             while not stop.is_set():
-                tick = time.monotonic()
                 dets.arrived.clear()  # before reading, so a message arriving now wakes us
-                d, d_age = dets.get()
-                sc, sc_age = scan.get()
-                captured = (time.time_ns() - d.header.stamp_ns) / 1e9 if d is not None else 0.0
-                inputs = Inputs(d, d_age, sc, sc_age, estop.is_set(), max(0.0, captured))
+                # One instant per tick: the ages are judged at it and the command is stamped
+                # with it, so that a reader of cmd_vel can check the judgement exactly.
+                at = now()
+                tick = at.mono_ns / 1e9
+                d, d_arrival = dets.get()
+                sc, sc_arrival = scan.get()
+                d_age = _age(d.header if d else None, d_arrival, at)
+                capture = capture_age_s(d.header, at, BOOT_ID) if d is not None else 0.0
+                inputs = Inputs(
+                    d, d_age, sc, _age(sc.header if sc else None, sc_arrival, at),
+                    latch.engaged, min(max(0.0, capture), s.detection_timeout_s),
+                )  # fmt: skip
                 cmd = controller.step(inputs, tick)
-                _publish(node, cmd_pub, status_pub, cmd, s.mode)
+                _publish(node, cmd_pub, status_pub, cmd, s.mode, at)
                 if cmd.state != last_state:
                     node.log.info("state %s: %s", cmd.state, cmd.reason)
                     last_state = cmd.state
                 node.publish_counters()
                 dets.arrived.wait(max(0.0, period - (time.monotonic() - tick)))
             # Leave the robot still: the last word on cmd_vel is always a stop.
-            _publish(node, cmd_pub, status_pub, Command(0.0, 0.0, "stopped", "shutdown"), s.mode)
+            stopped = Command(0.0, 0.0, "stopped", "shutdown")
+            _publish(node, cmd_pub, status_pub, stopped, s.mode, now())
         finally:
             for sub in subs:
                 sub.undeclare()
     return 0
 
 
+def _on_estop(
+    node: Node, latch: EStopLatch, sample: zenoh.Sample, max_age_s: float, tolerance_s: float
+) -> None:
+    """Latch on an engage or on garbage; release only on a fresh release newer than the stop."""
+    at = now()
+    try:
+        msg = EStop.decode(sample.payload.to_bytes())
+    except DecodeError as exc:
+        # Garbage on the e-stop key is treated as a press: fail safe, not open.
+        node.bad_input(node.keys.estop(), exc)
+        msg = None
+    try:
+        if msg is None or msg.engaged:
+            by = msg.header.source if msg else "garbage"
+            reason = msg.reason if msg else "undecodable message on the e-stop key"
+            was = latch.engaged
+            latch.engage(msg.header.stamp_ns if msg else at.wall_ns, by, reason)
+            if not was:
+                node.log.warning("e-stop ENGAGED by %s: %s", by, reason or "-")
+            return
+        verdict, age = judge_age(msg.header, at, BOOT_ID, max_age_s, tolerance_s)
+        if verdict is not Verdict.FRESH:
+            node.reject("estop_release_refused", f"{verdict} e-stop release ({age:.2f} s) refused")
+        elif not latch.release(msg.header.stamp_ns, msg.header.source):
+            node.reject("estop_release_refused", "e-stop release older than the stop refused")
+        elif latch.state.by == msg.header.source:
+            node.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
+    except OSError as exc:
+        # The latch in memory holds; only its copy on disk failed. Say so loudly.
+        node.log.error("cannot save the e-stop state to %s: %s", latch.path, exc)
+
+
 def _publish(
-    node: Node, cmd_pub: zenoh.Publisher, status_pub: zenoh.Publisher, cmd: Command, mode: str
+    node: Node, cmd_pub: Publisher, status_pub: Publisher, cmd: Command, mode: str, at: Stamp
 ) -> None:
     twist = Twist(
-        header=node.header(frame_id="base_link"),
+        header=node.header(at, frame_id="base_link"),
         linear=(cmd.linear_x, 0.0, 0.0),
         angular=(0.0, 0.0, cmd.angular_z),
         input_stamp_ns=cmd.input_stamp_ns,
@@ -150,7 +201,7 @@ def _publish(
 def send_estop(config: Config, engaged: bool, reason: str) -> int:
     """Publish one EStop and wait until the controller has seen it (its status says so)."""
     keys = Keys(config.stack.prefix)
-    session = open_session(config.zenoh)
+    session = open_session(config.zenoh, "estop")
     seen = threading.Event()
 
     def on_status(sample: zenoh.Sample) -> None:
@@ -162,11 +213,16 @@ def send_estop(config: Config, engaged: bool, reason: str) -> int:
             seen.set()
 
     sub = session.declare_subscriber(keys.controller_status(), on_status)
-    pub = session.declare_publisher(keys.estop())
-    header = Header(stamp_ns=now_ns(), frame_id="", seq=1, source="estop-cli")
+    pub = Publisher(session, keys.estop(), QoS.CONTROL)
     try:
-        # Repeat until acknowledged: the first put may race the peer mesh being formed.
-        for _ in range(50):
+        # Repeat until acknowledged: the first put may race the peer mesh being formed. Each
+        # is stamped afresh, since the controller refuses a release that is not fresh.
+        for seq in range(1, 51):
+            at = now()
+            header = Header(
+                stamp_ns=at.wall_ns, frame_id="", seq=seq, source="estop-cli",
+                mono_ns=at.mono_ns, boot_id=BOOT_ID,
+            )  # fmt: skip
             pub.put(EStop(header=header, engaged=engaged, reason=reason).encode())
             if seen.wait(0.2):
                 print("e-stop engaged" if engaged else "e-stop released")

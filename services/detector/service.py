@@ -10,8 +10,11 @@ import numpy as np
 import numpy.typing as npt
 import zenoh
 
+from common.bus import QoS
+from common.clock import BOOT_ID, now
 from common.errors import DecodeError, ImageError
 from common.frames import frame_to_bgr
+from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, now_ns
 from common.node import Node
 from common.settings import Config, DetectorSettings
@@ -76,7 +79,11 @@ def run(config: Config, stop: threading.Event) -> int:
         tracker = (
             Tracker(
                 TrackerParams(
-                    high_score=t.high_score, low_score=t.low_score, iou=t.iou, max_age_s=t.max_age_s
+                    high_score=t.high_score,
+                    low_score=t.low_score,
+                    iou=t.iou,
+                    max_age_s=t.max_age_s,
+                    max_stamp_jump_s=t.max_stamp_jump_s,
                 )
             )
             if t.enabled
@@ -94,7 +101,8 @@ def run(config: Config, stop: threading.Event) -> int:
                 node.bad_input(frame_key, exc)
 
         sub = node.session.declare_subscriber(frame_key, on_frame)
-        pub = node.session.declare_publisher(node.keys.detections(config.stack.camera))
+        pub = node.publisher(node.keys.detections(config.stack.camera), QoS.PERCEPTION)
+        gate = FreshnessGate(s.max_frame_age_s, config.stack.clock_tolerance_s, BOOT_ID)
         # Warm the backend up before announcing readiness: the first run allocates.
         detector.detect(np.full((480, 640, 3), 114, np.uint8))
         node.ready()
@@ -105,6 +113,12 @@ def run(config: Config, stop: threading.Event) -> int:
                 if item is None:
                     continue
                 frame, received_ns = item
+                # Judged as it leaves the mailbox: a frame that waited out a pause (or was
+                # stamped wrong, or sent again) is not worth a detection nobody may act on.
+                verdict, age = gate.check(frame.header, now())
+                if verdict is not Verdict.FRESH:
+                    node.reject(f"frames_{verdict}", f"{verdict} frame ({age:.2f} s old) dropped")
+                    continue
                 try:
                     image = frame_to_bgr(frame)
                 except ImageError as exc:
@@ -114,9 +128,7 @@ def run(config: Config, stop: threading.Event) -> int:
                 track_ids = (
                     None
                     if tracker is None
-                    else tracker.update(
-                        result.xyxy, result.scores, result.class_ids, frame.header.stamp_ns / 1e9
-                    )
+                    else _track(node, tracker, result, frame.header.stamp_ns, received_ns)
                 )
                 pub.put(to_message(frame, result, detector, received_ns, track_ids).encode())
                 node.counters.add("detections_out")
@@ -124,6 +136,21 @@ def run(config: Config, stop: threading.Event) -> int:
             sub.undeclare()
             detector.close()
     return 0
+
+
+def _track(
+    node: Node, tracker: Tracker, result: DetectionResult, stamp_ns: int, received_ns: int
+) -> npt.NDArray[np.int32]:
+    """Track ids for ``result``; a frame whose stamp jumped is counted, its ids left at -1."""
+    ignored, resets = tracker.ignored_frames, tracker.resets
+    ids = tracker.update(
+        result.xyxy, result.scores, result.class_ids, stamp_ns / 1e9, received_ns / 1e9
+    )
+    if tracker.ignored_frames > ignored:
+        node.reject("tracker_stamp_jumps", "frame stamp jumped: the tracker ignored it")
+    if tracker.resets > resets:
+        node.reject("tracker_resets", "frame stamps jumped for good: tracks restarted")
+    return ids
 
 
 def _run_serve(args: Any) -> int:

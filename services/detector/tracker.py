@@ -22,12 +22,17 @@ Boxes = npt.NDArray[np.float32]
 class TrackerParams:
     """``high_score`` starts tracks; ``low_score`` may extend them; ``iou`` is the least overlap
     with a track's predicted box that counts as the same object; a track unseen for
-    ``max_age_s`` is dropped."""
+    ``max_age_s`` is dropped. A frame whose stamp went back, or moved on by more than
+    ``max_stamp_jump_s`` beyond the time that passed between arrivals, is ignored; after
+    ``jumps_before_reset`` such frames in a row the stamps are believed and the tracks restart
+    (a camera clock that really stepped)."""
 
     high_score: float = 0.4
     low_score: float = 0.15
     iou: float = 0.25
     max_age_s: float = 1.0
+    max_stamp_jump_s: float = 0.5
+    jumps_before_reset: int = 3
 
 
 @dataclass(slots=True)
@@ -87,6 +92,21 @@ class Tracker:
         self.params = params or TrackerParams()
         self._tracks: list[_Track] = []
         self._next_id = 1
+        self._last: tuple[float, float] | None = None  # (stamp, arrival) of the last frame used
+        self._jumps_in_a_row = 0
+        self.ignored_frames = 0  # frames ignored for a stamp jump
+        self.resets = 0  # times the tracks restarted after a lasting jump
+
+    def _stamp_jumped(self, now: float, arrival: float | None) -> bool:
+        """Whether this frame's stamp disagrees with the time that really passed."""
+        if self._last is None:
+            return False
+        stamp, arrived = self._last
+        if now < stamp:
+            return True
+        if arrival is None:
+            return False
+        return abs((now - stamp) - (arrival - arrived)) > self.params.max_stamp_jump_s
 
     def update(
         self,
@@ -94,12 +114,23 @@ class Tracker:
         scores: npt.NDArray[np.float32],
         class_ids: npt.NDArray[np.int32],
         now: float,
+        arrival: float | None = None,
     ) -> npt.NDArray[np.int32]:
-        """Track ids (n,) for this frame's detections; -1 for weak unmatched ones.
+        """Track ids (n,) for this frame's detections; -1 for weak unmatched ones, and for
+        every detection of a frame ignored for its stamp.
 
-        ``now`` is the frame's capture time in seconds (any monotonic origin).
+        ``now`` is the frame's capture time in seconds (any monotonic origin); ``arrival``, on
+        the receiver's own clock in seconds, is when the frame arrived (None: not checked).
         """
         p = self.params
+        if self._stamp_jumped(now, arrival):
+            self._jumps_in_a_row += 1
+            if self._jumps_in_a_row < p.jumps_before_reset:
+                self.ignored_frames += 1
+                return np.full(len(scores), -1, np.int32)
+            self._tracks, self.resets = [], self.resets + 1
+        self._jumps_in_a_row = 0
+        self._last = (now, now if arrival is None else arrival)
         self._tracks = [t for t in self._tracks if now - t.last_seen <= p.max_age_s]
         ids = np.full(len(scores), -1, np.int32)
         free_tracks = list(range(len(self._tracks)))

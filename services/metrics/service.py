@@ -96,7 +96,7 @@ def run(config: Config, stop: threading.Event) -> int:
 
 def query(config: Config, timeout_s: float) -> dict[str, Any] | None:
     """Ask the metrics service for its snapshot; None if nobody answered within the timeout."""
-    session = open_session(config.zenoh)
+    session = open_session(config.zenoh, "observer")
     try:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:

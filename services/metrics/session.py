@@ -172,7 +172,7 @@ def record(
             start_new_session=True,  # our Ctrl-C is forwarded as one SIGINT, not twice
         )
     try:
-        session = open_session(config.zenoh)
+        session = open_session(config.zenoh, "observer")
         try:
             progress(f"report: starting the stack ({config.path}); log in {log_path}")
             services = set(config.supervisor.services)

@@ -108,7 +108,7 @@ def run_scenario(base: Config, name: str, log: Any = None) -> dict[str, Any]:
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
         try:
-            session = open_session(config.zenoh)
+            session = open_session(config.zenoh, "observer")
             try:
                 subs = _record(session, Keys(config.stack.prefix), config.stack.camera, rec)
                 _drive(proc, scenario, rec, config_path, log)

@@ -9,8 +9,9 @@ Figures:
     min_clearance_m         least distance from the robot centre to an obstacle's surface,
                             as the laser measures it (None without obstacles)
     mean_bearing_error_deg  mean |bearing of the followed target| while it was in view
-    stale_commands          non-zero commands sent when the newest detections were older
-                            than the detection timeout (must be 0)
+    stale_commands          non-zero commands acting on detections whose frame was captured
+                            longer than the detection timeout before the command was
+                            stamped: the controller's own rule (must be 0)
     stop_after_kill_s       detector_dies: kill -> first zero command (None otherwise); the
                             robot must have been moving in the second before the kill
 """
@@ -28,7 +29,6 @@ from services.sim.scenarios import Scenario
 from services.sim.world import World
 
 REACH_TOLERANCE_M = 0.4  # box-height ranging is coarse: +-0.4 m around the follow distance
-STALE_GRACE_S = 0.1  # transport jitter between a detection's publish and its receipt
 STOP_MARGIN_S = 0.5  # detector_dies: allowed on top of the detection timeout
 
 
@@ -56,15 +56,17 @@ def _distance(truth: GroundTruth, i: int, radius: float) -> float:
 
 
 def stale_commands(rec: Recording, timeout_s: float) -> int:
-    """Non-zero commands whose newest preceding detections were older than the timeout."""
-    published = sorted(d.published_ns for d in rec.detections)
-    count, j, latest = 0, 0, -math.inf
-    for tw in sorted(rec.twists, key=lambda t: t.header.stamp_ns):
-        while j < len(published) and published[j] <= tw.header.stamp_ns:
-            latest = published[j]
-            j += 1
-        age = (tw.header.stamp_ns - latest) / 1e9
-        if not tw.is_zero and age > timeout_s + STALE_GRACE_S:
+    """Non-zero commands on inputs older than the timeout, judged as the controller judges them.
+
+    Each Twist carries the capture stamp of the frame it reacts to (``input_stamp_ns``) and is
+    stamped with the instant at which the controller judged that frame's age; both are wall
+    clock. The controller also applies the monotonic clock and the arrival time, each of which
+    can only make an input older, so any command counted here broke the controller's rule.
+    """
+    count = 0
+    for tw in rec.twists:
+        age_s = (tw.header.stamp_ns - tw.input_stamp_ns) / 1e9
+        if not tw.is_zero and (tw.input_stamp_ns <= 0 or age_s > timeout_s):
             count += 1
     return count
 

@@ -8,6 +8,8 @@ import time
 import numpy as np
 import zenoh
 
+from common.bus import Publisher, QoS, source_of
+from common.command_sources import CommandSources
 from common.errors import ConfigError, DecodeError
 from common.frames import image_to_frame
 from common.messages import GroundTruth, LaserScan, Twist
@@ -48,6 +50,7 @@ def run(config: Config, stop: threading.Event) -> int:
     camera = CameraSpec(s.width, s.height, config.camera.hfov_deg, s.camera_height_m)
     laser = LaserSpec(s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m)
     rng = np.random.default_rng(s.seed)
+    sources = CommandSources(s.command_sources_window_s)
     with Node("sim", config) as node:
         keys = node.keys
 
@@ -58,13 +61,22 @@ def run(config: Config, stop: threading.Event) -> int:
                 node.bad_input(keys.cmd_vel(), exc)
                 return
             with lock:
+                active, new = sources.heard(source_of(sample), time.monotonic())
                 world.command(twist.linear[0], twist.angular[2])
+            if active > 1:
+                node.reject(
+                    "commands_from_several_sources",
+                    f"cmd_vel from {active} publishers at once "
+                    f"(this one from {twist.header.source!r}, {source_of(sample)})",
+                )
+                if new:
+                    node.log.warning("another publisher on cmd_vel: %s", sources.active())
 
         sub = node.session.declare_subscriber(keys.cmd_vel(), on_cmd)
         pubs = {
-            "frame": node.session.declare_publisher(keys.frame(config.stack.camera)),
-            "scan": node.session.declare_publisher(keys.scan()),
-            "truth": node.session.declare_publisher(keys.sim_truth()),
+            "frame": node.publisher(keys.frame(config.stack.camera), QoS.SENSOR),
+            "scan": node.publisher(keys.scan(), QoS.SENSOR),
+            "truth": node.publisher(keys.sim_truth(), QoS.TELEMETRY),
         }
 
         def new_clocks() -> dict[str, Clock]:
@@ -118,7 +130,7 @@ def _publish_due(
     world: World,
     t: float,
     clocks: dict[str, Clock],
-    pubs: dict[str, zenoh.Publisher],
+    pubs: dict[str, Publisher],
     camera: CameraSpec,
     laser: LaserSpec,
     rng: np.random.Generator,

@@ -20,8 +20,8 @@ import zenoh
 
 from common.bus import open_session
 from common.config_file import load_config
+from common.errors import ConfigError
 from common.keys import Keys
-from common.settings import ZenohSettings
 
 REPO = Path(__file__).resolve().parents[2]
 STARTUP_S = 120.0  # model load and warm-up on a loaded 2-core CI machine
@@ -56,6 +56,8 @@ def write_config(tmp: Path, **tables: dict[str, Any]) -> Path:
         "stack": {"prefix": f"test/{uuid.uuid4().hex[:8]}", "camera": "front"},
         "camera": {"source": "sample:cameraman", "rate_hz": 5.0},
         "supervisor": {"status_period_s": 1.0, "restart_backoff_s": 0.2},
+        # Each test's e-stop state of its own: a latched stop must not leak into the next test.
+        "controller": {"estop_file": str(tmp / "estop.json")},
     }
     for name, values in tables.items():
         base.setdefault(name, {}).update(values)
@@ -86,7 +88,31 @@ class Stack:
             stderr=subprocess.STDOUT,
             start_new_session=True,
         )
-        self.session = open_session(ZenohSettings(endpoint=self.config.zenoh.endpoint))
+        self.session = self.open("observer")
+
+    def open(self, principal: str) -> zenoh.Session:
+        """A session of the stack as ``principal``. In client mode the supervisor's router may
+        not listen yet, so opening is retried until it does."""
+        if self.config.zenoh.mode == "peer":
+            return open_session(self.config.zenoh, principal)
+
+        def attempt() -> zenoh.Session | None:
+            try:
+                return open_session(self.config.zenoh, principal)
+            except ConfigError:
+                return None
+
+        session: zenoh.Session = wait_for(attempt, 60, "the supervisor's router to listen")
+        return session
+
+    def estop(self, action: str) -> None:
+        """``python -m services.controller estop engage|release``, as an operator would."""
+        done = subprocess.run(
+            [sys.executable, "-m", "services.controller", "estop", action,
+             "--config", str(self.config_path), "--reason", "test"],
+            cwd=REPO, capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
 
     def ready_services(self) -> set[str]:
         replies = self.session.liveliness().get(self.keys.all_health(), timeout=1.0)

@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
-import sys
 
 import pytest
 
 from common.messages import ControllerStatus, Detections, Twist
 from deploy.pids import service_pids
-from tests.integration.conftest import REPO, Stack, wait_for
+from tests.integration.conftest import Stack, wait_for
 
 pytestmark = pytest.mark.integration
 
@@ -64,27 +62,7 @@ def test_estop_latches_zero_until_released(make_stack) -> None:  # type: ignore[
     _, statuses = stack.subscribe(stack.keys.controller_status())
     wait_for(lambda: any(not Twist.decode(c).is_zero for c in list(cmds)), 60, "motion")
 
-    def estop(action: str) -> None:
-        done = subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "services.controller",
-                "estop",
-                action,
-                "--config",
-                str(stack.config_path),
-                "--reason",
-                "test",
-            ],
-            cwd=REPO,
-            capture_output=True,
-            text=True,
-            timeout=60,
-        )
-        assert done.returncode == 0, done.stderr
-
-    estop("engage")
+    stack.estop("engage")
     engaged_at = len(statuses)
     # Let several control ticks pass; every one of them must be a latched zero.
     wait_for(lambda: len(statuses) > engaged_at + 20, 10, "control ticks while e-stopped")
@@ -92,7 +70,7 @@ def test_estop_latches_zero_until_released(make_stack) -> None:  # type: ignore[
     seqs = {st.header.seq for st in latched}
     assert all(st.state == "estop" for st in latched)
     assert all(t.is_zero for t in map(Twist.decode, list(cmds)) if t.header.seq in seqs)
-    estop("release")
+    stack.estop("release")
     released_at = len(cmds)
     wait_for(
         lambda: any(not Twist.decode(c).is_zero for c in list(cmds)[released_at:]),

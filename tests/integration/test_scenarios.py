@@ -79,7 +79,10 @@ def test_no_target_means_standing_still() -> None:
     assert result["success"], result
 
 
-def test_robot_stops_in_time_when_the_detector_dies() -> None:
+@pytest.mark.parametrize("attempt", [1, 2])
+def test_robot_stops_in_time_when_the_detector_dies(attempt: int) -> None:
+    # Run twice: stale_commands must be 0 on every run, not on most (the scorer and the
+    # controller judge staleness by the same rule, so a race cannot make one of them disagree).
     result = run("detector_dies")
     stop = result["stop_after_kill_s"]
     assert stop is not None and stop <= DEFAULTS.detection_timeout_s + STOP_MARGIN_S, result

@@ -67,3 +67,32 @@ def test_classes_never_share_a_track() -> None:
     tr = Tracker()
     person = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0, classes=[0])[0]
     assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.1, classes=[15]) != [person]
+
+
+def test_a_frame_whose_stamp_jumps_is_ignored_and_tracks_survive() -> None:
+    from services.detector.tracker import Tracker, TrackerParams
+
+    tr = Tracker(TrackerParams(max_stamp_jump_s=0.5))
+    box = np.array([[100, 100, 200, 300]], np.float32)
+    score, cls = np.array([0.9], np.float32), np.array([0], np.int32)
+    first = tr.update(box, score, cls, now=10.0, arrival=1.0)
+    # Stamped an hour ahead though it arrived 0.2 s later: ignored, ids -1, no reset.
+    assert (tr.update(box, score, cls, now=3610.0, arrival=1.2) == -1).all()
+    # Stamped in the past: ignored too.
+    assert (tr.update(box, score, cls, now=5.0, arrival=1.3) == -1).all()
+    assert tr.ignored_frames == 2
+    # The next honest frame keeps the same id.
+    assert (tr.update(box, score, cls, now=10.4, arrival=1.4) == first).all()
+
+
+def test_a_clock_that_really_stepped_restarts_the_tracks() -> None:
+    from services.detector.tracker import Tracker, TrackerParams
+
+    tr = Tracker(TrackerParams(max_stamp_jump_s=0.5, jumps_before_reset=3))
+    box = np.array([[100, 100, 200, 300]], np.float32)
+    score, cls = np.array([0.9], np.float32), np.array([0], np.int32)
+    tr.update(box, score, cls, now=10.0, arrival=1.0)
+    assert (tr.update(box, score, cls, now=110.0, arrival=1.1) == -1).all()
+    assert (tr.update(box, score, cls, now=110.1, arrival=1.2) == -1).all()
+    ids = tr.update(box, score, cls, now=110.2, arrival=1.3)
+    assert (ids > 0).all() and tr.resets == 1

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from common.messages import Detections, GroundTruth, Header, Twist
+from common.messages import GroundTruth, Header, Twist
 from common.settings import ControllerSettings
 from services.sim.laser import LaserSpec, cast
 from services.sim.render import CameraSpec, render
@@ -73,36 +73,22 @@ def test_every_scenario_builds() -> None:
 HDR = Header(stamp_ns=0, frame_id="", seq=0, source="t")
 
 
-def _twist(t_ns: int, v: float) -> Twist:
-    return Twist(header=Header(stamp_ns=t_ns, frame_id="", seq=0, source="c"), linear=(v, 0, 0))
+def _twist(t_ns: int, v: float, input_ns: int = 0) -> Twist:
+    header = Header(stamp_ns=t_ns, frame_id="", seq=0, source="c")
+    return Twist(header=header, linear=(v, 0, 0), input_stamp_ns=input_ns)
 
 
-def _dets(published_ns: int) -> Detections:
-    z = np.zeros(0)
-    return Detections(
-        header=HDR,
-        image_width=10,
-        image_height=10,
-        class_ids=z.astype(np.int32),
-        class_names=(),
-        scores=z.astype(np.float32),
-        xyxy=np.zeros((0, 4), np.float32),
-        published_ns=published_ns,
-    )
-
-
-def test_stale_commands_counts_only_moving_commands_on_old_detections() -> None:
+def test_stale_commands_counts_moving_commands_on_frames_older_than_the_timeout() -> None:
     s = 1_000_000_000
     rec = Recording(
-        detections=[_dets(1 * s)],
         twists=[
-            _twist(int(1.5 * s), 0.3),
-            _twist(3 * s, 0.0),
-            _twist(3 * s, 0.3),
-            _twist(int(0.5 * s), 0.3),
+            _twist(int(1.5 * s), 0.3, input_ns=1 * s),  # 0.5 s old: fresh
+            _twist(3 * s, 0.0, input_ns=1 * s),  # zero: fine however old
+            _twist(3 * s, 0.3, input_ns=1 * s),  # moving on a 2 s old frame: stale
+            _twist(2 * s, 0.3, input_ns=1 * s),  # exactly the timeout: still fresh
+            _twist(int(0.5 * s), 0.3),  # moving on no input at all: stale
         ],
     )
-    # 1.5 s: fresh; 3 s zero: fine; 3 s moving on 2 s old detections: stale; before any: stale
     assert stale_commands(rec, timeout_s=1.0) == 2
 
 

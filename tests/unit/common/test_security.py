@@ -1,0 +1,121 @@
+"""The secure profile's pieces without a bus: rules, settings checks and session configs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from common.bus import QoS, hub_access, open_session, zenoh_config
+from common.config_file import load_config
+from common.errors import ConfigError
+from common.keys import Keys
+from common.security import PRINCIPALS, access_control, may_put
+from common.settings import REPO_ROOT, ZenohSettings
+
+KEYS = Keys("robot1")
+
+
+def _allowed(acl: dict, principal: str, message: str) -> set[str]:
+    """Key expressions ``principal`` may send ``message`` on, on ingress to the router."""
+    subjects = {
+        s["id"]
+        for s in acl["subjects"]
+        if principal in next(iter(v for k, v in s.items() if k != "id"))
+    }
+    rules = {r["id"]: r for r in acl["rules"]}
+    out: set[str] = set()
+    for policy in acl["policies"]:
+        if subjects & set(policy["subjects"]):
+            for rid in policy["rules"]:
+                rule = rules[rid]
+                if message in rule["messages"] and "ingress" in rule["flows"]:
+                    out |= set(rule["key_exprs"])
+    return out
+
+
+def test_only_the_controller_puts_cmd_vel_and_only_estop_the_estop() -> None:
+    acl = access_control(KEYS, "front", "password")
+    assert acl["default_permission"] == "deny"
+    putters = {p for p in PRINCIPALS if KEYS.cmd_vel() in _allowed(acl, p, "put")}
+    assert putters == {"controller"}
+    assert {p for p in PRINCIPALS if KEYS.estop() in _allowed(acl, p, "put")} == {"estop"}
+    frames = {p for p in PRINCIPALS if KEYS.frame("front") in _allowed(acl, p, "put")}
+    assert frames == {"camera", "sim"}
+    assert {p for p in PRINCIPALS if KEYS.scan() in _allowed(acl, p, "put")} == {"sim"}
+    assert _allowed(acl, "observer", "put") == set()
+    assert _allowed(acl, "estop", "put") == {KEYS.estop()}
+    assert _allowed(acl, "detector", "put") == set(may_put(KEYS, "front", "detector"))
+    # Counters and health tokens: each stack service its own, nobody else.
+    assert _allowed(acl, "metrics", "liveliness_token") == {KEYS.health("metrics")}
+    assert KEYS.counters("estop") not in _allowed(acl, "estop", "put")
+    # Everyone may read.
+    assert _allowed(acl, "observer", "declare_subscriber") == {"**"}
+
+
+def test_certificate_mode_matches_common_names() -> None:
+    acl = access_control(KEYS, "front", "certificate")
+    assert all("cert_common_names" in s for s in acl["subjects"])
+
+
+def test_auth_needs_client_mode_and_certificates_need_tls() -> None:
+    with pytest.raises(ConfigError, match="client"):
+        ZenohSettings(auth="password")
+    with pytest.raises(ConfigError, match="tls"):
+        ZenohSettings(mode="client", auth="certificate")
+    with pytest.raises(ConfigError, match="auth"):
+        ZenohSettings(mode="client", auth="kerberos")
+    ZenohSettings(mode="client", auth="certificate", endpoint="tls/127.0.0.1:7447")
+
+
+def test_missing_credentials_are_one_clear_line(tmp_path: Path) -> None:
+    s = ZenohSettings(mode="client", auth="password", credentials_dir=str(tmp_path))
+    with pytest.raises(ConfigError, match=r"password file .*deploy\.credentials"):
+        open_session(s, "controller")
+
+
+def test_hub_config_carries_the_rules_and_the_dictionary(tmp_path: Path) -> None:
+    from deploy.credentials import generate
+
+    generate(tmp_path)
+    s = ZenohSettings(mode="client", auth="password", credentials_dir=str(tmp_path))
+    hub = json.loads(str(zenoh_config(s, "supervisor", access={"enabled": True})))
+    assert hub["mode"] == "router"
+    assert hub["transport"]["auth"]["usrpwd"]["dictionary_file"].endswith("users.txt")
+    assert hub["access_control"]["enabled"] is True
+    client = json.loads(str(zenoh_config(s, "controller")))
+    assert client["mode"] == "client" and client["listen"]["endpoints"] == []
+    assert client["transport"]["auth"]["usrpwd"]["user"] == "controller"
+    assert client["transport"]["auth"]["usrpwd"]["dictionary_file"] is None
+
+
+def test_secure_profile_extends_the_default_stack() -> None:
+    cfg = load_config(REPO_ROOT / "deploy" / "secure.toml", environ={})
+    default = load_config(REPO_ROOT / "deploy" / "stack.toml", environ={})
+    assert (cfg.zenoh.mode, cfg.zenoh.auth) == ("client", "password")
+    assert cfg.supervisor == default.supervisor and cfg.controller == default.controller
+    assert hub_access(cfg)["default_permission"] == "deny"
+    assert hub_access(default) == {}
+
+
+def test_extends_loops_are_refused(tmp_path: Path) -> None:
+    (tmp_path / "a.toml").write_text('extends = "b.toml"\n')
+    (tmp_path / "b.toml").write_text('extends = "a.toml"\n')
+    with pytest.raises(ConfigError, match="loops"):
+        load_config(tmp_path / "a.toml", environ={})
+
+
+def test_control_publishers_are_express_high_priority_and_blocking() -> None:
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(conf) as session:
+        from common.bus import Publisher
+
+        control = Publisher(session, "t/cmd_vel", QoS.CONTROL)
+        sensor = Publisher(session, "t/frame", QoS.SENSOR)
+        assert control._pub.priority == zenoh.Priority.REAL_TIME
+        assert control._pub.congestion_control == zenoh.CongestionControl.BLOCK
+        assert sensor._pub.congestion_control == zenoh.CongestionControl.DROP
+        assert sensor._pub.priority == zenoh.Priority.DATA

@@ -1,0 +1,187 @@
+from __future__ import annotations
+
+import ipaddress
+import json
+import socket
+import stat
+import sys
+from pathlib import Path
+
+import pytest
+import zenoh
+from cryptography import x509
+from cryptography.exceptions import InvalidSignature
+from cryptography.hazmat.primitives import serialization
+
+from common.errors import ConfigError
+from common.lifecycle import run_main
+from common.security import (
+    PRINCIPALS,
+    ca_file,
+    ca_key_file,
+    cert_file,
+    key_file,
+    password_file,
+    users_file,
+)
+from deploy import credentials
+from deploy.credentials import generate
+
+HOSTS = ("robot.local", "10.0.0.5")
+
+
+@pytest.fixture(scope="module")
+def creds(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Path]]:
+    directory = tmp_path_factory.mktemp("creds") / "secrets"
+    return directory, generate(directory, HOSTS, days=30)
+
+
+def _mode(path: Path) -> int:
+    return stat.S_IMODE(path.stat().st_mode)
+
+
+def _cert(path: Path) -> x509.Certificate:
+    return x509.load_pem_x509_certificate(path.read_bytes())
+
+
+def test_writes_every_file_with_private_modes(creds: tuple[Path, list[Path]]) -> None:
+    directory, written = creds
+    assert _mode(directory) == 0o700
+    secret = [users_file(directory), ca_key_file(directory)]
+    public = [ca_file(directory)]
+    for p in PRINCIPALS:
+        secret += [password_file(directory, p), key_file(directory, p)]
+        public.append(cert_file(directory, p))
+    assert sorted(written) == sorted(secret + public)
+    assert sorted(directory.iterdir()) == sorted(written)
+    assert {path.name: _mode(path) for path in secret} == {path.name: 0o600 for path in secret}
+    assert all(_mode(path) & 0o022 == 0 for path in public)  # readable, never writable by others
+
+
+def test_users_file_has_every_principal_and_its_password(creds: tuple[Path, list[Path]]) -> None:
+    directory, _ = creds
+    users = dict(line.split(":", 1) for line in users_file(directory).read_text().splitlines())
+    assert list(users) == list(PRINCIPALS)
+    for p in PRINCIPALS:
+        password = password_file(directory, p).read_text()
+        assert password.endswith("\n") and password.count("\n") == 1
+        assert users[p] == password.strip()
+        assert len(users[p]) >= 32  # token_urlsafe(24): 192 random bits
+    assert len(set(users.values())) == len(PRINCIPALS)
+
+
+def test_certificates_name_their_principal_and_are_signed_by_the_ca(
+    creds: tuple[Path, list[Path]],
+) -> None:
+    directory, _ = creds
+    ca = _cert(ca_file(directory))
+    assert ca.extensions.get_extension_for_class(x509.BasicConstraints).value.ca
+    ca_key = serialization.load_pem_private_key(ca_key_file(directory).read_bytes(), None)
+    assert ca_key.public_key() == ca.public_key()
+    for p in PRINCIPALS:
+        cert = _cert(cert_file(directory, p))
+        names = cert.subject.get_attributes_for_oid(x509.NameOID.COMMON_NAME)
+        assert [n.value for n in names] == [p]
+        cert.verify_directly_issued_by(ca)  # raises if the signature or issuer is wrong
+        assert not cert.extensions.get_extension_for_class(x509.BasicConstraints).value.ca
+        key = serialization.load_pem_private_key(key_file(directory, p).read_bytes(), None)
+        assert key.public_key() == cert.public_key()
+        days = (cert.not_valid_after_utc - cert.not_valid_before_utc).days
+        assert 30 <= days <= 31
+
+
+def test_certificates_name_localhost_loopback_and_extra_hosts(
+    creds: tuple[Path, list[Path]],
+) -> None:
+    directory, _ = creds
+    for p in PRINCIPALS:
+        san = _cert(cert_file(directory, p)).extensions.get_extension_for_class(
+            x509.SubjectAlternativeName
+        )
+        assert san.value.get_values_for_type(x509.DNSName) == ["localhost", "robot.local"]
+        assert san.value.get_values_for_type(x509.IPAddress) == [
+            ipaddress.ip_address("127.0.0.1"),
+            ipaddress.ip_address("10.0.0.5"),
+        ]
+
+
+def test_another_ca_does_not_verify(creds: tuple[Path, list[Path]], tmp_path: Path) -> None:
+    directory, _ = creds
+    generate(tmp_path)
+    other_ca = _cert(ca_file(tmp_path))
+    with pytest.raises(InvalidSignature):  # same issuer name, a different key
+        _cert(cert_file(directory, "controller")).verify_directly_issued_by(other_ca)
+
+
+def test_refuses_to_overwrite_without_force(tmp_path: Path) -> None:
+    generate(tmp_path)
+    before = users_file(tmp_path).read_text()
+    with pytest.raises(ConfigError, match=r"already exist.*--force"):
+        generate(tmp_path)
+    assert users_file(tmp_path).read_text() == before
+    password_file(tmp_path, "camera").chmod(0o644)
+    generate(tmp_path, force=True)
+    assert users_file(tmp_path).read_text() != before
+    assert _mode(password_file(tmp_path, "camera")) == 0o600
+
+
+@pytest.mark.parametrize(("hosts", "days"), [(("bad host",), 30), (("tcp/x:1",), 30), ((), 0)])
+def test_rejects_bad_hosts_and_days(tmp_path: Path, hosts: tuple[str, ...], days: int) -> None:
+    with pytest.raises(ConfigError):
+        generate(tmp_path / "s", hosts, days)
+    assert not (tmp_path / "s").exists()
+
+
+def test_cli_refuses_existing_with_one_line_and_exit_2(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(sys, "argv", ["credentials", "--dir", str(tmp_path), "--host", "::1"])
+    with pytest.raises(SystemExit) as first:
+        run_main(credentials.main, "credentials")
+    assert first.value.code == 0
+    assert 'auth = "password" or "certificate"' in capsys.readouterr().err
+    with pytest.raises(SystemExit) as second:
+        run_main(credentials.main, "credentials")
+    assert second.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("credentials: error: ")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.mark.integration
+def test_mtls_router_admits_only_clients_with_a_certificate(
+    creds: tuple[Path, list[Path]],
+) -> None:
+    directory, _ = creds
+    endpoint = f"tls/127.0.0.1:{_free_port()}"
+
+    def config(mode: str, tls: dict[str, object], **endpoints: list[str]) -> zenoh.Config:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", json.dumps(mode))
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("listen/endpoints", json.dumps(endpoints.get("listen", [])))
+        conf.insert_json5("connect/endpoints", json.dumps(endpoints.get("connect", [])))
+        tls = {"root_ca_certificate": str(ca_file(directory)), **tls}
+        conf.insert_json5("transport/link/tls", json.dumps(tls))
+        return conf
+
+    router_tls = {
+        "listen_private_key": str(key_file(directory, "supervisor")),
+        "listen_certificate": str(cert_file(directory, "supervisor")),
+        "enable_mtls": True,
+    }
+    client_tls = {
+        "connect_private_key": str(key_file(directory, "controller")),
+        "connect_certificate": str(cert_file(directory, "controller")),
+        "enable_mtls": True,  # without it the client never presents its certificate
+    }
+    with zenoh.open(config("router", router_tls, listen=[endpoint])):
+        with zenoh.open(config("client", client_tls, connect=[endpoint])) as client:
+            assert str(client.zid())
+        with pytest.raises(zenoh.ZError):
+            zenoh.open(config("client", {}, connect=[endpoint]))
