@@ -5,37 +5,48 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+DEV_STAMP := $(VENV)/.installed-dev
+CONFIG_ARG := $(if $(CONFIG),--config $(CONFIG))
 
 .PHONY: setup model run credentials test lint unit integration benchmark clean
 
+# What the stack needs to run: no test tools, no torch.
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install --quiet -e .
 	touch $(STAMP)
+
+# What the tests need on top.
+$(DEV_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet -e '.[dev]'
+	touch $(DEV_STAMP)
 
 setup: $(STAMP) model
 
+# The default model, fetched only when the config uses it.
 model: $(STAMP)
-	$(PY) -m services.detector fetch-model
+	$(PY) -m deploy.prepare $(CONFIG_ARG)
 
 run: setup
-	$(PY) -m deploy.supervisor $(if $(CONFIG),--config $(CONFIG)) $(ARGS)
+	$(PY) -m deploy.supervisor $(CONFIG_ARG) $(ARGS)
 
 credentials: $(STAMP)
 	$(PY) -m deploy.credentials $(ARGS)
 
-lint: $(STAMP)
+lint: $(DEV_STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m mypy
 
-test: setup lint
+test: $(DEV_STAMP) lint
+	$(PY) -m services.detector fetch-model
 	$(PY) -m pytest -q
 
-unit: $(STAMP)
+unit: $(DEV_STAMP)
 	$(PY) -m pytest -q tests/unit
 
-integration: setup
+integration: $(DEV_STAMP)
+	$(PY) -m services.detector fetch-model
 	$(PY) -m pytest -q -m integration
 
 benchmark: setup

@@ -62,14 +62,25 @@ def _build(cls: type[_T], table: str, values: Mapping[str, Any]) -> _T:
 
 
 def _env_overrides(environ: Mapping[str, str]) -> dict[str, dict[str, Any]]:
-    """Collect ``STACK__TABLE__FIELD=value`` overrides; values are TOML, else plain strings."""
+    """Collect ``STACK__TABLE__FIELD=value`` overrides; values are TOML, else plain strings.
+
+    A misspelt table or field is blamed on the variable, not on the config file."""
     out: dict[str, dict[str, Any]] = {}
+    hints = typing.get_type_hints(Config)
     for name, raw in environ.items():
         if not name.startswith(ENV_PREFIX):
             continue
         parts = name[len(ENV_PREFIX) :].lower().split("__")
         if len(parts) != 2:
             raise ConfigError(f"{name}: overrides look like {ENV_PREFIX}<TABLE>__<FIELD>")
+        if parts[0] == "path" or parts[0] not in hints:
+            known = sorted(set(hints) - {"path"})
+            raise ConfigError(f"{name}: there is no table [{parts[0]}]; known: {known}")
+        fields = {f.name for f in dataclasses.fields(hints[parts[0]])}
+        if parts[1] not in fields:
+            raise ConfigError(
+                f"{name}: [{parts[0]}] has no setting {parts[1]!r}; known: {sorted(fields)}"
+            )
         try:
             value = tomllib.loads(f"v = {raw}")["v"]
         except tomllib.TOMLDecodeError:

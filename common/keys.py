@@ -5,6 +5,7 @@ runs can share one network without hearing each other:
 
     <prefix>/camera/<camera>/frame            Frame           camera  -> detector
     <prefix>/detector/<camera>/detections     Detections      detector -> controller, metrics
+    <prefix>/detector/<camera>/info           queryable       detector -> JSON: model, classes
     <prefix>/scan                             LaserScan       robot/sim -> controller
     <prefix>/controller/cmd_vel               Twist           controller -> robot/sim, metrics
     <prefix>/controller/status                ControllerStatus
@@ -50,6 +51,9 @@ class Keys:
 
     def detections(self, camera: str) -> str:
         return f"{self.prefix}/detector/{_check_chunks('camera name', camera)}/detections"
+
+    def detector_info(self, camera: str) -> str:
+        return f"{self.prefix}/detector/{_check_chunks('camera name', camera)}/info"
 
     def all_detections(self) -> str:
         return f"{self.prefix}/detector/*/detections"

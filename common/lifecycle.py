@@ -92,9 +92,15 @@ def run_main(main: Callable[[], int], prog: str) -> None:
     """Run ``main`` and exit with its code; a StackError becomes one line on stderr."""
     try:
         code = main()
+        sys.stdout.flush()
     except StackError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         code = exit_code(exc)
     except KeyboardInterrupt:
         code = EXIT_INTERRUPTED
+    except BrokenPipeError:
+        # The reader went away (`... --json | head`): not an error of ours. Point stdout at
+        # /dev/null so that the interpreter's own final flush cannot fail again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        code = EXIT_OK
     raise SystemExit(code)

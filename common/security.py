@@ -82,7 +82,10 @@ def _principal_keys(keys: Keys, camera: str) -> dict[str, dict[str, tuple[str, .
     return {
         "camera": service("camera", keys.frame(camera)),
         "sim": service("sim", keys.frame(camera), keys.scan(), keys.sim_truth()),
-        "detector": service("detector", keys.detections(camera)),
+        "detector": {
+            **service("detector", keys.detections(camera)),
+            "serve": (keys.detector_info(camera),),
+        },
         "controller": service("controller", keys.cmd_vel(), keys.controller_status()),
         "metrics": {**service("metrics"), "serve": (keys.metrics(),)},
         "estop": {"put": (keys.estop(),)},

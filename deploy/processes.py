@@ -6,8 +6,10 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
+from typing import IO
 
 from common.lifecycle import PERMANENT_FAILURES, SUPERVISOR_PID_ENV
 from common.settings import SupervisorSettings
@@ -50,7 +52,9 @@ class ServiceProcess:
     last_exit: int | None = None
     started_at: float = 0.0
     restart_at: float = 0.0
+    last_error: str = ""  # the service's own one-line error, as it printed it
     backoff: Backoff = field(init=False)
+    _forwarder: threading.Thread = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.backoff = Backoff(self.settings.restart_backoff_s, self.settings.restart_backoff_max_s)
@@ -64,9 +68,27 @@ class ServiceProcess:
         env = {**os.environ, "PYTHONUNBUFFERED": "1", SUPERVISOR_PID_ENV: str(os.getpid())}
         # A session of its own: a Ctrl-C at the terminal reaches the supervisor only, which then
         # stops the services in order instead of all of them dying at once.
-        self.proc = subprocess.Popen(self.command, env=env, start_new_session=True)
+        self.proc = subprocess.Popen(
+            self.command, env=env, start_new_session=True, stderr=subprocess.PIPE
+        )
         self.started_at = time.monotonic()
         self.state = "starting"
+        assert self.proc.stderr is not None
+        self._forwarder = threading.Thread(
+            target=self._forward, args=(self.proc.stderr,), name=f"{self.name}-stderr", daemon=True
+        )
+        self._forwarder.start()
+
+    def _forward(self, stream: IO[bytes]) -> None:
+        """Pass the service's stderr through, remembering its one-line error if it prints one."""
+        for line in stream:
+            text = line.decode(errors="replace").strip()
+            if text.startswith(("error: ", f"{self.name}: error: ")):
+                named = text if text.startswith(self.name) else f"{self.name}: {text}"
+                self.last_error = named
+            sys.stderr.buffer.write(line)
+            sys.stderr.buffer.flush()
+        stream.close()
 
     def poll(self, now: float) -> str | None:
         """Check the process; on an exit, schedule the restart and return a log line."""
@@ -86,6 +108,7 @@ class ServiceProcess:
             return f"{self.name}: finished (exit code 0); not restarting"
         if code in PERMANENT_FAILURES:
             self.state = "failed"
+            self._forwarder.join(timeout=2.0)  # its last words carry the reason
             return f"{self.name}: exited with code {code} (config, model or backend); no restart"
         delay = self.backoff.next_delay(now - self.started_at)
         self.state, self.restart_at = "backoff", now + delay

@@ -2,7 +2,10 @@
 
 Starts every service of the stack config as its own process, shows their state and the stack's
 live figures, restarts a service that crashes (with backoff), and stops everything cleanly on
-Ctrl-C or SIGTERM. With --duration it runs headless for S seconds and ends with a JSON summary.
+Ctrl-C or SIGTERM. With --duration it runs headless for S seconds and ends with a JSON summary
+on stdout (status lines go to stderr, so the summary can be piped). A service that exits for a
+bad config, model or backend (exit codes 2, 3, 4) stops the whole stack: the supervisor exits
+with that code and the service's own error line.
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import threading
 import time
 from typing import Any
@@ -18,11 +22,18 @@ import zenoh
 
 from common.bus import open_hub
 from common.config_file import load_config
-from common.errors import DecodeError
+from common.errors import BackendUnavailable, ConfigError, DecodeError, ModelError, StackError
 from common.keys import Keys
-from common.lifecycle import run_main, setup_logging, stop_event
+from common.lifecycle import (
+    EXIT_BACKEND,
+    EXIT_CONFIG,
+    EXIT_MODEL,
+    run_main,
+    setup_logging,
+    stop_event,
+)
 from common.messages import ControllerStatus, GroundTruth, Twist
-from common.settings import Config
+from common.settings import CameraSettings, Config
 from deploy.lock import acquire
 from deploy.processes import ServiceProcess, service_command
 
@@ -114,6 +125,8 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
     lock = acquire(s.lock_dir, config.zenoh.endpoint, config.stack.prefix)
     session = open_hub(config)
     view = LiveView(session, keys)
+    for warning in config_warnings(config):
+        log.warning("%s", warning)
     procs = [ServiceProcess(n, service_command(n, config.path), s) for n in s.services]
     log.info("hub on %s; starting %s", config.zenoh.endpoint, ", ".join(s.services))
     for p in procs:
@@ -121,8 +134,9 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
     end = time.monotonic() + duration_s if duration_s else None
     next_status = time.monotonic()
     last_metrics: dict[str, Any] | None = None
+    failed: ServiceProcess | None = None
     try:
-        while not stop.wait(0.1):
+        while failed is None and not stop.wait(0.1):
             now = time.monotonic()
             if end is not None and now >= end:
                 break
@@ -132,10 +146,13 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
                     log.warning("%s", event)
                 if p.state == "starting" and view.is_ready(p.name):
                     p.state = "ready"
+                if p.state == "failed" and failed is None:
+                    failed = p  # restarting will not help: stop the stack and say why
             if now >= next_status:
                 next_status = now + s.status_period_s
                 last_metrics = _metrics(session, keys) or last_metrics
-                print(status_line(procs, view, last_metrics), flush=True)
+                # Status lines go to stderr: stdout carries only the --duration summary.
+                print(status_line(procs, view, last_metrics), file=sys.stderr, flush=True)
     finally:
         log.info("stopping")
         for p in reversed(procs):
@@ -151,9 +168,36 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
     }
     if duration_s:
         print(json.dumps(summary, indent=2), flush=True)
+    if failed is not None:
+        raise service_failure(failed)
     clean = all(p.last_exit == 0 for p in procs)
     log.info("stopped; %s", "all services exited cleanly" if clean else f"exit codes {summary}")
     return 0 if clean else 1
+
+
+def config_warnings(config: Config) -> list[str]:
+    """Settings that are valid but will not do what their author meant."""
+    out = []
+    camera_changed = config.camera.source != CameraSettings().source
+    if camera_changed and "camera" not in config.supervisor.services:
+        out.append(
+            f"camera.source is {config.camera.source!r} but the camera service is not in "
+            f"supervisor.services {list(config.supervisor.services)}: the source is unused; "
+            'list "camera" there (in place of "sim") to use it'
+        )
+    return out
+
+
+def service_failure(p: ServiceProcess) -> StackError:
+    """The supervisor's own error for a service that failed for good: the service's words, and
+    the service's exit code (2 config, 3 model, 4 backend) through the matching error type."""
+    kinds: dict[int | None, type[StackError]] = {
+        EXIT_CONFIG: ConfigError,
+        EXIT_MODEL: ModelError,
+        EXIT_BACKEND: BackendUnavailable,
+    }
+    why = p.last_error or f"{p.name}: exited with code {p.last_exit}"
+    return kinds.get(p.last_exit, StackError)(f"{why} (exit code {p.last_exit}; not restarted)")
 
 
 def main() -> int:

@@ -68,6 +68,11 @@ def candidates(
     return np.flatnonzero(mask & (dets.scores >= min_score))
 
 
+def unknown_targets(targets: tuple[str, ...], model_classes: list[str]) -> list[str]:
+    """The target classes the detector's model cannot report: the robot would search forever."""
+    return [t for t in targets if t not in model_classes]
+
+
 def focal_px(image_width: int, hfov_deg: float) -> float:
     """The pinhole focal length in pixels for this width and horizontal field of view."""
     return (image_width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
@@ -112,7 +117,8 @@ def corridor_clearance(scan: LaserScan, half_width_m: float) -> float:
     An angular sector alone misses things beside the nose that the body would still hit.
     """
     r = scan.ranges.astype(np.float64)
-    valid = ~np.isnan(r) & (r >= scan.range_min) & np.isfinite(r)
+    valid = np.isfinite(r) & (r >= scan.range_min)
+    r = np.where(valid, r, 0.0)  # inf * cos(90 deg) would be NaN (and a numpy warning)
     x = r * np.cos(scan.angles)
     y = r * np.sin(scan.angles)
     hit = valid & (x > 0) & (np.abs(y) <= half_width_m)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from typing import Generic, TypeVar
@@ -17,7 +18,7 @@ from common.messages import ControllerStatus, Detections, EStop, Header, LaserSc
 from common.node import Node
 from common.settings import Config
 from services.controller.estop import EStopLatch
-from services.controller.policy import Command, Controller, Inputs
+from services.controller.policy import Command, Controller, Inputs, unknown_targets
 
 _M = TypeVar("_M")
 
@@ -108,6 +109,9 @@ def run(config: Config, stop: threading.Event) -> int:
         cmd_pub = node.publisher(node.keys.cmd_vel(), QoS.CONTROL)
         status_pub = node.publisher(node.keys.controller_status(), QoS.TELEMETRY)
         node.log.info("mode %s on %s, targets %s", s.mode, det_key, list(s.target_classes))
+        threading.Thread(
+            target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
+        ).start()
         node.ready()
         period = 1.0 / s.control_rate_hz
         last_state = ""
@@ -140,6 +144,33 @@ def run(config: Config, stop: threading.Event) -> int:
             for sub in subs:
                 sub.undeclare()
     return 0
+
+
+def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:
+    """Ask the detector for its model's classes (until one answers) and warn, once, about
+    target classes it cannot report."""
+    key = node.keys.detector_info(config.stack.camera)
+    while not stop.is_set():
+        for reply in node.session.get(key, timeout=2.0):
+            if reply.ok is None:
+                continue
+            try:
+                classes = json.loads(reply.ok.payload.to_string())["classes"]
+                if not (isinstance(classes, list) and all(isinstance(c, str) for c in classes)):
+                    raise TypeError(f"classes must be a list of names, got {classes!r:.80}")
+            except (ValueError, KeyError, TypeError) as exc:
+                node.bad_input(key, exc)
+                continue
+            targets = config.controller.target_classes
+            missing = unknown_targets(targets, classes)
+            if missing:
+                node.log.warning(
+                    "target class(es) %s are not among the model's %d classes (%s...): the "
+                    "robot will never see them; check controller.target_classes",
+                    missing, len(classes), ", ".join(classes[:5]),
+                )  # fmt: skip
+            return
+        stop.wait(2.0)
 
 
 def _on_estop(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import threading
 from typing import Any
 
@@ -103,6 +104,12 @@ def run(config: Config, stop: threading.Event) -> int:
         sub = node.session.declare_subscriber(frame_key, on_frame)
         pub = node.publisher(node.keys.detections(config.stack.camera), QoS.PERCEPTION)
         gate = FreshnessGate(s.max_frame_age_s, config.stack.clock_tolerance_s, BOOT_ID)
+        info = json.dumps(
+            {"model": detector.model_path.name, "classes": list(detector.names),
+             "backend": b.name, "device": b.device, "precision": b.precision}
+        )  # fmt: skip
+        info_key = node.keys.detector_info(config.stack.camera)
+        queryable = node.session.declare_queryable(info_key, lambda q: q.reply(info_key, info))
         # Warm the backend up before announcing readiness: the first run allocates.
         detector.detect(np.full((480, 640, 3), 114, np.uint8))
         node.ready()
@@ -134,6 +141,7 @@ def run(config: Config, stop: threading.Event) -> int:
                 node.counters.add("detections_out")
         finally:
             sub.undeclare()
+            queryable.undeclare()
             detector.close()
     return 0
 

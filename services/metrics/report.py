@@ -91,6 +91,9 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
 def _summary_rows(session: Mapping[str, Any]) -> list[list[str]]:
     s, tl = session["summary"], session["summary"]["timeline"]
     period = float(tl.get("period_s", 1.0))
+    # Detected, offered and dropped over one span, the timeline's: the totals since start
+    # also count the warm-up before the detector's first counters and would not compare.
+    detected = sum(tl.get("fps", ())) * period
     offered = sum(tl.get("offered_fps", ())) * period
     dropped = sum(tl.get("dropped", ()))
     e2e = s["latency_ms"].get("end_to_end", {})
@@ -100,8 +103,8 @@ def _summary_rows(session: Mapping[str, Any]) -> list[list[str]]:
         f"p99 {_ms(e2e.get('p99', 0))} ms ({e2e.get('count', 0):.0f} commands)"
     )
     return [
-        ["frames detected", f"{s['frames']} ({s['fps']:.2f} FPS)"],
         ["frames offered to the detector", f"{offered:.0f}"],
+        ["frames detected", f"{detected:.0f} ({s['fps']:.2f} FPS)"],
         ["dropped by the detector", f"{dropped:.0f} (drop rate {s.get('drop_rate', 0.0):.1%})"],
         ["detections per frame", f"{s['detections_per_frame']:.2f}"],
         ["end to end, capture \u2192 command", e2e_text],

@@ -8,6 +8,7 @@ target the robot should end up following (None: it must stay still).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -17,6 +18,25 @@ from services.sim.world import Obstacle, Robot, Target, World
 
 def person(id: str, *path: tuple[float, float, float], mirror: bool = False) -> Target:
     return Target(id=id, name="person", sprite="person", height_m=1.7, path=path, mirror=mirror)
+
+
+DEMO_CENTRE = (4.0, 3.5)  # the demo's walk: a circle the person walks round, anticlockwise
+DEMO_RADIUS_M = 3.5
+DEMO_SPEED_MPS = 0.3  # well below the robot's speed limit, so the follower keeps up
+
+
+def demo_walker(points: int = 24) -> Target:
+    """The demo's person: starts 4 m straight ahead and walks a circle away from the robot,
+    forever, never towards it, so a follower keeps them in view for the whole run."""
+    cx, cy = DEMO_CENTRE
+    lap_s = 2 * math.pi * DEMO_RADIUS_M / DEMO_SPEED_MPS
+    path = tuple(
+        (lap_s * i / points,
+         cx + DEMO_RADIUS_M * math.cos(-math.pi / 2 + 2 * math.pi * i / points),
+         cy + DEMO_RADIUS_M * math.sin(-math.pi / 2 + 2 * math.pi * i / points))
+        for i in range(points + 1)
+    )  # fmt: skip
+    return Target(id="alice", name="person", sprite="person", height_m=1.7, path=path, loop=True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -37,10 +57,7 @@ SCENARIOS: dict[str, Scenario] = {
     s.name: s
     for s in (
         Scenario("demo", "a person walking a slow loop ahead of the robot (make run)",
-                 lambda: World(Robot(), targets=[person(
-                     "alice", (0, 4.0, 0.0), (20, 5.0, 1.5), (40, 6.0, -1.0), (60, 4.0, 0.0),
-                     (80, 5.0, 1.0), (100, 4.0, -0.5), (1e9, 4.0, -0.5))]),
-                 duration_s=1e9),
+                 lambda: World(Robot(), targets=[demo_walker()]), duration_s=1e9),
         Scenario("ahead", "a person standing straight ahead",
                  lambda: World(Robot(), targets=[person("alice", (0, 4.0, 0.0))]), 25.0),
         Scenario("side", "a person standing off to the left",

@@ -72,7 +72,8 @@ class Target:
     """Something the camera can see: a class, a cut-out, a size, and a scripted path.
 
     ``path`` is a list of (t, x, y) waypoints; the target moves linearly between them and stays
-    at the last. One waypoint means it stands still.
+    at the last. One waypoint means it stands still. With ``loop`` the path repeats: its last
+    waypoint should equal its first.
     """
 
     id: str
@@ -82,9 +83,12 @@ class Target:
     path: tuple[tuple[float, float, float], ...]
     radius: float = 0.25
     mirror: bool = False
+    loop: bool = False
 
     def position(self, t: float) -> tuple[float, float]:
         pts = self.path
+        if self.loop and t > pts[0][0] and pts[-1][0] > pts[0][0]:
+            t = pts[0][0] + (t - pts[0][0]) % (pts[-1][0] - pts[0][0])
         if t <= pts[0][0]:
             return pts[0][1], pts[0][2]
         for (t0, x0, y0), (t1, x1, y1) in itertools.pairwise(pts):

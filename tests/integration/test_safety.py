@@ -204,16 +204,22 @@ def test_a_killed_supervisor_takes_every_service_with_it(make_stack) -> None:  #
     assert all(len(p) == 1 for p in pids.values()), pids
     os.kill(stack.proc.pid, signal.SIGKILL)
     killed = time.monotonic()
-    wait_for(
-        lambda: not any(service_pids(name, stack.config_path) for name in STACK),
-        2.0,
-        lambda: (
-            f"every service to stop: {[n for n in STACK if service_pids(n, stack.config_path)]}"
-        ),
-    )
-    assert time.monotonic() - killed <= 2.0
-    assert Twist.decode(cmds[-1]).is_zero, "the controller's last word was not a stop"
-    stack.proc.wait()
+    try:
+        wait_for(
+            lambda: not any(service_pids(name, stack.config_path) for name in STACK),
+            2.0,
+            lambda: (
+                f"every service to stop: {[n for n in STACK if service_pids(n, stack.config_path)]}"
+            ),
+        )
+        assert time.monotonic() - killed <= 2.0
+        assert Twist.decode(cmds[-1]).is_zero, "the controller's last word was not a stop"
+    finally:
+        # Had the property failed, never leave orphans running the next tests' CPU down.
+        for name in STACK:
+            for pid in service_pids(name, stack.config_path):
+                os.kill(pid, signal.SIGKILL)
+        stack.proc.wait()
 
 
 def test_the_robot_side_reports_a_second_command_source(make_stack) -> None:  # type: ignore[no-untyped-def]

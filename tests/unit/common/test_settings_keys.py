@@ -10,7 +10,7 @@ from common.errors import ConfigError, ImageError
 from common.frames import frame_to_bgr, image_to_frame
 from common.keys import Keys
 from common.messages import Frame, Header
-from common.settings import DEFAULT_CONFIG
+from common.settings import DEFAULT_CONFIG, REPO_ROOT
 
 
 def test_default_config_loads() -> None:
@@ -163,3 +163,27 @@ def test_an_override_into_a_non_table_is_a_config_error(tmp_path: Path) -> None:
     path.write_text("camera = 5\n")
     with pytest.raises(ConfigError, match="must be a table"):
         load_config(path, environ={"STACK__CAMERA__RATE_HZ": "3"})
+
+
+def test_a_mistyped_override_is_blamed_on_the_variable() -> None:
+    with pytest.raises(ConfigError) as err:
+        load_config(DEFAULT_CONFIG, environ={"STACK__DETECTR__CONF": "0.3"})
+    assert str(err.value).startswith("STACK__DETECTR__CONF: there is no table [detectr]")
+    assert "stack.toml" not in str(err.value)
+    with pytest.raises(ConfigError, match=r"^STACK__DETECTOR__CONFF: \[detector\] has no setting"):
+        load_config(DEFAULT_CONFIG, environ={"STACK__DETECTOR__CONFF": "0.3"})
+
+
+def test_make_run_installs_no_test_tools_and_no_torch() -> None:
+    import tomllib
+
+    project = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text())["project"]
+    runtime = " ".join(project["dependencies"]).lower()
+    for tool in ("pytest", "mypy", "ruff", "torch", "nudenet", "hypothesis"):
+        assert tool not in runtime, tool
+    makefile = (REPO_ROOT / "Makefile").read_text()
+    # The run target's venv gets the project alone; the dev extra only for tests and lint.
+    assert "pip install --quiet -e .\n" in makefile
+    run_deps = next(line for line in makefile.splitlines() if line.startswith("run:"))
+    setup_deps = next(line for line in makefile.splitlines() if line.startswith("setup:"))
+    assert "DEV" not in run_deps and "DEV" not in setup_deps

@@ -291,3 +291,20 @@ def test_track_mode_does_not_hold_forward_speed_blind() -> None:
     ctl.step(Inputs(dets(("person", 0.9, 320, 240, 50, 100)), 0.0), now=0.0)
     held = ctl.step(Inputs(dets(), 0.0), now=0.1)  # no scan in track mode
     assert held.state == "holding" and held.linear_x == 0.0
+
+
+def test_corridor_with_rays_at_infinity_raises_no_numpy_warning() -> None:
+    import warnings
+
+    from services.controller.policy import corridor_clearance
+
+    ranges = np.full(541, np.inf, np.float32)
+    ranges[270] = 2.0  # straight ahead
+    scan = LaserScan(
+        header=Header(stamp_ns=1, frame_id="laser", seq=0, source="sim"),
+        angle_min=-2.356, angle_increment=4.712 / 540, range_min=0.05, range_max=12.0,
+        ranges=ranges,
+    )  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # "invalid value encountered in multiply" fails here
+        assert corridor_clearance(scan, 0.3) == pytest.approx(2.0)

@@ -188,3 +188,19 @@ def test_the_report_says_where_each_benchmark_ran(tmp_path: Path) -> None:
     session = {**_session(seconds=3), "benchmarks": benchmarks}
     write_report(session, tmp_path / "out")
     assert "Some GPU Box CPU, 16 cores" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_summary_counts_detected_offered_and_dropped_over_one_span() -> None:
+    from services.metrics.report import _summary_rows
+
+    session = _session()
+    tl = session["summary"]["timeline"]
+    # Detections heard before the detector's first counters (its warm-up) count in the total
+    # since start but not on the timeline, the span over which offered frames are known.
+    session["summary"]["frames"] = int(sum(tl["offered_fps"]) * tl["period_s"]) + 21
+    rows = dict(_summary_rows(session))
+    offered = float(rows["frames offered to the detector"])
+    detected = float(rows["frames detected"].split()[0])
+    dropped = float(rows["dropped by the detector"].split()[0])
+    # The detector cannot detect more frames than it was offered over the same span.
+    assert 0 < detected <= offered and dropped <= offered

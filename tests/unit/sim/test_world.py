@@ -129,3 +129,34 @@ def test_min_clearance_is_to_the_obstacle_surface() -> None:
     world = World(Robot(), obstacles=[Obstacle(2.5, 0.0, 0.3)], targets=sc.build().targets)
     result = score(sc, Recording(truths=truths), world, ControllerSettings(), 60.0)
     assert result["min_clearance_m"] == pytest.approx(0.5)
+
+
+def test_demo_person_stays_in_view_of_a_follower_for_ten_minutes() -> None:
+    """The demo walk, followed by an idealised follower (bearing P control, distance gain,
+    forward only when centred, 0.4 s perception latency, the base's limits): the person never
+    leaves a 60 degree field of view and never comes within reach of being passed."""
+    import math
+
+    from services.sim.scenarios import SCENARIOS
+
+    world = SCENARIOS["demo"].build()
+    dt, latency_steps = 0.05, 8
+    seen: list[tuple[float, float]] = []
+    worst_bearing, nearest = 0.0, math.inf
+    for _ in range(int(600 / dt)):
+        r = world.robot
+        tx, ty = world.target_positions()[0]
+        bearing = math.atan2(ty - r.y, tx - r.x) - r.theta
+        bearing = math.atan2(math.sin(bearing), math.cos(bearing))
+        distance = math.hypot(tx - r.x, ty - r.y)
+        seen.append((bearing, distance))
+        if world.t > 5.0:  # after the first approach
+            worst_bearing = max(worst_bearing, abs(math.degrees(bearing)))
+            nearest = min(nearest, distance)
+        b, d = seen[max(0, len(seen) - 1 - latency_steps)]
+        w = max(-1.0, min(1.0, 1.5 * b))
+        v = max(0.0, min(0.5, 0.6 * (d - 1.25))) if abs(math.degrees(b)) < 15 else 0.0
+        world.command(v, w)
+        world.advance(dt)
+    assert worst_bearing < 30.0, worst_bearing
+    assert nearest > 0.7, nearest

@@ -1,0 +1,54 @@
+"""What a new user trips over in the first hour, each fixed and kept fixed on real processes."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import pytest
+from skimage import data
+
+from tests.integration.conftest import REPO, write_config
+
+pytestmark = pytest.mark.integration
+
+
+def test_warnings_for_an_unused_camera_source_and_a_class_the_model_lacks(
+    tmp_path: Path,
+) -> None:
+    config = write_config(
+        tmp_path,
+        camera={"source": "device:0"},  # set, but no camera service listed
+        controller={"target_classes": ["unicorn"]},
+        supervisor={"services": ["detector", "controller"]},
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "deploy.supervisor", "--config", str(config), "--duration", "12"],
+        cwd=REPO, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "camera.source is 'device:0' but the camera service is not in" in done.stderr
+    warned = [line for line in done.stderr.splitlines() if "are not among the model's" in line]
+    assert len(warned) == 1 and "['unicorn']" in warned[0], done.stderr[-3000:]
+
+
+def test_detect_json_into_a_closed_pipe_is_not_a_traceback(
+    default_model: Path, tmp_path: Path
+) -> None:
+    for i in range(6):
+        cv2.imwrite(str(tmp_path / f"{i}.png"), cv2.cvtColor(data.chelsea(), cv2.COLOR_RGB2BGR))
+    # `detect --json | head -1`: the reader leaves after one line.
+    detect = subprocess.Popen(
+        [sys.executable, "-m", "services.detector", "detect", str(tmp_path),
+         "--model", str(default_model), "--json"],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    assert detect.stdout is not None and detect.stderr is not None
+    first = detect.stdout.readline()
+    detect.stdout.close()
+    err = detect.stderr.read().decode()
+    assert detect.wait(timeout=120) == 0, err
+    assert b'"image"' in first
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
