@@ -65,7 +65,11 @@ class Publisher:
         self._sn = itertools.count(1)
 
     def put(self, payload: bytes) -> None:
-        self._pub.put(payload, source_info=zenoh.SourceInfo(self._id, next(self._sn)))
+        self._pub.put(
+            payload,
+            encoding=zenoh.Encoding("application/msgpack"),  # every payload is a common.codec one
+            source_info=zenoh.SourceInfo(self._id, next(self._sn)),
+        )
 
     def undeclare(self) -> None:
         self._pub.undeclare()

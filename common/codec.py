@@ -1,39 +1,47 @@
-"""The one msgpack codec of the stack: envelope, schema version and typed-array helpers.
+"""The one msgpack codec of the stack: the envelope, per-type schema versions, the Message base.
 
-Every message on the bus is the msgpack map ``{"v": SCHEMA_VERSION, "t": <type tag>, "d": <body>}``.
-The body is a map of plain msgpack values; numpy arrays travel as raw little-endian bytes whose
-dtype is fixed by the field and whose element count is checked on decode. Anything that does not
-decode to exactly that raises :class:`common.errors.DecodeError` and nothing else, so a
-subscriber needs a single ``except DecodeError`` to drop garbage.
+Every message on the bus is the msgpack map ``{"v": <version>, "t": <type tag>, "d": <body>}``.
+The body is the message's dataclass fields by name (common/fields.py); numpy arrays travel as
+raw little-endian bytes whose dtype is fixed by the field and whose shape is checked on decode.
+
+Versions. Each message type carries its own ``VERSION`` and writes it in ``v``. A decoder reads
+every version from ``OLDEST_VERSION`` to its own: an older payload that lacks a field added
+since takes that field's default, and ``_upgrade`` may rewrite an older body first. A version
+newer than the decoder's own is refused with a DecodeError that says so: bump ``VERSION`` only
+for a change that older readers would misread (a field removed, renamed, retyped or given a new
+meaning, or a new field without a default); a new field with a default needs no bump, since
+readers ignore keys they do not know.
+
+Anything that does not decode to exactly a valid message raises
+:class:`common.errors.DecodeError` and nothing else, so a subscriber needs a single
+``except DecodeError`` to drop garbage.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar, Self
 
 import msgpack
-import numpy as np
-import numpy.typing as npt
 
 from common.errors import DecodeError
-
-SCHEMA_VERSION = 1
+from common.fields import decode_struct, encode_struct
 
 # A single frame of 8K RGB is ~100 MB; nothing legitimate on the bus is larger than this.
 MAX_PAYLOAD_BYTES = 128 * 1024 * 1024
 
 
-def pack(tag: str, body: Mapping[str, Any]) -> bytes:
+def pack(tag: str, version: int, body: Mapping[str, Any]) -> bytes:
     """Wrap ``body`` in the versioned envelope and serialise it."""
-    out = msgpack.packb({"v": SCHEMA_VERSION, "t": tag, "d": dict(body)}, use_bin_type=True)
+    out = msgpack.packb({"v": version, "t": tag, "d": body}, use_bin_type=True)
     assert isinstance(out, bytes)
     return out
 
 
-def unpack(payload: bytes | bytearray | memoryview, tag: str) -> dict[str, Any]:
-    """Check the envelope of ``payload`` and return its body, or raise DecodeError."""
+def unpack(
+    payload: bytes | bytearray | memoryview, tag: str, newest: int, oldest: int = 1
+) -> tuple[int, dict[str, Any]]:
+    """Check the envelope of ``payload``; return its version and body, or raise DecodeError."""
     if len(payload) > MAX_PAYLOAD_BYTES:
         raise DecodeError(f"{tag}: payload of {len(payload)} bytes is over the limit")
     try:
@@ -42,134 +50,65 @@ def unpack(payload: bytes | bytearray | memoryview, tag: str) -> dict[str, Any]:
         raise DecodeError(f"{tag}: not msgpack ({type(exc).__name__})") from exc
     if not isinstance(obj, dict):
         raise DecodeError(f"{tag}: expected an envelope map, got {type(obj).__name__}")
-    version = obj.get("v")
-    if version != SCHEMA_VERSION:
-        raise DecodeError(f"{tag}: schema version {version!r}, this build reads {SCHEMA_VERSION}")
     if obj.get("t") != tag:
         raise DecodeError(f"expected a {tag} message, got {obj.get('t')!r}")
+    version = obj.get("v")
+    if type(version) is not int:
+        raise DecodeError(f"{tag}: schema version {version!r} is not a version number")
+    if version > newest:
+        raise DecodeError(
+            f"{tag}: schema version {version} is newer than this build reads "
+            f"({oldest}..{newest}); update this reader"
+        )
+    if version < oldest:
+        raise DecodeError(
+            f"{tag}: schema version {version} is older than this build reads ({oldest}..{newest})"
+        )
     body = obj.get("d")
     if not isinstance(body, dict):
         raise DecodeError(f"{tag}: body is not a map")
-    return body
+    return version, body
 
 
-class Body:
-    """Typed accessors over a decoded body; every mismatch becomes a DecodeError."""
+class Message:
+    """A message type: a frozen dataclass whose fields are its wire body, declared once.
 
-    __slots__ = ("_d", "_tag")
+    A subclass sets ``TAG`` (the ``t`` of its envelope) and, when its schema changes,
+    ``VERSION``; it keeps its value checks in ``__post_init__``, whose ValueError becomes a
+    DecodeError on decode. Two hooks, both optional:
 
-    def __init__(self, tag: str, body: Mapping[str, Any]) -> None:
-        self._tag = tag
-        self._d = body
+    - ``_wire_extras``: derived values written on the wire for readers in other languages
+      (e.g. Detections' ``center_size``); a decoder never reads them back.
+    - ``_upgrade``: rewrites the body of an older version before it is decoded.
+    """
 
-    @property
-    def tag(self) -> str:
-        return self._tag
+    __slots__ = ()
 
-    def fields(self) -> list[str]:
-        return [k for k in self._d if isinstance(k, str)]
+    TAG: ClassVar[str]
+    VERSION: ClassVar[int] = 1
+    OLDEST_VERSION: ClassVar[int] = 1
 
-    def is_null(self, key: str) -> bool:
-        return self._get(key) is None
+    def _wire_extras(self) -> dict[str, Any]:
+        return {}
 
-    def floats(self, key: str) -> list[float]:
-        v = self._get(key)
-        if not isinstance(v, list) or not all(
-            isinstance(x, int | float) and not isinstance(x, bool) for x in v
-        ):
-            raise self._fail(key, "list of numbers")
-        return [float(x) for x in v]
+    @classmethod
+    def _upgrade(cls, version: int, body: dict[str, Any]) -> dict[str, Any]:
+        return body
 
-    def _get(self, key: str) -> Any:
-        if key not in self._d:
-            raise DecodeError(f"{self._tag}: missing field {key!r}")
-        return self._d[key]
+    def encode(self) -> bytes:
+        body = encode_struct(self)
+        body.update(self._wire_extras())
+        return pack(self.TAG, self.VERSION, body)
 
-    def _fail(self, key: str, expected: str) -> DecodeError:
-        got = type(self._d.get(key)).__name__
-        return DecodeError(f"{self._tag}.{key}: expected {expected}, got {got}")
-
-    def get_int(self, key: str, lo: int | None = None, hi: int | None = None) -> int:
-        v = self._get(key)
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise self._fail(key, "int")
-        if (lo is not None and v < lo) or (hi is not None and v > hi):
-            raise DecodeError(f"{self._tag}.{key}: {v} is outside [{lo}, {hi}]")
-        return v
-
-    def get_bool(self, key: str) -> bool:
-        v = self._get(key)
-        if not isinstance(v, bool):
-            raise self._fail(key, "bool")
-        return v
-
-    def get_float(self, key: str) -> float:
-        v = self._get(key)
-        if isinstance(v, bool) or not isinstance(v, int | float):
-            raise self._fail(key, "float")
-        return float(v)
-
-    def get_str(self, key: str) -> str:
-        v = self._get(key)
-        if not isinstance(v, str):
-            raise self._fail(key, "str")
-        return v
-
-    def get_bytes(self, key: str) -> bytes:
-        v = self._get(key)
-        if not isinstance(v, bytes):
-            raise self._fail(key, "bytes")
-        return v
-
-    def get_map(self, key: str) -> Body:
-        v = self._get(key)
-        if not isinstance(v, dict):
-            raise self._fail(key, "map")
-        return Body(f"{self._tag}.{key}", v)
-
-    def float_map(self, key: str) -> dict[str, float]:
-        v = self._get(key)
-        if not isinstance(v, dict) or not all(
-            isinstance(k, str)
-            and isinstance(x, int | float)
-            and not isinstance(x, bool)
-            and math.isfinite(x)
-            for k, x in v.items()
-        ):
-            raise self._fail(key, "map of str to finite float")
-        return {k: float(x) for k, x in v.items()}
-
-    def int_map(self, key: str) -> dict[str, int]:
-        v = self._get(key)
-        if not isinstance(v, dict) or not all(
-            isinstance(k, str) and isinstance(x, int) and not isinstance(x, bool)
-            for k, x in v.items()
-        ):
-            raise self._fail(key, "map of str to int")
-        return dict(v)
-
-    def str_list(self, key: str) -> tuple[str, ...]:
-        v = self._get(key)
-        if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
-            raise self._fail(key, "list of str")
-        return tuple(v)
-
-    def array(self, key: str, dtype: npt.DTypeLike, shape: tuple[int, ...]) -> npt.NDArray[Any]:
-        """Read a raw little-endian array of exactly ``shape``; -1 in shape is inferred."""
-        raw = self.get_bytes(key)
-        dt = np.dtype(dtype).newbyteorder("<")
-        if len(raw) % dt.itemsize:
-            raise DecodeError(f"{self._tag}.{key}: {len(raw)} bytes is not a whole {dt} array")
-        flat = np.frombuffer(raw, dtype=dt)
+    @classmethod
+    def decode(cls, payload: bytes | bytearray | memoryview) -> Self:
+        """Decode ``payload`` or raise DecodeError; never any other exception."""
+        version, body = unpack(payload, cls.TAG, cls.VERSION, cls.OLDEST_VERSION)
         try:
-            arr = flat.reshape(shape)
-        except ValueError as exc:
-            raise DecodeError(
-                f"{self._tag}.{key}: {flat.size} values do not fit shape {shape}"
-            ) from exc
-        return arr.astype(dt.newbyteorder("="), copy=False)
-
-
-def array_bytes(arr: npt.NDArray[Any], dtype: npt.DTypeLike) -> bytes:
-    """Serialise ``arr`` as raw little-endian ``dtype`` bytes."""
-    return np.ascontiguousarray(arr, dtype=np.dtype(dtype).newbyteorder("<")).tobytes()
+            if version != cls.VERSION:
+                body = cls._upgrade(version, body)
+            return decode_struct(cls, body, cls.TAG)
+        except DecodeError:
+            raise
+        except (ValueError, TypeError) as exc:  # a __post_init__ check on decoded values
+            raise DecodeError(f"{cls.TAG}: {exc}") from exc

@@ -4,6 +4,10 @@ The information matches the ROS 2 messages the lab used: ``std_msgs/Header`` (st
 plus our seq and source), ``sensor_msgs/Image``, ``vision_msgs/Detection2DArray`` (class name,
 score, box centre and size), ``geometry_msgs/Twist`` and ``sensor_msgs/LaserScan``.
 
+Each field is declared once, here: its name and type are its wire format (common/fields.py),
+and each message type has its own schema version, ``VERSION`` (common/codec.py). To add a field,
+declare it with a default; bump the version only for a change older readers would misread.
+
 Units: times are integer nanoseconds since the Unix epoch (``time.time_ns()``); image
 coordinates are pixels of the image the detections were made on, origin top-left, x right,
 y down; angles are radians, counter-clockwise positive (REP 103); ranges are metres.
@@ -14,13 +18,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Self
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
 
-from common.codec import Body, array_bytes, pack, unpack
-from common.errors import DecodeError
+from common.codec import Message
+from common.fields import Dim, NonNegativeInt, Shape
 
 # Limits that no real camera reaches; anything above is garbage, not a frame.
 MAX_IMAGE_SIDE = 16384
@@ -28,6 +32,12 @@ MAX_DETECTIONS = 10000
 MAX_SCAN_RAYS = 100_000
 
 FRAME_ENCODINGS: dict[str, int] = {"bgr8": 3, "rgb8": 3, "mono8": 1, "jpeg": 0}
+
+# The counts that size a message's arrays; each travels on the wire as "n", and is checked
+# against its bounds before any array is read.
+N_DETECTIONS = Dim("n", 0, MAX_DETECTIONS)
+N_RAYS = Dim("n", 1, MAX_SCAN_RAYS)
+N_TARGETS = Dim("n", 0, MAX_DETECTIONS)
 
 
 def now_ns() -> int:
@@ -44,68 +54,21 @@ class Header:
     A receiver on the same boot judges age on both clocks (common/freshness.py).
     """
 
-    stamp_ns: int
+    stamp_ns: NonNegativeInt
     frame_id: str
-    seq: int
+    seq: NonNegativeInt
     source: str
-    mono_ns: int = 0
+    # Absent from headers written before these fields existed: they decode as unknown.
+    mono_ns: NonNegativeInt = 0
     boot_id: str = ""
-
-    def to_wire(self) -> dict[str, Any]:
-        return {
-            "stamp_ns": self.stamp_ns,
-            "frame_id": self.frame_id,
-            "seq": self.seq,
-            "source": self.source,
-            "mono_ns": self.mono_ns,
-            "boot_id": self.boot_id,
-        }
-
-    @classmethod
-    def from_wire(cls, b: Body) -> Header:
-        return cls(
-            stamp_ns=b.get_int("stamp_ns", 0),
-            frame_id=b.get_str("frame_id"),
-            seq=b.get_int("seq", 0),
-            source=b.get_str("source"),
-            # Absent from headers written before these fields existed: unknown.
-            mono_ns=b.get_int("mono_ns", 0) if "mono_ns" in b.fields() else 0,
-            boot_id=b.get_str("boot_id") if "boot_id" in b.fields() else "",
-        )
-
-
-class _Message:
-    """Shared encode/decode plumbing; subclasses provide TAG, _body and _from_body."""
-
-    TAG: ClassVar[str]
-
-    def _body(self) -> dict[str, Any]:
-        raise NotImplementedError
-
-    @classmethod
-    def _from_body(cls, b: Body) -> Self:
-        raise NotImplementedError
-
-    def encode(self) -> bytes:
-        return pack(self.TAG, self._body())
-
-    @classmethod
-    def decode(cls, payload: bytes | bytearray | memoryview) -> Self:
-        """Decode ``payload`` or raise DecodeError; never any other exception."""
-        body = Body(cls.TAG, unpack(payload, cls.TAG))
-        try:
-            return cls._from_body(body)
-        except DecodeError:
-            raise
-        except (ValueError, TypeError) as exc:  # a __post_init__ check on decoded values
-            raise DecodeError(f"{cls.TAG}: {exc}") from exc
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Frame(_Message):
+class Frame(Message):
     """One camera image. ``data`` is row-major pixels for raw encodings, a JPEG file for jpeg."""
 
     TAG: ClassVar[str] = "Frame"
+    VERSION: ClassVar[int] = 1
     header: Header
     encoding: str
     width: int
@@ -126,28 +89,9 @@ class Frame(_Message):
         if not channels and not self.data:
             raise ValueError("empty jpeg")
 
-    def _body(self) -> dict[str, Any]:
-        return {
-            "header": self.header.to_wire(),
-            "encoding": self.encoding,
-            "width": self.width,
-            "height": self.height,
-            "data": self.data,
-        }
-
-    @classmethod
-    def _from_body(cls, b: Body) -> Frame:
-        return cls(
-            header=Header.from_wire(b.get_map("header")),
-            encoding=b.get_str("encoding"),
-            width=b.get_int("width"),
-            height=b.get_int("height"),
-            data=b.get_bytes("data"),
-        )
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Detections(_Message):
+class Detections(Message):
     """The detections of one frame: ``vision_msgs/Detection2DArray`` as a struct of arrays.
 
     ``header`` is the frame's header, unchanged, so latency is measured from the capture stamp.
@@ -158,19 +102,20 @@ class Detections(_Message):
     """
 
     TAG: ClassVar[str] = "Detections"
+    VERSION: ClassVar[int] = 1
     header: Header
     image_width: int
     image_height: int
-    class_ids: npt.NDArray[np.int32]
+    class_ids: Annotated[npt.NDArray[np.int32], Shape(N_DETECTIONS)]
     class_names: tuple[str, ...]
-    scores: npt.NDArray[np.float32]
-    xyxy: npt.NDArray[np.float32]
-    track_ids: npt.NDArray[np.int32] | None = None
+    scores: Annotated[npt.NDArray[np.float32], Shape(N_DETECTIONS)]
+    xyxy: Annotated[npt.NDArray[np.float32], Shape(N_DETECTIONS, 4)]
+    track_ids: Annotated[npt.NDArray[np.int32], Shape(N_DETECTIONS)] | None = None
     timing_ms: dict[str, float] = field(default_factory=dict)
     model: str = ""
     backend: str = ""
-    received_ns: int = 0
-    published_ns: int = 0
+    received_ns: NonNegativeInt = 0
+    published_ns: NonNegativeInt = 0
 
     def __post_init__(self) -> None:
         n = len(self.class_ids)
@@ -202,49 +147,14 @@ class Detections(_Message):
         """Box sizes (n, 2) width and height in pixels, as ``BoundingBox2D.size_x/size_y``."""
         return (self.xyxy[:, 2:] - self.xyxy[:, :2]).astype(np.float32)
 
-    def _body(self) -> dict[str, Any]:
-        # centre/size go on the wire too, for readers in other languages; decode ignores them.
-        return {
-            "header": self.header.to_wire(),
-            "image_width": self.image_width,
-            "image_height": self.image_height,
-            "n": len(self),
-            "class_ids": array_bytes(self.class_ids, np.int32),
-            "class_names": list(self.class_names),
-            "scores": array_bytes(self.scores, np.float32),
-            "xyxy": array_bytes(self.xyxy, np.float32),
-            "center_size": array_bytes(np.hstack([self.centers, self.sizes]), np.float32),
-            "track_ids": None if self.track_ids is None else array_bytes(self.track_ids, np.int32),
-            "timing_ms": self.timing_ms,
-            "model": self.model,
-            "backend": self.backend,
-            "received_ns": self.received_ns,
-            "published_ns": self.published_ns,
-        }
-
-    @classmethod
-    def _from_body(cls, b: Body) -> Detections:
-        n = b.get_int("n", 0, MAX_DETECTIONS)
-        track = None if b.is_null("track_ids") else b.array("track_ids", np.int32, (n,))
-        return cls(
-            header=Header.from_wire(b.get_map("header")),
-            image_width=b.get_int("image_width"),
-            image_height=b.get_int("image_height"),
-            class_ids=b.array("class_ids", np.int32, (n,)),
-            class_names=b.str_list("class_names"),
-            scores=b.array("scores", np.float32, (n,)),
-            xyxy=b.array("xyxy", np.float32, (n, 4)),
-            track_ids=track,
-            timing_ms=b.float_map("timing_ms"),
-            model=b.get_str("model"),
-            backend=b.get_str("backend"),
-            received_ns=b.get_int("received_ns", 0),
-            published_ns=b.get_int("published_ns", 0),
-        )
+    def _wire_extras(self) -> dict[str, Any]:
+        # (n, 4) float32 cx, cy, w, h for readers in other languages; decode ignores it.
+        center_size = np.hstack([self.centers, self.sizes])
+        return {"center_size": np.ascontiguousarray(center_size, "<f4").tobytes()}
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Twist(_Message):
+class Twist(Message):
     """A velocity command, as ``geometry_msgs/Twist``: m/s and rad/s in the robot's base frame.
 
     ``input_stamp_ns`` is the capture stamp of the frame whose detections this command reacts
@@ -252,10 +162,11 @@ class Twist(_Message):
     """
 
     TAG: ClassVar[str] = "Twist"
+    VERSION: ClassVar[int] = 1
     header: Header
     linear: tuple[float, float, float] = (0.0, 0.0, 0.0)
     angular: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    input_stamp_ns: int = 0
+    input_stamp_ns: NonNegativeInt = 0
 
     def __post_init__(self) -> None:
         # A NaN reaching a motor driver that does not check is a runaway: refuse to build one.
@@ -266,45 +177,22 @@ class Twist(_Message):
     def is_zero(self) -> bool:
         return not any(self.linear) and not any(self.angular)
 
-    def _body(self) -> dict[str, Any]:
-        return {
-            "header": self.header.to_wire(),
-            "linear": list(self.linear),
-            "angular": list(self.angular),
-            "input_stamp_ns": self.input_stamp_ns,
-        }
-
-    @classmethod
-    def _from_body(cls, b: Body) -> Twist:
-        return cls(
-            header=Header.from_wire(b.get_map("header")),
-            linear=_vec3(b, "linear"),
-            angular=_vec3(b, "angular"),
-            input_stamp_ns=b.get_int("input_stamp_ns", 0),
-        )
-
-
-def _vec3(b: Body, key: str) -> tuple[float, float, float]:
-    v = b.floats(key)
-    if len(v) != 3 or not all(np.isfinite(v)):
-        raise DecodeError(f"{b.tag}.{key}: expected 3 finite numbers, got {v}")
-    return (v[0], v[1], v[2])
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class LaserScan(_Message):
+class LaserScan(Message):
     """A planar scan, as ``sensor_msgs/LaserScan``: ray i points at angle_min + i*increment.
 
     ``ranges`` is (n,) float32 in metres; inf means nothing within range_max, NaN an invalid ray.
     """
 
     TAG: ClassVar[str] = "LaserScan"
+    VERSION: ClassVar[int] = 1
     header: Header
     angle_min: float
     angle_increment: float
     range_min: float
     range_max: float
-    ranges: npt.NDArray[np.float32]
+    ranges: Annotated[npt.NDArray[np.float32], Shape(N_RAYS)]
 
     def __post_init__(self) -> None:
         if not 0 < len(self.ranges) <= MAX_SCAN_RAYS:
@@ -319,35 +207,13 @@ class LaserScan(_Message):
         """The angle of each ray in radians, (n,) float64."""
         return self.angle_min + self.angle_increment * np.arange(len(self.ranges), dtype=np.float64)
 
-    def _body(self) -> dict[str, Any]:
-        return {
-            "header": self.header.to_wire(),
-            "angle_min": self.angle_min,
-            "angle_increment": self.angle_increment,
-            "range_min": self.range_min,
-            "range_max": self.range_max,
-            "n": len(self.ranges),
-            "ranges": array_bytes(self.ranges, np.float32),
-        }
-
-    @classmethod
-    def _from_body(cls, b: Body) -> LaserScan:
-        n = b.get_int("n", 1, MAX_SCAN_RAYS)
-        return cls(
-            header=Header.from_wire(b.get_map("header")),
-            angle_min=b.get_float("angle_min"),
-            angle_increment=b.get_float("angle_increment"),
-            range_min=b.get_float("range_min"),
-            range_max=b.get_float("range_max"),
-            ranges=b.array("ranges", np.float32, (n,)),
-        )
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ControllerStatus(_Message):
+class ControllerStatus(Message):
     """What the controller is doing and why: mode, target and state (e.g. "following")."""
 
     TAG: ClassVar[str] = "ControllerStatus"
+    VERSION: ClassVar[int] = 1
     header: Header
     mode: str
     target: str
@@ -355,30 +221,9 @@ class ControllerStatus(_Message):
     reason: str = ""
     track_id: int = -1
 
-    def _body(self) -> dict[str, Any]:
-        return {
-            "header": self.header.to_wire(),
-            "mode": self.mode,
-            "target": self.target,
-            "state": self.state,
-            "reason": self.reason,
-            "track_id": self.track_id,
-        }
-
-    @classmethod
-    def _from_body(cls, b: Body) -> ControllerStatus:
-        return cls(
-            header=Header.from_wire(b.get_map("header")),
-            mode=b.get_str("mode"),
-            target=b.get_str("target"),
-            state=b.get_str("state"),
-            reason=b.get_str("reason"),
-            track_id=b.get_int("track_id"),
-        )
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class GroundTruth(_Message):
+class GroundTruth(Message):
     """The simulator's truth: the robot's pose and every target's position, in the world frame.
 
     ``sim_time_s`` is the scenario clock, which starts once the detector and controller are up.
@@ -388,11 +233,14 @@ class GroundTruth(_Message):
     """
 
     TAG: ClassVar[str] = "GroundTruth"
+    VERSION: ClassVar[int] = 1
     header: Header
     sim_time_s: float
     robot: tuple[float, float, float]
     robot_velocity: tuple[float, float] = (0.0, 0.0)
-    targets_xy: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2)))
+    targets_xy: Annotated[npt.NDArray[np.float64], Shape(N_TARGETS, 2)] = field(
+        default_factory=lambda: np.zeros((0, 2))
+    )
     target_names: tuple[str, ...] = ()
     target_ids: tuple[str, ...] = ()
 
@@ -401,79 +249,31 @@ class GroundTruth(_Message):
         if self.targets_xy.shape != (n, 2) or len(self.target_ids) != n:
             raise ValueError(f"targets_xy must be ({n}, 2) with {n} ids")
 
-    def _body(self) -> dict[str, Any]:
-        return {
-            "header": self.header.to_wire(),
-            "sim_time_s": self.sim_time_s,
-            "robot": list(self.robot),
-            "robot_velocity": list(self.robot_velocity),
-            "n": len(self.target_names),
-            "targets_xy": array_bytes(self.targets_xy, np.float64),
-            "target_names": list(self.target_names),
-            "target_ids": list(self.target_ids),
-        }
-
-    @classmethod
-    def _from_body(cls, b: Body) -> GroundTruth:
-        n = b.get_int("n", 0, MAX_DETECTIONS)
-        vel = b.floats("robot_velocity")
-        if len(vel) != 2:
-            raise DecodeError(f"{b.tag}.robot_velocity: expected 2 numbers")
-        return cls(
-            header=Header.from_wire(b.get_map("header")),
-            sim_time_s=b.get_float("sim_time_s"),
-            robot=_vec3(b, "robot"),
-            robot_velocity=(vel[0], vel[1]),
-            targets_xy=b.array("targets_xy", np.float64, (n, 2)),
-            target_names=b.str_list("target_names"),
-            target_ids=b.str_list("target_ids"),
-        )
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class EStop(_Message):
+class EStop(Message):
     """The emergency stop: ``engaged`` latches zero velocity until an EStop with False."""
 
     TAG: ClassVar[str] = "EStop"
+    VERSION: ClassVar[int] = 1
     header: Header
     engaged: bool
     reason: str = ""
 
-    def _body(self) -> dict[str, Any]:
-        return {"header": self.header.to_wire(), "engaged": self.engaged, "reason": self.reason}
-
-    @classmethod
-    def _from_body(cls, b: Body) -> EStop:
-        return cls(
-            header=Header.from_wire(b.get_map("header")),
-            engaged=b.get_bool("engaged"),
-            reason=b.get_str("reason"),
-        )
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ServiceCounters(_Message):
+class ServiceCounters(Message):
     """A service's own counters (frames in, dropped, bad input ...), published periodically."""
 
     TAG: ClassVar[str] = "ServiceCounters"
+    VERSION: ClassVar[int] = 1
     header: Header
     service: str
     counters: dict[str, int]
 
-    def _body(self) -> dict[str, Any]:
-        return {"header": self.header.to_wire(), "service": self.service, "counters": self.counters}
-
-    @classmethod
-    def _from_body(cls, b: Body) -> ServiceCounters:
-        return cls(
-            header=Header.from_wire(b.get_map("header")),
-            service=b.get_str("service"),
-            counters=b.int_map("counters"),
-        )
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class MetricsSnapshot(_Message):
+class MetricsSnapshot(Message):
     """The metrics service's view of the stack over its sliding window.
 
     ``latency_ms`` maps a stage name (e.g. "capture_to_detections", "end_to_end") to its
@@ -482,13 +282,14 @@ class MetricsSnapshot(_Message):
     """
 
     TAG: ClassVar[str] = "MetricsSnapshot"
+    VERSION: ClassVar[int] = 1
     header: Header
     window_s: float
     fps: float
-    frames: int
-    detections: int
+    frames: NonNegativeInt
+    detections: NonNegativeInt
     detections_per_frame: float
-    dropped_frames: int
+    dropped_frames: NonNegativeInt
     latency_ms: dict[str, dict[str, float]]
     counters: dict[str, int]
     class_counts: dict[str, int] = field(default_factory=dict)
@@ -508,21 +309,7 @@ class MetricsSnapshot(_Message):
             "class_counts": self.class_counts,
         }
 
-    def _body(self) -> dict[str, Any]:
-        return {"header": self.header.to_wire(), **self.to_json_dict()}
-
-    @classmethod
-    def _from_body(cls, b: Body) -> MetricsSnapshot:
-        lat = b.get_map("latency_ms")
-        return cls(
-            header=Header.from_wire(b.get_map("header")),
-            window_s=b.get_float("window_s"),
-            fps=b.get_float("fps"),
-            frames=b.get_int("frames", 0),
-            detections=b.get_int("detections", 0),
-            detections_per_frame=b.get_float("detections_per_frame"),
-            dropped_frames=b.get_int("dropped_frames", 0),
-            latency_ms={k: lat.float_map(k) for k in lat.fields()},
-            counters=b.int_map("counters"),
-            class_counts=b.int_map("class_counts"),
-        )
+    def _wire_extras(self) -> dict[str, Any]:
+        # The body has always been the JSON answer plus the header, so it carries the header's
+        # stamp_ns at the top level too; decode ignores it.
+        return {"stamp_ns": self.header.stamp_ns}

@@ -73,7 +73,9 @@ def run(config: Config, stop: threading.Event) -> int:
         ]
 
         def on_query(query: zenoh.Query) -> None:
-            query.reply(keys.metrics(), json.dumps(answer()))
+            query.reply(
+                keys.metrics(), json.dumps(answer()), encoding=zenoh.Encoding.APPLICATION_JSON
+            )
 
         queryable = node.session.declare_queryable(keys.metrics(), on_query)
         if exporter is not None:

@@ -6,7 +6,6 @@ import msgpack
 import numpy as np
 import pytest
 
-from common.codec import SCHEMA_VERSION
 from common.messages import Detections, Frame, Header, LaserScan, Twist
 from tests.integration.conftest import Stack, wait_for
 
@@ -26,9 +25,9 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _garbage(good: bytes) -> list[bytes]:
-    """Random bytes, a wrong schema version, a truncated message and absurd dimensions."""
+    """Random bytes, a newer schema version, a truncated message and absurd dimensions."""
     env = msgpack.unpackb(good)
-    wrong_version = msgpack.packb({**env, "v": SCHEMA_VERSION + 99})
+    wrong_version = msgpack.packb({**env, "v": env["v"] + 99})
     body = env["d"]
     if "width" in body:  # a frame claiming a billion-pixel side
         absurd_body = {**body, "width": 10**9, "height": 10**9}
@@ -43,6 +42,10 @@ def test_stack_detects_reacts_and_stops_cleanly(make_stack) -> None:  # type: ig
     stack.wait_ready(SERVICES)
     _, dets = stack.subscribe(stack.keys.detections("front"))
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
+    encodings: set[str] = set()
+    _enc_sub = stack.session.declare_subscriber(
+        stack.keys.detections("front"), lambda s: encodings.add(str(s.encoding))
+    )
 
     def person_seen() -> Detections | None:
         for raw in list(dets):
@@ -73,6 +76,10 @@ def test_stack_detects_reacts_and_stops_cleanly(make_stack) -> None:  # type: ig
     assert metrics["latency_ms"]["end_to_end"]["count"] > 0
     assert metrics["latency_ms"]["inference"]["p50"] > 0
     assert metrics["class_counts"].get("person", 0) > 0
+    assert encodings == {"application/msgpack"}
+    replies = stack.session.get(stack.keys.metrics(), timeout=2.0)
+    answers = [r.ok for r in replies if r.ok is not None]
+    assert answers and str(answers[0].encoding) == "application/json"
 
     assert stack.stop() == 0, stack.log()
     log = stack.log()

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
+
 import msgpack
 import numpy as np
 import pytest
 
-from common.codec import SCHEMA_VERSION
+from common.codec import Message
 from common.errors import DecodeError
 from common.messages import (
+    MAX_SCAN_RAYS,
     ControllerStatus,
     Detections,
     EStop,
@@ -140,7 +144,7 @@ def _rewrite(payload: bytes, **changes: object) -> bytes:
 
 
 def test_wrong_schema_version() -> None:
-    payload = _rewrite(MESSAGES[0].encode(), v=SCHEMA_VERSION + 1)
+    payload = _rewrite(MESSAGES[0].encode(), v=Frame.VERSION + 1)
     with pytest.raises(DecodeError, match="schema version"):
         Frame.decode(payload)
 
@@ -217,3 +221,118 @@ def test_detections_and_twists_refuse_non_finite_or_inverted_values() -> None:
         Detections.decode(msgpack.packb(body))
     with pytest.raises(ValueError):
         Twist(header=HEADER, linear=(float("nan"), 0.0, 0.0))
+
+
+# The wire names of every message, pinned: docs/messages.md and readers in other languages use
+# them. "n" is the count that sizes the arrays; center_size and MetricsSnapshot's top-level
+# stamp_ns are derived extras that decoders ignore.
+HEADER_KEYS = {"stamp_ns", "frame_id", "seq", "source", "mono_ns", "boot_id"}
+WIRE_KEYS = {
+    "Frame": {"header", "encoding", "width", "height", "data"},
+    "Detections": {
+        "header", "image_width", "image_height", "n", "class_ids", "class_names", "scores",
+        "xyxy", "center_size", "track_ids", "timing_ms", "model", "backend", "received_ns",
+        "published_ns",
+    },
+    "Twist": {"header", "linear", "angular", "input_stamp_ns"},
+    "LaserScan": {
+        "header", "angle_min", "angle_increment", "range_min", "range_max", "n", "ranges"
+    },
+    "ControllerStatus": {"header", "mode", "target", "state", "reason", "track_id"},
+    "ServiceCounters": {"header", "service", "counters"},
+    "EStop": {"header", "engaged", "reason"},
+    "GroundTruth": {
+        "header", "sim_time_s", "robot", "robot_velocity", "n", "targets_xy", "target_names",
+        "target_ids",
+    },
+    "MetricsSnapshot": {
+        "header", "stamp_ns", "window_s", "fps", "frames", "detections", "detections_per_frame",
+        "dropped_frames", "latency_ms", "counters", "class_counts",
+    },
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("msg", MESSAGES, ids=lambda m: type(m).__name__)
+def test_wire_names_are_unchanged(msg: Message) -> None:
+    env = msgpack.unpackb(msg.encode())
+    assert set(env) == {"v", "t", "d"} and env["t"] == msg.TAG and env["v"] == msg.VERSION == 1
+    assert set(env["d"]) == WIRE_KEYS[msg.TAG]
+    assert set(env["d"]["header"]) == HEADER_KEYS
+
+
+def test_a_twist_as_written_before_the_field_walk_decodes() -> None:
+    # Byte for byte what the hand-written codec of schema version 1 put on the bus.
+    payload = msgpack.packb(
+        {
+            "v": 1,
+            "t": "Twist",
+            "d": {
+                "header": {"stamp_ns": 5, "frame_id": "base_link", "seq": 2, "source": "c"},
+                "linear": [0.3, 0, 0.0],
+                "angular": [0.0, 0.0, -0.5],
+                "input_stamp_ns": 4,
+            },
+        }
+    )
+    twist = Twist.decode(payload)
+    assert (twist.linear, twist.angular, twist.input_stamp_ns) == ((0.3, 0, 0), (0, 0, -0.5), 4)
+    assert (twist.header.mono_ns, twist.header.boot_id) == (0, "")
+
+
+@pytest.mark.parametrize("msg", MESSAGES, ids=lambda m: type(m).__name__)
+def test_a_newer_version_is_refused(msg: Message) -> None:
+    payload = _rewrite(msg.encode(), v=msg.VERSION + 1)
+    with pytest.raises(DecodeError, match=f"{msg.TAG}: schema version 2 is newer"):
+        type(msg).decode(payload)
+
+
+WRONG_VALUES: list[object] = [
+    None, True, -1, 2**64 - 1, -(2**63), 1.5, float("nan"), float("inf"), "x", b"\x00" * 3,
+    b"\x00" * 4096, [], [1, "a"], [float("nan")] * 3, {}, {"a": None}, {1: 2},
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("msg", MESSAGES, ids=lambda m: type(m).__name__)
+def test_any_wrong_value_anywhere_raises_only_decode_error(msg: Message) -> None:
+    good = msg.encode()
+    body = msgpack.unpackb(good)["d"]
+    paths = [(k,) for k in body] + [("header", k) for k in body["header"]]
+    for path in paths:
+        for value in WRONG_VALUES:
+            env = msgpack.unpackb(good, strict_map_key=False)
+            target = env["d"]
+            for key in path[:-1]:
+                target = target[key]
+            target[path[-1]] = value
+            with contextlib.suppress(DecodeError):  # anything else fails the test
+                type(msg).decode(msgpack.packb(env))
+
+
+def test_truncated_absurd_and_non_finite_arrays() -> None:
+    good = MESSAGES[3].encode()  # 3 detections
+    body = msgpack.unpackb(good)["d"]
+    nan_boxes = np.frombuffer(body["xyxy"], "<f4").copy()
+    nan_boxes[5] = np.nan
+    for change, match in (
+        ({"xyxy": body["xyxy"][:-16]}, "do not fit shape"),
+        ({"class_ids": body["class_ids"] + b"\x00" * 4}, "do not fit shape"),
+        ({"n": 10**9}, "outside"),
+        ({"n": -1}, "outside"),
+        ({"xyxy": nan_boxes.tobytes()}, "finite"),
+        ({"scores": np.full(3, np.inf, "<f4").tobytes()}, "finite"),
+        ({"track_ids": b"\x00" * 8}, "track_ids"),
+    ):
+        with pytest.raises(DecodeError, match=match):
+            Detections.decode(_rewrite(good, **change))
+    scan = MESSAGES[6].encode()
+    for change in ({"n": 0}, {"n": MAX_SCAN_RAYS + 1}, {"ranges": b""}, {"n": 4}):
+        with pytest.raises(DecodeError):
+            LaserScan.decode(_rewrite(scan, **change))
+    with pytest.raises(DecodeError, match="targets_xy"):
+        GroundTruth.decode(_rewrite(MESSAGES[10].encode(), targets_xy=b"\x00" * 16))
+
+
+@pytest.mark.parametrize("msg", MESSAGES, ids=lambda m: type(m).__name__)
+def test_wire_extras_never_shadow_a_field(msg: Message) -> None:
+    names = {f.name for f in dataclasses.fields(msg)}  # type: ignore[arg-type]
+    assert not names & set(msg._wire_extras())
