@@ -12,6 +12,7 @@ state only the fields it changes (``deploy/secure.toml`` does).
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 import os
 import tomllib
@@ -44,6 +45,13 @@ def _coerce(where: str, value: Any, hint: Any) -> Any:
         return tuple(_coerce(where, v, a) for v, a in zip(value, args, strict=True))
     if origin in (types.UnionType, typing.Union):
         raise ConfigError(f"{where}: unions are not supported in settings")
+    if isinstance(hint, type) and issubclass(hint, enum.Enum):
+        choices = [m.value for m in hint]
+        if value not in choices:
+            raise ConfigError(
+                f"{where} must be one of {', '.join(map(str, choices))}, got {value!r}"
+            )
+        return hint(value)
     if hint is float and isinstance(value, int | float) and not isinstance(value, bool):
         return float(value)
     if hint in (int, str, bool) and type(value) is hint:

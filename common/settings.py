@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
+from common.contracts import BackendName, ControllerMode, DistanceSource
 from common.errors import ConfigError
 from common.messages import MAX_DETECTIONS, MAX_IMAGE_SIDE
 from common.security import AUTH_MODES
@@ -27,6 +29,16 @@ def _positive(name: str, value: float) -> None:
 def _non_negative(name: str, value: float) -> None:
     if not (value >= 0 and math.isfinite(value)):
         raise ConfigError(f"{name} must be a finite number >= 0, got {value}")
+
+
+def _enum(settings: object, name: str, kind: type[StrEnum], where: str) -> None:
+    """Turn a plain string field into its enum member (settings built in code pass strings)."""
+    value = getattr(settings, name)
+    try:
+        object.__setattr__(settings, name, kind(value))
+    except ValueError:
+        choices = ", ".join(m.value for m in kind)
+        raise ConfigError(f"{where} must be one of {choices}, got {value!r}") from None
 
 
 def _fraction(name: str, value: float) -> None:
@@ -155,7 +167,7 @@ class DetectorSettings:
     """
 
     model: str = ""
-    backend: str = "onnx"
+    backend: BackendName = BackendName.ONNX
     precision: str = ""
     batch_profile: tuple[int, int, int] = (1, 1, 1)
     conf: float = 0.25
@@ -167,13 +179,7 @@ class DetectorSettings:
 
     def __post_init__(self) -> None:
         _positive("detector.max_frame_age_s", self.max_frame_age_s)
-        # Mirrors services.detector.backends.BACKEND_CHOICES: common must not import services,
-        # and a unit test keeps the two equal.
-        backends = ("onnx", "tensorrt", "cuda", "auto")
-        if self.backend not in backends:
-            raise ConfigError(
-                f"detector.backend must be one of {', '.join(backends)}, got {self.backend!r}"
-            )
+        _enum(self, "backend", BackendName, "detector.backend")
         if self.precision not in ("", "fp32", "fp16", "int8"):
             raise ConfigError(
                 f"detector.precision must be one of fp32, fp16, int8 (or empty for the "
@@ -243,7 +249,7 @@ class ControllerSettings:
     captured more than ``estop_release_max_age_s`` ago is refused.
     """
 
-    mode: str = "track"
+    mode: ControllerMode = ControllerMode.TRACK
     target_classes: tuple[str, ...] = ("person",)
     min_score: float = 0.3
     control_rate_hz: float = 20.0
@@ -259,7 +265,7 @@ class ControllerSettings:
     max_linear_accel: float = 1.0
     forward_speed: float = 0.3
     center_tolerance: float = 0.1
-    distance_source: str = "box"
+    distance_source: DistanceSource = DistanceSource.BOX
     follow_distance_m: float = 1.0
     distance_gain: float = 0.6
     target_height_m: float = 1.7
@@ -271,12 +277,8 @@ class ControllerSettings:
     counters_period_s: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.mode not in ("track", "follow"):
-            raise ConfigError(f"controller.mode must be 'track' or 'follow', got {self.mode!r}")
-        if self.distance_source not in ("box", "laser"):
-            raise ConfigError(
-                f"controller.distance_source must be 'box' or 'laser', got {self.distance_source!r}"
-            )
+        _enum(self, "mode", ControllerMode, "controller.mode")
+        _enum(self, "distance_source", DistanceSource, "controller.distance_source")
         if not self.target_classes:
             raise ConfigError("controller.target_classes needs at least one class name")
         for name in (

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from common.contracts import ControllerMode, ControllerState, DistanceSource
 from common.messages import Detections, LaserScan
 from common.settings import ControllerSettings
 from services.controller.limits import Limits, limit
@@ -27,7 +28,7 @@ class Command:
 
     linear_x: float
     angular_z: float
-    state: str
+    state: ControllerState
     reason: str
     target: str = ""
     track_id: int = -1
@@ -54,7 +55,7 @@ class Inputs:
     capture_age_s: float = 0.0
 
 
-def stop(state: str, reason: str, input_stamp_ns: int = 0) -> Command:
+def stop(state: ControllerState, reason: str, input_stamp_ns: int = 0) -> Command:
     return Command(0.0, 0.0, state, reason, input_stamp_ns=input_stamp_ns)
 
 
@@ -167,11 +168,13 @@ class Controller:
         dt = 1.0 / self.s.control_rate_hz if self.last_step is None else now - self.last_step
         self.last_step = now
         if inp.estop:
-            return self._halt(stop("estop", "emergency stop latched"))
+            return self._halt(stop(ControllerState.ESTOP, "emergency stop latched"))
         if inp.dets is None:
-            return self._halt(stop("stale", "no detections received yet"))
+            return self._halt(stop(ControllerState.STALE, "no detections received yet"))
         if inp.dets_age_s > self.s.detection_timeout_s:
-            return self._halt(stop("stale", f"detections are {inp.dets_age_s:.2f} s old"))
+            return self._halt(
+                stop(ControllerState.STALE, f"detections are {inp.dets_age_s:.2f} s old")
+            )
         scan = inp.scan if inp.scan_age_s <= self.s.scan_timeout_s else None
         # Room the robot needs to stop from its current speed: braking at the acceleration
         # limit, plus the distance covered while the scan ages and the next tick comes.
@@ -181,11 +184,13 @@ class Controller:
         # The compensation trusts the capture stamp no further than the dead-man does.
         captured = now - min(inp.capture_age_s, self.s.detection_timeout_s)
         aim = self._aim(inp.dets, scan, now, dt, captured)
-        if aim.state == "searching":
+        if aim.state == ControllerState.SEARCHING:
             return self._halt(aim)  # the target is gone: stop now, not at the braking rate
         if not (math.isfinite(aim.linear_x) and math.isfinite(aim.angular_z)):
             # Unreachable with validated inputs; if it ever happens, stop and start afresh.
-            return self._halt(stop("fault", "non-finite command computed", aim.input_stamp_ns))
+            return self._halt(
+                stop(ControllerState.FAULT, "non-finite command computed", aim.input_stamp_ns)
+            )
         v, w = limit(self.previous, (aim.linear_x, aim.angular_z), dt, self.limits)
         self.previous = (v, w)
         self.turns.append((now, w))
@@ -220,7 +225,7 @@ class Controller:
         """The target: the most central (track) or the locked / largest (follow) candidate."""
         if idx.size == 0:
             return None
-        if self.s.mode == "track":
+        if self.s.mode is ControllerMode.TRACK:
             offsets = np.abs(dets.centers[idx, 0] - dets.image_width / 2.0)
             return int(idx[int(np.argmin(offsets))])
         if dets.track_ids is not None and self.locked_id >= 0:
@@ -234,7 +239,7 @@ class Controller:
         self, dets: Detections, scan: LaserScan | None, now: float, dt: float, captured: float
     ) -> Command:
         s = self.s
-        classes = s.target_classes if s.mode == "track" else s.target_classes[:1]
+        classes = s.target_classes if s.mode is ControllerMode.TRACK else s.target_classes[:1]
         stamp = dets.header.stamp_ns
         best = self._pick(dets, candidates(dets, classes, s.min_score))
         if best is None:
@@ -253,7 +258,7 @@ class Controller:
                 return Command(
                     linear,
                     angular,
-                    "holding",
+                    ControllerState.HOLDING,
                     f"target unseen for {now - self.last_seen:.1f} s",
                     held.target,
                     held.track_id,
@@ -261,9 +266,9 @@ class Controller:
                 )
             self.locked_id, self.last_aim = -1, None
             self.pid.reset()
-            return stop("searching", f"no {'/'.join(classes)} in view", stamp)
+            return stop(ControllerState.SEARCHING, f"no {'/'.join(classes)} in view", stamp)
         track_id = -1 if dets.track_ids is None else int(dets.track_ids[best])
-        if s.mode == "follow" and self.locked_id < 0 and track_id >= 0:
+        if s.mode is ControllerMode.FOLLOW and self.locked_id < 0 and track_id >= 0:
             self.locked_id = track_id
         self.last_seen = now
         measured = bearing(dets, best, self.hfov_deg)
@@ -274,11 +279,11 @@ class Controller:
             s.center_tolerance * dets.image_width
         )
         name = dets.class_names[best]
-        if s.mode == "track":
+        if s.mode is ControllerMode.TRACK:
             aim = Command(
                 s.forward_speed if centred else 0.0,
                 angular,
-                "tracking" if centred else "turning",
+                ControllerState.TRACKING if centred else ControllerState.TURNING,
                 f"bearing {math.degrees(err):+.1f} deg",
                 name,
                 track_id,
@@ -303,36 +308,44 @@ class Controller:
         s = self.s
         stamp = dets.header.stamp_ns
 
-        def turn_only(state: str, reason: str) -> Command:
+        def turn_only(state: ControllerState, reason: str) -> Command:
             return Command(0.0, angular, state, reason, name, track_id, stamp)
 
         distance = math.inf
-        if s.distance_source == "laser":
+        if s.distance_source is DistanceSource.LASER:
             if scan is None:
-                return turn_only("blocked", "no recent laser scan for the distance")
+                return turn_only(ControllerState.BLOCKED, "no recent laser scan for the distance")
             # The laser rays across the middle 60% of the box's width, in the bearing ``err``
             # (already net of our turning since the frame was captured).
             f = focal_px(dets.image_width, self.hfov_deg)
             half_width = math.atan(float(dets.sizes[i, 0]) / 2 / f)
             distance = sector_range(scan, err, math.degrees(1.2 * half_width))
             if distance == 0.0:
-                return turn_only("blocked", "the laser sees nothing valid towards the target")
+                return turn_only(
+                    ControllerState.BLOCKED, "the laser sees nothing valid towards the target"
+                )
         if not math.isfinite(distance):  # by box height, or the laser saw nothing in range
             if box_clipped(dets, i):
                 # A box cut by the image edge is shorter than the target: its distance would
                 # be overestimated. Close enough to fill the frame is close enough.
-                return turn_only("arrived", "target fills the image height")
+                return turn_only(ControllerState.ARRIVED, "target fills the image height")
             distance = box_distance(dets, i, self.hfov_deg, s.target_height_m)
         if not centred:
-            return turn_only("turning", f"bearing {math.degrees(err):+.1f} deg")
+            return turn_only(ControllerState.TURNING, f"bearing {math.degrees(err):+.1f} deg")
         if distance <= s.follow_distance_m:
-            return turn_only("arrived", f"target at {distance:.2f} m")
+            return turn_only(ControllerState.ARRIVED, f"target at {distance:.2f} m")
         if scan is None:
-            return turn_only("blocked", "no recent laser scan")
+            return turn_only(ControllerState.BLOCKED, "no recent laser scan")
         clearance = self._clearance(scan)
         if clearance <= s.safety_distance_m + self.stopping_m:
-            return turn_only("blocked", f"obstacle at {clearance:.2f} m")
+            return turn_only(ControllerState.BLOCKED, f"obstacle at {clearance:.2f} m")
         speed = min(s.max_linear, s.distance_gain * (distance - s.follow_distance_m))
         return Command(
-            speed, angular, "following", f"target at {distance:.2f} m", name, track_id, stamp
+            speed,
+            angular,
+            ControllerState.FOLLOWING,
+            f"target at {distance:.2f} m",
+            name,
+            track_id,
+            stamp,
         )

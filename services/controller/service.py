@@ -11,6 +11,7 @@ import zenoh
 
 from common.bus import Publisher, QoS, open_session
 from common.clock import BOOT_ID, Stamp, now
+from common.contracts import ControllerMode, ControllerState
 from common.errors import DecodeError, StackError
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.keys import Keys
@@ -114,7 +115,7 @@ def run(config: Config, stop: threading.Event) -> int:
         ).start()
         node.ready()
         period = 1.0 / s.control_rate_hz
-        last_state = ""
+        last_state: ControllerState | None = None
         try:
             while not stop.is_set():
                 dets.arrived.clear()  # before reading, so a message arriving now wakes us
@@ -138,7 +139,7 @@ def run(config: Config, stop: threading.Event) -> int:
                 node.publish_counters()
                 dets.arrived.wait(max(0.0, period - (time.monotonic() - tick)))
             # Leave the robot still: the last word on cmd_vel is always a stop.
-            stopped = Command(0.0, 0.0, "stopped", "shutdown")
+            stopped = Command(0.0, 0.0, ControllerState.STOPPED, "shutdown")
             _publish(node, cmd_pub, status_pub, stopped, s.mode, now())
         finally:
             for sub in subs:
@@ -206,7 +207,12 @@ def _on_estop(
 
 
 def _publish(
-    node: Node, cmd_pub: Publisher, status_pub: Publisher, cmd: Command, mode: str, at: Stamp
+    node: Node,
+    cmd_pub: Publisher,
+    status_pub: Publisher,
+    cmd: Command,
+    mode: ControllerMode,
+    at: Stamp,
 ) -> None:
     twist = Twist(
         header=node.header(at, frame_id="base_link"),
@@ -240,7 +246,7 @@ def send_estop(config: Config, engaged: bool, reason: str) -> int:
             state = ControllerStatus.decode(sample.payload.to_bytes()).state
         except DecodeError:
             return
-        if (state == "estop") == engaged:
+        if (state == ControllerState.ESTOP) == engaged:
             seen.set()
 
     sub = session.declare_subscriber(keys.controller_status(), on_status)

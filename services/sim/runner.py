@@ -24,6 +24,7 @@ import zenoh
 
 from common.bus import open_session
 from common.config_file import to_toml
+from common.contracts import ControllerMode
 from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, GroundTruth, Twist
@@ -50,7 +51,10 @@ def scenario_config(base: Config, scenario: Scenario) -> Config:
         listen=("tcp/127.0.0.1:0",),
     )
     controller = dataclasses.replace(
-        base.controller, mode="follow", target_classes=("person",), **scenario.controller
+        base.controller,
+        mode=ControllerMode.FOLLOW,
+        target_classes=("person",),
+        **scenario.controller,
     )
     return dataclasses.replace(
         base,

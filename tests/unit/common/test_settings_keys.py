@@ -39,7 +39,7 @@ def test_env_override_is_typed(tmp_path: Path) -> None:
         ("[detectr]\n", "unknown table"),
         ("[detector]\nconf = 1.5\n", "within 0..1"),
         ("[detector]\nconf = 'high'\n", "must be float"),
-        ("[controller]\nmode = 'dance'\n", "track' or 'follow"),
+        ("[controller]\nmode = 'dance'\n", "must be one of track, follow, got 'dance'"),
         ("[camera]\nresize = [640]\n", "2 items"),
         ("not toml [", "not valid TOML"),
     ],
