@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.errors import ConfigError, ImageError
-from services.detector.images import list_images, load_image
+from common.images import list_images, load_image, load_sample
 from services.detector.pipeline import Detector
 from services.detector.types import DEFAULT_CONF, DetectionResult, DetectorParams
 
@@ -80,13 +80,8 @@ def machine() -> dict[str, Any]:
 
 
 def _sample(name: str) -> npt.NDArray[np.uint8]:
-    """A scikit-image photo as BGR (grey ones stay 2-D: the detector expands them)."""
-    from skimage import data  # slow import, only for the default images
-
-    # ``motorcycle`` is the left view of the stereo pair; the others are plain loaders.
-    loader = (lambda: data.stereo_motorcycle()[0]) if name == "motorcycle" else getattr(data, name)
-    image = np.asarray(loader(), dtype=np.uint8)
-    return np.ascontiguousarray(image[:, :, ::-1] if image.ndim == 3 else image)  # RGB -> BGR
+    """A scikit-image photo as BGR, by its name in scikit-image (``camera``, not ``cameraman``)."""
+    return load_sample("cameraman" if name == "camera" else name)
 
 
 def agreement_images(folder: str | None) -> list[tuple[str, npt.NDArray[np.uint8]]]:

@@ -23,10 +23,10 @@ import numpy as np
 import numpy.typing as npt
 
 from common.errors import ConfigError, ImageError, StackError
+from common.images import list_images, load_image
 from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code
 from services.detector.annotate import annotate
 from services.detector.backends import BACKEND_CHOICES
-from services.detector.images import list_images, load_image
 from services.detector.pipeline import Detector
 from services.detector.types import (
     DEFAULT_CONF,

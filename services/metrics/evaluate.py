@@ -43,7 +43,7 @@ def detect_dataset(
 
     Raises DatasetError when an image's real size differs from the size its labels assume.
     """
-    from services.detector.images import load_image
+    from common.images import load_image
 
     out = []
     for n, item in enumerate(dataset.images, 1):

@@ -22,7 +22,7 @@ from typing import Any
 
 from PIL import Image, UnidentifiedImageError
 
-from services.detector.images import IMAGE_EXTENSIONS
+from common.images import IMAGE_EXTENSIONS
 from services.metrics.datasets import DatasetError, LabelledImage, LabelledSet, check_box
 
 NAME_FILES = ("data.yaml", "classes.txt", "names.txt")
