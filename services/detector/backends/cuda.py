@@ -32,7 +32,7 @@ except ImportError as exc:  # open_backend turns this into BackendUnavailable
     raise ImportError("PyTorch is not installed") from exc
 
 from common.errors import BackendUnavailable, ConfigError, ModelError, one_line
-from services.detector.backends import Backend, Dim
+from services.detector.backends.base import Backend, Dim
 from services.detector.backends.onnx_torch import (
     OnnxModule,
     build_module,

@@ -17,7 +17,7 @@ import onnxruntime as ort
 from onnxruntime.capi import onnxruntime_pybind11_state as ort_state
 
 from common.errors import ConfigError, ModelError, one_line
-from services.detector.backends import Backend, Dim
+from services.detector.backends.base import Backend, Dim
 
 _PRECISIONS = {"tensor(float)": "fp32", "tensor(float16)": "fp16"}
 _ORT_ERRORS: tuple[type[Exception], ...] = (

@@ -36,8 +36,9 @@ except ImportError as exc:
         "TensorRT is not installed (pip install tensorrt-cu12 on a machine with an NVIDIA driver)"
     ) from exc
 
-from services.detector.backends import Backend, Dim, engine_cache
 from services.detector.backends import calibration as calib_data
+from services.detector.backends import engine_cache
+from services.detector.backends.base import Backend, Dim
 from services.detector.backends.engine_cache import BuildOptions
 from services.detector.backends.profiles import ProfileShapes, calibration_shape, model_profile
 from services.detector.backends.select import cuda_device_count, import_cudart
