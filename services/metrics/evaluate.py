@@ -22,7 +22,8 @@ from services.metrics.accuracy import (
     match_categories,
     to_results,
 )
-from services.metrics.datasets import DatasetError, LabelledSet, load_dataset
+from services.metrics.datasets import load_dataset
+from services.metrics.labelled import DatasetError, LabelledSet
 
 #: Confidence floor for the detections fed to mAP (the usual value for COCO evaluation).
 DEFAULT_EVAL_CONF = 0.001

@@ -1,4 +1,4 @@
-"""The YOLO dataset layout, read into a :class:`~services.metrics.datasets.LabelledSet`.
+"""The YOLO dataset layout, read into a :class:`~services.metrics.labelled.LabelledSet`.
 
     DATASET/
       data.yaml | classes.txt | names.txt     class names (the first one found, in that order)
@@ -23,7 +23,7 @@ from typing import Any
 from PIL import Image, UnidentifiedImageError
 
 from common.images import IMAGE_EXTENSIONS
-from services.metrics.datasets import DatasetError, LabelledImage, LabelledSet, check_box
+from services.metrics.labelled import DatasetError, LabelledImage, LabelledSet, check_box
 
 NAME_FILES = ("data.yaml", "classes.txt", "names.txt")
 _EXIF_ORIENTATION = 0x0112
