@@ -1,8 +1,8 @@
 """PyTorch on an NVIDIA GPU: the ONNX model run by our own interpreter, in FP16, as a CUDA graph.
 
 This is the GPU path for machines with a CUDA build of PyTorch but no TensorRT. The ONNX file is
-turned into a ``torch.nn.Module`` by :mod:`onnx_torch` (no converter package), for one static
-input shape, and run like this on every ``infer``:
+turned into a ``torch.nn.Module`` by our interpreter, :mod:`services.detector.onnx_torch` (no
+converter package), for one static input shape, and run like this on every ``infer``:
 
     host batch (float32) -> pinned host buffer -> static GPU input (async copy)
     -> cast to fp16 -> the module -> outputs cast to float32 -> host
@@ -33,13 +33,13 @@ except ImportError as exc:  # open_backend turns this into BackendUnavailable
 
 from common.errors import BackendUnavailable, ConfigError, ModelError, one_line
 from services.detector.backends.base import Backend, Dim
-from services.detector.backends.onnx_torch import (
+from services.detector.model_info import input_size
+from services.detector.onnx_torch.interpreter import (
     OnnxModule,
     build_module,
     declared_shape,
     read_model,
 )
-from services.detector.model_info import input_size
 
 log = logging.getLogger(__name__)
 

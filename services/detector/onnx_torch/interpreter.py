@@ -33,7 +33,8 @@ from onnx import helper, numpy_helper
 from torch import Tensor, nn
 
 from common.errors import ModelError, one_line
-from services.detector.backends.onnx_torch_ops import (
+from services.detector.onnx_torch.spatial_ops import SPATIAL_OPS
+from services.detector.onnx_torch.tensor_ops import (
     SHAPE_ONLY,
     TENSOR_OPS,
     Attrs,
@@ -42,7 +43,6 @@ from services.detector.backends.onnx_torch_ops import (
     RunContext,
     onnx_dtype,
 )
-from services.detector.backends.onnx_torch_spatial import SPATIAL_OPS
 
 #: ONNX op type -> its torch function; an op not here is a ModelError naming it.
 OPS: dict[str, OpDef] = {**TENSOR_OPS, **SPATIAL_OPS}
