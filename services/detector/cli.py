@@ -27,6 +27,7 @@ from common.images import list_images, load_image
 from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code
 from services.detector.annotate import annotate
 from services.detector.backends import BACKEND_CHOICES
+from services.detector.model_files import ensure_default_model
 from services.detector.pipeline import Detector
 from services.detector.types import (
     DEFAULT_CONF,
@@ -52,8 +53,6 @@ def _resolve_model(model: str | None) -> Path:
     """The ``--model`` path, or the default model, fetched first if it is not there yet."""
     if model is not None:
         return Path(model)
-    from services.detector.model_store import ensure_default_model  # fetch code: only if needed
-
     return ensure_default_model(progress=_progress)
 
 
@@ -251,8 +250,6 @@ def _add_export(subparsers: Any) -> None:
 
 def run_fetch_model(args: argparse.Namespace) -> int:
     """Fetch and convert the default model if needed, and print its path."""
-    from services.detector.model_store import ensure_default_model
-
     models_dir = Path(args.models_dir) if args.models_dir else None
     print(ensure_default_model(models_dir, progress=_progress))
     return EXIT_OK

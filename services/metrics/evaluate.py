@@ -115,18 +115,12 @@ def _check_fraction(name: str, value: float) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """The ``evaluate`` command: load, detect, score, print."""
-    from services.detector.pipeline import Detector
-    from services.detector.types import DetectorParams
+    from services.detector import Detector, DetectorParams, ensure_default_model
 
     for name in ("conf", "iou", "conf_threshold"):
         _check_fraction(f"--{name.replace('_', '-')}", getattr(args, name))
     dataset = load_dataset(args.dataset, args.images)
-    if args.model:
-        model = Path(args.model)
-    else:
-        from services.detector.model_store import ensure_default_model
-
-        model = ensure_default_model(progress=_stderr)
+    model = Path(args.model) if args.model else ensure_default_model(progress=_stderr)
     params = DetectorParams(conf=args.conf, iou=args.iou, max_det=EVAL_MAX_DET)
     with Detector.open(model, backend=args.backend, params=params) as detector:
         names = detector.names
@@ -145,8 +139,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from services.detector.types import DEFAULT_IOU
+    from services.detector import DetectorParams
 
+    default_iou = DetectorParams().iou
     parser.add_argument("--dataset", required=True, help="COCO JSON file or YOLO folder")
     parser.add_argument("--images", help="COCO: folder the file_names are relative to")
     parser.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model)")
@@ -158,7 +153,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"score floor of the detections fed to mAP (default {DEFAULT_EVAL_CONF})",
     )
     parser.add_argument(
-        "--iou", type=float, default=DEFAULT_IOU, help=f"NMS IoU (default {DEFAULT_IOU})"
+        "--iou", type=float, default=default_iou, help=f"NMS IoU (default {default_iou})"
     )
     parser.add_argument(
         "--conf-threshold",

@@ -82,7 +82,7 @@ class BuildOptions:
         """The engine cache folder: ``cache_dir``, or ``engines/`` beside the models."""
         if self.cache_dir is not None:
             return self.cache_dir
-        from services.detector.model_store import models_dir  # not needed when a dir is given
+        from services.detector.model_files import models_dir  # not needed when a dir is given
 
         return models_dir() / "engines"
 

@@ -23,8 +23,18 @@ import onnx
 from onnx import TensorProto, helper
 
 from common.errors import ModelError
-from services.detector.tfjs_graph import TfGraph, TfNode, load_tfjs_graph, strided_slice_plan
-from services.detector.tfjs_onnx_builder import NHWC_TO_NCHW, GraphBuilder, Layout, pick_layout
+from services.detector.acquire.tfjs_graph import (
+    TfGraph,
+    TfNode,
+    load_tfjs_graph,
+    strided_slice_plan,
+)
+from services.detector.acquire.tfjs_onnx_builder import (
+    NHWC_TO_NCHW,
+    GraphBuilder,
+    Layout,
+    pick_layout,
+)
 
 OPSET = 17  # Resize-13 semantics, and parsed by TensorRT 8.6+/10
 IR_VERSION = 8  # the IR that opset 17 shipped with; older runtimes reject newer IRs
@@ -106,7 +116,7 @@ def build_onnx_model(
     model = helper.make_model(
         onnx_graph,
         opset_imports=[helper.make_opsetid("", OPSET)],
-        producer_name="services.detector.tfjs_to_onnx",
+        producer_name="services.detector.acquire.tfjs_to_onnx",
     )
     model.ir_version = IR_VERSION
     props = {"names": str(dict(enumerate(names))), **metadata}

