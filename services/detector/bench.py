@@ -29,6 +29,7 @@ import numpy.typing as npt
 
 from common.errors import ConfigError, ImageError
 from common.images import list_images, load_image, load_sample
+from common.machine import cpu_model
 from services.detector.pipeline import Detector
 from services.detector.types import DEFAULT_CONF, DetectionResult, DetectorParams
 
@@ -58,21 +59,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
-def _cpu_model() -> str:
-    try:
-        cpuinfo = Path("/proc/cpuinfo").read_text()
-    except OSError:  # not Linux: platform.processor() is the best we have
-        cpuinfo = ""
-    for line in cpuinfo.splitlines():
-        if line.startswith("model name"):
-            return line.split(":", 1)[1].strip()
-    return platform.processor() or "unknown"
-
-
 def machine() -> dict[str, Any]:
     """What the numbers were measured on."""
     return {
-        "cpu_model": _cpu_model(),
+        "cpu_model": cpu_model(),
         "cpu_count": os.cpu_count(),
         "platform": platform.platform(),
         "python": platform.python_version(),

@@ -17,7 +17,13 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from services.metrics.labelled import DatasetError, LabelledImage, LabelledSet, check_box
+from services.metrics.labelled import (
+    DatasetError,
+    LabelledImage,
+    LabelledSet,
+    check_box,
+    read_text,
+)
 from services.metrics.yolo_dataset import load_yolo
 
 
@@ -57,10 +63,7 @@ def _objects(path: Path, data: Mapping[str, Any], key: str) -> list[Mapping[str,
 
 
 def _read_json(path: Path) -> Any:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"{path}: cannot read ({exc})") from exc
+    text = read_text(path)
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:

@@ -74,3 +74,11 @@ def check_box(where: str, box: tuple[float, float, float, float], width: int, he
             f"{where}: box [x={x:g}, y={y:g}, w={w:g}, h={h:g}] lies outside its "
             f"{width}x{height} image"
         )
+
+
+def read_text(path: Path) -> str:
+    """A dataset file's text (UTF-8); DatasetError naming it when it cannot be read."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"{path}: cannot read ({exc})") from exc

@@ -25,12 +25,12 @@ from common.bus import open_session
 from common.config_file import load_config
 from common.errors import ConfigError, DecodeError
 from common.keys import Keys
+from common.machine import machine_info
 from common.messages import Detections, Header, ServiceCounters, Twist
 from common.queries import query_metrics
 from common.settings import REPO_ROOT, Config
 from deploy.launch import start_supervisor, stop_supervisor, wait_ready
 from services.metrics.aggregate import Aggregator
-from services.metrics.machine import machine_info
 
 SESSION_VERSION = 1
 #: The recorder's window outlasts the session by this much, so no sample ever leaves it.
