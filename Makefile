@@ -26,7 +26,7 @@ setup: $(STAMP) model
 
 # The default model, fetched only when the config uses it.
 model: $(STAMP)
-	$(PY) -m deploy.prepare $(CONFIG_ARG)
+	$(PY) -m services.detector fetch-model --config $(or $(CONFIG),deploy/stack.toml)
 
 run: setup
 	$(PY) -m deploy.supervisor $(CONFIG_ARG) $(ARGS)

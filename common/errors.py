@@ -47,3 +47,17 @@ class ModelFetchError(ModelError):
 
 class BackendUnavailable(StackError):
     """An inference backend whose runtime or device is missing on this machine."""
+
+
+#: The longest message :func:`one_line` keeps (runtimes can print whole graphs in an error).
+ONE_LINE_MAX_CHARS = 200
+
+
+def one_line(exc: BaseException) -> str:
+    """``exc``'s message on one line, at most :data:`ONE_LINE_MAX_CHARS` characters.
+
+    For translating a library's error at the boundary: ``raise ModelError(f"...:
+    {one_line(exc)}") from exc``; the full text stays on the chained exception.
+    """
+    text = " ".join(str(exc).split())
+    return text if len(text) <= ONE_LINE_MAX_CHARS else text[: ONE_LINE_MAX_CHARS - 3] + "..."

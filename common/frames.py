@@ -6,12 +6,10 @@ from typing import cast
 
 import cv2
 import numpy as np
-import numpy.typing as npt
 
 from common.errors import ImageError
+from common.images import Image
 from common.messages import Frame, Header
-
-Image = npt.NDArray[np.uint8]
 
 
 def image_to_frame(image: Image, header: Header, *, jpeg_quality: int = 0) -> Frame:

@@ -33,6 +33,15 @@ def exit_code(error: StackError) -> int:
     return EXIT_FAILED
 
 
+#: Where a long command reports how it is getting on (a model fetch, an evaluation, a report).
+Progress = Callable[[str], None]
+
+
+def print_progress(line: str) -> None:
+    """A progress line on stderr, at once: stdout is kept for a command's result."""
+    print(line, file=sys.stderr, flush=True)
+
+
 def setup_logging(service: str, level: str | None = None) -> logging.Logger:
     """Log to stderr as ``time service level message``; level from STACK_LOG_LEVEL (INFO)."""
     logging.basicConfig(

@@ -33,9 +33,12 @@ from common.lifecycle import (
     stop_event,
 )
 from common.messages import ControllerStatus, GroundTruth, Twist
+from common.queries import query_metrics
 from common.settings import CameraSettings, Config
 from deploy.lock import acquire
 from deploy.processes import ServiceProcess, service_command
+
+METRICS_TIMEOUT_S = 0.5  # the status line must not wait long for a missing metrics service
 
 
 class LiveView:
@@ -86,14 +89,6 @@ class LiveView:
     def is_ready(self, service: str) -> bool:
         with self._lock:
             return service in self.ready
-
-
-def _metrics(session: zenoh.Session, keys: Keys) -> dict[str, Any] | None:
-    for reply in session.get(keys.metrics(), timeout=0.5):
-        if reply.ok is not None:
-            answer: dict[str, Any] = json.loads(reply.ok.payload.to_string())
-            return answer
-    return None
 
 
 def status_line(procs: list[ServiceProcess], view: LiveView, metrics: dict[str, Any] | None) -> str:
@@ -150,7 +145,7 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
                     failed = p  # restarting will not help: stop the stack and say why
             if now >= next_status:
                 next_status = now + s.status_period_s
-                last_metrics = _metrics(session, keys) or last_metrics
+                last_metrics = query_metrics(session, keys, METRICS_TIMEOUT_S) or last_metrics
                 # Status lines go to stderr: stdout carries only the --duration summary.
                 print(status_line(procs, view, last_metrics), file=sys.stderr, flush=True)
     finally:

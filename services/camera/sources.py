@@ -11,15 +11,9 @@ from pathlib import Path
 from typing import Protocol, cast
 
 import cv2
-import numpy as np
 
 from common.errors import ConfigError, ImageError
-from common.frames import Image
-
-IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"})
-
-# scikit-image ships these public-domain photos, so the stack runs with no camera and no download.
-SAMPLES = ("astronaut", "cameraman", "chelsea", "coffee", "rocket", "motorcycle")
+from common.images import IMAGE_EXTENSIONS, Image, list_images, load_image, load_sample
 
 
 class FrameSource(Protocol):
@@ -32,38 +26,6 @@ class FrameSource(Protocol):
         ...
 
     def close(self) -> None: ...
-
-
-def load_sample(name: str) -> Image:
-    """A scikit-image sample photo as BGR uint8.
-
-    ``cameraman`` is ``data.camera()`` (grey); ``motorcycle`` is ``stereo_motorcycle``'s left view.
-    """
-    from skimage import data  # heavy import, only for sample sources
-
-    loaders: dict[str, Callable[[], object]] = {
-        "astronaut": data.astronaut,
-        "cameraman": data.camera,
-        "chelsea": data.chelsea,
-        "coffee": data.coffee,
-        "rocket": data.rocket,
-        "motorcycle": lambda: data.stereo_motorcycle()[0],
-    }
-    if name not in loaders:
-        raise ConfigError(f"unknown sample {name!r}; choose one of {', '.join(SAMPLES)}")
-    rgb = np.asarray(loaders[name](), dtype=np.uint8)
-    if rgb.ndim == 2:
-        return cast(Image, cv2.cvtColor(rgb, cv2.COLOR_GRAY2BGR))
-    return np.ascontiguousarray(rgb[:, :, ::-1])
-
-
-def read_image(path: Path) -> Image:
-    """Read an image file as BGR; ImageError names the file when it is missing or corrupt."""
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        reason = "no such file" if not path.exists() else "not a readable image"
-        raise ImageError(f"{path}: {reason}")
-    return cast(Image, image)
 
 
 class StillSource:
@@ -84,9 +46,9 @@ class FolderSource:
     """The images of a folder in name order, looped. Unreadable files are skipped and counted."""
 
     def __init__(self, folder: Path, on_bad: Callable[[ImageError], None]) -> None:
-        self._paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        self._paths = list_images([folder])
         if not self._paths:
-            raise ConfigError(f"{folder}: no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
+            raise ConfigError(f"{folder}: no images ({', '.join(sorted(IMAGE_EXTENSIONS))})")
         self._i = 0
         self._on_bad = on_bad
         self.description = f"folder {folder} ({len(self._paths)} images)"
@@ -96,7 +58,7 @@ class FolderSource:
             path = self._paths[self._i % len(self._paths)]
             self._i += 1
             try:
-                return read_image(path)
+                return load_image(path)
             except ImageError as exc:
                 self._on_bad(exc)
         raise ImageError(f"{self.description}: no readable image left")
@@ -142,9 +104,9 @@ def open_source(
         raise ConfigError(f"camera source {spec!r}: no such file, folder or 'sample:'/'device:'")
     if path.is_dir():
         return FolderSource(path, on_bad or (lambda exc: None))
-    if path.suffix.lower() in IMAGE_SUFFIXES:
+    if path.suffix.lower() in IMAGE_EXTENSIONS:
         try:
-            return StillSource(read_image(path), f"image {path}")
+            return StillSource(load_image(path), f"image {path}")
         except ImageError as exc:
             raise ConfigError(str(exc)) from exc
     return CaptureSource(str(path), f"video {path}", loop=loop)

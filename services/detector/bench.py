@@ -28,7 +28,8 @@ import numpy as np
 import numpy.typing as npt
 
 from common.errors import ConfigError, ImageError
-from services.detector.images import list_images, load_image
+from common.images import list_images, load_image, load_sample
+from common.machine import cpu_model
 from services.detector.pipeline import Detector
 from services.detector.types import DEFAULT_CONF, DetectionResult, DetectorParams
 
@@ -58,21 +59,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
-def _cpu_model() -> str:
-    try:
-        cpuinfo = Path("/proc/cpuinfo").read_text()
-    except OSError:  # not Linux: platform.processor() is the best we have
-        cpuinfo = ""
-    for line in cpuinfo.splitlines():
-        if line.startswith("model name"):
-            return line.split(":", 1)[1].strip()
-    return platform.processor() or "unknown"
-
-
 def machine() -> dict[str, Any]:
     """What the numbers were measured on."""
     return {
-        "cpu_model": _cpu_model(),
+        "cpu_model": cpu_model(),
         "cpu_count": os.cpu_count(),
         "platform": platform.platform(),
         "python": platform.python_version(),
@@ -80,13 +70,8 @@ def machine() -> dict[str, Any]:
 
 
 def _sample(name: str) -> npt.NDArray[np.uint8]:
-    """A scikit-image photo as BGR (grey ones stay 2-D: the detector expands them)."""
-    from skimage import data  # slow import, only for the default images
-
-    # ``motorcycle`` is the left view of the stereo pair; the others are plain loaders.
-    loader = (lambda: data.stereo_motorcycle()[0]) if name == "motorcycle" else getattr(data, name)
-    image = np.asarray(loader(), dtype=np.uint8)
-    return np.ascontiguousarray(image[:, :, ::-1] if image.ndim == 3 else image)  # RGB -> BGR
+    """A scikit-image photo as BGR, by its name in scikit-image (``camera``, not ``cameraman``)."""
+    return load_sample("cameraman" if name == "camera" else name)
 
 
 def agreement_images(folder: str | None) -> list[tuple[str, npt.NDArray[np.uint8]]]:

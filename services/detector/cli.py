@@ -23,10 +23,11 @@ import numpy as np
 import numpy.typing as npt
 
 from common.errors import ConfigError, ImageError, StackError
-from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code
+from common.images import list_images, load_image
+from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code, print_progress
 from services.detector.annotate import annotate
 from services.detector.backends import BACKEND_CHOICES
-from services.detector.images import list_images, load_image
+from services.detector.model_files import ensure_default_model
 from services.detector.pipeline import Detector
 from services.detector.types import (
     DEFAULT_CONF,
@@ -44,17 +45,11 @@ def _error(message: str) -> None:
     print(f"error: {message}", file=sys.stderr)
 
 
-def _progress(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
-
-
 def _resolve_model(model: str | None) -> Path:
     """The ``--model`` path, or the default model, fetched first if it is not there yet."""
     if model is not None:
         return Path(model)
-    from services.detector.model_store import ensure_default_model  # fetch code: only if needed
-
-    return ensure_default_model(progress=_progress)
+    return ensure_default_model(progress=print_progress)
 
 
 def _parse_classes(raw: str | None) -> tuple[str, ...] | None:
@@ -223,7 +218,7 @@ def run_export(args: argparse.Namespace) -> int:
     model = _resolve_model(args.model)
     path = module.export_engine(
         model,
-        _progress,
+        print_progress,
         precision=args.precision,
         batch_profile=(1, args.batch, args.batch),
         calib_dir=Path(args.calib) if args.calib else None,
@@ -250,17 +245,29 @@ def _add_export(subparsers: Any) -> None:
 
 
 def run_fetch_model(args: argparse.Namespace) -> int:
-    """Fetch and convert the default model if needed, and print its path."""
-    from services.detector.model_store import ensure_default_model
+    """Fetch and convert the default model if needed, and print its path. With ``--config``,
+    only when that stack runs a detector on the default model (what ``make run`` asks)."""
+    if args.config:
+        from common.config_file import load_config
 
+        config = load_config(args.config)
+        if "detector" not in config.supervisor.services:
+            print_progress("fetch-model: the stack runs no detector: nothing to fetch")
+            return EXIT_OK
+        if config.detector.model:
+            print_progress(
+                f"fetch-model: detector.model is {config.detector.model}: nothing to fetch"
+            )
+            return EXIT_OK
     models_dir = Path(args.models_dir) if args.models_dir else None
-    print(ensure_default_model(models_dir, progress=_progress))
+    print(ensure_default_model(models_dir, progress=print_progress))
     return EXIT_OK
 
 
 def _add_fetch_model(subparsers: Any) -> None:
     p = subparsers.add_parser("fetch-model", help="fetch and convert the default model")
     p.add_argument("--models-dir", help="where to put it (default: the stack's models folder)")
+    p.add_argument("--config", help="only if this stack config uses the default model")
     p.set_defaults(handler=run_fetch_model)
 
 

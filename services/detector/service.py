@@ -19,7 +19,9 @@ from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, now_ns
 from common.node import Node
 from common.settings import Config, DetectorSettings
+from services.detector.backends.select import backend_options
 from services.detector.mailbox import Mailbox
+from services.detector.model_files import ensure_default_model
 from services.detector.pipeline import Detector
 from services.detector.tracker import Tracker, TrackerParams
 from services.detector.types import DetectionResult, DetectorParams
@@ -29,9 +31,6 @@ _WAIT_S = 0.2  # how often the idle loop looks at the stop flag
 
 def open_detector(s: DetectorSettings) -> Detector:
     """Load the configured model (the default one, fetched if needed, when none is named)."""
-    from services.detector.backends.select import backend_options
-    from services.detector.model_store import ensure_default_model
-
     model = s.model or str(ensure_default_model())
     params = DetectorParams(conf=s.conf, iou=s.iou, max_det=s.max_det, classes=s.classes or None)
     return Detector.open(model, backend=s.backend, params=params, **backend_options(s))

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from services.metrics.datasets import DatasetError
+from services.metrics.labelled import DatasetError
 
 DEFAULT_CONF_THRESHOLD = 0.25
 MATCH_IOU = 0.5

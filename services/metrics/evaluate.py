@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from common.lifecycle import Progress, print_progress
 from services.metrics.accuracy import (
     DEFAULT_CONF_THRESHOLD,
     AccuracyReport,
@@ -22,18 +21,13 @@ from services.metrics.accuracy import (
     match_categories,
     to_results,
 )
-from services.metrics.datasets import DatasetError, LabelledSet, load_dataset
+from services.metrics.datasets import load_dataset
+from services.metrics.labelled import DatasetError, LabelledSet
 
 #: Confidence floor for the detections fed to mAP (the usual value for COCO evaluation).
 DEFAULT_EVAL_CONF = 0.001
 #: Detections kept per image before COCO's own cap of 100 per image and class.
 EVAL_MAX_DET = 300
-
-Progress = Callable[[str], None]
-
-
-def _stderr(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
 
 
 def detect_dataset(
@@ -43,7 +37,7 @@ def detect_dataset(
 
     Raises DatasetError when an image's real size differs from the size its labels assume.
     """
-    from services.detector.images import load_image
+    from common.images import load_image
 
     out = []
     for n, item in enumerate(dataset.images, 1):
@@ -114,27 +108,21 @@ def _check_fraction(name: str, value: float) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """The ``evaluate`` command: load, detect, score, print."""
-    from services.detector.pipeline import Detector
-    from services.detector.types import DetectorParams
+    from services.detector import Detector, DetectorParams, ensure_default_model
 
     for name in ("conf", "iou", "conf_threshold"):
         _check_fraction(f"--{name.replace('_', '-')}", getattr(args, name))
     dataset = load_dataset(args.dataset, args.images)
-    if args.model:
-        model = Path(args.model)
-    else:
-        from services.detector.model_store import ensure_default_model
-
-        model = ensure_default_model(progress=_stderr)
+    model = Path(args.model) if args.model else ensure_default_model(progress=print_progress)
     params = DetectorParams(conf=args.conf, iou=args.iou, max_det=EVAL_MAX_DET)
     with Detector.open(model, backend=args.backend, params=params) as detector:
         names = detector.names
         ground_truth_for(dataset, names)  # before the run: nothing to score is an error now
-        detections = detect_dataset(detector, dataset, _stderr)
+        detections = detect_dataset(detector, dataset, print_progress)
     report = score(dataset, names, detections, args.conf_threshold)
     if report.excluded_categories:
         unknown = ", ".join(report.excluded_categories)
-        _stderr(f"evaluate: not scored, the model has no such class: {unknown}")
+        print_progress(f"evaluate: not scored, the model has no such class: {unknown}")
     if args.json:
         extra = {"dataset": str(dataset.source), "model": str(model), "backend": args.backend}
         print(json.dumps({**report.to_json_dict(), **extra}))
@@ -144,8 +132,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from services.detector.types import DEFAULT_IOU
+    from services.detector import DetectorParams
 
+    default_iou = DetectorParams().iou
     parser.add_argument("--dataset", required=True, help="COCO JSON file or YOLO folder")
     parser.add_argument("--images", help="COCO: folder the file_names are relative to")
     parser.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model)")
@@ -157,7 +146,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"score floor of the detections fed to mAP (default {DEFAULT_EVAL_CONF})",
     )
     parser.add_argument(
-        "--iou", type=float, default=DEFAULT_IOU, help=f"NMS IoU (default {DEFAULT_IOU})"
+        "--iou", type=float, default=default_iou, help=f"NMS IoU (default {default_iou})"
     )
     parser.add_argument(
         "--conf-threshold",

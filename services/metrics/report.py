@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from common.errors import ConfigError
+from common.lifecycle import print_progress
 from services.metrics.plots import SEGMENTS, benchmark_label, segment_means
 from services.metrics.session import check_session
 
@@ -33,9 +33,6 @@ STAGE_ROWS = (
     ("end_to_end", "capture \u2192 first command"),
 )
 
-
-def _progress(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
 
 
 def _read_json(path: Path) -> Any:
@@ -234,7 +231,7 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
         out.mkdir(parents=True, exist_ok=True)
         duration = DEFAULT_DURATION_S if args.duration is None else args.duration
         log = out / "supervisor.log"
-        session = record(args.config, duration, log, stop, _progress, args.startup_timeout)
+        session = record(args.config, duration, log, stop, print_progress, args.startup_timeout)
     if args.benchmark:
         session["benchmarks"] = load_benchmarks(args.benchmark)
     for path in write_report(session, out):

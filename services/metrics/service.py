@@ -20,6 +20,7 @@ from common.errors import DecodeError
 from common.keys import Keys
 from common.messages import Detections, ServiceCounters, Twist
 from common.node import Node
+from common.queries import query_metrics
 from common.settings import Config
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
 
@@ -99,13 +100,13 @@ def run(config: Config, stop: threading.Event) -> int:
 def query(config: Config, timeout_s: float) -> dict[str, Any] | None:
     """Ask the metrics service for its snapshot; None if nobody answered within the timeout."""
     session = open_session(config.zenoh, "observer")
+    keys = Keys(config.stack.prefix)
     try:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            for reply in session.get(Keys(config.stack.prefix).metrics(), timeout=1.0):
-                if reply.ok is not None:
-                    answer: dict[str, Any] = json.loads(reply.ok.payload.to_string())
-                    return answer
+            answer = query_metrics(session, keys, 1.0)
+            if answer is not None:
+                return answer
             time.sleep(0.2)  # the peer mesh may still be forming; ask again
         return None
     finally:

@@ -13,11 +13,6 @@ A session is plain JSON (``session.json``) that ``report --from`` reads back.
 from __future__ import annotations
 
 import datetime
-import json
-import os
-import signal
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -28,20 +23,22 @@ import zenoh
 
 from common.bus import open_session
 from common.config_file import load_config
-from common.errors import ConfigError, DecodeError, StackError
+from common.errors import ConfigError, DecodeError
 from common.keys import Keys
+from common.lifecycle import Progress
+from common.machine import machine_info
 from common.messages import Detections, Header, ServiceCounters, Twist
+from common.queries import query_metrics
 from common.settings import REPO_ROOT, Config
+from deploy.launch import start_supervisor, stop_supervisor, wait_ready
 from services.metrics.aggregate import Aggregator
-from services.metrics.machine import machine_info
 
 SESSION_VERSION = 1
 #: The recorder's window outlasts the session by this much, so no sample ever leaves it.
 _WINDOW_MARGIN_S = 60.0
 _STOP_MARGIN_S = 15.0  # on top of the supervisor's own stop_timeout_s
+_QUERY_TIMEOUT_S = 2.0
 _REQUIRED = {"version": int, "duration_s": float, "summary": dict, "latency_samples_ms": dict}
-
-Progress = Callable[[str], None]
 
 
 def _frames_source(config: Config) -> str:
@@ -75,50 +72,11 @@ def _config_summary(config: Config) -> dict[str, Any]:
     }
 
 
-def _ready(session: zenoh.Session, keys: Keys) -> set[str]:
-    replies = session.liveliness().get(keys.all_health(), timeout=1.0)
-    return {str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None}
-
-
-def _wait_ready(
-    session: zenoh.Session,
-    keys: Keys,
-    services: set[str],
-    proc: subprocess.Popen[bytes],
-    timeout_s: float,
-    stop: threading.Event,
-    log_path: Path,
-) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not services <= _ready(session, keys):
-        if proc.poll() is not None:
-            raise StackError(
-                f"the stack exited ({proc.returncode}) before it was ready; see {log_path}"
-            )
-        if time.monotonic() > deadline:
-            raise StackError(f"the stack was not ready within {timeout_s:.0f} s; see {log_path}")
-        if stop.wait(0.2):
-            raise KeyboardInterrupt
-
-
-def _stop_supervisor(proc: subprocess.Popen[bytes], timeout_s: float) -> int:
-    """SIGINT, as Ctrl-C would; SIGKILL to the whole group if it does not stop in time."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        return proc.wait(timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        return proc.wait()
-
-
 def _query_metrics(session: zenoh.Session, keys: Keys) -> dict[str, Any] | None:
-    for reply in session.get(keys.metrics(), timeout=2.0):
-        if reply.ok is not None:
-            answer: dict[str, Any] = json.loads(reply.ok.payload.to_string())
-            answer.pop("timeline", None)  # the recorder has its own, from the same messages
-            return answer
-    return None
+    answer = query_metrics(session, keys, _QUERY_TIMEOUT_S)
+    if answer is not None:
+        answer.pop("timeline", None)  # the recorder has its own, from the same messages
+    return answer
 
 
 def _listen(session: zenoh.Session, keys: Keys, agg: Aggregator, lock: threading.Lock) -> list[Any]:
@@ -164,19 +122,15 @@ def record(
     config = load_config(config_path)
     keys = Keys(config.stack.prefix)
     with log_path.open("wb") as log:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "deploy.supervisor", "--config", config.path],
-            cwd=REPO_ROOT,
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,  # our Ctrl-C is forwarded as one SIGINT, not twice
-        )
+        proc = start_supervisor(config.path, log)  # its own session: our Ctrl-C is sent once
     try:
         session = open_session(config.zenoh, "observer")
         try:
             progress(f"report: starting the stack ({config.path}); log in {log_path}")
             services = set(config.supervisor.services)
-            _wait_ready(session, keys, services, proc, startup_timeout_s, stop, log_path)
+            wait_ready(
+                session, keys, services, proc, startup_timeout_s, stop=stop, log_path=log_path
+            )
             progress(f"report: recording {duration_s:.0f} s")
             lock = threading.Lock()
             agg = Aggregator(duration_s + _WINDOW_MARGIN_S, duration_s + _WINDOW_MARGIN_S)
@@ -192,7 +146,8 @@ def record(
         finally:
             session.close()
     finally:
-        exit_code = _stop_supervisor(proc, config.supervisor.stop_timeout_s + _STOP_MARGIN_S)
+        stop_supervisor(proc, config.supervisor.stop_timeout_s + _STOP_MARGIN_S)
+        exit_code = proc.returncode
     return {
         **session_data,
         "config": _config_summary(config),

@@ -1,4 +1,4 @@
-"""The YOLO dataset layout, read into a :class:`~services.metrics.datasets.LabelledSet`.
+"""The YOLO dataset layout, read into a :class:`~services.metrics.labelled.LabelledSet`.
 
     DATASET/
       data.yaml | classes.txt | names.txt     class names (the first one found, in that order)
@@ -22,8 +22,14 @@ from typing import Any
 
 from PIL import Image, UnidentifiedImageError
 
-from services.detector.images import IMAGE_EXTENSIONS
-from services.metrics.datasets import DatasetError, LabelledImage, LabelledSet, check_box
+from common.images import IMAGE_EXTENSIONS
+from services.metrics.labelled import (
+    DatasetError,
+    LabelledImage,
+    LabelledSet,
+    check_box,
+    read_text,
+)
 
 NAME_FILES = ("data.yaml", "classes.txt", "names.txt")
 _EXIF_ORIENTATION = 0x0112
@@ -92,10 +98,7 @@ def read_class_names(folder: Path) -> tuple[Path, list[str]]:
         path = folder / name
         if not path.is_file():
             continue
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise DatasetError(f"{path}: cannot read ({exc})") from exc
+        text = read_text(path)
         if name.endswith(".yaml"):
             names = _yaml_names(path, text)
         else:
@@ -125,10 +128,7 @@ def image_size(path: Path) -> tuple[int, int]:
 def _parse_label(
     path: Path, names: list[str], names_file: Path, image: LabelledImage, next_id: int
 ) -> list[dict[str, Any]]:
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"{path}: cannot read ({exc})") from exc
+    lines = read_text(path).splitlines()
     annotations: list[dict[str, Any]] = []
     for lineno, line in enumerate(lines, 1):
         if not line.strip():

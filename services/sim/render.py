@@ -14,12 +14,9 @@ from functools import cache
 
 import cv2
 import numpy as np
-import numpy.typing as npt
 
-from services.camera.sources import load_sample
+from common.images import Image, load_sample
 from services.sim.world import World
-
-Image = npt.NDArray[np.uint8]
 
 # Crops (x1, y1, x2, y2) of the scikit-image photos, around the object each one shows.
 SPRITES: dict[str, tuple[str, tuple[int, int, int, int]]] = {

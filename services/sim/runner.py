@@ -10,9 +10,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import signal
-import socket
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -28,25 +26,20 @@ from common.contracts import ControllerMode
 from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, GroundTruth, Twist
-from common.settings import REPO_ROOT, Config
-from deploy.pids import service_pids
+from common.settings import Config
+from deploy.launch import free_port, service_pids, start_supervisor, stop_supervisor
 from services.sim.scenarios import SCENARIOS, Scenario
 from services.sim.score import Recording, score
 
 STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+STOP_TIMEOUT_S = 30.0  # then the whole stack is killed
 
 
 def scenario_config(base: Config, scenario: Scenario) -> Config:
     """``base`` made private to one run of ``scenario``."""
     zenoh_s = dataclasses.replace(
         base.zenoh,
-        endpoint=f"tcp/127.0.0.1:{_free_port()}",
+        endpoint=f"tcp/127.0.0.1:{free_port()}",
         connect=(),
         listen=("tcp/127.0.0.1:0",),
     )
@@ -103,14 +96,7 @@ def run_scenario(base: Config, name: str, log: Any = None) -> dict[str, Any]:
     config_path.write_text(to_toml(config))
     rec = Recording()
     with (workdir / "stack.log").open("wb") as stack_log:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "deploy.supervisor", "--config", str(config_path)],
-            cwd=REPO_ROOT,
-            stdout=stack_log,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
-        )
+        proc = start_supervisor(config_path, stack_log)
         try:
             session = open_session(config.zenoh, "observer")
             try:
@@ -121,7 +107,7 @@ def run_scenario(base: Config, name: str, log: Any = None) -> dict[str, Any]:
             finally:
                 session.close()
         finally:
-            _stop(proc)  # whatever happened, never leave the stack running
+            stop_supervisor(proc, STOP_TIMEOUT_S)  # whatever happened, never leave it running
     result = score(scenario, rec, scenario.build(), config.controller, config.camera.hfov_deg)
     result["log"] = str(workdir / "stack.log")
     result["supervisor_exit_code"] = proc.returncode
@@ -159,13 +145,3 @@ def _drive(
             if log:
                 log(f"{scenario.name}: killed the detector at t={_sim_time(rec):.1f} s")
         pause.wait(0.05)
-
-
-def _stop(proc: subprocess.Popen[bytes]) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        proc.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()

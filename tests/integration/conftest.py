@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -20,17 +19,13 @@ import zenoh
 
 from common.bus import open_session
 from common.config_file import load_config
-from common.errors import ConfigError
+from common.errors import ConfigError, StackError
 from common.keys import Keys
+from common.queries import query_metrics, ready_services
+from deploy.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 
 REPO = Path(__file__).resolve().parents[2]
 STARTUP_S = 120.0  # model load and warm-up on a loaded 2-core CI machine
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def wait_for(
@@ -80,14 +75,7 @@ class Stack:
         self.log_path = log_path
         self._log = log_path.open("wb")
         env = {k: v for k, v in os.environ.items() if not k.startswith("STACK__")}
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "deploy.supervisor", "--config", str(config_path)],
-            cwd=REPO,
-            env={**env, "PYTHONUNBUFFERED": "1"},
-            stdout=self._log,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
+        self.proc = start_supervisor(config_path, self._log, env)
         self.session = self.open("observer")
 
     def open(self, principal: str) -> zenoh.Session:
@@ -115,19 +103,13 @@ class Stack:
         assert done.returncode == 0, done.stderr
 
     def ready_services(self) -> set[str]:
-        replies = self.session.liveliness().get(self.keys.all_health(), timeout=1.0)
-        return {str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None}
+        return ready_services(self.session, self.keys)
 
     def wait_ready(self, services: set[str], timeout: float = STARTUP_S) -> None:
-        wait_for(
-            lambda: services <= self.ready_services() or self._died(),
-            timeout,
-            f"services {sorted(services)} to be ready",
-        )
-        assert self.proc.poll() is None, f"supervisor died:\n{self.log()}"
-
-    def _died(self) -> bool:
-        return self.proc.poll() is not None
+        try:
+            wait_ready(self.session, self.keys, services, self.proc, timeout, poll_s=0.05)
+        except StackError as exc:
+            pytest.fail(f"waiting for services {sorted(services)}: {exc}:\n{self.log()}")
 
     def subscribe(self, key: str) -> tuple[zenoh.Subscriber[Any], list[bytes]]:
         received: list[bytes] = []
@@ -135,11 +117,7 @@ class Stack:
         return sub, received
 
     def metrics(self) -> dict[str, Any] | None:
-        for reply in self.session.get(self.keys.metrics(), timeout=2.0):
-            if reply.ok is not None:
-                answer: dict[str, Any] = json.loads(reply.ok.payload.to_string())
-                return answer
-        return None
+        return query_metrics(self.session, self.keys, 2.0)
 
     def log(self) -> str:
         if not self._log.closed:
@@ -148,17 +126,11 @@ class Stack:
 
     def stop(self, timeout: float = 20.0, sig: int = signal.SIGINT) -> int:
         """Signal the supervisor (SIGINT, as Ctrl-C would) and return its exit code."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-        try:
-            code = self.proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-            self.proc.wait()
+        if not stop_supervisor(self.proc, timeout, sig):
             pytest.fail(f"supervisor did not stop within {timeout} s:\n{self.log()}")
         self.session.close()
         self._log.close()
-        return code
+        return self.proc.returncode
 
 
 @pytest.fixture

@@ -15,7 +15,7 @@ import pytest
 from skimage import data
 
 from services.detector.coco import COCO80
-from services.detector.model_store import ensure_default_model
+from services.detector.model_files import ensure_default_model
 
 pytestmark = pytest.mark.integration
 

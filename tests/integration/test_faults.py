@@ -8,7 +8,7 @@ import signal
 import pytest
 
 from common.messages import ControllerStatus, Detections, Twist
-from deploy.pids import service_pids
+from deploy.launch import service_pids
 from tests.integration.conftest import Stack, wait_for
 
 pytestmark = pytest.mark.integration

@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from tests.integration.conftest import REPO, STARTUP_S, free_port, wait_for, write_config
+from deploy.launch import free_port
+from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
 
 pytestmark = pytest.mark.integration
 

@@ -25,7 +25,7 @@ from common.messages import (
     ServiceCounters,
     Twist,
 )
-from deploy.pids import service_pids
+from deploy.launch import service_pids
 from tests.integration.conftest import REPO, Stack, wait_for
 
 pytestmark = pytest.mark.integration

@@ -2,7 +2,7 @@
 
 A backend module exposes ``load(model_path, **options) -> Backend``. It imports its runtime at
 module level, so importing the module is what fails on a machine without that runtime; the
-table below is what lets CPU-only machines import the detector cleanly. To add a runtime,
+table in :mod:`.base` is what lets CPU-only machines import the detector cleanly. To add a runtime,
 write its module and add one row: pre- and post-processing do not change.
 
 ``auto`` is not a row: :func:`open_backend` hands it to :mod:`.select`, which probes the rows
@@ -11,110 +11,33 @@ in order of speed (tensorrt, cuda, onnx) and loads the first that works here.
 
 from __future__ import annotations
 
-import importlib
-import inspect
-from collections.abc import Callable, Mapping
 from pathlib import Path
-from types import ModuleType
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
-import numpy as np
-import numpy.typing as npt
+from common.errors import ConfigError
+from services.detector.backends.base import (
+    AUTO,
+    BACKEND_CHOICES,
+    BACKENDS,
+    Backend,
+    Dim,
+    import_backend,
+    load_function,
+    supported_options,
+)
+from services.detector.backends.select import open_auto
 
-from common.errors import BackendUnavailable, ConfigError
-
-Dim = int | None  # None: a dynamic dimension (named or unknown in the model)
-
-#: Backend name -> module, imported only when that backend is asked for.
-BACKENDS: dict[str, str] = {
-    "onnx": "services.detector.backends.onnx",
-    "tensorrt": "services.detector.backends.tensorrt",
-    "cuda": "services.detector.backends.cuda",
-}
-
-#: The name that picks the best backend this machine can run (see :mod:`.select`).
-AUTO = "auto"
-
-#: Every name ``--backend`` and ``detector.backend`` accept.
-BACKEND_CHOICES: tuple[str, ...] = (*BACKENDS, AUTO)  # the default first, then by speed
-
-
-@runtime_checkable
-class Backend(Protocol):
-    """A loaded model that runs one NCHW float32 batch at a time.
-
-    ``input_shape`` and ``output_shapes`` are as the model declares them, ``None`` for
-    dynamic dimensions; ``metadata`` is the model's string key/value metadata (Ultralytics
-    puts ``names``, ``imgsz``, ``stride`` there).
-    """
-
-    @property
-    def name(self) -> str:
-        """The backend's name in :data:`BACKENDS`."""
-        ...
-
-    @property
-    def device(self) -> str:
-        """Where it runs, e.g. ``cpu`` or ``cuda:0``."""
-        ...
-
-    @property
-    def precision(self) -> str:
-        """Numeric precision of the model's input, e.g. ``fp32`` or ``fp16``."""
-        ...
-
-    @property
-    def input_shape(self) -> tuple[Dim, ...]:
-        """The declared input shape, ``[B, 3, H, W]``."""
-        ...
-
-    @property
-    def output_shapes(self) -> tuple[tuple[Dim, ...], ...]:
-        """The declared shape of each output, in output order."""
-        ...
-
-    @property
-    def metadata(self) -> Mapping[str, str]:
-        """The model's custom metadata."""
-        ...
-
-    def infer(self, batch: npt.NDArray[np.float32]) -> list[npt.NDArray[np.float32]]:
-        """Run ``batch`` (``[B, 3, H, W]`` float32) and return every output as float32."""
-        ...
-
-    def close(self) -> None:
-        """Release the runtime's resources; the backend is unusable afterwards."""
-        ...
-
-
-def import_backend(name: str) -> ModuleType:
-    """Import the module of the backend called ``name``.
-
-    Raises ConfigError for a name not in :data:`BACKENDS`, and BackendUnavailable when its
-    runtime cannot be imported here (a module may also raise BackendUnavailable itself, with
-    a better reason than the bare ImportError).
-    """
-    module_name = BACKENDS.get(name)
-    if module_name is None:
-        raise ConfigError(f"unknown backend {name!r}; valid backends: {', '.join(BACKEND_CHOICES)}")
-    try:
-        return importlib.import_module(module_name)
-    except ImportError as exc:
-        raise BackendUnavailable(f"backend {name!r} is unavailable on this machine: {exc}") from exc
-
-
-def load_function(name: str) -> Callable[..., Backend]:
-    """The ``load`` function of backend ``name`` (see :func:`import_backend` for errors)."""
-    load: Callable[..., Backend] = import_backend(name).load
-    return load
-
-
-def supported_options(load: Callable[..., Backend]) -> frozenset[str] | None:
-    """The keyword options ``load`` takes; None when it takes any (``**options``)."""
-    params = list(inspect.signature(load).parameters.values())[1:]  # [0] is the model path
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
-        return None
-    return frozenset(p.name for p in params)
+__all__ = [
+    "AUTO",
+    "BACKENDS",
+    "BACKEND_CHOICES",
+    "Backend",
+    "Dim",
+    "import_backend",
+    "load_function",
+    "open_backend",
+    "supported_options",
+]
 
 
 def open_backend(name: str, model_path: str | Path, **options: Any) -> Backend:
@@ -125,8 +48,6 @@ def open_backend(name: str, model_path: str | Path, **options: Any) -> Backend:
     backend) for a bad model file. ``auto`` drops options its choice does not take.
     """
     if name == AUTO:
-        from services.detector.backends.select import open_auto  # select imports this module
-
         return open_auto(Path(model_path), options)
     load = load_function(name)
     taken = supported_options(load)

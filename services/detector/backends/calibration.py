@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.errors import ConfigError
-from services.detector.images import list_images, load_image
+from common.images import list_images, load_image
 from services.detector.preprocess import Preprocessor
 
 LastBatch = Literal["pad", "drop"]

@@ -1,8 +1,8 @@
 """PyTorch on an NVIDIA GPU: the ONNX model run by our own interpreter, in FP16, as a CUDA graph.
 
 This is the GPU path for machines with a CUDA build of PyTorch but no TensorRT. The ONNX file is
-turned into a ``torch.nn.Module`` by :mod:`onnx_torch` (no converter package), for one static
-input shape, and run like this on every ``infer``:
+turned into a ``torch.nn.Module`` by our interpreter, :mod:`services.detector.onnx_torch` (no
+converter package), for one static input shape, and run like this on every ``infer``:
 
     host batch (float32) -> pinned host buffer -> static GPU input (async copy)
     -> cast to fp16 -> the module -> outputs cast to float32 -> host
@@ -31,26 +31,21 @@ try:
 except ImportError as exc:  # open_backend turns this into BackendUnavailable
     raise ImportError("PyTorch is not installed") from exc
 
-from common.errors import BackendUnavailable, ConfigError, ModelError
-from services.detector.backends import Backend, Dim
-from services.detector.backends.onnx_torch import (
+from common.errors import BackendUnavailable, ConfigError, ModelError, one_line
+from services.detector.backends.base import Backend, Dim
+from services.detector.model_info import input_size
+from services.detector.onnx_torch.interpreter import (
     OnnxModule,
     build_module,
     declared_shape,
     read_model,
 )
-from services.detector.model_info import input_size
 
 log = logging.getLogger(__name__)
 
 PRECISIONS: dict[str, torch.dtype] = {"fp16": torch.float16, "fp32": torch.float32}
 #: Eager runs before capture: cuDNN picks its algorithms and the allocator settles.
 WARMUP_RUNS = 3
-
-
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split())
-    return text if len(text) <= 200 else text[:197] + "..."
 
 
 def cuda_unavailable_reason() -> str | None:
@@ -182,7 +177,7 @@ class CudaBackend:
             with torch.inference_mode(), torch.cuda.graph(graph):
                 outputs = self._forward()
         except RuntimeError as exc:
-            self.graph_error = _one_line(exc)
+            self.graph_error = one_line(exc)
             log.warning("CUDA graph capture failed, running eagerly: %s", self.graph_error)
             return
         self._graph, self._graph_outputs = graph, outputs
@@ -210,7 +205,7 @@ class CudaBackend:
                 # .cpu() waits for the GPU; each call returns fresh arrays, never the buffers.
                 return [o.cpu().numpy() for o in outputs]
         except RuntimeError as exc:
-            raise ModelError(f"inference failed: {_one_line(exc)}") from exc
+            raise ModelError(f"inference failed: {one_line(exc)}") from exc
 
     def close(self) -> None:
         """Drop the module, the graph and the buffers; give cached GPU memory back."""

@@ -22,12 +22,12 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from common.errors import ConfigError
+from common.files import atomic_write_bytes, sha256_file
 
 SIDECAR_FORMAT = 1
 PRECISIONS = ("fp32", "fp16", "int8")
@@ -82,7 +82,7 @@ class BuildOptions:
         """The engine cache folder: ``cache_dir``, or ``engines/`` beside the models."""
         if self.cache_dir is not None:
             return self.cache_dir
-        from services.detector.model_store import models_dir  # not needed when a dir is given
+        from services.detector.model_files import models_dir  # not needed when a dir is given
 
         return models_dir() / "engines"
 
@@ -163,15 +163,6 @@ def calibration_cache_path(cache_dir: Path, key: EngineKey) -> Path:
     )
 
 
-def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
-    """Hex sha256 of a file, read in chunks (engines run to hundreds of MB)."""
-    digest = hashlib.sha256()
-    with path.open("rb") as f:
-        while block := f.read(chunk):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def _show(field: str, value: object) -> str:
     if field == "model_sha256" and isinstance(value, str):
         return f"sha256 {value[:12]}"
@@ -250,12 +241,6 @@ def check(
     return engine, HIT + str(engine)
 
 
-def _atomic_write(path: Path, payload: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_bytes(payload)
-    os.replace(tmp, path)
-
-
 def store(cache_dir: Path, key: EngineKey, engine: bytes) -> Path:
     """Write ``engine`` and its sidecar into ``key``'s slot; returns the engine path.
 
@@ -264,12 +249,12 @@ def store(cache_dir: Path, key: EngineKey, engine: bytes) -> Path:
     cache_dir.mkdir(parents=True, exist_ok=True)
     path, sidecar = engine_path(cache_dir, key), sidecar_path(cache_dir, key)
     sidecar.unlink(missing_ok=True)  # the old sidecar must not vouch for the new engine
-    _atomic_write(path, engine)
+    atomic_write_bytes(path, engine)
     meta = {
         "format": SIDECAR_FORMAT,
         "key": key.to_json(),
         "engine_bytes": len(engine),
         "engine_sha256": hashlib.sha256(engine).hexdigest(),
     }
-    _atomic_write(sidecar, (json.dumps(meta, indent=2) + "\n").encode())
+    atomic_write_bytes(sidecar, (json.dumps(meta, indent=2) + "\n").encode())
     return path

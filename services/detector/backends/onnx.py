@@ -16,8 +16,8 @@ import numpy.typing as npt
 import onnxruntime as ort
 from onnxruntime.capi import onnxruntime_pybind11_state as ort_state
 
-from common.errors import ConfigError, ModelError
-from services.detector.backends import Backend, Dim
+from common.errors import ConfigError, ModelError, one_line
+from services.detector.backends.base import Backend, Dim
 
 _PRECISIONS = {"tensor(float)": "fp32", "tensor(float16)": "fp16"}
 _ORT_ERRORS: tuple[type[Exception], ...] = (
@@ -54,11 +54,6 @@ def physical_cores() -> int:
     return len(cores) or os.cpu_count() or 1
 
 
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split())
-    return text if len(text) <= 200 else text[:197] + "..."
-
-
 def _dims(shape: list[object] | None) -> tuple[Dim, ...]:
     return tuple(d if isinstance(d, int) and d >= 0 else None for d in (shape or []))
 
@@ -83,7 +78,7 @@ class OnnxBackend:
                 str(model_path), sess_options=options, providers=["CPUExecutionProvider"]
             )
         except _ORT_ERRORS as exc:
-            raise ModelError(f"{model_path}: not a valid ONNX model ({_one_line(exc)})") from exc
+            raise ModelError(f"{model_path}: not a valid ONNX model ({one_line(exc)})") from exc
         self._session: ort.InferenceSession | None = session
         inputs = session.get_inputs()
         if len(inputs) != 1:
@@ -107,7 +102,7 @@ class OnnxBackend:
         try:
             outputs = self._session.run(self._output_names, {self._input_name: feed})
         except _ORT_ERRORS as exc:
-            raise ModelError(f"inference failed: {_one_line(exc)}") from exc
+            raise ModelError(f"inference failed: {one_line(exc)}") from exc
         return [np.asarray(o, dtype=np.float32) for o in outputs]
 
     def close(self) -> None:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from common.errors import ConfigError, ModelError
-from services.detector.backends import Dim
+from services.detector.backends.base import Dim
 
 Shape = tuple[int, int, int, int]
 

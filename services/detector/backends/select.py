@@ -22,7 +22,13 @@ from typing import Any
 
 from common.errors import BackendUnavailable, ConfigError
 from common.settings import DetectorSettings
-from services.detector.backends import AUTO, BACKENDS, Backend, load_function, supported_options
+from services.detector.backends.base import (
+    AUTO,
+    BACKENDS,
+    Backend,
+    load_function,
+    supported_options,
+)
 
 log = logging.getLogger(__name__)
 

@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.errors import BackendUnavailable, ConfigError, ModelError
+from common.files import sha256_file
 
 try:
     import tensorrt as trt
@@ -35,8 +36,9 @@ except ImportError as exc:
         "TensorRT is not installed (pip install tensorrt-cu12 on a machine with an NVIDIA driver)"
     ) from exc
 
-from services.detector.backends import Backend, Dim, engine_cache
 from services.detector.backends import calibration as calib_data
+from services.detector.backends import engine_cache
+from services.detector.backends.base import Backend, Dim
 from services.detector.backends.engine_cache import BuildOptions
 from services.detector.backends.profiles import ProfileShapes, calibration_shape, model_profile
 from services.detector.backends.select import cuda_device_count, import_cudart
@@ -226,7 +228,7 @@ def ensure_engine(
     calib = calib_data.calibration_images(int8) if int8 is not None else []
     key = engine_cache.EngineKey(
         model_name=model_path.stem,
-        model_sha256=engine_cache.sha256_file(model_path),
+        model_sha256=sha256_file(model_path),
         gpu_name=gpu,
         compute_capability=capability,
         tensorrt_version=trt.__version__,

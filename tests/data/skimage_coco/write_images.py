@@ -19,7 +19,7 @@ SAMPLES = ("astronaut", "cameraman", "chelsea", "coffee", "motorcycle", "rocket"
 
 def write_images(folder: Path) -> list[Path]:
     """Save every labelled photo as ``<name>.png`` in ``folder`` (lossless: labels stay exact)."""
-    from services.camera.sources import load_sample
+    from common.images import load_sample
 
     folder.mkdir(parents=True, exist_ok=True)
     paths = []

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from common.errors import ConfigError, ImageError
-from services.camera.sources import SAMPLES, open_source, resize
+from common.images import SAMPLES
+from services.camera.sources import open_source, resize
 
 
 def _write_image(path: Path, value: int, size: tuple[int, int] = (32, 24)) -> None:

@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from common.messages import Detections, Header, LaserScan
@@ -52,10 +53,8 @@ def dets(
     )
 
 
-def scan(front_range: float, *, rays: int = 181, fov_deg: float = 180.0) -> LaserScan:
-    angles = np.linspace(-np.radians(fov_deg / 2), np.radians(fov_deg / 2), rays)
-    ranges = np.full(rays, 10.0, np.float32)
-    ranges[np.abs(angles) < np.radians(5)] = front_range
+def scan_of(angles: npt.NDArray[np.float64], ranges: npt.NDArray[np.float32]) -> LaserScan:
+    """A scan whose rays point at ``angles`` (evenly spaced) and read ``ranges``."""
     return LaserScan(
         header=HEADER,
         angle_min=float(angles[0]),
@@ -64,6 +63,13 @@ def scan(front_range: float, *, rays: int = 181, fov_deg: float = 180.0) -> Lase
         range_max=20.0,
         ranges=ranges,
     )
+
+
+def scan(front_range: float, *, rays: int = 181, fov_deg: float = 180.0) -> LaserScan:
+    angles = np.linspace(-np.radians(fov_deg / 2), np.radians(fov_deg / 2), rays)
+    ranges = np.full(rays, 10.0, np.float32)
+    ranges[np.abs(angles) < np.radians(5)] = front_range
+    return scan_of(angles, ranges)
 
 
 def step(
@@ -244,14 +250,7 @@ def test_corridor_catches_what_the_sector_misses() -> None:
     angles = np.linspace(-np.pi / 2, np.pi / 2, 361)
     ranges = np.full(angles.size, np.inf, np.float32)
     ranges[np.argmin(np.abs(angles - math.atan2(0.25, 0.6)))] = math.hypot(0.6, 0.25)
-    s = LaserScan(
-        header=HEADER,
-        angle_min=float(angles[0]),
-        angle_increment=float(angles[1] - angles[0]),
-        range_min=0.05,
-        range_max=20.0,
-        ranges=ranges,
-    )
+    s = scan_of(angles, ranges)
     assert sector_clearance(s, 30.0) == math.inf
     assert sector_clearance(s, 30.0, half_width_m=0.3) == pytest.approx(0.6, abs=0.01)
     assert corridor_clearance(s, 0.2) == math.inf

@@ -2,7 +2,6 @@ from __future__ import annotations
 
 import ipaddress
 import json
-import socket
 import stat
 import sys
 from pathlib import Path
@@ -26,6 +25,7 @@ from common.security import (
 )
 from deploy import credentials
 from deploy.credentials import generate
+from deploy.launch import free_port
 
 HOSTS = ("robot.local", "10.0.0.5")
 
@@ -147,18 +147,12 @@ def test_cli_refuses_existing_with_one_line_and_exit_2(
     assert err.count("\n") == 1 and err.startswith("credentials: error: ")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.mark.integration
 def test_mtls_router_admits_only_clients_with_a_certificate(
     creds: tuple[Path, list[Path]],
 ) -> None:
     directory, _ = creds
-    endpoint = f"tls/127.0.0.1:{_free_port()}"
+    endpoint = f"tls/127.0.0.1:{free_port()}"
 
     def config(mode: str, tls: dict[str, object], **endpoints: list[str]) -> zenoh.Config:
         conf = zenoh.Config()

@@ -163,16 +163,6 @@ def test_file_names_are_safe_and_calibration_cache_is_per_model_and_data(tmp_pat
     assert calib == tmp_path / "m.111111111111.222222222222.calib"
 
 
-def test_sha256_file_matches_hashlib(tmp_path: Path) -> None:
-    import hashlib
-
-    blob = tmp_path / "blob"
-    blob.write_bytes(bytes(range(256)) * 5000)
-    assert (
-        engine_cache.sha256_file(blob, chunk=4096) == hashlib.sha256(blob.read_bytes()).hexdigest()
-    )
-
-
 @pytest.mark.parametrize(
     ("options", "message"),
     [

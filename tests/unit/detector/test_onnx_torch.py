@@ -23,7 +23,7 @@ from skimage import data
 from common.errors import BackendUnavailable, ConfigError, ModelError
 from services.detector.backends import BACKENDS, open_backend
 from services.detector.backends import cuda as cuda_backend
-from services.detector.backends.onnx_torch import OPS, build_module, load_module
+from services.detector.onnx_torch.interpreter import OPS, build_module, load_module
 from services.detector.preprocess import Preprocessor
 
 RNG = np.random.default_rng(0)
@@ -347,8 +347,14 @@ def test_missing_torch_is_backend_unavailable(
 ) -> None:
     monkeypatch.setitem(BACKENDS, "cuda", "services.detector.backends.cuda")
     monkeypatch.setitem(sys.modules, "torch", None)  # makes `import torch` fail
-    for name in ("cuda", "onnx_torch", "onnx_torch_ops", "onnx_torch_spatial"):
-        monkeypatch.delitem(sys.modules, f"services.detector.backends.{name}", raising=False)
+    for name in (
+        "backends.cuda",
+        "onnx_torch",
+        "onnx_torch.interpreter",
+        "onnx_torch.tensor_ops",
+        "onnx_torch.spatial_ops",
+    ):
+        monkeypatch.delitem(sys.modules, f"services.detector.{name}", raising=False)
     with pytest.raises(BackendUnavailable, match="PyTorch is not installed"):
         open_backend("cuda", tiny_model)
 

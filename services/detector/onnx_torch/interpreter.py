@@ -32,8 +32,9 @@ from google.protobuf.message import (  # type: ignore[import-untyped]  # no stub
 from onnx import helper, numpy_helper
 from torch import Tensor, nn
 
-from common.errors import ModelError
-from services.detector.backends.onnx_torch_ops import (
+from common.errors import ModelError, one_line
+from services.detector.onnx_torch.spatial_ops import SPATIAL_OPS
+from services.detector.onnx_torch.tensor_ops import (
     SHAPE_ONLY,
     TENSOR_OPS,
     Attrs,
@@ -42,7 +43,6 @@ from services.detector.backends.onnx_torch_ops import (
     RunContext,
     onnx_dtype,
 )
-from services.detector.backends.onnx_torch_spatial import SPATIAL_OPS
 
 #: ONNX op type -> its torch function; an op not here is a ModelError naming it.
 OPS: dict[str, OpDef] = {**TENSOR_OPS, **SPATIAL_OPS}
@@ -50,11 +50,6 @@ OPS: dict[str, OpDef] = {**TENSOR_OPS, **SPATIAL_OPS}
 _LIVE, _BUFFER, _VALUE = 0, 1, 2  # where a step's argument comes from
 _ONNX_DOMAINS = ("", "ai.onnx")
 _BUILD_ERRORS = (RuntimeError, ValueError, IndexError, TypeError, KeyError)
-
-
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split())
-    return text if len(text) <= 200 else text[:197] + "..."
 
 
 @dataclass(frozen=True, slots=True)
@@ -134,7 +129,7 @@ def read_model(model_path: Path) -> onnx.ModelProto:
     try:
         return onnx.load(str(model_path))
     except (OSError, ValueError, ProtobufDecodeError) as exc:
-        raise ModelError(f"{model_path}: not a valid ONNX model ({_one_line(exc)})") from exc
+        raise ModelError(f"{model_path}: not a valid ONNX model ({one_line(exc)})") from exc
 
 
 def declared_shape(value: onnx.ValueInfoProto) -> tuple[int | None, ...]:
@@ -174,7 +169,7 @@ def _call(op: OpDef, node: onnx.NodeProto, args: list[Any], attrs: Attrs) -> lis
     try:
         result = op.fn(RunContext(), args, attrs)
     except _BUILD_ERRORS as exc:
-        raise ModelError(f"{node.op_type} node {node.name!r}: {_one_line(exc)}") from exc
+        raise ModelError(f"{node.op_type} node {node.name!r}: {one_line(exc)}") from exc
     return [result] if isinstance(result, Tensor) else list(result)
 
 

@@ -1,0 +1,103 @@
+"""Launch helpers: a free port, readiness with a deadline, a stop that escalates to a kill."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+
+from common.errors import StackError
+from common.keys import Keys
+from deploy.launch import free_port, stop_supervisor, wait_ready
+
+KEYS = Keys("test")
+
+
+class FakeSession:
+    """Answers liveliness queries with the health tokens of ``ready`` services."""
+
+    def __init__(self, *ready: str) -> None:
+        self.ready = ready
+
+    def liveliness(self) -> Any:
+        replies = [
+            SimpleNamespace(ok=SimpleNamespace(key_expr=KEYS.health(name))) for name in self.ready
+        ]
+        return SimpleNamespace(get=lambda key, timeout: replies)
+
+
+def _child(code: str) -> subprocess.Popen[str]:
+    """A child in a session of its own (as the supervisor runs) that prints a line when set."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, start_new_session=True
+    )
+    assert proc.stdout is not None and proc.stdout.readline() == "ready\n"
+    return proc
+
+
+@pytest.fixture
+def sleeper() -> Iterator[subprocess.Popen[str]]:
+    proc = _child("import signal; print('ready', flush=True); signal.pause()")
+    yield proc
+    proc.kill()
+    proc.wait()
+
+
+def test_free_port_can_be_bound() -> None:
+    port = free_port()
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", port))
+
+
+def test_wait_ready_returns_once_every_service_is_ready(sleeper: Any) -> None:
+    wait_ready(FakeSession("detector", "camera"), KEYS, {"camera"}, sleeper, timeout_s=5)
+
+
+def test_wait_ready_gives_up_at_the_deadline_naming_the_log(sleeper: Any) -> None:
+    with pytest.raises(StackError, match=r"not ready within 0 s; see /tmp/stack\.log"):
+        wait_ready(
+            FakeSession("camera"), KEYS, {"detector"}, sleeper, 0.0, log_path=Path("/tmp/stack.log")
+        )
+
+
+def test_wait_ready_stops_when_the_stack_exits() -> None:
+    proc = subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])
+    proc.wait()
+    with pytest.raises(StackError, match=r"exited \(3\) before it was ready"):
+        wait_ready(FakeSession(), KEYS, {"detector"}, proc, timeout_s=5)
+
+
+def test_wait_ready_is_interrupted_by_the_stop_event(sleeper: Any) -> None:
+    stop = threading.Event()
+    stop.set()
+    with pytest.raises(KeyboardInterrupt):
+        wait_ready(FakeSession(), KEYS, {"detector"}, sleeper, 5, stop=stop)
+
+
+def test_stop_supervisor_sends_sigint_and_returns_the_exit_code() -> None:
+    proc = _child(
+        "import signal, sys\n"
+        "signal.signal(signal.SIGINT, lambda *_: sys.exit(0))\n"
+        "print('ready', flush=True)\n"
+        "signal.pause()"
+    )
+    assert stop_supervisor(proc, timeout_s=10) is True
+    assert proc.returncode == 0
+
+
+def test_stop_supervisor_kills_what_ignores_sigint_after_the_deadline() -> None:
+    proc = _child(
+        "import signal\n"
+        "signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+        "print('ready', flush=True)\n"
+        "signal.pause()"
+    )
+    assert stop_supervisor(proc, timeout_s=0.3) is False
+    assert proc.returncode == -9
