@@ -14,13 +14,10 @@ from typing import IO
 from common.lifecycle import PERMANENT_FAILURES, SUPERVISOR_PID_ENV
 from common.settings import SupervisorSettings
 
-# Extra arguments some services need before the shared ones.
-SERVICE_ARGS: dict[str, tuple[str, ...]] = {"detector": ("serve",), "metrics": ("serve",)}
-
 
 def service_command(name: str, config_path: str) -> list[str]:
-    return [sys.executable, "-m", f"services.{name}", *SERVICE_ARGS.get(name, ()),
-            "--config", config_path]  # fmt: skip
+    """Every service starts the same way (common/cli.py)."""
+    return [sys.executable, "-m", f"services.{name}", "serve", "--config", config_path]
 
 
 @dataclass

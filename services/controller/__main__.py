@@ -9,36 +9,51 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
+from common.cli import Command, add_config, service_main
 from common.config_file import load_config
+from common.contracts import ControllerMode
 from common.lifecycle import run_main, setup_logging, stop_event
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m services.controller",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument("command", nargs="?", default="serve", choices=["serve", "estop"])
-    parser.add_argument("action", nargs="?", choices=["engage", "release"], help="for estop")
-    parser.add_argument("--config", help="stack config (default deploy/stack.toml)")
-    parser.add_argument("--mode", choices=["track", "follow"], help="override controller.mode")
-    parser.add_argument("--reason", default="", help="estop: why (logged by the controller)")
-    args = parser.parse_args()
-    if args.command == "estop" and args.action is None:
-        parser.error("estop needs 'engage' or 'release'")
+def _serve_arguments(p: argparse.ArgumentParser) -> None:
+    add_config(p)
+    p.add_argument("--mode", choices=[m.value for m in ControllerMode], help="override mode")
+
+
+def serve(args: argparse.Namespace) -> int:
     stop = stop_event()
     config = load_config(args.config)
     if args.mode:
-        config = dataclasses.replace(
-            config, controller=dataclasses.replace(config.controller, mode=args.mode)
-        )
+        controller = dataclasses.replace(config.controller, mode=ControllerMode(args.mode))
+        config = dataclasses.replace(config, controller=controller)
     setup_logging("controller")
     from services.controller import service
 
-    if args.command == "estop":
-        return service.send_estop(config, args.action == "engage", args.reason)
     return service.run(config, stop)
+
+
+def _estop_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("action", choices=["engage", "release"])
+    p.add_argument("--reason", default="", help="why (logged by the controller)")
+    add_config(p)
+
+
+def estop(args: argparse.Namespace) -> int:
+    config = load_config(args.config)
+    setup_logging("estop", "WARNING")
+    from services.controller import service
+
+    return service.send_estop(config, args.action == "engage", args.reason)
+
+
+COMMANDS = [
+    Command("serve", "run the controller", _serve_arguments, serve),
+    Command("estop", "latch (engage) or release the emergency stop", _estop_arguments, estop),
+]
+
+
+def main() -> int:
+    return service_main("python -m services.controller", __doc__ or "", COMMANDS)
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from common.cli import with_default
 from common.errors import ConfigError, ImageError, StackError
 from common.images import list_images, load_image
 from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code, print_progress
@@ -300,7 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default ``sys.argv[1:]``), run the subcommand, return its exit code."""
-    args = build_parser().parse_args(argv)
+    names = ["detect", "benchmark", "fetch-model", "export", "serve"]
+    args = build_parser().parse_args(with_default(sys.argv[1:] if argv is None else argv, names))
     handler: Callable[[argparse.Namespace], int] = args.handler
     try:
         return handler(args)

@@ -14,6 +14,7 @@ import signal
 import sys
 from typing import Any
 
+from common.cli import Command, add_config, service_main
 from common.config_file import load_config
 from common.lifecycle import run_main, setup_logging, stop_event
 
@@ -43,47 +44,54 @@ def _interrupt(signum: int, _frame: object) -> None:
     raise KeyboardInterrupt
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m services.sim",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument(
-        "command", nargs="?", default="serve", choices=["serve", "scenario", "list"]
-    )
-    parser.add_argument("name", nargs="?", help="scenario name (see 'list')")
-    parser.add_argument("--config", help="stack config (default deploy/stack.toml)")
-    parser.add_argument("--json", action="store_true", help="scenario: print one JSON object")
-    args = parser.parse_args()
-    from services.sim.scenarios import SCENARIOS
-
-    if args.command == "list":
-        for name, sc in SCENARIOS.items():
-            print(f"{name:14} {sc.description}")
-        return 0
-    if args.command == "scenario":
-        # Ctrl-C or SIGTERM interrupt the run; the runner then stops the stack it started.
-        signal.signal(signal.SIGTERM, _interrupt)
-    stop = stop_event() if args.command == "serve" else None
+def serve(args: argparse.Namespace) -> int:
+    stop = stop_event()
     config = load_config(args.config)
-    if args.command == "scenario":
-        if not args.name:
-            parser.error("scenario needs a NAME (see 'python -m services.sim list')")
-        setup_logging("scenario", "WARNING")
-        from services.sim.runner import run_scenario
-
-        result = run_scenario(config, args.name, log=lambda m: print(m, file=sys.stderr))
-        if args.json:
-            print(json.dumps(result))
-        else:
-            _print_text(result)
-        return 0 if result["success"] else 1
     setup_logging("sim")
     from services.sim.service import run
 
-    assert stop is not None
     return run(config, stop)
+
+
+def _scenario_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("name", help="scenario name (see 'list')")
+    add_config(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def scenario(args: argparse.Namespace) -> int:
+    # Ctrl-C or SIGTERM interrupt the run; the runner then stops the stack it started.
+    signal.signal(signal.SIGTERM, _interrupt)
+    config = load_config(args.config)
+    setup_logging("scenario", "WARNING")
+    from services.sim.runner import run_scenario
+
+    result = run_scenario(config, args.name, log=lambda m: print(m, file=sys.stderr))
+    if args.json:
+        print(json.dumps(result))
+    else:
+        _print_text(result)
+    return 0 if result["success"] else 1
+
+
+def list_scenarios(args: argparse.Namespace) -> int:
+    from services.sim.scenarios import SCENARIOS
+
+    for name, sc in SCENARIOS.items():
+        print(f"{name:14} {sc.description}")
+    return 0
+
+
+COMMANDS = [
+    Command("serve", "run the simulated robot (camera, laser and base)", add_config, serve),
+    Command("scenario", "run the real stack against a scripted world", _scenario_arguments,
+            scenario),
+    Command("list", "name the scenarios", lambda p: None, list_scenarios),
+]  # fmt: skip
+
+
+def main() -> int:
+    return service_main("python -m services.sim", __doc__ or "", COMMANDS)
 
 
 if __name__ == "__main__":
