@@ -86,7 +86,7 @@ def source_of(sample: zenoh.Sample) -> str:
 def _readable(path: Path, what: str) -> str:
     if not path.is_file():
         raise ConfigError(
-            f"{what} {path} is missing: run `python -m deploy.credentials` (docs/security.md)"
+            f"{what} {path} is missing: run `zstack credentials` (docs/security.md)"
         )
     return str(path)
 

@@ -57,7 +57,7 @@ class ZenohSettings:
     ``mode = "client"`` makes the supervisor a Zenoh router that every service joins, so that
     all traffic passes through it. ``auth`` ("none", "password" or "certificate") turns on
     authentication and access control there, with the credentials that
-    ``python -m deploy.credentials`` writes to ``credentials_dir`` (relative to the repo root);
+    ``zstack credentials`` writes to ``credentials_dir`` (relative to the repo root);
     it needs client mode. An endpoint ``tls/<host>:<port>`` encrypts the links with the same
     credentials; "certificate" needs one (mutual TLS). See docs/security.md.
     """

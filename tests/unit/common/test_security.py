@@ -72,7 +72,7 @@ def test_auth_needs_client_mode_and_certificates_need_tls() -> None:
 
 def test_missing_credentials_are_one_clear_line(tmp_path: Path) -> None:
     s = ZenohSettings(mode="client", auth="password", credentials_dir=str(tmp_path))
-    with pytest.raises(ConfigError, match=r"password file .*deploy\.credentials"):
+    with pytest.raises(ConfigError, match=r"password file .*zstack credentials"):
         open_session(s, "controller")
 
 
