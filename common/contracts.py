@@ -9,6 +9,7 @@ recorded session): the writer builds them, every reader reads them through these
 from __future__ import annotations
 
 from enum import StrEnum
+from typing import Any, TypedDict
 
 
 class ControllerMode(StrEnum):
@@ -42,3 +43,123 @@ class BackendName(StrEnum):
     TENSORRT = "tensorrt"
     CUDA = "cuda"  # our ONNX interpreter on PyTorch CUDA
     AUTO = "auto"  # tensorrt, then cuda, then onnx
+
+
+# --- The JSON the stack writes ------------------------------------------------------------------
+# Latency statistics per stage: p50, p95, p99, mean and count (common to the query and reports).
+LatencyStats = dict[str, dict[str, float]]
+
+
+class TimelineSeries(TypedDict):
+    """Per-period figures over a run: ``t`` in seconds, the rest one value per period."""
+
+    period_s: float
+    t: list[float]
+    fps: list[float]
+    offered_fps: list[float]
+    dropped: list[float]
+    detections_per_frame: list[float]
+
+
+class MetricsAnswer(TypedDict):
+    """The metrics service's answer to a query (``zstack query``), and a session's summary."""
+
+    stamp_ns: int
+    window_s: float
+    fps: float
+    frames: int
+    detections: int
+    detections_per_frame: float
+    dropped_frames: int
+    latency_ms: LatencyStats
+    counters: dict[str, int]
+    class_counts: dict[str, int]
+    drop_rate: float
+    drop_rate_total: float
+    frames_offered: int
+    timeline: TimelineSeries
+
+
+class _SessionCore(TypedDict):
+    version: int
+    created: str
+    duration_s: float
+    detector: dict[str, str]
+    summary: MetricsAnswer
+    latency_samples_ms: dict[str, list[float]]
+
+
+class Session(_SessionCore, total=False):
+    """A recorded run (``zstack report`` writes it as session.json and reads it back); a
+    recording made live also says how the stack was set up and on what machine."""
+
+    config: dict[str, Any]
+    machine: dict[str, Any]
+    metrics_service: dict[str, Any] | None
+    supervisor_exit_code: int | None
+    benchmarks: list[BackendBenchmark]  # added by ``report --benchmark FILE``
+
+
+class DetectorInfo(TypedDict):
+    """The detector's answer on ``<prefix>/detector/<camera>/info``."""
+
+    model: str
+    classes: list[str]
+    backend: str
+    device: str
+    precision: str
+
+
+class ScenarioResult(TypedDict, total=False):
+    """A scenario's figures (``zstack scenario NAME --json``); see services/sim/score.py."""
+
+    success: bool
+    reason: str
+    scenario: str
+    duration_s: float
+    time_to_reach_s: float | None
+    final_distance_m: float | None
+    min_clearance_m: float | None
+    mean_bearing_error_deg: float | None
+    stale_commands: int
+    commands: int
+    nonzero_commands: int
+    stop_after_kill_s: float | None
+    distance_travelled_m: float
+    moving_at_kill: bool
+    checks: dict[str, bool]
+    log: str
+    supervisor_exit_code: int | None
+
+
+class BackendInfo(TypedDict):
+    name: str
+    device: str
+    precision: str
+    threads: int | None
+
+
+class BackendBenchmark(TypedDict, total=False):
+    """One backend's figures in ``zstack benchmark --json``."""
+
+    p50_ms: dict[str, float]
+    p95_ms: dict[str, float]
+    fps: float
+    bare_run_p50_ms: float
+    ratio_to_bare_run: float
+    pre_post_fraction_of_inference: float
+    backend: BackendInfo
+    agreement: dict[str, float]
+    machine: dict[str, Any]  # where it ran
+
+
+class BenchmarkReport(BackendBenchmark, total=False):
+    """``zstack benchmark --json``: the first backend's figures at the top level, every
+    backend's under ``backends``, and what they were measured on."""
+
+    runs: int
+    warmup: int
+    model: dict[str, Any]
+    image: dict[str, Any]
+    agreement_reference: dict[str, Any]
+    backends: dict[str, BackendBenchmark]

@@ -8,10 +8,11 @@ on the metrics key answered with JSON).
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import cast
 
 import zenoh
 
+from common.contracts import MetricsAnswer
 from common.keys import Keys
 
 
@@ -21,10 +22,9 @@ def ready_services(session: zenoh.Session, keys: Keys, timeout_s: float = 1.0) -
     return {str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None}
 
 
-def query_metrics(session: zenoh.Session, keys: Keys, timeout_s: float) -> dict[str, Any] | None:
+def query_metrics(session: zenoh.Session, keys: Keys, timeout_s: float) -> MetricsAnswer | None:
     """The metrics service's JSON answer, or None when nobody answered within ``timeout_s``."""
     for reply in session.get(keys.metrics(), timeout=timeout_s):
         if reply.ok is not None:
-            answer: dict[str, Any] = json.loads(reply.ok.payload.to_string())
-            return answer
+            return cast(MetricsAnswer, json.loads(reply.ok.payload.to_string()))
     return None

@@ -16,12 +16,12 @@ import math
 import sys
 import threading
 import time
-from typing import Any
 
 import zenoh
 
 from common.bus import open_hub
 from common.config_file import load_config
+from common.contracts import MetricsAnswer
 from common.errors import BackendUnavailable, ConfigError, DecodeError, ModelError, StackError
 from common.keys import Keys
 from common.lifecycle import (
@@ -91,7 +91,9 @@ class LiveView:
             return service in self.ready
 
 
-def status_line(procs: list[ServiceProcess], view: LiveView, metrics: dict[str, Any] | None) -> str:
+def status_line(
+    procs: list[ServiceProcess], view: LiveView, metrics: MetricsAnswer | None
+) -> str:
     parts = []
     for p in procs:
         parts.append(f"{p.name}:{p.state}" + (f"(r{p.restarts})" if p.restarts else ""))
@@ -128,7 +130,7 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
         p.start()
     end = time.monotonic() + duration_s if duration_s else None
     next_status = time.monotonic()
-    last_metrics: dict[str, Any] | None = None
+    last_metrics: MetricsAnswer | None = None
     failed: ServiceProcess | None = None
     try:
         while failed is None and not stop.wait(0.1):

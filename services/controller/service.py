@@ -11,7 +11,7 @@ import zenoh
 
 from common.bus import Publisher, QoS, open_session
 from common.clock import BOOT_ID, Stamp, now
-from common.contracts import ControllerMode, ControllerState
+from common.contracts import ControllerMode, ControllerState, DetectorInfo
 from common.errors import DecodeError, StackError
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.keys import Keys
@@ -156,7 +156,8 @@ def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:
             if reply.ok is None:
                 continue
             try:
-                classes = json.loads(reply.ok.payload.to_string())["classes"]
+                info: DetectorInfo = json.loads(reply.ok.payload.to_string())
+                classes = info["classes"]
                 if not (isinstance(classes, list) and all(isinstance(c, str) for c in classes)):
                     raise TypeError(f"classes must be a list of names, got {classes!r:.80}")
             except (ValueError, KeyError, TypeError) as exc:

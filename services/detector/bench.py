@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from common.contracts import BackendBenchmark, BenchmarkReport
 from common.errors import ConfigError, ImageError
 from common.images import list_images, load_image, load_sample
 from common.machine import cpu_model
@@ -98,7 +99,7 @@ class _Timings:
         self.stages["postprocess"].append(result.timing.postprocess_ms)
         self.stages["total"].append(total_ms)
 
-    def report(self, det: Detector) -> dict[str, Any]:
+    def report(self, det: Detector) -> BackendBenchmark:
         p50 = {k: round(float(np.percentile(v, 50)), 3) for k, v in self.stages.items()}
         bare = float(np.median(self.bare))
         return {
@@ -193,7 +194,7 @@ def run(args: argparse.Namespace, resolve_model: Callable[[str | None], Path]) -
                 truth, _detect_all(det, pictures, CANDIDATE_CONF)
             ).as_dict()
         first = dets[labels[0]]
-        report: dict[str, Any] = {
+        report: BenchmarkReport = {
             **reports[labels[0]],
             "runs": args.runs,
             "warmup": args.warmup,
@@ -220,7 +221,7 @@ def run(args: argparse.Namespace, resolve_model: Callable[[str | None], Path]) -
     return 0
 
 
-def format_table(reports: dict[str, dict[str, Any]]) -> str:
+def format_table(reports: dict[str, BackendBenchmark]) -> str:
     """The side-by-side text report: one row per backend."""
     head = f"{'backend':<10}{'device':<9}{'prec':<6}"
     head += (

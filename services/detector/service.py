@@ -13,6 +13,7 @@ import zenoh
 
 from common.bus import QoS
 from common.clock import BOOT_ID, now
+from common.contracts import DetectorInfo
 from common.errors import DecodeError, ImageError
 from common.frames import frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
@@ -104,9 +105,14 @@ def run(config: Config, stop: threading.Event) -> int:
         pub = node.publisher(node.keys.detections(config.stack.camera), QoS.PERCEPTION)
         gate = FreshnessGate(s.max_frame_age_s, config.stack.clock_tolerance_s, BOOT_ID)
         info = json.dumps(
-            {"model": detector.model_path.name, "classes": list(detector.names),
-             "backend": b.name, "device": b.device, "precision": b.precision}
-        )  # fmt: skip
+            DetectorInfo(
+                model=detector.model_path.name,
+                classes=list(detector.names),
+                backend=b.name,
+                device=b.device,
+                precision=b.precision,
+            )
+        )
         info_key = node.keys.detector_info(config.stack.camera)
         queryable = node.session.declare_queryable(info_key, lambda q: q.reply(info_key, info))
         # Warm the backend up before announcing readiness: the first run allocates.

@@ -20,8 +20,8 @@ from __future__ import annotations
 
 from collections import Counter, OrderedDict
 from collections.abc import Callable
-from typing import Any
 
+from common.contracts import MetricsAnswer, TimelineSeries
 from common.messages import Detections, Header, MetricsSnapshot, ServiceCounters, Twist
 from services.metrics.window import Timeline, Window, percentiles
 
@@ -163,8 +163,8 @@ class Aggregator:
             class_counts=dict(self._classes.most_common()),
         )
 
-    def extras(self, now: float, clock_to_unix: float = 0.0) -> dict[str, Any]:
-        """What the query answers beyond the snapshot: drop rates and the per-second timeline.
+    def answer(self, header: Header, now: float, clock_to_unix: float = 0.0) -> MetricsAnswer:
+        """The metrics query's JSON: the snapshot, drop rates and the per-second timeline.
 
         ``drop_rate`` covers the window (dropped / offered frames, 0 when none were offered);
         ``drop_rate_total`` the detector's counters since it started. The timeline's ``t`` is
@@ -180,23 +180,30 @@ class Aggregator:
         )
         period = self._timeline.period_s
         frames, boxes = series["frames"], series["detections"]
-        return {
-            "drop_rate": _ratio(recent.get("dropped", 0.0), recent.get("offered", 0.0)),
-            "drop_rate_total": _ratio(self._counters.get("detector.dropped", 0), offered_total),
-            "frames_offered": offered_total,
-            "timeline": {
-                "period_s": period,
-                "t": [t + clock_to_unix for t in series["t"]],
-                "fps": [f / period for f in frames],
-                "offered_fps": [f / period for f in series["offered"]],
-                "dropped": series["dropped"],
-                "detections_per_frame": [_ratio(b, f) for b, f in zip(boxes, frames, strict=True)],
-            },
-        }
-
-    def answer(self, header: Header, now: float, clock_to_unix: float = 0.0) -> dict[str, Any]:
-        """The metrics query's JSON: the snapshot plus :meth:`extras`."""
-        return {**self.snapshot(header, now).to_json_dict(), **self.extras(now, clock_to_unix)}
+        snap = self.snapshot(header, now)
+        return MetricsAnswer(
+            stamp_ns=snap.header.stamp_ns,
+            window_s=snap.window_s,
+            fps=snap.fps,
+            frames=snap.frames,
+            detections=snap.detections,
+            detections_per_frame=snap.detections_per_frame,
+            dropped_frames=snap.dropped_frames,
+            latency_ms=snap.latency_ms,
+            counters=snap.counters,
+            class_counts=snap.class_counts,
+            drop_rate=_ratio(recent.get("dropped", 0.0), recent.get("offered", 0.0)),
+            drop_rate_total=_ratio(self._counters.get("detector.dropped", 0), offered_total),
+            frames_offered=offered_total,
+            timeline=TimelineSeries(
+                period_s=period,
+                t=[t + clock_to_unix for t in series["t"]],
+                fps=[f / period for f in frames],
+                offered_fps=[f / period for f in series["offered"]],
+                dropped=series["dropped"],
+                detections_per_frame=[_ratio(b, f) for b, f in zip(boxes, frames, strict=True)],
+            ),
+        )
 
     def latency_samples(self, now: float) -> dict[str, list[float]]:
         """Every latency sample still in the window, per stage, in arrival order (ms)."""

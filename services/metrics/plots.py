@@ -15,6 +15,8 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
+from common.contracts import BackendBenchmark, TimelineSeries
+
 DPI = 100
 SIZE = (8.0, 4.5)  # inches: 800 x 450 px at DPI
 
@@ -94,7 +96,7 @@ def latency_histogram(samples: Mapping[str, Sequence[float]], path: Path) -> Pat
     return _save(fig, path)
 
 
-def fps_over_time(timeline: Mapping[str, Sequence[float]], path: Path) -> Path:
+def fps_over_time(timeline: TimelineSeries, path: Path) -> Path:
     """Frames offered to the detector, frames it detected on, and frames it dropped, per second."""
     fig = _new()
     ax = fig.subplots()
@@ -184,7 +186,7 @@ def benchmark_label(bench: Mapping[str, Any]) -> str:
     return "/".join(str(b.get(k, "?")) for k in ("name", "device", "precision"))
 
 
-def backend_comparison(benchmarks: Sequence[Mapping[str, Any]], path: Path) -> Path:
+def backend_comparison(benchmarks: Sequence[BackendBenchmark], path: Path) -> Path:
     """Median preprocess / inference / postprocess per backend, stacked; p95 total marked."""
     fig = _new()
     ax = fig.subplots()

@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Iterator
-from typing import Any
 from wsgiref.simple_server import WSGIServer
 
 from prometheus_client import CollectorRegistry, Histogram, start_http_server
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 
+from common.contracts import MetricsAnswer
 from common.errors import ConfigError
 
 #: Histogram buckets in seconds: a CPU detector lives around 50-500 ms, a GPU one below 50 ms.
@@ -37,8 +37,8 @@ _GAUGES = {
     "window_s": "Span of the sliding window in seconds",
 }
 
-#: Returns the metrics query's JSON answer (snapshot plus extras), taken under the service's lock.
-AnswerSource = Callable[[], dict[str, Any]]
+#: Returns the metrics query's JSON answer, taken under the service's lock.
+AnswerSource = Callable[[], MetricsAnswer]
 
 
 class _AnswerCollector:
@@ -50,7 +50,10 @@ class _AnswerCollector:
     def collect(self) -> Iterator[Metric]:
         a = self._source()
         for key, doc in _GAUGES.items():
-            yield GaugeMetricFamily(f"stack_{key}", doc, value=float(a.get(key, 0.0)))
+            value = a.get(key, 0.0)
+            yield GaugeMetricFamily(
+                f"stack_{key}", doc, value=float(value) if isinstance(value, int | float) else 0.0
+            )
         window = GaugeMetricFamily(
             "stack_latency_window_ms",
             "Latency percentiles over the sliding window, per stage (ms)",

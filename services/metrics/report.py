@@ -14,8 +14,9 @@ import json
 import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
+from common.contracts import BackendBenchmark, Session
 from common.errors import ConfigError
 from common.lifecycle import print_progress
 from services.metrics.plots import SEGMENTS, benchmark_label, segment_means
@@ -44,15 +45,15 @@ def _read_json(path: Path) -> Any:
         raise ConfigError(f"{path}: not valid JSON ({exc})") from exc
 
 
-def read_session(path: Path) -> dict[str, Any]:
+def read_session(path: Path) -> Session:
     """A saved session.json, checked; ConfigError naming the file if it is not one."""
     return check_session(_read_json(path), str(path))
 
 
-def load_benchmarks(paths: Sequence[str]) -> list[dict[str, Any]]:
+def load_benchmarks(paths: Sequence[str]) -> list[BackendBenchmark]:
     """Detector benchmark results: each file holds one JSON object, or one per line. An object
     from a side-by-side run (``benchmark --backend a --backend b``) gives one per backend."""
-    out: list[dict[str, Any]] = []
+    out: list[BackendBenchmark] = []
     for raw in paths:
         path = Path(raw)
         try:
@@ -72,7 +73,7 @@ def load_benchmarks(paths: Sequence[str]) -> list[dict[str, Any]]:
                     raise ConfigError(f"{path}: not `services.detector benchmark --json` output")
                 if isinstance(item.get("machine"), dict):
                     one = {"machine": item["machine"], **one}  # where it ran, for the report
-                out.append(one)
+                out.append(cast(BackendBenchmark, one))
     return out
 
 
@@ -85,7 +86,7 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     return lines + ["| " + " | ".join(row) + " |" for row in rows]
 
 
-def _summary_rows(session: Mapping[str, Any]) -> list[list[str]]:
+def _summary_rows(session: Session) -> list[list[str]]:
     s, tl = session["summary"], session["summary"]["timeline"]
     period = float(tl.get("period_s", 1.0))
     # Detected, offered and dropped over one span, the timeline's: the totals since start
@@ -121,7 +122,7 @@ def _machine_rows(m: Mapping[str, Any]) -> list[list[str]]:
     ]
 
 
-def render_markdown(session: Mapping[str, Any], plots: Mapping[str, Path]) -> str:
+def render_markdown(session: Session, plots: Mapping[str, Path]) -> str:
     """report.md: summary, per-stage latency, plots, setup and machine."""
     s, cfg = session["summary"], session.get("config", {})
     det = session.get("detector", {})
@@ -193,7 +194,7 @@ def render_markdown(session: Mapping[str, Any], plots: Mapping[str, Path]) -> st
     return "\n".join(lines)
 
 
-def write_report(session: dict[str, Any], out: Path) -> list[Path]:
+def write_report(session: Session, out: Path) -> list[Path]:
     """Write the plots, report.md and session.json into ``out``; return what was written."""
     from services.metrics import plots as draw  # matplotlib: only when a report is made
 

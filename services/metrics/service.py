@@ -1,8 +1,8 @@
 """The metrics service: listens to detections, commands and counters; answers queries in JSON.
 
-The answer is ``MetricsSnapshot.to_json_dict()`` plus :meth:`Aggregator.extras` (drop rates and
-the per-second timeline), so the message schema stays as it is. With ``prometheus_port`` set the
-same figures are also served to Prometheus.
+The answer is :meth:`Aggregator.answer`, a ``common.contracts.MetricsAnswer``: the snapshot's
+figures plus drop rates and the per-second timeline, so the message schema stays as it is. With
+``prometheus_port`` set the same figures are also served to Prometheus.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from typing import Any
 import zenoh
 
 from common.bus import open_session
+from common.contracts import MetricsAnswer
 from common.errors import DecodeError
 from common.keys import Keys
 from common.messages import Detections, ServiceCounters, Twist
@@ -40,7 +41,7 @@ def run(config: Config, stop: threading.Event) -> int:
     agg = Aggregator(s.window_s, s.history_s, on_latency=listener)
     with Node("metrics", config) as node:
 
-        def answer() -> dict[str, Any]:
+        def answer() -> MetricsAnswer:
             with lock:
                 return agg.answer(node.header(), now(), time.time() - time.monotonic())
 
@@ -97,7 +98,7 @@ def run(config: Config, stop: threading.Event) -> int:
     return 0
 
 
-def query(config: Config, timeout_s: float) -> dict[str, Any] | None:
+def query(config: Config, timeout_s: float) -> MetricsAnswer | None:
     """Ask the metrics service for its snapshot; None if nobody answered within the timeout."""
     session = open_session(config.zenoh, "observer")
     keys = Keys(config.stack.prefix)

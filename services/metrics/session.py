@@ -17,12 +17,13 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import zenoh
 
 from common.bus import open_session
 from common.config_file import load_config
+from common.contracts import Session
 from common.errors import ConfigError, DecodeError
 from common.keys import Keys
 from common.lifecycle import Progress
@@ -74,9 +75,10 @@ def _config_summary(config: Config) -> dict[str, Any]:
 
 def _query_metrics(session: zenoh.Session, keys: Keys) -> dict[str, Any] | None:
     answer = query_metrics(session, keys, _QUERY_TIMEOUT_S)
-    if answer is not None:
-        answer.pop("timeline", None)  # the recorder has its own, from the same messages
-    return answer
+    if answer is None:
+        return None
+    # Without its timeline: the recorder has its own, from the same messages.
+    return {k: v for k, v in answer.items() if k != "timeline"}
 
 
 def _listen(session: zenoh.Session, keys: Keys, agg: Aggregator, lock: threading.Lock) -> list[Any]:
@@ -111,7 +113,7 @@ def record(
     stop: threading.Event,
     progress: Progress,
     startup_timeout_s: float = 180.0,
-) -> dict[str, Any]:
+) -> Session:
     """Start the stack, wait until it is ready, record ``duration_s`` seconds, stop it.
 
     The supervisor's output goes to ``log_path``. Ctrl-C (``stop``) during the recording ends
@@ -148,31 +150,29 @@ def record(
     finally:
         stop_supervisor(proc, config.supervisor.stop_timeout_s + _STOP_MARGIN_S)
         exit_code = proc.returncode
-    return {
-        **session_data,
-        "config": _config_summary(config),
-        "machine": machine_info(),
-        "metrics_service": service_answer,
-        "supervisor_exit_code": exit_code,
-    }
+    session_data["config"] = _config_summary(config)
+    session_data["machine"] = machine_info()
+    session_data["metrics_service"] = service_answer
+    session_data["supervisor_exit_code"] = exit_code
+    return session_data
 
 
-def snapshot_session(agg: Aggregator, start: float, now: float) -> dict[str, Any]:
+def snapshot_session(agg: Aggregator, start: float, now: float) -> Session:
     """The recorded part of a session: ``agg``'s answer and samples between ``start`` and
     ``now`` (its clock), timeline times in seconds since ``start``."""
     header = Header(stamp_ns=time.time_ns(), frame_id="", seq=0, source="report")
     samples = agg.latency_samples(now)
-    return {
-        "version": SESSION_VERSION,
-        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
-        "duration_s": round(now - start, 3),
-        "detector": {"model": agg.model, "backend": agg.backend},
-        "summary": agg.answer(header, now, clock_to_unix=-start),
-        "latency_samples_ms": {k: [round(v, 3) for v in vs] for k, vs in samples.items()},
-    }
+    return Session(
+        version=SESSION_VERSION,
+        created=datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        duration_s=round(now - start, 3),
+        detector={"model": agg.model, "backend": agg.backend},
+        summary=agg.answer(header, now, clock_to_unix=-start),
+        latency_samples_ms={k: [round(v, 3) for v in vs] for k, vs in samples.items()},
+    )
 
 
-def check_session(data: Any, source: str) -> dict[str, Any]:
+def check_session(data: Any, source: str) -> Session:
     """``data`` if it looks like a session (version and the keys the report reads)."""
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: not a session file (expected a JSON object)")
@@ -190,4 +190,4 @@ def check_session(data: Any, source: str) -> dict[str, Any]:
     for key in ("latency_ms", "timeline"):
         if not isinstance(data["summary"].get(key), dict):
             raise ConfigError(f"{source}: not a session file (summary has no '{key}')")
-    return data
+    return cast(Session, data)

@@ -16,10 +16,11 @@ from typing import Any
 
 from common.cli import Command, add_config, service_main
 from common.config_file import load_config
+from common.contracts import ScenarioResult
 from common.lifecycle import run_main, setup_logging, stop_event
 
 
-def _print_text(r: dict[str, Any]) -> None:
+def _print_text(r: ScenarioResult) -> None:
     def fmt(v: Any) -> str:
         return "-" if v is None else f"{v:.2f}" if isinstance(v, float) else str(v)
 

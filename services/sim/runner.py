@@ -22,7 +22,7 @@ import zenoh
 
 from common.bus import open_session
 from common.config_file import to_toml
-from common.contracts import ControllerMode
+from common.contracts import ControllerMode, ScenarioResult
 from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, GroundTruth, Twist
@@ -84,7 +84,7 @@ def _record(session: zenoh.Session, keys: Keys, camera: str, rec: Recording) -> 
     ]
 
 
-def run_scenario(base: Config, name: str, log: Any = None) -> dict[str, Any]:
+def run_scenario(base: Config, name: str, log: Any = None) -> ScenarioResult:
     """Run scenario ``name`` on the real stack; returns its figures (see score.py)."""
     if name not in SCENARIOS or name == "demo":
         known = ", ".join(n for n in SCENARIOS if n != "demo")

@@ -21,8 +21,8 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
+from common.contracts import ScenarioResult
 from common.messages import Detections, GroundTruth, Twist
 from common.settings import ControllerSettings
 from services.sim.scenarios import Scenario
@@ -73,7 +73,7 @@ def stale_commands(rec: Recording, timeout_s: float) -> int:
 
 def score(
     scenario: Scenario, rec: Recording, world: World, s: ControllerSettings, hfov_deg: float
-) -> dict[str, Any]:
+) -> ScenarioResult:
     """The figures of one run, and whether it passed."""
     truths = [t for t in rec.truths if t.sim_time_s > 0]
     if not truths:
@@ -86,7 +86,7 @@ def score(
         ),
         default=None,
     )
-    out: dict[str, Any] = {
+    out: ScenarioResult = {
         "scenario": scenario.name,
         "duration_s": truths[-1].sim_time_s,
         "time_to_reach_s": None,
@@ -126,7 +126,7 @@ def score(
 
 
 def verdict(
-    scenario: Scenario, f: dict[str, Any], s: ControllerSettings
+    scenario: Scenario, f: ScenarioResult, s: ControllerSettings
 ) -> tuple[bool, dict[str, bool]]:
     """The pass conditions, each named so a failure says which one."""
     checks = {"no commands while stale": f["stale_commands"] == 0}

@@ -81,6 +81,9 @@ def test_counters_are_namespaced_and_drops_surface() -> None:
     assert snap.counters == {"detector.bad_input": 2, "detector.dropped": 7, "metrics.bad_input": 1}
 
 
+HDR = Header(stamp_ns=0, frame_id="", seq=0, source="metrics")
+
+
 def _counters(frames_in: int, dropped: int) -> ServiceCounters:
     hdr = Header(stamp_ns=0, frame_id="", seq=0, source="detector")
     return ServiceCounters(
@@ -93,14 +96,14 @@ def test_drop_rate_over_the_window_and_since_start() -> None:
     agg.on_counters(_counters(100, 50), now=0.0)  # a baseline: what came before is not in it
     agg.on_counters(_counters(110, 52), now=1.0)
     agg.on_counters(_counters(120, 58), now=2.0)
-    extras = agg.extras(now=2.5)
+    extras = agg.answer(HDR, now=2.5)
     assert extras["drop_rate"] == pytest.approx(8 / 20)
     assert extras["drop_rate_total"] == pytest.approx(58 / 120)
     assert extras["frames_offered"] == 120
     # A restarted detector counts from zero again; its new counts are deltas, not negatives.
     agg.on_counters(_counters(10, 1), now=3.0)
-    assert agg.extras(now=3.5)["drop_rate"] == pytest.approx(9 / 30)
-    assert agg.extras(now=20.0)["drop_rate"] == 0.0  # everything has left the window
+    assert agg.answer(HDR, now=3.5)["drop_rate"] == pytest.approx(9 / 30)
+    assert agg.answer(HDR, now=20.0)["drop_rate"] == 0.0  # everything has left the window
 
 
 def test_timeline_gives_fps_and_boxes_per_second() -> None:
@@ -109,7 +112,7 @@ def test_timeline_gives_fps_and_boxes_per_second() -> None:
         agg.on_detections(_dets(1_000 * MS + i * 100 * MS, n=2), now=10.0 + i * 0.1)
     agg.on_counters(_counters(0, 0), now=10.0)
     agg.on_counters(_counters(60, 30), now=13.0)  # 20 offered/s, 10 dropped/s, over 3 s
-    tl = agg.extras(now=15.5, clock_to_unix=1000.0)["timeline"]
+    tl = agg.answer(HDR, now=15.5, clock_to_unix=1000.0)["timeline"]
     assert tl["t"] == [1010.0, 1011.0, 1012.0]  # up to 2 s ago: counters may still come
     assert tl["fps"] == [10.0, 10.0, 10.0]
     assert tl["detections_per_frame"] == [2.0, 2.0, 2.0]
