@@ -5,7 +5,8 @@ from __future__ import annotations
 import json
 import threading
 import time
-from typing import Generic, TypeVar
+from collections.abc import Callable
+from typing import Generic, Protocol, TypeVar
 
 import zenoh
 
@@ -72,38 +73,15 @@ def run(config: Config, stop: threading.Event) -> int:
         det_gate = FreshnessGate(s.detection_timeout_s, tolerance, BOOT_ID)
         scan_gate = FreshnessGate(s.scan_timeout_s, tolerance, BOOT_ID)
 
-        def on_detections(sample: zenoh.Sample) -> None:
-            try:
-                msg = Detections.decode(sample.payload.to_bytes())
-            except DecodeError as exc:
-                node.bad_input(det_key, exc)
-                return
-            verdict, age = det_gate.check(msg.header, now())
-            if verdict is Verdict.FRESH:
-                dets.set(msg)
-                node.counters.add("detections_in")
-            else:
-                node.reject(f"detections_{verdict}", f"{verdict} detections ({age:.2f} s) ignored")
-
         def on_estop(sample: zenoh.Sample) -> None:
             _on_estop(node, latch, sample, s.estop_release_max_age_s, tolerance)
 
-        def on_scan(sample: zenoh.Sample) -> None:
-            try:
-                msg = LaserScan.decode(sample.payload.to_bytes())
-            except DecodeError as exc:
-                node.bad_input(node.keys.scan(), exc)
-                return
-            verdict, age = scan_gate.check(msg.header, now())
-            if verdict is Verdict.FRESH:
-                scan.set(msg)
-                node.counters.add("scans_in")
-            else:
-                node.reject(f"scans_{verdict}", f"{verdict} scan ({age:.2f} s) ignored")
-
+        on_detections = _fresh_input(node, det_key, Detections.decode, det_gate, dets, "detections")
+        scan_key = node.keys.scan()
+        on_scan = _fresh_input(node, scan_key, LaserScan.decode, scan_gate, scan, "scans")
         subs = [
             node.session.declare_subscriber(det_key, on_detections),
-            node.session.declare_subscriber(node.keys.scan(), on_scan),
+            node.session.declare_subscriber(scan_key, on_scan),
             node.session.declare_subscriber(node.keys.estop(), on_estop),
         ]
         controller = Controller(s, config.camera.hfov_deg)
@@ -145,6 +123,41 @@ def run(config: Config, stop: threading.Event) -> int:
             for sub in subs:
                 sub.undeclare()
     return 0
+
+
+class _Stamped(Protocol):
+    @property
+    def header(self) -> Header: ...
+
+
+_S = TypeVar("_S", bound=_Stamped)
+
+
+def _fresh_input(
+    node: Node,
+    key: str,
+    decode: Callable[[bytes], _S],
+    gate: FreshnessGate,
+    latest: Latest[_S],
+    name: str,
+) -> Callable[[zenoh.Sample], None]:
+    """A subscriber callback: decode, judge freshness, keep what is fresh, count the rest
+    (``<name>_in``, ``<name>_stale|future|replay``; garbage as bad input)."""
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        try:
+            msg = decode(sample.payload.to_bytes())
+        except DecodeError as exc:
+            node.bad_input(key, exc)
+            return
+        verdict, age = gate.check(msg.header, now())
+        if verdict is Verdict.FRESH:
+            latest.set(msg)
+            node.counters.add(f"{name}_in")
+        else:
+            node.reject(f"{name}_{verdict}", f"{verdict} {name} ({age:.2f} s) ignored")
+
+    return on_sample
 
 
 def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:
