@@ -276,37 +276,39 @@ def _rogue_attack(stack: Stack, principal: str, seconds: float) -> None:
         rogue.close()
 
 
+@pytest.mark.parametrize("auth", ["password", "certificate"])
 def test_secure_profile_keeps_strangers_out_and_services_to_their_own_keys(
-    make_stack, tmp_path: Path
+    make_stack, tmp_path: Path, auth: str
 ) -> None:  # type: ignore[no-untyped-def]
-    from deploy.credentials import generate
+    import dataclasses
 
-    creds = tmp_path / "credentials"
+    from common.bus import open_session
+    from common.errors import ConfigError
+    from deploy.credentials import generate
+    from tests.integration.conftest import free_port
+
+    creds, other = tmp_path / "credentials", tmp_path / "another-install"
     generate(creds)
-    stack: Stack = make_stack(
-        zenoh={"mode": "client", "auth": "password", "credentials_dir": str(creds)}
-    )
+    generate(other)
+    table = {"mode": "client", "auth": auth, "credentials_dir": str(creds)}
+    if auth == "certificate":  # mutual TLS: every link encrypted, every process its own key
+        table["endpoint"] = f"tls/127.0.0.1:{free_port()}"
+    stack: Stack = make_stack(zenoh=table)
     stack.wait_ready(STACK)
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
     _, statuses = stack.subscribe(stack.keys.controller_status())
     _, scans = stack.subscribe(stack.keys.scan())
     wait_for(lambda: moving(cmds), 60, "the secure stack working: motion")
 
-    # No credentials, or a wrong password: the session cannot join.
-    import dataclasses
-
-    from common.bus import open_session
-    from common.errors import ConfigError
-
+    # No credentials, or those of another installation (other passwords, another CA): the
+    # session cannot join.
+    zenoh_s = stack.config.zenoh
     with pytest.raises(ConfigError):
-        open_session(dataclasses.replace(stack.config.zenoh, auth="none"), "observer")
-    (creds / "observer.password").write_text("not-the-password\n")
+        open_session(dataclasses.replace(zenoh_s, auth="none"), "observer")
     with pytest.raises(ConfigError):
-        open_session(stack.config.zenoh, "observer")
+        open_session(dataclasses.replace(zenoh_s, credentials_dir=str(other)), "observer")
     # As a peer with no credentials it opens, alone: it sees no service and no command.
-    stranger = open_session(
-        dataclasses.replace(stack.config.zenoh, mode="peer", auth="none"), "observer"
-    )
+    stranger = open_session(dataclasses.replace(zenoh_s, mode="peer", auth="none"), "observer")
     try:
         heard: list[bytes] = []
         stranger.declare_subscriber(stack.keys.cmd_vel(), lambda s: heard.append(b""))
