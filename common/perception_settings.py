@@ -59,8 +59,14 @@ class DetectorSettings:
     ``precision`` empty leaves the backend's default (fp32 on the CPU, fp16 on a GPU); GPU
     backends take fp32 or fp16, TensorRT also int8. ``batch_profile`` is the (min, opt, max)
     batch a TensorRT engine is built for; the service sends single frames, so (1, 1, 1).
-    ``classes`` empty keeps every class. A frame captured more than ``max_frame_age_s`` ago,
-    stamped in the future or replayed is not detected on (counted, see common/freshness.py).
+    A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
+    not detected on (counted, see common/freshness.py).
+
+    Post-processing, which the Detector (services/detector/pipeline.py) reads from here:
+    ``conf`` is the least score kept (objectness x class score for YOLOv5-style models);
+    ``iou`` the overlap above which a lower-scored box of the same class is suppressed;
+    ``max_det`` caps detections per image (300 as in Ultralytics; the stack's config sets its
+    own); ``classes`` keeps only those class names, and empty keeps every class.
     """
 
     model: str = ""
@@ -69,7 +75,7 @@ class DetectorSettings:
     batch_profile: tuple[int, int, int] = (1, 1, 1)
     conf: float = 0.25
     iou: float = 0.45
-    max_det: int = 100
+    max_det: int = 300
     classes: tuple[str, ...] = ()
     max_frame_age_s: float = 1.0
     counters_period_s: float = 1.0
@@ -94,6 +100,10 @@ class DetectorSettings:
             raise ConfigError(
                 f"detector.max_det must be within 1..{MAX_DETECTIONS}, got {self.max_det}"
             )
+        if not all(self.classes):
+            raise ConfigError(
+                f"detector.classes must be non-empty class names, got {list(self.classes)}"
+            )
         positive("detector.counters_period_s", self.counters_period_s)
 
 
@@ -104,7 +114,9 @@ class TrackerSettings:
     ``high_score`` starts a track, ``low_score`` may only extend one, ``iou`` is the least
     overlap with a track's predicted box, and a track unseen for ``max_age_s`` is dropped.
     A frame whose stamp moved by more than ``max_stamp_jump_s`` beyond the time that really
-    passed between arrivals (or went back) is ignored, not allowed to age every track out.
+    passed between arrivals (or went back) is ignored, not allowed to age every track out;
+    after ``jumps_before_reset`` such frames in a row the stamps are believed and the tracks
+    restart (a camera clock that really stepped). ``enabled`` is the service's to read.
     """
 
     enabled: bool = True
@@ -113,6 +125,7 @@ class TrackerSettings:
     iou: float = 0.25
     max_age_s: float = 1.0
     max_stamp_jump_s: float = 0.5
+    jumps_before_reset: int = 3
 
     def __post_init__(self) -> None:
         for name in ("high_score", "low_score", "iou"):
@@ -121,3 +134,7 @@ class TrackerSettings:
             raise ConfigError("tracker.low_score must not be above tracker.high_score")
         positive("tracker.max_age_s", self.max_age_s)
         positive("tracker.max_stamp_jump_s", self.max_stamp_jump_s)
+        if self.jumps_before_reset < 1:
+            raise ConfigError(
+                f"tracker.jumps_before_reset must be an integer >= 1, got {self.jumps_before_reset}"
+            )

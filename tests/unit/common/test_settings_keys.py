@@ -202,3 +202,9 @@ def test_every_settings_class_is_still_imported_from_common_settings() -> None:
             assert getattr(common.settings, name) is getattr(module, name)
             assert name in common.settings.__all__
 
+
+def test_the_default_config_states_the_tracker_reset_and_keeps_its_own_max_det() -> None:
+    cfg = load_config(DEFAULT_CONFIG, environ={"STACK__TRACKER__JUMPS_BEFORE_RESET": "5"})
+    assert cfg.tracker.jumps_before_reset == 5
+    assert "jumps_before_reset" in DEFAULT_CONFIG.read_text()
+    assert load_config(DEFAULT_CONFIG, environ={}).detector.max_det == 100
