@@ -26,9 +26,11 @@ import numpy as np
 import numpy.typing as npt
 
 from common.boxes import Boxes
+from common.settings import DetectorSettings
 from services.metrics.labelled import DatasetError
 
-DEFAULT_CONF_THRESHOLD = 0.25
+#: Where precision and recall are read by default: the stack's own detector.conf.
+DEFAULT_CONF_THRESHOLD = DetectorSettings().conf
 MATCH_IOU = 0.5
 
 
