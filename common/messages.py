@@ -23,6 +23,7 @@ from typing import Annotated, Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from common.boxes import Boxes, check_boxes
 from common.codec import Message
 from common.fields import Dim, NonNegativeInt, Shape
 
@@ -97,6 +98,8 @@ class Detections(Message):
     ``header`` is the frame's header, unchanged, so latency is measured from the capture stamp.
     Boxes are ``xyxy`` (n, 4) float32 in pixels of the ``image_width`` x ``image_height`` image.
     ``track_ids`` is (n,) int32 with -1 where no tracker has assigned an id, or None.
+    The arrays are those of :class:`common.boxes.Boxes`, flat here because they are the wire
+    layout, and checked by the same ``check_boxes``; ``from_boxes`` and ``boxes`` convert.
     ``timing_ms`` holds the detector's stages (preprocess, inference, postprocess);
     ``received_ns`` and ``published_ns`` are when the detector took and sent the frame.
     """
@@ -118,24 +121,36 @@ class Detections(Message):
     published_ns: NonNegativeInt = 0
 
     def __post_init__(self) -> None:
-        n = len(self.class_ids)
+        check_boxes(self.xyxy, self.scores, self.class_ids, self.track_ids)
+        n = len(self.xyxy)
         if n > MAX_DETECTIONS:
             raise ValueError(f"{n} detections is over the limit of {MAX_DETECTIONS}")
         if not (0 < self.image_width <= MAX_IMAGE_SIDE and 0 < self.image_height <= MAX_IMAGE_SIDE):
             raise ValueError(f"absurd image size {self.image_width}x{self.image_height}")
-        if self.xyxy.shape != (n, 4):
-            raise ValueError(f"xyxy must be ({n}, 4), got {self.xyxy.shape}")
-        if self.scores.shape != (n,) or len(self.class_names) != n:
-            raise ValueError(f"scores and class_names must have {n} entries")
-        if self.track_ids is not None and self.track_ids.shape != (n,):
-            raise ValueError(f"track_ids must be ({n},), got {self.track_ids.shape}")
-        if not (np.isfinite(self.xyxy).all() and np.isfinite(self.scores).all()):
-            raise ValueError("boxes and scores must be finite")
-        if ((self.xyxy[:, 2] < self.xyxy[:, 0]) | (self.xyxy[:, 3] < self.xyxy[:, 1])).any():
-            raise ValueError("boxes must have x2 >= x1 and y2 >= y1")
+        if len(self.class_names) != n:
+            raise ValueError(f"class_names must have {n} entries, got {len(self.class_names)}")
+
+    @classmethod
+    def from_boxes(cls, boxes: Boxes, **fields: Any) -> Detections:
+        """The message carrying ``boxes``; ``fields`` are its other fields (header,
+        image_width, image_height, class_names, ...), by name."""
+        return cls(
+            xyxy=boxes.xyxy,
+            scores=boxes.scores,
+            class_ids=boxes.class_ids,
+            track_ids=boxes.track_ids,
+            **fields,
+        )
+
+    @property
+    def boxes(self) -> Boxes:
+        """The detections as the one struct of arrays (common/boxes.py)."""
+        return Boxes(
+            xyxy=self.xyxy, scores=self.scores, class_ids=self.class_ids, track_ids=self.track_ids
+        )
 
     def __len__(self) -> int:
-        return len(self.class_ids)
+        return len(self.xyxy)
 
     @property
     def centers(self) -> npt.NDArray[np.float32]:

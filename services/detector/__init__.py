@@ -2,8 +2,8 @@
 
 What other packages may use is exported here; the modules behind it are the detector's own.
 
-    Detector               a model loaded on one backend: ``Detector.open(path, backend=...)``
-    DetectorParams         its post-processing settings (conf, iou, max_det, classes)
+    Detector               a model loaded on one backend: ``Detector.open(path, backend=...,
+                           settings=DetectorSettings(...))`` (from common.settings)
     DetectionResult        what ``Detector.detect`` returns
     ensure_default_model   the default model's path, fetched and converted first if needed
 
@@ -15,6 +15,6 @@ the CPU path.
 
 from services.detector.model_files import ensure_default_model
 from services.detector.pipeline import Detector
-from services.detector.types import DetectionResult, DetectorParams
+from services.detector.types import DetectionResult
 
-__all__ = ["DetectionResult", "Detector", "DetectorParams", "ensure_default_model"]
+__all__ = ["DetectionResult", "Detector", "ensure_default_model"]

@@ -15,6 +15,7 @@ that a box scored 0.249 instead of 0.251 still counts as found, as COCO evaluati
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -31,8 +32,9 @@ from common.contracts import BackendBenchmark, BenchmarkReport
 from common.errors import ConfigError, ImageError
 from common.images import list_images, load_image, load_sample
 from common.machine import cpu_model
+from common.settings import DetectorSettings
 from services.detector.pipeline import Detector
-from services.detector.types import DEFAULT_CONF, DetectionResult, DetectorParams
+from services.detector.types import DetectionResult
 
 STAGES = ("preprocess", "inference", "postprocess", "total")
 #: scikit-image photos scored for agreement when no ``--images`` folder is given.
@@ -56,7 +58,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--images",
         help="folder of photos for the agreement score (default: six scikit-image photos)",
     )
-    p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="reference threshold")
+    p.add_argument(
+        "--conf", type=float, default=DetectorSettings().conf, help="reference threshold"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -144,13 +148,13 @@ def _one_round(det: Detector, image: npt.NDArray[np.uint8], bare_input: Any, fir
 def _detect_all(
     det: Detector, images: Sequence[npt.NDArray[np.uint8]], conf: float
 ) -> list[DetectionResult]:
-    """Detections at threshold ``conf`` (the detector's own params are put back after)."""
-    saved = det.params
-    det.params = DetectorParams(conf=conf, iou=saved.iou, max_det=saved.max_det)
+    """Detections at threshold ``conf`` (the detector's own settings are put back after)."""
+    saved = det.settings
+    det.settings = dataclasses.replace(saved, conf=conf)
     try:
         return [det.detect(image) for image in images]
     finally:
-        det.params = saved
+        det.settings = saved
 
 
 def run(args: argparse.Namespace, resolve_model: Callable[[str | None], Path]) -> int:

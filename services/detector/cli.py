@@ -26,20 +26,17 @@ from common.cli import with_default
 from common.errors import ConfigError, ImageError, StackError
 from common.images import list_images, load_image
 from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code, print_progress
+from common.settings import DetectorSettings
 from services.detector.annotate import annotate
 from services.detector.backends import BACKEND_CHOICES
 from services.detector.model_files import ensure_default_model
 from services.detector.pipeline import Detector
-from services.detector.types import (
-    DEFAULT_CONF,
-    DEFAULT_IOU,
-    DEFAULT_MAX_DET,
-    DetectionResult,
-    DetectorParams,
-)
+from services.detector.types import DetectionResult
 
 # The stack's shared exit codes (common/lifecycle.py); a failed image is the generic failure.
 EXIT_IMAGE_FAILED = EXIT_FAILED
+#: The thresholds' defaults: those of the settings, stated once there.
+_DEFAULTS = DetectorSettings()
 
 
 def _error(message: str) -> None:
@@ -148,8 +145,11 @@ def _save_annotated(
 
 def run_detect(args: argparse.Namespace) -> int:
     """Detect objects in each image; bad images are reported and skipped (exit 1 at the end)."""
-    params = DetectorParams(
-        conf=args.conf, iou=args.iou, max_det=args.max_det, classes=_parse_classes(args.classes)
+    settings = DetectorSettings(
+        conf=args.conf,
+        iou=args.iou,
+        max_det=args.max_det,
+        classes=_parse_classes(args.classes) or (),
     )
     paths = list_images(args.paths)
     if not paths:
@@ -159,7 +159,7 @@ def run_detect(args: argparse.Namespace) -> int:
         save_dir.mkdir(parents=True, exist_ok=True)
     failed = 0
     _show_backend_log()
-    with Detector.open(_resolve_model(args.model), backend=args.backend, params=params) as det:
+    with Detector.open(_resolve_model(args.model), backend=args.backend, settings=settings) as det:
         for path in paths:
             try:
                 image = load_image(path)
@@ -179,9 +179,9 @@ def _add_detect(subparsers: Any) -> None:
     p = subparsers.add_parser("detect", help="detect objects in images or folders of images")
     p.add_argument("paths", nargs="+", metavar="PATH", help="image file or folder of images")
     _add_model_arguments(p)
-    p.add_argument("--conf", type=float, default=DEFAULT_CONF, help="minimum score, 0..1")
-    p.add_argument("--iou", type=float, default=DEFAULT_IOU, help="NMS IoU threshold, 0..1")
-    p.add_argument("--max-det", type=int, default=DEFAULT_MAX_DET, help="detections per image")
+    p.add_argument("--conf", type=float, default=_DEFAULTS.conf, help="minimum score, 0..1")
+    p.add_argument("--iou", type=float, default=_DEFAULTS.iou, help="NMS IoU threshold, 0..1")
+    p.add_argument("--max-det", type=int, default=_DEFAULTS.max_det, help="detections per image")
     p.add_argument("--classes", help="comma-separated class names to keep, e.g. person,cup")
     p.add_argument("--json", action="store_true", help="one JSON object per image per line")
     p.add_argument("--save-dir", help="write annotated copies of the images here")

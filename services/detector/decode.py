@@ -11,7 +11,8 @@ Three layouts cover the common YOLO exports (``B`` batch, ``C`` classes):
 
 They are told apart by the output shape, checked against the class count from the ``names``
 metadata when the model has one, never by file name. Scores are expected already sigmoided, as
-every Ultralytics export does. Decoded boxes are xyxy in network-input pixels.
+every Ultralytics export does. Each image's candidates are a :class:`common.boxes.Boxes`, xyxy
+in network-input pixels; rows that are not boxes (a non-finite value, x2 < x1) are dropped here.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from common.boxes import Boxes, valid_rows
 from common.errors import UnknownModelFamily
 
 #: The strides of the three YOLO detection heads, in input pixels.
@@ -49,24 +51,6 @@ class OutputLayout:
 
     family: Family
     num_classes: int | None
-
-
-@dataclass(frozen=True, slots=True)
-class Candidates:
-    """Boxes of one image that passed the confidence threshold, before NMS.
-
-    ``xyxy`` ``(n, 4)`` float32 in network-input pixels, ``scores`` ``(n,)`` float32,
-    ``class_ids`` ``(n,)`` int32.
-    """
-
-    xyxy: npt.NDArray[np.float32]
-    scores: npt.NDArray[np.float32]
-    class_ids: npt.NDArray[np.int32]
-
-    @classmethod
-    def empty(cls) -> Candidates:
-        """No candidates."""
-        return cls(np.zeros((0, 4), np.float32), np.zeros(0, np.float32), np.zeros(0, np.int32))
 
 
 def v5_anchor_count(input_height: int, input_width: int) -> int:
@@ -126,6 +110,22 @@ def _allowed_ids(class_mask: npt.NDArray[np.bool_] | None) -> npt.NDArray[np.int
     return None if class_mask is None else np.flatnonzero(class_mask)
 
 
+def _candidates(
+    xyxy: npt.NDArray[np.float32],
+    scores: npt.NDArray[np.float32],
+    class_ids: npt.NDArray[np.int32],
+) -> Boxes:
+    """The decoded rows that are boxes, the rest dropped.
+
+    A model can emit rows that are not (an fp16 overflow on a GPU, say). Left in, one NaN
+    coordinate would poison OpenCV's per-class offsets, and NMS then keeps nothing else.
+    """
+    ok = valid_rows(xyxy, scores)
+    if not ok.all():
+        xyxy, scores, class_ids = xyxy[ok], scores[ok], class_ids[ok]
+    return Boxes(xyxy=xyxy, scores=scores, class_ids=class_ids)
+
+
 def _cxcywh_to_xyxy(cxcywh: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
     half = cxcywh[:, 2:4] * np.float32(0.5)
     return np.concatenate((cxcywh[:, :2] - half, cxcywh[:, :2] + half), axis=1, dtype=np.float32)
@@ -135,7 +135,7 @@ def decode_yolov5(
     output: npt.NDArray[np.float32],
     conf: float,
     class_mask: npt.NDArray[np.bool_] | None = None,
-) -> list[Candidates]:
+) -> list[Boxes]:
     """Decode ``[B, N, 5 + C]``: best class per row, score = objectness x class score.
 
     Rows are first filtered on objectness alone, which is cheap and exact: a class score is at
@@ -148,14 +148,14 @@ def decode_yolov5(
         rows = pred[np.flatnonzero(pred[:, 4] > conf)]
         cls = rows[:, 5:] if allowed is None else rows[:, 5 + allowed]
         if cls.shape[0] == 0 or cls.shape[1] == 0:
-            results.append(Candidates.empty())
+            results.append(Boxes())
             continue
         best = cls.argmax(axis=1)
         scores = cls[np.arange(cls.shape[0]), best] * rows[:, 4]
         keep = scores > conf
         ids = best[keep] if allowed is None else allowed[best[keep]]
         results.append(
-            Candidates(
+            _candidates(
                 _cxcywh_to_xyxy(rows[keep, :4]),
                 scores[keep].astype(np.float32, copy=False),
                 ids.astype(np.int32),
@@ -168,14 +168,14 @@ def decode_yolov8(
     output: npt.NDArray[np.float32],
     conf: float,
     class_mask: npt.NDArray[np.bool_] | None = None,
-) -> list[Candidates]:
+) -> list[Boxes]:
     """Decode ``[B, 4 + C, N]``: best class per column, score = class score (no objectness)."""
     allowed = _allowed_ids(class_mask)
     results = []
     for pred in output:
         cls = pred[4:] if allowed is None else pred[4 + allowed]
         if cls.shape[0] == 0 or cls.shape[1] == 0:
-            results.append(Candidates.empty())
+            results.append(Boxes())
             continue
         cols = np.flatnonzero(cls.max(axis=0) > conf)
         cls = cls[:, cols]
@@ -183,7 +183,7 @@ def decode_yolov8(
         scores = cls[best, np.arange(cols.size)]
         ids = best if allowed is None else allowed[best]
         results.append(
-            Candidates(
+            _candidates(
                 _cxcywh_to_xyxy(np.ascontiguousarray(pred[:4, cols].T)),
                 scores.astype(np.float32, copy=False),
                 ids.astype(np.int32),
@@ -197,7 +197,7 @@ def decode_end2end(
     conf: float,
     num_classes: int,
     class_mask: npt.NDArray[np.bool_] | None = None,
-) -> list[Candidates]:
+) -> list[Boxes]:
     """Decode ``[B, K, 6]`` rows of x1, y1, x2, y2, score, class (already NMS-free).
 
     Rows whose class id falls outside ``0..num_classes-1`` (padding rows) are dropped.
@@ -209,7 +209,7 @@ def decode_end2end(
         if class_mask is not None:
             keep[keep] &= class_mask[ids[keep]]
         results.append(
-            Candidates(
+            _candidates(
                 np.ascontiguousarray(pred[keep, :4], dtype=np.float32),
                 pred[keep, 4].astype(np.float32),
                 ids[keep],
@@ -224,8 +224,8 @@ def decode(
     conf: float,
     num_classes: int,
     class_mask: npt.NDArray[np.bool_] | None = None,
-) -> list[Candidates]:
-    """Decode ``output`` with the decoder of ``layout.family``; one Candidates per image."""
+) -> list[Boxes]:
+    """Decode ``output`` with the decoder of ``layout.family``; one Boxes per image."""
     if layout.family is Family.YOLOV5:
         return decode_yolov5(output, conf, class_mask)
     if layout.family is Family.YOLOV8:

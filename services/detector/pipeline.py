@@ -11,12 +11,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from common.settings import DetectorSettings
 from services.detector.backends import Backend, open_backend
 from services.detector.decode import Family, decode
 from services.detector.model_info import ModelInfo, read_model_info
 from services.detector.postprocess import class_mask, select
 from services.detector.preprocess import Letterbox, Preprocessor, unletterbox
-from services.detector.types import DetectionResult, DetectorParams, StageTiming
+from services.detector.types import DetectionResult, StageTiming
 
 
 def _ms_since(start: float) -> float:
@@ -26,17 +27,20 @@ def _ms_since(start: float) -> float:
 class Detector:
     """A model loaded on one backend, with its post-processing settings.
 
+    Of its ``DetectorSettings`` the Detector reads ``conf``, ``iou``, ``max_det`` and
+    ``classes``; which model and backend to load are :meth:`open`'s arguments.
+
     Not thread-safe: the input buffer is reused between calls. Use one Detector per thread.
     """
 
     def __init__(
-        self, backend: Backend, model_path: Path, params: DetectorParams | None = None
+        self, backend: Backend, model_path: Path, settings: DetectorSettings | None = None
     ) -> None:
         """Wrap an open ``backend``; prefer :meth:`open`. Closes it on any error here."""
         try:
             self.info: ModelInfo = read_model_info(backend)
-            self.params = params if params is not None else DetectorParams()
-            self._class_mask = class_mask(self.info.names, self.params.classes)
+            self.settings = settings if settings is not None else DetectorSettings()
+            self._class_mask = class_mask(self.info.names, self.settings.classes or None)
         except BaseException:
             backend.close()
             raise
@@ -52,7 +56,7 @@ class Detector:
         model_path: str | Path,
         *,
         backend: str = "onnx",
-        params: DetectorParams | None = None,
+        settings: DetectorSettings | None = None,
         **backend_options: Any,
     ) -> Detector:
         """Load ``model_path`` on the named backend.
@@ -61,7 +65,7 @@ class Detector:
         UnknownModelFamily, each with a one-line message.
         """
         path = Path(model_path)
-        return cls(open_backend(backend, path, **backend_options), path, params)
+        return cls(open_backend(backend, path, **backend_options), path, settings)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -98,9 +102,9 @@ class Detector:
         output = self.backend.infer(batch)[0]
         infer_ms = _ms_since(t1) / len(images)
         t2 = time.perf_counter()
-        p = self.params
+        s = self.settings
         candidates = decode(
-            self.info.layout, output[: len(images)], p.conf, len(self.names), self._class_mask
+            self.info.layout, output[: len(images)], s.conf, len(self.names), self._class_mask
         )
         decode_ms = _ms_since(t2) / len(images)
         results = []
@@ -108,11 +112,10 @@ class Detector:
             t3 = time.perf_counter()
             kept = select(
                 cands,
-                iou=p.iou,
-                max_det=p.max_det,
+                iou=s.iou,
+                max_det=s.max_det,
                 apply_nms=self.info.family is not Family.END2END,
             )
-            xyxy = unletterbox(kept.xyxy, lb)
             timing = StageTiming(
                 preprocess_ms=pre_ms / len(images),
                 inference_ms=infer_ms,
@@ -120,9 +123,7 @@ class Detector:
             )
             results.append(
                 DetectionResult(
-                    xyxy=xyxy,
-                    scores=kept.scores,
-                    class_ids=kept.class_ids,
+                    boxes=kept.with_xyxy(unletterbox(kept.xyxy, lb)),
                     names=self.names,
                     image_width=lb.src_width,
                     image_height=lb.src_height,

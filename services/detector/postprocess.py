@@ -1,4 +1,4 @@
-"""Post-processing of decoded candidates: class filter, class-aware NMS, top-k.
+"""Post-processing of decoded candidates (Boxes): class filter, class-aware NMS, top-k.
 
 NMS runs in OpenCV (``cv2.dnn.NMSBoxesBatched``), which keeps boxes of different classes apart
 by offsetting each class into its own coordinate range. Measured on a 2-core EPYC against a
@@ -15,8 +15,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from common.boxes import Boxes
 from common.errors import ConfigError
-from services.detector.decode import Candidates
 
 #: Candidates kept (highest scores first) before NMS, bounding its O(n^2) cost at low ``conf``.
 MAX_NMS_CANDIDATES = 30_000
@@ -64,39 +64,19 @@ def nms(
     return np.asarray(kept, dtype=np.intp).reshape(-1)
 
 
-def _take(c: Candidates, idx: npt.NDArray[np.intp]) -> Candidates:
-    return Candidates(c.xyxy[idx], c.scores[idx], c.class_ids[idx])
-
-
-def drop_invalid(c: Candidates) -> Candidates:
-    """Drop boxes with a non-finite coordinate or score, or with x2 < x1 or y2 < y1.
-
-    A model can emit such rows (an fp16 overflow on a GPU, say). Left in, one NaN coordinate
-    poisons OpenCV's per-class offsets and NMS then keeps nothing else in the frame.
-    """
-    xyxy = c.xyxy
-    ok = (
-        np.isfinite(xyxy).all(axis=1)
-        & np.isfinite(c.scores)
-        & (xyxy[:, 2] >= xyxy[:, 0])
-        & (xyxy[:, 3] >= xyxy[:, 1])
-    )
-    return c if bool(ok.all()) else _take(c, np.flatnonzero(ok))
-
-
-def select(candidates: Candidates, *, iou: float, max_det: int, apply_nms: bool) -> Candidates:
+def select(candidates: Boxes, *, iou: float, max_det: int, apply_nms: bool) -> Boxes:
     """Keep the best ``max_det`` candidates, after class-aware NMS when ``apply_nms``.
 
     End-to-end models already ran NMS in the graph, so they pass ``apply_nms=False``.
-    The result is sorted by descending score.
+    The result is sorted by descending score. Candidates are Boxes, so every row is finite
+    and upright (the decoder dropped the rest), as OpenCV's NMS needs.
     """
-    candidates = drop_invalid(candidates)
-    n = candidates.scores.shape[0]
+    n = len(candidates)
     if n == 0:
         return candidates
     order = np.argsort(-candidates.scores, kind="stable")
     if apply_nms:
         if n > MAX_NMS_CANDIDATES:
-            candidates = _take(candidates, order[:MAX_NMS_CANDIDATES])
+            candidates = candidates.take(order[:MAX_NMS_CANDIDATES])
         order = nms(candidates.xyxy, candidates.scores, candidates.class_ids, iou)
-    return _take(candidates, order[:max_det])
+    return candidates.take(order[:max_det])

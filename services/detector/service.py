@@ -24,8 +24,8 @@ from services.detector.backends.select import backend_options
 from services.detector.mailbox import Mailbox
 from services.detector.model_files import ensure_default_model
 from services.detector.pipeline import Detector
-from services.detector.tracker import Tracker, TrackerParams
-from services.detector.types import DetectionResult, DetectorParams
+from services.detector.tracker import Tracker
+from services.detector.types import DetectionResult
 
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag
 
@@ -33,8 +33,7 @@ _WAIT_S = 0.2  # how often the idle loop looks at the stop flag
 def open_detector(s: DetectorSettings) -> Detector:
     """Load the configured model (the default one, fetched if needed, when none is named)."""
     model = s.model or str(ensure_default_model())
-    params = DetectorParams(conf=s.conf, iou=s.iou, max_det=s.max_det, classes=s.classes or None)
-    return Detector.open(model, backend=s.backend, params=params, **backend_options(s))
+    return Detector.open(model, backend=s.backend, settings=s, **backend_options(s))
 
 
 def to_message(
@@ -46,15 +45,12 @@ def to_message(
 ) -> Detections:
     """The Detections message for ``frame``: its header, the result, the detector's stamps."""
     t = result.timing
-    return Detections(
+    return Detections.from_boxes(
+        result.boxes.with_track_ids(track_ids),
         header=frame.header,
         image_width=frame.width,
         image_height=frame.height,
-        class_ids=result.class_ids,
         class_names=tuple(result.class_names),
-        scores=result.scores,
-        xyxy=result.xyxy,
-        track_ids=track_ids,
         timing_ms={
             "preprocess": t.preprocess_ms,
             "inference": t.inference_ms,
@@ -76,20 +72,7 @@ def run(config: Config, stop: threading.Event) -> int:
         node.log.info("model %s on %s (%s, %s)", detector.model_path, b.name, b.device, b.precision)
         frame_key = node.keys.frame(config.stack.camera)
         mailbox: Mailbox[Frame] = Mailbox()
-        t = config.tracker
-        tracker = (
-            Tracker(
-                TrackerParams(
-                    high_score=t.high_score,
-                    low_score=t.low_score,
-                    iou=t.iou,
-                    max_age_s=t.max_age_s,
-                    max_stamp_jump_s=t.max_stamp_jump_s,
-                )
-            )
-            if t.enabled
-            else None
-        )
+        tracker = Tracker(config.tracker) if config.tracker.enabled else None
 
         def on_frame(sample: zenoh.Sample) -> None:
             # Decode here, not in the loop: garbage must be counted even when a newer frame
@@ -156,9 +139,7 @@ def _track(
 ) -> npt.NDArray[np.int32]:
     """Track ids for ``result``; a frame whose stamp jumped is counted, its ids left at -1."""
     ignored, resets = tracker.ignored_frames, tracker.resets
-    ids = tracker.update(
-        result.xyxy, result.scores, result.class_ids, stamp_ns / 1e9, received_ns / 1e9
-    )
+    ids = tracker.update(result.boxes, stamp_ns / 1e9, received_ns / 1e9)
     if tracker.ignored_frames > ignored:
         node.reject("tracker_stamp_jumps", "frame stamp jumped: the tracker ignored it")
     if tracker.resets > resets:

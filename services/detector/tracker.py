@@ -5,7 +5,7 @@ weak ones (down to ``low_score``) may only extend existing tracks, never start o
 a person whose score dips for a frame on the same id without spawning tracks from noise. Each
 track predicts its next box from a constant-velocity model of the box corners, so a target
 moving across the image still overlaps its prediction. Matching is greedy on IoU, highest
-first, and only within one class.
+first, and only within one class. The thresholds are ``common.settings.TrackerSettings``.
 """
 
 from __future__ import annotations
@@ -15,24 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-Boxes = npt.NDArray[np.float32]
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class TrackerParams:
-    """``high_score`` starts tracks; ``low_score`` may extend them; ``iou`` is the least overlap
-    with a track's predicted box that counts as the same object; a track unseen for
-    ``max_age_s`` is dropped. A frame whose stamp went back, or moved on by more than
-    ``max_stamp_jump_s`` beyond the time that passed between arrivals, is ignored; after
-    ``jumps_before_reset`` such frames in a row the stamps are believed and the tracks restart
-    (a camera clock that really stepped)."""
-
-    high_score: float = 0.4
-    low_score: float = 0.15
-    iou: float = 0.25
-    max_age_s: float = 1.0
-    max_stamp_jump_s: float = 0.5
-    jumps_before_reset: int = 3
+from common.boxes import Boxes
+from common.settings import TrackerSettings
 
 
 @dataclass(slots=True)
@@ -88,8 +72,8 @@ def _greedy_match(iou: npt.NDArray[np.float64], threshold: float) -> list[tuple[
 class Tracker:
     """Assigns a track id to each detection of a stream of frames of one camera."""
 
-    def __init__(self, params: TrackerParams | None = None) -> None:
-        self.params = params or TrackerParams()
+    def __init__(self, settings: TrackerSettings | None = None) -> None:
+        self.settings = settings if settings is not None else TrackerSettings()
         self._tracks: list[_Track] = []
         self._next_id = 1
         self._last: tuple[float, float] | None = None  # (stamp, arrival) of the last frame used
@@ -106,23 +90,19 @@ class Tracker:
             return True
         if arrival is None:
             return False
-        return abs((now - stamp) - (arrival - arrived)) > self.params.max_stamp_jump_s
+        return abs((now - stamp) - (arrival - arrived)) > self.settings.max_stamp_jump_s
 
     def update(
-        self,
-        xyxy: Boxes,
-        scores: npt.NDArray[np.float32],
-        class_ids: npt.NDArray[np.int32],
-        now: float,
-        arrival: float | None = None,
+        self, boxes: Boxes, now: float, arrival: float | None = None
     ) -> npt.NDArray[np.int32]:
-        """Track ids (n,) for this frame's detections; -1 for weak unmatched ones, and for
-        every detection of a frame ignored for its stamp.
+        """Track ids (n,) for this frame's ``boxes``; -1 for weak unmatched ones, and for
+        every detection of a frame ignored for its stamp. ``boxes.track_ids`` is not read.
 
         ``now`` is the frame's capture time in seconds (any monotonic origin); ``arrival``, on
         the receiver's own clock in seconds, is when the frame arrived (None: not checked).
         """
-        p = self.params
+        p = self.settings
+        xyxy, scores, class_ids = boxes.xyxy, boxes.scores, boxes.class_ids
         if self._stamp_jumped(now, arrival):
             self._jumps_in_a_row += 1
             if self._jumps_in_a_row < p.jumps_before_reset:

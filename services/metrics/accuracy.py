@@ -25,19 +25,22 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from common.boxes import Boxes
+from common.settings import DetectorSettings
 from services.metrics.labelled import DatasetError
 
-DEFAULT_CONF_THRESHOLD = 0.25
+#: Where precision and recall are read by default: the stack's own detector.conf.
+DEFAULT_CONF_THRESHOLD = DetectorSettings().conf
 MATCH_IOU = 0.5
 
 
 @dataclass(frozen=True, slots=True)
 class ImageDetections:
-    """The detections of one dataset image: ``xyxy`` (n, 4) pixels, ``scores`` (n,), names."""
+    """The detections of one dataset image: its ``boxes`` (in the image's pixels) and the
+    class name of each."""
 
     image_id: int
-    xyxy: npt.NDArray[np.float32]
-    scores: npt.NDArray[np.float32]
+    boxes: Boxes
     class_names: tuple[str, ...]
 
 
@@ -98,7 +101,7 @@ def to_results(
     results = []
     for det in detections:
         for box, score, name in zip(
-            det.xyxy.tolist(), det.scores.tolist(), det.class_names, strict=True
+            det.boxes.xyxy.tolist(), det.boxes.scores.tolist(), det.class_names, strict=True
         ):
             cid = name_to_category.get(name)
             if cid is None:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from common.lifecycle import Progress, print_progress
+from common.settings import DetectorSettings
 from services.metrics.accuracy import (
     DEFAULT_CONF_THRESHOLD,
     AccuracyReport,
@@ -26,8 +27,6 @@ from services.metrics.labelled import DatasetError, LabelledSet
 
 #: Confidence floor for the detections fed to mAP (the usual value for COCO evaluation).
 DEFAULT_EVAL_CONF = 0.001
-#: Detections kept per image before COCO's own cap of 100 per image and class.
-EVAL_MAX_DET = 300
 
 
 def detect_dataset(
@@ -49,7 +48,7 @@ def detect_dataset(
                 f"but its labels are for {item.width}x{item.height}"
             )
         result = detector.detect(image)
-        out.append(ImageDetections(item.id, result.xyxy, result.scores, tuple(result.class_names)))
+        out.append(ImageDetections(item.id, result.boxes, tuple(result.class_names)))
         if progress is not None and n % 100 == 0:
             progress(f"evaluate: {n}/{len(dataset.images)} images")
     return out
@@ -108,14 +107,16 @@ def _check_fraction(name: str, value: float) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """The ``evaluate`` command: load, detect, score, print."""
-    from services.detector import Detector, DetectorParams, ensure_default_model
+    from services.detector import Detector, ensure_default_model
 
     for name in ("conf", "iou", "conf_threshold"):
         _check_fraction(f"--{name.replace('_', '-')}", getattr(args, name))
     dataset = load_dataset(args.dataset, args.images)
     model = Path(args.model) if args.model else ensure_default_model(progress=print_progress)
-    params = DetectorParams(conf=args.conf, iou=args.iou, max_det=EVAL_MAX_DET)
-    with Detector.open(model, backend=args.backend, params=params) as detector:
+    # max_det keeps its one default, 300 (Ultralytics' own): COCO then keeps the best 100 per
+    # image and class.
+    settings = DetectorSettings(conf=args.conf, iou=args.iou)
+    with Detector.open(model, backend=args.backend, settings=settings) as detector:
         names = detector.names
         ground_truth_for(dataset, names)  # before the run: nothing to score is an error now
         detections = detect_dataset(detector, dataset, print_progress)
@@ -132,9 +133,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from services.detector import DetectorParams
-
-    default_iou = DetectorParams().iou
+    default_iou = DetectorSettings().iou
     parser.add_argument("--dataset", required=True, help="COCO JSON file or YOLO folder")
     parser.add_argument("--images", help="COCO: folder the file_names are relative to")
     parser.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model)")

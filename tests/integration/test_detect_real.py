@@ -66,9 +66,9 @@ def test_default_model_finds_the_object(
 
 
 def test_class_filter_on_real_photo(coco_detector: Detector, default_model: Path) -> None:
-    from services.detector.types import DetectorParams
+    from common.settings import DetectorSettings
 
-    with Detector.open(default_model, params=DetectorParams(classes=("dog",))) as det:
+    with Detector.open(default_model, settings=DetectorSettings(classes=("dog",))) as det:
         assert len(det.detect(bgr("chelsea"))) == 0
 
 
@@ -179,7 +179,7 @@ def test_cli_model_with_unknown_output_shape(tmp_path: Path, photo_dir: Path) ->
 @pytest.mark.parametrize(
     ("extra", "code", "text"),
     [
-        (["--conf", "1.5"], 2, "conf must be a number in [0, 1], got 1.5"),
+        (["--conf", "1.5"], 2, "detector.conf must be within 0..1, got 1.5"),
         (["--classes", "person,kitten"], 2, "unknown class name(s) 'kitten'; valid names: person"),
         (["--backend", "tpu"], 2, "unknown backend 'tpu'"),
     ],

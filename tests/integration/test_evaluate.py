@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 from faster_coco_eval import COCO, COCOeval_faster
 
+from common.settings import DetectorSettings
 from services.detector.pipeline import Detector
-from services.detector.types import DetectorParams
 from services.metrics.datasets import load_dataset
-from services.metrics.evaluate import DEFAULT_EVAL_CONF, EVAL_MAX_DET, detect_dataset, score
+from services.metrics.evaluate import DEFAULT_EVAL_CONF, detect_dataset, score
 from tests.data.skimage_coco.write_images import ANNOTATIONS, write_images
 
 pytestmark = pytest.mark.integration
@@ -58,8 +58,8 @@ def test_evaluate_agrees_with_the_evaluator_on_the_same_detections(
     images: Path, default_model: Path
 ) -> None:
     dataset = load_dataset(ANNOTATIONS, images)
-    params = DetectorParams(conf=DEFAULT_EVAL_CONF, max_det=EVAL_MAX_DET)
-    with Detector.open(default_model, params=params) as detector:
+    settings = DetectorSettings(conf=DEFAULT_EVAL_CONF)  # as the command: max_det 300
+    with Detector.open(default_model, settings=settings) as detector:
         detections = detect_dataset(detector, dataset)
         names = detector.names
     ours = score(dataset, names, detections)
@@ -71,7 +71,9 @@ def test_evaluate_agrees_with_the_evaluator_on_the_same_detections(
         {"image_id": d.image_id, "category_id": category[name], "score": float(s),
          "bbox": [float(x1), float(y1), float(x2 - x1), float(y2 - y1)]}
         for d in detections
-        for name, s, (x1, y1, x2, y2) in zip(d.class_names, d.scores, d.xyxy, strict=True)
+        for name, s, (x1, y1, x2, y2) in zip(
+            d.class_names, d.boxes.scores, d.boxes.xyxy, strict=True
+        )
     ]  # fmt: skip
     direct = COCOeval_faster(coco_gt, coco_gt.loadRes(results), "bbox", print_function=_silent)
     direct.evaluate()

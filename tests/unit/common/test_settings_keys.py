@@ -187,3 +187,24 @@ def test_make_run_installs_no_test_tools_and_no_torch() -> None:
     run_deps = next(line for line in makefile.splitlines() if line.startswith("run:"))
     setup_deps = next(line for line in makefile.splitlines() if line.startswith("setup:"))
     assert "DEV" not in run_deps and "DEV" not in setup_deps
+
+
+def test_every_settings_class_is_still_imported_from_common_settings() -> None:
+    import common.control_settings
+    import common.perception_settings
+    import common.settings
+
+    for module, names in (
+        (common.perception_settings, ("CameraSettings", "DetectorSettings", "TrackerSettings")),
+        (common.control_settings, ("ControllerSettings", "SimSettings")),
+    ):
+        for name in names:
+            assert getattr(common.settings, name) is getattr(module, name)
+            assert name in common.settings.__all__
+
+
+def test_the_default_config_states_the_tracker_reset_and_keeps_its_own_max_det() -> None:
+    cfg = load_config(DEFAULT_CONFIG, environ={"STACK__TRACKER__JUMPS_BEFORE_RESET": "5"})
+    assert cfg.tracker.jumps_before_reset == 5
+    assert "jumps_before_reset" in DEFAULT_CONFIG.read_text()
+    assert load_config(DEFAULT_CONFIG, environ={}).detector.max_det == 100

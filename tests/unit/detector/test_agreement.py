@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from faster_coco_eval import COCO, COCOeval_faster
 
+from common.boxes import Boxes
 from services.detector.agreement import score
 from services.detector.types import DetectionResult
 
@@ -16,9 +17,11 @@ def result(boxes: list[tuple[float, float, float, float, float, int]]) -> Detect
     """A 640x480 image's detections from (x1, y1, x2, y2, score, class) rows."""
     rows = np.array(boxes, dtype=np.float64).reshape(-1, 6)
     return DetectionResult(
-        xyxy=rows[:, :4].astype(np.float32),
-        scores=rows[:, 4].astype(np.float32),
-        class_ids=rows[:, 5].astype(np.int32),
+        boxes=Boxes(
+            xyxy=rows[:, :4].astype(np.float32),
+            scores=rows[:, 4].astype(np.float32),
+            class_ids=rows[:, 5].astype(np.int32),
+        ),
         names=NAMES,
         image_width=640,
         image_height=480,

@@ -10,6 +10,7 @@ import numpy.typing as npt
 import pytest
 
 from common.errors import BackendUnavailable, ConfigError, ModelError, UnknownModelFamily
+from common.settings import DetectorSettings
 from services.detector.backends import BACKENDS, Dim, open_backend
 from services.detector.coco import COCO80
 from services.detector.decode import (
@@ -28,7 +29,6 @@ from services.detector.model_info import (
     read_model_info,
 )
 from services.detector.pipeline import Detector
-from services.detector.types import DetectorParams
 
 # --- family detection ---------------------------------------------------------------------------
 
@@ -235,7 +235,7 @@ def test_detector_maps_end2end_boxes_back_to_image_pixels() -> None:
     # A 1280x720 image in a 640x640 input: scale 0.5, 140 px of padding above and below.
     rows = np.array([[[100, 190, 300, 290, 0.9, 15], [0, 0, 10, 10, 0.1, 0]]], np.float32)
     backend = FakeBackend((1, 3, 640, 640), rows, {"names": str(dict(enumerate(COCO80)))})
-    with Detector(backend, Path("fake.onnx"), DetectorParams(conf=0.25)) as det:
+    with Detector(backend, Path("fake.onnx"), DetectorSettings(conf=0.25)) as det:
         result = det.detect(np.zeros((720, 1280, 3), np.uint8))
         assert det.names == COCO80
     assert backend.closed
@@ -247,10 +247,30 @@ def test_detector_maps_end2end_boxes_back_to_image_pixels() -> None:
     assert result.timing.inference_ms >= 0
 
 
+def test_the_detector_takes_the_stack_detector_settings() -> None:
+    rows = np.array(
+        [[[0, 0, 50, 50, 0.9, 15], [100, 100, 200, 200, 0.6, 0], [300, 300, 330, 330, 0.3, 0]]],
+        np.float32,
+    )
+    backend = FakeBackend((1, 3, 640, 640), rows, {"names": str(dict(enumerate(COCO80)))})
+    image = np.zeros((640, 640, 3), np.uint8)
+    with Detector(backend, Path("fake.onnx")) as det:
+        assert det.settings == DetectorSettings()  # one default per field: the settings' own
+        assert det.detect(image).class_names == ["cat", "person", "person"]
+    for settings, names in (
+        (DetectorSettings(conf=0.5), ["cat", "person"]),
+        (DetectorSettings(max_det=1), ["cat"]),
+        (DetectorSettings(classes=("person",)), ["person", "person"]),
+    ):
+        with Detector(FakeBackend((1, 3, 640, 640), rows), Path("fake.onnx"), settings) as det:
+            assert det.settings is settings
+            assert det.detect(image).class_names == names
+
+
 def test_detector_rejects_unknown_class_names_and_closes_the_backend() -> None:
     backend = FakeBackend((1, 3, 640, 640), np.zeros((1, 300, 6), np.float32))
     with pytest.raises(ConfigError, match=r"unknown class name.*'kitten'.*valid names: person"):
-        Detector(backend, Path("fake.onnx"), DetectorParams(classes=("kitten",)))
+        Detector(backend, Path("fake.onnx"), DetectorSettings(classes=("kitten",)))
     assert backend.closed
 
 

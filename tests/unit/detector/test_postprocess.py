@@ -1,5 +1,5 @@
-"""Class-aware NMS against a brute-force reference, the class filter, top-k, and the result
-and settings types that post-processing produces."""
+"""Class-aware NMS against a brute-force reference, the class filter, top-k, the result type
+that post-processing produces and the settings it reads."""
 
 from __future__ import annotations
 
@@ -7,10 +7,12 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from common.boxes import Boxes
 from common.errors import ConfigError
-from services.detector.decode import Candidates
+from common.settings import DetectorSettings
+from services.detector.decode import decode_end2end
 from services.detector.postprocess import class_mask, nms, select
-from services.detector.types import DetectionResult, DetectorParams
+from services.detector.types import DetectionResult
 
 
 def iou(a: list[float], b: list[float]) -> float:
@@ -62,16 +64,17 @@ def test_nms_is_class_aware() -> None:
 
 def test_select_caps_detections_and_sorts_by_score() -> None:
     xyxy, scores, classes = random_boxes(0, n=200, num_classes=80)
-    picked = select(Candidates(xyxy, scores, classes), iou=0.45, max_det=5, apply_nms=True)
+    cands = Boxes(xyxy=xyxy, scores=scores, class_ids=classes)
+    picked = select(cands, iou=0.45, max_det=5, apply_nms=True)
     assert picked.scores.shape == (5,)
     assert np.all(np.diff(picked.scores) <= 0)
-    full = select(Candidates(xyxy, scores, classes), iou=0.45, max_det=300, apply_nms=True)
+    full = select(cands, iou=0.45, max_det=300, apply_nms=True)
     np.testing.assert_array_equal(picked.xyxy, full.xyxy[:5])
 
 
 def test_select_without_nms_keeps_overlaps() -> None:
     xyxy = np.array([[0, 0, 10, 10], [0, 0, 10, 10]], np.float32)
-    c = Candidates(xyxy, np.array([0.5, 0.9], np.float32), np.zeros(2, np.int32))
+    c = Boxes(xyxy=xyxy, scores=np.array([0.5, 0.9], np.float32), class_ids=np.zeros(2, np.int32))
     out = select(c, iou=0.45, max_det=10, apply_nms=False)
     np.testing.assert_allclose(out.scores, [0.9, 0.5])
 
@@ -85,27 +88,35 @@ def test_class_mask() -> None:
     assert str(info.value) == "unknown class name(s) 'kitten'; valid names: person, bicycle, cup"
 
 
-# --- DetectionResult / DetectorParams -----------------------------------------------------------
+# --- DetectionResult / DetectorSettings ---------------------------------------------------------
 
 
 def test_detection_result_validates_shapes_saying_what_was_expected() -> None:
     ok = DetectionResult(
-        xyxy=np.zeros((2, 4), np.float32),
-        scores=np.zeros(2, np.float32),
-        class_ids=np.array([0, 1], np.int32),
+        boxes=Boxes(
+            xyxy=np.zeros((2, 4), np.float32),
+            scores=np.zeros(2, np.float32),
+            class_ids=np.array([0, 1], np.int32),
+        ),
         names=("a", "b"),
     )
     assert len(ok) == 2 and ok.class_names == ["a", "b"]
+    assert ok.xyxy is ok.boxes.xyxy and ok.scores is ok.boxes.scores
     assert len(DetectionResult()) == 0
+    # The arrays are checked by Boxes (common/boxes.py), the one place that checks them.
     with pytest.raises(ValueError, match=r"xyxy must be an \(n, 4\) float32 array"):
-        DetectionResult(xyxy=np.zeros((2, 5), np.float32))
+        DetectionResult(boxes=Boxes(xyxy=np.zeros((2, 5), np.float32)))
     with pytest.raises(ValueError, match=r"scores must be a \(2,\) float32 array"):
-        DetectionResult(xyxy=np.zeros((2, 4), np.float32), scores=np.zeros(3, np.float32))
+        DetectionResult(
+            boxes=Boxes(xyxy=np.zeros((2, 4), np.float32), scores=np.zeros(3, np.float32))
+        )
     with pytest.raises(ValueError, match=r"class_ids must lie in 0..1"):
         DetectionResult(
-            xyxy=np.zeros((1, 4), np.float32),
-            scores=np.zeros(1, np.float32),
-            class_ids=np.array([2], np.int32),
+            boxes=Boxes(
+                xyxy=np.zeros((1, 4), np.float32),
+                scores=np.zeros(1, np.float32),
+                class_ids=np.array([2], np.int32),
+            ),
             names=("a", "b"),
         )
 
@@ -113,30 +124,35 @@ def test_detection_result_validates_shapes_saying_what_was_expected() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"conf": 1.5}, r"conf must be a number in \[0, 1\], got 1.5"),
-        ({"conf": -0.1}, "conf must be"),
-        ({"iou": float("nan")}, "iou must be"),
-        ({"max_det": 0}, "max_det must be a positive integer"),
-        ({"classes": ()}, "at least one class"),
+        ({"conf": 1.5}, r"detector\.conf must be within 0\.\.1, got 1.5"),
+        ({"conf": -0.1}, "detector.conf must be"),
+        ({"iou": float("nan")}, "detector.iou must be"),
+        ({"max_det": 0}, r"detector\.max_det must be within 1\.\.10000, got 0"),
         ({"classes": ("cup", "")}, "non-empty class names"),
     ],
 )
-def test_detector_params_validation(kwargs: dict[str, object], message: str) -> None:
+def test_detector_settings_validation(kwargs: dict[str, object], message: str) -> None:
     with pytest.raises(ConfigError, match=message):
-        DetectorParams(**kwargs)  # type: ignore[arg-type]
+        DetectorSettings(**kwargs)  # type: ignore[arg-type]
+
+
+def test_detector_settings_have_one_default_per_threshold() -> None:
+    s = DetectorSettings()
+    assert (s.conf, s.iou, s.max_det, s.classes) == (0.25, 0.45, 300, ())  # () keeps all
 
 
 def test_a_non_finite_or_inverted_box_does_not_wipe_out_the_frame() -> None:
-    from services.detector.decode import Candidates
-    from services.detector.postprocess import select
-
     good = np.array([[75, 270, 125, 370], [475, 270, 525, 370]], np.float32)
     bad = np.array([[np.nan, 260, np.inf, 340], [300, 300, 200, 200]], np.float32)
-    cands = Candidates(
-        np.vstack([good, bad]),
-        np.array([0.9, 0.8, 0.99, 0.95], np.float32),
-        np.array([0, 2, 0, 9], np.int32),
-    )
+    # End-to-end rows (x1, y1, x2, y2, score, class) as a model might emit them: the decoder
+    # drops the two that are not boxes, so NMS sees only the good ones.
+    rows = np.hstack(
+        [
+            np.vstack([good, bad]),
+            np.array([[0.9, 0], [0.8, 2], [0.99, 0], [0.95, 9]], np.float32),
+        ]
+    )[None]
+    (cands,) = decode_end2end(rows, conf=0.25, num_classes=10)
     kept = select(cands, iou=0.45, max_det=10, apply_nms=True)
     np.testing.assert_array_equal(kept.xyxy, good)
     assert kept.class_ids.tolist() == [0, 2]

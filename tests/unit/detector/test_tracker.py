@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from services.detector.tracker import Tracker, TrackerParams, iou_matrix
+from common.boxes import Boxes
+from common.errors import ConfigError
+from common.settings import TrackerSettings
+from services.detector.tracker import Tracker, iou_matrix
 
 
 def _frame(
@@ -15,9 +19,11 @@ def _frame(
     classes: list[int] | None = None,
 ) -> list[int]:
     ids = tracker.update(
-        np.array(boxes, np.float32).reshape(-1, 4),
-        np.array(scores, np.float32),
-        np.array(classes or [0] * len(scores), np.int32),
+        Boxes(
+            xyxy=np.array(boxes, np.float32).reshape(-1, 4),
+            scores=np.array(scores, np.float32),
+            class_ids=np.array(classes or [0] * len(scores), np.int32),
+        ),
         t,
     )
     return ids.tolist()
@@ -50,14 +56,14 @@ def test_two_people_crossing_keep_their_ids() -> None:
 
 
 def test_weak_detection_extends_but_never_starts_a_track() -> None:
-    tr = Tracker(TrackerParams(high_score=0.5, low_score=0.1))
+    tr = Tracker(TrackerSettings(high_score=0.5, low_score=0.1))
     first = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0)[0]
     assert _frame(tr, [[2, 0, 52, 100]], [0.2], t=0.1) == [first]  # a dip keeps the id
     assert _frame(tr, [[300, 0, 350, 100]], [0.2], t=0.2) == [-1]  # weak and new: no track
 
 
 def test_lost_track_expires_and_a_new_id_is_given() -> None:
-    tr = Tracker(TrackerParams(max_age_s=0.5))
+    tr = Tracker(TrackerSettings(max_age_s=0.5))
     first = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0)[0]
     assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.4) == [first]
     assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=1.5) != [first]
@@ -70,29 +76,49 @@ def test_classes_never_share_a_track() -> None:
 
 
 def test_a_frame_whose_stamp_jumps_is_ignored_and_tracks_survive() -> None:
-    from services.detector.tracker import Tracker, TrackerParams
-
-    tr = Tracker(TrackerParams(max_stamp_jump_s=0.5))
-    box = np.array([[100, 100, 200, 300]], np.float32)
-    score, cls = np.array([0.9], np.float32), np.array([0], np.int32)
-    first = tr.update(box, score, cls, now=10.0, arrival=1.0)
+    tr = Tracker(TrackerSettings(max_stamp_jump_s=0.5))
+    box = Boxes(
+        xyxy=np.array([[100, 100, 200, 300]], np.float32),
+        scores=np.array([0.9], np.float32),
+        class_ids=np.array([0], np.int32),
+    )
+    first = tr.update(box, now=10.0, arrival=1.0)
     # Stamped an hour ahead though it arrived 0.2 s later: ignored, ids -1, no reset.
-    assert (tr.update(box, score, cls, now=3610.0, arrival=1.2) == -1).all()
+    assert (tr.update(box, now=3610.0, arrival=1.2) == -1).all()
     # Stamped in the past: ignored too.
-    assert (tr.update(box, score, cls, now=5.0, arrival=1.3) == -1).all()
+    assert (tr.update(box, now=5.0, arrival=1.3) == -1).all()
     assert tr.ignored_frames == 2
     # The next honest frame keeps the same id.
-    assert (tr.update(box, score, cls, now=10.4, arrival=1.4) == first).all()
+    assert (tr.update(box, now=10.4, arrival=1.4) == first).all()
 
 
 def test_a_clock_that_really_stepped_restarts_the_tracks() -> None:
-    from services.detector.tracker import Tracker, TrackerParams
-
-    tr = Tracker(TrackerParams(max_stamp_jump_s=0.5, jumps_before_reset=3))
-    box = np.array([[100, 100, 200, 300]], np.float32)
-    score, cls = np.array([0.9], np.float32), np.array([0], np.int32)
-    tr.update(box, score, cls, now=10.0, arrival=1.0)
-    assert (tr.update(box, score, cls, now=110.0, arrival=1.1) == -1).all()
-    assert (tr.update(box, score, cls, now=110.1, arrival=1.2) == -1).all()
-    ids = tr.update(box, score, cls, now=110.2, arrival=1.3)
+    tr = Tracker(TrackerSettings(max_stamp_jump_s=0.5, jumps_before_reset=3))
+    box = Boxes(
+        xyxy=np.array([[100, 100, 200, 300]], np.float32),
+        scores=np.array([0.9], np.float32),
+        class_ids=np.array([0], np.int32),
+    )
+    tr.update(box, now=10.0, arrival=1.0)
+    assert (tr.update(box, now=110.0, arrival=1.1) == -1).all()
+    assert (tr.update(box, now=110.1, arrival=1.2) == -1).all()
+    ids = tr.update(box, now=110.2, arrival=1.3)
     assert (ids > 0).all() and tr.resets == 1
+
+
+def test_the_tracker_takes_the_stack_tracker_settings() -> None:
+    settings = TrackerSettings(max_stamp_jump_s=0.5, jumps_before_reset=1)
+    tr = Tracker(settings)
+    assert tr.settings is settings
+    assert Tracker().settings == TrackerSettings()  # one default, the settings' own
+    box = Boxes(
+        xyxy=np.array([[100, 100, 200, 300]], np.float32),
+        scores=np.array([0.9], np.float32),
+        class_ids=np.array([0], np.int32),
+    )
+    tr.update(box, now=10.0, arrival=1.0)
+    # jumps_before_reset = 1: the first jump is believed at once and the tracks restart.
+    assert (tr.update(box, now=110.0, arrival=1.1) > 0).all() and tr.resets == 1
+    message = r"tracker\.jumps_before_reset must be an integer >= 1, got 0"
+    with pytest.raises(ConfigError, match=message):
+        TrackerSettings(jumps_before_reset=0)

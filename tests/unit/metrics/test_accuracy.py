@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from faster_coco_eval import COCO, COCOeval_faster
 
+from common.boxes import Boxes
 from services.metrics.accuracy import (
     ImageDetections,
     evaluate,
@@ -42,8 +43,11 @@ def _dets(image_id: int, rows: list[tuple[str, float, list[float]]]) -> ImageDet
     """Detections from (name, score, xyxy) rows."""
     return ImageDetections(
         image_id=image_id,
-        xyxy=np.array([r[2] for r in rows], np.float32).reshape(-1, 4),
-        scores=np.array([r[1] for r in rows], np.float32),
+        boxes=Boxes(
+            xyxy=np.array([r[2] for r in rows], np.float32).reshape(-1, 4),
+            scores=np.array([r[1] for r in rows], np.float32),
+            class_ids=np.zeros(len(rows), np.int32),  # the evaluator goes by class name
+        ),
         class_names=tuple(r[0] for r in rows),
     )
 
@@ -112,7 +116,8 @@ def test_agrees_with_the_evaluator_called_directly() -> None:
     coco_gt = COCO(gt)
     results = []
     for d in dets:
-        for name, score, (x1, y1, x2, y2) in zip(d.class_names, d.scores, d.xyxy, strict=True):
+        b = d.boxes
+        for name, score, (x1, y1, x2, y2) in zip(d.class_names, b.scores, b.xyxy, strict=True):
             xywh = [float(x1), float(y1), float(x2 - x1), float(y2 - y1)]
             cid = MAP[name]
             results.append(

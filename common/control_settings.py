@@ -1,0 +1,140 @@
+"""Settings of control: the controller's policy and the simulated robot (tables of stack.toml).
+
+Re-exported by common/settings.py, where the whole Config is assembled.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from common.contracts import ControllerMode, DistanceSource
+from common.errors import ConfigError
+from common.setting_checks import enum_field, fraction, non_negative, positive
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ControllerSettings:
+    """The reaction policy. Speeds in m/s and rad/s, angles in degrees, times in seconds.
+
+    track:  turn towards the most central confident detection of ``target_classes``; drive
+            forward at ``forward_speed`` only while it is within ``center_tolerance`` (a
+            fraction of the image width) of the image centre.
+    follow: lock onto the largest detection of ``target_classes[0]`` (by track id, so it does
+            not jump to another person) and keep it at ``follow_distance_m``, measured from the
+            box height (``distance_source = "box"``, for a target ``target_height_m`` tall) or
+            by the laser in the target's bearing (``"laser"``). Forward only while centred and
+            while the laser sector of ``sector_width_deg`` straight ahead, and the corridor
+            ``robot_width_m`` wide that the body sweeps, are clear beyond ``safety_distance_m``
+            plus the room needed to brake. A box cut by the image edge counts as arrived.
+            A target unseen for ``target_lost_timeout_s`` is dropped.
+    Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
+    acceleration limits. Stale detections (captured or received longer than
+    ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the
+    acceleration limit. The latched e-stop is kept in ``estop_file`` (relative to the repo
+    root; empty: ``state/estop-<prefix>.json``), so that it survives every restart; a release
+    captured more than ``estop_release_max_age_s`` ago is refused.
+    """
+
+    mode: ControllerMode = ControllerMode.TRACK
+    target_classes: tuple[str, ...] = ("person",)
+    min_score: float = 0.3
+    control_rate_hz: float = 20.0
+    detection_timeout_s: float = 1.0
+    scan_timeout_s: float = 0.5
+    target_lost_timeout_s: float = 1.5
+    bearing_kp: float = 1.5
+    bearing_ki: float = 0.0
+    bearing_kd: float = 0.05
+    max_angular: float = 1.0
+    max_linear: float = 0.5
+    max_angular_accel: float = 3.0
+    max_linear_accel: float = 1.0
+    forward_speed: float = 0.3
+    center_tolerance: float = 0.1
+    distance_source: DistanceSource = DistanceSource.BOX
+    follow_distance_m: float = 1.0
+    distance_gain: float = 0.6
+    target_height_m: float = 1.7
+    safety_distance_m: float = 0.5
+    sector_width_deg: float = 30.0
+    robot_width_m: float = 0.6
+    estop_file: str = ""
+    estop_release_max_age_s: float = 2.0
+    counters_period_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        enum_field(self, "mode", ControllerMode, "controller.mode")
+        enum_field(self, "distance_source", DistanceSource, "controller.distance_source")
+        if not self.target_classes:
+            raise ConfigError("controller.target_classes needs at least one class name")
+        for name in (
+            "control_rate_hz",
+            "detection_timeout_s",
+            "scan_timeout_s",
+            "target_lost_timeout_s",
+            "max_angular",
+            "max_linear",
+            "max_angular_accel",
+            "max_linear_accel",
+            "follow_distance_m",
+            "target_height_m",
+            "safety_distance_m",
+            "sector_width_deg",
+            "robot_width_m",
+            "estop_release_max_age_s",
+            "counters_period_s",
+        ):
+            positive(f"controller.{name}", getattr(self, name))
+        for name in ("bearing_kp", "bearing_ki", "bearing_kd", "distance_gain"):
+            non_negative(f"controller.{name}", getattr(self, name))
+        for name in ("min_score", "center_tolerance"):
+            fraction(f"controller.{name}", getattr(self, name))
+        if not 0 <= self.forward_speed <= self.max_linear:
+            raise ConfigError("controller.forward_speed must be within 0..max_linear")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SimSettings:
+    """The simulated robot and world (services/sim), standing in for a camera and a base.
+
+    ``scenario`` names a world in services/sim/scenarios.py. The scenario clock starts once
+    every service in ``wait_for`` is ready, so start-up time does not eat into the scenario.
+    The camera uses camera.hfov_deg; the image is ``width`` x ``height``. Commands from more
+    than one publisher within ``command_sources_window_s`` are counted and warned about.
+    """
+
+    scenario: str = "demo"
+    wait_for: tuple[str, ...] = ("detector", "controller")
+    physics_hz: float = 50.0
+    camera_rate_hz: float = 5.0
+    scan_rate_hz: float = 10.0
+    truth_rate_hz: float = 20.0
+    width: int = 640
+    height: int = 480
+    camera_height_m: float = 0.6
+    laser_fov_deg: float = 270.0
+    laser_rays: int = 541
+    laser_range_max_m: float = 12.0
+    laser_noise_m: float = 0.01
+    seed: int = 0
+    command_sources_window_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in (
+            "physics_hz",
+            "camera_rate_hz",
+            "scan_rate_hz",
+            "truth_rate_hz",
+            "camera_height_m",
+            "laser_fov_deg",
+            "laser_range_max_m",
+        ):
+            positive(f"sim.{name}", getattr(self, name))
+        if not (16 <= self.width <= 4096 and 16 <= self.height <= 4096):
+            raise ConfigError(f"sim image size {self.width}x{self.height} is out of range")
+        if self.laser_rays < 2:
+            raise ConfigError(f"sim.laser_rays must be >= 2, got {self.laser_rays}")
+        non_negative("sim.laser_noise_m", self.laser_noise_m)
+        positive("sim.command_sources_window_s", self.command_sources_window_s)
+        if self.seed < 0:
+            raise ConfigError(f"sim.seed must be >= 0, got {self.seed}")

@@ -1,0 +1,140 @@
+"""Settings of perception: the camera, the detector and its tracker (tables of stack.toml).
+
+Re-exported by common/settings.py, where the whole Config is assembled.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from common.contracts import BackendName
+from common.errors import ConfigError
+from common.messages import MAX_DETECTIONS, MAX_IMAGE_SIDE
+from common.setting_checks import enum_field, fraction, positive
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CameraSettings:
+    """The frame source.
+
+    ``source`` is one of: ``sample:<name>`` (a scikit-image photo: astronaut, cameraman, chelsea,
+    coffee, rocket, motorcycle), a path to an image (repeated), a folder of images (looped), a
+    video file (looped when ``loop``), or ``device:<index or /dev/videoN>`` (webcam / V4L2).
+    ``resize`` is (width, height), or (0, 0) to keep the source size. ``jpeg_quality`` 0 sends
+    raw bgr8; 1..100 sends JPEG at that quality. ``hfov_deg`` is the horizontal field of view,
+    which turns a pixel column into a bearing (the controller and the simulator use it).
+    """
+
+    source: str = "sample:cameraman"
+    rate_hz: float = 10.0
+    resize: tuple[int, int] = (0, 0)
+    jpeg_quality: int = 0
+    frame_id: str = "camera"
+    loop: bool = True
+    hfov_deg: float = 60.0
+
+    def __post_init__(self) -> None:
+        positive("camera.rate_hz", self.rate_hz)
+        if (
+            min(self.resize) < 0
+            or max(self.resize) > MAX_IMAGE_SIDE
+            or (0 in self.resize and self.resize != (0, 0))
+        ):
+            raise ConfigError(
+                f"camera.resize must be [w, h] within 1..{MAX_IMAGE_SIDE} or [0, 0], "
+                f"got {list(self.resize)}"
+            )
+        if not 0 <= self.jpeg_quality <= 100:
+            raise ConfigError(f"camera.jpeg_quality must be 0..100, got {self.jpeg_quality}")
+        if not 1 <= self.hfov_deg <= 179:
+            raise ConfigError(f"camera.hfov_deg must be within 1..179, got {self.hfov_deg}")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DetectorSettings:
+    """The model, its backend and the post-processing thresholds.
+
+    ``model`` empty means the default COCO model (fetched at setup). ``backend`` is onnx,
+    tensorrt, cuda or auto (auto picks tensorrt, then cuda, then onnx: docs/tensorrt.md).
+    ``precision`` empty leaves the backend's default (fp32 on the CPU, fp16 on a GPU); GPU
+    backends take fp32 or fp16, TensorRT also int8. ``batch_profile`` is the (min, opt, max)
+    batch a TensorRT engine is built for; the service sends single frames, so (1, 1, 1).
+    A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
+    not detected on (counted, see common/freshness.py).
+
+    Post-processing, which the Detector (services/detector/pipeline.py) reads from here:
+    ``conf`` is the least score kept (objectness x class score for YOLOv5-style models);
+    ``iou`` the overlap above which a lower-scored box of the same class is suppressed;
+    ``max_det`` caps detections per image (300 as in Ultralytics; the stack's config sets its
+    own); ``classes`` keeps only those class names, and empty keeps every class.
+    """
+
+    model: str = ""
+    backend: BackendName = BackendName.ONNX
+    precision: str = ""
+    batch_profile: tuple[int, int, int] = (1, 1, 1)
+    conf: float = 0.25
+    iou: float = 0.45
+    max_det: int = 300
+    classes: tuple[str, ...] = ()
+    max_frame_age_s: float = 1.0
+    counters_period_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        positive("detector.max_frame_age_s", self.max_frame_age_s)
+        enum_field(self, "backend", BackendName, "detector.backend")
+        if self.precision not in ("", "fp32", "fp16", "int8"):
+            raise ConfigError(
+                f"detector.precision must be one of fp32, fp16, int8 (or empty for the "
+                f"backend's default), got {self.precision!r}"
+            )
+        lo, opt, hi = self.batch_profile
+        if not 1 <= lo <= opt <= hi:
+            raise ConfigError(
+                f"detector.batch_profile must be [min, opt, max] with 1 <= min <= opt <= max, "
+                f"got {list(self.batch_profile)}"
+            )
+        fraction("detector.conf", self.conf)
+        fraction("detector.iou", self.iou)
+        if not 1 <= self.max_det <= MAX_DETECTIONS:
+            raise ConfigError(
+                f"detector.max_det must be within 1..{MAX_DETECTIONS}, got {self.max_det}"
+            )
+        if not all(self.classes):
+            raise ConfigError(
+                f"detector.classes must be non-empty class names, got {list(self.classes)}"
+            )
+        positive("detector.counters_period_s", self.counters_period_s)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TrackerSettings:
+    """The detector's multi-object tracker, which gives Detections their track ids.
+
+    ``high_score`` starts a track, ``low_score`` may only extend one, ``iou`` is the least
+    overlap with a track's predicted box, and a track unseen for ``max_age_s`` is dropped.
+    A frame whose stamp moved by more than ``max_stamp_jump_s`` beyond the time that really
+    passed between arrivals (or went back) is ignored, not allowed to age every track out;
+    after ``jumps_before_reset`` such frames in a row the stamps are believed and the tracks
+    restart (a camera clock that really stepped). ``enabled`` is the service's to read.
+    """
+
+    enabled: bool = True
+    high_score: float = 0.4
+    low_score: float = 0.15
+    iou: float = 0.25
+    max_age_s: float = 1.0
+    max_stamp_jump_s: float = 0.5
+    jumps_before_reset: int = 3
+
+    def __post_init__(self) -> None:
+        for name in ("high_score", "low_score", "iou"):
+            fraction(f"tracker.{name}", getattr(self, name))
+        if self.low_score > self.high_score:
+            raise ConfigError("tracker.low_score must not be above tracker.high_score")
+        positive("tracker.max_age_s", self.max_age_s)
+        positive("tracker.max_stamp_jump_s", self.max_stamp_jump_s)
+        if self.jumps_before_reset < 1:
+            raise ConfigError(
+                f"tracker.jumps_before_reset must be an integer >= 1, got {self.jumps_before_reset}"
+            )
