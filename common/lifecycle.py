@@ -9,6 +9,7 @@ import signal
 import sys
 import threading
 from collections.abc import Callable
+from typing import Self
 
 from common.errors import BackendUnavailable, ConfigError, ModelError, StackError
 
@@ -20,6 +21,19 @@ EXIT_MODEL = 3
 EXIT_BACKEND = 4
 EXIT_INTERRUPTED = 130
 PERMANENT_FAILURES = frozenset({EXIT_CONFIG, EXIT_MODEL, EXIT_BACKEND})
+
+
+class Closing:
+    """``with thing:`` closes the thing at the end, however the block ends."""
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
 
 
 def exit_code(error: StackError) -> int:

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import logging
 import time
-from types import TracebackType
-from typing import Self
 
 import zenoh
 
@@ -13,11 +11,12 @@ from common.bus import Publisher, QoS, open_session
 from common.clock import BOOT_ID, Stamp, now
 from common.counters import Counters
 from common.keys import Keys
+from common.lifecycle import Closing
 from common.messages import Header, ServiceCounters
 from common.settings import Config
 
 
-class Node:
+class Node(Closing):
     """A service's presence on the bus.
 
     ``ready()`` declares the liveliness token ``<prefix>/health/<service>``; the supervisor and
@@ -91,14 +90,3 @@ class Node:
         if self._token is not None:
             self._token.undeclare()
         self.session.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

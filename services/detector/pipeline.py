@@ -5,12 +5,12 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from common.lifecycle import Closing
 from common.settings import DetectorSettings
 from services.detector.backends import Backend, open_backend
 from services.detector.decode import Family, decode
@@ -24,7 +24,7 @@ def _ms_since(start: float) -> float:
     return (time.perf_counter() - start) * 1e3
 
 
-class Detector:
+class Detector(Closing):
     """A model loaded on one backend, with its post-processing settings.
 
     Of its ``DetectorSettings`` the Detector reads ``conf``, ``iou``, ``max_det`` and
@@ -135,14 +135,3 @@ class Detector:
     def close(self) -> None:
         """Release the backend."""
         self.backend.close()
-
-    def __enter__(self) -> Detector:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

@@ -208,3 +208,21 @@ def test_the_default_config_states_the_tracker_reset_and_keeps_its_own_max_det()
     assert cfg.tracker.jumps_before_reset == 5
     assert "jumps_before_reset" in DEFAULT_CONFIG.read_text()
     assert load_config(DEFAULT_CONFIG, environ={}).detector.max_det == 100
+
+
+def test_the_default_stack_file_names_every_setting() -> None:
+    """deploy/stack.toml says it documents every field: a new setting must appear there."""
+    import dataclasses
+    import tomllib
+
+    from common.settings import Config
+
+    data = tomllib.loads(DEFAULT_CONFIG.read_text())
+    missing = [
+        f"{table.name}.{f.name}"
+        for table in dataclasses.fields(Config)
+        if table.name != "path"
+        for f in dataclasses.fields(getattr(Config(), table.name))
+        if f.name not in data.get(table.name, {})
+    ]
+    assert missing == []
