@@ -97,7 +97,9 @@ def run(config: Config, stop: threading.Event) -> int:
             )
         )
         info_key = node.keys.detector_info(config.stack.camera)
-        queryable = node.session.declare_queryable(info_key, lambda q: q.reply(info_key, info))
+        queryable = node.session.declare_queryable(
+            info_key, lambda q: q.reply(info_key, info, encoding=zenoh.Encoding.APPLICATION_JSON)
+        )
         # Warm the backend up before announcing readiness: the first run allocates.
         detector.detect(np.full((480, 640, 3), 114, np.uint8))
         node.ready()

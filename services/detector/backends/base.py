@@ -16,22 +16,24 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import numpy.typing as npt
 
+from common.contracts import BackendName
 from common.errors import BackendUnavailable, ConfigError
 
 Dim = int | None  # None: a dynamic dimension (named or unknown in the model)
 
 #: Backend name -> module, imported only when that backend is asked for.
 BACKENDS: dict[str, str] = {
-    "onnx": "services.detector.backends.onnx",
-    "tensorrt": "services.detector.backends.tensorrt",
-    "cuda": "services.detector.backends.cuda",
+    BackendName.ONNX: "services.detector.backends.onnx",
+    BackendName.TENSORRT: "services.detector.backends.tensorrt",
+    BackendName.CUDA: "services.detector.backends.cuda",
 }
 
 #: The name that picks the best backend this machine can run (see :mod:`.select`).
-AUTO = "auto"
+AUTO = BackendName.AUTO
 
-#: Every name ``--backend`` and ``detector.backend`` accept.
-BACKEND_CHOICES: tuple[str, ...] = (*BACKENDS, AUTO)  # the default first, then by speed
+#: Every name ``--backend`` and ``detector.backend`` accept: the enum's members, in its order
+#: (the default first, then by speed, then auto).
+BACKEND_CHOICES: tuple[str, ...] = tuple(b.value for b in BackendName)
 
 
 @runtime_checkable
