@@ -23,7 +23,7 @@ from common.keys import Keys
 
 # Every principal the credentials command creates. "estop" is the operator's e-stop tool,
 # "observer" may watch (subscribe, query) but publishes nothing: status lines, queries, tests.
-SERVICE_PRINCIPALS = ("camera", "sim", "detector", "controller", "metrics")
+SERVICE_PRINCIPALS = ("camera", "sim", "ros2", "detector", "controller", "metrics")
 PRINCIPALS = ("supervisor", *SERVICE_PRINCIPALS, "estop", "observer")
 
 AUTH_MODES = ("none", "password", "certificate")
@@ -82,6 +82,8 @@ def _principal_keys(keys: Keys, camera: str) -> dict[str, dict[str, tuple[str, .
     return {
         "camera": service("camera", keys.frame(camera)),
         "sim": service("sim", keys.frame(camera), keys.scan(), keys.sim_truth()),
+        # The ROS 2 bridge feeds the robot's camera and laser into the stack.
+        "ros2": service("ros2", keys.frame(camera), keys.scan()),
         "detector": {
             **service("detector", keys.detections(camera)),
             "serve": (keys.detector_info(camera),),

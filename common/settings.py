@@ -5,7 +5,8 @@ Reading the file and the environment overrides is in common/config_file.py.
 
 This module holds the bus, stack, metrics and supervisor settings and the whole ``Config``; the
 perception settings (camera, detector, tracker) live in common/perception_settings.py and the
-control settings (controller, sim) in common/control_settings.py. All are re-exported here, so
+control settings (controller, sim) in common/control_settings.py, the ROS 2 bridge's in
+common/ros2_settings.py. All are re-exported here, so
 ``from common.settings import X`` works for every one of them.
 """
 
@@ -17,6 +18,7 @@ from pathlib import Path
 from common.control_settings import ControllerSettings, SimSettings
 from common.errors import ConfigError
 from common.perception_settings import CameraSettings, DetectorSettings, TrackerSettings
+from common.ros2_settings import Ros2Settings
 from common.security import AUTH_MODES
 from common.setting_checks import positive
 
@@ -29,6 +31,7 @@ __all__ = [
     "ControllerSettings",
     "DetectorSettings",
     "MetricsSettings",
+    "Ros2Settings",
     "SimSettings",
     "StackSettings",
     "SupervisorSettings",
@@ -37,7 +40,8 @@ __all__ = [
 ]
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-SERVICES = ("camera", "sim", "detector", "controller", "metrics")  # runnable by the supervisor
+# Runnable by the supervisor, and started in this order.
+SERVICES = ("camera", "sim", "ros2", "detector", "controller", "metrics")
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
 
 
@@ -182,6 +186,7 @@ class Config:
     controller: ControllerSettings = field(default_factory=ControllerSettings)
     sim: SimSettings = field(default_factory=SimSettings)
     metrics: MetricsSettings = field(default_factory=MetricsSettings)
+    ros2: Ros2Settings = field(default_factory=Ros2Settings)
     supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)
 
     @property

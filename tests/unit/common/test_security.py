@@ -43,8 +43,8 @@ def test_only_the_controller_puts_cmd_vel_and_only_estop_the_estop() -> None:
     assert putters == {"controller"}
     assert {p for p in PRINCIPALS if KEYS.estop() in _allowed(acl, p, "put")} == {"estop"}
     frames = {p for p in PRINCIPALS if KEYS.frame("front") in _allowed(acl, p, "put")}
-    assert frames == {"camera", "sim"}
-    assert {p for p in PRINCIPALS if KEYS.scan() in _allowed(acl, p, "put")} == {"sim"}
+    assert frames == {"camera", "sim", "ros2"}  # the camera, the simulator or the ROS 2 bridge
+    assert {p for p in PRINCIPALS if KEYS.scan() in _allowed(acl, p, "put")} == {"sim", "ros2"}
     assert _allowed(acl, "observer", "put") == set()
     assert _allowed(acl, "estop", "put") == {KEYS.estop()}
     assert _allowed(acl, "detector", "put") == set(may_put(KEYS, "front", "detector"))

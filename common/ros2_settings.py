@@ -1,0 +1,80 @@
+"""Settings of the ``ros2`` bridge: how the stack joins a ROS 2 graph over rmw_zenoh.
+
+Re-exported by common/settings.py, where the whole Config is assembled. See docs/ros2.md.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from enum import StrEnum
+
+from common.errors import ConfigError
+from common.setting_checks import enum_field, positive
+
+
+class RosDistro(StrEnum):
+    HUMBLE = "humble"
+    JAZZY = "jazzy"
+    KILTED = "kilted"
+    ROLLING = "rolling"
+
+
+class ImageFormat(StrEnum):
+    RAW = "raw"  # sensor_msgs/msg/Image: bgr8, rgb8 or mono8
+    COMPRESSED = "compressed"  # sensor_msgs/msg/CompressedImage: jpeg
+
+
+_TOPIC = re.compile(r"^/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$")
+
+
+def _topic(name: str, value: str) -> None:
+    if not _TOPIC.match(value):
+        raise ConfigError(f"ros2.{name} {value!r} is not a ROS 2 topic name (e.g. /camera/image)")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Ros2Settings:
+    """The bridge between the stack's keys and a ROS 2 graph (rmw_zenoh, no ROS install).
+
+    ``router`` are the rmw_zenoh router's endpoints (``rmw_zenohd`` listens on port 7447);
+    ``domain_id``, ``distro``, ``node`` and ``namespace`` place the bridge in the graph. Each
+    direction can be turned off: images and scans in (``image_in``, ``scan_in``), detections
+    and commands out (``detections_out``, ``cmd_vel_out``). ``twist_stamped`` publishes
+    ``geometry_msgs/msg/TwistStamped`` instead of ``Twist`` (many Jazzy robots take it).
+    ``router_timeout_s`` bounds the wait for the router at start-up.
+    """
+
+    router: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    domain_id: int = 0
+    distro: RosDistro = RosDistro.JAZZY
+    node: str = "zenoh_yolo_stack"
+    namespace: str = "/"
+    image_topic: str = "/camera/rgb/image_raw"
+    image_format: ImageFormat = ImageFormat.RAW
+    scan_topic: str = "/scan"
+    detections_topic: str = "/detections"
+    cmd_vel_topic: str = "/cmd_vel"
+    twist_stamped: bool = False
+    image_in: bool = True
+    scan_in: bool = True
+    detections_out: bool = True
+    cmd_vel_out: bool = True
+    router_timeout_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        enum_field(self, "distro", RosDistro, "ros2.distro")
+        enum_field(self, "image_format", ImageFormat, "ros2.image_format")
+        if not self.router or not all("/" in ep for ep in self.router):
+            raise ConfigError(
+                f"ros2.router must list endpoints like tcp/<host>:7447, got {list(self.router)}"
+            )
+        if not 0 <= self.domain_id <= 232:
+            raise ConfigError(f"ros2.domain_id must be within 0..232, got {self.domain_id}")
+        if not re.match(r"^[A-Za-z][A-Za-z0-9_]*$", self.node):
+            raise ConfigError(f"ros2.node {self.node!r} is not a ROS 2 node name")
+        if self.namespace != "/":
+            _topic("namespace", self.namespace)
+        for name in ("image_topic", "scan_topic", "detections_topic", "cmd_vel_topic"):
+            _topic(name, getattr(self, name))
+        positive("ros2.router_timeout_s", self.router_timeout_s)
