@@ -2,7 +2,7 @@
 
 The pure layer, exported here for other packages (the simulator plays a ROS robot with it):
 
-    Distro, typestore_for      rosbags' message types per distribution, vision_msgs added
+    RosDistro, typestore_for      rosbags' message types per distribution, vision_msgs added
     data_key, Attachment, ...  rmw_zenoh's keys, per-sample attachment and liveliness tokens
     cdr_encode, cdr_decode     CDR as rmw_zenoh carries it; garbage raises DecodeError
     *_to_ros, *_from_ros       the translations (images in ``images.py``, the rest ``convert.py``)
@@ -11,6 +11,7 @@ No module here imports zenoh; the session and its publishers belong to ``service
 The wire-format facts and their sources: /work/shared/ROS2_ZENOH.md.
 """
 
+from common.ros2_settings import RosDistro
 from services.ros2.convert import (
     DETECTION_2D_ARRAY,
     LASER_SCAN,
@@ -33,7 +34,7 @@ from services.ros2.images import (
     frame_to_compressed_image,
     frame_to_image,
 )
-from services.ros2.typestore import Distro, typestore_for
+from services.ros2.typestore import typestore_for
 from services.ros2.wire import (
     DEFAULT_QOS,
     SENSOR_DATA_QOS,
@@ -57,8 +58,8 @@ __all__ = [
     "TWIST",
     "TWIST_STAMPED",
     "Attachment",
-    "Distro",
     "QoS",
+    "RosDistro",
     "RosMessage",
     "cdr_decode",
     "cdr_encode",

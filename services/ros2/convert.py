@@ -1,7 +1,7 @@
 """Translations between the stack's messages and ROS 2 messages, and CDR in and out. No I/O.
 
 ROS messages are rosbags' generated dataclasses (typed here as ``RosMessage``): one class per
-type per distribution, so every function that builds one takes the ``Distro``. Payloads are
+type per distribution, so every function that builds one takes the ``RosDistro``. Payloads are
 CDR as rmw_zenoh carries them; bad input raises ``DecodeError`` and nothing else.
 
 A ROS header has no sequence number, no producer and only a wall-clock stamp: the stack's
@@ -18,7 +18,8 @@ import numpy as np
 
 from common.errors import DecodeError, one_line
 from common.messages import Detections, Header, LaserScan, Twist
-from services.ros2.typestore import Distro, typestore_for
+from common.ros2_settings import RosDistro
+from services.ros2.typestore import typestore_for
 
 #: A rosbags message instance; its class is generated per type and distribution at run time.
 RosMessage = Any
@@ -33,13 +34,13 @@ _NS_PER_S = 1_000_000_000
 _INT32_MAX = 2**31 - 1
 
 
-def cdr_encode(distro: Distro, ros_type: str, msg: RosMessage) -> bytes:
+def cdr_encode(distro: RosDistro, ros_type: str, msg: RosMessage) -> bytes:
     """``msg`` as little-endian CDR with its encapsulation header, as rmw_zenoh puts it."""
     return bytes(typestore_for(distro).serialize_cdr(msg, ros_type, little_endian=True))
 
 
 def cdr_decode(
-    distro: Distro, ros_type: str, payload: bytes | bytearray | memoryview
+    distro: RosDistro, ros_type: str, payload: bytes | bytearray | memoryview
 ) -> RosMessage:
     """The ROS message in ``payload``; DecodeError for anything that is not one.
 
@@ -55,7 +56,7 @@ def cdr_decode(
         raise DecodeError(f"{ros_type}: not valid CDR ({one_line(exc)})") from exc
 
 
-def build(distro: Distro, ros_type: str, **fields: Any) -> RosMessage:
+def build(distro: RosDistro, ros_type: str, **fields: Any) -> RosMessage:
     """A new ``ros_type`` message of ``distro`` with ``fields``."""
     return typestore_for(distro).types[ros_type](**fields)
 
@@ -71,7 +72,7 @@ def stamp_ns_from_ros(stamp: RosMessage) -> int:
     return sec * _NS_PER_S + nanosec
 
 
-def ros_time(distro: Distro, stamp_ns: int) -> RosMessage:
+def ros_time(distro: RosDistro, stamp_ns: int) -> RosMessage:
     """ns since the epoch as a ``builtin_interfaces/Time`` (int32 seconds: until 2038)."""
     sec, nanosec = divmod(stamp_ns, _NS_PER_S)
     if not 0 <= sec <= _INT32_MAX:
@@ -79,7 +80,7 @@ def ros_time(distro: Distro, stamp_ns: int) -> RosMessage:
     return build(distro, "builtin_interfaces/msg/Time", sec=sec, nanosec=nanosec)
 
 
-def ros_header(distro: Distro, stamp_ns: int, frame_id: str) -> RosMessage:
+def ros_header(distro: RosDistro, stamp_ns: int, frame_id: str) -> RosMessage:
     return build(distro, "std_msgs/msg/Header", stamp=ros_time(distro, stamp_ns), frame_id=frame_id)
 
 
@@ -115,7 +116,7 @@ def scan_from_ros(msg: RosMessage, *, source: str, seq: int = 0) -> LaserScan:
         raise DecodeError(f"LaserScan: {exc}") from exc
 
 
-def scan_to_ros(distro: Distro, scan: LaserScan) -> RosMessage:
+def scan_to_ros(distro: RosDistro, scan: LaserScan) -> RosMessage:
     """The stack's scan as a ``sensor_msgs/LaserScan`` (no intensities, timing unknown: 0)."""
     n = len(scan.ranges)
     return build(
@@ -137,7 +138,7 @@ def scan_to_ros(distro: Distro, scan: LaserScan) -> RosMessage:
 # ---------------------------------------------------------------------------- detections
 
 
-def detections_to_ros(distro: Distro, dets: Detections) -> RosMessage:
+def detections_to_ros(distro: RosDistro, dets: Detections) -> RosMessage:
     """The stack's detections as a ``vision_msgs/Detection2DArray``.
 
     One hypothesis per detection (class name, score); the box as centre and size in pixels;
@@ -184,7 +185,7 @@ def detections_to_ros(distro: Distro, dets: Detections) -> RosMessage:
 
 
 def twist_to_ros(
-    distro: Distro, twist: Twist, *, stamped: bool = False, frame_id: str = DEFAULT_BASE_FRAME
+    distro: RosDistro, twist: Twist, *, stamped: bool = False, frame_id: str = DEFAULT_BASE_FRAME
 ) -> RosMessage:
     """A ``geometry_msgs/Twist``, or with ``stamped`` a ``TwistStamped`` whose stamp is the
     command's header stamp, in ``frame_id``."""

@@ -11,8 +11,8 @@ import numpy as np
 from common.errors import DecodeError
 from common.frames import jpeg_size
 from common.messages import FRAME_ENCODINGS, Frame
+from common.ros2_settings import RosDistro
 from services.ros2.convert import RosMessage, build, header_from_ros, ros_header
-from services.ros2.typestore import Distro
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
@@ -69,7 +69,7 @@ def frame_from_compressed_image(msg: RosMessage, *, source: str, seq: int = 0) -
         raise DecodeError(f"CompressedImage: {exc}") from exc
 
 
-def frame_to_image(distro: Distro, frame: Frame) -> RosMessage:
+def frame_to_image(distro: RosDistro, frame: Frame) -> RosMessage:
     """A raw Frame as a ``sensor_msgs/Image`` (rows unpadded); the pixels are not copied."""
     channels = FRAME_ENCODINGS[frame.encoding]
     if not channels:
@@ -88,7 +88,7 @@ def frame_to_image(distro: Distro, frame: Frame) -> RosMessage:
 
 
 def frame_to_compressed_image(
-    distro: Distro, frame: Frame, *, fmt: str = JPEG_FORMAT
+    distro: RosDistro, frame: Frame, *, fmt: str = JPEG_FORMAT
 ) -> RosMessage:
     """A jpeg Frame as a ``sensor_msgs/CompressedImage``."""
     if frame.encoding != "jpeg":

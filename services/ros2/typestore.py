@@ -8,22 +8,14 @@ distribution but not vision_msgs; its 4.x definitions are shipped beside this mo
 from __future__ import annotations
 
 import functools
-from enum import StrEnum
 from pathlib import Path
 
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
+from common.ros2_settings import RosDistro
+
 MSG_DIR = Path(__file__).with_name("msg")
-
-
-class Distro(StrEnum):
-    """A ROS 2 distribution whose rmw_zenoh we speak."""
-
-    HUMBLE = "humble"
-    JAZZY = "jazzy"
-    KILTED = "kilted"
-    ROLLING = "rolling"
 
 
 def _newest_ros2_store() -> Stores:
@@ -31,17 +23,17 @@ def _newest_ros2_store() -> Stores:
     return [store for store in Stores if store.name.startswith("ROS2_")][-1]
 
 
-_STORES: dict[Distro, Stores] = {
-    Distro.HUMBLE: Stores.ROS2_HUMBLE,
-    Distro.JAZZY: Stores.ROS2_JAZZY,
-    Distro.KILTED: Stores.ROS2_KILTED,
-    Distro.ROLLING: _newest_ros2_store(),
+_STORES: dict[RosDistro, Stores] = {
+    RosDistro.HUMBLE: Stores.ROS2_HUMBLE,
+    RosDistro.JAZZY: Stores.ROS2_JAZZY,
+    RosDistro.KILTED: Stores.ROS2_KILTED,
+    RosDistro.ROLLING: _newest_ros2_store(),
 }
 
 
-def store_name(distro: Distro) -> Stores:
+def store_name(distro: RosDistro) -> Stores:
     """The rosbags store that holds ``distro``'s message definitions."""
-    return _STORES[Distro(distro)]
+    return _STORES[RosDistro(distro)]
 
 
 def shipped_msg_types() -> dict[str, str]:
@@ -53,7 +45,7 @@ def shipped_msg_types() -> dict[str, str]:
 
 
 @functools.cache
-def typestore_for(distro: Distro) -> Typestore:
+def typestore_for(distro: RosDistro) -> Typestore:
     """The rosbags typestore for ``distro``, with the shipped vision_msgs registered (cached).
 
     The store is shared by every caller: register nothing else into it.

@@ -17,7 +17,8 @@ from enum import IntEnum
 from typing import Literal
 
 from common.errors import DecodeError
-from services.ros2.typestore import Distro, typestore_for
+from common.ros2_settings import RosDistro
+from services.ros2.typestore import typestore_for
 
 HUMBLE_TYPE_HASH = "TypeHashNotSupported"
 ADMIN_SPACE = "@ros2_lv"
@@ -42,12 +43,12 @@ def dds_type(ros_type: str) -> str:
 
 
 @functools.cache
-def type_hash(distro: Distro, ros_type: str) -> str:
+def type_hash(distro: RosDistro, ros_type: str) -> str:
     """The type hash segment of keys and tokens: RIHS01 from Jazzy on, a literal on Humble."""
     dds_type(ros_type)  # refuse a malformed name on every distribution
-    if Distro(distro) is Distro.HUMBLE:
+    if RosDistro(distro) is RosDistro.HUMBLE:
         return HUMBLE_TYPE_HASH
-    store = typestore_for(Distro(distro))
+    store = typestore_for(RosDistro(distro))
     if ros_type not in store.types:
         raise ValueError(f"{ros_type} is not a known {distro} type")
     return store.hash_rihs01(ros_type)
@@ -64,7 +65,7 @@ def fully_qualified(topic: str, namespace: str = "/") -> str:
 
 
 def data_key(
-    domain_id: int, topic: str, ros_type: str, distro: Distro, namespace: str = "/"
+    domain_id: int, topic: str, ros_type: str, distro: RosDistro, namespace: str = "/"
 ) -> str:
     """The key samples travel on: ``<domain>/<topic>/<pkg>::msg::dds_::<Type>_/<hash>``, the
     topic fully qualified without its leading '/' (``0/cmd_vel/geometry_msgs::msg::...``)."""
@@ -245,7 +246,7 @@ def endpoint_token(
     node: str,
     topic: str,
     ros_type: str,
-    distro: Distro,
+    distro: RosDistro,
     qos: QoS = DEFAULT_QOS,
     enclave: str = "/",
 ) -> str:

@@ -10,6 +10,7 @@ import pytest
 
 from common.errors import DecodeError
 from common.messages import Detections, Frame, Header, LaserScan, Twist
+from common.ros2_settings import RosDistro
 from services.ros2.convert import (
     DETECTION_2D_ARRAY,
     LASER_SCAN,
@@ -28,17 +29,17 @@ from services.ros2.convert import (
     twist_to_ros,
 )
 from services.ros2.images import frame_to_image
-from services.ros2.typestore import Distro, typestore_for
+from services.ros2.typestore import typestore_for
 
 STAMP_NS = 1_700_000_000_123_456_789
-DISTROS = [Distro.HUMBLE, Distro.JAZZY, Distro.KILTED, Distro.ROLLING]
+DISTROS = [RosDistro.HUMBLE, RosDistro.JAZZY, RosDistro.KILTED, RosDistro.ROLLING]
 
 
 def header(frame_id: str = "camera") -> Header:
     return Header(stamp_ns=STAMP_NS, frame_id=frame_id, seq=9, source="camera", mono_ns=5)
 
 
-def roundtrip(distro: Distro, ros_type: str, msg: RosMessage) -> RosMessage:
+def roundtrip(distro: RosDistro, ros_type: str, msg: RosMessage) -> RosMessage:
     """``msg`` through CDR, read back by rosbags itself (not by our cdr_decode)."""
     payload = cdr_encode(distro, ros_type, msg)
     assert payload[:4] == b"\x00\x01\x00\x00"  # CDR little-endian, as rmw_zenoh sends
@@ -47,11 +48,11 @@ def roundtrip(distro: Distro, ros_type: str, msg: RosMessage) -> RosMessage:
 
 def test_a_twist_is_52_bytes_of_cdr() -> None:
     twist = Twist(header=header("base_link"), linear=(0.5, 0, 0), angular=(0, 0, -0.25))
-    assert len(cdr_encode(Distro.JAZZY, TWIST, twist_to_ros(Distro.JAZZY, twist))) == 52
+    assert len(cdr_encode(RosDistro.JAZZY, TWIST, twist_to_ros(RosDistro.JAZZY, twist))) == 52
 
 
 @pytest.mark.parametrize("distro", DISTROS)
-def test_twist_out_and_back(distro: Distro) -> None:
+def test_twist_out_and_back(distro: RosDistro) -> None:
     twist = Twist(header=header("base_link"), linear=(0.5, 0.0, 0.0), angular=(0.0, 0.0, -0.25))
     ros = roundtrip(distro, TWIST, twist_to_ros(distro, twist))
     assert (ros.linear.x, ros.angular.z) == (0.5, -0.25)
@@ -63,7 +64,7 @@ def test_twist_out_and_back(distro: Distro) -> None:
 
 
 @pytest.mark.parametrize("distro", DISTROS)
-def test_twist_stamped_out_and_back(distro: Distro) -> None:
+def test_twist_stamped_out_and_back(distro: RosDistro) -> None:
     twist = Twist(header=header("ignored"), linear=(1.0, 0.0, 0.0), angular=(0.0, 0.0, 0.5))
     ros = roundtrip(distro, TWIST_STAMPED, twist_to_ros(distro, twist, stamped=True))
     assert ros.header.frame_id == "base_link"
@@ -77,14 +78,14 @@ def test_twist_stamped_out_and_back(distro: Distro) -> None:
 
 
 def test_non_finite_ros_twists_are_refused() -> None:
-    vector3 = typestore_for(Distro.JAZZY).types["geometry_msgs/msg/Vector3"]
+    vector3 = typestore_for(RosDistro.JAZZY).types["geometry_msgs/msg/Vector3"]
     for bad in (math.nan, math.inf, -math.inf):
         ros = build(
-            Distro.JAZZY, TWIST, linear=vector3(bad, 0.0, 0.0), angular=vector3(0.0, 0.0, 0.0)
+            RosDistro.JAZZY, TWIST, linear=vector3(bad, 0.0, 0.0), angular=vector3(0.0, 0.0, 0.0)
         )
-        payload = cdr_encode(Distro.JAZZY, TWIST, ros)
+        payload = cdr_encode(RosDistro.JAZZY, TWIST, ros)
         with pytest.raises(DecodeError):
-            twist_from_ros(cdr_decode(Distro.JAZZY, TWIST, payload), source="s", received_ns=0)
+            twist_from_ros(cdr_decode(RosDistro.JAZZY, TWIST, payload), source="s", received_ns=0)
 
 
 def make_scan(n: int = 360) -> LaserScan:
@@ -101,7 +102,7 @@ def make_scan(n: int = 360) -> LaserScan:
 
 
 @pytest.mark.parametrize("distro", DISTROS)
-def test_scan_out_and_back(distro: Distro) -> None:
+def test_scan_out_and_back(distro: RosDistro) -> None:
     scan = make_scan()
     ros = roundtrip(distro, LASER_SCAN, scan_to_ros(distro, scan))
     assert ros.angle_max == pytest.approx(scan.angle_min + 359 * scan.angle_increment)
@@ -118,7 +119,7 @@ def test_scan_out_and_back(distro: Distro) -> None:
     assert (back.header.stamp_ns, back.header.frame_id, back.header.seq) == (STAMP_NS, "laser", 2)
 
 
-def ros_scan(distro: Distro, **changes: object) -> bytes:
+def ros_scan(distro: RosDistro, **changes: object) -> bytes:
     fields: dict[str, object] = {
         "header": ros_header(distro, STAMP_NS, "laser"),
         "angle_min": -1.0,
@@ -135,11 +136,11 @@ def ros_scan(distro: Distro, **changes: object) -> bytes:
 
 
 def test_a_big_endian_scan_decodes_to_native_floats() -> None:
-    store = typestore_for(Distro.JAZZY)
-    msg = store.deserialize_cdr(ros_scan(Distro.JAZZY), LASER_SCAN)
+    store = typestore_for(RosDistro.JAZZY)
+    msg = store.deserialize_cdr(ros_scan(RosDistro.JAZZY), LASER_SCAN)
     big = bytes(store.serialize_cdr(msg, LASER_SCAN, little_endian=False))
     assert big[:2] == b"\x00\x00"
-    scan = scan_from_ros(cdr_decode(Distro.JAZZY, LASER_SCAN, big), source="s")
+    scan = scan_from_ros(cdr_decode(RosDistro.JAZZY, LASER_SCAN, big), source="s")
     np.testing.assert_array_equal(scan.ranges, np.ones(5, dtype=np.float32))
 
 
@@ -155,9 +156,9 @@ def test_a_big_endian_scan_decodes_to_native_floats() -> None:
     ],
 )
 def test_scans_the_stack_would_refuse_raise_decode_error(changes: dict[str, object]) -> None:
-    payload = ros_scan(Distro.JAZZY, **changes)
+    payload = ros_scan(RosDistro.JAZZY, **changes)
     with pytest.raises(DecodeError):
-        scan_from_ros(cdr_decode(Distro.JAZZY, LASER_SCAN, payload), source="s")
+        scan_from_ros(cdr_decode(RosDistro.JAZZY, LASER_SCAN, payload), source="s")
 
 
 def make_detections(n: int = 10, tracks: bool = True) -> Detections:
@@ -180,7 +181,7 @@ def make_detections(n: int = 10, tracks: bool = True) -> Detections:
 
 
 @pytest.mark.parametrize("distro", DISTROS)
-def test_detections_out(distro: Distro) -> None:
+def test_detections_out(distro: RosDistro) -> None:
     dets = make_detections()
     ros = roundtrip(distro, DETECTION_2D_ARRAY, detections_to_ros(distro, dets))
     assert ros.header.frame_id == "camera"
@@ -202,16 +203,16 @@ def test_detections_out(distro: Distro) -> None:
 
 
 def test_detections_without_tracks_and_empty_ones() -> None:
-    ros = detections_to_ros(Distro.JAZZY, make_detections(3, tracks=False))
+    ros = detections_to_ros(RosDistro.JAZZY, make_detections(3, tracks=False))
     assert [d.id for d in ros.detections] == ["", "", ""]
     empty = roundtrip(
-        Distro.JAZZY, DETECTION_2D_ARRAY, detections_to_ros(Distro.JAZZY, make_detections(0))
+        RosDistro.JAZZY, DETECTION_2D_ARRAY, detections_to_ros(RosDistro.JAZZY, make_detections(0))
     )
     assert empty.detections == []
 
 
 def test_header_from_ros_refuses_impossible_stamps() -> None:
-    store = typestore_for(Distro.JAZZY)
+    store = typestore_for(RosDistro.JAZZY)
     time, ros_hdr = store.types["builtin_interfaces/msg/Time"], store.types["std_msgs/msg/Header"]
     for sec, nanosec in ((-1, 0), (0, 1_000_000_000)):
         with pytest.raises(DecodeError):
@@ -222,7 +223,7 @@ def test_header_from_ros_refuses_impossible_stamps() -> None:
 
 def test_ros_header_refuses_stamps_a_ros_time_cannot_hold() -> None:
     with pytest.raises(ValueError):
-        ros_header(Distro.JAZZY, 2**31 * 1_000_000_000, "f")
+        ros_header(RosDistro.JAZZY, 2**31 * 1_000_000_000, "f")
 
 
 ALL_TYPES = [
@@ -242,10 +243,10 @@ def test_random_bytes_raise_decode_error_only(ros_type: str) -> None:
         payload = rng.bytes(n)
         for prefix in (b"", b"\x00\x01\x00\x00", b"\x00\x00\x00\x00"):
             with contextlib.suppress(DecodeError):  # anything else fails the test
-                cdr_decode(Distro.JAZZY, ros_type, prefix + payload)
+                cdr_decode(RosDistro.JAZZY, ros_type, prefix + payload)
 
 
-def _valid_payloads(distro: Distro) -> dict[str, bytes]:
+def _valid_payloads(distro: RosDistro) -> dict[str, bytes]:
     frame = Frame(header=header(), encoding="bgr8", width=4, height=2, data=bytes(range(24)))
     twist = Twist(header=header("base_link"), linear=(0.5, 0, 0))
     return {
@@ -261,8 +262,8 @@ def _valid_payloads(distro: Distro) -> dict[str, bytes]:
     }
 
 
-@pytest.mark.parametrize("distro", [Distro.HUMBLE, Distro.JAZZY])
-def test_truncated_and_padded_cdr_raises_decode_error(distro: Distro) -> None:
+@pytest.mark.parametrize("distro", [RosDistro.HUMBLE, RosDistro.JAZZY])
+def test_truncated_and_padded_cdr_raises_decode_error(distro: RosDistro) -> None:
     for ros_type, payload in _valid_payloads(distro).items():
         assert cdr_decode(distro, ros_type, payload) is not None
         for cut in range(len(payload) - 4):  # keep at most 3 bytes of CDR alignment slack
@@ -275,11 +276,11 @@ def test_truncated_and_padded_cdr_raises_decode_error(distro: Distro) -> None:
 
 
 def test_cdr_decode_accepts_bytes_bytearray_and_memoryview() -> None:
-    payload = _valid_payloads(Distro.JAZZY)[TWIST]
+    payload = _valid_payloads(RosDistro.JAZZY)[TWIST]
     for form in (payload, bytearray(payload), memoryview(payload)):
-        assert cdr_decode(Distro.JAZZY, TWIST, form).linear.x == 0.5
+        assert cdr_decode(RosDistro.JAZZY, TWIST, form).linear.x == 0.5
 
 
 def test_cdr_decode_refuses_an_unknown_type_as_a_caller_error() -> None:
     with pytest.raises(ValueError):
-        cdr_decode(Distro.JAZZY, "nosuch_msgs/msg/Thing", b"\x00\x01\x00\x00")
+        cdr_decode(RosDistro.JAZZY, "nosuch_msgs/msg/Thing", b"\x00\x01\x00\x00")

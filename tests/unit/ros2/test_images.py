@@ -8,6 +8,7 @@ import pytest
 
 from common.errors import DecodeError
 from common.messages import Frame, Header
+from common.ros2_settings import RosDistro
 from services.ros2.convert import RosMessage, build, cdr_decode, cdr_encode, ros_header
 from services.ros2.images import (
     COMPRESSED_IMAGE,
@@ -18,7 +19,7 @@ from services.ros2.images import (
     frame_to_compressed_image,
     frame_to_image,
 )
-from services.ros2.typestore import Distro, typestore_for
+from services.ros2.typestore import typestore_for
 
 STAMP_NS = 1_700_000_000_000_000_123
 HEADER = Header(
@@ -40,7 +41,7 @@ def jpeg_frame(width: int = 64, height: int = 48) -> Frame:
     return Frame(header=HEADER, encoding="jpeg", width=width, height=height, data=buf.tobytes())
 
 
-def ros_image(distro: Distro, **changes: object) -> bytes:
+def ros_image(distro: RosDistro, **changes: object) -> bytes:
     fields: dict[str, object] = {
         "header": ros_header(distro, STAMP_NS, "camera"),
         "height": 2,
@@ -53,7 +54,7 @@ def ros_image(distro: Distro, **changes: object) -> bytes:
     return cdr_encode(distro, IMAGE, build(distro, IMAGE, **fields))
 
 
-def ros_compressed(distro: Distro, data: bytes, fmt: str = "jpeg") -> bytes:
+def ros_compressed(distro: RosDistro, data: bytes, fmt: str = "jpeg") -> bytes:
     msg = build(
         distro,
         COMPRESSED_IMAGE,
@@ -64,9 +65,9 @@ def ros_compressed(distro: Distro, data: bytes, fmt: str = "jpeg") -> bytes:
     return cdr_encode(distro, COMPRESSED_IMAGE, msg)
 
 
-@pytest.mark.parametrize("distro", [Distro.HUMBLE, Distro.JAZZY])
+@pytest.mark.parametrize("distro", [RosDistro.HUMBLE, RosDistro.JAZZY])
 @pytest.mark.parametrize("encoding", ["bgr8", "rgb8", "mono8"])
-def test_raw_frames_out_and_back(distro: Distro, encoding: str) -> None:
+def test_raw_frames_out_and_back(distro: RosDistro, encoding: str) -> None:
     frame = raw_frame(encoding)
     out = frame_to_image(distro, frame)
     assert out.data.base is frame.data  # the pixels are not copied on the way out
@@ -93,11 +94,11 @@ def test_raw_frames_out_and_back(distro: Distro, encoding: str) -> None:
 
 def test_padded_rows_are_unpadded() -> None:
     rows = np.arange(24, dtype=np.uint8).reshape(2, 12)  # 3 bgr8 pixels (9 bytes) + 3 padding
-    payload = ros_image(Distro.JAZZY, step=12, data=rows.ravel())
-    frame = frame_from_image(cdr_decode(Distro.JAZZY, IMAGE, payload), source="s")
+    payload = ros_image(RosDistro.JAZZY, step=12, data=rows.ravel())
+    frame = frame_from_image(cdr_decode(RosDistro.JAZZY, IMAGE, payload), source="s")
     assert frame.data == rows[:, :9].tobytes()
-    mono = ros_image(Distro.JAZZY, encoding="mono8")  # 3 bytes a row, padded to 9
-    grey = frame_from_image(cdr_decode(Distro.JAZZY, IMAGE, mono), source="s")
+    mono = ros_image(RosDistro.JAZZY, encoding="mono8")  # 3 bytes a row, padded to 9
+    grey = frame_from_image(cdr_decode(RosDistro.JAZZY, IMAGE, mono), source="s")
     assert grey.data == np.arange(18, dtype=np.uint8).reshape(2, 9)[:, :3].tobytes()
 
 
@@ -119,14 +120,14 @@ def test_padded_rows_are_unpadded() -> None:
     ],
 )
 def test_bad_images_raise_decode_error(changes: dict[str, object]) -> None:
-    payload = ros_image(Distro.JAZZY, **changes)
-    msg = cdr_decode(Distro.JAZZY, IMAGE, payload)
+    payload = ros_image(RosDistro.JAZZY, **changes)
+    msg = cdr_decode(RosDistro.JAZZY, IMAGE, payload)
     with pytest.raises(DecodeError):
         frame_from_image(msg, source="s")
 
 
-@pytest.mark.parametrize("distro", [Distro.HUMBLE, Distro.JAZZY])
-def test_jpeg_frames_out_and_back(distro: Distro) -> None:
+@pytest.mark.parametrize("distro", [RosDistro.HUMBLE, RosDistro.JAZZY])
+def test_jpeg_frames_out_and_back(distro: RosDistro) -> None:
     frame = jpeg_frame()
     out = frame_to_compressed_image(distro, frame)
     ros: RosMessage = typestore_for(distro).deserialize_cdr(
@@ -144,9 +145,9 @@ def test_jpeg_frames_out_and_back(distro: Distro) -> None:
     "fmt", ["jpeg", "JPEG", "jpg", "rgb8; jpeg compressed bgr8", "mono8; jpeg"]
 )
 def test_jpeg_formats_are_accepted(fmt: str) -> None:
-    payload = ros_compressed(Distro.JAZZY, jpeg_frame(32, 16).data, fmt)
+    payload = ros_compressed(RosDistro.JAZZY, jpeg_frame(32, 16).data, fmt)
     frame = frame_from_compressed_image(
-        cdr_decode(Distro.JAZZY, COMPRESSED_IMAGE, payload), source="s"
+        cdr_decode(RosDistro.JAZZY, COMPRESSED_IMAGE, payload), source="s"
     )
     assert (frame.width, frame.height) == (32, 16)
 
@@ -155,9 +156,11 @@ def test_jpeg_formats_are_accepted(fmt: str) -> None:
     "fmt", ["png", "bgr8; png compressed bgr8", "16UC1; compressedDepth jpeg", ""]
 )
 def test_other_formats_are_refused(fmt: str) -> None:
-    payload = ros_compressed(Distro.JAZZY, jpeg_frame().data, fmt)
+    payload = ros_compressed(RosDistro.JAZZY, jpeg_frame().data, fmt)
     with pytest.raises(DecodeError):
-        frame_from_compressed_image(cdr_decode(Distro.JAZZY, COMPRESSED_IMAGE, payload), source="s")
+        frame_from_compressed_image(
+            cdr_decode(RosDistro.JAZZY, COMPRESSED_IMAGE, payload), source="s"
+        )
 
 
 def test_corrupt_jpegs_raise_decode_error() -> None:
@@ -169,21 +172,21 @@ def test_corrupt_jpegs_raise_decode_error() -> None:
     corrupt.append(good[: sof + 5] + (0).to_bytes(2, "big") + good[sof + 7 :])
     corrupt.append(good[: sof + 7] + (40000).to_bytes(2, "big") + good[sof + 9 :])
     for data in corrupt:
-        payload = ros_compressed(Distro.JAZZY, data)
+        payload = ros_compressed(RosDistro.JAZZY, data)
         with pytest.raises(DecodeError):
             frame_from_compressed_image(
-                cdr_decode(Distro.JAZZY, COMPRESSED_IMAGE, payload), source="s"
+                cdr_decode(RosDistro.JAZZY, COMPRESSED_IMAGE, payload), source="s"
             )
 
 
 def test_frames_go_out_as_the_matching_message_type() -> None:
     with pytest.raises(ValueError):
-        frame_to_image(Distro.JAZZY, jpeg_frame())
+        frame_to_image(RosDistro.JAZZY, jpeg_frame())
     with pytest.raises(ValueError):
-        frame_to_compressed_image(Distro.JAZZY, raw_frame("bgr8"))
+        frame_to_compressed_image(RosDistro.JAZZY, raw_frame("bgr8"))
 
 
 def test_the_pixels_of_a_decoded_image_are_a_view_of_the_payload() -> None:
-    payload = ros_image(Distro.JAZZY)
-    msg = cdr_decode(Distro.JAZZY, IMAGE, payload)
+    payload = ros_image(RosDistro.JAZZY)
+    msg = cdr_decode(RosDistro.JAZZY, IMAGE, payload)
     assert np.shares_memory(msg.data, np.frombuffer(payload, np.uint8))

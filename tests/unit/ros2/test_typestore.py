@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from rosbags.typesys import Stores
 
-from services.ros2.typestore import MSG_DIR, Distro, shipped_msg_types, store_name, typestore_for
+from services.ros2.typestore import MSG_DIR, RosDistro, shipped_msg_types, store_name, typestore_for
 
 ROOT = Path(__file__).resolve().parents[3]
 TWIST_HASH = "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
@@ -26,15 +26,15 @@ VISION_MSGS = {
 }
 
 
-@pytest.mark.parametrize("distro", [Distro.JAZZY, Distro.KILTED, Distro.ROLLING])
-def test_official_type_hashes(distro: Distro) -> None:
+@pytest.mark.parametrize("distro", [RosDistro.JAZZY, RosDistro.KILTED, RosDistro.ROLLING])
+def test_official_type_hashes(distro: RosDistro) -> None:
     store = typestore_for(distro)
     assert store.hash_rihs01("geometry_msgs/msg/Twist") == TWIST_HASH
     assert store.hash_rihs01("vision_msgs/msg/Detection2DArray") == DETECTION_2D_ARRAY_HASH
 
 
 def test_every_distro_has_vision_msgs_and_the_stacks_types() -> None:
-    for distro in Distro:
+    for distro in RosDistro:
         store = typestore_for(distro)
         for name in VISION_MSGS:
             assert f"vision_msgs/msg/{name}" in store.types
@@ -48,22 +48,22 @@ def test_every_distro_has_vision_msgs_and_the_stacks_types() -> None:
 
 
 def test_typestores_are_cached_per_distro_and_accept_plain_names() -> None:
-    assert typestore_for(Distro.JAZZY) is typestore_for(Distro.JAZZY)
-    assert typestore_for(Distro("kilted")) is typestore_for(Distro.KILTED)
-    assert typestore_for(Distro.HUMBLE) is not typestore_for(Distro.JAZZY)
+    assert typestore_for(RosDistro.JAZZY) is typestore_for(RosDistro.JAZZY)
+    assert typestore_for(RosDistro("kilted")) is typestore_for(RosDistro.KILTED)
+    assert typestore_for(RosDistro.HUMBLE) is not typestore_for(RosDistro.JAZZY)
 
 
 def test_distro_stores() -> None:
-    assert [d.value for d in Distro] == ["humble", "jazzy", "kilted", "rolling"]
-    assert store_name(Distro.HUMBLE) is Stores.ROS2_HUMBLE
-    assert store_name(Distro.JAZZY) is Stores.ROS2_JAZZY
-    assert store_name(Distro.KILTED) is Stores.ROS2_KILTED
+    assert [d.value for d in RosDistro] == ["humble", "jazzy", "kilted", "rolling"]
+    assert store_name(RosDistro.HUMBLE) is Stores.ROS2_HUMBLE
+    assert store_name(RosDistro.JAZZY) is Stores.ROS2_JAZZY
+    assert store_name(RosDistro.KILTED) is Stores.ROS2_KILTED
     # Rolling: the newest ROS 2 store rosbags has, never older than Kilted.
     ros2 = [s for s in Stores if s.name.startswith("ROS2_")]
-    assert store_name(Distro.ROLLING) is ros2[-1]
-    assert ros2.index(store_name(Distro.ROLLING)) >= ros2.index(Stores.ROS2_KILTED)
+    assert store_name(RosDistro.ROLLING) is ros2[-1]
+    assert ros2.index(store_name(RosDistro.ROLLING)) >= ros2.index(Stores.ROS2_KILTED)
     with pytest.raises(ValueError):
-        Distro("foxy")
+        RosDistro("foxy")
 
 
 def test_the_vision_msgs_definitions_are_shipped_as_package_data() -> None:

@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from common.errors import DecodeError
-from services.ros2.typestore import Distro
+from common.ros2_settings import RosDistro
 from services.ros2.wire import (
     ATTACHMENT_SIZE,
     DEFAULT_QOS,
@@ -47,38 +47,38 @@ def test_dds_type_names() -> None:
 
 
 def test_type_hash_per_distro() -> None:
-    assert type_hash(Distro.HUMBLE, TWIST) == "TypeHashNotSupported"
-    for distro in (Distro.JAZZY, Distro.KILTED, Distro.ROLLING):
+    assert type_hash(RosDistro.HUMBLE, TWIST) == "TypeHashNotSupported"
+    for distro in (RosDistro.JAZZY, RosDistro.KILTED, RosDistro.ROLLING):
         assert type_hash(distro, TWIST) == TWIST_HASH
         assert type_hash(distro, "vision_msgs/msg/Detection2DArray") == DETS_HASH
     with pytest.raises(ValueError):
-        type_hash(Distro.JAZZY, "nosuch_msgs/msg/Thing")
+        type_hash(RosDistro.JAZZY, "nosuch_msgs/msg/Thing")
 
 
 def test_data_key_the_documented_twist_example() -> None:
     expected = f"0/cmd_vel/geometry_msgs::msg::dds_::Twist_/{TWIST_HASH}"
-    assert data_key(0, "/cmd_vel", TWIST, Distro.JAZZY) == expected
-    assert data_key(0, "/cmd_vel", TWIST, Distro.KILTED) == expected
-    assert data_key(0, "cmd_vel", TWIST, Distro.JAZZY) == expected  # relative, root namespace
-    assert data_key(0, "/cmd_vel/", TWIST, Distro.JAZZY) == expected
+    assert data_key(0, "/cmd_vel", TWIST, RosDistro.JAZZY) == expected
+    assert data_key(0, "/cmd_vel", TWIST, RosDistro.KILTED) == expected
+    assert data_key(0, "cmd_vel", TWIST, RosDistro.JAZZY) == expected  # relative, root namespace
+    assert data_key(0, "/cmd_vel/", TWIST, RosDistro.JAZZY) == expected
 
 
 def test_data_key_on_humble_and_other_domains_and_namespaces() -> None:
     assert (
-        data_key(0, "/cmd_vel", TWIST, Distro.HUMBLE)
+        data_key(0, "/cmd_vel", TWIST, RosDistro.HUMBLE)
         == "0/cmd_vel/geometry_msgs::msg::dds_::Twist_/TypeHashNotSupported"
     )
-    assert data_key(7, "/robot1/scan", "sensor_msgs/msg/LaserScan", Distro.HUMBLE) == (
+    assert data_key(7, "/robot1/scan", "sensor_msgs/msg/LaserScan", RosDistro.HUMBLE) == (
         "7/robot1/scan/sensor_msgs::msg::dds_::LaserScan_/TypeHashNotSupported"
     )
-    assert data_key(3, "detections", "vision_msgs/msg/Detection2DArray", Distro.JAZZY, "/r1") == (
-        f"3/r1/detections/vision_msgs::msg::dds_::Detection2DArray_/{DETS_HASH}"
-    )
+    assert data_key(
+        3, "detections", "vision_msgs/msg/Detection2DArray", RosDistro.JAZZY, "/r1"
+    ) == (f"3/r1/detections/vision_msgs::msg::dds_::Detection2DArray_/{DETS_HASH}")
     for bad_topic in ("", "/", "//a", "/a//b", "/a/*", "/a b"):
         with pytest.raises(ValueError):
-            data_key(0, bad_topic, TWIST, Distro.JAZZY)
+            data_key(0, bad_topic, TWIST, RosDistro.JAZZY)
     with pytest.raises(ValueError):
-        data_key(-1, "/cmd_vel", TWIST, Distro.JAZZY)
+        data_key(-1, "/cmd_vel", TWIST, RosDistro.JAZZY)
 
 
 def test_fully_qualified_names() -> None:
@@ -198,9 +198,9 @@ def test_node_token() -> None:
 
 @pytest.mark.parametrize(
     ("distro", "hash_chunk"),
-    [(Distro.HUMBLE, "TypeHashNotSupported"), (Distro.JAZZY, TWIST_HASH)],
+    [(RosDistro.HUMBLE, "TypeHashNotSupported"), (RosDistro.JAZZY, TWIST_HASH)],
 )
-def test_endpoint_tokens(distro: Distro, hash_chunk: str) -> None:
+def test_endpoint_tokens(distro: RosDistro, hash_chunk: str) -> None:
     common: dict[str, Any] = {
         "domain_id": 0,
         "zid": ZID,
@@ -244,7 +244,7 @@ def test_endpoint_token_joins_a_relative_topic_to_the_namespace() -> None:
         node="bridge",
         topic="detections",
         ros_type="vision_msgs/msg/Detection2DArray",
-        distro=Distro.KILTED,
+        distro=RosDistro.KILTED,
     )
     assert token.split("/")[7:12] == [
         "%robot1",
@@ -267,5 +267,5 @@ def test_endpoint_token_refuses_other_kinds() -> None:
             node="n",
             topic="/t",
             ros_type=TWIST,
-            distro=Distro.JAZZY,
+            distro=RosDistro.JAZZY,
         )
