@@ -24,7 +24,7 @@ from typing import Any
 
 import zenoh
 
-from common.errors import ConfigError
+from common.errors import ConfigError, StackError
 from common.keys import Keys
 from common.security import (
     access_control,
@@ -34,7 +34,7 @@ from common.security import (
     password_file,
     users_file,
 )
-from common.settings import Config, ZenohSettings
+from common.settings import Config, Ros2Settings, ZenohSettings
 
 log = logging.getLogger(__name__)
 
@@ -172,6 +172,33 @@ def open_session(settings: ZenohSettings, principal: str) -> zenoh.Session:
     conf = zenoh_config(settings, principal)
     where = settings.endpoint if settings.mode == "client" else ", ".join(settings.listen)
     return _open(conf, settings, where, principal)
+
+
+def open_ros_session(s: Ros2Settings, *, host: bool = False) -> zenoh.Session:
+    """A session in a ROS 2 graph, as an rmw_zenoh node joins it: a peer that connects to the
+    router and listens for the other nodes. ``host`` opens the router itself instead (the
+    simulator playing a robot). No router within ``router_timeout_s`` is a StackError."""
+    options: dict[str, Any] = {
+        "mode": "router" if host else "peer",
+        "listen/endpoints": list(s.router if host else s.listen),
+        "connect/endpoints": [] if host else list(s.router),
+        "scouting/multicast/enabled": False,
+        "connect/exit_on_failure": True,
+        "connect/timeout_ms": int(s.router_timeout_s * 1000),
+    }
+    conf = zenoh.Config()
+    for path, value in options.items():
+        conf.insert_json5(path, json.dumps(value))
+    try:
+        return zenoh.open(conf)
+    except zenoh.ZError as exc:
+        where = ", ".join(s.router)
+        if host:
+            raise ConfigError(f"cannot host the ROS 2 router on {where}: {exc}") from exc
+        raise StackError(
+            f"no rmw_zenoh router answered on {where} within {s.router_timeout_s:.0f} s: "
+            "start rmw_zenohd on the robot, or set ros2.router"
+        ) from exc
 
 
 def hub_access(config: Config) -> dict[str, Any]:

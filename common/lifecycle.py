@@ -78,36 +78,50 @@ def stop_event() -> threading.Event:
 
     A service started by the supervisor also stops when the supervisor dies, however it dies:
     the kernel sends it SIGTERM (Linux), and a watcher thread sees that its parent changed
-    (anywhere). It then has ``ORPHAN_GRACE_S`` to stop cleanly before it exits hard.
+    (anywhere). Either way it then has ``ORPHAN_GRACE_S`` to stop cleanly (the controller
+    commands zero) before the kernel ends it: an alarm with its default action, which needs no
+    Python code to run, so that a shutdown stuck in a call that holds the interpreter still
+    ends on time.
     """
     event = threading.Event()
+    supervisor = os.environ.get(SUPERVISOR_PID_ENV, "")
+    supervisor_pid = int(supervisor) if supervisor.isdigit() else None
 
     def _handler(signum: int, _frame: object) -> None:
+        if supervisor_pid is not None and os.getppid() != supervisor_pid:
+            _leave_soon(supervisor_pid)
         event.set()
 
     signal.signal(signal.SIGINT, _handler)
     signal.signal(signal.SIGTERM, _handler)
-    supervisor = os.environ.get(SUPERVISOR_PID_ENV, "")
-    if supervisor.isdigit():
-        _die_with(int(supervisor), event)
+    if supervisor_pid is not None:
+        _die_with(supervisor_pid, event)
     return event
 
 
+def _leave_soon(supervisor_pid: int) -> None:
+    """Arm the kernel's alarm: whatever this process is doing, it ends in ORPHAN_GRACE_S."""
+    if signal.getitimer(signal.ITIMER_REAL)[0] > 0:
+        return  # armed already (by the signal handler or the watcher, whichever came first)
+    signal.setitimer(signal.ITIMER_REAL, ORPHAN_GRACE_S)
+    logging.getLogger().error("the supervisor (pid %d) is gone: stopping", supervisor_pid)
+
+
 def _die_with(supervisor_pid: int, event: threading.Event) -> None:
+    signal.signal(signal.SIGALRM, signal.SIG_DFL)  # an alarm terminates: see _leave_soon
     if sys.platform.startswith("linux"):
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
 
     def watch() -> None:
+        # Also covers a supervisor that died before prctl took effect, and systems without
+        # it. It keeps watching after a stop was asked for: the stop may have come first.
+        tick = threading.Event()  # never set: its wait() is the poll interval
         while os.getppid() == supervisor_pid:
-            if event.wait(ORPHAN_POLL_S):
-                return  # stopping anyway; the supervisor waits for us
-        logging.getLogger().error("the supervisor (pid %d) is gone: stopping", supervisor_pid)
+            tick.wait(ORPHAN_POLL_S)
+        _leave_soon(supervisor_pid)
         event.set()
-        threading.Event().wait(ORPHAN_GRACE_S)
-        os._exit(EXIT_FAILED)  # the main thread did not finish in time: leave now
 
-    # The check in the loop also covers a supervisor that died before prctl took effect.
     threading.Thread(target=watch, name="supervisor-watch", daemon=True).start()
 
 

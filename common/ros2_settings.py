@@ -38,6 +38,8 @@ class Ros2Settings:
     """The bridge between the stack's keys and a ROS 2 graph (rmw_zenoh, no ROS install).
 
     ``router`` are the rmw_zenoh router's endpoints (``rmw_zenohd`` listens on port 7447);
+    the bridge also listens on ``listen`` so that the robot's nodes (peers) reach it directly,
+    as rmw_zenoh's own nodes do (use ``tcp/0.0.0.0:0`` when the router is on another host);
     ``domain_id``, ``distro``, ``node`` and ``namespace`` place the bridge in the graph. Each
     direction can be turned off: images and scans in (``image_in``, ``scan_in``), detections
     and commands out (``detections_out``, ``cmd_vel_out``). ``twist_stamped`` publishes
@@ -46,6 +48,7 @@ class Ros2Settings:
     """
 
     router: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
     domain_id: int = 0
     distro: RosDistro = RosDistro.JAZZY
     node: str = "zenoh_yolo_stack"

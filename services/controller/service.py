@@ -22,24 +22,38 @@ from common.settings import Config
 from services.controller.estop import EStopLatch
 from services.controller.policy import Command, Controller, Inputs, unknown_targets
 
-_M = TypeVar("_M")
+
+class _Stamped(Protocol):
+    @property
+    def header(self) -> Header: ...
 
 
-class Latest(Generic[_M]):
-    """The newest decoded message of one key and when it arrived (monotonic seconds)."""
+_S = TypeVar("_S", bound=_Stamped)
+
+
+class Latest(Generic[_S]):
+    """The newest decoded message of one key and when it arrived (monotonic seconds).
+
+    Newest by capture stamp: a message captured before the one held (a late delivery, another
+    source's older view) never replaces it.
+    """
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._msg: _M | None = None
+        self._msg: _S | None = None
         self._t = 0.0
         self.arrived = threading.Event()  # set on every new message; the loop clears it
 
-    def set(self, msg: _M) -> None:
+    def set(self, msg: _S) -> bool:
+        """Hold ``msg``; False (and nothing changes) when it is older than the one held."""
         with self._lock:
+            if self._msg is not None and msg.header.stamp_ns < self._msg.header.stamp_ns:
+                return False
             self._msg, self._t = msg, time.monotonic()
         self.arrived.set()
+        return True
 
-    def get(self) -> tuple[_M | None, float]:
+    def get(self) -> tuple[_S | None, float]:
         """The message and its age in seconds (inf when none has arrived)."""
         with self._lock:
             if self._msg is None:
@@ -103,10 +117,10 @@ def run(config: Config, stop: threading.Event) -> int:
                 tick = at.mono_ns / 1e9
                 d, d_arrival = dets.get()
                 sc, sc_arrival = scan.get()
-                d_age = _age(d.header if d else None, d_arrival, at)
+                d_age = _age(d.header if d is not None else None, d_arrival, at)
                 capture = capture_age_s(d.header, at, BOOT_ID) if d is not None else 0.0
                 inputs = Inputs(
-                    d, d_age, sc, _age(sc.header if sc else None, sc_arrival, at),
+                    d, d_age, sc, _age(sc.header if sc is not None else None, sc_arrival, at),
                     latch.engaged, min(max(0.0, capture), s.detection_timeout_s),
                 )  # fmt: skip
                 cmd = controller.step(inputs, tick)
@@ -125,14 +139,6 @@ def run(config: Config, stop: threading.Event) -> int:
     return 0
 
 
-class _Stamped(Protocol):
-    @property
-    def header(self) -> Header: ...
-
-
-_S = TypeVar("_S", bound=_Stamped)
-
-
 def _fresh_input(
     node: Node,
     key: str,
@@ -141,8 +147,8 @@ def _fresh_input(
     latest: Latest[_S],
     name: str,
 ) -> Callable[[zenoh.Sample], None]:
-    """A subscriber callback: decode, judge freshness, keep what is fresh, count the rest
-    (``<name>_in``, ``<name>_stale|future|replay``; garbage as bad input)."""
+    """A subscriber callback: decode, judge freshness, keep what is fresh and newest, count
+    the rest (``<name>_in``, ``<name>_stale|future|replay|late``; garbage as bad input)."""
 
     def on_sample(sample: zenoh.Sample) -> None:
         try:
@@ -151,11 +157,12 @@ def _fresh_input(
             node.bad_input(key, exc)
             return
         verdict, age = gate.check(msg.header, now())
-        if verdict is Verdict.FRESH:
-            latest.set(msg)
+        if verdict is not Verdict.FRESH:
+            node.reject(f"{name}_{verdict}", f"{verdict} {name} ({age:.2f} s) ignored")
+        elif latest.set(msg):
             node.counters.add(f"{name}_in")
         else:
-            node.reject(f"{name}_{verdict}", f"{verdict} {name} ({age:.2f} s) ignored")
+            node.reject(f"{name}_late", f"{name} older than the ones held ignored")
 
     return on_sample
 

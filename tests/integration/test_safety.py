@@ -131,8 +131,17 @@ def test_stale_future_and_replayed_detections_never_move_the_robot(make_stack) -
     # The control: fresh detections of a centred person move the robot.
     start = send_for(1.0, fresh)
     wait_for(lambda: moving(cmds, start), 10, "motion on fresh detections")
-    pub.put(person(header(now().wall_ns), n=0).encode())  # nobody in view: stop
-    wait_for(lambda: not Twist.decode(cmds[-1]).linear[0], 5, "a stop")
+    at = now()
+    nobody = at.wall_ns
+    pub.put(person(header(nobody, mono_ns=at.mono_ns), n=0).encode())  # nobody in view: stop
+    # The target is gone: the robot holds its aim briefly and slows to a stop.
+    wait_for(
+        lambda: [
+            t for t in map(Twist.decode, list(cmds)) if t.input_stamp_ns == nobody and t.is_zero
+        ],
+        5,
+        "a stop on the empty detections",
+    )
 
     for name, offset in (("past", -HOUR_NS), ("future", HOUR_NS)):
         start = send_for(1.5, lambda o=offset: person(header(now().wall_ns + o)).encode())
@@ -140,13 +149,27 @@ def test_stale_future_and_replayed_detections_never_move_the_robot(make_stack) -
 
     # A replay: an old message again, after a newer one from the same source.
     at = now()
-    old = person(header(at.wall_ns, mono_ns=at.mono_ns)).encode()
+    old_stamp = at.wall_ns
+    old = person(header(old_stamp, mono_ns=at.mono_ns)).encode()
+    before = len(cmds)
     pub.put(old)
-    wait_for(lambda: moving(cmds), 5, "motion on the original message")
+    wait_for(
+        lambda: [t for t in moving(cmds, before) if t.input_stamp_ns == old_stamp],
+        5,
+        "motion on the original message",
+    )
     at = now()
     pub.put(person(header(at.wall_ns, mono_ns=at.mono_ns), n=0).encode())  # newer: nobody
-    wait_for(lambda: not Twist.decode(cmds[-1]).linear[0], 5, "a stop on the newer message")
-    start = send_for(0.6, lambda: old)
+    wait_for(
+        lambda: [
+            t for t in map(Twist.decode, list(cmds)) if t.input_stamp_ns == at.wall_ns and t.is_zero
+        ],
+        5,
+        "a stop on the newer message",
+    )
+    start = len(cmds)
+    assert Twist.decode(cmds[-1]).is_zero
+    send_for(0.6, lambda: old)
     assert moving(cmds, start) == [], "a replayed message moved the robot"
 
     wait_for(
