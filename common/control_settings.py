@@ -99,7 +99,10 @@ class SimSettings:
 
     ``scenario`` names a world in services/sim/scenarios.py. The scenario clock starts once
     every service in ``wait_for`` is ready, so start-up time does not eat into the scenario.
-    The camera uses camera.hfov_deg; the image is ``width`` x ``height``. Commands from more
+    The camera uses camera.hfov_deg; the image is ``width`` x ``height``. With ``ros2_robot``
+    the simulator plays a ROS 2 robot: it hosts the graph's router on ``ros2.router`` and
+    speaks ROS 2 messages on the topics of ``[ros2]``, so that the ``ros2`` bridge service
+    carries every frame, scan and command. Commands from more
     than one publisher within ``command_sources_window_s`` are counted and warned about.
     """
 
@@ -117,6 +120,7 @@ class SimSettings:
     laser_range_max_m: float = 12.0
     laser_noise_m: float = 0.01
     seed: int = 0
+    ros2_robot: bool = False
     command_sources_window_s: float = 1.0
 
     def __post_init__(self) -> None:

@@ -7,9 +7,13 @@ The pure layer, exported here for other packages (the simulator plays a ROS robo
     cdr_encode, cdr_decode     CDR as rmw_zenoh carries it; garbage raises DecodeError
     *_to_ros, *_from_ros       the translations (images in ``images.py``, the rest ``convert.py``)
 
-No module here imports zenoh; the session and its publishers belong to ``service.py``.
+and the one I/O piece other packages need: ``RosGraph``, a node in a ROS 2 graph (``graph.py``:
+the session, its publishers and subscribers, their liveliness tokens). The translation modules
+import no zenoh.
 The wire-format facts and their sources: /work/shared/ROS2_ZENOH.md.
 """
+
+from typing import TYPE_CHECKING, Any
 
 from common.ros2_settings import RosDistro
 from services.ros2.convert import (
@@ -60,7 +64,9 @@ __all__ = [
     "Attachment",
     "QoS",
     "RosDistro",
+    "RosGraph",
     "RosMessage",
+    "RosPublisher",
     "cdr_decode",
     "cdr_encode",
     "data_key",
@@ -80,3 +86,15 @@ __all__ = [
     "type_hash",
     "typestore_for",
 ]
+
+if TYPE_CHECKING:
+    from services.ros2.graph import RosGraph, RosPublisher
+
+
+def __getattr__(name: str) -> Any:
+    # The I/O piece is imported on first use, so that the translations alone load no zenoh.
+    if name in ("RosGraph", "RosPublisher"):
+        from services.ros2 import graph
+
+        return getattr(graph, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

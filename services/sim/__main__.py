@@ -58,6 +58,11 @@ def _scenario_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("name", help="scenario name (see 'list')")
     add_config(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--ros2",
+        action="store_true",
+        help="play a ROS 2 robot: every frame, scan and command through the ros2 bridge",
+    )
 
 
 def scenario(args: argparse.Namespace) -> int:
@@ -67,7 +72,9 @@ def scenario(args: argparse.Namespace) -> int:
     setup_logging("scenario", "WARNING")
     from services.sim.runner import run_scenario
 
-    result = run_scenario(config, args.name, log=lambda m: print(m, file=sys.stderr))
+    result = run_scenario(
+        config, args.name, log=lambda m: print(m, file=sys.stderr), ros2=args.ros2
+    )
     if args.json:
         print(json.dumps(result))
     else:

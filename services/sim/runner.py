@@ -35,8 +35,9 @@ STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
 STOP_TIMEOUT_S = 30.0  # then the whole stack is killed
 
 
-def scenario_config(base: Config, scenario: Scenario) -> Config:
-    """``base`` made private to one run of ``scenario``."""
+def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Config:
+    """``base`` made private to one run of ``scenario``. With ``ros2`` the simulator plays a
+    ROS 2 robot on a private router, and the ``ros2`` bridge carries its sensors and commands."""
     zenoh_s = dataclasses.replace(
         base.zenoh,
         endpoint=f"tcp/127.0.0.1:{free_port()}",
@@ -49,14 +50,24 @@ def scenario_config(base: Config, scenario: Scenario) -> Config:
         target_classes=("person",),
         **scenario.controller,
     )
+    bridge = ("ros2",) if ros2 else ()
     return dataclasses.replace(
         base,
         zenoh=zenoh_s,
         stack=dataclasses.replace(base.stack, prefix=f"sim/{uuid.uuid4().hex[:8]}"),
         controller=controller,
-        sim=dataclasses.replace(base.sim, scenario=scenario.name),
+        sim=dataclasses.replace(
+            base.sim,
+            scenario=scenario.name,
+            ros2_robot=ros2,
+            wait_for=(*base.sim.wait_for, *bridge),
+        ),
+        ros2=dataclasses.replace(
+            base.ros2,
+            router=(f"tcp/127.0.0.1:{free_port()}",) if ros2 else base.ros2.router,
+        ),
         supervisor=dataclasses.replace(
-            base.supervisor, services=("sim", "detector", "controller", "metrics")
+            base.supervisor, services=("sim", *bridge, "detector", "controller", "metrics")
         ),
     )
 
@@ -84,13 +95,16 @@ def _record(session: zenoh.Session, keys: Keys, camera: str, rec: Recording) -> 
     ]
 
 
-def run_scenario(base: Config, name: str, log: Any = None) -> ScenarioResult:
-    """Run scenario ``name`` on the real stack; returns its figures (see score.py)."""
+def run_scenario(
+    base: Config, name: str, log: Any = None, ros2: bool = False
+) -> ScenarioResult:
+    """Run scenario ``name`` on the real stack (``ros2``: through the ROS 2 bridge, the
+    simulator playing a ROS 2 robot); returns its figures (see score.py)."""
     if name not in SCENARIOS or name == "demo":
         known = ", ".join(n for n in SCENARIOS if n != "demo")
         raise StackError(f"unknown scenario {name!r}; choose one of {known}")
     scenario = SCENARIOS[name]
-    config = scenario_config(base, scenario)
+    config = scenario_config(base, scenario, ros2)
     workdir = Path(tempfile.mkdtemp(prefix=f"scenario-{name}-"))
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))

@@ -4,19 +4,20 @@ from __future__ import annotations
 
 import threading
 import time
+from contextlib import ExitStack
 
 import numpy as np
-import zenoh
 
-from common.bus import Publisher, QoS, source_of
+from common.bus import Publisher, QoS
 from common.command_sources import CommandSources
-from common.errors import ConfigError, DecodeError
+from common.errors import ConfigError
 from common.frames import image_to_frame
 from common.messages import GroundTruth, LaserScan, Twist
 from common.node import Node
 from common.settings import Config
 from services.sim.laser import LaserSpec, cast
 from services.sim.render import CameraSpec, render
+from services.sim.robot_io import RosRobot, SensorOutput, StackRobot
 from services.sim.scenarios import SCENARIOS
 from services.sim.world import World
 
@@ -51,33 +52,32 @@ def run(config: Config, stop: threading.Event) -> int:
     laser = LaserSpec(s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m)
     rng = np.random.default_rng(s.seed)
     sources = CommandSources(s.command_sources_window_s)
-    with Node("sim", config) as node:
+    with Node("sim", config) as node, ExitStack() as closing:
         keys = node.keys
 
-        def on_cmd(sample: zenoh.Sample) -> None:
-            try:
-                twist = Twist.decode(sample.payload.to_bytes())
-            except DecodeError as exc:
-                node.bad_input(keys.cmd_vel(), exc)
-                return
+        def command(twist: Twist, source: str) -> None:
+            """A velocity command reached the base, from ``source`` (a publisher's id)."""
             with lock:
-                active, new = sources.heard(source_of(sample), time.monotonic())
+                active, new = sources.heard(source, time.monotonic())
                 world.command(twist.linear[0], twist.angular[2])
             if active > 1:
                 node.reject(
                     "commands_from_several_sources",
                     f"cmd_vel from {active} publishers at once "
-                    f"(this one from {twist.header.source!r}, {source_of(sample)})",
+                    f"(this one from {twist.header.source!r}, {source})",
                 )
                 if new:
                     node.log.warning("another publisher on cmd_vel: %s", sources.active())
 
-        sub = node.session.declare_subscriber(keys.cmd_vel(), on_cmd)
-        pubs = {
-            "frame": node.publisher(keys.frame(config.stack.camera), QoS.SENSOR),
-            "scan": node.publisher(keys.scan(), QoS.SENSOR),
-            "truth": node.publisher(keys.sim_truth(), QoS.TELEMETRY),
-        }
+        truth_pub = node.publisher(keys.sim_truth(), QoS.TELEMETRY)
+        out: SensorOutput
+        if s.ros2_robot:
+            # The robot speaks ROS 2: it hosts the graph's router, as a robot runs rmw_zenohd.
+            out = closing.enter_context(RosRobot(config, node, command))
+        else:
+            stack_robot = StackRobot(config, node, command)
+            closing.callback(stack_robot.close)
+            out = stack_robot
 
         def new_clocks() -> dict[str, Clock]:
             return {
@@ -108,12 +108,12 @@ def run(config: Config, stop: threading.Event) -> int:
                     if started:
                         world.advance(dt)
                     t = world.t if started else now - boot
-                    _publish_due(node, world, t, clocks, pubs, camera, laser, rng, config)
+                    _publish_due(node, world, t, clocks, out, truth_pub, camera, laser, rng, config)
                 node.publish_counters()
                 next_tick = max(next_tick + dt, time.monotonic() - dt)
                 stop.wait(max(0.0, next_tick - time.monotonic()))
         finally:
-            sub.undeclare()
+            node.log.info("stopping")
     return 0
 
 
@@ -130,7 +130,8 @@ def _publish_due(
     world: World,
     t: float,
     clocks: dict[str, Clock],
-    pubs: dict[str, Publisher],
+    out: SensorOutput,
+    truth_pub: Publisher,
     camera: CameraSpec,
     laser: LaserSpec,
     rng: np.random.Generator,
@@ -143,7 +144,7 @@ def _publish_due(
         frame = image_to_frame(
             render(world, camera), header, jpeg_quality=config.camera.jpeg_quality
         )
-        pubs["frame"].put(frame.encode())
+        out.frame(frame)
         node.counters.add("frames_out")
     if clocks["scan"].due(t):
         scan = LaserScan(
@@ -154,7 +155,7 @@ def _publish_due(
             range_max=laser.range_max,
             ranges=cast(pose, world.circles(), laser, rng),
         )
-        pubs["scan"].put(scan.encode())
+        out.scan(scan)
     if clocks["truth"].due(t):
         truth = GroundTruth(
             header=node.header(frame_id="world"),
@@ -165,4 +166,4 @@ def _publish_due(
             target_names=tuple(t.name for t in world.targets),
             target_ids=tuple(t.id for t in world.targets),
         )
-        pubs["truth"].put(truth.encode())
+        truth_pub.put(truth.encode())

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -19,9 +20,9 @@ pytestmark = pytest.mark.integration
 DEFAULTS = ControllerSettings()
 
 
-def run(name: str) -> dict[str, Any]:
+def run(name: str, *extra: str) -> dict[str, Any]:
     done = subprocess.run(
-        [sys.executable, "-m", "services.sim", "scenario", name, "--json"],
+        [sys.executable, "-m", "services.sim", "scenario", name, "--json", *extra],
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -87,3 +88,13 @@ def test_robot_stops_in_time_when_the_detector_dies(attempt: int) -> None:
     stop = result["stop_after_kill_s"]
     assert stop is not None and stop <= DEFAULTS.detection_timeout_s + STOP_MARGIN_S, result
     assert result["success"], result
+
+
+def test_ahead_with_the_simulator_playing_a_ros2_robot() -> None:
+    # The simulator speaks only ROS 2 (Image, LaserScan, Twist on rmw_zenoh keys, through a
+    # router it hosts): every frame, scan and command passes through the ros2 bridge.
+    result = run("ahead", "--ros2")
+    assert reached(result), result
+    assert result["success"], result
+    log = Path(result["log"]).read_text()
+    assert "ros2 INFO in the ROS 2 graph" in log and "ros2: exited" not in log
