@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
     "scenario": ("services.sim", ("scenario",), "run the real stack against a scripted world"),
     "scenarios": ("services.sim", ("list",), "name the scenarios"),
     "estop": ("services.controller", ("estop",), "engage or release the emergency stop"),
+    "ros2-benchmark": ("services.ros2", ("benchmark",), "the ROS 2 bridge's added latency"),
     "credentials": ("deploy.credentials", (), "write the secure profile's credentials"),
 }
 

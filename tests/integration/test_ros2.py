@@ -139,8 +139,10 @@ def test_a_ros2_robot_feeds_the_stack_and_obeys_it(make_stack, tmp_path: Path) -
         wait_for(
             saw_person,
             90,
-            lambda: f"a Detection2DArray holding a person ({len(dets)} arrays; bridge counters "
-            f"{ServiceCounters.decode(counts[-1]).counters if counts else None})",
+            lambda: (
+                f"a Detection2DArray holding a person ({len(dets)} arrays; bridge counters "
+                f"{ServiceCounters.decode(counts[-1]).counters if counts else None})"
+            ),
         )
         first = next(d for d in dets if d.detections)
         det = first.detections[0]
@@ -180,3 +182,62 @@ def test_a_ros2_robot_feeds_the_stack_and_obeys_it(make_stack, tmp_path: Path) -
     finally:
         stop.set()
         robot.close()
+
+
+def test_no_router_is_one_line_and_a_lost_router_is_survived(make_stack, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    import subprocess
+    import sys
+
+    from tests.integration.conftest import write_config
+
+    # No router at start-up: one clear line, a non-zero exit (the supervisor retries it).
+    lonely = write_config(tmp_path, ros2={"router": [f"tcp/127.0.0.1:{free_port()}"],
+                                          "router_timeout_s": 1.0})  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-m", "services.ros2", "serve", "--config", str(lonely)],
+        cwd=REPO, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert done.returncode == 1, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert lines[-1].startswith("ros2: error: no rmw_zenoh router answered on "), done.stderr
+    assert "Traceback" not in done.stderr
+
+    # The router goes away while the stack runs, and comes back.
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    robot = Robot(endpoint)
+    stop = threading.Event()
+    stack: Stack = make_stack(
+        supervisor={"services": sorted(ROS_SERVICES)}, ros2={"router": [endpoint]}
+    )
+    stack.wait_ready(ROS_SERVICES)
+    _, cmds = stack.subscribe(stack.keys.controller_status())
+    person = np.ascontiguousarray(data.camera())
+    current = {"robot": robot}
+
+    def drive() -> None:
+        while not stop.wait(0.2):
+            r = current["robot"]
+            if r is not None:
+                r.put("camera/rgb/image_raw", "sensor_msgs/msg/Image", r.image(person))
+
+    threading.Thread(target=drive, daemon=True).start()
+    try:
+        from common.messages import ControllerStatus
+
+        def state() -> str:
+            return ControllerStatus.decode(cmds[-1]).state if cmds else ""
+
+        wait_for(lambda: state() == "tracking", 60, "tracking through the bridge")
+        current["robot"] = None
+        robot.close()  # the robot's router and node are gone
+        wait_for(lambda: state() == "stale", 5, "the dead-man stop while the router is gone")
+        assert "ros2" in stack.ready_services(), stack.log()
+        robot = Robot(endpoint)  # back, on the same endpoint
+        current["robot"] = robot
+        wait_for(lambda: state() == "tracking", 60, "tracking again once the router is back")
+        assert stack.stop() == 0, stack.log()
+        assert "ros2: exited" not in stack.log()
+    finally:
+        stop.set()
+        if current["robot"] is not None:
+            current["robot"].close()
