@@ -4,16 +4,21 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
+from typing import TypeVar
 
 import zenoh
 
 from common.bus import Publisher, QoS, open_session
 from common.clock import BOOT_ID, Stamp, now
 from common.counters import Counters
+from common.errors import DecodeError
 from common.keys import Keys
 from common.lifecycle import Closing
 from common.messages import Header, ServiceCounters
 from common.settings import Config
+
+_M = TypeVar("_M")
 
 
 class Node(Closing):
@@ -45,6 +50,22 @@ class Node(Closing):
     def publisher(self, key: str, qos: QoS) -> Publisher:
         """Declare a publisher with the QoS profile of its role (common/bus.py)."""
         return Publisher(self.session, key, qos)
+
+    def subscribe(
+        self, key: str, decode: Callable[[bytes], _M], handle: Callable[[_M, zenoh.Sample], None]
+    ) -> zenoh.Subscriber[None]:
+        """Subscribe to ``key``: each sample is decoded, garbage is counted as bad input and
+        dropped (never raised into Zenoh's thread), and the message goes to ``handle``."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                msg = decode(sample.payload.to_bytes())
+            except DecodeError as exc:
+                self.bad_input(key, exc)
+                return
+            handle(msg, sample)
+
+        return self.session.declare_subscriber(key, on_sample)
 
     def header(self, stamp: Stamp | None = None, frame_id: str = "") -> Header:
         """A header for a message this service originates, stamped on both clocks (now, unless

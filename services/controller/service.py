@@ -90,12 +90,13 @@ def run(config: Config, stop: threading.Event) -> int:
         def on_estop(sample: zenoh.Sample) -> None:
             _on_estop(node, latch, sample, s.estop_release_max_age_s, tolerance)
 
-        on_detections = _fresh_input(node, det_key, Detections.decode, det_gate, dets, "detections")
-        scan_key = node.keys.scan()
-        on_scan = _fresh_input(node, scan_key, LaserScan.decode, scan_gate, scan, "scans")
         subs = [
-            node.session.declare_subscriber(det_key, on_detections),
-            node.session.declare_subscriber(scan_key, on_scan),
+            node.subscribe(
+                det_key, Detections.decode, _fresh_input(node, det_gate, dets, "detections")
+            ),
+            node.subscribe(
+                node.keys.scan(), LaserScan.decode, _fresh_input(node, scan_gate, scan, "scans")
+            ),
             node.session.declare_subscriber(node.keys.estop(), on_estop),
         ]
         controller = Controller(s, config.camera.hfov_deg)
@@ -140,22 +141,12 @@ def run(config: Config, stop: threading.Event) -> int:
 
 
 def _fresh_input(
-    node: Node,
-    key: str,
-    decode: Callable[[bytes], _S],
-    gate: FreshnessGate,
-    latest: Latest[_S],
-    name: str,
-) -> Callable[[zenoh.Sample], None]:
-    """A subscriber callback: decode, judge freshness, keep what is fresh and newest, count
-    the rest (``<name>_in``, ``<name>_stale|future|replay|late``; garbage as bad input)."""
+    node: Node, gate: FreshnessGate, latest: Latest[_S], name: str
+) -> Callable[[_S, zenoh.Sample], None]:
+    """A decoded message's fate: judge its freshness, keep it if fresh and newest, count the
+    rest (``<name>_in``, ``<name>_stale|future|replay|late``)."""
 
-    def on_sample(sample: zenoh.Sample) -> None:
-        try:
-            msg = decode(sample.payload.to_bytes())
-        except DecodeError as exc:
-            node.bad_input(key, exc)
-            return
+    def on_message(msg: _S, _sample: zenoh.Sample) -> None:
         verdict, age = gate.check(msg.header, now())
         if verdict is not Verdict.FRESH:
             node.reject(f"{name}_{verdict}", f"{verdict} {name} ({age:.2f} s) ignored")
@@ -164,7 +155,7 @@ def _fresh_input(
         else:
             node.reject(f"{name}_late", f"{name} older than the ones held ignored")
 
-    return on_sample
+    return on_message
 
 
 def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:

@@ -94,32 +94,22 @@ def run(config: Config, stop: threading.Event) -> int:
             graph.subscribe(s.scan_topic, LASER_SCAN, inbound(LASER_SCAN, to_scan), SENSOR_DATA_QOS)
         if s.detections_out:
             det_pub = graph.publisher(s.detections_topic, DETECTION_2D_ARRAY)
-            det_key = keys.detections(config.stack.camera)
 
-            def on_detections(sample: zenoh.Sample) -> None:
-                try:
-                    dets = Detections.decode(sample.payload.to_bytes())
-                except DecodeError as exc:
-                    node.bad_input(det_key, exc)
-                    return
+            def on_detections(dets: Detections, _sample: zenoh.Sample) -> None:
                 det_pub.put(detections_to_ros(s.distro, dets))
                 node.counters.add("detections_out")
 
-            subs.append(node.session.declare_subscriber(det_key, on_detections))
+            det_key = keys.detections(config.stack.camera)
+            subs.append(node.subscribe(det_key, Detections.decode, on_detections))
         if s.cmd_vel_out:
             twist_type = TWIST_STAMPED if s.twist_stamped else TWIST
             cmd_pub = graph.publisher(s.cmd_vel_topic, twist_type)
 
-            def on_cmd(sample: zenoh.Sample) -> None:
-                try:
-                    twist = Twist.decode(sample.payload.to_bytes())
-                except DecodeError as exc:
-                    node.bad_input(keys.cmd_vel(), exc)
-                    return
+            def on_cmd(twist: Twist, _sample: zenoh.Sample) -> None:
                 cmd_pub.put(twist_to_ros(s.distro, twist, stamped=s.twist_stamped))
                 node.counters.add("commands_out")
 
-            subs.append(node.session.declare_subscriber(keys.cmd_vel(), on_cmd))
+            subs.append(node.subscribe(keys.cmd_vel(), Twist.decode, on_cmd))
         node.log.info(
             "in the ROS 2 graph (%s, domain %d) via %s as %s%s",
             s.distro, s.domain_id, ", ".join(s.router), s.namespace.rstrip("/"), s.node,

@@ -50,15 +50,10 @@ class StackRobot:
         self._frame = node.publisher(keys.frame(config.stack.camera), QoS.SENSOR)
         self._scan = node.publisher(keys.scan(), QoS.SENSOR)
 
-        def on_cmd(sample: zenoh.Sample) -> None:
-            try:
-                twist = Twist.decode(sample.payload.to_bytes())
-            except DecodeError as exc:
-                node.bad_input(keys.cmd_vel(), exc)
-                return
+        def on_cmd(twist: Twist, sample: zenoh.Sample) -> None:
             on_command(twist, source_of(sample))
 
-        self._sub = node.session.declare_subscriber(keys.cmd_vel(), on_cmd)
+        self._sub = node.subscribe(keys.cmd_vel(), Twist.decode, on_cmd)
 
     def frame(self, frame: Frame) -> None:
         self._frame.put(frame.encode())
@@ -101,4 +96,3 @@ class RosRobot(Closing):
 
     def close(self) -> None:
         self._graph.close()
-

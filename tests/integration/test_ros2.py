@@ -156,13 +156,20 @@ def test_a_ros2_robot_feeds_the_stack_and_obeys_it(make_stack, tmp_path: Path) -
         )
 
         # The stack is in the ROS 2 graph: its node and endpoints have liveliness tokens.
-        tokens = [str(r.ok.key_expr) for r in robot.node.liveliness().get("@ros2_lv/0/**")
-                  if r.ok is not None]  # fmt: skip
-        node_tokens = [t for t in tokens if "/NN/" in t and t.endswith("/zenoh_yolo_stack")]
-        assert node_tokens, tokens
-        for kind, topic in (("MS", "%camera%rgb%image_raw"), ("MS", "%scan"),
-                            ("MP", "%detections"), ("MP", "%cmd_vel")):  # fmt: skip
-            assert any(f"/{kind}/" in t and f"/{topic}/" in t for t in tokens), (kind, topic)
+        wanted = (("MS", "%camera%rgb%image_raw"), ("MS", "%scan"),
+                  ("MP", "%detections"), ("MP", "%cmd_vel"))  # fmt: skip
+
+        def graph_tokens() -> list[str]:
+            replies = robot.node.liveliness().get("@ros2_lv/0/**", timeout=2.0)
+            tokens = [str(r.ok.key_expr) for r in replies if r.ok is not None]
+            node = any("/NN/" in t and t.endswith("/zenoh_yolo_stack") for t in tokens)
+            endpoints = all(
+                any(f"/{kind}/" in t and f"/{topic}/" in t for t in tokens)
+                for kind, topic in wanted
+            )
+            return tokens if node and endpoints else []
+
+        wait_for(graph_tokens, 20, "the bridge's node and endpoint liveliness tokens")
 
         # Garbage on the ROS keys is counted, and the bridge stays up.
         for _ in range(5):
