@@ -126,3 +126,4 @@ class ServiceProcess:
             self.proc.kill()
             self.last_exit = self.proc.wait()
         self.state = "exited"
+        self._forwarder.join(timeout=1.0)  # pass on its last words before we exit

@@ -211,7 +211,7 @@ def _on_estop(
             node.reject("estop_release_refused", f"{verdict} e-stop release ({age:.2f} s) refused")
         elif not latch.release(msg.header.stamp_ns, msg.header.source):
             node.reject("estop_release_refused", "e-stop release older than the stop refused")
-        elif latch.state.by == msg.header.source:
+        else:
             node.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
     except OSError as exc:
         # The latch in memory holds; only its copy on disk failed. Say so loudly.
