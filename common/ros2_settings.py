@@ -44,6 +44,9 @@ class Ros2Settings:
     direction can be turned off: images and scans in (``image_in``, ``scan_in``), detections
     and commands out (``detections_out``, ``cmd_vel_out``). ``twist_stamped`` publishes
     ``geometry_msgs/msg/TwistStamped`` instead of ``Twist`` (many Jazzy robots take it).
+    ``debug_image_out`` publishes each frame with its detections drawn on it (boxes, class,
+    score, track id) as a jpeg ``CompressedImage`` on ``debug_image_topic``, at most
+    ``debug_image_rate_hz`` times a second, at ``debug_jpeg_quality``.
     ``router_timeout_s`` bounds the wait for the router at start-up.
     """
 
@@ -63,6 +66,10 @@ class Ros2Settings:
     scan_in: bool = True
     detections_out: bool = True
     cmd_vel_out: bool = True
+    debug_image_out: bool = False
+    debug_image_topic: str = "/detections/image"
+    debug_image_rate_hz: float = 5.0
+    debug_jpeg_quality: int = 80
     router_timeout_s: float = 5.0
 
     def __post_init__(self) -> None:
@@ -78,6 +85,12 @@ class Ros2Settings:
             raise ConfigError(f"ros2.node {self.node!r} is not a ROS 2 node name")
         if self.namespace != "/":
             _topic("namespace", self.namespace)
-        for name in ("image_topic", "scan_topic", "detections_topic", "cmd_vel_topic"):
+        topics = ("image_topic", "scan_topic", "detections_topic", "cmd_vel_topic")
+        for name in (*topics, "debug_image_topic"):
             _topic(name, getattr(self, name))
         positive("ros2.router_timeout_s", self.router_timeout_s)
+        positive("ros2.debug_image_rate_hz", self.debug_image_rate_hz)
+        if not 1 <= self.debug_jpeg_quality <= 100:
+            raise ConfigError(
+                f"ros2.debug_jpeg_quality must be within 1..100, got {self.debug_jpeg_quality}"
+            )

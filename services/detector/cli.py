@@ -22,12 +22,12 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from common.annotate import annotate
 from common.cli import with_default
 from common.errors import ConfigError, ImageError, StackError
 from common.images import list_images, load_image
 from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code, print_progress
 from common.settings import DetectorSettings
-from services.detector.annotate import annotate
 from services.detector.backends import BACKEND_CHOICES
 from services.detector.model_files import ensure_default_model
 from services.detector.pipeline import Detector
@@ -134,7 +134,8 @@ def _save_annotated(
     save_dir: Path, path: Path, image: npt.NDArray[np.uint8], result: DetectionResult
 ) -> None:
     target = save_dir / path.name
-    ok, encoded = cv2.imencode(target.suffix or ".png", annotate(image, result))
+    drawn = annotate(image, result.boxes, result.class_names)
+    ok, encoded = cv2.imencode(target.suffix or ".png", drawn)
     if not ok:
         raise ImageError(f"{target}: cannot encode the annotated image")
     try:

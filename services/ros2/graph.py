@@ -108,6 +108,10 @@ class RosGraph(Closing):
         self._closers += [sub.undeclare, token.undeclare]
         return key
 
+    def on_close(self, close: Callable[[], None]) -> None:
+        """Call ``close`` when the graph closes (before its session does)."""
+        self._closers.append(close)
+
     def close(self) -> None:
         for close in reversed(self._closers):
             close()

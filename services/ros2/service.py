@@ -15,12 +15,13 @@ commands zero.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 
 import zenoh
 
 from common.bus import Publisher, QoS
-from common.errors import DecodeError
+from common.errors import DecodeError, ImageError
 from common.messages import Detections, Frame, LaserScan, Twist
 from common.node import Node
 from common.ros2_settings import ImageFormat
@@ -35,14 +36,18 @@ from services.ros2.convert import (
     scan_from_ros,
     twist_to_ros,
 )
+from services.ros2.debug_image import FrameCache, debug_image
 from services.ros2.graph import RosGraph
 from services.ros2.images import (
     COMPRESSED_IMAGE,
     IMAGE,
     frame_from_compressed_image,
     frame_from_image,
+    frame_to_compressed_image,
 )
 from services.ros2.wire import SENSOR_DATA_QOS
+
+_Subscriber = zenoh.Subscriber[None]
 
 _IDLE_S = 1.0  # how often the loop publishes counters and looks at the stop flag
 
@@ -52,7 +57,7 @@ def run(config: Config, stop: threading.Event) -> int:
     s = config.ros2
     with Node("ros2", config) as node, RosGraph(s) as graph:
         keys = node.keys
-        subs: list[zenoh.Subscriber[None]] = []
+        subs: list[_Subscriber] = []
 
         def inbound(
             ros_type: str, convert: Callable[[str, memoryview], bytes]
@@ -92,6 +97,8 @@ def run(config: Config, stop: threading.Event) -> int:
                 return scan.encode()
 
             graph.subscribe(s.scan_topic, LASER_SCAN, inbound(LASER_SCAN, to_scan), SENSOR_DATA_QOS)
+        if s.debug_image_out:
+            subs.append(_debug_images(node, graph, config))
         if s.detections_out:
             det_pub = graph.publisher(s.detections_topic, DETECTION_2D_ARRAY)
 
@@ -122,3 +129,34 @@ def run(config: Config, stop: threading.Event) -> int:
             for sub in subs:
                 sub.undeclare()
     return 0
+
+
+def _debug_images(node: Node, graph: RosGraph, config: Config) -> _Subscriber:
+    """Publish each frame with its detections drawn on it, at most ``debug_image_rate_hz``.
+    Returns the frames' subscriber; the detections' one is undeclared with the graph."""
+    s = config.ros2
+    frames = FrameCache()
+    frame_key = node.keys.frame(config.stack.camera)
+    pub = graph.publisher(s.debug_image_topic, COMPRESSED_IMAGE)
+    period_s = 1.0 / s.debug_image_rate_hz
+    due = 0.0
+
+    def on_detections(dets: Detections, _sample: zenoh.Sample) -> None:
+        nonlocal due
+        frame = frames.take(dets.header.stamp_ns)
+        if frame is None or time.monotonic() < due:
+            return
+        due = time.monotonic() + period_s
+        try:
+            drawn = debug_image(frame, dets, s.debug_jpeg_quality)
+        except ImageError as exc:
+            node.bad_input(frame_key, exc)
+            return
+        pub.put(frame_to_compressed_image(s.distro, drawn))
+        node.counters.add("debug_images_out")
+
+    dets_sub = node.subscribe(
+        node.keys.detections(config.stack.camera), Detections.decode, on_detections
+    )
+    graph.on_close(dets_sub.undeclare)
+    return node.subscribe(frame_key, Frame.decode, lambda f, _s: frames.add(f))

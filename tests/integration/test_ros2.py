@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import pytest
 import zenoh
@@ -102,9 +103,16 @@ def test_a_ros2_robot_feeds_the_stack_and_obeys_it(make_stack, tmp_path: Path) -
     stop = threading.Event()
     try:
         stack: Stack = make_stack(
-            supervisor={"services": sorted(ROS_SERVICES)}, ros2={"router": [endpoint]}
+            supervisor={"services": sorted(ROS_SERVICES)},
+            ros2={"router": [endpoint], "debug_image_out": True},
         )
         stack.wait_ready(ROS_SERVICES)
+        debug: list[Any] = []
+        robot.node.declare_subscriber(
+            robot.key("detections/image", "sensor_msgs/msg/CompressedImage"),
+            lambda s: debug.append(robot.ts.deserialize_cdr(
+                s.payload.to_bytes(), "sensor_msgs/msg/CompressedImage")),
+        )  # fmt: skip
         dets: list[Any] = []
         cmds: list[Any] = []
         robot.node.declare_subscriber(
@@ -154,6 +162,13 @@ def test_a_ros2_robot_feeds_the_stack_and_obeys_it(make_stack, tmp_path: Path) -
             30,
             "a cmd_vel reacting to the person",
         )
+
+        # The debug image: the frame with its boxes drawn, a jpeg as RViz and Foxglove take it.
+        wait_for(lambda: debug, 30, "an annotated CompressedImage on /detections/image")
+        assert "jpeg" in debug[0].format
+        drawn = cv2.imdecode(np.asarray(debug[0].data, np.uint8), cv2.IMREAD_COLOR)
+        assert drawn.shape == (512, 512, 3)
+        assert not (drawn == drawn[..., :1]).all(), "no coloured box drawn on the grey photo"
 
         # The stack is in the ROS 2 graph: its node and endpoints have liveliness tokens.
         wanted = (("MS", "%camera%rgb%image_raw"), ("MS", "%scan"),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -190,3 +192,35 @@ def test_the_pixels_of_a_decoded_image_are_a_view_of_the_payload() -> None:
     payload = ros_image(RosDistro.JAZZY)
     msg = cdr_decode(RosDistro.JAZZY, IMAGE, payload)
     assert np.shares_memory(msg.data, np.frombuffer(payload, np.uint8))
+
+
+def test_debug_image_draws_the_detections_on_their_frame() -> None:
+    import cv2
+
+    from common.boxes import Boxes
+    from common.messages import Detections
+    from services.ros2.debug_image import FrameCache, debug_image
+
+    pixels = np.full((120, 160, 3), 255, np.uint8)
+    header = Header(stamp_ns=5, frame_id="camera", seq=1, source="cam")
+    frame = Frame(header=header, encoding="bgr8", width=160, height=120, data=pixels.tobytes())
+    boxes = Boxes(
+        xyxy=np.array([[20, 20, 100, 100]], np.float32),
+        scores=np.array([0.9], np.float32),
+        class_ids=np.zeros(1, np.int32),
+        track_ids=np.array([7], np.int32),
+    )
+    dets = Detections.from_boxes(
+        boxes, header=header, image_width=160, image_height=120, class_names=("person",)
+    )
+    cache = FrameCache(size=3)
+    for stamp in (1, 2, 5, 9):
+        cache.add(frame if stamp == 5 else dataclasses.replace(frame, header=dataclasses.replace(
+            header, stamp_ns=stamp)))  # fmt: skip
+    assert cache.take(5) is frame and cache.take(5) is None  # taken, and older ones forgotten
+    drawn = debug_image(frame, dets, jpeg_quality=90)
+    assert drawn.encoding == "jpeg" and drawn.header == header
+    image = cv2.imdecode(np.frombuffer(drawn.data, np.uint8), cv2.IMREAD_COLOR)
+    assert image.shape == (120, 160, 3)
+    assert image[20, 60].min() < 200  # the box's top edge is drawn where the frame was white
+    assert image[110, 150].min() > 240  # far from the box, untouched
