@@ -13,10 +13,11 @@ Rules:
 from __future__ import annotations
 
 import json
-import os
 import threading
 from dataclasses import asdict, dataclass
 from pathlib import Path
+
+from common.files import atomic_write_bytes
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,19 +51,10 @@ def load(path: Path) -> tuple[EStopState, str]:
 
 
 def save(path: Path, state: EStopState) -> None:
-    """Write ``state`` so that a crash at any instant leaves the old or the new file whole."""
+    """Write ``state`` so that a crash or a power cut at any instant leaves the old or the new
+    file whole."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with tmp.open("w", encoding="utf-8") as f:
-        json.dump(asdict(state), f)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    fd = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(fd)  # the rename itself must survive a power cut
-    finally:
-        os.close(fd)
+    atomic_write_bytes(path, json.dumps(asdict(state)).encode(), durable=True)
 
 
 class EStopLatch:
