@@ -244,7 +244,8 @@ class GroundTruth(Message):
     ``sim_time_s`` is the scenario clock, which starts once the detector and controller are up.
     ``robot`` is (x, y, theta) in metres and radians; ``targets_xy`` is (n, 2) float64 metres;
     ``target_names`` the class of each target (e.g. "person") and ``target_ids`` its scenario
-    id, so a run can be scored against what really happened.
+    id, so a run can be scored against what really happened. ``obstacles`` is (m, 3) float64,
+    each round obstacle's centre x, y and radius in metres (the live view draws them).
     """
 
     TAG: ClassVar[str] = "GroundTruth"
@@ -258,11 +259,20 @@ class GroundTruth(Message):
     )
     target_names: tuple[str, ...] = ()
     target_ids: tuple[str, ...] = ()
+    # Absent from truths written before it existed: no obstacles. The row count comes from the
+    # byte length (no count of its own on the wire, so older payloads still decode).
+    obstacles: Annotated[npt.NDArray[np.float64], Shape(-1, 3)] = field(
+        default_factory=lambda: np.zeros((0, 3))
+    )
 
     def __post_init__(self) -> None:
         n = len(self.target_names)
         if self.targets_xy.shape != (n, 2) or len(self.target_ids) != n:
             raise ValueError(f"targets_xy must be ({n}, 2) with {n} ids")
+        if self.obstacles.ndim != 2 or self.obstacles.shape[1] != 3:
+            raise ValueError(f"obstacles must be (m, 3) x, y, radius, got {self.obstacles.shape}")
+        if len(self.obstacles) > MAX_DETECTIONS:
+            raise ValueError(f"{len(self.obstacles)} obstacles is over {MAX_DETECTIONS}")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -23,7 +23,7 @@ from common.keys import Keys
 
 # Every principal the credentials command creates. "estop" is the operator's e-stop tool,
 # "observer" may watch (subscribe, query) but publishes nothing: status lines, queries, tests.
-SERVICE_PRINCIPALS = ("camera", "sim", "ros2", "detector", "controller", "metrics")
+SERVICE_PRINCIPALS = ("camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
 PRINCIPALS = ("supervisor", *SERVICE_PRINCIPALS, "estop", "observer")
 
 AUTH_MODES = ("none", "password", "certificate")
@@ -90,6 +90,8 @@ def _principal_keys(keys: Keys, camera: str) -> dict[str, dict[str, tuple[str, .
         },
         "controller": service("controller", keys.cmd_vel(), keys.controller_status()),
         "metrics": {**service("metrics"), "serve": (keys.metrics(),)},
+        # The live view only reads (and queries the metrics); it announces itself like a service.
+        "viewer": service("viewer"),
         "estop": {"put": (keys.estop(),)},
         "supervisor": {},  # its own session lives inside the router: no rule applies to it
         "observer": {},

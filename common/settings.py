@@ -6,7 +6,7 @@ Reading the file and the environment overrides is in common/config_file.py.
 This module holds the bus, stack, metrics and supervisor settings and the whole ``Config``; the
 perception settings (camera, detector, tracker) live in common/perception_settings.py and the
 control settings (controller, sim) in common/control_settings.py, the ROS 2 bridge's in
-common/ros2_settings.py. All are re-exported here, so
+common/ros2_settings.py, the live view's in common/viewer_settings.py. All are re-exported here, so
 ``from common.settings import X`` works for every one of them.
 """
 
@@ -21,6 +21,7 @@ from common.perception_settings import CameraSettings, DetectorSettings, Tracker
 from common.ros2_settings import Ros2Settings
 from common.security import AUTH_MODES
 from common.setting_checks import positive
+from common.viewer_settings import ViewerSettings
 
 __all__ = [
     "DEFAULT_CONFIG",
@@ -36,12 +37,13 @@ __all__ = [
     "StackSettings",
     "SupervisorSettings",
     "TrackerSettings",
+    "ViewerSettings",
     "ZenohSettings",
 ]
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-# Runnable by the supervisor, and started in this order.
-SERVICES = ("camera", "sim", "ros2", "detector", "controller", "metrics")
+# Runnable by the supervisor, and started in this order (the viewer after what it watches).
+SERVICES = ("camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
 
 
@@ -187,6 +189,7 @@ class Config:
     sim: SimSettings = field(default_factory=SimSettings)
     metrics: MetricsSettings = field(default_factory=MetricsSettings)
     ros2: Ros2Settings = field(default_factory=Ros2Settings)
+    viewer: ViewerSettings = field(default_factory=ViewerSettings)
     supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)
 
     @property

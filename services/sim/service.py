@@ -165,5 +165,6 @@ def _publish_due(
             targets_xy=world.target_positions(),
             target_names=tuple(t.name for t in world.targets),
             target_ids=tuple(t.id for t in world.targets),
+            obstacles=world.obstacle_circles(),
         )
         truth_pub.put(truth.encode())

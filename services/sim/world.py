@@ -124,6 +124,11 @@ class World:
             return np.zeros((0, 2))
         return np.array([tg.position(self.t) for tg in self.targets], np.float64)
 
+    def obstacle_circles(self) -> npt.NDArray[np.float64]:
+        """The obstacles alone as (x, y, r) rows, (m, 3)."""
+        rows = [(o.x, o.y, o.radius) for o in self.obstacles]
+        return np.array(rows, np.float64).reshape(-1, 3)
+
     def circles(self) -> npt.NDArray[np.float64]:
         """Every solid thing as (x, y, r) rows: obstacles and targets (the laser sees both)."""
         rows = [(o.x, o.y, o.radius) for o in self.obstacles]

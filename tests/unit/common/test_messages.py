@@ -81,6 +81,7 @@ MESSAGES = [
         targets_xy=np.array([[3.0, 1.0], [4.0, -1.0]]),
         target_names=("person", "cat"),
         target_ids=("alice", "tom"),
+        obstacles=np.array([[2.0, 0.5, 0.3]]),
     ),
     MetricsSnapshot(
         header=HEADER,
@@ -243,7 +244,7 @@ WIRE_KEYS = {
     "EStop": {"header", "engaged", "reason"},
     "GroundTruth": {
         "header", "sim_time_s", "robot", "robot_velocity", "n", "targets_xy", "target_names",
-        "target_ids",
+        "target_ids", "obstacles",
     },
     "MetricsSnapshot": {
         "header", "stamp_ns", "window_s", "fps", "frames", "detections", "detections_per_frame",

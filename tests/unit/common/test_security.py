@@ -46,6 +46,10 @@ def test_only_the_controller_puts_cmd_vel_and_only_estop_the_estop() -> None:
     assert frames == {"camera", "sim", "ros2"}  # the camera, the simulator or the ROS 2 bridge
     assert {p for p in PRINCIPALS if KEYS.scan() in _allowed(acl, p, "put")} == {"sim", "ros2"}
     assert _allowed(acl, "observer", "put") == set()
+    # The live view reads everything but puts only its own counters.
+    assert _allowed(acl, "viewer", "put") == {KEYS.counters("viewer")}
+    assert _allowed(acl, "viewer", "liveliness_token") == {KEYS.health("viewer")}
+    assert _allowed(acl, "viewer", "declare_queryable") == set()
     assert _allowed(acl, "estop", "put") == {KEYS.estop()}
     assert _allowed(acl, "detector", "put") == set(may_put(KEYS, "front", "detector"))
     # Counters and health tokens: each stack service its own, nobody else.

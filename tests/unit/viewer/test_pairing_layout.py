@@ -1,0 +1,86 @@
+"""Which image the viewer sends, the settings' bounds, and the shipped Foxglove layout."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from common.config_file import load_config
+from common.errors import ConfigError
+from common.messages import Detections, Frame, Header
+from common.settings import DEFAULT_CONFIG, ViewerSettings
+from services.viewer import channels, layout
+from services.viewer.pairing import Pairing
+
+
+def _frame(stamp_ns: int) -> Frame:
+    header = Header(stamp_ns=stamp_ns, frame_id="camera", seq=stamp_ns, source="sim")
+    return Frame(header=header, encoding="mono8", width=4, height=2, data=bytes(8))
+
+
+def _dets(stamp_ns: int) -> Detections:
+    header = Header(stamp_ns=stamp_ns, frame_id="camera", seq=stamp_ns, source="sim")
+    empty = np.zeros(0, np.int32)
+    return Detections(
+        header=header, image_width=4, image_height=2, class_ids=empty, class_names=(),
+        scores=np.zeros(0, np.float32), xyxy=np.zeros((0, 4), np.float32),
+    )  # fmt: skip
+
+
+def test_a_frame_goes_out_with_the_detections_made_on_it() -> None:
+    p = Pairing(unpaired_after_s=1.0)
+    for stamp in (1, 2, 3):
+        p.add_frame(_frame(stamp))
+    assert p.add_detections(_dets(2), now=10.0)
+    frame, dets = p.take(now=10.1) or (None, None)
+    assert frame is not None and dets is not None
+    assert frame.header.stamp_ns == dets.header.stamp_ns == 2
+    assert p.take(now=10.2) is None  # frame 3 waits for its detections
+    assert not p.add_detections(_dets(1), now=10.3)  # already gone with frame 2
+    assert p.add_detections(_dets(3), now=10.4)
+    p.add_frame(_frame(4))
+    assert p.add_detections(_dets(4), now=10.5)  # replaces the pair of 3, not taken
+    assert p.dropped == 1
+    taken = p.take(now=10.6)
+    assert taken is not None and taken[0].header.stamp_ns == 4
+
+
+def test_without_a_detector_the_newest_frame_goes_out_alone() -> None:
+    p = Pairing(unpaired_after_s=1.0)
+    p.add_frame(_frame(1))
+    p.add_frame(_frame(2))
+    taken = p.take(now=100.0)
+    assert taken is not None and taken[0].header.stamp_ns == 2 and taken[1] is None
+    assert p.take(now=100.1) is None  # nothing new
+    p.add_detections(_dets(9), now=100.2)  # a detector has started
+    p.add_frame(_frame(3))
+    assert p.take(now=100.3) is None  # frame 3 waits for its detections now
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("port", 0), ("port", 70000), ("jpeg_quality", 0), ("jpeg_quality", 101),
+     ("image_rate_hz", 0.0), ("image_rate_hz", 100.0), ("max_image_width", 10),
+     ("metrics_rate_hz", -1.0), ("scene_rate_hz", 0.0), ("path_points", 1), ("host", "")],
+)  # fmt: skip
+def test_viewer_settings_are_bounded(field: str, value: object) -> None:
+    with pytest.raises(ConfigError, match=f"viewer.{field}"):
+        ViewerSettings(**{field: value})  # type: ignore[arg-type]
+
+
+def test_the_default_stack_runs_the_viewer_on_loopback() -> None:
+    cfg = load_config(DEFAULT_CONFIG, environ={})
+    assert cfg.supervisor.services[-1] == "viewer"
+    assert (cfg.viewer.host, cfg.viewer.port) == ("127.0.0.1", 8765)
+
+
+def test_the_shipped_layout_is_the_one_built_here() -> None:
+    assert layout.LAYOUT_FILE.read_text() == layout.layout_json(), (
+        "run `python -m services.viewer layout` and commit deploy/foxglove/layout.json"
+    )
+    text = json.dumps(json.loads(layout.layout_json()))
+    for topic in (channels.IMAGE, channels.ANNOTATIONS, channels.SCAN, channels.SCENE,
+                  channels.CMD_VEL, channels.CONTROLLER, channels.METRICS):  # fmt: skip
+        assert f'"{topic}' in text, topic
