@@ -33,7 +33,7 @@ def start_server(config: Config, context: foxglove.Context) -> WebSocketServer:
     try:
         return foxglove.start_server(name=SERVER_NAME, host=v.host, port=v.port, context=context)
     except RuntimeError as exc:  # the SDK's error for an address in use or not ours
-        raise ConfigError(f"viewer: cannot listen on {v.host}:{v.port} ({exc})") from exc
+        raise ConfigError(f"viewer.port: cannot listen on {v.host}:{v.port} ({exc})") from exc
 
 
 class Viewer:

@@ -84,3 +84,20 @@ def test_the_shipped_layout_is_the_one_built_here() -> None:
     for topic in (channels.IMAGE, channels.ANNOTATIONS, channels.SCAN, channels.SCENE,
                   channels.CMD_VEL, channels.CONTROLLER, channels.METRICS):  # fmt: skip
         assert f'"{topic}' in text, topic
+
+
+def test_a_port_in_use_is_one_config_error() -> None:
+    import socket
+
+    import foxglove
+
+    from common.settings import Config
+    from services.viewer.service import start_server
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        config = Config(viewer=ViewerSettings(port=port))
+        with pytest.raises(ConfigError, match=f"viewer.port: cannot listen on 127.0.0.1:{port}"):
+            start_server(config, foxglove.Context())
