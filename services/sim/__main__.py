@@ -1,6 +1,7 @@
 """python -m services.sim [serve] [--config FILE]
 python -m services.sim scenario NAME [--json] [--config FILE]
 python -m services.sim list
+python -m services.sim soak [--duration S] [--flood-hz HZ] [--json] [--config FILE]
 
 serve (the default) runs the simulator as the stack's camera, laser and base. scenario runs the
 real stack (every service over Zenoh) against a scripted world and prints its figures.
@@ -90,11 +91,34 @@ def list_scenarios(args: argparse.Namespace) -> int:
     return 0
 
 
+def _soak_arguments(p: argparse.ArgumentParser) -> None:
+    add_config(p)
+    p.add_argument("--duration", type=float, default=600.0, help="seconds (default 600)")
+    p.add_argument("--flood-hz", type=float, default=200.0,
+                   help="garbage messages a second, spread over every key (default 200)")
+    p.add_argument("--sample-s", type=float, default=10.0, help="seconds between samples")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def soak(args: argparse.Namespace) -> int:
+    signal.signal(signal.SIGTERM, _interrupt)
+    config = load_config(args.config)
+    setup_logging("soak", "WARNING")
+    from services.sim.soak import run_soak, soak_table
+
+    result = run_soak(config, args.duration, args.flood_hz, args.sample_s,
+                      log=lambda m: print(m, file=sys.stderr))
+    print(json.dumps(result, indent=1) if args.json else soak_table(result))
+    healthy = result["still_following"] and not any(result["restarts"].values())
+    return 0 if healthy else 1
+
+
 COMMANDS = [
     Command("serve", "run the simulated robot (camera, laser and base)", add_config, serve),
     Command("scenario", "run the real stack against a scripted world", _scenario_arguments,
             scenario),
     Command("list", "name the scenarios", lambda p: None, list_scenarios),
+    Command("soak", "the stack for a long run under a garbage flood", _soak_arguments, soak),
 ]  # fmt: skip
 
 
