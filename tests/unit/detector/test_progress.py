@@ -13,7 +13,9 @@ def test_progress_line_with_and_without_a_total() -> None:
     )
     assert progress_line("clip.mp4", 10, 10, 5.0).endswith("10/10 frames, 2.0 fps, done in 5.0 s")
     assert progress_line("device:0", 42, 0, 4.2) == "device:0: 42 frames, 10.0 fps, 4 s"
-    assert progress_line("images", 0, 3, 0.0, unit="images").endswith("0/3 images, 0.0 fps, starting")
+    assert progress_line("images", 0, 3, 0.0, unit="images").endswith(
+        "0/3 images, 0.0 fps, starting"
+    )
 
 
 def test_updates_are_throttled_and_the_last_one_is_always_written() -> None:
