@@ -4,14 +4,15 @@ Each subcommand is registered by one function in :data:`SUBCOMMANDS`; a new one 
 adds its register function there. Handlers take the parsed arguments and return an exit code.
 
 Exit codes: 0 success; 1 one or more images could not be read or written (the others were still
-processed); 2 bad arguments or settings; 3 a bad model (not a model, unknown output family,
+processed); 2 bad arguments or settings, or a video or camera device that cannot be opened or
+gives not one frame; 3 a bad model (not a model, unknown output family,
 fetch failure); 4 a backend this machine lacks; 130 interrupted. Errors are one line on stderr.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import contextlib
 import logging
 import sys
 from collections.abc import Callable, Sequence
@@ -28,10 +29,14 @@ from common.errors import ConfigError, ImageError, StackError
 from common.images import list_images, load_image
 from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code, print_progress
 from common.settings import DetectorSettings
+from services.camera import CaptureSource, is_stream, open_stream
 from services.detector.backends import BACKEND_CHOICES
 from services.detector.model_files import ensure_default_model
 from services.detector.pipeline import Detector
+from services.detector.progress import ProgressBar
+from services.detector.results import result_json, result_text
 from services.detector.types import DetectionResult
+from services.detector.video import detect_stream
 
 # The stack's shared exit codes (common/lifecycle.py); a failed image is the generic failure.
 EXIT_IMAGE_FAILED = EXIT_FAILED
@@ -83,53 +88,6 @@ def _add_model_arguments(parser: argparse.ArgumentParser) -> None:
 # --- detect -------------------------------------------------------------------------------------
 
 
-def _result_json(path: Path, result: DetectionResult) -> str:
-    detections = [
-        {
-            "class_id": cid,
-            "class_name": name,
-            "score": round(score, 4),
-            "bbox_xyxy": [round(v, 2) for v in box],
-        }
-        for cid, name, score, box in zip(
-            result.class_ids.tolist(),
-            result.class_names,
-            result.scores.tolist(),
-            result.xyxy.tolist(),
-            strict=True,
-        )
-    ]
-    t = result.timing
-    return json.dumps(
-        {
-            "image": str(path),
-            "width": result.image_width,
-            "height": result.image_height,
-            "detections": detections,
-            "timing_ms": {
-                "preprocess": round(t.preprocess_ms, 3),
-                "inference": round(t.inference_ms, 3),
-                "postprocess": round(t.postprocess_ms, 3),
-            },
-        }
-    )
-
-
-def _result_text(path: Path, result: DetectionResult) -> str:
-    found = ", ".join(
-        f"{name} {score:.2f} [{', '.join(f'{v:.0f}' for v in box)}]"
-        for name, score, box in zip(
-            result.class_names, result.scores.tolist(), result.xyxy.tolist(), strict=True
-        )
-    )
-    t = result.timing
-    return (
-        f"{path}: {result.image_width}x{result.image_height}, {len(result)} detection(s)"
-        f"{': ' + found if found else ''} (pre {t.preprocess_ms:.1f} ms, "
-        f"infer {t.inference_ms:.1f} ms, post {t.postprocess_ms:.1f} ms)"
-    )
-
-
 def _save_annotated(
     save_dir: Path, path: Path, image: npt.NDArray[np.uint8], result: DetectionResult
 ) -> None:
@@ -144,48 +102,93 @@ def _save_annotated(
         raise ImageError(f"{target}: cannot write ({exc.strerror or exc})") from exc
 
 
+def _detect_image(det: Detector, path: Path, *, as_json: bool, save_dir: Path | None) -> bool:
+    """Detect on one image file and print the result; False (after one error line) when the
+    image cannot be read or its annotated copy cannot be written."""
+    try:
+        image = load_image(path)
+        result = det.detect(image)
+        print(result_json(str(path), result) if as_json else result_text(str(path), result))
+        if save_dir is not None:
+            _save_annotated(save_dir, path, image, result)
+    except ImageError as exc:
+        _error(str(exc))
+        return False
+    return True
+
+
 def run_detect(args: argparse.Namespace) -> int:
-    """Detect objects in each image; bad images are reported and skipped (exit 1 at the end)."""
+    """Detect objects in images, folders of images, videos and camera devices, in order.
+
+    Bad images are reported and skipped (exit 1 at the end). A video or device that cannot be
+    opened, or that gives not one frame, stops with one line (exit 2).
+    """
     settings = DetectorSettings(
         conf=args.conf,
         iou=args.iou,
         max_det=args.max_det,
         classes=_parse_classes(args.classes) or (),
     )
-    paths = list_images(args.paths)
-    if not paths:
-        raise ImageError(f"no images found in {' '.join(args.paths)}")
     save_dir = Path(args.save_dir) if args.save_dir else None
-    if save_dir is not None:
-        save_dir.mkdir(parents=True, exist_ok=True)
-    failed = 0
-    _show_backend_log()
-    with Detector.open(_resolve_model(args.model), backend=args.backend, settings=settings) as det:
-        for path in paths:
-            try:
-                image = load_image(path)
-                result = det.detect(image)
-                print(_result_json(path, result) if args.json else _result_text(path, result))
-                if save_dir is not None:
-                    _save_annotated(save_dir, path, image, result)
-            except ImageError as exc:
-                _error(str(exc))
-                failed += 1
-    if failed:
-        _error(f"{failed} of {len(paths)} image(s) failed")
+    with contextlib.ExitStack() as opened:
+        # Videos and devices are opened before the model loads: a missing one is one line, now.
+        inputs: list[Path | tuple[str, CaptureSource]] = []
+        for spec in args.paths:
+            if is_stream(spec):
+                source = open_stream(spec)
+                opened.callback(source.close)
+                inputs.append((spec, source))
+            else:
+                inputs.extend(list_images([spec]))
+        if not inputs:
+            raise ImageError(f"no images found in {' '.join(args.paths)}")
+        if save_dir is not None:
+            save_dir.mkdir(parents=True, exist_ok=True)
+        _show_backend_log()
+        det = opened.enter_context(
+            Detector.open(_resolve_model(args.model), backend=args.backend, settings=settings)
+        )
+        images = [item for item in inputs if isinstance(item, Path)]
+        bar = ProgressBar("images", len(images), unit="images") if len(images) > 1 else None
+        failed = 0
+        for item in inputs:
+            if isinstance(item, Path):
+                failed += not _detect_image(det, item, as_json=args.json, save_dir=save_dir)
+                if bar is not None:
+                    bar.advance()
+            else:
+                detect_stream(*item, det, as_json=args.json, save_dir=save_dir)
+        if bar is not None:
+            bar.finish()
+    if failed and failed == len(images):
+        _error(f"none of the {failed} image(s) could be read")
+    elif failed:
+        _error(f"{failed} of {len(images)} image(s) failed")
     return EXIT_IMAGE_FAILED if failed else EXIT_OK
 
 
 def _add_detect(subparsers: Any) -> None:
-    p = subparsers.add_parser("detect", help="detect objects in images or folders of images")
-    p.add_argument("paths", nargs="+", metavar="PATH", help="image file or folder of images")
+    p = subparsers.add_parser(
+        "detect", help="detect objects in images, folders, videos or a camera device"
+    )
+    p.add_argument(
+        "paths",
+        nargs="+",
+        metavar="PATH",
+        help="image file, folder of images, video file, device:N or /dev/videoN",
+    )
     _add_model_arguments(p)
     p.add_argument("--conf", type=float, default=_DEFAULTS.conf, help="minimum score, 0..1")
     p.add_argument("--iou", type=float, default=_DEFAULTS.iou, help="NMS IoU threshold, 0..1")
     p.add_argument("--max-det", type=int, default=_DEFAULTS.max_det, help="detections per image")
     p.add_argument("--classes", help="comma-separated class names to keep, e.g. person,cup")
-    p.add_argument("--json", action="store_true", help="one JSON object per image per line")
-    p.add_argument("--save-dir", help="write annotated copies of the images here")
+    p.add_argument(
+        "--json", action="store_true", help="one JSON object per image or frame per line"
+    )
+    p.add_argument(
+        "--save-dir",
+        help="write annotated copies of the images, and of videos (plus their .jsonl), here",
+    )
     p.set_defaults(handler=run_detect)
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from common.errors import ConfigError, ImageError
 from common.images import SAMPLES
-from services.camera.sources import open_source, resize
+from services.camera.sources import is_stream, open_source, open_stream, resize
 
 
 def _write_image(path: Path, value: int, size: tuple[int, int] = (32, 24)) -> None:
@@ -82,3 +82,62 @@ def test_resize() -> None:
     image = np.zeros((480, 640, 3), np.uint8)
     assert resize(image, (0, 0)) is image
     assert resize(image, (320, 240)).shape == (240, 320, 3)
+
+
+# --- sources that give nothing readable; videos and devices as detect opens them ----------------
+
+
+def test_folder_of_only_corrupt_files_is_a_config_error_after_one_pass(tmp_path: Path) -> None:
+    for name in ("a.png", "b.jpg", "c.png"):
+        (tmp_path / name).write_bytes(b"not an image")
+    bad: list[ImageError] = []
+    src = open_source(str(tmp_path), on_bad=bad.append)
+    with pytest.raises(ConfigError, match=r"not one of them is a readable image"):
+        src.read()
+    assert [Path(str(e).split(":")[0]).name for e in bad] == ["a.png", "b.jpg", "c.png"]
+
+
+def test_video_without_a_readable_frame_is_a_config_error(tmp_path: Path) -> None:
+    path = tmp_path / "empty.avi"
+    cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), 10, (64, 48)).release()
+    with pytest.raises(ConfigError, match=r"empty\.avi"):  # at open, or at the first read
+        open_source(str(path), loop=True).read()
+
+
+def test_video_declares_its_rate_and_length(tmp_path: Path) -> None:
+    path = tmp_path / "clip.mkv"  # any other extension than an image's is tried as a video
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), 7, (64, 48))
+    for i in range(4):
+        writer.write(np.full((48, 64, 3), 40 * i, np.uint8))
+    writer.release()
+    stream = open_stream(str(path))
+    assert (stream.fps, stream.frame_count) == (7.0, 4)
+    assert [stream.read() is not None for _ in range(5)] == [True] * 4 + [False]  # no loop
+
+
+@pytest.mark.parametrize(
+    ("spec", "stream"),
+    [
+        ("device:0", True),
+        ("device:/dev/video0", True),
+        ("/dev/video9", True),  # a device path, even unplugged
+        ("missing.mp4", True),
+        ("missing.png", False),
+        ("sample:chelsea", False),
+    ],
+)
+def test_is_stream(spec: str, stream: bool) -> None:
+    assert is_stream(spec) is stream
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ("device:/dev/video_nope", "camera device /dev/video_nope: no such device"),
+        ("/dev/video_nope", "camera device /dev/video_nope: no such device"),
+        ("/no/such/clip.mp4", "video /no/such/clip.mp4: no such file"),
+    ],
+)
+def test_missing_stream_is_one_line(spec: str, message: str) -> None:
+    with pytest.raises(ConfigError, match=f"^{message}$"):
+        open_stream(spec)
