@@ -161,7 +161,7 @@ class SupervisorSettings:
     status_period_s: float = 2.0
     lock_dir: str = ""
     watchdog_grace_s: float = 2.0
-    watchdog_progress_s: float = 10.0
+    watchdog_progress_s: float = 20.0
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.services) - set(SERVICES))

@@ -16,6 +16,11 @@ Two signals, per service the supervisor started itself (never a service on anoth
   service was ready: hung. The metrics service has no work loop (it aggregates in Zenoh's
   callbacks and publishes no counters): only its token is watched.
 
+The default ``watchdog_progress_s`` (20 s) stays above Zenoh's lease (10 s): with the link to
+another host cut, a detector's loop was seen to go without counters for about 10 s (until the
+lease dropped the dead peers), and must not be restarted for that (tests/integration/
+test_two_hosts.py).
+
 A hung service is then stopped (SIGTERM and SIGCONT, SIGKILL after ``stop_timeout_s``) and
 restarted with the same backoff as a crash.
 """
