@@ -20,7 +20,7 @@ from common.errors import ConfigError
 from common.perception_settings import CameraSettings, DetectorSettings, TrackerSettings
 from common.ros2_settings import Ros2Settings
 from common.security import AUTH_MODES
-from common.setting_checks import positive
+from common.setting_checks import non_negative, positive
 from common.viewer_settings import ViewerSettings
 
 __all__ = [
@@ -150,6 +150,10 @@ class SupervisorSettings:
 
     One supervisor per stack (endpoint and prefix) on a host: its lock file lives in
     ``lock_dir`` (empty: the system's temporary folder).
+
+    The watchdog (deploy/watchdog.py) restarts a running service whose liveliness token has been
+    gone for ``watchdog_grace_s``, or whose work loop has published no counters for
+    ``watchdog_progress_s`` (0 turns that check off).
     """
 
     services: tuple[str, ...] = ("camera", "detector", "controller", "metrics")
@@ -158,6 +162,8 @@ class SupervisorSettings:
     stop_timeout_s: float = 5.0
     status_period_s: float = 2.0
     lock_dir: str = ""
+    watchdog_grace_s: float = 2.0
+    watchdog_progress_s: float = 20.0
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.services) - set(SERVICES))
@@ -171,8 +177,10 @@ class SupervisorSettings:
             "restart_backoff_max_s",
             "stop_timeout_s",
             "status_period_s",
+            "watchdog_grace_s",
         ):
             positive(f"supervisor.{name}", getattr(self, name))
+        non_negative("supervisor.watchdog_progress_s (0 = off)", self.watchdog_progress_s)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import subprocess
@@ -44,11 +45,14 @@ class ServiceProcess:
     command: list[str]
     settings: SupervisorSettings
     proc: subprocess.Popen[bytes] | None = None
-    state: str = "stopped"  # starting | running | ready | backoff | failed | exited
+    state: str = "stopped"  # starting | ready | hung | backoff | failed | exited
     restarts: int = 0
+    hangs: int = 0  # how many times the watchdog found it hung (deploy/watchdog.py)
     last_exit: int | None = None
     started_at: float = 0.0
+    ready_at: float = 0.0
     restart_at: float = 0.0
+    kill_at: float = 0.0  # while hung: when SIGKILL follows the SIGTERM
     last_error: str = ""  # the service's own one-line error, as it printed it
     backoff: Backoff = field(init=False)
     _forwarder: threading.Thread = field(init=False, repr=False)
@@ -87,6 +91,20 @@ class ServiceProcess:
             sys.stderr.buffer.flush()
         stream.close()
 
+    def mark_ready(self, now: float) -> None:
+        self.state, self.ready_at = "ready", now
+
+    def hung(self, why: str, now: float) -> str:
+        """The watchdog's verdict: stop the process (SIGTERM; SIGCONT, since a stopped process
+        acts on no signal but SIGKILL), SIGKILL it at ``stop_timeout_s`` if it is still there;
+        ``poll`` restarts it with the backoff of a crash. Returns the log line."""
+        self.hangs += 1
+        self.state, self.kill_at = "hung", now + self.settings.stop_timeout_s
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            self.proc.send_signal(signal.SIGCONT)
+        return f"{self.name}: hung ({why}); killing it and restarting"
+
     def poll(self, now: float) -> str | None:
         """Check the process; on an exit, schedule the restart and return a log line."""
         if self.state == "backoff" and now >= self.restart_at:
@@ -97,8 +115,20 @@ class ServiceProcess:
             return None
         code = self.proc.poll()
         if code is None:
+            if self.state == "hung" and now >= self.kill_at:
+                self.proc.kill()
+                self.kill_at = math.inf  # once
+                waited = self.settings.stop_timeout_s
+                return f"{self.name}: still running {waited:g} s after SIGTERM; killed"
             return None
         self.last_exit = code
+        if self.state == "hung":
+            # Whatever it exited with, it was stopped for being hung: restart it.
+            delay = self.backoff.next_delay(now - self.started_at)
+            self.state, self.restart_at = "backoff", now + delay
+            return (
+                f"{self.name}: ended (exit code {code}) after it hung; restarting in {delay:.1f} s"
+            )
         if code == 0:
             # It finished on purpose (a video that ended with loop = false): leave it be.
             self.state = "exited"

@@ -32,21 +32,26 @@ from common.lifecycle import (
     setup_logging,
     stop_event,
 )
-from common.messages import ControllerStatus, GroundTruth, Twist
+from common.messages import ControllerStatus, GroundTruth, ServiceCounters, Twist
 from common.queries import query_metrics
 from common.settings import CameraSettings, Config
 from deploy.lock import acquire
 from deploy.processes import ServiceProcess, service_command
+from deploy.watchdog import Observation, check_settings, judge
 
 METRICS_TIMEOUT_S = 0.5  # the status line must not wait long for a missing metrics service
 
 
 class LiveView:
-    """What the supervisor shows: readiness from liveliness tokens, the latest command/status."""
+    """What the supervisor shows and its watchdog judges: readiness from liveliness tokens (and
+    when one vanished), each service's last counters (its work loop's heartbeat), the latest
+    command, controller status and ground truth."""
 
     def __init__(self, session: zenoh.Session, keys: Keys) -> None:
         self.keys = keys
         self.ready: set[str] = set()
+        self.token_lost_at: dict[str, float] = {}
+        self.progress_at: dict[str, float] = {}
         self.status: ControllerStatus | None = None
         self.twist: Twist | None = None
         self.truth: GroundTruth | None = None
@@ -55,6 +60,7 @@ class LiveView:
             session.liveliness().declare_subscriber(
                 keys.all_health(), self._on_health, history=True
             ),
+            session.declare_subscriber(keys.all_counters(), self._on_counters),
             session.declare_subscriber(keys.controller_status(), self._on_status),
             session.declare_subscriber(keys.cmd_vel(), self._on_twist),
             session.declare_subscriber(keys.sim_truth(), self._on_truth),
@@ -65,8 +71,19 @@ class LiveView:
         with self._lock:
             if sample.kind == zenoh.SampleKind.PUT:
                 self.ready.add(service)
+                self.token_lost_at.pop(service, None)
             else:
                 self.ready.discard(service)
+                self.token_lost_at[service] = time.monotonic()
+
+    def _on_counters(self, sample: zenoh.Sample) -> None:
+        try:
+            ServiceCounters.decode(sample.payload.to_bytes())
+        except DecodeError:
+            return  # garbage is no sign of life
+        service = str(sample.key_expr).rsplit("/", 1)[-1]
+        with self._lock:
+            self.progress_at[service] = time.monotonic()
 
     def _on_status(self, sample: zenoh.Sample) -> None:
         try:
@@ -90,13 +107,23 @@ class LiveView:
         with self._lock:
             return service in self.ready
 
+    def observe(self, p: ServiceProcess) -> Observation:
+        """What the watchdog judges ``p`` by (deploy/watchdog.py)."""
+        with self._lock:
+            return Observation(
+                ready_at=p.ready_at,
+                token_lost_at=self.token_lost_at.get(p.name),
+                last_progress=self.progress_at.get(p.name),
+            )
+
 
 def status_line(
     procs: list[ServiceProcess], view: LiveView, metrics: MetricsAnswer | None
 ) -> str:
     parts = []
     for p in procs:
-        parts.append(f"{p.name}:{p.state}" + (f"(r{p.restarts})" if p.restarts else ""))
+        hung = f", {p.hangs} hung" if p.hangs else ""
+        parts.append(f"{p.name}:{p.state}" + (f"(r{p.restarts}{hung})" if p.restarts else ""))
     line = " ".join(parts)
     if metrics:
         lat = metrics["latency_ms"]
@@ -119,6 +146,8 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
     log = setup_logging("supervisor")
     s = config.supervisor
     keys = Keys(config.stack.prefix)
+    check_settings(config)
+    grace, progress = s.watchdog_grace_s, s.watchdog_progress_s
     lock = acquire(s.lock_dir, config.zenoh.endpoint, config.stack.prefix)
     session = open_hub(config)
     view = LiveView(session, keys)
@@ -142,7 +171,11 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
                 if event:
                     log.warning("%s", event)
                 if p.state == "starting" and view.is_ready(p.name):
-                    p.state = "ready"
+                    p.mark_ready(now)
+                elif p.state == "ready":
+                    why = judge(p.name, view.observe(p), now, grace_s=grace, progress_s=progress)
+                    if why:
+                        log.warning("%s", p.hung(why, now))
                 if p.state == "failed" and failed is None:
                     failed = p  # restarting will not help: stop the stack and say why
             if now >= next_status:

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import os
+import signal
 import sys
 import threading
 import time
@@ -50,16 +52,16 @@ def test_config_model_and_backend_errors_are_not_restarted(code: int) -> None:
     assert "no restart" in events[-1] and proc.restarts == 0
 
 
-def _wait_ignoring_sigint(pid: int) -> None:
-    """Wait until the child has installed its SIGINT-ignore handler (Linux /proc)."""
+def _wait_ignoring(pid: int, sig: int = signal.SIGINT) -> None:
+    """Wait until the child has installed its ignore handler for ``sig`` (Linux /proc)."""
     deadline, pause = time.monotonic() + 10, threading.Event()
     while time.monotonic() < deadline:
         with open(f"/proc/{pid}/status") as f:
             ignored = next(int(line.split()[1], 16) for line in f if line.startswith("SigIgn"))
-        if ignored & (1 << (2 - 1)):  # bit of signal 2 (SIGINT)
+        if ignored & (1 << (sig - 1)):
             return
         pause.wait(0.01)
-    pytest.fail("the child never ignored SIGINT")
+    pytest.fail(f"the child never ignored signal {sig}")
 
 
 def test_stop_escalates_to_kill() -> None:
@@ -67,7 +69,7 @@ def test_stop_escalates_to_kill() -> None:
     proc = ServiceProcess("stubborn", [sys.executable, "-c", code], SETTINGS)
     proc.start()
     assert proc.proc is not None
-    _wait_ignoring_sigint(proc.proc.pid)
+    _wait_ignoring(proc.proc.pid)
     time_started = time.monotonic()
     proc.signal_stop()
     proc.wait_stopped(time.monotonic() + 0.5)
@@ -80,3 +82,30 @@ def test_a_clean_exit_is_not_restarted() -> None:
     proc.start()
     events = _poll_until(proc, "exited")
     assert "not restarting" in events[-1] and proc.restarts == 0
+
+
+def test_a_hung_process_is_killed_even_when_stopped_and_restarted_with_backoff() -> None:
+    # Stubborn: ignores SIGTERM, and is frozen (SIGSTOP) like a hung service seen by the
+    # watchdog. The supervisor must still get rid of it, then restart it as after a crash.
+    code = "import signal; signal.signal(signal.SIGTERM, signal.SIG_IGN); signal.pause()"
+    settings = SupervisorSettings(
+        restart_backoff_s=0.05, restart_backoff_max_s=1.0, stop_timeout_s=0.3
+    )
+    proc = ServiceProcess("frozen", [sys.executable, "-c", code], settings)
+    proc.start()
+    assert proc.proc is not None
+    first = proc.proc
+    _wait_ignoring(first.pid, signal.SIGTERM)
+    proc.mark_ready(time.monotonic())
+    os.kill(first.pid, signal.SIGSTOP)
+    line = proc.hung("its work loop has published no counters for 3.0 s", time.monotonic())
+    assert line.startswith("frozen: hung (its work loop") and proc.state == "hung"
+    events = _poll_until(proc, "backoff")
+    assert any("after SIGTERM; killed" in e for e in events), events
+    assert "after it hung; restarting in" in events[-1]
+    assert proc.backoff.current_s == pytest.approx(0.05)  # the first delay, as after a crash
+    assert first.returncode == -signal.SIGKILL
+    _poll_until(proc, "starting")
+    assert proc.restarts == 1 and proc.hangs == 1 and proc.proc is not first
+    proc.signal_stop()
+    proc.wait_stopped(time.monotonic() + 1)

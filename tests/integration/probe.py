@@ -1,0 +1,92 @@
+"""python -m tests.integration.probe --config FILE
+
+A test's eyes inside a network namespace (tests/integration/test_two_hosts.py): it joins the
+stack as "observer" and prints one JSON line per detections, cmd_vel and controller status
+sample and per health token that comes or goes, stamped with the system's monotonic clock
+(shared by every namespace of the host), so that a test in another namespace can read what
+the stack does there. It prints
+``{"kind": "open"}`` once its session is up, and runs until SIGINT or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from common.bus import open_session
+from common.config_file import load_config
+from common.errors import DecodeError
+from common.keys import Keys
+from common.lifecycle import stop_event
+from common.messages import ControllerStatus, Detections, Twist
+
+_lock = threading.Lock()
+
+
+def emit(kind: str, **fields: Any) -> None:
+    line = json.dumps({"kind": kind, "t": time.monotonic(), **fields})
+    with _lock:
+        print(line, flush=True)
+
+
+def _on(kind: str, summary: Callable[[bytes], dict[str, Any]]) -> Callable[[zenoh.Sample], None]:
+    def handle(sample: zenoh.Sample) -> None:
+        try:
+            emit(kind, **summary(sample.payload.to_bytes()))
+        except DecodeError as exc:
+            emit("garbage", key=str(sample.key_expr), error=str(exc))
+
+    return handle
+
+
+def _on_health(sample: zenoh.Sample) -> None:
+    service = str(sample.key_expr).rsplit("/", 1)[-1]
+    emit("health", service=service, present=sample.kind == zenoh.SampleKind.PUT)
+
+
+def _detections(raw: bytes) -> dict[str, Any]:
+    return {"classes": list(Detections.decode(raw).class_names)}
+
+
+def _twist(raw: bytes) -> dict[str, Any]:
+    t = Twist.decode(raw)
+    return {"zero": t.is_zero, "v": t.linear[0], "w": t.angular[2]}
+
+
+def _status(raw: bytes) -> dict[str, Any]:
+    s = ControllerStatus.decode(raw)
+    return {"state": str(s.state), "seq": s.header.seq}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(prog="python -m tests.integration.probe")
+    parser.add_argument("--config", required=True)
+    args = parser.parse_args()
+    stop = stop_event()
+    config = load_config(args.config, environ={})
+    keys = Keys(config.stack.prefix)
+    session = open_session(config.zenoh, "observer")
+    detections = keys.detections(config.stack.camera)
+    subs = [
+        session.declare_subscriber(detections, _on("detections", _detections)),
+        session.declare_subscriber(keys.cmd_vel(), _on("cmd_vel", _twist)),
+        session.declare_subscriber(keys.controller_status(), _on("status", _status)),
+        session.liveliness().declare_subscriber(keys.all_health(), _on_health, history=True),
+    ]
+    emit("open")
+    stop.wait()
+    for sub in subs:
+        sub.undeclare()
+    session.close()
+    sys.exit(0)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,204 @@
+"""Two hosts for real: two network namespaces joined by a veth pair, as README "Two hosts" says.
+
+    namespace A ("GPU box", 10.77.0.1)            namespace B ("robot", 10.77.0.2)
+    supervisor A: services = ["detector"]         supervisor B: camera, controller, metrics
+      endpoint tcp/127.0.0.1:7447 (its own)         endpoint tcp/10.77.0.2:7447 (the hub)
+      connect  tcp/10.77.0.2:7447                   listen   tcp/10.77.0.2:0 (each service)
+      listen   tcp/10.77.0.1:0 (the detector)       the test's probe (tests/integration/probe.py)
+
+Every process is a Zenoh peer. The detector connects to both supervisors and listens on its veth
+address, so that B's services, told of it by B's supervisor, connect to it directly. Then the
+link is cut for longer than Zenoh's lease, so every session across it closes, and restored.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import pytest
+
+from deploy.launch import service_pids
+from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
+
+pytestmark = pytest.mark.integration
+
+ADDR_A, ADDR_B, PORT = "10.77.0.1", "10.77.0.2", 7447  # private namespaces: no port clash
+DEAD_MAN_S = 2.0  # controller.detection_timeout_s: inference takes ~1 s on a loaded 2-core CI box
+MARGIN_S = 1.0  # one control tick, scheduling on a loaded machine
+LEASE_S = 10.0  # Zenoh's default lease: a silent peer is dropped after it
+
+
+def _ip(*args: str) -> None:
+    done = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
+    if done.returncode != 0:
+        raise RuntimeError(f"ip {' '.join(args)}: {done.stderr.strip()}")
+
+
+@dataclass
+class Hosts:
+    """Two namespaces (unique per run) and a veth pair between them."""
+
+    a: str
+    b: str
+    veth_a: str
+    procs: list[subprocess.Popen[bytes]] = field(default_factory=list)
+
+    def run(self, ns: str, args: list[str], out: IO[bytes]) -> subprocess.Popen[bytes]:
+        proc = subprocess.Popen(
+            ["ip", "netns", "exec", ns, sys.executable, *args],
+            cwd=REPO, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            stdout=out, stderr=subprocess.STDOUT if out is not subprocess.PIPE else None,
+            start_new_session=True,
+        )  # fmt: skip
+        self.procs.append(proc)
+        return proc
+
+    def link(self, up: bool) -> float:
+        _ip("-n", self.a, "link", "set", self.veth_a, "up" if up else "down")
+        return time.monotonic()
+
+
+@pytest.fixture
+def hosts() -> Iterator[Hosts]:
+    if os.geteuid() != 0:
+        pytest.skip("needs root to create network namespaces (ip netns)")
+    if shutil.which("ip") is None:
+        pytest.skip("needs iproute2's `ip` for network namespaces")
+    tag = uuid.uuid4().hex[:6]
+    h = Hosts(a=f"zys-{tag}-a", b=f"zys-{tag}-b", veth_a=f"zy{tag}a")
+    veth_b = f"zy{tag}b"
+    try:
+        _ip("netns", "add", h.a)
+    except RuntimeError as exc:
+        pytest.skip(f"cannot create a network namespace here: {exc}")
+    try:
+        _ip("netns", "add", h.b)
+        _ip("link", "add", h.veth_a, "type", "veth", "peer", "name", veth_b)
+        for ns, dev, addr in ((h.a, h.veth_a, ADDR_A), (h.b, veth_b, ADDR_B)):
+            _ip("link", "set", dev, "netns", ns)
+            _ip("-n", ns, "addr", "add", f"{addr}/24", "dev", dev)
+            _ip("-n", ns, "link", "set", dev, "up")
+            _ip("-n", ns, "link", "set", "lo", "up")
+        yield h
+    finally:
+        for proc in h.procs:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        for ns in (h.a, h.b):  # deleting a namespace deletes its end of the veth pair too
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=30)
+
+
+class Probe:
+    """What the probe in namespace B saw: one dict per sample (tests/integration/probe.py)."""
+
+    def __init__(self, proc: subprocess.Popen[bytes]) -> None:
+        self.events: list[dict[str, Any]] = []
+        assert proc.stdout is not None
+        self._thread = threading.Thread(target=self._read, args=(proc.stdout,), daemon=True)
+        self._thread.start()
+
+    def _read(self, stream: IO[bytes]) -> None:
+        for line in stream:
+            if line.startswith(b"{"):
+                self.events.append(json.loads(line))
+
+    def of(self, kind: str, after: float = 0.0, before: float = math.inf) -> list[dict[str, Any]]:
+        return [e for e in list(self.events) if e["kind"] == kind and after <= e["t"] < before]
+
+    def health(self, service: str, present: bool, after: float) -> bool:
+        events = self.of("health", after)
+        return any(e["service"] == service and e["present"] is present for e in events)
+
+    def moving(self, after: float) -> bool:
+        return any(not c["zero"] for c in self.of("cmd_vel", after))
+
+
+def _log(path: Path) -> str:
+    return path.read_text(errors="replace")[-5000:]
+
+
+def test_detector_on_another_host_survives_a_cut_link(hosts: Hosts, tmp_path: Path) -> None:
+    prefix = f"test/{uuid.uuid4().hex[:8]}"
+    stack = {"prefix": prefix, "camera": "front"}
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    robot = write_config(
+        tmp_path / "b",
+        zenoh={"endpoint": f"tcp/{ADDR_B}:{PORT}", "listen": [f"tcp/{ADDR_B}:0"]},
+        stack=stack,
+        supervisor={"services": ["camera", "controller", "metrics"]},
+        controller={"mode": "track", "detection_timeout_s": DEAD_MAN_S},
+    )
+    gpu_box = write_config(
+        tmp_path / "a",
+        zenoh={
+            "endpoint": f"tcp/127.0.0.1:{PORT}",
+            "connect": [f"tcp/{ADDR_B}:{PORT}"],
+            "listen": [f"tcp/{ADDR_A}:0"],
+        },
+        stack=stack,
+        supervisor={"services": ["detector"]},
+    )
+    log_a, log_b = tmp_path / "a.log", tmp_path / "b.log"
+    supervise = ["-m", "deploy.supervisor", "--config"]
+    sup_b = hosts.run(hosts.b, [*supervise, str(robot)], log_b.open("wb"))
+    sup_a = hosts.run(hosts.a, [*supervise, str(gpu_box)], log_a.open("wb"))
+    probe_args = ["-m", "tests.integration.probe", "--config", str(robot)]
+    probe = Probe(hosts.run(hosts.b, probe_args, subprocess.PIPE))
+
+    def logs() -> str:
+        return f"--- host A:\n{_log(log_a)}\n--- host B:\n{_log(log_b)}"
+
+    # Across the link: frames B -> A, detections A -> B, and the robot follows.
+    wait_for(lambda: probe.moving(0.0), STARTUP_S, lambda: f"a non-zero command:\n{logs()}")
+    assert any("person" in d["classes"] for d in probe.of("detections"))
+    [detector] = service_pids("detector", gpu_box)
+
+    cut = hosts.link(up=False)
+    wait_for(lambda: probe.of("cmd_vel", cut + DEAD_MAN_S), 10, "commands after the cut")
+    first_zero = min(c["t"] for c in probe.of("cmd_vel", cut) if c["zero"])
+    assert first_zero - cut <= DEAD_MAN_S + MARGIN_S, "no stop within the dead-man timeout"
+    # Longer than the lease: B drops the detector's session (its health token goes).
+    wait_for(lambda: probe.health("detector", False, cut), 2 * LEASE_S + 10, "B to drop host A")
+    restored = hosts.link(up=True)
+    stopped_from = cut + DEAD_MAN_S + MARGIN_S
+    cut_off = probe.of("cmd_vel", stopped_from, restored)
+    assert cut_off and all(c["zero"] for c in cut_off), "the robot moved with no detections"
+    assert not probe.of("detections", cut + MARGIN_S, restored)
+
+    # The link is back: Zenoh reconnects by itself, detections resume, the robot follows.
+    wait_for(lambda: probe.health("detector", True, restored), 60, lambda: f"A back:\n{logs()}")
+    wait_for(lambda: probe.of("detections", restored), 30, "detections after the link is back")
+    wait_for(lambda: probe.moving(restored), 30, lambda: f"the robot to follow again:\n{logs()}")
+    dropped = min(e["t"] for e in probe.of("health", cut) if not e["present"])
+    back = min(e["t"] for e in probe.of("detections", restored))
+    moving = min(c["t"] for c in probe.of("cmd_vel", restored) if not c["zero"])
+    print(
+        f"link cut: zero command after {first_zero - cut:.2f} s, host A dropped after "
+        f"{dropped - cut:.1f} s; link back: detections after {back - restored:.1f} s, "
+        f"following after {moving - restored:.1f} s"
+    )
+    # Nothing was restarted, by hand or by either watchdog: A's detector kept its health token
+    # and its heartbeat with A's own supervisor, and B's services never depended on host A.
+    assert service_pids("detector", gpu_box) == [detector]
+    for name, path in (("A", log_a), ("B", log_b)):
+        text = path.read_text(errors="replace")
+        assert "hung (" not in text and "restarted" not in text, f"host {name}:\n{logs()}"
+    for proc in (sup_a, sup_b):
+        proc.send_signal(signal.SIGINT)
+    for name, proc in (("A", sup_a), ("B", sup_b)):
+        assert proc.wait(timeout=30) == 0, f"supervisor {name}:\n{logs()}"
