@@ -42,7 +42,8 @@ class BackendName(StrEnum):
     ONNX = "onnx"  # ONNX Runtime on the CPU
     TENSORRT = "tensorrt"
     CUDA = "cuda"  # our ONNX interpreter on PyTorch CUDA
-    AUTO = "auto"  # tensorrt, then cuda, then onnx
+    OPENVINO = "openvino"  # OpenVINO on the CPU (an optional extra)
+    AUTO = "auto"  # tensorrt, then cuda, then openvino (Intel CPUs only), then onnx
 
 
 # --- The JSON the stack writes ------------------------------------------------------------------

@@ -55,9 +55,10 @@ class DetectorSettings:
     """The model, its backend and the post-processing thresholds.
 
     ``model`` empty means the default COCO model (fetched at setup). ``backend`` is onnx,
-    tensorrt, cuda or auto (auto picks tensorrt, then cuda, then onnx: docs/tensorrt.md).
-    ``precision`` empty leaves the backend's default (fp32 on the CPU, fp16 on a GPU); GPU
-    backends take fp32 or fp16, TensorRT also int8. ``batch_profile`` is the (min, opt, max)
+    tensorrt, cuda, openvino or auto (auto picks tensorrt, then cuda, then openvino on Intel
+    CPUs with VNNI/AMX, then onnx: docs/detector.md). ``precision`` empty leaves the backend's
+    default (fp32 on the CPU, fp16 on a GPU); GPU backends take fp32 or fp16, TensorRT also
+    int8; openvino takes fp32 or int8. ``batch_profile`` is the (min, opt, max)
     batch a TensorRT engine is built for; the service sends single frames, so (1, 1, 1).
     A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
     not detected on (counted, see common/freshness.py).

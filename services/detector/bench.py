@@ -49,7 +49,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--backend",
         action="append",
-        help="backend to time: onnx, tensorrt, cuda or auto; repeat to compare (default onnx)",
+        help="backend to time: onnx, tensorrt, cuda, openvino or auto; repeat to compare "
+        "(default onnx)",
     )
     p.add_argument("--runs", type=int, default=50, help="timed runs (default 50)")
     p.add_argument("--warmup", type=int, default=5, help="untimed runs first (default 5)")

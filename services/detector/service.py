@@ -169,7 +169,7 @@ def add_serve_command(subparsers: Any) -> None:
     p = subparsers.add_parser("serve", help="run the detector service on the Zenoh bus")
     p.add_argument("--config", help="stack config (default deploy/stack.toml)")
     p.add_argument(
-        "--backend", help="override detector.backend: onnx, tensorrt, cuda or auto (CPU fallback)"
+        "--backend", help="override detector.backend: onnx, tensorrt, cuda, openvino or auto"
     )
     p.add_argument("--model", help="override detector.model")
     p.set_defaults(handler=_run_serve)

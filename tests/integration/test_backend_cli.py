@@ -93,7 +93,9 @@ def test_serve_on_tensorrt_without_it_exits_4_with_one_error_line(
 def test_serve_refuses_an_unknown_backend_with_one_line(tmp_path: Path) -> None:
     proc = run_cli("serve", "--config", write_config(tmp_path), "--backend", "tpu", timeout=60)
     assert_one_line(
-        proc, 2, "error: detector.backend must be one of onnx, tensorrt, cuda, auto, got 'tpu'"
+        proc,
+        2,
+        "error: detector.backend must be one of onnx, tensorrt, cuda, openvino, auto, got 'tpu'",
     )
 
 

@@ -26,6 +26,7 @@ BACKENDS: dict[str, str] = {
     BackendName.ONNX: "services.detector.backends.onnx",
     BackendName.TENSORRT: "services.detector.backends.tensorrt",
     BackendName.CUDA: "services.detector.backends.cuda",
+    BackendName.OPENVINO: "services.detector.backends.openvino",
 }
 
 #: The name that picks the best backend this machine can run (see :mod:`.select`).

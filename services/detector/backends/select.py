@@ -1,13 +1,15 @@
 """Choosing a backend: ``auto`` takes the fastest one this machine can run.
 
 Order: ``tensorrt`` (an engine built for this GPU), then ``cuda`` (PyTorch on the GPU), then
-``onnx`` (ONNX Runtime on the CPU, always there). Each candidate is first *probed*: can its
-runtime be imported, and does it see a device? A probe never loads a model, so ``auto`` costs
-a few imports, not a model load per candidate. A candidate that probes fine but still fails to
-load with BackendUnavailable (a driver too old, say) is skipped too, and the reason is kept.
-The choice is returned with one line that says why, e.g.
-``auto: TensorRT not installed (...); CUDA backend: PyTorch has no CUDA device; falling back
-to onnx (CPU)``.
+``openvino`` (only on an Intel CPU with VNNI or AMX, where the optional extra is installed: see
+:func:`openvino_cpu_reason`), then ``onnx`` (ONNX Runtime on the CPU, always there). Each
+candidate is first *probed*: can its runtime be imported, and does it see a device? A probe
+never loads a model, so ``auto`` costs a few imports, not a model load per candidate. A
+candidate that probes fine but still fails to load with BackendUnavailable (a driver too old,
+say) is skipped too, and the reason is kept. The choice is returned with one line that says
+why (the reasons of the candidates preferred to it), e.g. ``auto: TensorRT not installed
+(...); CUDA backend: PyTorch has no CUDA device; OpenVINO: not an Intel CPU (AuthenticAMD);
+falling back to onnx (CPU)``.
 """
 
 from __future__ import annotations
@@ -35,8 +37,11 @@ log = logging.getLogger(__name__)
 #: A probe returns None when its backend can run here, else the reason it cannot.
 Probe = Callable[[], str | None]
 
-AUTO_ORDER = ("tensorrt", "cuda", "onnx")
-_WHERE = {"tensorrt": "GPU", "cuda": "GPU", "onnx": "CPU"}
+AUTO_ORDER = ("tensorrt", "cuda", "openvino", "onnx")
+_WHERE = {"tensorrt": "GPU", "cuda": "GPU", "openvino": "CPU", "onnx": "CPU"}
+#: CPU flags (Linux names) of the INT8 dot-product units OpenVINO's CPU kernels use.
+INT8_UNITS = ("avx512_vnni", "avx_vnni", "amx_int8")
+CPUINFO = Path("/proc/cpuinfo")
 _TRT_INSTALL = "pip install tensorrt-cu12 on a machine with an NVIDIA driver"
 
 
@@ -101,6 +106,48 @@ def probe_cuda() -> str | None:
     return None
 
 
+def openvino_cpu_reason(cpuinfo: str) -> str | None:
+    """None when a CPU described by ``cpuinfo`` (``/proc/cpuinfo`` text) suits OpenVINO.
+
+    The rule: an Intel CPU (vendor ``GenuineIntel``) with VNNI or AMX (:data:`INT8_UNITS`).
+    Measured on an AMD EPYC (AVX2, no VNNI), OpenVINO FP32 ran at 1.03x ONNX Runtime's time,
+    no gain for a 180 MB runtime, so other vendors keep onnx. On Intel, OpenVINO's kernels are
+    the vendor's own and VNNI/AMX run its INT8 in hardware dot products; that it beats ONNX
+    Runtime there is expected, not measured here (docs/detector.md, "OpenVINO").
+    """
+    vendor = ""
+    flags: set[str] = set()
+    for line in cpuinfo.splitlines():
+        key, _, value = line.partition(":")
+        key = key.strip()
+        if key == "vendor_id" and not vendor:
+            vendor = value.strip()
+        elif key == "flags" and not flags:
+            flags = set(value.split())
+    if vendor != "GenuineIntel":
+        return f"OpenVINO: not an Intel CPU ({vendor or 'vendor unknown'})"
+    if not flags.intersection(INT8_UNITS):
+        return "OpenVINO: this Intel CPU has neither VNNI nor AMX"
+    return None
+
+
+def probe_openvino(cpuinfo_path: Path = CPUINFO) -> str | None:
+    """None on a CPU that suits OpenVINO (:func:`openvino_cpu_reason`) with OpenVINO installed.
+
+    Reads the CPU first, so a machine where the rule says no never imports anything.
+    """
+    try:
+        cpuinfo = cpuinfo_path.read_text()
+    except OSError:  # not Linux
+        return f"OpenVINO: cannot read {cpuinfo_path} to check the CPU"
+    reason = openvino_cpu_reason(cpuinfo)
+    if reason is not None:
+        return reason
+    if not _find("openvino"):
+        return "OpenVINO not installed (pip install '.[openvino]')"
+    return None
+
+
 def probe_onnx() -> str | None:
     """None when ONNX Runtime is importable (it is a dependency, so this is a formality)."""
     return None if _find("onnxruntime") else "ONNX Runtime not installed"
@@ -109,26 +156,32 @@ def probe_onnx() -> str | None:
 DEFAULT_PROBES: Mapping[str, Probe] = {
     "tensorrt": probe_tensorrt,
     "cuda": probe_cuda,
+    "openvino": probe_openvino,
     "onnx": probe_onnx,
 }
 
 
-def auto_candidates(probes: Mapping[str, Probe] | None = None) -> tuple[list[str], list[str]]:
-    """``(usable backends in preference order, reasons the others are not usable)``."""
+def auto_candidates(
+    probes: Mapping[str, Probe] | None = None,
+) -> tuple[list[str], dict[str, str]]:
+    """``(usable backends in preference order, {backend: why it is not usable})``."""
     table = DEFAULT_PROBES if probes is None else probes
     usable: list[str] = []
-    reasons: list[str] = []
+    reasons: dict[str, str] = {}
     for name in AUTO_ORDER:
         probe = table.get(name)
         why = probe() if probe is not None else f"{name}: no probe"
         if why is None:
             usable.append(name)
         else:
-            reasons.append(why)
+            reasons[name] = why
     return usable, reasons
 
 
-def _explain(skipped: list[str], name: str) -> str:
+def _explain(reasons: Mapping[str, str], name: str) -> str:
+    """Why ``name`` was chosen: the reasons of the candidates preferred to it, none after it."""
+    rank = AUTO_ORDER.index(name)
+    skipped = [why for n, why in reasons.items() if AUTO_ORDER.index(n) < rank]
     verb = "falling back to" if skipped else "using"
     return "auto: " + "".join(f"{r}; " for r in skipped) + f"{verb} {name} ({_WHERE[name]})"
 
@@ -148,7 +201,7 @@ def resolve_backend(requested: str, probes: Mapping[str, Probe] | None = None) -
         return requested, f"{requested}: requested"
     usable, reasons = auto_candidates(probes)
     if not usable:
-        raise BackendUnavailable("auto: no backend can run here: " + "; ".join(reasons))
+        raise BackendUnavailable("auto: no backend can run here: " + "; ".join(reasons.values()))
     return usable[0], _explain(reasons, usable[0])
 
 
@@ -160,8 +213,10 @@ def open_auto(
     """Load ``model_path`` on the best backend that works here, logging the choice.
 
     ``options`` a candidate does not take are dropped for it (``precision`` means nothing to
-    ONNX Runtime), and said so in the log. A fallback from the first choice is logged as a
-    warning: someone expecting a GPU should notice they got the CPU.
+    ONNX Runtime), and said so in the log. A candidate that refuses an option it takes (the
+    GPU's ``fp16`` on openvino) is skipped like one that cannot load, unless it is the last
+    one left. A fallback from the first choice is logged as a warning: someone expecting a
+    GPU should notice they got the CPU.
     """
     usable, reasons = auto_candidates(probes)
     for name in usable:
@@ -172,14 +227,19 @@ def open_auto(
         try:
             backend = load(model_path, **kept)
         except BackendUnavailable as exc:
-            reasons.append(f"{name}: {exc}")
+            reasons[name] = f"{name}: {exc}"
+            continue
+        except ConfigError as exc:
+            if name == usable[-1]:
+                raise
+            reasons[name] = f"{name}: {exc}"
             continue
         message = _explain(reasons, name)
         if dropped:
             message += f" (ignoring option(s) it does not take: {', '.join(dropped)})"
         log.log(logging.WARNING if name != AUTO_ORDER[0] else logging.INFO, "%s", message)
         return backend
-    raise BackendUnavailable("auto: no backend can run here: " + "; ".join(reasons))
+    raise BackendUnavailable("auto: no backend can run here: " + "; ".join(reasons.values()))
 
 
 def backend_options(settings: DetectorSettings) -> dict[str, Any]:

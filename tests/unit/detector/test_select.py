@@ -23,6 +23,7 @@ from services.detector.backends import select as sel
 
 NO_TRT = "TensorRT not installed"
 NO_TORCH_GPU = "CUDA backend: PyTorch has no CUDA device"
+NOT_INTEL = "OpenVINO: not an Intel CPU (AuthenticAMD)"
 
 
 def probes(**results: str | None) -> dict[str, sel.Probe]:
@@ -43,15 +44,28 @@ def test_auto_takes_cuda_when_tensorrt_is_missing() -> None:
 
 def test_auto_falls_back_to_the_cpu_and_says_why_for_each() -> None:
     name, reason = sel.resolve_backend(
-        "auto", probes(tensorrt=NO_TRT, cuda=NO_TORCH_GPU, onnx=None)
+        "auto", probes(tensorrt=NO_TRT, cuda=NO_TORCH_GPU, openvino=NOT_INTEL, onnx=None)
     )
     assert name == "onnx"
-    assert reason == f"auto: {NO_TRT}; {NO_TORCH_GPU}; falling back to onnx (CPU)"
+    assert reason == f"auto: {NO_TRT}; {NO_TORCH_GPU}; {NOT_INTEL}; falling back to onnx (CPU)"
+
+
+def test_auto_takes_openvino_before_onnx_where_it_probes_fine() -> None:
+    name, reason = sel.resolve_backend(
+        "auto", probes(tensorrt=NO_TRT, cuda=NO_TORCH_GPU, openvino=None, onnx=None)
+    )
+    assert (name, reason) == (
+        "openvino",
+        f"auto: {NO_TRT}; {NO_TORCH_GPU}; falling back to openvino (CPU)",
+    )
 
 
 def test_auto_with_nothing_usable_is_backend_unavailable() -> None:
     with pytest.raises(BackendUnavailable, match=r"no backend can run here: .*ONNX gone"):
-        sel.resolve_backend("auto", probes(tensorrt=NO_TRT, cuda=NO_TORCH_GPU, onnx="ONNX gone"))
+        sel.resolve_backend(
+            "auto",
+            probes(tensorrt=NO_TRT, cuda=NO_TORCH_GPU, openvino=NOT_INTEL, onnx="ONNX gone"),
+        )
 
 
 def test_a_named_backend_is_taken_as_asked_without_probing() -> None:
@@ -59,7 +73,7 @@ def test_a_named_backend_is_taken_as_asked_without_probing() -> None:
         raise AssertionError("a named backend must not be probed")
 
     for name in BACKENDS:
-        assert sel.resolve_backend(name, {"tensorrt": boom, "cuda": boom, "onnx": boom}) == (
+        assert sel.resolve_backend(name, dict.fromkeys(sel.AUTO_ORDER, boom)) == (
             name,
             f"{name}: requested",
         )
@@ -67,7 +81,8 @@ def test_a_named_backend_is_taken_as_asked_without_probing() -> None:
 
 def test_an_unknown_name_lists_the_valid_ones() -> None:
     with pytest.raises(
-        ConfigError, match="unknown backend 'tpu'; valid backends: onnx, tensorrt, cuda, auto"
+        ConfigError,
+        match="unknown backend 'tpu'; valid backends: onnx, tensorrt, cuda, openvino, auto",
     ):
         sel.resolve_backend("tpu")
 
@@ -125,13 +140,15 @@ def test_open_auto_falls_back_when_loading_fails_and_warns(
     fake_loaders({"tensorrt": "driver too old"}, monkeypatch)
     with caplog.at_level(logging.INFO, logger=sel.__name__):
         backend: Any = sel.open_auto(
-            Path("m.onnx"), {}, probes(tensorrt=None, cuda="no torch", onnx=None)
+            Path("m.onnx"),
+            {},
+            probes(tensorrt=None, cuda="no torch", openvino=NOT_INTEL, onnx=None),
         )
     assert backend.name == "onnx"
     record = caplog.records[-1]
     assert record.levelno == logging.WARNING
     assert record.getMessage() == (
-        "auto: no torch; tensorrt: driver too old; falling back to onnx (CPU)"
+        f"auto: no torch; {NOT_INTEL}; tensorrt: driver too old; falling back to onnx (CPU)"
     )
 
 
@@ -164,7 +181,7 @@ def test_settings_accept_exactly_the_backend_choices() -> None:
     for name in BACKEND_CHOICES:
         assert DetectorSettings(backend=name).backend == name
     with pytest.raises(
-        ConfigError, match=r"detector\.backend must be one of onnx, tensorrt, cuda, auto"
+        ConfigError, match=r"detector\.backend must be one of onnx, tensorrt, cuda, openvino, auto"
     ):
         DetectorSettings(backend="tpu")
 

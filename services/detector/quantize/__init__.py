@@ -1,0 +1,1 @@
+"""Post-training INT8 quantization with each runtime's own tool."""
