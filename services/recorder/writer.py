@@ -179,7 +179,7 @@ class QueuedRecorder(Closing):
                     return
                 self._write(item)
                 self.file.tick()
-        except OSError as exc:
+        except Exception as exc:  # a full disk, or a bug: the service then exits non-zero
             self._error = exc
             log.error("recording stopped: %s", one_line(exc))
 
@@ -197,7 +197,12 @@ class QueuedRecorder(Closing):
 
     def close(self) -> None:
         """Write what is queued, then finish the file."""
-        self._queue.put(None)  # blocks only this caller, while the writer drains the queue
+        while self._thread.is_alive():  # a writer that failed takes nothing from the queue
+            try:
+                self._queue.put(None, timeout=0.1)  # waits while the writer drains the queue
+                break
+            except queue.Full:
+                continue
         self._thread.join()
         if self._error is None:
             self.file.close()

@@ -3,7 +3,6 @@ readable recordings, each refused with one line."""
 
 from __future__ import annotations
 
-import shutil
 import threading
 from pathlib import Path
 
@@ -165,4 +164,17 @@ def test_a_full_queue_drops_and_counts_and_never_blocks(tmp_path: Path) -> None:
     with Recording(tmp_path / "q.mcap") as reader:
         topics = [r.channel.topic for r in reader.records()]
     assert topics.count("/cmd_vel") == 3 and not reader.truncated
-    shutil.rmtree(tmp_path)
+
+
+def test_a_writer_that_fails_says_so_and_closing_does_not_hang(tmp_path: Path) -> None:
+    def broken(payload: bytes) -> Twist:
+        raise RuntimeError("disk on fire")
+
+    counters = Counters()
+    settings = RecorderSettings(queue_size=1)
+    rec = QueuedRecorder(McapFile(tmp_path / "f.mcap", settings), Translator(Ros2Settings()),
+                         settings, counters)  # fmt: skip
+    for _ in range(3):
+        rec.offer("stack/controller/cmd_vel", b"", 1, broken)
+    rec.close()
+    assert isinstance(rec.failed, RuntimeError)
