@@ -7,7 +7,9 @@
     ├── ModelError               a file that is not a usable model
     │   ├── UnknownModelFamily   an output shape that matches no known YOLO family
     │   └── ModelFetchError      the default model could not be fetched or converted
-    └── BackendUnavailable       a runtime (TensorRT, CUDA, ...) that this machine lacks
+    ├── BackendUnavailable       a runtime (TensorRT, CUDA, ...) that this machine lacks
+    └── RecordingError           a file that is not a readable MCAP recording, or holds nothing
+                                 that can be played
 
 Library errors are translated at the boundary (``raise ModelError(...) from exc``) so callers
 only ever catch these. Command-line entry points print ``str(error)`` as one line and exit
@@ -47,6 +49,10 @@ class ModelFetchError(ModelError):
 
 class BackendUnavailable(StackError):
     """An inference backend whose runtime or device is missing on this machine."""
+
+
+class RecordingError(StackError):
+    """A recording that cannot be read or played: not MCAP, corrupt, or of unknown schemas."""
 
 
 #: The longest message :func:`one_line` keeps (runtimes can print whole graphs in an error).

@@ -10,8 +10,9 @@ router, which knows the authenticated name of every link, and every message pass
 connects to, so rules by name cannot be enforced there; see docs/security.md.)
 
 Each process has its own principal and may publish only its own keys: only the controller puts
-``cmd_vel``, only the ``estop`` principal the e-stop, only the camera and the simulator frames
-and scans, only stack services counters and health tokens. Anything not allowed is denied.
+``cmd_vel``, only the ``estop`` principal the e-stop, only the camera, the simulator, the ROS 2
+bridge and the recorder (playing a recording back) frames and scans, only stack services
+counters and health tokens. Anything not allowed is denied.
 """
 
 from __future__ import annotations
@@ -23,7 +24,9 @@ from common.keys import Keys
 
 # Every principal the credentials command creates. "estop" is the operator's e-stop tool,
 # "observer" may watch (subscribe, query) but publishes nothing: status lines, queries, tests.
-SERVICE_PRINCIPALS = ("camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
+SERVICE_PRINCIPALS = (
+    "recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer"
+)
 PRINCIPALS = ("supervisor", *SERVICE_PRINCIPALS, "estop", "observer")
 
 AUTH_MODES = ("none", "password", "certificate")
@@ -84,6 +87,8 @@ def _principal_keys(keys: Keys, camera: str) -> dict[str, dict[str, tuple[str, .
         "sim": service("sim", keys.frame(camera), keys.scan(), keys.sim_truth()),
         # The ROS 2 bridge feeds the robot's camera and laser into the stack.
         "ros2": service("ros2", keys.frame(camera), keys.scan()),
+        # The recorder listens to everything; playing a recording back puts frames and scans.
+        "recorder": service("recorder", keys.frame(camera), keys.scan()),
         "detector": {
             **service("detector", keys.detections(camera)),
             "serve": (keys.detector_info(camera),),

@@ -6,7 +6,8 @@ Reading the file and the environment overrides is in common/config_file.py.
 This module holds the bus, stack, metrics and supervisor settings and the whole ``Config``; the
 perception settings (camera, detector, tracker) live in common/perception_settings.py and the
 control settings (controller, sim) in common/control_settings.py, the ROS 2 bridge's in
-common/ros2_settings.py, the live view's in common/viewer_settings.py. All are re-exported here, so
+common/ros2_settings.py, the live view's in common/viewer_settings.py, the recorder's in
+common/recorder_settings.py. All are re-exported here, so
 ``from common.settings import X`` works for every one of them.
 """
 
@@ -18,6 +19,7 @@ from pathlib import Path
 from common.control_settings import ControllerSettings, SimSettings
 from common.errors import ConfigError
 from common.perception_settings import CameraSettings, DetectorSettings, TrackerSettings
+from common.recorder_settings import RecorderSettings
 from common.ros2_settings import Ros2Settings
 from common.security import AUTH_MODES
 from common.setting_checks import non_negative, positive
@@ -32,6 +34,7 @@ __all__ = [
     "ControllerSettings",
     "DetectorSettings",
     "MetricsSettings",
+    "RecorderSettings",
     "Ros2Settings",
     "SimSettings",
     "StackSettings",
@@ -42,8 +45,9 @@ __all__ = [
 ]
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-# Runnable by the supervisor, and started in this order (the viewer after what it watches).
-SERVICES = ("camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
+# Runnable by the supervisor, and started in this order: the recorder first, so that it hears
+# the others from their start; the viewer after what it watches.
+SERVICES = ("recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
 
 
@@ -198,6 +202,7 @@ class Config:
     metrics: MetricsSettings = field(default_factory=MetricsSettings)
     ros2: Ros2Settings = field(default_factory=Ros2Settings)
     viewer: ViewerSettings = field(default_factory=ViewerSettings)
+    recorder: RecorderSettings = field(default_factory=RecorderSettings)
     supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)
 
     @property

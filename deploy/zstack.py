@@ -16,7 +16,7 @@ from common.settings import SERVICES
 # command -> (module, the argv it starts with, help)
 COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
     "run": ("deploy.supervisor", (), "start the stack under the supervisor (Ctrl-C stops it)"),
-    "serve": ("", (), "run one service: zstack serve camera|sim|detector|controller|metrics"),
+    "serve": ("", (), "run one service: zstack serve camera|sim|detector|controller|metrics|..."),
     "detect": ("services.detector", ("detect",), "detect on images or folders of images"),
     "benchmark": ("services.detector", ("benchmark",), "time the detector's stages, per backend"),
     "export": ("services.detector", ("export",), "build a TensorRT engine ahead of time"),
@@ -28,6 +28,9 @@ COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
     "scenarios": ("services.sim", ("list",), "name the scenarios"),
     "estop": ("services.controller", ("estop",), "engage or release the emergency stop"),
     "ros2-benchmark": ("services.ros2", ("benchmark",), "the ROS 2 bridge's added latency"),
+    "record": ("services.recorder", ("record",), "record the stack's keys to an MCAP file"),
+    "play": ("services.recorder", ("play",), "publish a recording's frames and scans, as live"),
+    "compare": ("services.recorder", ("compare",), "how two runs differ (or a replay)"),
     "credentials": ("deploy.credentials", (), "write the secure profile's credentials"),
 }
 

@@ -43,8 +43,10 @@ def test_only_the_controller_puts_cmd_vel_and_only_estop_the_estop() -> None:
     assert putters == {"controller"}
     assert {p for p in PRINCIPALS if KEYS.estop() in _allowed(acl, p, "put")} == {"estop"}
     frames = {p for p in PRINCIPALS if KEYS.frame("front") in _allowed(acl, p, "put")}
-    assert frames == {"camera", "sim", "ros2"}  # the camera, the simulator or the ROS 2 bridge
-    assert {p for p in PRINCIPALS if KEYS.scan() in _allowed(acl, p, "put")} == {"sim", "ros2"}
+    # the camera, the simulator, the ROS 2 bridge or a recording played back
+    assert frames == {"camera", "sim", "ros2", "recorder"}
+    scans = {p for p in PRINCIPALS if KEYS.scan() in _allowed(acl, p, "put")}
+    assert scans == {"sim", "ros2", "recorder"}
     assert _allowed(acl, "observer", "put") == set()
     # The live view reads everything but puts only its own counters.
     assert _allowed(acl, "viewer", "put") == {KEYS.counters("viewer")}

@@ -1,0 +1,68 @@
+"""Settings of the ``recorder``: recording the stack's keys to MCAP, and playing them back.
+
+Re-exported by common/settings.py, where the whole Config is assembled. The ROS 2 topic names
+and distribution the CDR channels use come from the ``[ros2]`` table (the bridge's names).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+from common.errors import ConfigError
+from common.setting_checks import enum_field, positive
+
+
+class Compression(StrEnum):
+    LZ4 = "lz4"  # fast: a few ms per MB, what a recorder beside a CPU detector can afford
+    ZSTD = "zstd"  # smaller files, several times the CPU
+    NONE = "none"
+
+
+#: What ``file_pattern`` may contain: ``{time}`` becomes the start time, YYYYmmdd-HHMMSS.
+TIME_FIELD = "{time}"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RecorderSettings:
+    """Where recordings go and how they are written.
+
+    The recorder service (and ``zstack record`` without ``--out``) writes
+    ``output_dir/file_pattern`` (``output_dir`` relative to the repo root), ``{time}`` replaced
+    by the start time. Subscribers only push into a queue of ``queue_size`` messages; one
+    thread writes; a full queue drops the message and counts it (the bus is never blocked).
+    Messages are written in compressed chunks of ``chunk_size_kb``; a chunk is also closed
+    every ``flush_period_s``, so a recorder that is killed loses at most that much.
+    A progress line (messages, MB, drops) every ``progress_period_s``.
+    """
+
+    output_dir: str = "recordings"
+    file_pattern: str = "stack-{time}.mcap"
+    queue_size: int = 256
+    chunk_size_kb: int = 1024
+    compression: Compression = Compression.LZ4
+    flush_period_s: float = 1.0
+    progress_period_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        enum_field(self, "compression", Compression, "recorder.compression")
+        if not self.output_dir:
+            raise ConfigError("recorder.output_dir must not be empty")
+        if not self.file_pattern.endswith(".mcap") or "/" in self.file_pattern:
+            raise ConfigError(
+                f"recorder.file_pattern must be a file name ending in .mcap, "
+                f"got {self.file_pattern!r}"
+            )
+        if not 1 <= self.queue_size <= 100_000:
+            raise ConfigError(
+                f"recorder.queue_size must be within 1..100000, got {self.queue_size}"
+            )
+        if not 16 <= self.chunk_size_kb <= 65536:
+            raise ConfigError(
+                f"recorder.chunk_size_kb must be within 16..65536, got {self.chunk_size_kb}"
+            )
+        if not 0.05 <= self.flush_period_s <= 60:
+            raise ConfigError(
+                f"recorder.flush_period_s must be within 0.05..60 s, got {self.flush_period_s}"
+            )
+        positive("recorder.progress_period_s", self.progress_period_s)

@@ -1,0 +1,74 @@
+"""Matching detections by class and IoU, command differences, latency, the report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from services.recorder.compare import compare_runs, iou_matrix, match_frame, report_markdown
+from services.recorder.runs import Command, FrameDetections, Run
+
+
+def _frame(seq: int, boxes: list[tuple[str, list[float]]], stamp: int = 0) -> FrameDetections:
+    return FrameDetections(
+        seq=seq,
+        stamp_ns=stamp or seq * 1_000_000_000,
+        class_names=tuple(name for name, _ in boxes),
+        xyxy=np.array([b for _, b in boxes], dtype=np.float64).reshape(-1, 4),
+        scores=np.full(len(boxes), 0.9),
+        timing_ms={"inference": 10.0 * seq},
+        received_ns=(stamp or seq * 1_000_000_000) + 2_000_000,
+    )
+
+
+def test_iou_matrix_against_hand_figures() -> None:
+    a = np.array([[0, 0, 10, 10], [0, 0, 10, 10]], dtype=np.float64)
+    b = np.array([[5, 0, 15, 10], [20, 20, 30, 30], [0, 0, 10, 10]], dtype=np.float64)
+    assert iou_matrix(a, b)[0].tolist() == pytest.approx([50 / 150, 0.0, 1.0])
+
+
+def test_match_frame_pairs_within_a_class_best_first_each_box_once() -> None:
+    a = _frame(1, [("person", [0, 0, 10, 10]), ("car", [0, 0, 10, 10])])
+    b = _frame(1, [("car", [1, 0, 11, 10]), ("person", [0, 0, 10, 10]), ("person", [0, 0, 9, 10])])
+    pairs = match_frame(a, b, 0.5)
+    assert [(i, j) for i, j, _ in pairs] == [(0, 1), (1, 0)]
+    assert pairs[1][2] == pytest.approx(90 / 110)
+    assert match_frame(a, _frame(1, [("dog", [0, 0, 10, 10])]), 0.5) == []
+
+
+def test_compare_runs_counts_matches_commands_and_latency() -> None:
+    a = Run(Path("a"), detections={
+        1: _frame(1, [("person", [0, 0, 10, 10])]),
+        2: _frame(2, [("person", [0, 0, 10, 10]), ("cup", [5, 5, 6, 6])]),
+        3: _frame(3, [("person", [0, 0, 10, 10])]),  # only A detected on frame 3
+    })  # fmt: skip
+    b = Run(Path("b"), detections={
+        1: _frame(1, [("person", [0, 0, 10, 10])], stamp=50_000_000_000),
+        2: _frame(2, [("person", [30, 30, 40, 40])], stamp=51_000_000_000),
+    })  # fmt: skip
+    a.commands = [Command(1_100_000_000, 1_000_000_000, 0.3, 0.1),
+                  Command(1_200_000_000, 1_000_000_000, 0.0, 0.0)]  # a later repeat: ignored
+    b.commands = [Command(50_150_000_000, 50_000_000_000, 0.2, -0.1)]  # fmt: skip
+    c = compare_runs(a, b, iou_min=0.5)
+    assert (c.frames, c.frames_both) == ((3, 2), 2)
+    assert (c.detections, c.matched) == ((3, 2), 1)
+    assert c.match_rate == pytest.approx(1 / 3)
+    assert c.per_class == {"cup": (1, 0, 0), "person": (2, 2, 1)}
+    assert c.command_pairs == 1
+    assert c.dv == pytest.approx([0.1]) and c.dw == pytest.approx([0.2])
+    lat_a, lat_b = c.latency_ms["capture_to_command"]
+    assert lat_a == pytest.approx([100.0]) and lat_b == pytest.approx([150.0])
+    assert c.latency_ms["capture_to_detector"][0] == pytest.approx([2.0, 2.0, 2.0])
+    md = report_markdown(c, "a.mcap", "b.mcap", "compare.png")
+    assert "| person | 2 | 2 | 1 |" in md and "**33.3 %**" in md
+    assert "| inference | 20.0 | 15.0 |" in md
+    assert "|dv| mean / max 0.100 / 0.100 m/s" in md and "![latency and IoU](compare.png)" in md
+
+
+def test_the_report_of_runs_with_nothing_in_common_says_so() -> None:
+    a = Run(Path("a"), detections={1: _frame(1, [])})
+    c = compare_runs(a, Run(Path("b"), detections={2: _frame(2, [])}))
+    md = report_markdown(c, "a", "b")
+    assert "both 0" in md and "0 frames: |dv| mean / max - m/s" in md
