@@ -42,12 +42,15 @@ def _unit(name: str) -> str:
     return next((unit for suffix, unit in _UNITS if field.endswith(suffix)), "")
 
 
+def range_text(name: str, lo: float, hi: float) -> str:
+    """How a setting's range reads in its error and in docs/configuration.md: ``0.01..5 m/s``."""
+    return f"{_number(lo)}..{_number(hi)}{_unit(name)}"
+
+
 def within(name: str, value: float, lo: float, hi: float) -> None:
     """``value`` must be a number in ``lo..hi`` (NaN never is)."""
     if isinstance(value, bool) or not isinstance(value, int | float) or not lo <= value <= hi:
-        raise ConfigError(
-            f"{name} must be within {_number(lo)}..{_number(hi)}{_unit(name)}, got {value!r}"
-        )
+        raise ConfigError(f"{name} must be within {range_text(name, lo, hi)}, got {value!r}")
 
 
 def check_bounds(settings: object, table: str, bounds: Bounds) -> None:

@@ -14,7 +14,8 @@ import pytest
 
 from common.config_file import load_config
 from common.errors import ConfigError
-from common.settings import DEFAULT_CONFIG, Config
+from common.setting_checks import range_text
+from common.settings import DEFAULT_CONFIG, REPO_ROOT, Config
 from services.controller.service import STOP_POLL_S, wait_either
 
 TABLES = {f.name: f.type for f in dataclasses.fields(Config) if f.name != "path"}
@@ -161,3 +162,17 @@ def test_a_control_period_never_holds_back_a_stop() -> None:
     start = time.monotonic()
     wait_either(wake, stop, 0.05)
     assert 0.04 <= time.monotonic() - start < 1.0
+
+
+def test_docs_configuration_states_every_range_as_the_code_does() -> None:
+    doc = (REPO_ROOT / "docs" / "configuration.md").read_text()
+    missing = []
+    for table in TABLES:
+        cls = HINTS[table]
+        for name, (lo, hi) in getattr(cls, "BOUNDS", {}).items():
+            row = f"| `{table}.{name}` | {range_text(name, lo, hi)} |"
+            missing += [] if row in doc else [row]
+        for name, (lo, hi) in getattr(cls, "LENGTHS", {}).items():
+            row = f"| `{table}.{name}` | {range_text('', lo, hi)} items |"
+            missing += [] if row in doc else [row]
+    assert missing == []
