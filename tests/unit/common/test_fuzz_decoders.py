@@ -48,7 +48,7 @@ def test_every_message_type_has_valid_samples_to_mutate() -> None:
 
 @pytest.mark.parametrize("cls", MESSAGE_TYPES, ids=lambda cls: cls.TAG)
 def test_every_decoder_decodes_or_raises_decode_error(cls: type[Message]) -> None:
-    @fuzz(150)
+    @fuzz(120)
     @given(payload=message_payloads(cls))
     def check(payload: bytes) -> None:
         msg = decoded_or_rejected(cls, payload)
@@ -71,7 +71,7 @@ def test_jpeg_frames_decode_to_pixels_or_an_image_error() -> None:
     marker) gives the image its header promised, or ImageError."""
     good = jpeg(16, 8)
 
-    @fuzz(200)
+    @fuzz(150)
     @given(
         data=st.one_of(byte_mutation(good), st.binary(max_size=64).map(lambda b: b"\xff\xd8" + b)),
         size=st.sampled_from([(16, 8), (8, 16), (1, 1), (16384, 16384)]),

@@ -57,7 +57,7 @@ def test_every_inbound_ros_payload_is_translated_or_a_decode_error(ros_type: str
     valid = [cdr_encode(DISTRO, ros_type, m) for m in VALID[ros_type]()]
     assert all(to_stack(cdr_decode(DISTRO, ros_type, v)) is not None for v in valid)
 
-    @fuzz(120)
+    @fuzz(100)
     @given(payload=payloads(ros_type, valid, msgpack_shapes=False))
     def check(payload: bytes) -> None:
         try:
