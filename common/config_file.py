@@ -15,6 +15,7 @@ import dataclasses
 import enum
 import math
 import os
+import re
 import tomllib
 import types
 import typing
@@ -72,7 +73,8 @@ def _build(cls: type[_T], table: str, values: Mapping[str, Any]) -> _T:
 def _env_overrides(environ: Mapping[str, str]) -> dict[str, dict[str, Any]]:
     """Collect ``STACK__TABLE__FIELD=value`` overrides; values are TOML, else plain strings.
 
-    A misspelt table or field is blamed on the variable, not on the config file."""
+    A misspelt table or field is blamed on the variable, not on the config file (and so is a
+    bad value: see :func:`_blame`)."""
     out: dict[str, dict[str, Any]] = {}
     hints = typing.get_type_hints(Config)
     for name, raw in environ.items():
@@ -95,6 +97,16 @@ def _env_overrides(environ: Mapping[str, str]) -> dict[str, dict[str, Any]]:
             value = raw
         out.setdefault(parts[0], {})[parts[1]] = value
     return out
+
+
+def _blame(error: ConfigError, table: str, fields: Mapping[str, Any]) -> ConfigError:
+    """``error`` about a setting of ``table`` prefixed with the variable that set it, when an
+    environment override did (``STACK__SIM__LASER_RAYS: sim.laser_rays must be ...``)."""
+    text = str(error)
+    for name in fields:
+        if re.search(rf"(?<![\w.]){re.escape(table)}\.{re.escape(name)}(?!\w)", text):
+            return ConfigError(f"{ENV_PREFIX}{table.upper()}__{name.upper()}: {text}")
+    return error
 
 
 def _read(cfg_path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
@@ -129,7 +141,8 @@ def load_config(path: str | Path | None = None, environ: Mapping[str, str] | Non
     """Read the stack config (default ``deploy/stack.toml``), apply env overrides, validate."""
     cfg_path = Path(path) if path else DEFAULT_CONFIG
     data = _read(cfg_path, (cfg_path.resolve(),))
-    for table, values in _env_overrides(os.environ if environ is None else environ).items():
+    overrides = _env_overrides(os.environ if environ is None else environ)
+    for table, values in overrides.items():
         current = data.setdefault(table, {})
         if not isinstance(current, dict):
             raise ConfigError(f"{cfg_path}: [{table}] must be a table")
@@ -144,8 +157,14 @@ def load_config(path: str | Path | None = None, environ: Mapping[str, str] | Non
         values = data.get(table, {})
         if not isinstance(values, dict):
             raise ConfigError(f"{cfg_path}: [{table}] must be a table")
-        built[table] = _build(hints[table], table, values)
-    return Config(path=str(cfg_path), **built)
+        try:
+            built[table] = _build(hints[table], table, values)
+        except ConfigError as exc:
+            raise _blame(exc, table, overrides.get(table, {})) from exc
+    try:
+        return Config(path=str(cfg_path), **built)
+    except ConfigError as exc:
+        raise _blame(exc, "sim", overrides.get("sim", {})) from exc
 
 
 def _toml_value(value: Any) -> str:

@@ -6,10 +6,11 @@ Re-exported by common/settings.py, where the whole Config is assembled.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 from common.contracts import ControllerMode, DistanceSource
 from common.errors import ConfigError
-from common.setting_checks import enum_field, fraction, non_negative, positive
+from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -62,35 +63,50 @@ class ControllerSettings:
     estop_release_max_age_s: float = 2.0
     counters_period_s: float = 1.0
 
+    # A real base: up to 5 m/s (warehouse robots run at 2..3), 10 rad/s, about 1 g of braking.
+    # Commands go out at least control_rate_hz times a second: below 1 Hz a base's own
+    # command timeout would trip between them. The dead-man (detection_timeout_s) stops the
+    # robot within 10 s at the very most.
+    BOUNDS: ClassVar[Bounds] = {
+        "min_score": (0, 1),
+        "control_rate_hz": (1, 1000),
+        "detection_timeout_s": (0.01, 10),
+        "scan_timeout_s": (0.01, 10),
+        "target_lost_timeout_s": (0.01, 60),
+        "bearing_kp": (0, 100),
+        "bearing_ki": (0, 100),
+        "bearing_kd": (0, 100),
+        "max_angular": (0.01, 10),
+        "max_linear": (0.01, 5),
+        "max_angular_accel": (0.01, 100),
+        "max_linear_accel": (0.01, 20),
+        "forward_speed": (0, 5),
+        "center_tolerance": (0, 1),
+        "follow_distance_m": (0.1, 20),
+        "distance_gain": (0, 10),
+        "target_height_m": (0.01, 10),
+        "safety_distance_m": (0.01, 10),
+        "sector_width_deg": (1, 360),
+        "robot_width_m": (0.05, 5),
+        "estop_release_max_age_s": (0.1, 60),
+        "counters_period_s": (0.1, 60),
+    }
+    LENGTHS: ClassVar[Bounds] = {"target_classes": (1, 100)}
+
     def __post_init__(self) -> None:
         enum_field(self, "mode", ControllerMode, "controller.mode")
         enum_field(self, "distance_source", DistanceSource, "controller.distance_source")
-        if not self.target_classes:
-            raise ConfigError("controller.target_classes needs at least one class name")
-        for name in (
-            "control_rate_hz",
-            "detection_timeout_s",
-            "scan_timeout_s",
-            "target_lost_timeout_s",
-            "max_angular",
-            "max_linear",
-            "max_angular_accel",
-            "max_linear_accel",
-            "follow_distance_m",
-            "target_height_m",
-            "safety_distance_m",
-            "sector_width_deg",
-            "robot_width_m",
-            "estop_release_max_age_s",
-            "counters_period_s",
-        ):
-            positive(f"controller.{name}", getattr(self, name))
-        for name in ("bearing_kp", "bearing_ki", "bearing_kd", "distance_gain"):
-            non_negative(f"controller.{name}", getattr(self, name))
-        for name in ("min_score", "center_tolerance"):
-            fraction(f"controller.{name}", getattr(self, name))
-        if not 0 <= self.forward_speed <= self.max_linear:
-            raise ConfigError("controller.forward_speed must be within 0..max_linear")
+        check_lengths(self, "controller", self.LENGTHS)
+        if not all(self.target_classes):
+            raise ConfigError(
+                f"controller.target_classes must be class names, got {list(self.target_classes)}"
+            )
+        check_bounds(self, "controller", self.BOUNDS)
+        if self.forward_speed > self.max_linear:
+            raise ConfigError(
+                f"controller.forward_speed must be within 0..max_linear ({self.max_linear}), "
+                f"got {self.forward_speed}"
+            )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -123,22 +139,23 @@ class SimSettings:
     ros2_robot: bool = False
     command_sources_window_s: float = 1.0
 
+    BOUNDS: ClassVar[Bounds] = {
+        "physics_hz": (1, 1000),
+        "camera_rate_hz": (0.1, 100),
+        "scan_rate_hz": (0.1, 100),
+        "truth_rate_hz": (0.1, 100),
+        "width": (16, 4096),
+        "height": (16, 4096),
+        "camera_height_m": (0.05, 5),
+        "laser_fov_deg": (1, 360),
+        "laser_rays": (2, 10000),  # real 2D lidars: 360..3200 rays a scan
+        "laser_range_max_m": (0.1, 100),
+        "laser_noise_m": (0, 1),
+        "seed": (0, 2**32 - 1),
+        "command_sources_window_s": (0.01, 60),
+    }
+    LENGTHS: ClassVar[Bounds] = {"wait_for": (0, 6)}
+
     def __post_init__(self) -> None:
-        for name in (
-            "physics_hz",
-            "camera_rate_hz",
-            "scan_rate_hz",
-            "truth_rate_hz",
-            "camera_height_m",
-            "laser_fov_deg",
-            "laser_range_max_m",
-        ):
-            positive(f"sim.{name}", getattr(self, name))
-        if not (16 <= self.width <= 4096 and 16 <= self.height <= 4096):
-            raise ConfigError(f"sim image size {self.width}x{self.height} is out of range")
-        if self.laser_rays < 2:
-            raise ConfigError(f"sim.laser_rays must be >= 2, got {self.laser_rays}")
-        non_negative("sim.laser_noise_m", self.laser_noise_m)
-        positive("sim.command_sources_window_s", self.command_sources_window_s)
-        if self.seed < 0:
-            raise ConfigError(f"sim.seed must be >= 0, got {self.seed}")
+        check_bounds(self, "sim", self.BOUNDS)
+        check_lengths(self, "sim", self.LENGTHS)

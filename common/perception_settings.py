@@ -6,11 +6,17 @@ Re-exported by common/settings.py, where the whole Config is assembled.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 from common.contracts import BackendName
 from common.errors import ConfigError
 from common.messages import MAX_DETECTIONS, MAX_IMAGE_SIDE
-from common.setting_checks import enum_field, fraction, positive
+from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
+
+#: The most class names a model may have (LVIS has 1203; COCO 80, Open Images 601).
+MAX_CLASSES = 2000
+#: The largest TensorRT batch an engine is built for (the service sends single frames).
+MAX_BATCH = 64
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -33,8 +39,14 @@ class CameraSettings:
     loop: bool = True
     hfov_deg: float = 60.0
 
+    BOUNDS: ClassVar[Bounds] = {
+        "rate_hz": (0.1, 1000),
+        "jpeg_quality": (0, 100),
+        "hfov_deg": (1, 179),
+    }
+
     def __post_init__(self) -> None:
-        positive("camera.rate_hz", self.rate_hz)
+        check_bounds(self, "camera", self.BOUNDS)
         if (
             min(self.resize) < 0
             or max(self.resize) > MAX_IMAGE_SIDE
@@ -44,10 +56,6 @@ class CameraSettings:
                 f"camera.resize must be [w, h] within 1..{MAX_IMAGE_SIDE} or [0, 0], "
                 f"got {list(self.resize)}"
             )
-        if not 0 <= self.jpeg_quality <= 100:
-            raise ConfigError(f"camera.jpeg_quality must be 0..100, got {self.jpeg_quality}")
-        if not 1 <= self.hfov_deg <= 179:
-            raise ConfigError(f"camera.hfov_deg must be within 1..179, got {self.hfov_deg}")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -81,8 +89,19 @@ class DetectorSettings:
     max_frame_age_s: float = 1.0
     counters_period_s: float = 1.0
 
+    BOUNDS: ClassVar[Bounds] = {
+        "batch_profile": (1, MAX_BATCH),
+        "conf": (0, 1),
+        "iou": (0, 1),
+        "max_det": (1, MAX_DETECTIONS),
+        "max_frame_age_s": (0.01, 60),
+        "counters_period_s": (0.1, 60),
+    }
+    LENGTHS: ClassVar[Bounds] = {"classes": (0, MAX_CLASSES)}
+
     def __post_init__(self) -> None:
-        positive("detector.max_frame_age_s", self.max_frame_age_s)
+        check_bounds(self, "detector", self.BOUNDS)
+        check_lengths(self, "detector", self.LENGTHS)
         enum_field(self, "backend", BackendName, "detector.backend")
         if self.precision not in ("", "fp32", "fp16", "int8"):
             raise ConfigError(
@@ -95,17 +114,10 @@ class DetectorSettings:
                 f"detector.batch_profile must be [min, opt, max] with 1 <= min <= opt <= max, "
                 f"got {list(self.batch_profile)}"
             )
-        fraction("detector.conf", self.conf)
-        fraction("detector.iou", self.iou)
-        if not 1 <= self.max_det <= MAX_DETECTIONS:
-            raise ConfigError(
-                f"detector.max_det must be within 1..{MAX_DETECTIONS}, got {self.max_det}"
-            )
         if not all(self.classes):
             raise ConfigError(
                 f"detector.classes must be non-empty class names, got {list(self.classes)}"
             )
-        positive("detector.counters_period_s", self.counters_period_s)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -128,14 +140,16 @@ class TrackerSettings:
     max_stamp_jump_s: float = 0.5
     jumps_before_reset: int = 3
 
+    BOUNDS: ClassVar[Bounds] = {
+        "high_score": (0, 1),
+        "low_score": (0, 1),
+        "iou": (0, 1),
+        "max_age_s": (0.01, 60),
+        "max_stamp_jump_s": (0.01, 60),
+        "jumps_before_reset": (1, 1000),
+    }
+
     def __post_init__(self) -> None:
-        for name in ("high_score", "low_score", "iou"):
-            fraction(f"tracker.{name}", getattr(self, name))
+        check_bounds(self, "tracker", self.BOUNDS)
         if self.low_score > self.high_score:
             raise ConfigError("tracker.low_score must not be above tracker.high_score")
-        positive("tracker.max_age_s", self.max_age_s)
-        positive("tracker.max_stamp_jump_s", self.max_stamp_jump_s)
-        if self.jumps_before_reset < 1:
-            raise ConfigError(
-                f"tracker.jumps_before_reset must be an integer >= 1, got {self.jumps_before_reset}"
-            )

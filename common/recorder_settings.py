@@ -8,9 +8,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import ClassVar
 
 from common.errors import ConfigError
-from common.setting_checks import enum_field, positive
+from common.setting_checks import Bounds, check_bounds, enum_field
 
 
 class Compression(StrEnum):
@@ -44,6 +45,13 @@ class RecorderSettings:
     flush_period_s: float = 1.0
     progress_period_s: float = 5.0
 
+    BOUNDS: ClassVar[Bounds] = {
+        "queue_size": (1, 100_000),
+        "chunk_size_kb": (16, 65536),
+        "flush_period_s": (0.05, 60),
+        "progress_period_s": (0.1, 3600),
+    }
+
     def __post_init__(self) -> None:
         enum_field(self, "compression", Compression, "recorder.compression")
         if not self.output_dir:
@@ -53,16 +61,4 @@ class RecorderSettings:
                 f"recorder.file_pattern must be a file name ending in .mcap, "
                 f"got {self.file_pattern!r}"
             )
-        if not 1 <= self.queue_size <= 100_000:
-            raise ConfigError(
-                f"recorder.queue_size must be within 1..100000, got {self.queue_size}"
-            )
-        if not 16 <= self.chunk_size_kb <= 65536:
-            raise ConfigError(
-                f"recorder.chunk_size_kb must be within 16..65536, got {self.chunk_size_kb}"
-            )
-        if not 0.05 <= self.flush_period_s <= 60:
-            raise ConfigError(
-                f"recorder.flush_period_s must be within 0.05..60 s, got {self.flush_period_s}"
-            )
-        positive("recorder.progress_period_s", self.progress_period_s)
+        check_bounds(self, "recorder", self.BOUNDS)

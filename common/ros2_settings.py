@@ -8,9 +8,10 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import ClassVar
 
 from common.errors import ConfigError
-from common.setting_checks import enum_field, positive
+from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
 
 
 class RosDistro(StrEnum):
@@ -72,15 +73,23 @@ class Ros2Settings:
     debug_jpeg_quality: int = 80
     router_timeout_s: float = 5.0
 
+    BOUNDS: ClassVar[Bounds] = {
+        "domain_id": (0, 232),  # the DDS domain ids that map to valid ports
+        "debug_image_rate_hz": (0.1, 100),
+        "debug_jpeg_quality": (1, 100),
+        "router_timeout_s": (0.1, 300),
+    }
+    LENGTHS: ClassVar[Bounds] = {"router": (1, 16), "listen": (0, 16)}
+
     def __post_init__(self) -> None:
+        check_bounds(self, "ros2", self.BOUNDS)
+        check_lengths(self, "ros2", self.LENGTHS)
         enum_field(self, "distro", RosDistro, "ros2.distro")
         enum_field(self, "image_format", ImageFormat, "ros2.image_format")
         if not self.router or not all("/" in ep for ep in self.router):
             raise ConfigError(
                 f"ros2.router must list endpoints like tcp/<host>:7447, got {list(self.router)}"
             )
-        if not 0 <= self.domain_id <= 232:
-            raise ConfigError(f"ros2.domain_id must be within 0..232, got {self.domain_id}")
         if not re.match(r"^[A-Za-z][A-Za-z0-9_]*$", self.node):
             raise ConfigError(f"ros2.node {self.node!r} is not a ROS 2 node name")
         if self.namespace != "/":
@@ -88,9 +97,3 @@ class Ros2Settings:
         topics = ("image_topic", "scan_topic", "detections_topic", "cmd_vel_topic")
         for name in (*topics, "debug_image_topic"):
             _topic(name, getattr(self, name))
-        positive("ros2.router_timeout_s", self.router_timeout_s)
-        positive("ros2.debug_image_rate_hz", self.debug_image_rate_hz)
-        if not 1 <= self.debug_jpeg_quality <= 100:
-            raise ConfigError(
-                f"ros2.debug_jpeg_quality must be within 1..100, got {self.debug_jpeg_quality}"
-            )

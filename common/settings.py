@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 from common.control_settings import ControllerSettings, SimSettings
 from common.errors import ConfigError
@@ -22,7 +23,7 @@ from common.perception_settings import CameraSettings, DetectorSettings, Tracker
 from common.recorder_settings import RecorderSettings
 from common.ros2_settings import Ros2Settings
 from common.security import AUTH_MODES
-from common.setting_checks import non_negative, positive
+from common.setting_checks import Bounds, check_bounds, check_lengths
 from common.viewer_settings import ViewerSettings
 
 __all__ = [
@@ -75,7 +76,10 @@ class ZenohSettings:
     auth: str = "none"
     credentials_dir: str = "secrets"
 
+    LENGTHS: ClassVar[Bounds] = {"connect": (0, 16), "listen": (0, 16)}
+
     def __post_init__(self) -> None:
+        check_lengths(self, "zenoh", self.LENGTHS)
         if self.mode not in ("peer", "client"):
             raise ConfigError(f"zenoh.mode must be 'peer' or 'client', got {self.mode!r}")
         for ep in (self.endpoint, *self.connect, *self.listen):
@@ -114,11 +118,10 @@ class StackSettings:
     camera: str = "front"
     clock_tolerance_s: float = 0.1
 
+    BOUNDS: ClassVar[Bounds] = {"clock_tolerance_s": (0, 5)}
+
     def __post_init__(self) -> None:
-        if not 0 <= self.clock_tolerance_s <= 5:
-            raise ConfigError(
-                f"stack.clock_tolerance_s must be within 0..5 s, got {self.clock_tolerance_s}"
-            )
+        check_bounds(self, "stack", self.BOUNDS)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -136,14 +139,15 @@ class MetricsSettings:
     prometheus_port: int = 0
     prometheus_host: str = "127.0.0.1"
 
+    BOUNDS: ClassVar[Bounds] = {
+        "window_s": (0.1, 3600),
+        "report_period_s": (0.1, 3600),
+        "history_s": (1, 86400),
+        "prometheus_port": (0, 65535),  # 0 = off
+    }
+
     def __post_init__(self) -> None:
-        positive("metrics.window_s", self.window_s)
-        positive("metrics.report_period_s", self.report_period_s)
-        positive("metrics.history_s", self.history_s)
-        if not 0 <= self.prometheus_port <= 65535:
-            raise ConfigError(
-                f"metrics.prometheus_port must be 0..65535 (0 = off), got {self.prometheus_port}"
-            )
+        check_bounds(self, "metrics", self.BOUNDS)
         if not self.prometheus_host:
             raise ConfigError("metrics.prometheus_host must not be empty")
 
@@ -169,6 +173,15 @@ class SupervisorSettings:
     watchdog_grace_s: float = 2.0
     watchdog_progress_s: float = 20.0
 
+    BOUNDS: ClassVar[Bounds] = {
+        "restart_backoff_s": (0.01, 60),
+        "restart_backoff_max_s": (0.01, 600),
+        "stop_timeout_s": (0.1, 60),
+        "status_period_s": (0.1, 60),
+        "watchdog_grace_s": (0.1, 60),
+        "watchdog_progress_s": (0, 600),  # 0 = off
+    }
+
     def __post_init__(self) -> None:
         unknown = sorted(set(self.services) - set(SERVICES))
         if unknown or len(set(self.services)) != len(self.services) or not self.services:
@@ -176,15 +189,12 @@ class SupervisorSettings:
                 f"supervisor.services must name each of {', '.join(SERVICES)} at most once, "
                 f"got {list(self.services)}"
             )
-        for name in (
-            "restart_backoff_s",
-            "restart_backoff_max_s",
-            "stop_timeout_s",
-            "status_period_s",
-            "watchdog_grace_s",
-        ):
-            positive(f"supervisor.{name}", getattr(self, name))
-        non_negative("supervisor.watchdog_progress_s (0 = off)", self.watchdog_progress_s)
+        check_bounds(self, "supervisor", self.BOUNDS)
+        if self.restart_backoff_max_s < self.restart_backoff_s:
+            raise ConfigError(
+                f"supervisor.restart_backoff_max_s ({self.restart_backoff_max_s}) must not be "
+                f"below supervisor.restart_backoff_s ({self.restart_backoff_s})"
+            )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -204,6 +214,13 @@ class Config:
     viewer: ViewerSettings = field(default_factory=ViewerSettings)
     recorder: RecorderSettings = field(default_factory=RecorderSettings)
     supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)
+
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.sim.wait_for) - set(SERVICES))
+        if unknown:
+            raise ConfigError(
+                f"sim.wait_for must name services among {', '.join(SERVICES)}, got {unknown}"
+            )
 
     @property
     def estop_path(self) -> Path:

@@ -6,14 +6,10 @@ Re-exported by common/settings.py, where the whole Config is assembled.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 from common.errors import ConfigError
-from common.setting_checks import positive
-
-
-def _within(name: str, value: float, lo: float, hi: float) -> None:
-    if not lo <= value <= hi:
-        raise ConfigError(f"viewer.{name} must be within {lo:g}..{hi:g}, got {value}")
+from common.setting_checks import Bounds, check_bounds
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -39,17 +35,21 @@ class ViewerSettings:
     scene_rate_hz: float = 5.0
     path_points: int = 1000
 
+    BOUNDS: ClassVar[Bounds] = {
+        "port": (1, 65535),
+        "image_rate_hz": (0.1, 60),
+        "jpeg_quality": (1, 100),
+        "max_image_width": (0, 8192),  # 0 keeps the frame's width; else at least 64
+        "metrics_rate_hz": (0.1, 10),
+        "scene_rate_hz": (0.1, 50),
+        "path_points": (2, 100_000),
+    }
+
     def __post_init__(self) -> None:
         if not self.host:
             raise ConfigError("viewer.host must not be empty")
-        _within("port", self.port, 1, 65535)
-        positive("viewer.image_rate_hz", self.image_rate_hz)
-        _within("image_rate_hz", self.image_rate_hz, 0, 60)
-        _within("jpeg_quality", self.jpeg_quality, 1, 100)
-        if self.max_image_width != 0:
-            _within("max_image_width", self.max_image_width, 64, 8192)
-        positive("viewer.metrics_rate_hz", self.metrics_rate_hz)
-        _within("metrics_rate_hz", self.metrics_rate_hz, 0, 10)
-        positive("viewer.scene_rate_hz", self.scene_rate_hz)
-        _within("scene_rate_hz", self.scene_rate_hz, 0, 50)
-        _within("path_points", self.path_points, 2, 100_000)
+        check_bounds(self, "viewer", self.BOUNDS)
+        if self.max_image_width != 0 and self.max_image_width < 64:
+            raise ConfigError(
+                f"viewer.max_image_width must be 0 (keep) or 64..8192, got {self.max_image_width}"
+            )

@@ -30,6 +30,20 @@ class _Stamped(Protocol):
 
 _S = TypeVar("_S", bound=_Stamped)
 
+# The longest the control loop goes without looking at the stop flag, whatever its rate.
+STOP_POLL_S = 0.1
+
+
+def wait_either(wake: threading.Event, stop: threading.Event, timeout_s: float) -> None:
+    """Return when ``wake`` is set, ``stop`` is set or ``timeout_s`` has passed, whichever
+    comes first. ``stop`` is looked at every ``STOP_POLL_S``: a stop (SIGTERM) is never left
+    waiting for a whole control period."""
+    deadline = time.monotonic() + timeout_s
+    while not stop.is_set():
+        left = deadline - time.monotonic()
+        if left <= 0 or wake.wait(min(left, STOP_POLL_S)):
+            return
+
 
 class Latest(Generic[_S]):
     """The newest decoded message of one key and when it arrived (monotonic seconds).
@@ -130,7 +144,7 @@ def run(config: Config, stop: threading.Event) -> int:
                     node.log.info("state %s: %s", cmd.state, cmd.reason)
                     last_state = cmd.state
                 node.publish_counters()
-                dets.arrived.wait(max(0.0, period - (time.monotonic() - tick)))
+                wait_either(dets.arrived, stop, period - (time.monotonic() - tick))
             # Leave the robot still: the last word on cmd_vel is always a stop.
             stopped = Command(0.0, 0.0, ControllerState.STOPPED, "shutdown")
             _publish(node, cmd_pub, status_pub, stopped, s.mode, now())

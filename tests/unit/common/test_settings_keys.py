@@ -143,10 +143,10 @@ def test_truncated_jpeg_is_an_image_error() -> None:
 @pytest.mark.parametrize(
     "override, message",
     [
-        ({"STACK__CONTROLLER__BEARING_KP": "nan"}, "finite"),
-        ({"STACK__CONTROLLER__DISTANCE_GAIN": "inf"}, "finite"),
+        ({"STACK__CONTROLLER__BEARING_KP": "nan"}, "bearing_kp must be within 0..100, got nan"),
+        ({"STACK__CONTROLLER__DISTANCE_GAIN": "inf"}, "distance_gain must be within 0..10, got"),
         ({"STACK__SIM__SEED": "-1"}, "sim.seed"),
-        ({"STACK__SIM__LASER_NOISE_M": "nan"}, "finite"),
+        ({"STACK__SIM__LASER_NOISE_M": "nan"}, "laser_noise_m must be within 0..1 m, got nan"),
         ({"STACK__CAMERA__RESIZE": "[20000, 10]"}, "camera.resize"),
         ({"STACK__DETECTOR__MAX_DET": "100000"}, "max_det"),
         ({"STACK__SUPERVISOR__SERVICES": '["bogus"]'}, "supervisor.services"),

@@ -24,8 +24,9 @@ from services.controller.policy import (
 
 HEADER = Header(stamp_ns=123, frame_id="camera", seq=1, source="test")
 W, H, HFOV = 640, 480, 60.0
-# No acceleration limit and a pure P term: a single tick shows the policy's intent.
-FREE = dict(max_linear_accel=1e9, max_angular_accel=1e9, bearing_kd=0.0)
+# The highest accelerations the settings allow and a pure P term: a single tick shows the
+# policy's intent.
+FREE = dict(max_linear_accel=20.0, max_angular_accel=100.0, bearing_kd=0.0)
 TRACK = ControllerSettings(mode="track", target_classes=("person",), **FREE)  # type: ignore[arg-type]
 FOLLOW = dataclasses.replace(TRACK, mode="follow")
 

@@ -119,6 +119,6 @@ def test_the_tracker_takes_the_stack_tracker_settings() -> None:
     tr.update(box, now=10.0, arrival=1.0)
     # jumps_before_reset = 1: the first jump is believed at once and the tracks restart.
     assert (tr.update(box, now=110.0, arrival=1.1) > 0).all() and tr.resets == 1
-    message = r"tracker\.jumps_before_reset must be an integer >= 1, got 0"
+    message = r"tracker\.jumps_before_reset must be within 1\.\.1000, got 0"
     with pytest.raises(ConfigError, match=message):
         TrackerSettings(jumps_before_reset=0)

@@ -23,7 +23,7 @@ from services.recorder.service import default_path
         ("file_pattern", "a/b.mcap", "must be a file name ending in .mcap"),
         ("compression", "gzip", "must be one of lz4, zstd, none"),
         ("output_dir", "", "must not be empty"),
-        ("progress_period_s", -1.0, "must be a positive number"),
+        ("progress_period_s", -1.0, "progress_period_s must be within 0.1..3600"),
     ],
 )
 def test_out_of_range_settings_are_refused(field: str, value: object, message: str) -> None:
