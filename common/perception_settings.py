@@ -12,6 +12,12 @@ from common.errors import ConfigError
 from common.messages import MAX_DETECTIONS, MAX_IMAGE_SIDE
 from common.setting_checks import enum_field, fraction, positive
 
+#: The detector's default pixel budget per frame: 2**25, 32 Mpx. It admits every real camera
+#: up to 8K UHD (7680x4320, 33.2 Mpx) and 4096x4096 inspection cameras, and bounds one decoded
+#: BGR frame to 96 MiB, where a 16384x16384 JPEG header (the largest a Frame may claim)
+#: would make the decoder allocate 768 MiB and more.
+DEFAULT_MAX_FRAME_PIXELS = 1 << 25
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class CameraSettings:
@@ -60,7 +66,9 @@ class DetectorSettings:
     backends take fp32 or fp16, TensorRT also int8. ``batch_profile`` is the (min, opt, max)
     batch a TensorRT engine is built for; the service sends single frames, so (1, 1, 1).
     A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
-    not detected on (counted, see common/freshness.py).
+    not detected on (counted, see common/freshness.py). A frame of more than
+    ``max_frame_pixels`` (width x height, JPEG or raw) is counted as ``frames_oversize`` and
+    dropped before its pixels are decoded.
 
     Post-processing, which the Detector (services/detector/pipeline.py) reads from here:
     ``conf`` is the least score kept (objectness x class score for YOLOv5-style models);
@@ -79,6 +87,7 @@ class DetectorSettings:
     classes: tuple[str, ...] = ()
     max_frame_age_s: float = 1.0
     counters_period_s: float = 1.0
+    max_frame_pixels: int = DEFAULT_MAX_FRAME_PIXELS
 
     def __post_init__(self) -> None:
         positive("detector.max_frame_age_s", self.max_frame_age_s)
@@ -105,6 +114,11 @@ class DetectorSettings:
                 f"detector.classes must be non-empty class names, got {list(self.classes)}"
             )
         positive("detector.counters_period_s", self.counters_period_s)
+        if not 1 <= self.max_frame_pixels <= MAX_IMAGE_SIDE * MAX_IMAGE_SIDE:
+            raise ConfigError(
+                f"detector.max_frame_pixels must be within 1..{MAX_IMAGE_SIDE * MAX_IMAGE_SIDE}, "
+                f"got {self.max_frame_pixels}"
+            )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

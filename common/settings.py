@@ -43,6 +43,9 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 # Runnable by the supervisor, and started in this order.
 SERVICES = ("camera", "sim", "ros2", "detector", "controller", "metrics")
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
+# zenoh.max_payload_bytes: a counters message must fit; Zenoh refuses to receive above 1 GiB.
+MIN_PAYLOAD_LIMIT = 64 * 1024
+MAX_PAYLOAD_LIMIT = 1 << 30
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -59,6 +62,11 @@ class ZenohSettings:
     ``zstack credentials`` writes to ``credentials_dir`` (relative to the repo root);
     it needs client mode. An endpoint ``tls/<host>:<port>`` encrypts the links with the same
     credentials; "certificate" needs one (mutual TLS). See docs/security.md.
+
+    ``max_payload_bytes`` is the largest payload a service sends; a larger one is counted
+    (``payload_too_large``) and not sent, because Zenoh silently loses big payloads under
+    congestion control DROP (64 MiB on loopback; 48 MiB still arrived). 32 MiB leaves a
+    margin for a loaded host and fits a raw 3840x2160 bgr8 frame (24 MiB).
     """
 
     mode: str = "peer"
@@ -68,6 +76,7 @@ class ZenohSettings:
     multicast_scouting: bool = False
     auth: str = "none"
     credentials_dir: str = "secrets"
+    max_payload_bytes: int = 32 * 1024 * 1024
 
     def __post_init__(self) -> None:
         if self.mode not in ("peer", "client"):
@@ -87,6 +96,11 @@ class ZenohSettings:
             raise ConfigError('zenoh.auth = "certificate" needs a tls/<host>:<port> endpoint')
         if not self.credentials_dir:
             raise ConfigError("zenoh.credentials_dir must not be empty")
+        if not MIN_PAYLOAD_LIMIT <= self.max_payload_bytes <= MAX_PAYLOAD_LIMIT:
+            raise ConfigError(
+                f"zenoh.max_payload_bytes must be within {MIN_PAYLOAD_LIMIT}..{MAX_PAYLOAD_LIMIT} "
+                f"(Zenoh's own limit on a received message), got {self.max_payload_bytes}"
+            )
 
     @property
     def uses_tls(self) -> bool:
@@ -122,6 +136,10 @@ class MetricsSettings:
 
     ``prometheus_port`` 0 turns the endpoint off; it listens on ``prometheus_host`` (loopback by
     default, so that nothing is exposed to the network unless asked for).
+
+    What is believed (services/metrics/trust.py): counters only from a known service on its own
+    key, at most ``max_counters_per_service`` names each; a detector's stage times only within
+    0..``max_timing_ms``. The rest is refused and counted as ``metrics.refused.<why>``.
     """
 
     window_s: float = 10.0
@@ -129,9 +147,20 @@ class MetricsSettings:
     history_s: float = 600.0
     prometheus_port: int = 0
     prometheus_host: str = "127.0.0.1"
+    max_counters_per_service: int = 256
+    max_timing_ms: float = 1e6
 
     def __post_init__(self) -> None:
         positive("metrics.window_s", self.window_s)
+        if not 1 <= self.max_counters_per_service <= 2000:
+            raise ConfigError(
+                "metrics.max_counters_per_service must be within 1..2000, "
+                f"got {self.max_counters_per_service}"
+            )
+        if not 0 < self.max_timing_ms <= 1e9:
+            raise ConfigError(
+                f"metrics.max_timing_ms must be > 0 and <= 1e9, got {self.max_timing_ms}"
+            )
         positive("metrics.report_period_s", self.report_period_s)
         positive("metrics.history_s", self.history_s)
         if not 0 <= self.prometheus_port <= 65535:

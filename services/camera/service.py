@@ -19,8 +19,7 @@ def run(config: Config, stop: threading.Event) -> int:
     with Node("camera", config) as node:
 
         def on_bad(exc: ImageError) -> None:
-            node.counters.add("bad_images")
-            node.log.warning("%s", exc)
+            node.reject("bad_images", str(exc))  # a looped folder repeats it: rate-limited
 
         source = open_source(settings.source, loop=settings.loop, on_bad=on_bad)
         key = node.keys.frame(config.stack.camera)
