@@ -4,6 +4,7 @@
     ├── ConfigError              bad settings or stack config: exit non-zero with one line
     ├── DecodeError              bytes on a Zenoh key that are not a valid message
     ├── ImageError               a missing, unreadable or corrupt image
+    │   └── ImageTooLarge        an image over the pixel budget, refused before decoding
     ├── ModelError               a file that is not a usable model
     │   ├── UnknownModelFamily   an output shape that matches no known YOLO family
     │   └── ModelFetchError      the default model could not be fetched or converted
@@ -33,6 +34,10 @@ class DecodeError(StackError):
 
 class ImageError(StackError):
     """An image that is missing, unreadable or corrupt."""
+
+
+class ImageTooLarge(ImageError):
+    """An image whose header claims more pixels than the budget allows (never decoded)."""
 
 
 class ModelError(StackError):

@@ -7,9 +7,10 @@ from typing import cast
 import cv2
 import numpy as np
 
-from common.errors import ImageError
+from common.errors import ImageError, ImageTooLarge
 from common.images import Image
 from common.messages import Frame, Header
+from common.perception_settings import DEFAULT_MAX_FRAME_PIXELS
 
 
 def image_to_frame(image: Image, header: Header, *, jpeg_quality: int = 0) -> Frame:
@@ -33,11 +34,12 @@ _SOF_MARKERS = frozenset(
 _STANDALONE = frozenset({0x01, *range(0xD0, 0xD9)})
 
 
-def jpeg_size(data: bytes) -> tuple[int, int] | None:
-    """(width, height) from a JPEG's start-of-frame header, without decoding; None if absent.
+def jpeg_header(data: bytes) -> tuple[int, int, int] | None:
+    """(width, height, components) from a JPEG's start-of-frame header, without decoding;
+    None if there is none before the image data.
 
-    Decoding first and checking after would let a tiny file claiming 20000x20000 pixels make
-    the decoder allocate gigabytes.
+    Decoding first and checking after would let a tiny file claiming 16384x16384 pixels make
+    the decoder allocate gigabytes (a decompression bomb).
     """
     if data[:2] != b"\xff\xd8":
         return None
@@ -54,23 +56,51 @@ def jpeg_size(data: bytes) -> tuple[int, int] | None:
             continue
         length = int.from_bytes(data[i + 2 : i + 4], "big")
         if marker in _SOF_MARKERS:
-            if i + 9 > len(data):
+            if i + 10 > len(data):
                 return None
             height = int.from_bytes(data[i + 5 : i + 7], "big")
             width = int.from_bytes(data[i + 7 : i + 9], "big")
-            return width, height
+            return width, height, data[i + 9]
         if marker == 0xDA or length < 2:  # start of scan before any frame header
             return None
         i += 2 + length
     return None
 
 
-def frame_to_bgr(frame: Frame) -> Image:
-    """The frame's pixels as a BGR uint8 image; raises ImageError for a corrupt JPEG."""
+def jpeg_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) from a JPEG's start-of-frame header (:func:`jpeg_header`)."""
+    header = jpeg_header(data)
+    return None if header is None else header[:2]
+
+
+def check_pixel_budget(frame: Frame, max_pixels: int) -> None:
+    """Raise ImageTooLarge when ``frame`` claims more than ``max_pixels`` (width x height).
+
+    Only the message's sizes are read, so this is cheap enough for Zenoh's callback; a JPEG's
+    own header is held to those sizes before it is decoded (:func:`frame_to_bgr`).
+    """
+    pixels = frame.width * frame.height
+    if pixels > max_pixels:
+        raise ImageTooLarge(
+            f"frame {frame.header.seq}: {frame.width}x{frame.height} ({pixels} pixels) is over "
+            f"the budget of {max_pixels} pixels (detector.max_frame_pixels); not decoded"
+        )
+
+
+def frame_to_bgr(frame: Frame, max_pixels: int = DEFAULT_MAX_FRAME_PIXELS) -> Image:
+    """The frame's pixels as a BGR uint8 image.
+
+    Raises ImageTooLarge, before decoding anything, for a frame over ``max_pixels``, and
+    ImageError for a corrupt JPEG or one whose own header disagrees with the message.
+    """
+    check_pixel_budget(frame, max_pixels)
     if frame.encoding == "jpeg":
-        size = jpeg_size(frame.data)
-        if size is None:
+        header = jpeg_header(frame.data)
+        if header is None:
             raise ImageError(f"frame {frame.header.seq}: corrupt JPEG (no frame header)")
+        size, components = header[:2], header[2]
+        if components not in (1, 3, 4):  # grey, YCbCr or RGB, CMYK: nothing else is a photo
+            raise ImageError(f"frame {frame.header.seq}: JPEG with {components} components")
         if size != (frame.width, frame.height):
             raise ImageError(
                 f"frame {frame.header.seq}: JPEG header says {size[0]}x{size[1]}, "

@@ -16,6 +16,7 @@ from common.errors import DecodeError
 from common.keys import Keys
 from common.lifecycle import Closing
 from common.messages import Header, ServiceCounters
+from common.ratelimit import LogLimiter
 from common.settings import Config
 
 _M = TypeVar("_M")
@@ -35,6 +36,7 @@ class Node(Closing):
         self.keys = Keys(config.stack.prefix)
         self.counters = Counters()
         self.log = logging.getLogger(service)
+        self.log_limit = LogLimiter()  # bad input's log lines, per key (common/ratelimit.py)
         self.session = open_session(config.zenoh, service)
         self._token: zenoh.LivelinessToken | None = None
         self._counters_pub = self.publisher(self.keys.counters(service), QoS.TELEMETRY)
@@ -48,8 +50,24 @@ class Node(Closing):
         self.log.info("ready (zenoh id %s)", self.session.info.zid())
 
     def publisher(self, key: str, qos: QoS) -> Publisher:
-        """Declare a publisher with the QoS profile of its role (common/bus.py)."""
-        return Publisher(self.session, key, qos)
+        """Declare a publisher with the QoS profile of its role (common/bus.py). A payload
+        over ``zenoh.max_payload_bytes`` is not sent but counted (``payload_too_large``)."""
+        return Publisher(
+            self.session,
+            key,
+            qos,
+            max_payload_bytes=self.config.zenoh.max_payload_bytes,
+            on_refused=self._payload_refused,
+        )
+
+    def _payload_refused(self, key: str, size: int) -> None:
+        limit = self.config.zenoh.max_payload_bytes
+        self.reject(
+            "payload_too_large",
+            f"{size}-byte payload on {key} not sent: over zenoh.max_payload_bytes ({limit}), "
+            "which Zenoh would lose",
+            key=key,
+        )
 
     def subscribe(
         self, key: str, decode: Callable[[bytes], _M], handle: Callable[[_M, zenoh.Sample], None]
@@ -86,27 +104,38 @@ class Node(Closing):
         if not force and now < self._counters_next:
             return
         self._counters_next = now + self._counters_period_s
+        for line in self.log_limit.due():  # the summaries of floods that stopped
+            self.log.warning("%s", line)
         msg = ServiceCounters(
             header=self.header(), service=self.service, counters=self.counters.snapshot()
         )
         self._counters_pub.put(msg.encode())
 
     def bad_input(self, key: str, error: Exception) -> None:
-        """Log, count and drop one bad message."""
+        """Log (rate-limited per key), count and drop one bad message."""
         self.counters.add("bad_input")
         self.counters.add(f"bad_input.{key.rsplit('/', 1)[-1]}")
-        self.log.warning("dropped bad input on %s: %s", key, error)
+        self._log_limited(key, "bad_input", "dropped bad input on %s: %s", key, error)
 
-    def reject(self, counter: str, message: str) -> None:
-        """Count one message that was fine as bytes but unfit to act on (stale, replayed, from
-        a foreign source ...). Logged at the 1st, 2nd, 4th, 8th ... and every 1024th, so that a
-        flood cannot fill the log while the count stays exact."""
+    def reject(self, counter: str, message: str, *, key: str = "") -> None:
+        """Count one message that was fine as bytes but unfit to act on (stale, replayed,
+        oversize ...). Always counted; logged in full only for the first few per ``key``
+        (default: the counter), then summarised once a period (common/ratelimit.py), so that
+        a flood cannot fill the log while the count stays exact."""
         self.counters.add(counter)
-        n = self.counters.get(counter)
-        if n & (n - 1) == 0 or n % 1024 == 0:
-            self.log.warning("%s (%s: %d so far)", message, counter, n)
+        self._log_limited(key or counter, counter, "%s (%s)", message, counter)
+
+    def _log_limited(self, key: str, reason: str, fmt: str, *args: object) -> None:
+        # Per key and counter: a flood of garbage cannot hide the first bombs on the same key.
+        admit = self.log_limit.admit(reason if key == reason else f"{key} ({reason})", reason)
+        if admit.summary:
+            self.log.warning("%s", admit.summary)
+        if admit.log:
+            self.log.warning(fmt, *args)
 
     def close(self) -> None:
+        for line in self.log_limit.drain():
+            self.log.warning("%s", line)
         self.publish_counters(force=True)
         if self._token is not None:
             self._token.undeclare()

@@ -18,6 +18,12 @@ MAX_CLASSES = 2000
 #: The largest TensorRT batch an engine is built for (the service sends single frames).
 MAX_BATCH = 64
 
+#: The detector's default pixel budget per frame: 2**25, 32 Mpx. It admits every real camera
+#: up to 8K UHD (7680x4320, 33.2 Mpx) and 4096x4096 inspection cameras, and bounds one decoded
+#: BGR frame to 96 MiB, where a 16384x16384 JPEG header (the largest a Frame may claim)
+#: would make the decoder allocate 768 MiB and more.
+DEFAULT_MAX_FRAME_PIXELS = 1 << 25
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class CameraSettings:
@@ -69,7 +75,9 @@ class DetectorSettings:
     int8; openvino takes fp32 or int8. ``batch_profile`` is the (min, opt, max)
     batch a TensorRT engine is built for; the service sends single frames, so (1, 1, 1).
     A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
-    not detected on (counted, see common/freshness.py).
+    not detected on (counted, see common/freshness.py). A frame of more than
+    ``max_frame_pixels`` (width x height, JPEG or raw) is counted as ``frames_oversize`` and
+    dropped before its pixels are decoded.
 
     Post-processing, which the Detector (services/detector/pipeline.py) reads from here:
     ``conf`` is the least score kept (objectness x class score for YOLOv5-style models);
@@ -88,6 +96,7 @@ class DetectorSettings:
     classes: tuple[str, ...] = ()
     max_frame_age_s: float = 1.0
     counters_period_s: float = 1.0
+    max_frame_pixels: int = DEFAULT_MAX_FRAME_PIXELS
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
@@ -96,6 +105,7 @@ class DetectorSettings:
         "max_det": (1, MAX_DETECTIONS),
         "max_frame_age_s": (0.01, 60),
         "counters_period_s": (0.1, 60),
+        "max_frame_pixels": (1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE),  # JPEG header or raw size
     }
     LENGTHS: ClassVar[Bounds] = {"classes": (0, MAX_CLASSES)}
 

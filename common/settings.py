@@ -50,6 +50,9 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 # the others from their start; the viewer after what it watches.
 SERVICES = ("recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
+# zenoh.max_payload_bytes: a counters message must fit; Zenoh refuses to receive above 1 GiB.
+MIN_PAYLOAD_LIMIT = 64 * 1024
+MAX_PAYLOAD_LIMIT = 1 << 30
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -66,6 +69,11 @@ class ZenohSettings:
     ``zstack credentials`` writes to ``credentials_dir`` (relative to the repo root);
     it needs client mode. An endpoint ``tls/<host>:<port>`` encrypts the links with the same
     credentials; "certificate" needs one (mutual TLS). See docs/security.md.
+
+    ``max_payload_bytes`` is the largest payload a service sends; a larger one is counted
+    (``payload_too_large``) and not sent, because Zenoh silently loses big payloads under
+    congestion control DROP (64 MiB on loopback; 48 MiB still arrived). 32 MiB leaves a
+    margin for a loaded host and fits a raw 3840x2160 bgr8 frame (24 MiB).
     """
 
     mode: str = "peer"
@@ -75,10 +83,13 @@ class ZenohSettings:
     multicast_scouting: bool = False
     auth: str = "none"
     credentials_dir: str = "secrets"
+    max_payload_bytes: int = 32 * 1024 * 1024
 
+    BOUNDS: ClassVar[Bounds] = {"max_payload_bytes": (MIN_PAYLOAD_LIMIT, MAX_PAYLOAD_LIMIT)}
     LENGTHS: ClassVar[Bounds] = {"connect": (0, 16), "listen": (0, 16)}
 
     def __post_init__(self) -> None:
+        check_bounds(self, "zenoh", self.BOUNDS)
         check_lengths(self, "zenoh", self.LENGTHS)
         if self.mode not in ("peer", "client"):
             raise ConfigError(f"zenoh.mode must be 'peer' or 'client', got {self.mode!r}")
@@ -131,6 +142,10 @@ class MetricsSettings:
 
     ``prometheus_port`` 0 turns the endpoint off; it listens on ``prometheus_host`` (loopback by
     default, so that nothing is exposed to the network unless asked for).
+
+    What is believed (services/metrics/trust.py): counters only from a known service on its own
+    key, at most ``max_counters_per_service`` names each; a detector's stage times only within
+    0..``max_timing_ms``. The rest is refused and counted as ``metrics.refused.<why>``.
     """
 
     window_s: float = 10.0
@@ -138,12 +153,16 @@ class MetricsSettings:
     history_s: float = 600.0
     prometheus_port: int = 0
     prometheus_host: str = "127.0.0.1"
+    max_counters_per_service: int = 256
+    max_timing_ms: float = 1e6
 
     BOUNDS: ClassVar[Bounds] = {
         "window_s": (0.1, 3600),
         "report_period_s": (0.1, 3600),
         "history_s": (1, 86400),
         "prometheus_port": (0, 65535),  # 0 = off
+        "max_counters_per_service": (1, 2000),
+        "max_timing_ms": (0.001, 1e9),
     }
 
     def __post_init__(self) -> None:

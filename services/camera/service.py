@@ -10,7 +10,6 @@ from common.errors import ImageError
 from common.frames import image_to_frame
 from common.node import Node
 from common.settings import Config
-from services.camera.skips import SkipLog
 from services.camera.sources import open_source, resize
 
 
@@ -19,15 +18,12 @@ def run(config: Config, stop: threading.Event) -> int:
 
     A source from which no frame at all can be read raises ConfigError (one line, exit 2: the
     supervisor does not restart it). Unreadable frames among good ones are counted and skipped,
-    with the log rate limited (skips.py).
+    with the log rate limited per key (common/ratelimit.py, through Node.reject).
     """
     settings = config.camera
     with Node("camera", config) as node:
-        skips = SkipLog(node.log)
-
         def on_bad(exc: ImageError) -> None:
-            node.counters.add("bad_images")
-            skips.skip(exc)
+            node.reject("bad_images", str(exc))  # a looped folder repeats it: rate-limited
 
         source = open_source(settings.source, loop=settings.loop, on_bad=on_bad)
         key = node.keys.frame(config.stack.camera)
@@ -62,6 +58,5 @@ def run(config: Config, stop: threading.Event) -> int:
                 next_t = max(next_t, time.monotonic())
                 stop.wait(next_t - time.monotonic())
         finally:
-            skips.flush()
             source.close()
     return 0

@@ -34,7 +34,18 @@ V5_ANCHORS_PER_CELL = 3
 #: Columns of an end-to-end output row: x1, y1, x2, y2, score, class.
 END2END_COLUMNS = 6
 
+#: A raw output value beyond this (in either sign) is neither a pixel nor a score: the model
+#: is broken (overflowed weights, a bad conversion), and its frame's output is not decoded.
+MAX_OUTPUT_MAGNITUDE = 1e6
+
 Dim = int | None  # None: a dynamic dimension
+
+
+def sane_outputs(output: npt.NDArray[np.floating]) -> npt.NDArray[np.bool_]:
+    """Per image of a batch output ``[B, ...]``: True where every value is finite and within
+    :data:`MAX_OUTPUT_MAGNITUDE`. One pass: the max of the magnitudes is NaN if any is."""
+    peak = np.abs(output.reshape(len(output), -1)).max(axis=1, initial=0.0)
+    return np.asarray(peak <= MAX_OUTPUT_MAGNITUDE)
 
 
 class Family(enum.Enum):

@@ -10,10 +10,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from common.boxes import Boxes
 from common.lifecycle import Closing
 from common.settings import DetectorSettings
 from services.detector.backends import Backend, open_backend
-from services.detector.decode import Family, decode
+from services.detector.decode import Family, decode, sane_outputs
 from services.detector.model_info import ModelInfo, read_model_info
 from services.detector.postprocess import class_mask, select
 from services.detector.preprocess import Letterbox, Preprocessor, unletterbox
@@ -103,12 +104,12 @@ class Detector(Closing):
         infer_ms = _ms_since(t1) / len(images)
         t2 = time.perf_counter()
         s = self.settings
-        candidates = decode(
-            self.info.layout, output[: len(images)], s.conf, len(self.names), self._class_mask
-        )
+        output = output[: len(images)]
+        sane = sane_outputs(output)
+        candidates = decode(self.info.layout, output, s.conf, len(self.names), self._class_mask)
         decode_ms = _ms_since(t2) / len(images)
         results = []
-        for cands, lb in zip(candidates, boxes, strict=True):
+        for cands, lb, ok in zip(candidates, boxes, sane.tolist(), strict=True):
             t3 = time.perf_counter()
             kept = select(
                 cands,
@@ -123,7 +124,8 @@ class Detector(Closing):
             )
             results.append(
                 DetectionResult(
-                    boxes=kept.with_xyxy(unletterbox(kept.xyxy, lb)),
+                    boxes=kept.with_xyxy(unletterbox(kept.xyxy, lb)) if ok else Boxes(),
+                    output_sane=ok,
                     names=self.names,
                     image_width=lb.src_width,
                     image_height=lb.src_height,

@@ -14,11 +14,12 @@ import zenoh
 from common.bus import QoS
 from common.clock import BOOT_ID, now
 from common.contracts import DetectorInfo
-from common.errors import DecodeError, ImageError
-from common.frames import frame_to_bgr
+from common.errors import DecodeError, ImageError, ImageTooLarge
+from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, now_ns
 from common.node import Node
+from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
 from services.detector.backends.select import backend_options
 from services.detector.mailbox import Mailbox
@@ -74,15 +75,27 @@ def run(config: Config, stop: threading.Event) -> int:
         mailbox: Mailbox[Frame] = Mailbox()
         tracker = Tracker(config.tracker) if config.tracker.enabled else None
 
+        gaps = SeqGaps()
+
         def on_frame(sample: zenoh.Sample) -> None:
             # Decode here, not in the loop: garbage must be counted even when a newer frame
-            # would have replaced it in the mailbox before the loop looked at it.
+            # would have replaced it in the mailbox before the loop looked at it; and an
+            # oversize frame must never displace a real one there.
             node.counters.add("frames_in")
             try:
-                if mailbox.put(Frame.decode(sample.payload.to_bytes())):
-                    node.counters.add("dropped")
+                frame = Frame.decode(sample.payload.to_bytes())
+                missed = gaps.observe(frame.header)
+                if missed:
+                    node.counters.add("frames_missed", missed)
+                check_pixel_budget(frame, s.max_frame_pixels)
             except DecodeError as exc:
                 node.bad_input(frame_key, exc)
+                return
+            except ImageTooLarge as exc:
+                node.reject("frames_oversize", str(exc), key=frame_key)
+                return
+            if mailbox.put(frame):
+                node.counters.add("dropped")
 
         sub = node.session.declare_subscriber(frame_key, on_frame)
         pub = node.publisher(node.keys.detections(config.stack.camera), QoS.PERCEPTION)
@@ -117,11 +130,20 @@ def run(config: Config, stop: threading.Event) -> int:
                     node.reject(f"frames_{verdict}", f"{verdict} frame ({age:.2f} s old) dropped")
                     continue
                 try:
-                    image = frame_to_bgr(frame)
+                    image = frame_to_bgr(frame, s.max_frame_pixels)
                 except ImageError as exc:
                     node.bad_input(frame_key, exc)
                     continue
                 result = detector.detect(image)
+                if not result.output_sane:
+                    # Zero boxes from a broken model are no verdict: publish nothing, so that
+                    # the controller's detection timeout stops the robot.
+                    node.reject(
+                        "nonfinite_outputs",
+                        f"the model's output for frame {frame.header.seq} is not finite (NaN, "
+                        "infinity or a magnitude over 1e6): no detections published",
+                    )
+                    continue
                 track_ids = (
                     None
                     if tracker is None

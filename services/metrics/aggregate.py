@@ -57,8 +57,11 @@ class Aggregator:
         window_s: float,
         history_s: float = 600.0,
         on_latency: LatencyListener | None = None,
+        max_counters_per_service: int = MAX_COUNTERS,
     ) -> None:
         self.window_s = window_s
+        self.max_counters_per_service = max_counters_per_service
+        self._names: Counter[str] = Counter()  # service -> its counter names kept
         self._lat = {stage: Window(window_s) for stage in STAGES}
         self._frames = Window(window_s)  # one sample per Detections message: value = n boxes
         self._timeline = Timeline(history_s)
@@ -130,8 +133,13 @@ class Aggregator:
         for name, value in msg.counters.items():
             key = f"{msg.service}.{name}"
             previous = self._counters.get(key)
-            if previous is None and len(self._counters) >= MAX_COUNTERS:
-                continue  # bounded, like the class counts
+            if previous is None:
+                if (
+                    len(self._counters) >= MAX_COUNTERS
+                    or self._names[msg.service] >= self.max_counters_per_service
+                ):
+                    continue  # bounded, like the class counts
+                self._names[msg.service] += 1
             self._counters[key] = value
             column = _DETECTOR_DELTAS.get(name) if msg.service == "detector" else None
             if column is not None and previous is not None:

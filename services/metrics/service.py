@@ -7,7 +7,6 @@ figures plus drop rates and the per-second timeline, so the message schema stays
 
 from __future__ import annotations
 
-import json
 import threading
 import time
 from collections.abc import Callable
@@ -22,8 +21,9 @@ from common.keys import Keys
 from common.messages import Detections, ServiceCounters, Twist
 from common.node import Node
 from common.queries import query_metrics
-from common.settings import Config
+from common.settings import SERVICES, Config
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
+from services.metrics.trust import refuse_counters, refuse_detections, strict_json
 
 
 def run(config: Config, stop: threading.Event) -> int:
@@ -38,14 +38,24 @@ def run(config: Config, stop: threading.Event) -> int:
 
         exporter = PrometheusExporter()
         listener = exporter.observe
-    agg = Aggregator(s.window_s, s.history_s, on_latency=listener)
+    agg = Aggregator(
+        s.window_s,
+        s.history_s,
+        on_latency=listener,
+        max_counters_per_service=s.max_counters_per_service,
+    )
     with Node("metrics", config) as node:
 
         def answer() -> MetricsAnswer:
             with lock:
                 return agg.answer(node.header(), now(), time.time() - time.monotonic())
 
-        def handler(key: str, decode: Callable[[bytes], Any], feed: Callable[[Any], None]) -> Any:
+        def handler(
+            key: str,
+            decode: Callable[[bytes], Any],
+            feed: Callable[[Any], None],
+            refuse: Callable[[Any, str], str | None] = lambda _m, _k: None,
+        ) -> Any:
             def on_sample(sample: zenoh.Sample) -> None:
                 try:
                     msg = decode(sample.payload.to_bytes())
@@ -54,29 +64,49 @@ def run(config: Config, stop: threading.Event) -> int:
                     with lock:
                         agg.count("bad_input")
                     return
+                heard_on = str(sample.key_expr)
+                why = refuse(msg, heard_on)
+                if why is not None:
+                    node.reject(f"refused.{why}", f"{key} on {heard_on} refused: {why}", key=key)
+                    with lock:
+                        agg.count(f"refused.{why}")
+                    return
                 with lock:
                     feed(msg)
 
             return on_sample
 
+        def refuse_counters_of(msg: ServiceCounters, heard_on: str) -> str | None:
+            return refuse_counters(msg, heard_on, SERVICES, s.max_counters_per_service)
+
         keys = node.keys
         subs = [
             node.session.declare_subscriber(
                 keys.all_detections(),
-                handler("detections", Detections.decode, lambda m: agg.on_detections(m, now())),
+                handler(
+                    "detections",
+                    Detections.decode,
+                    lambda m: agg.on_detections(m, now()),
+                    lambda m, _k: refuse_detections(m, s.max_timing_ms),
+                ),
             ),
             node.session.declare_subscriber(
                 keys.cmd_vel(), handler("cmd_vel", Twist.decode, lambda m: agg.on_twist(m, now()))
             ),
             node.session.declare_subscriber(
                 keys.all_counters(),
-                handler("counters", ServiceCounters.decode, lambda m: agg.on_counters(m, now())),
+                handler(
+                    "counters",
+                    ServiceCounters.decode,
+                    lambda m: agg.on_counters(m, now()),
+                    refuse_counters_of,
+                ),
             ),
         ]
 
         def on_query(query: zenoh.Query) -> None:
             query.reply(
-                keys.metrics(), json.dumps(answer()), encoding=zenoh.Encoding.APPLICATION_JSON
+                keys.metrics(), strict_json(answer()), encoding=zenoh.Encoding.APPLICATION_JSON
             )
 
         queryable = node.session.declare_queryable(keys.metrics(), on_query)

@@ -10,6 +10,7 @@ from collections import OrderedDict
 from common.annotate import annotate
 from common.frames import frame_to_bgr, image_to_frame
 from common.messages import Detections, Frame
+from common.perception_settings import DEFAULT_MAX_FRAME_PIXELS
 
 FRAMES_KEPT = 30  # a detector never lags more than this many frames behind its camera
 
@@ -38,8 +39,11 @@ class FrameCache:
             return frame
 
 
-def debug_image(frame: Frame, dets: Detections, jpeg_quality: int) -> Frame:
+def debug_image(
+    frame: Frame, dets: Detections, jpeg_quality: int, max_pixels: int = DEFAULT_MAX_FRAME_PIXELS
+) -> Frame:
     """``frame`` with ``dets`` drawn on it, as a jpeg Frame with the frame's header.
-    Raises common.errors.ImageError if the frame's pixels cannot be read."""
-    drawn = annotate(frame_to_bgr(frame), dets.boxes, dets.class_names)
+    Raises common.errors.ImageError if the frame's pixels cannot be read, or (ImageTooLarge)
+    if it has more than ``max_pixels``."""
+    drawn = annotate(frame_to_bgr(frame, max_pixels), dets.boxes, dets.class_names)
     return image_to_frame(drawn, frame.header, jpeg_quality=jpeg_quality)

@@ -148,7 +148,9 @@ def _debug_images(node: Node, graph: RosGraph, config: Config) -> _Subscriber:
             return
         due = time.monotonic() + period_s
         try:
-            drawn = debug_image(frame, dets, s.debug_jpeg_quality)
+            drawn = debug_image(
+                frame, dets, s.debug_jpeg_quality, config.detector.max_frame_pixels
+            )
         except ImageError as exc:
             node.bad_input(frame_key, exc)
             return

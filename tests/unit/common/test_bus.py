@@ -30,3 +30,32 @@ def test_every_put_is_marked_msgpack() -> None:
         sub.undeclare()
     assert str(received[0].encoding) == "application/msgpack"
     assert EStop.decode(received[0].payload.to_bytes()) == msg
+
+
+def test_a_payload_over_the_limit_is_refused_and_reported() -> None:
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", "[]")
+    refused: list[tuple[str, int]] = []
+    received: list[int] = []
+    arrived = threading.Event()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        received.append(len(sample.payload))
+        arrived.set()
+
+    with zenoh.open(conf) as session:
+        sub = session.declare_subscriber("t/frame", on_sample)
+        pub = Publisher(
+            session,
+            "t/frame",
+            QoS.SENSOR,
+            max_payload_bytes=1000,
+            on_refused=lambda key, size: refused.append((key, size)),
+        )
+        assert not pub.put(bytes(1001))
+        assert pub.put(bytes(1000))
+        assert arrived.wait(10), "the sample within the limit never arrived"
+        sub.undeclare()
+    assert refused == [("t/frame", 1001)]
+    assert received == [1000]

@@ -1,0 +1,80 @@
+"""The metrics service believes only known services' counters, bounded; its JSON is strict."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from common.errors import ConfigError
+from common.messages import Detections, Header, ServiceCounters
+from common.settings import SERVICES, MetricsSettings
+from services.metrics.aggregate import Aggregator
+from services.metrics.trust import refuse_counters, refuse_detections, strict_json
+
+HEADER = Header(stamp_ns=1, frame_id="", seq=1, source="x")
+KEY = "stack/counters/detector"
+
+
+def counters(service: str = "detector", **values: int) -> ServiceCounters:
+    return ServiceCounters(header=HEADER, service=service, counters=values or {"frames_in": 3})
+
+
+def no_constants(name: str) -> float:
+    raise ValueError(f"not JSON: {name}")
+
+
+@pytest.mark.parametrize(
+    "msg, key, why",
+    [
+        (counters(), KEY, None),
+        (counters("rogue"), "stack/counters/rogue", "unknown_service"),
+        (counters("camera"), KEY, "service_mismatch"),
+        (counters(**{f"n{i}": 1 for i in range(11)}), KEY, "too_many_names"),
+        (counters(**{"x" * 81: 1}), KEY, "bad_name"),
+        (counters(frames_in=-1), KEY, "negative_count"),
+    ],
+)
+def test_counters_are_believed_only_from_known_services(
+    msg: ServiceCounters, key: str, why: str | None
+) -> None:
+    assert refuse_counters(msg, key, SERVICES, max_names=10) == why
+
+
+def test_stage_times_outside_the_bound_are_refused() -> None:
+    def dets(ms: float) -> Detections:
+        empty = np.zeros(0, np.int32)
+        return Detections(
+            header=HEADER, image_width=4, image_height=4, class_ids=empty, class_names=(),
+            scores=np.zeros(0, np.float32), xyxy=np.zeros((0, 4), np.float32),
+            timing_ms={"inference": ms},
+        )  # fmt: skip
+
+    assert refuse_detections(dets(12.5), 1e6) is None
+    assert refuse_detections(dets(1e308), 1e6) == "bad_timing"
+    assert refuse_detections(dets(-1.0), 1e6) == "bad_timing"
+
+
+def test_each_service_keeps_a_bounded_number_of_names() -> None:
+    agg = Aggregator(10.0, max_counters_per_service=3)
+    agg.on_counters(counters(a=1, b=2, c=3, d=4), 0.0)
+    agg.on_counters(counters("camera", a=1), 0.0)
+    agg.on_counters(counters(a=5, e=1), 1.0)  # kept names still update, new ones wait
+    snap = agg.snapshot(HEADER, 1.0).counters
+    assert snap == {"camera.a": 1, "detector.a": 5, "detector.b": 2, "detector.c": 3}
+
+
+def test_the_answer_is_strict_json() -> None:
+    text = strict_json({"p50": math.inf, "xs": [1.0, math.nan, (2, -math.inf)], "n": 3})
+    assert json.loads(text, parse_constant=no_constants) == {
+        "p50": None, "xs": [1.0, None, [2, None]], "n": 3,
+    }  # fmt: skip
+
+
+def test_metrics_bounds_are_settings() -> None:
+    with pytest.raises(ConfigError, match="max_counters_per_service"):
+        MetricsSettings(max_counters_per_service=0)
+    with pytest.raises(ConfigError, match="max_timing_ms"):
+        MetricsSettings(max_timing_ms=math.inf)
