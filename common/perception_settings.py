@@ -50,6 +50,10 @@ class CameraSettings:
             raise ConfigError(f"camera.hfov_deg must be within 1..179, got {self.hfov_deg}")
 
 
+MIN_IMGSZ, MAX_IMGSZ = 160, 1280
+PROFILES = ("default", "fast")
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DetectorSettings:
     """The model, its backend and the post-processing thresholds.
@@ -57,7 +61,13 @@ class DetectorSettings:
     ``model`` empty means the default COCO model (fetched at setup). ``backend`` is onnx,
     tensorrt, cuda or auto (auto picks tensorrt, then cuda, then onnx: docs/tensorrt.md).
     ``precision`` empty leaves the backend's default (fp32 on the CPU, fp16 on a GPU); GPU
-    backends take fp32 or fp16, TensorRT also int8. ``batch_profile`` is the (min, opt, max)
+    backends take fp32 or fp16, TensorRT also int8, and onnx takes fp32 or int8 (an INT8 model
+    quantized here, calibrated on real photos plus ``calibration_dir``'s, and cached beside the
+    model: docs/detector.md). ``imgsz`` is the input size: 0 keeps the model's own; another
+    multiple of 32 (160..1280) rebuilds the default model at that size, and must equal a named
+    model's own size. ``profile`` "fast" picks the fastest (backend, precision, imgsz) variant
+    whose AP50 on the labelled photos is at most ``fast_max_ap50_drop`` below FP32 at 640,
+    overriding backend, precision and imgsz. ``batch_profile`` is the (min, opt, max)
     batch a TensorRT engine is built for; the service sends single frames, so (1, 1, 1).
     A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
     not detected on (counted, see common/freshness.py).
@@ -79,9 +89,23 @@ class DetectorSettings:
     classes: tuple[str, ...] = ()
     max_frame_age_s: float = 1.0
     counters_period_s: float = 1.0
+    imgsz: int = 0
+    calibration_dir: str = ""
+    profile: str = "default"
+    fast_max_ap50_drop: float = 0.01
 
     def __post_init__(self) -> None:
         positive("detector.max_frame_age_s", self.max_frame_age_s)
+        if self.imgsz != 0 and (self.imgsz % 32 or not MIN_IMGSZ <= self.imgsz <= MAX_IMGSZ):
+            raise ConfigError(
+                f"detector.imgsz must be 0 (the model's own) or a multiple of 32 within "
+                f"{MIN_IMGSZ}..{MAX_IMGSZ}, got {self.imgsz}"
+            )
+        if self.profile not in PROFILES:
+            raise ConfigError(
+                f"detector.profile must be one of {', '.join(PROFILES)}, got {self.profile!r}"
+            )
+        fraction("detector.fast_max_ap50_drop", self.fast_max_ap50_drop)
         enum_field(self, "backend", BackendName, "detector.backend")
         if self.precision not in ("", "fp32", "fp16", "int8"):
             raise ConfigError(
