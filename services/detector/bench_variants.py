@@ -75,9 +75,9 @@ def run_variants(args: Any) -> int:
                 ap50=round(labelled_ap50(det), 4),
                 agreement=[matched, total],
             )
-    from services.detector.bench import machine
+    from common.machine import machine_info
 
-    report = {"runs": args.runs, "warmup": args.warmup, "variants": rows, "machine": machine()}
+    report = {"runs": args.runs, "warmup": args.warmup, "variants": rows, "machine": machine_info()}
     print(json.dumps(report) if args.json else format_rows(rows))
     return 0
 
