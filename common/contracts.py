@@ -102,13 +102,20 @@ class Session(_SessionCore, total=False):
 
 
 class DetectorInfo(TypedDict):
-    """The detector's answer on ``<prefix>/detector/<camera>/info``."""
+    """The detector's answer on ``<prefix>/detector/<camera>/info``.
+
+    ``variant`` is what runs, ``backend:precision:input size`` (e.g. ``onnx:int8:480``);
+    ``note`` says why it differs from what was asked (an INT8 model that could not be built,
+    the fast profile's choice), else "".
+    """
 
     model: str
     classes: list[str]
     backend: str
     device: str
     precision: str
+    variant: str
+    note: str
 
 
 class ScenarioResult(TypedDict, total=False):

@@ -64,6 +64,10 @@ class CameraSettings:
             )
 
 
+MIN_IMGSZ, MAX_IMGSZ = 160, 1280
+PROFILES = ("default", "fast")
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DetectorSettings:
     """The model, its backend and the post-processing thresholds.
@@ -72,7 +76,13 @@ class DetectorSettings:
     tensorrt, cuda, openvino or auto (auto picks tensorrt, then cuda, then openvino on Intel
     CPUs with VNNI/AMX, then onnx: docs/detector.md). ``precision`` empty leaves the backend's
     default (fp32 on the CPU, fp16 on a GPU); GPU backends take fp32 or fp16, TensorRT also
-    int8; openvino takes fp32 or int8. ``batch_profile`` is the (min, opt, max)
+    int8; onnx and openvino take fp32 or int8 (an INT8 model quantized here, calibrated on real
+    photos plus ``calibration_dir``'s, and cached beside the model: docs/detector.md). ``imgsz``
+    is the input size: 0 keeps the model's own; another multiple of 32 (160..1280) rebuilds the
+    default model at that size, and must equal a named model's own size. ``profile`` "fast"
+    picks the fastest (backend, precision, imgsz) variant whose AP50 on the labelled photos is
+    at most ``fast_max_ap50_drop`` below FP32 at 640, overriding backend, precision and imgsz.
+    ``batch_profile`` is the (min, opt, max)
     batch a TensorRT engine is built for; the service sends single frames, so (1, 1, 1).
     A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
     not detected on (counted, see common/freshness.py). A frame of more than
@@ -97,6 +107,10 @@ class DetectorSettings:
     max_frame_age_s: float = 1.0
     counters_period_s: float = 1.0
     max_frame_pixels: int = DEFAULT_MAX_FRAME_PIXELS
+    imgsz: int = 0
+    calibration_dir: str = ""
+    profile: str = "default"
+    fast_max_ap50_drop: float = 0.01
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
@@ -106,12 +120,23 @@ class DetectorSettings:
         "max_frame_age_s": (0.01, 60),
         "counters_period_s": (0.1, 60),
         "max_frame_pixels": (1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE),  # JPEG header or raw size
+        "imgsz": (0, MAX_IMGSZ),  # 0 = the model's own; else a multiple of 32, checked below
+        "fast_max_ap50_drop": (0, 1),
     }
     LENGTHS: ClassVar[Bounds] = {"classes": (0, MAX_CLASSES)}
 
     def __post_init__(self) -> None:
         check_bounds(self, "detector", self.BOUNDS)
         check_lengths(self, "detector", self.LENGTHS)
+        if self.imgsz != 0 and (self.imgsz % 32 or not MIN_IMGSZ <= self.imgsz <= MAX_IMGSZ):
+            raise ConfigError(
+                f"detector.imgsz must be 0 (the model's own) or a multiple of 32 within "
+                f"{MIN_IMGSZ}..{MAX_IMGSZ}, got {self.imgsz}"
+            )
+        if self.profile not in PROFILES:
+            raise ConfigError(
+                f"detector.profile must be one of {', '.join(PROFILES)}, got {self.profile!r}"
+            )
         enum_field(self, "backend", BackendName, "detector.backend")
         if self.precision not in ("", "fp32", "fp16", "int8"):
             raise ConfigError(

@@ -63,6 +63,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--conf", type=float, default=DetectorSettings().conf, help="reference threshold"
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--variants",
+        help="compare backend:precision:size variants instead, e.g. "
+        "onnx:fp32:640,onnx:int8:480,onnx:fp32:416 (bench_variants.py)",
+    )
 
 
 def machine() -> dict[str, Any]:
@@ -160,6 +165,10 @@ def _detect_all(
 
 def run(args: argparse.Namespace, resolve_model: Callable[[str | None], Path]) -> int:
     """Time every requested backend in one interleaved loop, then score agreement."""
+    if args.variants:
+        from services.detector.bench_variants import run_variants
+
+        return run_variants(args)
     if args.runs < 1 or args.warmup < 0:
         raise ConfigError(f"--runs must be >= 1 and --warmup >= 0, got {args.runs}, {args.warmup}")
     if not 0 <= args.conf <= 1:

@@ -21,20 +21,27 @@ from common.messages import Detections, Frame, now_ns
 from common.node import Node
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
-from services.detector.backends.select import backend_options
 from services.detector.mailbox import Mailbox
-from services.detector.model_files import ensure_default_model
 from services.detector.pipeline import Detector
 from services.detector.tracker import Tracker
 from services.detector.types import DetectionResult
+from services.detector.variants import variant_of
 
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag
 
 
-def open_detector(s: DetectorSettings) -> Detector:
-    """Load the configured model (the default one, fetched if needed, when none is named)."""
-    model = s.model or str(ensure_default_model())
-    return Detector.open(model, backend=s.backend, settings=s, **backend_options(s))
+def open_detector(s: DetectorSettings) -> tuple[Detector, str]:
+    """Load the configured model (the default one, fetched if needed, when none is named) at
+    its size and precision, or the fast profile's choice; with a note on what was chosen."""
+    from services.detector.variants import open_prepared
+
+    if s.profile == "fast":
+        from services.detector.fast_profile import choose_fast
+
+        variant, why = choose_fast(s)
+        det, note = open_prepared(variant.settings(s))
+        return det, f"{why}; {note}" if note else why
+    return open_prepared(s)
 
 
 def to_message(
@@ -68,9 +75,17 @@ def run(config: Config, stop: threading.Event) -> int:
     """Detect on the newest frame until ``stop`` is set."""
     s = config.detector
     with Node("detector", config, counters_period_s=s.counters_period_s) as node:
-        detector = open_detector(s)
+        detector, note = open_detector(s)
         b = detector.backend
-        node.log.info("model %s on %s (%s, %s)", detector.model_path, b.name, b.device, b.precision)
+        node.log.info(
+            "model %s on %s (%s, %s, input %d)%s",
+            detector.model_path,
+            b.name,
+            b.device,
+            b.precision,
+            detector.info.input_height,
+            f": {note}" if note else "",
+        )
         frame_key = node.keys.frame(config.stack.camera)
         mailbox: Mailbox[Frame] = Mailbox()
         tracker = Tracker(config.tracker) if config.tracker.enabled else None
@@ -107,6 +122,8 @@ def run(config: Config, stop: threading.Event) -> int:
                 backend=b.name,
                 device=b.device,
                 precision=b.precision,
+                variant=variant_of(detector),
+                note=note,
             )
         )
         info_key = node.keys.detector_info(config.stack.camera)

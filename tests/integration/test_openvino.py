@@ -9,7 +9,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 import numpy.typing as npt
-import onnx
 import pytest
 from skimage import data
 
@@ -72,7 +71,7 @@ def test_fp32_finds_the_object_and_agrees_with_onnx_runtime(
 
 
 def test_nncf_int8_still_finds_the_cat_and_the_cup(default_model: Path, tmp_path: Path) -> None:
-    keep = head_nodes(onnx.load(str(default_model), load_external_data=False))
+    keep = head_nodes(default_model)
     ir = tmp_path / "int8.xml"
     quantize(default_model, ir, calibration_frames(640, 640), keep_float=keep)
     with Detector.open(ir, backend="openvino", precision="int8") as det:

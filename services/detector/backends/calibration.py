@@ -88,3 +88,51 @@ def calibration_digest(paths: Sequence[Path]) -> str:
         digest.update(path.name.encode() + b"\0")
         digest.update(hashlib.sha256(path.read_bytes()).digest())
     return digest.hexdigest()
+
+
+# ---------------------------------------------------------------- ONNX Runtime / NNCF INT8
+
+#: How each shipped photo is varied for calibration: as it is, mirrored, and the middle
+#: two thirds (objects at a larger scale). Still real pixels, three times the frames.
+PHOTO_VIEWS = ("full", "mirror", "crop")
+
+
+def _view(image: npt.NDArray[np.uint8], view: str) -> npt.NDArray[np.uint8]:
+    if view == "mirror":
+        return np.ascontiguousarray(image[:, ::-1])
+    if view == "crop":
+        h, w = image.shape[:2]
+        return np.ascontiguousarray(image[h // 6 : h - h // 6, w // 6 : w - w // 6])
+    return image
+
+
+def shipped_photo_names() -> tuple[str, ...]:
+    """The photos that ship offline: scikit-image's samples, which are also the images of the
+    project's hand-labelled set (tests/data/skimage_coco)."""
+    from common.images import SAMPLES
+
+    return tuple(SAMPLES)
+
+
+def calibration_photos(
+    extra: Sequence[Path] = (),
+) -> Iterator[tuple[str, npt.NDArray[np.uint8]]]:
+    """``(label, BGR image)``: every view of the shipped photos, then the user's ``extra``
+    images (as they are). Read lazily; an unreadable image raises ImageError."""
+    from common.images import load_sample
+
+    for name in shipped_photo_names():
+        image = load_sample(name)
+        for view in PHOTO_VIEWS:
+            yield f"{name}:{view}", _view(image, view)
+    for path in extra:
+        yield str(path), load_image(path)
+
+
+def calibration_frames(
+    photos: Sequence[npt.NDArray[np.uint8]], input_height: int, input_width: int
+) -> list[npt.NDArray[np.float32]]:
+    """Each photo as a ``(1, 3, H, W)`` float32 network input, letterboxed by the pipeline's
+    own Preprocessor (each a fresh array)."""
+    pre = Preprocessor(input_height, input_width, 1)
+    return [pre.run([photo])[0].copy() for photo in photos]

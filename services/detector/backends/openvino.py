@@ -130,15 +130,11 @@ def int8_model(model_path: Path) -> Path:
     """
     if is_ir(model_path):
         return model_path
-    # MERGE POINT (branch fastcpu): the single call site of the quantization cache. Replace
-    # the raise below with
-    #     from services.detector.quantize import quantized_model
-    #     return quantized_model(model_path, runtime="openvino")
-    # which calibrates, runs quantize.nncf_int8.quantize and returns the cached IR (.xml).
-    raise ConfigError(
-        f"{model_path}: openvino int8 needs a quantized OpenVINO IR (.xml) as the model "
-        "in this build (see services/detector/quantize/nncf_int8.py)"
-    )
+    # The detector's own path (services/detector/variants.py) quantizes before loading; this
+    # serves a direct load(..., precision="int8") of an ONNX model with the same cache.
+    from services.detector.quantize import quantized_model
+
+    return quantized_model(model_path, runtime="openvino")
 
 
 def load(model_path: Path, *, precision: str = "", threads: int | None = None) -> Backend:
