@@ -39,9 +39,17 @@ LABEL_FONT_PX = 14.0
 _BLACK = Color(r=0.0, g=0.0, b=0.0, a=1.0)
 
 
+#: The last second a Foxglove timestamp holds (its seconds are a uint32: early 2106).
+MAX_STAMP_S = 2**32 - 1
+
+
 def stamp(ns: int) -> Timestamp:
-    """A Foxglove timestamp from our nanoseconds since the epoch."""
-    return Timestamp(ns // 1_000_000_000, ns % 1_000_000_000)
+    """A Foxglove timestamp from our nanoseconds since the epoch. Raises ValueError for a
+    stamp past ``MAX_STAMP_S`` (a header may hold any uint64; Foxglove's cannot)."""
+    sec, nsec = divmod(ns, 1_000_000_000)
+    if not 0 <= sec <= MAX_STAMP_S:
+        raise ValueError(f"stamp {ns} ns is past what a Foxglove timestamp holds")
+    return Timestamp(sec, nsec)
 
 
 def scaled_size(width: int, height: int, max_width: int) -> tuple[int, int]:

@@ -58,8 +58,17 @@ class Viewer:
         if not self.pairing.add_detections(dets, time.monotonic()):
             self.node.counters.add("detections_unpaired")
 
+    def _unshowable(self, what: str, error: ValueError) -> None:
+        """A message that decoded but that Foxglove cannot carry (a stamp past 2106)."""
+        self.node.reject("unshowable", f"{what} not shown: {error}")
+
     def on_scan(self, scan: LaserScan, _sample: zenoh.Sample) -> None:
-        self.channels.scan.log(convert.laser_scan(scan), log_time=scan.header.stamp_ns)
+        try:
+            shown = convert.laser_scan(scan)
+        except ValueError as exc:
+            self._unshowable("scan", exc)
+            return
+        self.channels.scan.log(shown, log_time=scan.header.stamp_ns)
 
     def on_twist(self, twist: Twist, _sample: zenoh.Sample) -> None:
         self.channels.cmd_vel.log(convert.twist_json(twist), log_time=twist.header.stamp_ns)
@@ -70,8 +79,13 @@ class Viewer:
 
     def on_truth(self, truth: GroundTruth, _sample: zenoh.Sample) -> None:
         at = truth.header.stamp_ns
+        try:
+            pose = scene.transforms(truth)
+        except ValueError as exc:
+            self._unshowable("ground truth", exc)
+            return
         self.trail.add(truth.robot[0], truth.robot[1])
-        self.channels.tf.log(scene.transforms(truth), log_time=at)
+        self.channels.tf.log(pose, log_time=at)
         now = time.monotonic()
         if now >= self._next_scene:
             self._next_scene = now + self._scene_period_s
@@ -88,21 +102,28 @@ class Viewer:
                 dropped = self.pairing.dropped
             if item is None or not self.channels.watched():
                 continue
-            frame, dets = item
-            try:
-                self._send(frame, dets)
-            except ImageError as exc:
-                self.node.bad_input("frame", exc)
+            self.send(*item)
 
-    def _send(self, frame: Frame, dets: Detections | None) -> None:
+    def send(self, frame: Frame, dets: Detections | None) -> None:
+        """Send ``frame`` as a JPEG, and ``dets`` as its annotations; a frame whose pixels
+        cannot be read is bad input, one Foxglove cannot carry is counted as unshowable."""
         v = self.settings
-        image = convert.compressed_image(frame, v.jpeg_quality, v.max_image_width)
+        try:
+            image = convert.compressed_image(frame, v.jpeg_quality, v.max_image_width)
+            marks = None
+            if dets is not None:
+                w, h = convert.scaled_size(frame.width, frame.height, v.max_image_width)
+                marks = convert.image_annotations(dets, w, h, self.locked_track)
+        except ImageError as exc:
+            self.node.bad_input("frame", exc)
+            return
+        except ValueError as exc:
+            self._unshowable("image", exc)
+            return
         at = frame.header.stamp_ns
         self.channels.image.log(image, log_time=at)
         self.node.counters.add("images_out")
-        if dets is not None:
-            w, h = convert.scaled_size(frame.width, frame.height, v.max_image_width)
-            marks = convert.image_annotations(dets, w, h, self.locked_track)
+        if marks is not None:
             self.channels.annotations.log(marks, log_time=at)
 
     def metrics_loop(self, stop: threading.Event) -> None:

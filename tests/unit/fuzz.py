@@ -15,6 +15,7 @@ import os
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from datetime import timedelta
 from typing import Any
 
@@ -260,6 +261,22 @@ def message_payloads(cls: type[Message], *, fresh: bool = False) -> st.SearchStr
     """Payloads for ``cls.decode``; ``fresh``: mutations of messages stamped now."""
     valid = samples(None if fresh else 1_700_000_000_000_000_000)[cls]
     return payloads(cls.TAG, [m.encode() for m in valid])
+
+
+#: A header's stamp and seq at the edges of what consumers can carry: a ROS Time's int32
+#: seconds (2038), a Foxglove timestamp's uint32 seconds (2106), MCAP's uint32 sequence.
+EDGE_STAMPS_NS = [0, (2**31 - 1) * 10**9, 2**31 * 10**9, 2**32 * 10**9, 2**63, 2**64 - 1]
+EDGE_SEQS = [0, 2**32 - 1, 2**32, 2**64 - 1]
+
+
+def edge_stamped(cls: type[Message]) -> list[bytes]:
+    """Valid ``cls`` payloads, one for each edge stamp (with the edge seqs in turn): few
+    enough to feed every one, where a strategy would seldom draw them."""
+    msg: Any = samples()[cls][0]
+    return [
+        replace(msg, header=replace(msg.header, stamp_ns=at, seq=seq)).encode()
+        for at, seq in zip(EDGE_STAMPS_NS, [*EDGE_SEQS, *EDGE_SEQS], strict=False)
+    ]
 
 
 # ---------------------------------------------------------------------------- a bus in a box

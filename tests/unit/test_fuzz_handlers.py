@@ -9,19 +9,13 @@ payload the key's decoder rejects, and stay put for every other.
 from __future__ import annotations
 
 import threading
-import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
-from types import ModuleType, SimpleNamespace
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import given
 
-from common.codec import Message
-from common.errors import DecodeError
 from common.messages import Detections, EStop, Frame, LaserScan, ServiceCounters, Twist
 from common.node import Node
 from common.settings import Config, ControllerSettings, Ros2Settings, SimSettings
@@ -40,122 +34,31 @@ from services.ros2.convert import (
 )
 from services.ros2.images import IMAGE, frame_to_image
 from services.sim.robot_io import RosRobot, StackRobot
-from tests.unit.fuzz import (
-    FakeSample,
-    RecordingSession,
-    fuzz,
-    message_payloads,
-    payloads,
-    samples,
-    sessions,
-    to_stack,
+from tests.unit.fuzz import RecordingSession, payloads, samples, sessions, to_stack
+from tests.unit.fuzz_serving import (
+    NODE_SESSION,
+    ROS_SESSION,
+    fuzz_handler,
+    message_handler,
+    serving,
 )
-
-NODE_SESSION = "common.node.open_session"
-ROS_SESSION = "services.ros2.graph.open_ros_session"
-READY_S = 60.0
-EXAMPLES = 50  # per subscription: about 750 payloads in all, in a few seconds
-
-
-def _wait(condition: Callable[[], Any], what: str) -> None:
-    deadline, pause = time.monotonic() + READY_S, threading.Event()
-    while not condition():
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        pause.wait(0.02)
-
-
-@contextmanager
-def serving(
-    monkeypatch: pytest.MonkeyPatch, module: ModuleType, config: Config, *opens: str
-) -> Iterator[tuple[Node, list[RecordingSession]]]:
-    """``module.run(config, stop)`` in a thread, until ready; yields its Node and sessions."""
-    nodes: list[Node] = []
-
-    class Recorded(Node):
-        def __init__(self, *args: Any, **kw: Any) -> None:
-            super().__init__(*args, **kw)
-            nodes.append(self)
-
-    monkeypatch.setattr(module, "Node", Recorded)
-    with sessions(monkeypatch, NODE_SESSION, *opens) as opened:
-        stop, errors = threading.Event(), []
-
-        def run() -> None:
-            try:
-                module.run(config, stop)
-            except BaseException as exc:  # handed to the test below
-                errors.append(exc)
-
-        thread = threading.Thread(target=run, name=f"fuzz-{module.__name__}", daemon=True)
-        thread.start()
-        _wait(lambda: errors or (nodes and any("/health/" in t for t in opened[0].tokens)), "ready")
-        assert not errors, errors
-        try:
-            yield nodes[0], opened
-        finally:
-            stop.set()
-            thread.join(timeout=10)
-        assert not errors, errors
-
-
-def rejected_by(decode: Callable[[bytes], Any], payload: bytes) -> bool:
-    try:
-        decode(payload)
-    except DecodeError:
-        return True
-    return False
-
-
-def fuzz_handler(
-    node: Node,
-    handler: Callable[[Any], None],
-    key: str,
-    decode: Callable[[bytes], Any],
-    strategy: Any,
-    examples: int = EXAMPLES,
-) -> int:
-    """Feed ``handler`` payloads: ``bad_input`` grows by one exactly for each that ``decode``
-    rejects; an exception escaping the handler fails the test. Returns how many it was fed."""
-    counts = {"rejected": 0, "taken": 0}
-
-    @fuzz(examples)
-    @given(payload=strategy)
-    def check(payload: bytes) -> None:
-        before = node.counters.get("bad_input")
-        handler(FakeSample(key, payload))
-        rejected = rejected_by(decode, payload)
-        assert node.counters.get("bad_input") - before == int(rejected), key
-        counts["rejected" if rejected else "taken"] += 1
-
-    check()
-    assert counts["rejected"] > 0, f"{key}: no payload was rejected: {counts}"
-    return counts["rejected"] + counts["taken"]
-
-
-def _message_handler(node: Node, session: RecordingSession, part: str, cls: type[Message]) -> int:
-    found = session.handlers_of(part)
-    assert found, f"no subscription on {part!r}"
-    return sum(
-        fuzz_handler(node, handler, key, cls.decode, message_payloads(cls, fresh=True))
-        for key, handler in found
-    )
 
 
 def test_the_controllers_handlers(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     config = Config(controller=ControllerSettings(estop_file=str(tmp_path / "estop.json")))
     with serving(monkeypatch, controller, config) as (node, (session,)):
-        _message_handler(node, session, "/detections", Detections)
-        _message_handler(node, session, "/scan", LaserScan)
-        _message_handler(node, session, "/estop", EStop)
+        message_handler(node, session, "/detections", Detections)
+        message_handler(node, session, "/scan", LaserScan)
+        message_handler(node, session, "/estop", EStop)
     # Garbage on the e-stop key is a press: fail safe. The latch is on disk.
     assert '"engaged": true' in (tmp_path / "estop.json").read_text()
 
 
 def test_the_metrics_services_handlers(monkeypatch: pytest.MonkeyPatch) -> None:
     with serving(monkeypatch, metrics, Config()) as (node, (session,)):
-        _message_handler(node, session, "/detections", Detections)
-        _message_handler(node, session, "/cmd_vel", Twist)
-        _message_handler(node, session, "/counters/", ServiceCounters)
+        message_handler(node, session, "/detections", Detections)
+        message_handler(node, session, "/cmd_vel", Twist)
+        message_handler(node, session, "/counters/", ServiceCounters)
 
 
 class _IdleMailbox:
@@ -184,7 +87,7 @@ def test_the_detectors_handler(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(detector, "Mailbox", _IdleMailbox)
     with serving(monkeypatch, detector, Config()) as (node, (session,)):
         before = node.counters.get("frames_in")
-        fed = _message_handler(node, session, "/frame", Frame)
+        fed = message_handler(node, session, "/frame", Frame)
         assert node.counters.get("frames_in") - before == fed
 
 
@@ -205,9 +108,9 @@ def test_the_ros2_bridges_handlers(monkeypatch: pytest.MonkeyPatch) -> None:
     distro = config.ros2.distro
     fresh = samples(stamp_ns=None)
     with serving(monkeypatch, ros2, config, ROS_SESSION) as (node, (stack, graph)):
-        _message_handler(node, stack, "/detections", Detections)  # the ROS and debug images
-        _message_handler(node, stack, "/cmd_vel", Twist)
-        _message_handler(node, stack, "/frame", Frame)  # the debug images' frames
+        message_handler(node, stack, "/detections", Detections)  # the ROS and debug images
+        message_handler(node, stack, "/cmd_vel", Twist)
+        message_handler(node, stack, "/frame", Frame)  # the debug images' frames
         images = [frame_to_image(distro, f) for f in fresh[Frame] if f.encoding != "jpeg"]
         _ros_handler(node, graph, "::Image_", IMAGE, images)
         scans = [scan_to_ros(distro, s) for s in fresh[LaserScan]]
@@ -225,7 +128,7 @@ def test_the_simulated_robots_command_handlers(monkeypatch: pytest.MonkeyPatch) 
     with sessions(monkeypatch, NODE_SESSION, ROS_SESSION) as opened, Node("sim", config) as node:
         stack_robot = StackRobot(config, node, on_command)
         with RosRobot(config, node, on_command):
-            _message_handler(node, opened[0], "/cmd_vel", Twist)
+            message_handler(node, opened[0], "/cmd_vel", Twist)
             twists = [twist_to_ros(config.ros2.distro, t) for t in samples(None)[Twist]]
             _ros_handler(node, opened[1], "::Twist_", TWIST, twists)
         stack_robot.close()
