@@ -8,6 +8,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable
 from typing import Self
 
@@ -70,10 +71,31 @@ def setup_logging(service: str, level: str | None = None) -> logging.Logger:
 SUPERVISOR_PID_ENV = "STACK_SUPERVISOR_PID"
 ORPHAN_POLL_S = 0.1  # how often a service checks that its supervisor is still its parent
 ORPHAN_GRACE_S = 1.0  # time to stop cleanly (the controller: command zero) before a hard exit
+SIGNAL_POLL_S = 0.2  # the longest a StopEvent wait holds off a signal that hit another thread
+
+
+class StopEvent(threading.Event):
+    """An Event whose ``wait`` wakes at least every ``SIGNAL_POLL_S``.
+
+    Python runs a signal handler only when the main thread next executes Python code. A SIGINT
+    that the kernel hands to one of Zenoh's threads (any thread may take a process's signal)
+    leaves the main thread asleep in a plain ``Event.wait(timeout)`` for the whole timeout:
+    the metrics service, waiting 5 s between reports, was seen to overrun the supervisor's stop
+    timeout that way and be killed. Waiting in short slices bounds that delay.
+    """
+
+    def wait(self, timeout: float | None = None) -> bool:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            left = SIGNAL_POLL_S if deadline is None else deadline - time.monotonic()
+            if left <= 0:
+                return self.is_set()
+            if super().wait(min(left, SIGNAL_POLL_S)):
+                return True
 _PR_SET_PDEATHSIG = 1
 
 
-def stop_event() -> threading.Event:
+def stop_event() -> StopEvent:
     """An event set on SIGINT or SIGTERM, so loops end cleanly and the process exits 0.
 
     A service started by the supervisor also stops when the supervisor dies, however it dies:
@@ -83,7 +105,7 @@ def stop_event() -> threading.Event:
     Python code to run, so that a shutdown stuck in a call that holds the interpreter still
     ends on time.
     """
-    event = threading.Event()
+    event = StopEvent()
     supervisor = os.environ.get(SUPERVISOR_PID_ENV, "")
     supervisor_pid = int(supervisor) if supervisor.isdigit() else None
 

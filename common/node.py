@@ -42,7 +42,7 @@ class Node(Closing):
         self._counters_pub = self.publisher(self.keys.counters(service), QoS.TELEMETRY)
         self._counters_period_s = counters_period_s
         self._counters_next = 0.0
-        self._seq = 0
+        self._seq: dict[str, int] = {}  # per frame_id: one numbering per stream
 
     def ready(self) -> None:
         """Announce that the service is up and serving."""
@@ -87,13 +87,14 @@ class Node(Closing):
 
     def header(self, stamp: Stamp | None = None, frame_id: str = "") -> Header:
         """A header for a message this service originates, stamped on both clocks (now, unless
-        ``stamp`` is given), with its own sequence number."""
-        self._seq += 1
+        ``stamp`` is given), with its own sequence number: one numbering per ``frame_id``, so
+        that a receiver of one stream (the simulator's frames, not its scans) sees no gaps."""
+        seq = self._seq[frame_id] = self._seq.get(frame_id, 0) + 1
         at = now() if stamp is None else stamp
         return Header(
             stamp_ns=at.wall_ns,
             frame_id=frame_id,
-            seq=self._seq,
+            seq=seq,
             source=self.service,
             mono_ns=at.mono_ns,
             boot_id=BOOT_ID,

@@ -1,6 +1,7 @@
 """Messages a receiver never got, told from gaps in their senders' sequence numbers. Pure.
 
-Every header carries ``seq``, one more per message its source stamps (common/node.py). A
+Every header carries ``seq``, one more per message its source stamps for one ``frame_id``
+(common/node.py): a stream is (source, boot, frame_id). A
 frame dropped under congestion (QoS SENSOR drops rather than block), lost with its link, or
 refused by its publisher as too large leaves a gap that nothing else would report.
 """
@@ -19,7 +20,8 @@ MAX_GAP = 10_000
 
 
 class SeqGaps:
-    """Per source (``header.source`` on one boot): how many sequence numbers were skipped.
+    """Per stream (``header.source`` and ``frame_id`` on one boot): how many sequence numbers
+    were skipped.
 
     A number at or below the last one heard is a restart (or a replay, which the freshness
     gate refuses): counting starts again from it, and nothing is counted missed.
@@ -27,14 +29,14 @@ class SeqGaps:
     """
 
     def __init__(self, max_sources: int = MAX_SOURCES, max_gap: int = MAX_GAP) -> None:
-        self._last: OrderedDict[tuple[str, str], int] = OrderedDict()
+        self._last: OrderedDict[tuple[str, str, str], int] = OrderedDict()
         self._max_sources = max_sources
         self._max_gap = max_gap
         self._lock = threading.Lock()
 
     def observe(self, header: Header) -> int:
         """Note ``header``; return how many messages from its source were skipped before it."""
-        source = (header.source, header.boot_id)
+        source = (header.source, header.boot_id, header.frame_id)
         with self._lock:
             last = self._last.get(source)
             self._last[source] = header.seq

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from common.clock import BOOT_ID
 from common.messages import Header
+from common.node import Node
 from common.seqgaps import SeqGaps
 
 
-def header(seq: int, source: str = "camera", boot: str = "b1") -> Header:
-    return Header(stamp_ns=1, frame_id="", seq=seq, source=source, boot_id=boot)
+def header(seq: int, source: str = "camera", boot: str = "b1", frame_id: str = "") -> Header:
+    return Header(stamp_ns=1, frame_id=frame_id, seq=seq, source=source, boot_id=boot)
 
 
 def test_gaps_are_counted_per_source_and_restarts_are_not_loss() -> None:
@@ -29,3 +31,16 @@ def test_sources_are_bounded() -> None:
     gaps.observe(header(1, "c"))  # forgets "a"
     assert gaps.observe(header(5, "a")) == 0
     assert gaps.observe(header(5, "c")) == 3
+
+
+def test_one_source_numbers_each_frame_id_apart_and_its_streams_show_no_false_gaps() -> None:
+    # The simulator stamps frames, scans and truths: each is its own numbered stream, so the
+    # detector, which hears only the frames, must count nothing missed.
+    node = Node.__new__(Node)  # only the numbering: no session is needed for header()
+    node.service, node._seq = "sim", {}
+    stamped = [node.header(frame_id=f) for f in ("camera", "laser", "world") * 3]
+    gaps = SeqGaps()
+    assert [gaps.observe(h) for h in stamped if h.frame_id == "camera"] == [0, 0, 0]
+    assert [h.seq for h in stamped if h.frame_id == "laser"] == [1, 2, 3]
+    assert gaps.observe(header(3, "sim", BOOT_ID, "laser")) == 0
+    assert gaps.observe(header(5, "sim", BOOT_ID, "laser")) == 1

@@ -1,0 +1,41 @@
+"""A stop signal ends a long wait promptly even when it lands on another thread."""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+
+from common.lifecycle import StopEvent, stop_event
+
+
+def test_a_signal_taken_by_another_thread_still_ends_a_long_wait() -> None:
+    previous = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    try:
+        stop = stop_event()
+
+        def signal_from_here() -> None:
+            threading.Event().wait(0.2)
+            # As the kernel may do with a process's signal: deliver it to this thread, not the
+            # main one, which only runs the handler once it executes Python code again.
+            signal.pthread_kill(threading.get_ident(), signal.SIGINT)
+
+        other = threading.Thread(target=signal_from_here)
+        start = time.monotonic()
+        other.start()
+        assert stop.wait(30.0)  # a plain Event would sleep the full 30 s here
+        assert time.monotonic() - start < 5.0  # 0.2 s of polling plus a loaded machine's margin
+        other.join()
+    finally:
+        signal.signal(signal.SIGINT, previous[0])
+        signal.signal(signal.SIGTERM, previous[1])
+
+
+def test_waits_still_time_out_and_see_a_set() -> None:
+    stop = StopEvent()
+    start = time.monotonic()
+    assert stop.wait(0.5) is False
+    assert 0.45 <= time.monotonic() - start < 2.0
+    threading.Timer(0.1, stop.set).start()
+    assert stop.wait(None) is True
+    assert stop.wait(0) is True
