@@ -34,7 +34,10 @@ class RecorderSettings:
     thread writes; a full queue drops the message and counts it (the bus is never blocked).
     Messages are written in compressed chunks of ``chunk_size_kb``; a chunk is also closed
     every ``flush_period_s``, so a recorder that is killed loses at most that much.
-    A progress line (messages, MB, drops) every ``progress_period_s``.
+    A progress line (messages, MB, drops) every ``progress_period_s``. The recorder lowers its
+    own CPU priority by ``nice`` (0..19): on a small robot computer it shares the cores with the
+    detector, and a recording must take only the time perception leaves over (the queue then
+    drops and counts what it could not write).
     """
 
     output_dir: str = "recordings"
@@ -44,12 +47,14 @@ class RecorderSettings:
     compression: Compression = Compression.LZ4
     flush_period_s: float = 1.0
     progress_period_s: float = 5.0
+    nice: int = 10
 
     BOUNDS: ClassVar[Bounds] = {
         "queue_size": (1, 100_000),
         "chunk_size_kb": (16, 65536),
         "flush_period_s": (0.05, 60),
         "progress_period_s": (0.1, 3600),
+        "nice": (0, 19),
     }
 
     def __post_init__(self) -> None:

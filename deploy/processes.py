@@ -69,8 +69,13 @@ class ServiceProcess:
         env = {**os.environ, "PYTHONUNBUFFERED": "1", SUPERVISOR_PID_ENV: str(os.getpid())}
         # A session of its own: a Ctrl-C at the terminal reaches the supervisor only, which then
         # stops the services in order instead of all of them dying at once.
+        # Its stdout goes to our stderr: our stdout carries only the --duration summary.
         self.proc = subprocess.Popen(
-            self.command, env=env, start_new_session=True, stderr=subprocess.PIPE
+            self.command,
+            env=env,
+            start_new_session=True,
+            stdout=sys.stderr.fileno(),
+            stderr=subprocess.PIPE,
         )
         self.started_at = time.monotonic()
         self.state = "starting"

@@ -9,6 +9,7 @@ service as ``recorder.*``; a progress line says messages, MB and drops.
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -116,6 +117,7 @@ def record(
     duration_s: float = 0.0,
 ) -> int:
     """Record until ``stop`` is set or ``duration_s`` (0: no limit) has passed."""
+    os.nice(config.recorder.nice)  # below perception: recording takes only the spare CPU
     with Node(SERVICE, config) as node:
         recorder = Recorder(node, path)
         node.ready()

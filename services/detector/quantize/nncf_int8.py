@@ -16,6 +16,7 @@ The model's metadata (class names, input size) is copied into the IR's runtime i
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -75,6 +76,8 @@ def quantize(
     onnx_model = onnx.load(str(model), load_external_data=False)
     ov_model = ov.Core().read_model(str(model))
     ignored = openvino_names(ov_model, onnx_model, keep_float)
+    # NNCF logs a line per ignored node on stdout; the caller prints its own progress.
+    nncf.set_log_level(logging.WARNING)
     quantized = nncf.quantize(
         ov_model,
         nncf.Dataset(list(frames)),

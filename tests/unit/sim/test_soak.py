@@ -8,24 +8,10 @@ import numpy as np
 import pytest
 
 from common.errors import DecodeError
-from common.messages import (
-    ControllerStatus,
-    Detections,
-    EStop,
-    Frame,
-    GroundTruth,
-    Header,
-    LaserScan,
-    MetricsSnapshot,
-    ServiceCounters,
-    Twist,
-)
+from common.messages import GroundTruth, Header
 from services.sim.soak import Sample, SoakFigures, garbage, summarise
+from tests.unit.common.test_fuzz_decoders import MESSAGE_TYPES
 
-MESSAGE_TYPES = (
-    Frame, Detections, Twist, LaserScan, ControllerStatus, GroundTruth, EStop, ServiceCounters,
-    MetricsSnapshot,
-)  # fmt: skip
 HDR = Header(stamp_ns=1, frame_id="world", source="sim", seq=0)
 
 
