@@ -249,14 +249,18 @@ def test_no_router_is_one_line_and_a_lost_router_is_survived(make_stack, tmp_pat
         def state() -> str:
             return ControllerStatus.decode(cmds[-1]).state if cmds else ""
 
-        wait_for(lambda: state() == "tracking", 60, "tracking through the bridge")
+        # Acting on the person seen through the bridge: centred ("tracking") or, if the last
+        # box landed just outside the centre tolerance, turning to it (the robot here is a
+        # stand-in that never turns, so either may last).
+        acting = ("tracking", "turning")
+        wait_for(lambda: state() in acting, 60, "acting on the person through the bridge")
         current["robot"] = None
         robot.close()  # the robot's router and node are gone
         wait_for(lambda: state() == "stale", 5, "the dead-man stop while the router is gone")
         assert "ros2" in stack.ready_services(), stack.log()
         robot = Robot(endpoint)  # back, on the same endpoint
         current["robot"] = robot
-        wait_for(lambda: state() == "tracking", 60, "tracking again once the router is back")
+        wait_for(lambda: state() in acting, 60, "acting on the person once the router is back")
         assert stack.stop() == 0, stack.log()
         assert "ros2: exited" not in stack.log()
     finally:
