@@ -10,7 +10,6 @@ checks that every numeric and list field of every table is in one of the two.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sized
 from enum import StrEnum
 
@@ -83,19 +82,10 @@ def check_lengths(settings: object, table: str, lengths: Bounds) -> None:
             raise ConfigError(f"{table}.{field} must have {what}, got {shown}")
 
 
-def positive(name: str, value: float) -> None:
-    if not (value > 0 and math.isfinite(value)):
-        raise ConfigError(f"{name} must be a positive number, got {value}")
 
 
-def non_negative(name: str, value: float) -> None:
-    if not (value >= 0 and math.isfinite(value)):
-        raise ConfigError(f"{name} must be a finite number >= 0, got {value}")
 
 
-def fraction(name: str, value: float) -> None:
-    if not 0 <= value <= 1:
-        raise ConfigError(f"{name} must be within 0..1, got {value}")
 
 
 def enum_field(settings: object, name: str, kind: type[StrEnum], where: str) -> None:

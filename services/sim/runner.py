@@ -72,7 +72,8 @@ def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Con
     )
 
 
-def _record(session: zenoh.Session, keys: Keys, camera: str, rec: Recording) -> list[Any]:
+def record_into(session: zenoh.Session, keys: Keys, camera: str, rec: Recording) -> list[Any]:
+    """Subscribe to the truth, commands and detections, appending each to ``rec``."""
     lock = threading.Lock()
 
     def recorder(decode: Any, into: list[Any]) -> Any:
@@ -114,7 +115,7 @@ def run_scenario(
         try:
             session = open_session(config.zenoh, "observer")
             try:
-                subs = _record(session, Keys(config.stack.prefix), config.stack.camera, rec)
+                subs = record_into(session, Keys(config.stack.prefix), config.stack.camera, rec)
                 _drive(proc, scenario, rec, config_path, log)
                 for sub in subs:
                     sub.undeclare()

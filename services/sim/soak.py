@@ -28,7 +28,7 @@ from common.keys import Keys
 from common.messages import GroundTruth
 from common.settings import SERVICES, Config
 from deploy.launch import service_pids, start_supervisor, stop_supervisor
-from services.sim.runner import STOP_TIMEOUT_S, _record, scenario_config
+from services.sim.runner import STOP_TIMEOUT_S, record_into, scenario_config
 from services.sim.scenarios import SCENARIOS
 from services.sim.score import Recording
 
@@ -181,7 +181,7 @@ def run_soak(
         session = open_session(config.zenoh, "observer")
         flooder = threading.Thread(target=_flood, args=(config, flood_hz, stop, figures))
         try:
-            subs = _record(session, Keys(config.stack.prefix), config.stack.camera, rec)
+            subs = record_into(session, Keys(config.stack.prefix), config.stack.camera, rec)
             flooder.start()
             start = time.monotonic()
             while (now := time.monotonic() - start) < duration_s:
