@@ -1,10 +1,12 @@
 """Frame sources: a scikit-image sample, an image, a folder of images, a video, a device.
 
 Each source yields BGR uint8 images. Opening a source that does not exist raises ConfigError
-with one line; a source that ends (a video without ``loop``) returns None from ``read``. A source
-from which no frame at all can be read (a folder of corrupt files, a video with no decodable
-frame, a device that gives nothing) raises ConfigError from ``read``: waiting will not help, so
-the service ends with that line and the supervisor does not restart it.
+with one line; a source that ends (a video without ``loop``, an unplugged device) returns None
+from ``read``. A source from which no frame at all can be read (a folder of corrupt files, a
+video with no decodable frame, a device that gives nothing) raises ConfigError from ``read``:
+waiting will not help, so the service ends with that line and the supervisor does not restart
+it. A device that gave frames and then stopped is ``live``: the service reopens it
+(services/camera/reopen.py).
 
 The command line's ``detect`` opens videos and devices here too (:func:`is_stream`,
 :func:`open_stream`), so both read the same ``device:``/path forms.
@@ -33,9 +35,11 @@ _DEVICE_PREFIX = "device:"
 
 
 class FrameSource(Protocol):
-    """Anything that produces BGR frames."""
+    """Anything that produces BGR frames. ``live``: a camera device, which may stop giving
+    frames and come back (services/camera/reopen.py); False for stills, folders and videos."""
 
     description: str
+    live: bool
 
     def read(self) -> Image | None:
         """The next frame, or None when the source has ended."""
@@ -46,6 +50,8 @@ class FrameSource(Protocol):
 
 class StillSource:
     """One image, repeated forever (a sample photo or an image file)."""
+
+    live = False
 
     def __init__(self, image: Image, description: str) -> None:
         self._image = image
@@ -60,6 +66,8 @@ class StillSource:
 
 class FolderSource:
     """The images of a folder in name order, looped. Unreadable files are skipped and counted."""
+
+    live = False
 
     def __init__(self, folder: Path, on_bad: Callable[[ImageError], None]) -> None:
         self._paths = list_images([folder])
@@ -86,9 +94,11 @@ class FolderSource:
 
 
 class CaptureSource:
-    """A video file or a camera device through OpenCV's VideoCapture."""
+    """A video file or a camera device (``live``) through OpenCV's VideoCapture."""
 
-    def __init__(self, target: str | int, description: str, *, loop: bool) -> None:
+    def __init__(
+        self, target: str | int, description: str, *, loop: bool, live: bool = False
+    ) -> None:
         _quiet_opencv()
         with _stderr_silenced():
             self._cap = cv2.VideoCapture(target)
@@ -97,6 +107,7 @@ class CaptureSource:
             raise ConfigError(f"cannot open {description} ({what})")
         self._loop = loop
         self.description = description
+        self.live = live
         self.frames_read = 0
 
     @property
@@ -171,12 +182,12 @@ def open_stream(spec: str, *, loop: bool = False) -> CaptureSource:
         target: str | int = int(dev) if dev.isdigit() else dev
         if isinstance(target, str) and not Path(target).exists():
             raise ConfigError(f"camera device {dev}: no such device")
-        return CaptureSource(target, f"camera device {dev}", loop=False)
+        return CaptureSource(target, f"camera device {dev}", loop=False, live=True)
     path = Path(spec).expanduser()
     if _is_device(path):
         if not path.exists():
             raise ConfigError(f"camera device {path}: no such device")
-        return CaptureSource(str(path), f"camera device {path}", loop=False)
+        return CaptureSource(str(path), f"camera device {path}", loop=False, live=True)
     if not path.is_file():
         raise ConfigError(f"video {spec}: no such file")
     return CaptureSource(str(path), f"video {path}", loop=loop)

@@ -51,6 +51,7 @@ def test_folder_loops_in_name_order_and_skips_bad_files(tmp_path: Path) -> None:
     # a.png=100, b.png=50, broken (skipped), c.jpg=~150; then again from the start
     assert seen[:3] == seen[3:] and seen[0] == 100 and seen[1] == 50
     assert len(bad) == 2 and "broken.png" in str(bad[0])
+    assert not src.live
 
 
 def test_video_plays_and_loops(tmp_path: Path) -> None:
@@ -64,6 +65,7 @@ def test_video_plays_and_loops(tmp_path: Path) -> None:
     assert levels[:3] == levels[3:] and levels[0] < levels[1] < levels[2]
     once = open_source(str(path), loop=False)
     assert [once.read() is not None for _ in range(4)] == [True, True, True, False]
+    assert not looped.live and not once.live  # a video's end is not reopened
 
 
 @pytest.mark.parametrize("spec", ["/no/such/file.mp4", "device:/dev/video_nope"])
@@ -141,3 +143,23 @@ def test_is_stream(spec: str, stream: bool) -> None:
 def test_missing_stream_is_one_line(spec: str, message: str) -> None:
     with pytest.raises(ConfigError, match=f"^{message}$"):
         open_stream(spec)
+
+
+class _OpenCapture:
+    """Stands in for cv2.VideoCapture on a device index: opens, gives nothing."""
+
+    def __init__(self, target: object) -> None:
+        self.target = target
+
+    def isOpened(self) -> bool:  # OpenCV's name
+        return True
+
+    def release(self) -> None:
+        return None
+
+
+def test_devices_are_live(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(cv2, "VideoCapture", _OpenCapture)
+    device = open_source("device:3")
+    assert device.live and device.description == "camera device 3"
+    assert not open_source("sample:chelsea").live
