@@ -34,10 +34,16 @@ class RecorderSettings:
     thread writes; a full queue drops the message and counts it (the bus is never blocked).
     Messages are written in compressed chunks of ``chunk_size_kb``; a chunk is also closed
     every ``flush_period_s``, so a recorder that is killed loses at most that much.
-    A progress line (messages, MB, drops) every ``progress_period_s``. The recorder lowers its
-    own CPU priority by ``nice`` (0..19): on a small robot computer it shares the cores with the
-    detector, and a recording must take only the time perception leaves over (the queue then
-    drops and counts what it could not write).
+    A progress line (messages, MB, drops) every ``progress_period_s``.
+
+    On a small robot computer the recorder shares the cores with the detector, and a recording
+    must take only the time perception leaves over (common/priority.py). With ``sched_idle``
+    (Linux ``SCHED_IDLE``, the default) it runs only on a core nothing else wants: on a machine
+    that perception keeps busy all the time it then falls behind, and the queue drops and counts
+    what it could not write (the progress line says so). ``sched_idle = false`` shares the CPU
+    by ``nice`` (0..19) instead: a smaller share, but one taken even mid-inference. Either ranks
+    the recorder only against the processes of its own session: the supervisor's services
+    share its session; a ``zstack record`` typed at another terminal does not.
     """
 
     output_dir: str = "recordings"
@@ -48,6 +54,7 @@ class RecorderSettings:
     flush_period_s: float = 1.0
     progress_period_s: float = 5.0
     nice: int = 10
+    sched_idle: bool = True
 
     BOUNDS: ClassVar[Bounds] = {
         "queue_size": (1, 100_000),

@@ -3,8 +3,10 @@ clean stop, and the PIDs of the services it started.
 
 The scenario runner (``services/sim/runner.py``), the report's recorder
 (``services/metrics/session.py``) and the integration tests start stacks this way. The
-supervisor gets a session of its own (``start_new_session``), so a Ctrl-C at the terminal reaches
-only the caller, which then stops the stack with one SIGINT, as a person would.
+supervisor gets a process group of its own, so a Ctrl-C at the terminal reaches only the caller,
+which then stops the stack with one SIGINT, as a person would. It stays in the caller's session,
+as its services stay in its own: CPU priorities rank processes within a session only
+(common/priority.py), and a benchmark's recorder must rank as the service would.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ def free_port() -> int:
 def start_supervisor(
     config_path: str | Path, log: IO[bytes], env: Mapping[str, str] | None = None
 ) -> subprocess.Popen[bytes]:
-    """Start ``python -m deploy.supervisor --config config_path`` in a session of its own.
+    """Start ``python -m deploy.supervisor --config config_path`` in a process group of its own.
 
     Its output (stdout and stderr, unbuffered) goes to ``log``; ``env`` replaces this process's
     environment when given.
@@ -50,7 +52,8 @@ def start_supervisor(
         env={**base, "PYTHONUNBUFFERED": "1"},
         stdout=log,
         stderr=subprocess.STDOUT,
-        start_new_session=True,
+        process_group=0,
+        stdin=subprocess.DEVNULL,
     )
 
 

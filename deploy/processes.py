@@ -67,13 +67,17 @@ class ServiceProcess:
     def start(self) -> None:
         # The PID tells the service whom it must not outlive (common/lifecycle.py).
         env = {**os.environ, "PYTHONUNBUFFERED": "1", SUPERVISOR_PID_ENV: str(os.getpid())}
-        # A session of its own: a Ctrl-C at the terminal reaches the supervisor only, which then
-        # stops the services in order instead of all of them dying at once.
+        # A process group of its own: a Ctrl-C at the terminal reaches the supervisor only, which
+        # then stops the services in order instead of all of them dying at once. The same
+        # session as ours, though: with the kernel's autogroup scheduling the CPU is shared
+        # between sessions first, and a service's priority (the recorder's nice, SCHED_IDLE)
+        # ranks it against the detector only within one (common/priority.py).
         # Its stdout goes to our stderr: our stdout carries only the --duration summary.
         self.proc = subprocess.Popen(
             self.command,
             env=env,
-            start_new_session=True,
+            process_group=0,
+            stdin=subprocess.DEVNULL,
             stdout=sys.stderr.fileno(),
             stderr=subprocess.PIPE,
         )

@@ -38,6 +38,8 @@ from deploy.launch import free_port, start_supervisor, stop_supervisor, wait_rea
 STARTUP_S = 180.0
 WARMUP_S = 10.0
 STACK = ("sim", "detector", "controller", "metrics")
+#: Where a frame's time to detections goes: capture -> the detector took it, then its stages.
+STAGES = ("transport", "preprocess", "inference", "postprocess")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -60,12 +62,16 @@ class _Phase:
             self.start = time.monotonic()
             self.latency_ms: list[float] = []
             self.detections_ms: list[float] = []
+            self.stages_ms: dict[str, list[float]] = {s: [] for s in STAGES}
             self._seen: set[int] = set()
 
     def on_detections(self, msg: Detections) -> None:
         with self._lock:
             self.frames += 1
             self.detections_ms.append((msg.published_ns - msg.header.stamp_ns) / 1e6)
+            self.stages_ms["transport"].append((msg.received_ns - msg.header.stamp_ns) / 1e6)
+            for stage in STAGES[1:]:
+                self.stages_ms[stage].append(msg.timing_ms.get(stage, float("nan")))
 
     def on_twist(self, msg: Twist) -> None:
         with self._lock:
@@ -74,10 +80,11 @@ class _Phase:
                 self._seen.add(stamp)
                 self.latency_ms.append((msg.header.stamp_ns - stamp) / 1e6)
 
-    def take(self) -> tuple[int, float, list[float], list[float]]:
+    def take(self) -> tuple[int, float, list[float], list[float], dict[str, list[float]]]:
         with self._lock:
             elapsed = time.monotonic() - self.start
-            return self.frames, elapsed, list(self.latency_ms), list(self.detections_ms)
+            stages = {s: list(v) for s, v in self.stages_ms.items()}
+            return self.frames, elapsed, list(self.latency_ms), list(self.detections_ms), stages
 
 
 def _config(base: Config, workdir: Path) -> Config:
@@ -92,16 +99,28 @@ def _config(base: Config, workdir: Path) -> Config:
 
 
 def _p50(values: list[float]) -> float:
-    return float(np.percentile(values, 50)) if values else float("nan")
+    return float(np.nanpercentile(values, 50)) if values else float("nan")
 
 
-def _summary(frames: int, seconds: float, e2e: list[float], dets: list[float]) -> dict[str, float]:
+def _summary(
+    frames: int, seconds: float, e2e: list[float], dets: list[float],
+    stages: dict[str, list[float]],
+) -> dict[str, float]:  # fmt: skip
     return {
         "fps": frames / seconds if seconds > 0 else 0.0,
         "e2e_p50_ms": _p50(e2e),  # capture -> first command reacting to the frame
         "detections_p50_ms": _p50(dets),  # capture -> detections sent
+        **{f"{s}_p50_ms": _p50(v) for s, v in stages.items()},
         "commands": float(len(e2e)),
     }
+
+
+def _add(total: list[Any], took: tuple[Any, ...]) -> list[Any]:
+    """Phase figures summed: counts and seconds added, lists (and lists per stage) joined."""
+    out = []
+    for t, v in zip(total, took, strict=True):
+        out.append({s: t[s] + v[s] for s in t} if isinstance(t, dict) else t + v)
+    return out
 
 
 def main(args: argparse.Namespace, stop: threading.Event) -> int:
@@ -133,6 +152,9 @@ def main(args: argparse.Namespace, stop: threading.Event) -> int:
           f"{on['commands']:.0f} commands reacting to a frame)")
     print(f"{'capture->det p50':18}{off['detections_p50_ms']:10.0f}"
           f"{on['detections_p50_ms']:10.0f}{figures['detections_p50_ratio']:8.3f}   (ms)")
+    for stage in STAGES:
+        a, b = off[f"{stage}_p50_ms"], on[f"{stage}_p50_ms"]
+        print(f"{'  ' + stage + ' p50':18}{a:10.1f}{b:10.1f}{b / a if a else float('nan'):8.3f}")
     print(f"({args.rounds} phases of {args.phase:.0f} s each; recorder wrote "
           f"{figures['recorded_mb']:.1f} MB, dropped {figures['dropped']})")  # fmt: skip
     return 0
@@ -157,7 +179,9 @@ def _run(
     try:
         wait_ready(session, keys, set(STACK), proc, STARTUP_S, stop=stop)
         stop.wait(WARMUP_S)
-        totals: dict[str, list[Any]] = {c: [0, 0.0, [], []] for c in ("without", "with")}
+        totals: dict[str, list[Any]] = {
+            c: [0, 0.0, [], [], {s: [] for s in STAGES}] for c in ("without", "with")
+        }
         dropped, recorded = 0, 0.0
         for k in range(args.rounds):
             for condition in ("without", "with"):
@@ -168,13 +192,14 @@ def _run(
                         [sys.executable, "-m", "services.recorder", "record", "--config",
                          str(path), "--out", str(out)],
                         cwd=REPO_ROOT, stderr=subprocess.PIPE, env={**os.environ},
+                        process_group=0,  # in the stack's session, as the service runs
                     )  # fmt: skip
                     wait_ready(session, keys, {"recorder"}, proc, 60.0, stop=stop)
                 phase.reset()
                 if stop.wait(args.phase):
                     raise KeyboardInterrupt
                 took = phase.take()
-                totals[condition] = [t + v for t, v in zip(totals[condition], took, strict=True)]
+                totals[condition] = _add(totals[condition], took)
                 if recorder is not None:
                     recorder.send_signal(signal.SIGINT)
                     _, err = recorder.communicate(timeout=60)

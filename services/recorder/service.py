@@ -9,7 +9,6 @@ service as ``recorder.*``; a progress line says messages, MB and drops.
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections.abc import Callable
@@ -32,6 +31,7 @@ from common.messages import (
     Twist,
 )
 from common.node import Node
+from common.priority import lower_priority
 from common.recorder_settings import TIME_FIELD
 from common.settings import REPO_ROOT, Config
 from services.recorder.channels import Translator
@@ -117,8 +117,9 @@ def record(
     duration_s: float = 0.0,
 ) -> int:
     """Record until ``stop`` is set or ``duration_s`` (0: no limit) has passed."""
-    os.nice(config.recorder.nice)  # below perception: recording takes only the spare CPU
+    priority = lower_priority(config.recorder.nice, config.recorder.sched_idle)
     with Node(SERVICE, config) as node:
+        node.log.info("CPU priority: %s", priority)
         recorder = Recorder(node, path)
         node.ready()
         progress(f"recording to {path}")

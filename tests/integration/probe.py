@@ -52,7 +52,8 @@ def _on_health(sample: zenoh.Sample) -> None:
 
 
 def _detections(raw: bytes) -> dict[str, Any]:
-    return {"classes": list(Detections.decode(raw).class_names)}
+    d = Detections.decode(raw)
+    return {"classes": list(d.class_names), "age_ms": (time.time_ns() - d.header.stamp_ns) / 1e6}
 
 
 def _twist(raw: bytes) -> dict[str, Any]:
@@ -62,7 +63,7 @@ def _twist(raw: bytes) -> dict[str, Any]:
 
 def _status(raw: bytes) -> dict[str, Any]:
     s = ControllerStatus.decode(raw)
-    return {"state": str(s.state), "seq": s.header.seq}
+    return {"state": str(s.state), "reason": s.reason, "seq": s.header.seq}
 
 
 def main() -> None:

@@ -4,6 +4,7 @@ play a ROS 2 bag that rosbags wrote, survive a SIGKILL, and refuse bad files wit
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -21,6 +22,7 @@ from rosbags.rosbag2 import Writer as BagWriter
 from common.frames import image_to_frame
 from common.images import load_sample
 from common.messages import Detections, Header, LaserScan
+from deploy.launch import service_pids
 from services.recorder.compare import match_frame
 from services.recorder.reading import Recording
 from services.recorder.runs import FrameDetections, load_run
@@ -102,6 +104,19 @@ def _ros2_bag(folder: Path) -> Path:
     return folder
 
 
+def _check_priority(stack: Stack) -> None:
+    """The recorder service yields the CPU to perception: niced and SCHED_IDLE, in the
+    detector's session (the kernel's autogroup shares the CPU between sessions first, so a
+    priority ranks a process only within its own: common/priority.py)."""
+    (pid,) = service_pids("recorder", stack.config_path)
+    (detector,) = service_pids("detector", stack.config_path)
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    nice, policy = int(fields[16]), int(fields[38])  # stat fields 19 and 41
+    assert nice == stack.config.recorder.nice > 0
+    assert policy == os.SCHED_IDLE and stack.config.recorder.sched_idle
+    assert os.getsid(pid) == os.getsid(detector)
+
+
 def test_record_read_replay_and_bad_files(make_stack, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     # 1. Record the default stack (the recorder listed as a service) and, beside it, a second
     #    recorder that is SIGKILLed.
@@ -111,6 +126,7 @@ def test_record_read_replay_and_bad_files(make_stack, tmp_path: Path) -> None:  
         sim={"camera_rate_hz": 2.0},
     )
     stack.wait_ready(set(DEFAULT))
+    _check_priority(stack)
     killed = tmp_path / "killed.mcap"
     victim = _recorder(stack, "record", "--out", str(killed))
     _, dets = stack.subscribe(stack.keys.detections("front"))

@@ -123,6 +123,14 @@ class Probe:
         events = self.of("health", after)
         return any(e["service"] == service and e["present"] is present for e in events)
 
+    def recent(self, after: float) -> str:
+        """The newest detections and controller states seen since ``after``, for a failure."""
+        dets = [(round(e["t"] - after, 1), e["classes"], round(e["age_ms"])) for e in
+                self.of("detections", after)[-5:]]  # fmt: skip
+        states = [(round(e["t"] - after, 1), e["state"], e["reason"]) for e in
+                  self.of("status", after)[-5:]]  # fmt: skip
+        return f"detections (t, classes, age ms): {dets}; controller: {states}"
+
     def moving(self, after: float) -> bool:
         return any(not c["zero"] for c in self.of("cmd_vel", after))
 
@@ -183,7 +191,10 @@ def test_detector_on_another_host_survives_a_cut_link(hosts: Hosts, tmp_path: Pa
     # The link is back: Zenoh reconnects by itself, detections resume, the robot follows.
     wait_for(lambda: probe.health("detector", True, restored), 60, lambda: f"A back:\n{logs()}")
     wait_for(lambda: probe.of("detections", restored), 30, "detections after the link is back")
-    wait_for(lambda: probe.moving(restored), 30, lambda: f"the robot to follow again:\n{logs()}")
+    wait_for(
+        lambda: probe.moving(restored), 30,
+        lambda: f"the robot to follow again; {probe.recent(restored)}\n{logs()}",
+    )  # fmt: skip
     dropped = min(e["t"] for e in probe.of("health", cut) if not e["present"])
     back = min(e["t"] for e in probe.of("detections", restored))
     moving = min(c["t"] for c in probe.of("cmd_vel", restored) if not c["zero"])
