@@ -22,12 +22,14 @@ import zenoh
 
 from common.bus import open_session
 from common.config_file import load_config
-from common.errors import DecodeError
+from common.errors import ConfigError, DecodeError
 from common.keys import Keys
 from common.lifecycle import stop_event
 from common.messages import ControllerStatus, Detections, Twist
+from common.settings import Config
 
 _lock = threading.Lock()
+OPEN_TIMEOUT_S = 60.0  # a router (client mode) may start after the probe
 
 
 def emit(kind: str, **fields: Any) -> None:
@@ -66,6 +68,17 @@ def _status(raw: bytes) -> dict[str, Any]:
     return {"state": str(s.state), "reason": s.reason, "seq": s.header.seq}
 
 
+def _open(config: Config, stop: threading.Event) -> zenoh.Session:
+    """The probe's session; in client mode the router may not listen yet: retry for a while."""
+    deadline = time.monotonic() + OPEN_TIMEOUT_S
+    while True:
+        try:
+            return open_session(config.zenoh, "observer")
+        except ConfigError:
+            if time.monotonic() > deadline or stop.wait(0.5):
+                raise
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(prog="python -m tests.integration.probe")
     parser.add_argument("--config", required=True)
@@ -73,7 +86,7 @@ def main() -> None:
     stop = stop_event()
     config = load_config(args.config, environ={})
     keys = Keys(config.stack.prefix)
-    session = open_session(config.zenoh, "observer")
+    session = _open(config, stop)
     detections = keys.detections(config.stack.camera)
     subs = [
         session.declare_subscriber(detections, _on("detections", _detections)),
