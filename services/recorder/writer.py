@@ -131,12 +131,11 @@ class _Item:
 class QueuedRecorder(Closing):
     """The bounded queue and its writer thread in front of an :class:`McapFile`.
 
-    The writer works in batches: it wakes every ``poll_s`` (at most 0.1 s) and writes all that
-    is queued, rather than waking for each message. On a small computer every wake-up of
-    another thread can take a core from the detector in the middle of an inference, so a
-    recorder woken 10 times a second instead of ~100 costs perception less
-    (docs/benchmarks.md). Offering is a length check and an append, with no lock to wait on
-    and no thread to wake.
+    The writer works in batches: it wakes at most every 0.1 s (half ``flush_period_s`` if less)
+    and writes all that is queued, rather than waking for each message: about 6 % of one core
+    instead of 7 % on the default stack (docs/benchmarks.md; what keeps it off the detector's
+    cores is its priority, service.py). Offering is a length check and an append, with no lock
+    to wait on and no thread to wake.
 
     Counters: ``received`` (offered), ``dropped`` (queue full), ``written`` (stack messages
     written, each one or more MCAP messages), ``bad_input`` (undecodable).
@@ -155,7 +154,7 @@ class QueuedRecorder(Closing):
         self._limit = settings.queue_size
         self._queue: deque[_Item] = deque()  # append and popleft are atomic
         self._closing = threading.Event()
-        self.poll_s = min(0.1, settings.flush_period_s / 2)
+        self._poll_s = min(0.1, settings.flush_period_s / 2)
         self._thread = threading.Thread(target=self._run, name="recorder-writer", daemon=True)
         self._error: Exception | None = None
         self._thread.start()
@@ -178,7 +177,7 @@ class QueuedRecorder(Closing):
     def _run(self) -> None:
         try:
             while True:
-                closing = self._closing.wait(self.poll_s)
+                closing = self._closing.wait(self._poll_s)
                 while self._queue:  # what came in meanwhile; on closing, all that is left
                     self._write(self._queue.popleft())
                 self.file.tick()
