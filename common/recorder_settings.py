@@ -34,7 +34,9 @@ class RecorderSettings:
     thread writes; a full queue drops the message and counts it (the bus is never blocked).
     Messages are written in compressed chunks of ``chunk_size_kb``; a chunk is also closed
     every ``flush_period_s``, so a recorder that is killed loses at most that much.
-    A progress line (messages, MB, drops) every ``progress_period_s``.
+    A progress line (messages, MB, drops) every ``progress_period_s``. ``zstack record``
+    warns when it has heard nothing of the stack after ``silence_warning_s``, and fails at the
+    end if it never did.
 
     On a small robot computer the recorder shares the cores with the detector, and a recording
     must take only the time perception leaves over (common/priority.py). With ``sched_idle``
@@ -53,6 +55,7 @@ class RecorderSettings:
     compression: Compression = Compression.LZ4
     flush_period_s: float = 1.0
     progress_period_s: float = 5.0
+    silence_warning_s: float = 5.0
     nice: int = 10
     sched_idle: bool = True
 
@@ -61,6 +64,7 @@ class RecorderSettings:
         "chunk_size_kb": (16, 65536),
         "flush_period_s": (0.05, 60),
         "progress_period_s": (0.1, 3600),
+        "silence_warning_s": (0.5, 3600),
         "nice": (0, 19),
     }
 

@@ -14,16 +14,19 @@ from typing import Any
 
 import zenoh
 
+from common import reach
 from common.bus import open_session
 from common.contracts import MetricsAnswer
-from common.errors import DecodeError
+from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, ServiceCounters, Twist
 from common.node import Node
-from common.queries import query_metrics
+from common.queries import query_metrics, ready_services
 from common.settings import SERVICES, Config
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
 from services.metrics.trust import refuse_counters, refuse_detections, strict_json
+
+OBSERVER = "observer"  # the principal that asks: it may read and query, never put
 
 
 def run(config: Config, stop: threading.Event) -> int:
@@ -128,9 +131,10 @@ def run(config: Config, stop: threading.Event) -> int:
     return 0
 
 
-def query(config: Config, timeout_s: float) -> MetricsAnswer | None:
-    """Ask the metrics service for its snapshot; None if nobody answered within the timeout."""
-    session = open_session(config.zenoh, "observer")
+def query(config: Config, timeout_s: float) -> MetricsAnswer:
+    """Ask the metrics service for its snapshot. Nobody answering within the timeout is a
+    StackError naming where it looked and the likely fix (common/reach.py)."""
+    session = open_session(config.zenoh, OBSERVER)
     keys = Keys(config.stack.prefix)
     try:
         deadline = time.monotonic() + timeout_s
@@ -139,6 +143,17 @@ def query(config: Config, timeout_s: float) -> MetricsAnswer | None:
             if answer is not None:
                 return answer
             time.sleep(0.2)  # the peer mesh may still be forming; ask again
-        return None
+        linked = reach.connected(session)
+        ready = frozenset(ready_services(session, keys)) if linked else frozenset()
+        raise StackError(
+            reach.unreached(
+                f"no metrics service answered within {timeout_s:.0f} s",
+                config.zenoh,
+                config.stack.prefix,
+                OBSERVER,
+                linked=linked,
+                ready=ready,
+            )
+        )
     finally:
         session.close()

@@ -44,7 +44,7 @@ def record(args: argparse.Namespace) -> int:
     if args.duration < 0:
         raise ConfigError(f"--duration must be >= 0, got {args.duration}")
     path = args.out or service.default_path(config)
-    return service.record(config, path, stop, print_progress, args.duration)
+    return service.record(config, path, stop, print_progress, args.duration, require_stack=True)
 
 
 def _rate(text: str) -> float:

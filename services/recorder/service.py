@@ -13,11 +13,14 @@ import threading
 import time
 from collections.abc import Callable
 from datetime import datetime
+from math import inf
 from pathlib import Path
 
 import zenoh
 
+from common import reach
 from common.codec import Message
+from common.errors import StackError
 from common.keys import Keys
 from common.lifecycle import EXIT_FAILED, EXIT_OK, Progress
 from common.messages import (
@@ -75,14 +78,18 @@ class Recorder:
             node.counters,
         )  # fmt: skip
         self._subs: list[zenoh.Subscriber[None]] = []
+        self._own = node.keys.counters(SERVICE)
+        self.heard = 0  # samples from the stack: every key but the recorder's own counters
         for key, cls in subscriptions(node.keys, config.stack.camera).items():
             self._subs.append(node.session.declare_subscriber(key, self._offer(cls.decode)))
 
     def _offer(self, decode: Decode) -> Callable[[zenoh.Sample], None]:
         def on_sample(sample: zenoh.Sample) -> None:
             # Zenoh's thread: copy the bytes and queue them, nothing else.
-            self._queued.offer(str(sample.key_expr), sample.payload.to_bytes(), time.time_ns(),
-                               decode)  # fmt: skip
+            key = str(sample.key_expr)
+            if key != self._own:
+                self.heard += 1  # one writer per subscriber thread; a count, never a decision
+            self._queued.offer(key, sample.payload.to_bytes(), time.time_ns(), decode)
 
         return on_sample
 
@@ -115,8 +122,15 @@ def record(
     stop: threading.Event,
     progress: Progress,
     duration_s: float = 0.0,
+    *,
+    require_stack: bool = False,
 ) -> int:
-    """Record until ``stop`` is set or ``duration_s`` (0: no limit) has passed."""
+    """Record until ``stop`` is set or ``duration_s`` (0: no limit) has passed.
+
+    ``require_stack`` (the command line): warn once when nothing of the stack has been heard
+    after ``recorder.silence_warning_s``, and fail (exit 1, the file kept) when nothing was
+    heard at all: a recording of the recorder's own counters is not a recording of a stack.
+    """
     priority = lower_priority(config.recorder.nice, config.recorder.sched_idle)
     with Node(SERVICE, config) as node:
         node.log.info("CPU priority: %s", priority)
@@ -126,6 +140,8 @@ def record(
         period = config.recorder.progress_period_s
         end = time.monotonic() + duration_s if duration_s > 0 else float("inf")
         next_line = time.monotonic() + period
+        warn_at = time.monotonic() + config.recorder.silence_warning_s if require_stack else inf
+        where = reach.describe(config.zenoh, config.stack.prefix, SERVICE)
         code = EXIT_OK
         try:
             while not stop.is_set() and time.monotonic() < end:
@@ -137,7 +153,22 @@ def record(
                 if time.monotonic() >= next_line:
                     next_line += period
                     progress(recorder.progress())
+                if recorder.heard == 0 and time.monotonic() >= warn_at:
+                    warn_at = inf
+                    progress(f"warning: nothing heard from the stack yet at {where}")
         finally:
             recorder.close()
         progress(recorder.progress() + (" (stopped by an error)" if code else ", done"))
+        if code == EXIT_OK and require_stack and recorder.heard == 0:
+            linked = reach.connected(node.session)
+            raise StackError(
+                reach.unreached(
+                    f"recorded nothing from the stack ({path} holds only the recorder's own "
+                    "counters)",
+                    config.zenoh,
+                    config.stack.prefix,
+                    SERVICE,
+                    linked=linked,
+                )
+            )
         return code
