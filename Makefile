@@ -12,10 +12,11 @@ CONFIG_ARG := $(if $(CONFIG),--config $(CONFIG))
 
 # What the stack needs to run: no test tools, no torch.
 $(STAMP): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e .
-	touch $(STAMP)
+	@echo "installing the runtime into $(VENV)" >&2
+	@$(PYTHON) -m venv $(VENV)
+	@$(PY) -m pip install --quiet --upgrade pip >&2
+	@$(PY) -m pip install --quiet -e . >&2
+	@touch $(STAMP)
 
 # What the tests need on top.
 $(DEV_STAMP): $(STAMP)
@@ -24,12 +25,13 @@ $(DEV_STAMP): $(STAMP)
 
 setup: $(STAMP) model
 
-# The default model, fetched only when the config uses it.
+# The default model, fetched only when the config uses it. Its path goes to stderr: with
+# `make run ARGS="--duration S"` stdout carries the run's JSON summary and nothing else.
 model: $(STAMP)
-	$(PY) -m services.detector fetch-model --config $(or $(CONFIG),deploy/stack.toml)
+	@$(PY) -m services.detector fetch-model --config $(or $(CONFIG),deploy/stack.toml) >&2
 
 run: setup
-	$(PY) -m deploy.supervisor $(CONFIG_ARG) $(ARGS)
+	@$(PY) -m deploy.supervisor $(CONFIG_ARG) $(ARGS)
 
 credentials: $(STAMP)
 	$(PY) -m deploy.credentials $(ARGS)

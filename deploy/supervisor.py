@@ -16,6 +16,7 @@ import math
 import sys
 import threading
 import time
+from typing import cast
 
 import zenoh
 
@@ -142,7 +143,9 @@ def status_line(
     return line
 
 
-def supervise(config: Config, stop: threading.Event, duration_s: float | None) -> int:
+def supervise(
+    config: Config, stop: threading.Event, duration_s: float | None, *, timeline: bool = False
+) -> int:
     log = setup_logging("supervisor")
     s = config.supervisor
     keys = Keys(config.stack.prefix)
@@ -194,7 +197,7 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
         lock.close()
     summary = {
         "services": {p.name: {"exit_code": p.last_exit, "restarts": p.restarts} for p in procs},
-        "metrics": last_metrics,
+        "metrics": brief(last_metrics, timeline=timeline),
     }
     if duration_s:
         print(json.dumps(summary, indent=2), flush=True)
@@ -203,6 +206,14 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
     clean = all(p.last_exit == 0 for p in procs)
     log.info("stopped; %s", "all services exited cleanly" if clean else f"exit codes {summary}")
     return 0 if clean else 1
+
+
+def brief(metrics: MetricsAnswer | None, *, timeline: bool) -> MetricsAnswer | None:
+    """The metrics answer for the summary: without its per-second ``timeline`` arrays (a few
+    hundred lines for a minute's run) unless they were asked for."""
+    if metrics is None or timeline:
+        return metrics
+    return cast(MetricsAnswer, {k: v for k, v in metrics.items() if k != "timeline"})
 
 
 def config_warnings(config: Config) -> list[str]:
@@ -234,10 +245,14 @@ def main() -> int:
     parser = argparse.ArgumentParser(prog="python -m deploy.supervisor", description=__doc__)
     parser.add_argument("--config", help="stack config (default deploy/stack.toml)")
     parser.add_argument("--duration", type=float, help="run headless for S seconds, then stop")
+    parser.add_argument(
+        "--timeline", action="store_true",
+        help="with --duration: keep the metrics' per-second timeline in the JSON summary",
+    )  # fmt: skip
     args = parser.parse_args()
     stop = stop_event()
     config = load_config(args.config)
-    return supervise(config, stop, args.duration)
+    return supervise(config, stop, args.duration, timeline=args.timeline)
 
 
 if __name__ == "__main__":
