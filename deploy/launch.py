@@ -1,6 +1,9 @@
 """Running a stack from outside it: a private port, the supervisor as a child, readiness, a
 clean stop, and the PIDs of the services it started.
 
+Every tool here writes the whole config it wants (the user's, with the user's environment
+overrides already applied, plus its private port) and the supervisor reads only that file.
+
 The scenario runner (``services/sim/runner.py``), the report's recorder
 (``services/metrics/session.py``) and the integration tests start stacks this way. The
 supervisor gets a process group of its own, so a Ctrl-C at the terminal reaches only the caller,
@@ -24,10 +27,11 @@ from typing import IO
 
 import zenoh
 
+from common.config_file import ENV_PREFIX, to_toml
 from common.errors import StackError
 from common.keys import Keys
 from common.queries import ready_services
-from common.settings import REPO_ROOT
+from common.settings import REPO_ROOT, Config
 
 
 def free_port() -> int:
@@ -43,18 +47,29 @@ def start_supervisor(
     """Start ``python -m deploy.supervisor --config config_path`` in a process group of its own.
 
     Its output (stdout and stderr, unbuffered) goes to ``log``; ``env`` replaces this process's
-    environment when given.
+    environment when given. The file is the whole truth: ``STACK__*`` overrides are taken out
+    of the supervisor's environment, so that an endpoint exported in the caller's shell cannot
+    move a stack that a tool started on a private port (a caller folds the overrides it wants
+    into the file it writes: :func:`write_config`).
     """
     base = os.environ if env is None else env
+    clean = {k: v for k, v in base.items() if not k.startswith(ENV_PREFIX)}
     return subprocess.Popen(
         [sys.executable, "-m", "deploy.supervisor", "--config", str(config_path)],
         cwd=REPO_ROOT,
-        env={**base, "PYTHONUNBUFFERED": "1"},
+        env={**clean, "PYTHONUNBUFFERED": "1"},
         stdout=log,
         stderr=subprocess.STDOUT,
         process_group=0,
         stdin=subprocess.DEVNULL,
     )
+
+
+def write_config(config: Config, path: Path) -> Path:
+    """Write ``config`` as it was loaded (the file and the environment's overrides together)
+    to ``path``: what a tool hands the supervisor it starts."""
+    path.write_text(to_toml(config))
+    return path
 
 
 def wait_ready(

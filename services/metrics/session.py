@@ -31,7 +31,7 @@ from common.machine import machine_info
 from common.messages import Detections, Header, ServiceCounters, Twist
 from common.queries import query_metrics
 from common.settings import REPO_ROOT, Config
-from deploy.launch import start_supervisor, stop_supervisor, wait_ready
+from deploy.launch import start_supervisor, stop_supervisor, wait_ready, write_config
 from services.metrics.aggregate import Aggregator
 
 SESSION_VERSION = 1
@@ -124,7 +124,9 @@ def record(
     config = load_config(config_path)
     keys = Keys(config.stack.prefix)
     with log_path.open("wb") as log:
-        proc = start_supervisor(config.path, log)  # its own session: our Ctrl-C is sent once
+        # The config as loaded, beside the log: the supervisor reads only that file.
+        path = write_config(config, log_path.with_suffix(".toml"))
+        proc = start_supervisor(path, log)  # its own session: our Ctrl-C is sent once
     try:
         session = open_session(config.zenoh, "observer")
         try:

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -12,6 +13,7 @@ from typing import Any
 import pytest
 
 from common.settings import ControllerSettings
+from deploy.launch import free_port
 from services.sim.score import REACH_TOLERANCE_M, STOP_MARGIN_S
 from tests.integration.conftest import REPO
 
@@ -20,13 +22,14 @@ pytestmark = pytest.mark.integration
 DEFAULTS = ControllerSettings()
 
 
-def run(name: str, *extra: str) -> dict[str, Any]:
+def run(name: str, *extra: str, env: dict[str, str] | None = None) -> dict[str, Any]:
     done = subprocess.run(
         [sys.executable, "-m", "services.sim", "scenario", name, "--json", *extra],
         cwd=REPO,
         capture_output=True,
         text=True,
         timeout=400,
+        env=env,
     )
     assert "Traceback" not in done.stderr, done.stderr
     result: dict[str, Any] = json.loads(done.stdout)
@@ -54,7 +57,10 @@ def reached(result: dict[str, Any]) -> bool:
 
 @pytest.mark.parametrize("name", ["ahead", "side", "crossing"])
 def test_reaches_the_stop_distance(name: str) -> None:
-    result = run(name)
+    # An endpoint exported in the user's shell (as the README teaches) must not move the
+    # scenario's private stack: the runner's own config wins in the supervisor it starts.
+    exported = {**os.environ, "STACK__ZENOH__ENDPOINT": f"tcp/127.0.0.1:{free_port()}"}
+    result = run(name, env=exported)
     assert reached(result), result
     assert result["time_to_reach_s"] is not None
     assert result["success"], result
