@@ -14,6 +14,7 @@ from typing import IO
 
 from common.lifecycle import PERMANENT_FAILURES, SUPERVISOR_PID_ENV
 from common.settings import SupervisorSettings
+from services import STOP_SIGNALS
 
 
 def service_command(name: str, config_path: str) -> list[str]:
@@ -73,14 +74,20 @@ class ServiceProcess:
         # between sessions first, and a service's priority (the recorder's nice, SCHED_IDLE)
         # ranks it against the detector only within one (common/priority.py).
         # Its stdout goes to our stderr: our stdout carries only the --duration summary.
-        self.proc = subprocess.Popen(
-            self.command,
-            env=env,
-            process_group=0,
-            stdin=subprocess.DEVNULL,
-            stdout=sys.stderr.fileno(),
-            stderr=subprocess.PIPE,
-        )
+        # It starts with the stop signals blocked (a child inherits the mask): a stop sent while
+        # its interpreter starts stays pending until services/__init__.py can take it quietly.
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+        try:
+            self.proc = subprocess.Popen(
+                self.command,
+                env=env,
+                process_group=0,
+                stdin=subprocess.DEVNULL,
+                stdout=sys.stderr.fileno(),
+                stderr=subprocess.PIPE,
+            )
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         self.started_at = time.monotonic()
         self.state = "starting"
         assert self.proc.stderr is not None

@@ -1,0 +1,38 @@
+"""A stack stopped at any moment, even while its services are still importing, ends without a
+traceback: a stop is not an error."""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+
+import pytest
+
+from deploy.launch import service_pids, start_supervisor, stop_supervisor
+from tests.integration.conftest import wait_for, write_config
+
+pytestmark = pytest.mark.integration
+
+SERVICES = ["detector", "controller", "metrics"]
+
+
+@pytest.mark.parametrize("attempt", range(3))
+def test_a_stop_while_services_import_leaves_no_traceback(tmp_path: Path, attempt: int) -> None:
+    config = write_config(tmp_path, supervisor={"services": SERVICES})
+    log_path = tmp_path / "supervisor.log"
+    with log_path.open("wb") as log:
+        proc = start_supervisor(config, log)
+    try:
+        # Every service process exists, and none can have finished importing its runtime.
+        wait_for(
+            lambda: all(service_pids(s, config) for s in SERVICES) or proc.poll() is not None,
+            30,
+            "the services' processes",
+            poll=0.01,
+        )
+        proc.send_signal(signal.SIGINT)
+    finally:
+        assert stop_supervisor(proc, 30), log_path.read_text()
+    text = log_path.read_text(errors="replace")
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text, text[-4000:]
+    assert proc.returncode == 0, text[-4000:]
