@@ -31,11 +31,13 @@ class CameraSettings:
 
     ``source`` is one of: ``sample:<name>`` (a scikit-image photo: astronaut, cameraman, chelsea,
     coffee, rocket, motorcycle), a path to an image (repeated), a folder of images (looped), a
-    video file (looped when ``loop``), or ``device:<index or /dev/videoN>`` (webcam / V4L2).
+    video file (looped when ``loop``), ``device:<index or /dev/videoN>`` (webcam / V4L2), or a
+    network stream's URL (``rtsp://``, ``rtsps://``, ``http(s)://``, ``rtmp://``, ``udp://``,
+    ``tcp://``, ``srt://``; read by OpenCV's FFmpeg).
     ``resize`` is (width, height), or (0, 0) to keep the source size. ``jpeg_quality`` 0 sends
     raw bgr8; 1..100 sends JPEG at that quality. ``hfov_deg`` is the horizontal field of view,
     which turns a pixel column into a bearing (the controller and the simulator use it).
-    A device that gave frames and then stops (unplugged, reset) is reopened every
+    A device or stream that gave frames and then stops (unplugged, reset) is reopened every
     ``reopen_period_s`` until it gives frames again (services/camera/reopen.py); one that gives
     none at start-up stops the camera with one line.
     """

@@ -1,12 +1,14 @@
-"""Frame sources: a scikit-image sample, an image, a folder of images, a video, a device.
+"""Frame sources: a scikit-image sample, an image, a folder of images, a video, a device, or a
+network stream (``rtsp://``, ``http://`` ...: OpenCV's FFmpeg reads it).
 
 Each source yields BGR uint8 images. Opening a source that does not exist raises ConfigError
 with one line; a source that ends (a video without ``loop``, an unplugged device) returns None
 from ``read``. A source from which no frame at all can be read (a folder of corrupt files, a
 video with no decodable frame, a device that gives nothing) raises ConfigError from ``read``:
 waiting will not help, so the service ends with that line and the supervisor does not restart
-it. A device that gave frames and then stopped is ``live``: the service reopens it
-(services/camera/reopen.py).
+it. A device or a network stream that gave frames and then stopped is ``live``: the service
+reopens it (services/camera/reopen.py). A network stream that does not answer within
+``STREAM_TIMEOUT_S`` is one line, never a hang.
 
 The command line's ``detect`` opens videos and devices here too (:func:`is_stream`,
 :func:`open_stream`), so both read the same ``device:``/path forms.
@@ -32,6 +34,10 @@ VIDEO_EXTENSIONS = frozenset(
     {".avi", ".m4v", ".mkv", ".mov", ".mp4", ".mpeg", ".mpg", ".ts", ".webm", ".wmv"}
 )
 _DEVICE_PREFIX = "device:"
+#: URL schemes read as network streams through OpenCV's FFmpeg backend.
+STREAM_SCHEMES = ("rtsp", "rtsps", "rtmp", "http", "https", "udp", "tcp", "srt")
+#: How long opening a network stream, or waiting for its next frame, may take.
+STREAM_TIMEOUT_S = 5.0
 
 
 class FrameSource(Protocol):
@@ -97,13 +103,30 @@ class CaptureSource:
     """A video file or a camera device (``live``) through OpenCV's VideoCapture."""
 
     def __init__(
-        self, target: str | int, description: str, *, loop: bool, live: bool = False
+        self,
+        target: str | int,
+        description: str,
+        *,
+        loop: bool,
+        live: bool = False,
+        network: bool = False,
     ) -> None:
         _quiet_opencv()
         with _stderr_silenced():
-            self._cap = cv2.VideoCapture(target)
+            if network:
+                ms = int(STREAM_TIMEOUT_S * 1000)
+                timeouts = [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, ms, cv2.CAP_PROP_READ_TIMEOUT_MSEC, ms]
+                self._cap = cv2.VideoCapture(target, cv2.CAP_FFMPEG, timeouts)
+            else:
+                self._cap = cv2.VideoCapture(target)
         if not self._cap.isOpened():
-            what = "no such device" if isinstance(target, int) else "not a readable video"
+            what = (
+                f"no stream there, or none within {STREAM_TIMEOUT_S:g} s"
+                if network
+                else "no such device"
+                if isinstance(target, int)
+                else "not a readable video"
+            )
             raise ConfigError(f"cannot open {description} ({what})")
         self._loop = loop
         self.description = description
@@ -161,11 +184,17 @@ def open_source(
     raise ConfigError(f"{spec!r}: neither an image, a video nor a folder")  # is_stream said no
 
 
+def is_url(spec: str) -> bool:
+    """Whether ``spec`` is a network stream's URL (``rtsp://host/path``, ``http://...``)."""
+    scheme, sep, rest = spec.partition("://")
+    return bool(sep and rest) and scheme.lower() in STREAM_SCHEMES
+
+
 def is_stream(spec: str) -> bool:
-    """Whether ``spec`` names a video file or a camera device rather than images: a
-    ``device:`` spec, a device file (``/dev/video0``), a video extension, or any other existing
-    file that is not an image (tried as a video)."""
-    if spec.startswith(_DEVICE_PREFIX):
+    """Whether ``spec`` names a video file, a camera device or a network stream rather than
+    images: a ``device:`` spec, a device file (``/dev/video0``), a stream URL, a video
+    extension, or any other existing file that is not an image (tried as a video)."""
+    if spec.startswith(_DEVICE_PREFIX) or is_url(spec):
         return True
     path = Path(spec).expanduser()
     suffix = path.suffix.lower()
@@ -175,8 +204,11 @@ def is_stream(spec: str) -> bool:
 
 
 def open_stream(spec: str, *, loop: bool = False) -> CaptureSource:
-    """Open a video file or a device (``device:0``, ``device:/dev/video0`` or ``/dev/video0``);
-    ConfigError with one line when it does not exist or cannot be opened. Devices never loop."""
+    """Open a video file, a device (``device:0``, ``device:/dev/video0`` or ``/dev/video0``) or a
+    network stream (``rtsp://...``); ConfigError with one line when it does not exist or cannot
+    be opened. Devices and streams never loop; both are live (reopened when they stop)."""
+    if is_url(spec):
+        return CaptureSource(spec, f"network stream {spec}", loop=False, live=True, network=True)
     if spec.startswith(_DEVICE_PREFIX):
         dev = spec.removeprefix(_DEVICE_PREFIX)
         target: str | int = int(dev) if dev.isdigit() else dev

@@ -31,11 +31,13 @@ from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code, 
 from common.settings import DetectorSettings
 from services.camera import CaptureSource, is_stream, open_stream
 from services.detector.backends import BACKEND_CHOICES
+from services.detector.device import backend_for
 from services.detector.model_files import ensure_default_model
 from services.detector.pipeline import Detector
 from services.detector.progress import ProgressBar
 from services.detector.results import result_json, result_text
 from services.detector.types import DetectionResult
+from services.detector.variants import sized_model
 from services.detector.video import detect_stream
 
 # The stack's shared exit codes (common/lifecycle.py); a failed image is the generic failure.
@@ -48,8 +50,12 @@ def _error(message: str) -> None:
     print(f"error: {message}", file=sys.stderr)
 
 
-def _resolve_model(model: str | None) -> Path:
-    """The ``--model`` path, or the default model, fetched first if it is not there yet."""
+def _resolve_model(model: str | None, imgsz: int = 0) -> Path:
+    """The ``--model`` path, or the default model, fetched first if it is not there yet;
+    ``imgsz``: at that input size (the default model is rebuilt for it; another model must
+    have it already)."""
+    if imgsz:
+        return sized_model(DetectorSettings(model=model or "", imgsz=imgsz), print_progress)
     if model is not None:
         return Path(model)
     return ensure_default_model(progress=print_progress)
@@ -144,9 +150,15 @@ def run_detect(args: argparse.Namespace) -> int:
             raise ImageError(f"no images found in {' '.join(args.paths)}")
         if save_dir is not None:
             save_dir.mkdir(parents=True, exist_ok=True)
+        backend, options = backend_for(args.backend, args.device)
         _show_backend_log()
         det = opened.enter_context(
-            Detector.open(_resolve_model(args.model), backend=args.backend, settings=settings)
+            Detector.open(
+                _resolve_model(args.model, args.imgsz),
+                backend=backend,
+                settings=settings,
+                **options,
+            )
         )
         images = [item for item in inputs if isinstance(item, Path)]
         bar = ProgressBar("images", len(images), unit="images") if len(images) > 1 else None
@@ -175,9 +187,23 @@ def _add_detect(subparsers: Any) -> None:
         "paths",
         nargs="+",
         metavar="PATH",
-        help="image file, folder of images, video file, device:N or /dev/videoN",
+        help="image file, folder of images, video file, device:N, /dev/videoN or a stream URL "
+        "(rtsp://, http://, ...)",
     )
-    _add_model_arguments(p)
+    p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
+    p.add_argument(
+        "--backend",
+        choices=BACKEND_CHOICES,
+        help="onnx, openvino, cuda, tensorrt or auto (default: onnx; cuda with a GPU --device)",
+    )
+    p.add_argument("--device", help="cpu, N, cuda or cuda:N (as yolo's --device)")
+    p.add_argument(
+        "--imgsz",
+        type=int,
+        default=0,
+        help="input size, a multiple of 32 (default: the model's own; the default model is "
+        "rebuilt for it)",
+    )
     p.add_argument("--conf", type=float, default=_DEFAULTS.conf, help="minimum score, 0..1")
     p.add_argument("--iou", type=float, default=_DEFAULTS.iou, help="NMS IoU threshold, 0..1")
     p.add_argument("--max-det", type=int, default=_DEFAULTS.max_det, help="detections per image")

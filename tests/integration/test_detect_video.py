@@ -145,3 +145,37 @@ def test_camera_on_a_folder_of_only_corrupt_images_ends_with_one_line(
 
 def tail(path: Path) -> str:
     return "\n".join(path.read_text(errors="replace").splitlines()[-10:])
+
+
+def test_detect_reads_a_network_stream_at_the_asked_size(cat_video: Path, tmp_path: Path) -> None:
+    """A video served over HTTP (a real socket, OpenCV's FFmpeg on the other end), as `yolo
+    predict source=http://...` would read it, at --imgsz 320 on --device cpu."""
+    import functools
+    import http.server
+    import threading
+
+    handler = functools.partial(
+        http.server.SimpleHTTPRequestHandler, directory=str(cat_video.parent)
+    )
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        url = f"http://127.0.0.1:{server.server_address[1]}/{cat_video.name}"
+        done = run("detect", url, "--json", "--imgsz", "320", "--device", "cpu")
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    assert len(lines) == FRAMES, done.stdout
+    assert any(d["class_name"] == "cat" for line in lines for d in line["detections"]), lines
+
+
+def test_a_stream_that_does_not_answer_is_one_line(tmp_path: Path) -> None:
+    done = run("detect", "rtsp://127.0.0.1:9/stream")
+    assert done.returncode in PERMANENT_FAILURES, done.stderr
+    assert "Traceback" not in done.stderr
+    assert done.stderr.strip().splitlines()[-1] == (
+        "error: cannot open network stream rtsp://127.0.0.1:9/stream "
+        "(no stream there, or none within 5 s)"
+    ), done.stderr
