@@ -88,6 +88,18 @@ def _coco_categories(path: Path, data: Mapping[str, Any]) -> dict[int, str]:
     return categories
 
 
+# A labelled set that ships without its photos carries a script beside it that writes them.
+IMAGE_WRITER = "write_images.py"
+
+
+def _how_to_get_images(annotations: Path) -> str:
+    """The hint for a labelled set whose photos are written by a script beside its labels."""
+    writer = annotations.parent / IMAGE_WRITER
+    if not writer.is_file():
+        return " (--images names the folder the file names are relative to)"
+    return f"; write its photos with `python {writer} DIR`, then pass --images DIR"
+
+
 def _coco_images(path: Path, data: Mapping[str, Any], root: Path) -> dict[int, LabelledImage]:
     images: dict[int, LabelledImage] = {}
     for i, im in enumerate(_objects(path, data, "images")):
@@ -101,7 +113,10 @@ def _coco_images(path: Path, data: Mapping[str, Any], root: Path) -> dict[int, L
             raise DatasetError(f"{where}: duplicate image id {iid}")
         image_path = root / file_name
         if not image_path.is_file():
-            raise DatasetError(f"{path}: image {file_name!r} (id {iid}) not found at {image_path}")
+            raise DatasetError(
+                f"{path}: image {file_name!r} (id {iid}) not found at {image_path}"
+                + _how_to_get_images(path)
+            )
         images[iid] = LabelledImage(iid, image_path, width, height)
     if not images:
         raise DatasetError(f"{path}: no images")

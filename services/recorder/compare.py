@@ -103,6 +103,7 @@ class Comparison:
     dv: list[float] = field(default_factory=list)  # |linear A - linear B|, m/s
     dw: list[float] = field(default_factory=list)  # |angular A - angular B|, rad/s
     latency_ms: dict[str, tuple[list[float], list[float]]] = field(default_factory=dict)
+    detectors: tuple[list[str], list[str]] = field(default_factory=lambda: ([], []))
 
     @property
     def match_rate(self) -> float:
@@ -112,7 +113,11 @@ class Comparison:
 
 
 def compare_runs(a: Run, b: Run, iou_min: float = 0.5) -> Comparison:
-    out = Comparison(iou_min=iou_min, frames=(len(a.detections), len(b.detections)))
+    out = Comparison(
+        iou_min=iou_min,
+        frames=(len(a.detections), len(b.detections)),
+        detectors=(a.detectors, b.detectors),
+    )
     both = sorted(set(a.detections) & set(b.detections))
     out.frames_both = len(both)
     count_a: Counter[str] = Counter()
@@ -154,6 +159,9 @@ def report_markdown(c: Comparison, name_a: str, name_b: str, plot: str = "") -> 
     mean_iou = f"Mean IoU of the matched: {np.mean(c.ious):.3f}." if c.ious else ""
     lines = [
         f"# {name_a} vs {name_b}",
+        "",
+        f"Detector: A {', '.join(c.detectors[0]) or 'unknown'}; "
+        f"B {', '.join(c.detectors[1]) or 'unknown'}.",
         "",
         f"Frames detected on: A {c.frames[0]}, B {c.frames[1]}, both {c.frames_both} "
         "(matched by sequence number).",

@@ -47,6 +47,9 @@ class Run:
     detections: dict[int, FrameDetections] = field(default_factory=dict)
     commands: list[Command] = field(default_factory=list)
     truncated: bool = False
+    # Which model produced the detections: "model (backend/device/precision)", in the order
+    # first seen (a run that changed model midway names both).
+    detectors: list[str] = field(default_factory=list)
 
 
 def detections_from_json(body: dict[str, Any]) -> FrameDetections:
@@ -72,6 +75,12 @@ def detections_from_json(body: dict[str, Any]) -> FrameDetections:
         raise DecodeError(f"not a Detections message: {exc}") from exc
 
 
+def detector_name(body: dict[str, Any]) -> str:
+    """``model (backend)`` as a Detections JSON message names them; "unknown" when it does not."""
+    model, backend = str(body.get("model") or "unknown"), str(body.get("backend") or "")
+    return f"{model} ({backend})" if backend else model
+
+
 def command_from_json(body: dict[str, Any]) -> Command:
     try:
         return Command(
@@ -93,8 +102,12 @@ def load_run(path: str | Path) -> Run:
             kind = record.stack_type
             try:
                 if kind == "Detections" and record.channel.message_encoding == "json":
-                    dets = detections_from_json(record.json())
+                    body = record.json()
+                    dets = detections_from_json(body)
                     run.detections.setdefault(dets.seq, dets)
+                    detector = detector_name(body)
+                    if detector not in run.detectors:
+                        run.detectors.append(detector)
                 elif kind == "Twist" and record.channel.message_encoding == "json":
                     run.commands.append(command_from_json(record.json()))
                 elif input_kind(record) is Input.FRAME:

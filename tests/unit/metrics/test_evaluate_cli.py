@@ -35,6 +35,13 @@ def test_missing_image(tmp_path: Path) -> None:
     }))  # fmt: skip
     line = _one_line_error(_evaluate("--dataset", str(ann)))
     assert f"{ann}: image 'gone.jpg' (id 1) not found at {tmp_path / 'gone.jpg'}" in line
+    assert "--images names the folder" in line
+
+
+def test_the_shipped_labels_without_their_photos_name_the_script() -> None:
+    ann = REPO / "tests" / "data" / "skimage_coco" / "annotations.json"
+    line = _one_line_error(_evaluate("--dataset", str(ann)))
+    assert f"write its photos with `python {ann.parent / 'write_images.py'} DIR`" in line
 
 
 def test_label_out_of_range(tmp_path: Path) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from services.recorder.compare import compare_runs, iou_matrix, match_frame, report_markdown
-from services.recorder.runs import Command, FrameDetections, Run
+from services.recorder.runs import Command, FrameDetections, Run, detector_name
 
 
 def _frame(seq: int, boxes: list[tuple[str, list[float]]], stamp: int = 0) -> FrameDetections:
@@ -48,9 +48,13 @@ def test_compare_runs_counts_matches_commands_and_latency() -> None:
         1: _frame(1, [("person", [0, 0, 10, 10])], stamp=50_000_000_000),
         2: _frame(2, [("person", [30, 30, 40, 40])], stamp=51_000_000_000),
     })  # fmt: skip
-    a.commands = [Command(1_100_000_000, 1_000_000_000, 0.3, 0.1),
-                  Command(1_200_000_000, 1_000_000_000, 0.0, 0.0)]  # a later repeat: ignored
+    a.commands = [
+        Command(1_100_000_000, 1_000_000_000, 0.3, 0.1),
+        Command(1_200_000_000, 1_000_000_000, 0.0, 0.0),
+    ]  # a later repeat: ignored
     b.commands = [Command(50_150_000_000, 50_000_000_000, 0.2, -0.1)]  # fmt: skip
+    a.detectors = ["yolov5s-coco.onnx (onnx/cpu/fp32)"]
+    b.detectors = [detector_name({"model": "yolov5s-coco-480.onnx", "backend": "onnx/cpu/int8"})]
     c = compare_runs(a, b, iou_min=0.5)
     assert (c.frames, c.frames_both) == ((3, 2), 2)
     assert (c.detections, c.matched) == ((3, 2), 1)
@@ -63,6 +67,10 @@ def test_compare_runs_counts_matches_commands_and_latency() -> None:
     assert c.latency_ms["capture_to_detector"][0] == pytest.approx([2.0, 2.0, 2.0])
     md = report_markdown(c, "a.mcap", "b.mcap", "compare.png")
     assert "| person | 2 | 2 | 1 |" in md and "**33.3 %**" in md
+    assert (
+        "Detector: A yolov5s-coco.onnx (onnx/cpu/fp32); B yolov5s-coco-480.onnx (onnx/cpu/int8)."
+        in md
+    )
     assert "| inference | 20.0 | 15.0 |" in md
     assert "|dv| mean / max 0.100 / 0.100 m/s" in md and "![latency and IoU](compare.png)" in md
 
@@ -71,4 +79,5 @@ def test_the_report_of_runs_with_nothing_in_common_says_so() -> None:
     a = Run(Path("a"), detections={1: _frame(1, [])})
     c = compare_runs(a, Run(Path("b"), detections={2: _frame(2, [])}))
     md = report_markdown(c, "a", "b")
+    assert "Detector: A unknown; B unknown." in md
     assert "both 0" in md and "0 frames: |dv| mean / max - m/s" in md
