@@ -1,0 +1,238 @@
+"""The one place where a Zenoh configuration is built, a session opened and a publisher declared.
+
+Only service I/O modules (``services/*/service.py``), the supervisor and the command-line
+clients import this module; the logic modules never touch the bus.
+
+Topology. In ``peer`` mode (the default) the supervisor listens on ``zenoh.endpoint``, services
+connect there and then mesh directly. In ``client`` mode the supervisor is a Zenoh router and
+every message passes through it; that is where authentication and access control run
+(common/security.py).
+
+QoS by role (:class:`QoS`): control and safety messages (cmd_vel, e-stop) go first, express,
+and block rather than drop under congestion; sensor data is dropped under congestion, so that a
+flood of frames can never hold back a stop.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import logging
+from collections.abc import Callable
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from common.errors import ConfigError, StackError
+from common.keys import Keys
+from common.security import (
+    access_control,
+    ca_file,
+    cert_file,
+    key_file,
+    password_file,
+    users_file,
+)
+from common.settings import Config, Ros2Settings, ZenohSettings
+
+log = logging.getLogger(__name__)
+
+HUB_PRINCIPAL = "supervisor"
+
+
+class QoS(Enum):
+    """Publisher profiles by role: (priority, congestion control, express)."""
+
+    CONTROL = (zenoh.Priority.REAL_TIME, zenoh.CongestionControl.BLOCK, True)
+    PERCEPTION = (zenoh.Priority.DATA_HIGH, zenoh.CongestionControl.DROP, True)
+    SENSOR = (zenoh.Priority.DATA, zenoh.CongestionControl.DROP, False)
+    TELEMETRY = (zenoh.Priority.DATA_LOW, zenoh.CongestionControl.DROP, False)
+
+
+class Publisher:
+    """A declared publisher that stamps each sample with Zenoh's source info (its global id and
+    a sequence number), so that a receiver can tell one publisher from another.
+
+    A payload over ``max_payload_bytes`` is not sent: ``on_refused(key, size)`` is told, and
+    ``put`` returns False. Zenoh does not refuse it, it loses it: on loopback a 64 MiB put
+    with congestion control DROP never arrived while 48 MiB did (zenoh 1.10, measured), and
+    nothing tells either end; the limit turns that into a count (zenoh.max_payload_bytes).
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        qos: QoS,
+        *,
+        max_payload_bytes: int | None = None,
+        on_refused: Callable[[str, int], None] | None = None,
+    ) -> None:
+        priority, congestion, express = qos.value
+        self.key = key
+        self.qos = qos
+        self.max_payload_bytes = max_payload_bytes
+        self._on_refused = on_refused
+        self._pub = session.declare_publisher(
+            key, priority=priority, congestion_control=congestion, express=express
+        )
+        self._id = self._pub.id
+        self._sn = itertools.count(1)
+
+    def put(self, payload: bytes) -> bool:
+        """Send ``payload``; False (and ``on_refused`` told) when it is over the limit."""
+        if self.max_payload_bytes is not None and len(payload) > self.max_payload_bytes:
+            if self._on_refused is not None:
+                self._on_refused(self.key, len(payload))
+            return False
+        self._pub.put(
+            payload,
+            encoding=zenoh.Encoding("application/msgpack"),  # every payload is a common.codec one
+            source_info=zenoh.SourceInfo(self._id, next(self._sn)),
+        )
+        return True
+
+    def undeclare(self) -> None:
+        self._pub.undeclare()
+
+
+def source_of(sample: zenoh.Sample) -> str:
+    """Who published ``sample``: its publisher's global id, or "unidentified"."""
+    info = sample.source_info
+    if info is None:
+        return "unidentified"
+    return f"{info.source_id.zid}/{info.source_id.eid}"
+
+
+def _readable(path: Path, what: str) -> str:
+    if not path.is_file():
+        raise ConfigError(
+            f"{what} {path} is missing: run `zstack credentials` (docs/security.md)"
+        )
+    return str(path)
+
+
+def _password(settings: ZenohSettings, principal: str) -> str:
+    path = Path(_readable(password_file(settings.credentials_path, principal), "password file"))
+    try:
+        password = path.read_text(encoding="utf-8").strip()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read {path}: {exc}") from exc
+    if not password:
+        raise ConfigError(f"{path} is empty")
+    return password
+
+
+def _security(settings: ZenohSettings, principal: str, hub: bool) -> dict[str, Any]:
+    """The ``transport`` options for authentication and TLS, by dotted path."""
+    out: dict[str, Any] = {}
+    creds = settings.credentials_path
+    if settings.auth == "password":
+        usrpwd: dict[str, Any] = {"user": principal, "password": _password(settings, principal)}
+        if hub:
+            usrpwd["dictionary_file"] = _readable(users_file(creds), "user dictionary")
+        out["transport/auth/usrpwd"] = usrpwd
+    if settings.uses_tls:
+        tls: dict[str, Any] = {"root_ca_certificate": _readable(ca_file(creds), "CA certificate")}
+        if hub:
+            tls["listen_certificate"] = _readable(cert_file(creds, principal), "certificate")
+            tls["listen_private_key"] = _readable(key_file(creds, principal), "private key")
+            tls["enable_mtls"] = settings.auth == "certificate"
+        elif settings.auth == "certificate":
+            tls["connect_certificate"] = _readable(cert_file(creds, principal), "certificate")
+            tls["connect_private_key"] = _readable(key_file(creds, principal), "private key")
+            # A client sends its certificate only with this set too (checked on zenoh 1.10).
+            tls["enable_mtls"] = True
+        out["transport/link/tls"] = tls
+    return out
+
+
+def zenoh_config(
+    settings: ZenohSettings, principal: str, *, access: dict[str, Any] | None = None
+) -> zenoh.Config:
+    """Build the Zenoh config of one process.
+
+    ``access`` is given for the supervisor only: its access-control rules. The supervisor
+    listens on ``settings.endpoint`` (as a router in client mode); everyone else connects there.
+    """
+    hub = access is not None
+    if hub:
+        listen = [settings.endpoint, *settings.listen]
+        listen = [ep for ep in listen if not ep.endswith(":0")] or [settings.endpoint]
+        connect = list(settings.connect)
+        mode = "router" if settings.mode == "client" else "peer"
+    else:
+        listen = [] if settings.mode == "client" else list(settings.listen)
+        connect = [settings.endpoint, *settings.connect]
+        mode = settings.mode
+    options: dict[str, Any] = {
+        "mode": mode,
+        "listen/endpoints": listen,
+        "connect/endpoints": connect,
+        "scouting/multicast/enabled": settings.multicast_scouting,
+        **_security(settings, principal, hub),
+    }
+    if hub and settings.auth != "none":
+        options["access_control"] = access
+    conf = zenoh.Config()
+    for path, value in options.items():
+        conf.insert_json5(path, json.dumps(value))
+    return conf
+
+
+def _open(conf: zenoh.Config, settings: ZenohSettings, where: str, principal: str) -> zenoh.Session:
+    try:
+        return zenoh.open(conf)
+    except zenoh.ZError as exc:
+        auth = f" as {principal!r} ({settings.auth} auth)" if settings.auth != "none" else ""
+        raise ConfigError(f"cannot open a Zenoh session on {where}{auth}: {exc}") from exc
+
+
+def open_session(settings: ZenohSettings, principal: str) -> zenoh.Session:
+    """Join the stack as ``principal`` (a service's name, "estop" or "observer")."""
+    conf = zenoh_config(settings, principal)
+    where = settings.endpoint if settings.mode == "client" else ", ".join(settings.listen)
+    return _open(conf, settings, where, principal)
+
+
+def open_ros_session(s: Ros2Settings, *, host: bool = False) -> zenoh.Session:
+    """A session in a ROS 2 graph, as an rmw_zenoh node joins it: a peer that connects to the
+    router and listens for the other nodes. ``host`` opens the router itself instead (the
+    simulator playing a robot). No router within ``router_timeout_s`` is a StackError."""
+    options: dict[str, Any] = {
+        "mode": "router" if host else "peer",
+        "listen/endpoints": list(s.router if host else s.listen),
+        "connect/endpoints": [] if host else list(s.router),
+        "scouting/multicast/enabled": False,
+        "connect/exit_on_failure": True,
+        "connect/timeout_ms": int(s.router_timeout_s * 1000),
+    }
+    conf = zenoh.Config()
+    for path, value in options.items():
+        conf.insert_json5(path, json.dumps(value))
+    try:
+        return zenoh.open(conf)
+    except zenoh.ZError as exc:
+        where = ", ".join(s.router)
+        if host:
+            raise ConfigError(f"cannot host the ROS 2 router on {where}: {exc}") from exc
+        raise StackError(
+            f"no rmw_zenoh router answered on {where} within {s.router_timeout_s:.0f} s: "
+            "start rmw_zenohd on the robot, or set ros2.router"
+        ) from exc
+
+
+def hub_access(config: Config) -> dict[str, Any]:
+    """The supervisor's access-control rules for this stack's keys ({} without auth)."""
+    z = config.zenoh
+    if z.auth == "none":
+        return {}
+    return access_control(Keys(config.stack.prefix), config.stack.camera, z.auth)
+
+
+def open_hub(config: Config) -> zenoh.Session:
+    """The supervisor's session: the endpoint every service joins, enforcing access control."""
+    conf = zenoh_config(config.zenoh, HUB_PRINCIPAL, access=hub_access(config))
+    return _open(conf, config.zenoh, config.zenoh.endpoint, HUB_PRINCIPAL)

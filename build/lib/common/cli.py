@@ -1,0 +1,63 @@
+"""One command-line shape for every service: ``python -m services.<name> COMMAND [options]``.
+
+A service lists its commands; ``serve`` (run the service on the bus) comes first and is the
+default, so ``python -m services.camera --config X`` and ``... serve --config X`` are the same,
+and the supervisor starts every service as ``python -m services.<name> serve --config FILE``.
+Results meant for programs go to stdout; progress and status go to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+CONFIG_HELP = "stack config (default deploy/stack.toml)"
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """One subcommand: its name, one line of help, its arguments and what runs it."""
+
+    name: str
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+def add_config(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", help=CONFIG_HELP)
+
+
+def with_default(argv: Sequence[str], names: Sequence[str], default: str = "serve") -> list[str]:
+    """``argv`` with ``default`` put first when it names no command (nor asks for help)."""
+    out = list(argv)
+    if not out or (out[0] not in names and out[0] not in ("-h", "--help")):
+        out.insert(0, default)
+    return out
+
+
+def build_parser(
+    prog: str, description: str, commands: Sequence[Command]
+) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for c in commands:
+        p = sub.add_parser(c.name, help=c.help, description=c.help)
+        c.add_arguments(p)
+        p.set_defaults(run=c.run)
+    return parser
+
+
+def service_main(
+    prog: str, description: str, commands: Sequence[Command], argv: Sequence[str] | None = None
+) -> int:
+    """Parse ``argv`` (default ``sys.argv[1:]``) and run the chosen command."""
+    args = sys.argv[1:] if argv is None else argv
+    names = [c.name for c in commands]
+    parsed = build_parser(prog, description, commands).parse_args(with_default(args, names))
+    run: Callable[[argparse.Namespace], int] = parsed.run
+    return run(parsed)

@@ -1,0 +1,173 @@
+"""The stack's shared vocabularies and the shapes of the JSON it writes, in one module.
+
+Enums name what used to be bare strings (a controller mode, a state, a backend); each is a
+``StrEnum``, so it equals its string on the wire, in TOML and in JSON. The ``TypedDict``s are
+the contracts of the JSON answers (the metrics query, a scenario's figures, a benchmark, a
+recorded session): the writer builds them, every reader reads them through these types.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Any, TypedDict
+
+
+class ControllerMode(StrEnum):
+    TRACK = "track"  # turn towards the most central target; forward while centred
+    FOLLOW = "follow"  # lock onto one target and keep a distance
+
+
+class ControllerState(StrEnum):
+    """What the controller is doing; ControllerStatus.state carries it."""
+
+    STALE = "stale"  # no fresh detections: zero (dead-man)
+    ESTOP = "estop"  # the e-stop is latched: zero
+    SEARCHING = "searching"  # no target in view: zero
+    HOLDING = "holding"  # target briefly unseen: keep the last aim
+    TURNING = "turning"  # target off-centre: turn only
+    TRACKING = "tracking"  # track mode, centred: forward
+    FOLLOWING = "following"  # follow mode, centred and clear: forward
+    BLOCKED = "blocked"  # something ahead, or no scan: turn only
+    ARRIVED = "arrived"  # at the follow distance: turn only
+    FAULT = "fault"  # a non-finite command was computed: zero
+    STOPPED = "stopped"  # shutting down: zero
+
+
+class DistanceSource(StrEnum):
+    BOX = "box"  # from the box height and the target's known height
+    LASER = "laser"  # the laser's range in the target's bearing
+
+
+class BackendName(StrEnum):
+    ONNX = "onnx"  # ONNX Runtime on the CPU
+    TENSORRT = "tensorrt"
+    CUDA = "cuda"  # our ONNX interpreter on PyTorch CUDA
+    OPENVINO = "openvino"  # OpenVINO on the CPU (an optional extra)
+    AUTO = "auto"  # tensorrt, then cuda, then openvino (Intel CPUs only), then onnx
+
+
+# --- The JSON the stack writes ------------------------------------------------------------------
+# Latency statistics per stage: p50, p95, p99, mean and count (common to the query and reports).
+LatencyStats = dict[str, dict[str, float]]
+
+
+class TimelineSeries(TypedDict):
+    """Per-period figures over a run: ``t`` in seconds, the rest one value per period."""
+
+    period_s: float
+    t: list[float]
+    fps: list[float]
+    offered_fps: list[float]
+    dropped: list[float]
+    detections_per_frame: list[float]
+
+
+class MetricsAnswer(TypedDict):
+    """The metrics service's answer to a query (``zstack query``), and a session's summary."""
+
+    stamp_ns: int
+    window_s: float
+    fps: float
+    frames: int
+    detections: int
+    detections_per_frame: float
+    dropped_frames: int
+    latency_ms: LatencyStats
+    counters: dict[str, int]
+    class_counts: dict[str, int]
+    drop_rate: float
+    drop_rate_total: float
+    frames_offered: int
+    timeline: TimelineSeries
+
+
+class _SessionCore(TypedDict):
+    version: int
+    created: str
+    duration_s: float
+    detector: dict[str, str]
+    summary: MetricsAnswer
+    latency_samples_ms: dict[str, list[float]]
+
+
+class Session(_SessionCore, total=False):
+    """A recorded run (``zstack report`` writes it as session.json and reads it back); a
+    recording made live also says how the stack was set up and on what machine."""
+
+    config: dict[str, Any]
+    machine: dict[str, Any]
+    metrics_service: dict[str, Any] | None
+    supervisor_exit_code: int | None
+    benchmarks: list[BackendBenchmark]  # added by ``report --benchmark FILE``
+
+
+class DetectorInfo(TypedDict):
+    """The detector's answer on ``<prefix>/detector/<camera>/info``.
+
+    ``variant`` is what runs, ``backend:precision:input size`` (e.g. ``onnx:int8:480``);
+    ``note`` says why it differs from what was asked (an INT8 model that could not be built,
+    the fast profile's choice), else "".
+    """
+
+    model: str
+    classes: list[str]
+    backend: str
+    device: str
+    precision: str
+    variant: str
+    note: str
+
+
+class ScenarioResult(TypedDict, total=False):
+    """A scenario's figures (``zstack scenario NAME --json``); see services/sim/score.py."""
+
+    success: bool
+    reason: str
+    scenario: str
+    duration_s: float
+    time_to_reach_s: float | None
+    final_distance_m: float | None
+    min_clearance_m: float | None
+    mean_bearing_error_deg: float | None
+    stale_commands: int
+    commands: int
+    nonzero_commands: int
+    stop_after_kill_s: float | None
+    distance_travelled_m: float
+    moving_at_kill: bool
+    checks: dict[str, bool]
+    log: str
+    supervisor_exit_code: int | None
+
+
+class BackendInfo(TypedDict):
+    name: str
+    device: str
+    precision: str
+    threads: int | None
+
+
+class BackendBenchmark(TypedDict, total=False):
+    """One backend's figures in ``zstack benchmark --json``."""
+
+    p50_ms: dict[str, float]
+    p95_ms: dict[str, float]
+    fps: float
+    bare_run_p50_ms: float
+    ratio_to_bare_run: float
+    pre_post_fraction_of_inference: float
+    backend: BackendInfo
+    agreement: dict[str, float]
+    machine: dict[str, Any]  # where it ran
+
+
+class BenchmarkReport(BackendBenchmark, total=False):
+    """``zstack benchmark --json``: the first backend's figures at the top level, every
+    backend's under ``backends``, and what they were measured on."""
+
+    runs: int
+    warmup: int
+    model: dict[str, Any]
+    image: dict[str, Any]
+    agreement_reference: dict[str, Any]
+    backends: dict[str, BackendBenchmark]

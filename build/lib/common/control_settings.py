@@ -1,0 +1,161 @@
+"""Settings of control: the controller's policy and the simulated robot (tables of stack.toml).
+
+Re-exported by common/settings.py, where the whole Config is assembled.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from common.contracts import ControllerMode, DistanceSource
+from common.errors import ConfigError
+from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ControllerSettings:
+    """The reaction policy. Speeds in m/s and rad/s, angles in degrees, times in seconds.
+
+    track:  turn towards the most central confident detection of ``target_classes``; drive
+            forward at ``forward_speed`` only while it is within ``center_tolerance`` (a
+            fraction of the image width) of the image centre.
+    follow: lock onto the largest detection of ``target_classes[0]`` (by track id, so it does
+            not jump to another person) and keep it at ``follow_distance_m``, measured from the
+            box height (``distance_source = "box"``, for a target ``target_height_m`` tall) or
+            by the laser in the target's bearing (``"laser"``). Forward only while centred and
+            while the laser sector of ``sector_width_deg`` straight ahead, and the corridor
+            ``robot_width_m`` wide that the body sweeps, are clear beyond ``safety_distance_m``
+            plus the room needed to brake. A box cut by the image edge counts as arrived.
+            A target unseen for ``target_lost_timeout_s`` is dropped.
+    Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
+    acceleration limits. Stale detections (captured or received longer than
+    ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the
+    acceleration limit. The latched e-stop is kept in ``estop_file`` (relative to the repo
+    root; empty: ``state/estop-<prefix>.json``), so that it survives every restart; a release
+    captured more than ``estop_release_max_age_s`` ago is refused.
+    """
+
+    mode: ControllerMode = ControllerMode.TRACK
+    target_classes: tuple[str, ...] = ("person",)
+    min_score: float = 0.3
+    control_rate_hz: float = 20.0
+    detection_timeout_s: float = 1.0
+    scan_timeout_s: float = 0.5
+    target_lost_timeout_s: float = 1.5
+    bearing_kp: float = 1.5
+    bearing_ki: float = 0.0
+    bearing_kd: float = 0.05
+    max_angular: float = 1.0
+    max_linear: float = 0.5
+    max_angular_accel: float = 3.0
+    max_linear_accel: float = 1.0
+    forward_speed: float = 0.3
+    center_tolerance: float = 0.1
+    distance_source: DistanceSource = DistanceSource.BOX
+    follow_distance_m: float = 1.0
+    distance_gain: float = 0.6
+    target_height_m: float = 1.7
+    safety_distance_m: float = 0.5
+    sector_width_deg: float = 30.0
+    robot_width_m: float = 0.6
+    estop_file: str = ""
+    estop_release_max_age_s: float = 2.0
+    counters_period_s: float = 1.0
+
+    # A real base: up to 5 m/s (warehouse robots run at 2..3), 10 rad/s, about 1 g of braking.
+    # Commands go out at least control_rate_hz times a second: below 1 Hz a base's own
+    # command timeout would trip between them. The dead-man (detection_timeout_s) stops the
+    # robot within 10 s at the very most.
+    BOUNDS: ClassVar[Bounds] = {
+        "min_score": (0, 1),
+        "control_rate_hz": (1, 1000),
+        "detection_timeout_s": (0.01, 10),
+        "scan_timeout_s": (0.01, 10),
+        "target_lost_timeout_s": (0.01, 60),
+        "bearing_kp": (0, 100),
+        "bearing_ki": (0, 100),
+        "bearing_kd": (0, 100),
+        "max_angular": (0.01, 10),
+        "max_linear": (0.01, 5),
+        "max_angular_accel": (0.01, 100),
+        "max_linear_accel": (0.01, 20),
+        "forward_speed": (0, 5),
+        "center_tolerance": (0, 1),
+        "follow_distance_m": (0.1, 20),
+        "distance_gain": (0, 10),
+        "target_height_m": (0.01, 10),
+        "safety_distance_m": (0.01, 10),
+        "sector_width_deg": (1, 360),
+        "robot_width_m": (0.05, 5),
+        "estop_release_max_age_s": (0.1, 60),
+        "counters_period_s": (0.1, 60),
+    }
+    LENGTHS: ClassVar[Bounds] = {"target_classes": (1, 100)}
+
+    def __post_init__(self) -> None:
+        enum_field(self, "mode", ControllerMode, "controller.mode")
+        enum_field(self, "distance_source", DistanceSource, "controller.distance_source")
+        check_lengths(self, "controller", self.LENGTHS)
+        if not all(self.target_classes):
+            raise ConfigError(
+                f"controller.target_classes must be class names, got {list(self.target_classes)}"
+            )
+        check_bounds(self, "controller", self.BOUNDS)
+        if self.forward_speed > self.max_linear:
+            raise ConfigError(
+                f"controller.forward_speed must be within 0..max_linear ({self.max_linear}), "
+                f"got {self.forward_speed}"
+            )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SimSettings:
+    """The simulated robot and world (services/sim), standing in for a camera and a base.
+
+    ``scenario`` names a world in services/sim/scenarios.py. The scenario clock starts once
+    every service in ``wait_for`` is ready, so start-up time does not eat into the scenario.
+    The camera uses camera.hfov_deg; the image is ``width`` x ``height``. With ``ros2_robot``
+    the simulator plays a ROS 2 robot: it hosts the graph's router on ``ros2.router`` and
+    speaks ROS 2 messages on the topics of ``[ros2]``, so that the ``ros2`` bridge service
+    carries every frame, scan and command. Commands from more
+    than one publisher within ``command_sources_window_s`` are counted and warned about.
+    """
+
+    scenario: str = "demo"
+    wait_for: tuple[str, ...] = ("detector", "controller")
+    physics_hz: float = 50.0
+    camera_rate_hz: float = 5.0
+    scan_rate_hz: float = 10.0
+    truth_rate_hz: float = 20.0
+    width: int = 640
+    height: int = 480
+    camera_height_m: float = 0.6
+    laser_fov_deg: float = 270.0
+    laser_rays: int = 541
+    laser_range_max_m: float = 12.0
+    laser_noise_m: float = 0.01
+    seed: int = 0
+    ros2_robot: bool = False
+    command_sources_window_s: float = 1.0
+
+    BOUNDS: ClassVar[Bounds] = {
+        "physics_hz": (1, 1000),
+        "camera_rate_hz": (0.1, 100),
+        "scan_rate_hz": (0.1, 100),
+        "truth_rate_hz": (0.1, 100),
+        "width": (16, 4096),
+        "height": (16, 4096),
+        "camera_height_m": (0.05, 5),
+        "laser_fov_deg": (1, 360),
+        "laser_rays": (2, 10000),  # real 2D lidars: 360..3200 rays a scan
+        "laser_range_max_m": (0.1, 100),
+        "laser_noise_m": (0, 1),
+        "seed": (0, 2**32 - 1),
+        "command_sources_window_s": (0.01, 60),
+    }
+    LENGTHS: ClassVar[Bounds] = {"wait_for": (0, 6)}
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "sim", self.BOUNDS)
+        check_lengths(self, "sim", self.LENGTHS)

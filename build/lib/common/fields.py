@@ -1,0 +1,384 @@
+"""The field walk: a message's dataclass fields are its wire format, declared once.
+
+A message body is the msgpack map of its dataclass fields, by name, in declaration order. The
+type hint of each field (read with ``typing.get_type_hints(..., include_extras=True)``) says how
+it travels and what a decoder accepts; the plan is built once per class and cached.
+
+The type hints it knows, how each travels, and what a decoder accepts:
+
+- ``int``: an int, never a bool; ``Annotated[int, Range(lo, hi)]`` bounds it on decode.
+- ``float``: a number (an int is taken as a float), NaN and inf included.
+- ``str``, ``bool``, ``bytes``: exactly that type; bytes stay bytes.
+- a dataclass (``Header``): a map, by these same rules.
+- ``tuple[X, ...]`` or ``tuple[X, X, X]``: a list (of exactly that length) of plain values.
+- ``dict[str, V]``: a map with str keys; V a plain value or another such dict.
+- ``Annotated[npt.NDArray[np.float32], Shape(...)]``: raw little-endian bytes of that dtype,
+  exactly that shape.
+- ``X | None``: nil or X.
+
+A float inside a tuple or a map must be finite (a NaN velocity or latency means nothing); a
+float field on its own may be anything, and ``__post_init__`` says where it may not.
+
+Array shapes. ``Shape(N, 4)`` is an (n, 4) array where ``N = Dim("n", lo, hi)`` is a count:
+it travels as its own key, taken from the shape of the first array that names it and is never
+None (and written just before it); a decoder checks it against [lo, hi] before reading any
+array, and every array that names it must then have exactly that many rows. A -1 instead takes
+the count from the array's byte length. The dtype comes from the ``NDArray`` hint itself. A
+decoded array is a read-only view of the received bytes: no copy, no per-element Python.
+
+Versions. A key that is missing takes the field's default, so a payload from before a field
+was added still decodes (``Header.mono_ns``); a missing field without a default is an error.
+Keys the class does not declare are ignored, so a newer writer's extra fields do no harm.
+
+Anything that does not fit raises :class:`common.errors.DecodeError` naming the field's path.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Annotated, Any, TypeVar, Union, get_args, get_origin, get_type_hints
+
+import numpy as np
+
+from common.errors import DecodeError
+
+T = TypeVar("T")
+
+Encoder = Callable[[Any], Any]
+Decoder = Callable[[Any, Mapping[str, int]], Any]
+
+
+@dataclass(frozen=True, slots=True)
+class Range:
+    """Bounds of an int field, checked on decode: ``Annotated[int, Range(lo=0)]``."""
+
+    lo: int | None = None
+    hi: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Dim:
+    """A count that sizes arrays; it travels as its own key ``name`` (e.g. "n")."""
+
+    name: str
+    lo: int
+    hi: int
+
+
+@dataclass(frozen=True, slots=True)
+class Shape:
+    """An array field's shape: ints, Dims or one -1 (from the byte length)."""
+
+    dims: tuple[int | Dim, ...]
+
+    def __init__(self, *dims: int | Dim) -> None:
+        object.__setattr__(self, "dims", dims)
+
+
+NonNegativeInt = Annotated[int, Range(lo=0)]
+
+
+class _Bad(DecodeError):
+    """A value that does not fit its field; the path is filled in on the way up."""
+
+    def __init__(self, reason: str, path: tuple[str, ...] = ()) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.path = path
+
+
+def _got(v: Any) -> str:
+    return type(v).__name__
+
+
+# Counts written on the wire just before a field, from that field's shape: (dim, axis).
+_Counts = tuple[tuple[Dim, int], ...]
+
+
+@dataclass(frozen=True, slots=True)
+class _Plan:
+    """How one dataclass travels, as flat tuples for a tight loop on every message."""
+
+    encoders: tuple[tuple[str, Encoder | None, _Counts], ...]  # None: the value as it is
+    decoders: tuple[tuple[str, Decoder, bool], ...]  # bool: required (no default)
+    dims: tuple[Dim, ...]
+
+
+_PLANS: dict[type, _Plan] = {}
+
+
+def encode_struct(obj: Any) -> dict[str, Any]:
+    """The wire body of dataclass ``obj``: every field by name, plus its counts."""
+    plan = _PLANS.get(type(obj)) or _plan(type(obj))
+    out: dict[str, Any] = {}
+    for name, enc, counts in plan.encoders:
+        v = getattr(obj, name)
+        if counts:
+            for dim, axis in counts:
+                out[dim.name] = int(v.shape[axis])
+        out[name] = v if enc is None else enc(v)
+    return out
+
+
+def decode_struct(cls: type[T], body: Mapping[str, Any], where: str) -> T:
+    """Build ``cls`` from a wire body, or raise DecodeError naming ``where`` and the field."""
+    try:
+        return _decode(cls, body)
+    except _Bad as exc:
+        raise DecodeError(f"{'.'.join((where, *exc.path))}: {exc.reason}") from None
+
+
+def _decode(cls: type[T], body: Mapping[str, Any]) -> T:
+    plan = _PLANS.get(cls) or _plan(cls)
+    dims: dict[str, int] = {}
+    for dim in plan.dims:
+        v = body.get(dim.name)
+        if type(v) is not int:
+            raise _Bad(f"expected an int count, got {_got(v)}", (dim.name,))
+        if not dim.lo <= v <= dim.hi:
+            raise _Bad(f"{v} is outside [{dim.lo}, {dim.hi}]", (dim.name,))
+        dims[dim.name] = v
+    kwargs: dict[str, Any] = {}
+    for name, dec, required in plan.decoders:
+        if name not in body:
+            if required:
+                raise _Bad("missing field", (name,))
+            continue  # written before this field existed: the dataclass default applies
+        try:
+            kwargs[name] = dec(body[name], dims)
+        except _Bad as exc:
+            raise _Bad(exc.reason, (name, *exc.path)) from None
+    return cls(**kwargs)
+
+
+def _plan(cls: type) -> _Plan:
+    """Compile the encoders and decoders of dataclass ``cls`` from its type hints."""
+    if not dataclasses.is_dataclass(cls):
+        raise TypeError(f"{cls.__name__} is not a dataclass")
+    hints = get_type_hints(cls, include_extras=True)
+    encoders: list[tuple[str, Encoder | None, _Counts]] = []
+    decoders: list[tuple[str, Decoder, bool]] = []
+    placed: set[str] = set()
+    dims: dict[str, Dim] = {}
+    for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        enc, dec = _converter(hint, (), f"{cls.__name__}.{f.name}")
+        here: list[tuple[Dim, int]] = []
+        shape, optional = _shape_of(hint)
+        for axis, d in enumerate(shape.dims if shape else ()):
+            if isinstance(d, Dim):
+                if dims.setdefault(d.name, d) != d:
+                    raise TypeError(f"{cls.__name__}: two different Dims named {d.name!r}")
+                if not optional and d.name not in placed:
+                    placed.add(d.name)
+                    here.append((d, axis))
+        required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+        encoders.append((f.name, enc, tuple(here)))
+        decoders.append((f.name, dec, required))
+    for name in dims:
+        if name in {e[0] for e in encoders}:
+            raise TypeError(f"{cls.__name__}: Dim {name!r} has a field's name")
+        if name not in placed:
+            raise TypeError(f"{cls.__name__}: Dim {name!r} sizes no array that is always there")
+    plan = _Plan(tuple(encoders), tuple(decoders), tuple(dims.values()))
+    _PLANS[cls] = plan
+    return plan
+
+
+def _shape_of(hint: Any) -> tuple[Shape | None, bool]:
+    """The Shape annotating an array field, and whether the field may be None."""
+    optional = False
+    shape = None
+    while True:
+        origin = get_origin(hint)
+        if origin is Annotated:
+            hint, *meta = get_args(hint)
+            shape = next((m for m in meta if isinstance(m, Shape)), shape)
+        elif origin in (Union, types.UnionType) and type(None) in get_args(hint):
+            optional = True
+            hint = next(a for a in get_args(hint) if a is not type(None))
+        else:
+            return shape, optional
+
+
+def _converter(hint: Any, meta: tuple[Any, ...], where: str) -> tuple[Encoder | None, Decoder]:
+    origin, args = get_origin(hint), get_args(hint)
+    if origin is Annotated:
+        return _converter(args[0], meta + tuple(args[1:]), where)
+    if origin in (Union, types.UnionType):
+        rest = [a for a in args if a is not type(None)]
+        if len(rest) != 1 or len(args) != 2:
+            raise TypeError(f"{where}: only `X | None` unions are supported, got {hint}")
+        return _optional(*_converter(rest[0], meta, where))
+    if origin is np.ndarray:
+        return _array(_dtype_of(hint, where), meta, where)
+    if hint is int:
+        rng = next((m for m in meta if isinstance(m, Range)), Range())
+        return None, _int(rng)
+    if hint is float:
+        return None, _float(finite=False)
+    if hint in (str, bool, bytes):
+        return None, _exact(hint)
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+        _plan(hint)
+        return encode_struct, _nested(hint)
+    if origin is tuple:
+        return list, _tuple(args, where)
+    if origin is dict and args and args[0] is str:
+        return None, _map(_element(args[1], where))
+    raise TypeError(f"{where}: no wire format for {hint}")
+
+
+def _dtype_of(hint: Any, where: str) -> np.dtype[Any]:
+    """The element type of ``npt.NDArray[np.float32]``: ndarray[shape, dtype[float32]]."""
+    args = get_args(hint)
+    scalar = get_args(args[1])[0] if len(args) == 2 and get_args(args[1]) else None
+    if not (isinstance(scalar, type) and issubclass(scalar, np.generic)) or scalar in (
+        np.generic,
+        np.number,
+        np.floating,
+        np.integer,
+    ):
+        raise TypeError(f"{where}: an array field needs a concrete dtype, got {hint}")
+    return np.dtype(scalar)
+
+
+def _array(dtype: np.dtype[Any], meta: tuple[Any, ...], where: str) -> tuple[Encoder, Decoder]:
+    shape = next((m for m in meta if isinstance(m, Shape)), None)
+    if shape is None or list(shape.dims).count(-1) > 1:
+        raise TypeError(f"{where}: an array field needs Shape(...) with at most one -1")
+    wire = dtype.newbyteorder("<")
+    native = None if wire == dtype.newbyteorder("=") else dtype.newbyteorder("=")
+    spec = shape.dims
+
+    def encode(arr: Any) -> bytes:
+        return np.ascontiguousarray(arr, dtype=wire).tobytes()
+
+    def decode(v: Any, dims: Mapping[str, int]) -> Any:
+        if type(v) is not bytes:
+            raise _Bad(f"expected {dtype} array bytes, got {_got(v)}")
+        if len(v) % wire.itemsize:
+            raise _Bad(f"{len(v)} bytes is not a whole {dtype} array")
+        shp = tuple(dims[d.name] if isinstance(d, Dim) else d for d in spec)
+        flat = np.frombuffer(v, dtype=wire)
+        try:
+            arr = flat.reshape(shp)
+        except ValueError:
+            raise _Bad(f"{flat.size} values do not fit shape {shp}") from None
+        return arr if native is None else arr.astype(native)  # a copy on big-endian hosts only
+
+    return encode, decode
+
+
+def _optional(enc: Encoder | None, dec: Decoder) -> tuple[Encoder | None, Decoder]:
+    def decode(v: Any, dims: Mapping[str, int]) -> Any:
+        return None if v is None else dec(v, dims)
+
+    if enc is None:
+        return None, decode
+    inner = enc
+
+    def encode(v: Any) -> Any:
+        return None if v is None else inner(v)
+
+    return encode, decode
+
+
+def _int(rng: Range) -> Decoder:
+    lo, hi = rng.lo, rng.hi
+
+    def decode(v: Any, dims: Mapping[str, int]) -> int:
+        if type(v) is not int:
+            raise _Bad(f"expected int, got {_got(v)}")
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            raise _Bad(f"{v} is outside [{lo}, {hi}]")
+        return v
+
+    return decode
+
+
+def _float(finite: bool) -> Decoder:
+    def decode(v: Any, dims: Mapping[str, int]) -> float:
+        if type(v) is not float and type(v) is not int:
+            raise _Bad(f"expected float, got {_got(v)}")
+        if finite and not math.isfinite(v):
+            raise _Bad(f"expected a finite number, got {v}")
+        return float(v)
+
+    return decode
+
+
+def _exact(kind: type) -> Decoder:
+    def decode(v: Any, dims: Mapping[str, int]) -> Any:
+        if type(v) is not kind:
+            raise _Bad(f"expected {kind.__name__}, got {_got(v)}")
+        return v
+
+    return decode
+
+
+def _nested(cls: type) -> Decoder:
+    def decode(v: Any, dims: Mapping[str, int]) -> Any:
+        if type(v) is not dict:
+            raise _Bad(f"expected map, got {_got(v)}")
+        return _decode(cls, v)
+
+    return decode
+
+
+def _element(hint: Any, where: str) -> Decoder:
+    """Elements of tuples and maps: floats there must be finite (a NaN vector means nothing)."""
+    if hint is float:
+        return _float(finite=True)
+    enc, dec = _converter(hint, (), where)
+    if enc is not None:
+        raise TypeError(f"{where}: elements must be plain values, got {hint}")
+    return dec
+
+
+def _tuple(args: tuple[Any, ...], where: str) -> Decoder:
+    if len(args) == 2 and args[1] is Ellipsis:
+        item, length = args[0], None
+    elif args and all(a is args[0] for a in args):
+        item, length = args[0], len(args)
+    else:
+        raise TypeError(f"{where}: tuples must be tuple[X, ...] or of one type, got {args}")
+    dec = _element(item, where)
+    expected = f"list of {length or 'any number of'} {getattr(item, '__name__', item)}"
+
+    def decode(v: Any, dims: Mapping[str, int]) -> tuple[Any, ...]:
+        if type(v) is not list:
+            raise _Bad(f"expected {expected}, got {_got(v)}")
+        if length is not None and len(v) != length:
+            raise _Bad(f"expected {expected}, got {len(v)}")
+        if item is str:  # class names: up to MAX_DETECTIONS of them, check types in one pass
+            if not all(type(x) is str for x in v):
+                raise _Bad(f"expected {expected}, got another type inside")
+            return tuple(v)
+        try:
+            return tuple(dec(x, dims) for x in v)
+        except _Bad as exc:
+            raise _Bad(f"expected {expected}: {exc.reason}") from None
+
+    return decode
+
+
+def _map(value_dec: Decoder) -> Decoder:
+    def decode(v: Any, dims: Mapping[str, int]) -> dict[str, Any]:
+        if type(v) is not dict:
+            raise _Bad(f"expected map, got {_got(v)}")
+        out: dict[str, Any] = {}
+        for k, x in v.items():
+            if type(k) is not str:
+                raise _Bad(f"expected str keys, got {_got(k)}")
+            try:
+                out[k] = value_dec(x, dims)
+            except _Bad as exc:
+                raise _Bad(exc.reason, (k, *exc.path)) from None
+        return out
+
+    return decode

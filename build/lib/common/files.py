@@ -1,0 +1,41 @@
+"""File helpers shared by the model store and the engine cache: hashing and atomic writes."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+_CHUNK_BYTES = 1 << 20
+
+
+def sha256_file(path: Path, chunk: int = _CHUNK_BYTES) -> str:
+    """Hex sha256 of a file, read in chunks (models and engines run to hundreds of MB)."""
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        while block := f.read(chunk):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def atomic_write_bytes(path: Path, payload: bytes, *, durable: bool = False) -> None:
+    """Write ``payload`` to ``path`` so that a reader sees the old file or the new one whole.
+
+    The bytes go to a hidden temporary beside ``path`` (same file system, so the rename is
+    atomic), named after this process so that two writers never share one. ``durable`` also
+    syncs the file and its folder before returning, so that the new file survives a power cut
+    (the e-stop's state must).
+    """
+    partial = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with partial.open("wb") as f:
+        f.write(payload)
+        if durable:
+            f.flush()
+            os.fsync(f.fileno())
+    os.replace(partial, path)
+    if durable:
+        fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(fd)  # the rename itself
+        finally:
+            os.close(fd)

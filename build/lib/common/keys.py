@@ -1,0 +1,89 @@
+"""Every Zenoh key expression of the stack is built here, and nowhere else.
+
+All keys live under a configurable prefix (default ``stack``) so that several robots or test
+runs can share one network without hearing each other:
+
+    <prefix>/camera/<camera>/frame            Frame           camera  -> detector
+    <prefix>/detector/<camera>/detections     Detections      detector -> controller, metrics
+    <prefix>/detector/<camera>/info           queryable       detector -> JSON: model, classes
+    <prefix>/scan                             LaserScan       robot/sim -> controller
+    <prefix>/controller/cmd_vel               Twist           controller -> robot/sim, metrics
+    <prefix>/controller/status                ControllerStatus
+    <prefix>/controller/estop                 EStop           anyone -> controller (latching)
+    <prefix>/sim/truth                        GroundTruth     simulator -> scenario scoring
+    <prefix>/counters/<service>               ServiceCounters each service -> metrics
+    <prefix>/metrics                          queryable       metrics -> JSON snapshot
+    <prefix>/health/<service>                 liveliness      present while a service is ready
+
+Who may put on which key under the secure profile is in common/security.py.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from common.errors import ConfigError
+
+# A chunk is one path segment; Zenoh reserves *, $, ?, # and we forbid empty segments.
+_CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
+
+
+def _check_chunks(what: str, value: str) -> str:
+    if not value or not all(_CHUNK.match(chunk) for chunk in value.split("/")):
+        raise ConfigError(
+            f"{what} {value!r} must be '/'-separated words of letters, digits, '_', '-', '.'"
+        )
+    return value
+
+
+@dataclass(frozen=True, slots=True)
+class Keys:
+    """The key space of one stack, rooted at ``prefix``."""
+
+    prefix: str = "stack"
+
+    def __post_init__(self) -> None:
+        _check_chunks("key prefix", self.prefix)
+
+    def frame(self, camera: str) -> str:
+        return f"{self.prefix}/camera/{_check_chunks('camera name', camera)}/frame"
+
+    def detections(self, camera: str) -> str:
+        return f"{self.prefix}/detector/{_check_chunks('camera name', camera)}/detections"
+
+    def detector_info(self, camera: str) -> str:
+        return f"{self.prefix}/detector/{_check_chunks('camera name', camera)}/info"
+
+    def all_detections(self) -> str:
+        return f"{self.prefix}/detector/*/detections"
+
+    def scan(self) -> str:
+        return f"{self.prefix}/scan"
+
+    def cmd_vel(self) -> str:
+        return f"{self.prefix}/controller/cmd_vel"
+
+    def controller_status(self) -> str:
+        return f"{self.prefix}/controller/status"
+
+    def sim_truth(self) -> str:
+        return f"{self.prefix}/sim/truth"
+
+    def estop(self) -> str:
+        return f"{self.prefix}/controller/estop"
+
+    def counters(self, service: str) -> str:
+        return f"{self.prefix}/counters/{_check_chunks('service name', service)}"
+
+    def all_counters(self) -> str:
+        return f"{self.prefix}/counters/*"
+
+    def metrics(self) -> str:
+        return f"{self.prefix}/metrics"
+
+    def health(self, service: str) -> str:
+        return f"{self.prefix}/health/{_check_chunks('service name', service)}"
+
+    def all_health(self) -> str:
+        return f"{self.prefix}/health/*"

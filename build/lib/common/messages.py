@@ -1,0 +1,340 @@
+"""Every message on the bus, as frozen dataclasses that encode and decode themselves.
+
+The information matches the ROS 2 messages the lab used: ``std_msgs/Header`` (stamp, frame_id,
+plus our seq and source), ``sensor_msgs/Image``, ``vision_msgs/Detection2DArray`` (class name,
+score, box centre and size), ``geometry_msgs/Twist`` and ``sensor_msgs/LaserScan``.
+
+Each field is declared once, here: its name and type are its wire format (common/fields.py),
+and each message type has its own schema version, ``VERSION`` (common/codec.py). To add a field,
+declare it with a default; bump the version only for a change older readers would misread.
+
+Units: times are integer nanoseconds since the Unix epoch (``time.time_ns()``); image
+coordinates are pixels of the image the detections were made on, origin top-left, x right,
+y down; angles are radians, counter-clockwise positive (REP 103); ranges are metres.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Annotated, Any, ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from common.boxes import Boxes, check_boxes
+from common.codec import Message
+from common.fields import Dim, NonNegativeInt, Shape
+
+# Limits that no real camera reaches; anything above is garbage, not a frame.
+MAX_IMAGE_SIDE = 16384
+MAX_DETECTIONS = 10000
+MAX_SCAN_RAYS = 100_000
+
+FRAME_ENCODINGS: dict[str, int] = {"bgr8": 3, "rgb8": 3, "mono8": 1, "jpeg": 0}
+
+# The counts that size a message's arrays; each travels on the wire as "n", and is checked
+# against its bounds before any array is read.
+N_DETECTIONS = Dim("n", 0, MAX_DETECTIONS)
+N_RAYS = Dim("n", 1, MAX_SCAN_RAYS)
+N_TARGETS = Dim("n", 0, MAX_DETECTIONS)
+
+
+def now_ns() -> int:
+    """Wall-clock time in ns, the stamp used across processes."""
+    return time.time_ns()
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Header:
+    """Who produced a message, when the data it describes was captured, and its sequence.
+
+    ``stamp_ns`` is wall-clock time. ``mono_ns`` is the same instant on the producer's
+    monotonic clock and ``boot_id`` names that clock (the host's boot); 0 and "" when unknown.
+    A receiver on the same boot judges age on both clocks (common/freshness.py).
+    """
+
+    stamp_ns: NonNegativeInt
+    frame_id: str
+    seq: NonNegativeInt
+    source: str
+    # Absent from headers written before these fields existed: they decode as unknown.
+    mono_ns: NonNegativeInt = 0
+    boot_id: str = ""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Frame(Message):
+    """One camera image. ``data`` is row-major pixels for raw encodings, a JPEG file for jpeg."""
+
+    TAG: ClassVar[str] = "Frame"
+    VERSION: ClassVar[int] = 1
+    header: Header
+    encoding: str
+    width: int
+    height: int
+    data: bytes
+
+    def __post_init__(self) -> None:
+        if self.encoding not in FRAME_ENCODINGS:
+            raise ValueError(f"unknown encoding {self.encoding!r}")
+        if not (0 < self.width <= MAX_IMAGE_SIDE and 0 < self.height <= MAX_IMAGE_SIDE):
+            raise ValueError(f"absurd image size {self.width}x{self.height}")
+        channels = FRAME_ENCODINGS[self.encoding]
+        if channels and len(self.data) != self.width * self.height * channels:
+            raise ValueError(
+                f"{self.encoding} {self.width}x{self.height} needs "
+                f"{self.width * self.height * channels} bytes, got {len(self.data)}"
+            )
+        if not channels and not self.data:
+            raise ValueError("empty jpeg")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Detections(Message):
+    """The detections of one frame: ``vision_msgs/Detection2DArray`` as a struct of arrays.
+
+    ``header`` is the frame's header, unchanged, so latency is measured from the capture stamp.
+    Boxes are ``xyxy`` (n, 4) float32 in pixels of the ``image_width`` x ``image_height`` image.
+    ``track_ids`` is (n,) int32 with -1 where no tracker has assigned an id, or None.
+    The arrays are those of :class:`common.boxes.Boxes`, flat here because they are the wire
+    layout, and checked by the same ``check_boxes``; ``from_boxes`` and ``boxes`` convert.
+    ``timing_ms`` holds the detector's stages (preprocess, inference, postprocess);
+    ``received_ns`` and ``published_ns`` are when the detector took and sent the frame.
+    """
+
+    TAG: ClassVar[str] = "Detections"
+    VERSION: ClassVar[int] = 1
+    header: Header
+    image_width: int
+    image_height: int
+    class_ids: Annotated[npt.NDArray[np.int32], Shape(N_DETECTIONS)]
+    class_names: tuple[str, ...]
+    scores: Annotated[npt.NDArray[np.float32], Shape(N_DETECTIONS)]
+    xyxy: Annotated[npt.NDArray[np.float32], Shape(N_DETECTIONS, 4)]
+    track_ids: Annotated[npt.NDArray[np.int32], Shape(N_DETECTIONS)] | None = None
+    timing_ms: dict[str, float] = field(default_factory=dict)
+    model: str = ""
+    backend: str = ""
+    received_ns: NonNegativeInt = 0
+    published_ns: NonNegativeInt = 0
+
+    def __post_init__(self) -> None:
+        check_boxes(self.xyxy, self.scores, self.class_ids, self.track_ids)
+        n = len(self.xyxy)
+        if n > MAX_DETECTIONS:
+            raise ValueError(f"{n} detections is over the limit of {MAX_DETECTIONS}")
+        if not (0 < self.image_width <= MAX_IMAGE_SIDE and 0 < self.image_height <= MAX_IMAGE_SIDE):
+            raise ValueError(f"absurd image size {self.image_width}x{self.image_height}")
+        if len(self.class_names) != n:
+            raise ValueError(f"class_names must have {n} entries, got {len(self.class_names)}")
+
+    @classmethod
+    def from_boxes(cls, boxes: Boxes, **fields: Any) -> Detections:
+        """The message carrying ``boxes``; ``fields`` are its other fields (header,
+        image_width, image_height, class_names, ...), by name."""
+        return cls(
+            xyxy=boxes.xyxy,
+            scores=boxes.scores,
+            class_ids=boxes.class_ids,
+            track_ids=boxes.track_ids,
+            **fields,
+        )
+
+    @property
+    def boxes(self) -> Boxes:
+        """The detections as the one struct of arrays (common/boxes.py)."""
+        return Boxes(
+            xyxy=self.xyxy, scores=self.scores, class_ids=self.class_ids, track_ids=self.track_ids
+        )
+
+    def __len__(self) -> int:
+        return len(self.xyxy)
+
+    @property
+    def centers(self) -> npt.NDArray[np.float32]:
+        """Box centres (n, 2) in pixels, as ``BoundingBox2D.center``."""
+        return ((self.xyxy[:, :2] + self.xyxy[:, 2:]) / 2).astype(np.float32)
+
+    @property
+    def sizes(self) -> npt.NDArray[np.float32]:
+        """Box sizes (n, 2) width and height in pixels, as ``BoundingBox2D.size_x/size_y``."""
+        return (self.xyxy[:, 2:] - self.xyxy[:, :2]).astype(np.float32)
+
+    def _wire_extras(self) -> dict[str, Any]:
+        # (n, 4) float32 cx, cy, w, h for readers in other languages; decode ignores it.
+        center_size = np.hstack([self.centers, self.sizes])
+        return {"center_size": np.ascontiguousarray(center_size, "<f4").tobytes()}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Twist(Message):
+    """A velocity command, as ``geometry_msgs/Twist``: m/s and rad/s in the robot's base frame.
+
+    ``input_stamp_ns`` is the capture stamp of the frame whose detections this command reacts
+    to (0 when it reacts to none, e.g. a stop), so capture-to-command latency can be measured.
+    """
+
+    TAG: ClassVar[str] = "Twist"
+    VERSION: ClassVar[int] = 1
+    header: Header
+    linear: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    angular: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    input_stamp_ns: NonNegativeInt = 0
+
+    def __post_init__(self) -> None:
+        # A NaN reaching a motor driver that does not check is a runaway: refuse to build one.
+        if not all(math.isfinite(v) for v in (*self.linear, *self.angular)):
+            raise ValueError(f"velocities must be finite, got {self.linear} {self.angular}")
+
+    @property
+    def is_zero(self) -> bool:
+        return not any(self.linear) and not any(self.angular)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LaserScan(Message):
+    """A planar scan, as ``sensor_msgs/LaserScan``: ray i points at angle_min + i*increment.
+
+    ``ranges`` is (n,) float32 in metres; inf means nothing within range_max, NaN an invalid ray.
+    """
+
+    TAG: ClassVar[str] = "LaserScan"
+    VERSION: ClassVar[int] = 1
+    header: Header
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    ranges: Annotated[npt.NDArray[np.float32], Shape(N_RAYS)]
+
+    def __post_init__(self) -> None:
+        if not 0 < len(self.ranges) <= MAX_SCAN_RAYS:
+            raise ValueError(f"a scan needs 1..{MAX_SCAN_RAYS} rays, got {len(self.ranges)}")
+        if not (np.isfinite(self.angle_min) and np.isfinite(self.angle_increment)):
+            raise ValueError("angles must be finite")
+        if not 0 <= self.range_min < self.range_max:
+            raise ValueError(f"range_min {self.range_min} must be below range_max {self.range_max}")
+
+    @property
+    def angles(self) -> npt.NDArray[np.float64]:
+        """The angle of each ray in radians, (n,) float64."""
+        return self.angle_min + self.angle_increment * np.arange(len(self.ranges), dtype=np.float64)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ControllerStatus(Message):
+    """What the controller is doing and why: mode, target and state (e.g. "following")."""
+
+    TAG: ClassVar[str] = "ControllerStatus"
+    VERSION: ClassVar[int] = 1
+    header: Header
+    mode: str
+    target: str
+    state: str
+    reason: str = ""
+    track_id: int = -1
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class GroundTruth(Message):
+    """The simulator's truth: the robot's pose and every target's position, in the world frame.
+
+    ``sim_time_s`` is the scenario clock, which starts once the detector and controller are up.
+    ``robot`` is (x, y, theta) in metres and radians; ``targets_xy`` is (n, 2) float64 metres;
+    ``target_names`` the class of each target (e.g. "person") and ``target_ids`` its scenario
+    id, so a run can be scored against what really happened. ``obstacles`` is (m, 3) float64,
+    each round obstacle's centre x, y and radius in metres (the live view draws them).
+    """
+
+    TAG: ClassVar[str] = "GroundTruth"
+    VERSION: ClassVar[int] = 1
+    header: Header
+    sim_time_s: float
+    robot: tuple[float, float, float]
+    robot_velocity: tuple[float, float] = (0.0, 0.0)
+    targets_xy: Annotated[npt.NDArray[np.float64], Shape(N_TARGETS, 2)] = field(
+        default_factory=lambda: np.zeros((0, 2))
+    )
+    target_names: tuple[str, ...] = ()
+    target_ids: tuple[str, ...] = ()
+    # Absent from truths written before it existed: no obstacles. The row count comes from the
+    # byte length (no count of its own on the wire, so older payloads still decode).
+    obstacles: Annotated[npt.NDArray[np.float64], Shape(-1, 3)] = field(
+        default_factory=lambda: np.zeros((0, 3))
+    )
+
+    def __post_init__(self) -> None:
+        n = len(self.target_names)
+        if self.targets_xy.shape != (n, 2) or len(self.target_ids) != n:
+            raise ValueError(f"targets_xy must be ({n}, 2) with {n} ids")
+        if self.obstacles.ndim != 2 or self.obstacles.shape[1] != 3:
+            raise ValueError(f"obstacles must be (m, 3) x, y, radius, got {self.obstacles.shape}")
+        if len(self.obstacles) > MAX_DETECTIONS:
+            raise ValueError(f"{len(self.obstacles)} obstacles is over {MAX_DETECTIONS}")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class EStop(Message):
+    """The emergency stop: ``engaged`` latches zero velocity until an EStop with False."""
+
+    TAG: ClassVar[str] = "EStop"
+    VERSION: ClassVar[int] = 1
+    header: Header
+    engaged: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ServiceCounters(Message):
+    """A service's own counters (frames in, dropped, bad input ...), published periodically."""
+
+    TAG: ClassVar[str] = "ServiceCounters"
+    VERSION: ClassVar[int] = 1
+    header: Header
+    service: str
+    counters: dict[str, int]
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MetricsSnapshot(Message):
+    """The metrics service's view of the stack over its sliding window.
+
+    ``latency_ms`` maps a stage name (e.g. "capture_to_detections", "end_to_end") to its
+    percentiles ({"p50", "p95", "p99", "mean", "count"}). ``counters`` maps
+    "<service>.<counter>" to a count, bad input included.
+    """
+
+    TAG: ClassVar[str] = "MetricsSnapshot"
+    VERSION: ClassVar[int] = 1
+    header: Header
+    window_s: float
+    fps: float
+    frames: NonNegativeInt
+    detections: NonNegativeInt
+    detections_per_frame: float
+    dropped_frames: NonNegativeInt
+    latency_ms: dict[str, dict[str, float]]
+    counters: dict[str, int]
+    class_counts: dict[str, int] = field(default_factory=dict)
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The snapshot as plain JSON-able data, the answer to a metrics query."""
+        return {
+            "stamp_ns": self.header.stamp_ns,
+            "window_s": self.window_s,
+            "fps": self.fps,
+            "frames": self.frames,
+            "detections": self.detections,
+            "detections_per_frame": self.detections_per_frame,
+            "dropped_frames": self.dropped_frames,
+            "latency_ms": self.latency_ms,
+            "counters": self.counters,
+            "class_counts": self.class_counts,
+        }
+
+    def _wire_extras(self) -> dict[str, Any]:
+        # The body has always been the JSON answer plus the header, so it carries the header's
+        # stamp_ns at the top level too; decode ignores it.
+        return {"stamp_ns": self.header.stamp_ns}

@@ -1,0 +1,143 @@
+"""What every service process has: a Zenoh session, its keys, counters and a health token."""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from typing import TypeVar
+
+import zenoh
+
+from common.bus import Publisher, QoS, open_session
+from common.clock import BOOT_ID, Stamp, now
+from common.counters import Counters
+from common.errors import DecodeError
+from common.keys import Keys
+from common.lifecycle import Closing
+from common.messages import Header, ServiceCounters
+from common.ratelimit import LogLimiter
+from common.settings import Config
+
+_M = TypeVar("_M")
+
+
+class Node(Closing):
+    """A service's presence on the bus.
+
+    ``ready()`` declares the liveliness token ``<prefix>/health/<service>``; the supervisor and
+    tests wait on it instead of sleeping. ``publish_counters()`` is rate-limited, so the service
+    loop may call it every iteration.
+    """
+
+    def __init__(self, service: str, config: Config, *, counters_period_s: float = 1.0) -> None:
+        self.service = service
+        self.config = config
+        self.keys = Keys(config.stack.prefix)
+        self.counters = Counters()
+        self.log = logging.getLogger(service)
+        self.log_limit = LogLimiter()  # bad input's log lines, per key (common/ratelimit.py)
+        self.session = open_session(config.zenoh, service)
+        self._token: zenoh.LivelinessToken | None = None
+        self._counters_pub = self.publisher(self.keys.counters(service), QoS.TELEMETRY)
+        self._counters_period_s = counters_period_s
+        self._counters_next = 0.0
+        self._seq: dict[str, int] = {}  # per frame_id: one numbering per stream
+
+    def ready(self) -> None:
+        """Announce that the service is up and serving."""
+        self._token = self.session.liveliness().declare_token(self.keys.health(self.service))
+        self.log.info("ready (zenoh id %s)", self.session.info.zid())
+
+    def publisher(self, key: str, qos: QoS) -> Publisher:
+        """Declare a publisher with the QoS profile of its role (common/bus.py). A payload
+        over ``zenoh.max_payload_bytes`` is not sent but counted (``payload_too_large``)."""
+        return Publisher(
+            self.session,
+            key,
+            qos,
+            max_payload_bytes=self.config.zenoh.max_payload_bytes,
+            on_refused=self._payload_refused,
+        )
+
+    def _payload_refused(self, key: str, size: int) -> None:
+        limit = self.config.zenoh.max_payload_bytes
+        self.reject(
+            "payload_too_large",
+            f"{size}-byte payload on {key} not sent: over zenoh.max_payload_bytes ({limit}), "
+            "which Zenoh would lose",
+            key=key,
+        )
+
+    def subscribe(
+        self, key: str, decode: Callable[[bytes], _M], handle: Callable[[_M, zenoh.Sample], None]
+    ) -> zenoh.Subscriber[None]:
+        """Subscribe to ``key``: each sample is decoded, garbage is counted as bad input and
+        dropped (never raised into Zenoh's thread), and the message goes to ``handle``."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                msg = decode(sample.payload.to_bytes())
+            except DecodeError as exc:
+                self.bad_input(key, exc)
+                return
+            handle(msg, sample)
+
+        return self.session.declare_subscriber(key, on_sample)
+
+    def header(self, stamp: Stamp | None = None, frame_id: str = "") -> Header:
+        """A header for a message this service originates, stamped on both clocks (now, unless
+        ``stamp`` is given), with its own sequence number: one numbering per ``frame_id``, so
+        that a receiver of one stream (the simulator's frames, not its scans) sees no gaps."""
+        seq = self._seq[frame_id] = self._seq.get(frame_id, 0) + 1
+        at = now() if stamp is None else stamp
+        return Header(
+            stamp_ns=at.wall_ns,
+            frame_id=frame_id,
+            seq=seq,
+            source=self.service,
+            mono_ns=at.mono_ns,
+            boot_id=BOOT_ID,
+        )
+
+    def publish_counters(self, *, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now < self._counters_next:
+            return
+        self._counters_next = now + self._counters_period_s
+        for line in self.log_limit.due():  # the summaries of floods that stopped
+            self.log.warning("%s", line)
+        msg = ServiceCounters(
+            header=self.header(), service=self.service, counters=self.counters.snapshot()
+        )
+        self._counters_pub.put(msg.encode())
+
+    def bad_input(self, key: str, error: Exception) -> None:
+        """Log (rate-limited per key), count and drop one bad message."""
+        self.counters.add("bad_input")
+        self.counters.add(f"bad_input.{key.rsplit('/', 1)[-1]}")
+        self._log_limited(key, "bad_input", "dropped bad input on %s: %s", key, error)
+
+    def reject(self, counter: str, message: str, *, key: str = "") -> None:
+        """Count one message that was fine as bytes but unfit to act on (stale, replayed,
+        oversize ...). Always counted; logged in full only for the first few per ``key``
+        (default: the counter), then summarised once a period (common/ratelimit.py), so that
+        a flood cannot fill the log while the count stays exact."""
+        self.counters.add(counter)
+        self._log_limited(key or counter, counter, "%s (%s)", message, counter)
+
+    def _log_limited(self, key: str, reason: str, fmt: str, *args: object) -> None:
+        # Per key and counter: a flood of garbage cannot hide the first bombs on the same key.
+        admit = self.log_limit.admit(reason if key == reason else f"{key} ({reason})", reason)
+        if admit.summary:
+            self.log.warning("%s", admit.summary)
+        if admit.log:
+            self.log.warning(fmt, *args)
+
+    def close(self) -> None:
+        for line in self.log_limit.drain():
+            self.log.warning("%s", line)
+        self.publish_counters(force=True)
+        if self._token is not None:
+            self._token.undeclare()
+        self.session.close()

@@ -1,0 +1,99 @@
+"""Settings of the ``ros2`` bridge: how the stack joins a ROS 2 graph over rmw_zenoh.
+
+Re-exported by common/settings.py, where the whole Config is assembled. See docs/ros2.md.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import ClassVar
+
+from common.errors import ConfigError
+from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
+
+
+class RosDistro(StrEnum):
+    HUMBLE = "humble"
+    JAZZY = "jazzy"
+    KILTED = "kilted"
+    ROLLING = "rolling"
+
+
+class ImageFormat(StrEnum):
+    RAW = "raw"  # sensor_msgs/msg/Image: bgr8, rgb8 or mono8
+    COMPRESSED = "compressed"  # sensor_msgs/msg/CompressedImage: jpeg
+
+
+_TOPIC = re.compile(r"^/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$")
+
+
+def _topic(name: str, value: str) -> None:
+    if not _TOPIC.match(value):
+        raise ConfigError(f"ros2.{name} {value!r} is not a ROS 2 topic name (e.g. /camera/image)")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Ros2Settings:
+    """The bridge between the stack's keys and a ROS 2 graph (rmw_zenoh, no ROS install).
+
+    ``router`` are the rmw_zenoh router's endpoints (``rmw_zenohd`` listens on port 7447);
+    the bridge also listens on ``listen`` so that the robot's nodes (peers) reach it directly,
+    as rmw_zenoh's own nodes do (use ``tcp/0.0.0.0:0`` when the router is on another host);
+    ``domain_id``, ``distro``, ``node`` and ``namespace`` place the bridge in the graph. Each
+    direction can be turned off: images and scans in (``image_in``, ``scan_in``), detections
+    and commands out (``detections_out``, ``cmd_vel_out``). ``twist_stamped`` publishes
+    ``geometry_msgs/msg/TwistStamped`` instead of ``Twist`` (many Jazzy robots take it).
+    ``debug_image_out`` publishes each frame with its detections drawn on it (boxes, class,
+    score, track id) as a jpeg ``CompressedImage`` on ``debug_image_topic``, at most
+    ``debug_image_rate_hz`` times a second, at ``debug_jpeg_quality``.
+    ``router_timeout_s`` bounds the wait for the router at start-up.
+    """
+
+    router: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
+    domain_id: int = 0
+    distro: RosDistro = RosDistro.JAZZY
+    node: str = "zenoh_yolo_stack"
+    namespace: str = "/"
+    image_topic: str = "/camera/rgb/image_raw"
+    image_format: ImageFormat = ImageFormat.RAW
+    scan_topic: str = "/scan"
+    detections_topic: str = "/detections"
+    cmd_vel_topic: str = "/cmd_vel"
+    twist_stamped: bool = False
+    image_in: bool = True
+    scan_in: bool = True
+    detections_out: bool = True
+    cmd_vel_out: bool = True
+    debug_image_out: bool = False
+    debug_image_topic: str = "/detections/image"
+    debug_image_rate_hz: float = 5.0
+    debug_jpeg_quality: int = 80
+    router_timeout_s: float = 5.0
+
+    BOUNDS: ClassVar[Bounds] = {
+        "domain_id": (0, 232),  # the DDS domain ids that map to valid ports
+        "debug_image_rate_hz": (0.1, 100),
+        "debug_jpeg_quality": (1, 100),
+        "router_timeout_s": (0.1, 300),
+    }
+    LENGTHS: ClassVar[Bounds] = {"router": (1, 16), "listen": (0, 16)}
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "ros2", self.BOUNDS)
+        check_lengths(self, "ros2", self.LENGTHS)
+        enum_field(self, "distro", RosDistro, "ros2.distro")
+        enum_field(self, "image_format", ImageFormat, "ros2.image_format")
+        if not self.router or not all("/" in ep for ep in self.router):
+            raise ConfigError(
+                f"ros2.router must list endpoints like tcp/<host>:7447, got {list(self.router)}"
+            )
+        if not re.match(r"^[A-Za-z][A-Za-z0-9_]*$", self.node):
+            raise ConfigError(f"ros2.node {self.node!r} is not a ROS 2 node name")
+        if self.namespace != "/":
+            _topic("namespace", self.namespace)
+        topics = ("image_topic", "scan_topic", "detections_topic", "cmd_vel_topic")
+        for name in (*topics, "debug_image_topic"):
+            _topic(name, getattr(self, name))

@@ -1,0 +1,250 @@
+"""Typed, frozen settings for every service: one table of the stack's TOML file each.
+
+Each dataclass validates itself and raises ConfigError with one line for an out-of-range value.
+Reading the file and the environment overrides is in common/config_file.py.
+
+This module holds the bus, stack, metrics and supervisor settings and the whole ``Config``; the
+perception settings (camera, detector, tracker) live in common/perception_settings.py and the
+control settings (controller, sim) in common/control_settings.py, the ROS 2 bridge's in
+common/ros2_settings.py, the live view's in common/viewer_settings.py, the recorder's in
+common/recorder_settings.py. All are re-exported here, so
+``from common.settings import X`` works for every one of them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar
+
+from common.control_settings import ControllerSettings, SimSettings
+from common.errors import ConfigError
+from common.perception_settings import CameraSettings, DetectorSettings, TrackerSettings
+from common.recorder_settings import RecorderSettings
+from common.ros2_settings import Ros2Settings
+from common.security import AUTH_MODES
+from common.setting_checks import Bounds, check_bounds, check_lengths
+from common.viewer_settings import ViewerSettings
+
+__all__ = [
+    "DEFAULT_CONFIG",
+    "REPO_ROOT",
+    "SERVICES",
+    "CameraSettings",
+    "Config",
+    "ControllerSettings",
+    "DetectorSettings",
+    "MetricsSettings",
+    "RecorderSettings",
+    "Ros2Settings",
+    "SimSettings",
+    "StackSettings",
+    "SupervisorSettings",
+    "TrackerSettings",
+    "ViewerSettings",
+    "ZenohSettings",
+]
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+# Runnable by the supervisor, and started in this order: the recorder first, so that it hears
+# the others from their start; the viewer after what it watches.
+SERVICES = ("recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
+DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
+# zenoh.max_payload_bytes: a counters message must fit; Zenoh refuses to receive above 1 GiB.
+MIN_PAYLOAD_LIMIT = 64 * 1024
+MAX_PAYLOAD_LIMIT = 1 << 30
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ZenohSettings:
+    """How every process joins the bus.
+
+    The supervisor listens on ``endpoint``; services connect to it and to ``connect`` (other
+    hosts), and listen on ``listen`` (port 0: any free port) so that peers mesh directly.
+    Multicast scouting is off by default: robots share networks, and tests must stay private.
+
+    ``mode = "client"`` makes the supervisor a Zenoh router that every service joins, so that
+    all traffic passes through it. ``auth`` ("none", "password" or "certificate") turns on
+    authentication and access control there, with the credentials that
+    ``zstack credentials`` writes to ``credentials_dir`` (relative to the repo root);
+    it needs client mode. An endpoint ``tls/<host>:<port>`` encrypts the links with the same
+    credentials; "certificate" needs one (mutual TLS). See docs/security.md.
+
+    ``max_payload_bytes`` is the largest payload a service sends; a larger one is counted
+    (``payload_too_large``) and not sent, because Zenoh silently loses big payloads under
+    congestion control DROP (64 MiB on loopback; 48 MiB still arrived). 32 MiB leaves a
+    margin for a loaded host and fits a raw 3840x2160 bgr8 frame (24 MiB).
+    """
+
+    mode: str = "peer"
+    endpoint: str = "tcp/127.0.0.1:7447"
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
+    multicast_scouting: bool = False
+    auth: str = "none"
+    credentials_dir: str = "secrets"
+    max_payload_bytes: int = 32 * 1024 * 1024
+
+    BOUNDS: ClassVar[Bounds] = {"max_payload_bytes": (MIN_PAYLOAD_LIMIT, MAX_PAYLOAD_LIMIT)}
+    LENGTHS: ClassVar[Bounds] = {"connect": (0, 16), "listen": (0, 16)}
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "zenoh", self.BOUNDS)
+        check_lengths(self, "zenoh", self.LENGTHS)
+        if self.mode not in ("peer", "client"):
+            raise ConfigError(f"zenoh.mode must be 'peer' or 'client', got {self.mode!r}")
+        for ep in (self.endpoint, *self.connect, *self.listen):
+            if "/" not in ep:
+                raise ConfigError(f"zenoh endpoint {ep!r} must look like tcp/<host>:<port>")
+        if self.auth not in AUTH_MODES:
+            modes = ", ".join(AUTH_MODES)
+            raise ConfigError(f"zenoh.auth must be one of {modes}, got {self.auth!r}")
+        if self.auth != "none" and self.mode != "client":
+            raise ConfigError(
+                'zenoh.auth needs zenoh.mode = "client": access control runs on the supervisor\'s '
+                "router, which must see every message"
+            )
+        if self.auth == "certificate" and not self.uses_tls:
+            raise ConfigError('zenoh.auth = "certificate" needs a tls/<host>:<port> endpoint')
+        if not self.credentials_dir:
+            raise ConfigError("zenoh.credentials_dir must not be empty")
+
+    @property
+    def uses_tls(self) -> bool:
+        return any(ep.startswith("tls/") for ep in (self.endpoint, *self.connect))
+
+    @property
+    def credentials_path(self) -> Path:
+        path = Path(self.credentials_dir).expanduser()
+        return path if path.is_absolute() else REPO_ROOT / path
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StackSettings:
+    """Names shared by all services (the key prefix and the camera they work on), and how far
+    ahead of the receiver's clock a stamp may be before it counts as from the future
+    (``clock_tolerance_s``: the clock offset allowed between hosts; see docs/security.md)."""
+
+    prefix: str = "stack"
+    camera: str = "front"
+    clock_tolerance_s: float = 0.1
+
+    BOUNDS: ClassVar[Bounds] = {"clock_tolerance_s": (0, 5)}
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "stack", self.BOUNDS)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MetricsSettings:
+    """The sliding window the percentiles cover, how often the report is logged, how much
+    per-second history (FPS over time) is kept, and the optional Prometheus endpoint.
+
+    ``prometheus_port`` 0 turns the endpoint off; it listens on ``prometheus_host`` (loopback by
+    default, so that nothing is exposed to the network unless asked for).
+
+    What is believed (services/metrics/trust.py): counters only from a known service on its own
+    key, at most ``max_counters_per_service`` names each; a detector's stage times only within
+    0..``max_timing_ms``. The rest is refused and counted as ``metrics.refused.<why>``.
+    """
+
+    window_s: float = 10.0
+    report_period_s: float = 5.0
+    history_s: float = 600.0
+    prometheus_port: int = 0
+    prometheus_host: str = "127.0.0.1"
+    max_counters_per_service: int = 256
+    max_timing_ms: float = 1e6
+
+    BOUNDS: ClassVar[Bounds] = {
+        "window_s": (0.1, 3600),
+        "report_period_s": (0.1, 3600),
+        "history_s": (1, 86400),
+        "prometheus_port": (0, 65535),  # 0 = off
+        "max_counters_per_service": (1, 2000),
+        "max_timing_ms": (0.001, 1e9),
+    }
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "metrics", self.BOUNDS)
+        if not self.prometheus_host:
+            raise ConfigError("metrics.prometheus_host must not be empty")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SupervisorSettings:
+    """Which services to run and how to restart them (exponential backoff, capped).
+
+    One supervisor per stack (endpoint and prefix) on a host: its lock file lives in
+    ``lock_dir`` (empty: the system's temporary folder).
+
+    The watchdog (deploy/watchdog.py) restarts a running service whose liveliness token has been
+    gone for ``watchdog_grace_s``, or whose work loop has published no counters for
+    ``watchdog_progress_s`` (0 turns that check off).
+    """
+
+    services: tuple[str, ...] = ("camera", "detector", "controller", "metrics")
+    restart_backoff_s: float = 0.5
+    restart_backoff_max_s: float = 10.0
+    stop_timeout_s: float = 5.0
+    status_period_s: float = 2.0
+    lock_dir: str = ""
+    watchdog_grace_s: float = 2.0
+    watchdog_progress_s: float = 20.0
+
+    BOUNDS: ClassVar[Bounds] = {
+        "restart_backoff_s": (0.01, 60),
+        "restart_backoff_max_s": (0.01, 600),
+        "stop_timeout_s": (0.1, 60),
+        "status_period_s": (0.1, 60),
+        "watchdog_grace_s": (0.1, 60),
+        "watchdog_progress_s": (0, 600),  # 0 = off
+    }
+
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.services) - set(SERVICES))
+        if unknown or len(set(self.services)) != len(self.services) or not self.services:
+            raise ConfigError(
+                f"supervisor.services must name each of {', '.join(SERVICES)} at most once, "
+                f"got {list(self.services)}"
+            )
+        check_bounds(self, "supervisor", self.BOUNDS)
+        if self.restart_backoff_max_s < self.restart_backoff_s:
+            raise ConfigError(
+                f"supervisor.restart_backoff_max_s ({self.restart_backoff_max_s}) must not be "
+                f"below supervisor.restart_backoff_s ({self.restart_backoff_s})"
+            )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Config:
+    """The whole stack configuration; each service reads its own table."""
+
+    path: str = ""
+    zenoh: ZenohSettings = field(default_factory=ZenohSettings)
+    stack: StackSettings = field(default_factory=StackSettings)
+    camera: CameraSettings = field(default_factory=CameraSettings)
+    detector: DetectorSettings = field(default_factory=DetectorSettings)
+    tracker: TrackerSettings = field(default_factory=TrackerSettings)
+    controller: ControllerSettings = field(default_factory=ControllerSettings)
+    sim: SimSettings = field(default_factory=SimSettings)
+    metrics: MetricsSettings = field(default_factory=MetricsSettings)
+    ros2: Ros2Settings = field(default_factory=Ros2Settings)
+    viewer: ViewerSettings = field(default_factory=ViewerSettings)
+    recorder: RecorderSettings = field(default_factory=RecorderSettings)
+    supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)
+
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.sim.wait_for) - set(SERVICES))
+        if unknown:
+            raise ConfigError(
+                f"sim.wait_for must name services among {', '.join(SERVICES)}, got {unknown}"
+            )
+
+    @property
+    def estop_path(self) -> Path:
+        """Where the controller keeps the latched e-stop (one file per stack prefix)."""
+        default = f"state/estop-{self.stack.prefix.replace('/', '_')}.json"
+        name = self.controller.estop_file or default
+        path = Path(name).expanduser()
+        return path if path.is_absolute() else REPO_ROOT / path

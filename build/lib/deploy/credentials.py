@@ -1,0 +1,225 @@
+"""python -m deploy.credentials [--dir DIR] [--host NAME_OR_IP ...] [--force] [--days N]
+
+Creates the credentials of the secure profile in DIR (default ``secrets/``, git-ignored): a
+random password per principal plus the router's ``user:password`` dictionary, and a private CA
+with a key and certificate per principal (common name = principal). Every certificate names
+``localhost``, ``127.0.0.1`` and each --host, because the supervisor's certificate is served by
+the TLS listener and clients check the name they connect to. Existing credentials are kept
+unless --force is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import ipaddress
+import os
+import re
+import secrets
+import sys
+from pathlib import Path
+
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+from common.errors import ConfigError
+from common.lifecycle import run_main
+from common.security import (
+    PRINCIPALS,
+    ca_file,
+    ca_key_file,
+    cert_file,
+    key_file,
+    password_file,
+    users_file,
+)
+from common.settings import REPO_ROOT
+
+DEFAULT_DIR = REPO_ROOT / "secrets"
+DEFAULT_DAYS = 825  # the longest validity that browsers and most TLS stacks still accept
+DEFAULT_HOSTS = ("localhost", "127.0.0.1")
+SECRET_MODE = 0o600
+PUBLIC_MODE = 0o644
+_HOSTNAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9.-]*[A-Za-z0-9])?")
+# Back-date certificates a little so a peer whose clock runs slightly behind accepts them.
+_CLOCK_SKEW = datetime.timedelta(minutes=5)
+
+PrivateKey = ec.EllipticCurvePrivateKey
+
+
+def _subject_names(hosts: tuple[str, ...]) -> list[x509.GeneralName]:
+    """SubjectAltNames for ``localhost``, ``127.0.0.1`` and ``hosts``: IP or DNS, no repeats."""
+    names: list[x509.GeneralName] = []
+    for host in dict.fromkeys((*DEFAULT_HOSTS, *hosts)):
+        try:
+            names.append(x509.IPAddress(ipaddress.ip_address(host)))
+        except ValueError:
+            if not _HOSTNAME.fullmatch(host):
+                msg = f"--host {host!r} is neither an IP address nor a DNS name"
+                raise ConfigError(msg) from None
+            names.append(x509.DNSName(host))
+    return names
+
+
+def _new_key() -> PrivateKey:
+    # ECDSA P-256: accepted by rustls (Zenoh's TLS) as PKCS#8, and small and fast.
+    return ec.generate_private_key(ec.SECP256R1())
+
+
+def _key_pem(key: PrivateKey) -> bytes:
+    return key.private_bytes(
+        serialization.Encoding.PEM,
+        serialization.PrivateFormat.PKCS8,
+        serialization.NoEncryption(),
+    )
+
+
+def _builder(
+    subject: str, issuer: x509.Name, key: PrivateKey, days: int
+) -> x509.CertificateBuilder:
+    now = datetime.datetime.now(datetime.UTC)
+    public_key = key.public_key()
+    return (
+        x509.CertificateBuilder()
+        .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, subject)]))
+        .issuer_name(issuer)
+        .public_key(public_key)
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - _CLOCK_SKEW)
+        .not_valid_after(now + datetime.timedelta(days=days))
+        .add_extension(x509.SubjectKeyIdentifier.from_public_key(public_key), critical=False)
+    )
+
+
+def _key_usage(*, signs_certificates: bool) -> x509.KeyUsage:
+    """A CA signs certificates and CRLs; a leaf signs TLS handshakes only."""
+    return x509.KeyUsage(
+        digital_signature=not signs_certificates,
+        content_commitment=False,
+        key_encipherment=False,
+        data_encipherment=False,
+        key_agreement=False,
+        key_cert_sign=signs_certificates,
+        crl_sign=signs_certificates,
+        encipher_only=False,
+        decipher_only=False,
+    )
+
+
+def _ca_certificate(key: PrivateKey, days: int) -> x509.Certificate:
+    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "zenoh-yolo-stack CA")])
+    return (
+        _builder("zenoh-yolo-stack CA", name, key, days)
+        .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+        .add_extension(_key_usage(signs_certificates=True), critical=True)
+        .sign(key, hashes.SHA256())
+    )
+
+
+def _leaf_certificate(
+    principal: str,
+    key: PrivateKey,
+    ca: x509.Certificate,
+    ca_key: PrivateKey,
+    names: list[x509.GeneralName],
+    days: int,
+) -> x509.Certificate:
+    """A certificate for ``principal`` that serves a TLS listener and authenticates a client."""
+    purposes = [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]
+    authority = x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key())
+    return (
+        _builder(principal, ca.subject, key, days)
+        .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+        .add_extension(_key_usage(signs_certificates=False), critical=True)
+        .add_extension(x509.ExtendedKeyUsage(purposes), critical=False)
+        .add_extension(x509.SubjectAlternativeName(names), critical=False)
+        .add_extension(authority, critical=False)
+        .sign(ca_key, hashes.SHA256())
+    )
+
+
+def _write(path: Path, data: bytes, mode: int) -> Path:
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
+    with os.fdopen(fd, "wb") as f:
+        os.fchmod(f.fileno(), mode)  # with --force an existing file would keep its old mode
+        f.write(data)
+    return path
+
+
+def _targets(directory: Path) -> list[Path]:
+    files = [users_file(directory), ca_file(directory), ca_key_file(directory)]
+    for p in PRINCIPALS:
+        files += [password_file(directory, p), cert_file(directory, p), key_file(directory, p)]
+    return files
+
+
+def generate(
+    directory: Path, hosts: tuple[str, ...] = (), days: int = DEFAULT_DAYS, force: bool = False
+) -> list[Path]:
+    """Write passwords, the user dictionary, a CA and one certificate per principal into
+    ``directory`` (created 0700; secrets 0600). Returns the files written, in order."""
+    if days < 1:
+        raise ConfigError(f"--days must be at least 1, got {days}")
+    names = _subject_names(hosts)
+    if not force and (existing := [f.name for f in _targets(directory) if f.exists()]):
+        raise ConfigError(
+            f"credentials already exist in {directory} ({', '.join(existing[:3])}"
+            f"{', ...' if len(existing) > 3 else ''}); pass --force to replace them"
+        )
+    if directory.exists() and not directory.is_dir():
+        raise ConfigError(f"{directory} exists and is not a directory")
+    if not directory.exists():
+        directory.mkdir(mode=0o700, parents=True)
+        directory.chmod(0o700)  # mkdir's mode is reduced by the umask
+
+    written: list[Path] = []
+    passwords = {p: secrets.token_urlsafe(24) for p in PRINCIPALS}
+    for p, password in passwords.items():
+        written.append(_write(password_file(directory, p), f"{password}\n".encode(), SECRET_MODE))
+    users = "".join(f"{p}:{password}\n" for p, password in passwords.items())
+    written.append(_write(users_file(directory), users.encode(), SECRET_MODE))
+
+    ca_key = _new_key()
+    ca = _ca_certificate(ca_key, days)
+    written.append(_write(ca_key_file(directory), _key_pem(ca_key), SECRET_MODE))
+    ca_pem = ca.public_bytes(serialization.Encoding.PEM)
+    written.append(_write(ca_file(directory), ca_pem, PUBLIC_MODE))
+    for p in PRINCIPALS:
+        key = _new_key()
+        cert = _leaf_certificate(p, key, ca, ca_key, names, days)
+        written.append(_write(key_file(directory, p), _key_pem(key), SECRET_MODE))
+        pem = cert.public_bytes(serialization.Encoding.PEM)
+        written.append(_write(cert_file(directory, p), pem, PUBLIC_MODE))
+    return written
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(prog="python -m deploy.credentials", description=__doc__)
+    parser.add_argument("--dir", type=Path, default=DEFAULT_DIR, help="default: secrets/")
+    parser.add_argument(
+        "--host",
+        action="append",
+        default=[],
+        help="another name or IP address the supervisor is reached at (repeatable)",
+    )
+    parser.add_argument("--force", action="store_true", help="replace existing credentials")
+    parser.add_argument("--days", type=int, default=DEFAULT_DAYS, help="certificate validity")
+    args = parser.parse_args()
+    directory: Path = args.dir.resolve()
+    generate(directory, tuple(args.host), args.days, args.force)
+    n = len(PRINCIPALS)
+    names = ", ".join(dict.fromkeys((*DEFAULT_HOSTS, *args.host)))
+    for line in (
+        f"wrote {n} passwords and {users_file(directory).name} to {directory}",
+        f"wrote a CA and {n} certificates for {names}, valid {args.days} days, to {directory}",
+        f'use in the stack config: [zenoh] auth = "password" or "certificate", '
+        f'credentials_dir = "{directory}"',
+    ):
+        print(f"credentials: {line}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    run_main(main, "credentials")

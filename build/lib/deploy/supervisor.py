@@ -1,0 +1,259 @@
+"""python -m deploy.supervisor [--config FILE] [--duration S]
+
+Starts every service of the stack config as its own process, shows their state and the stack's
+live figures, restarts a service that crashes (with backoff), and stops everything cleanly on
+Ctrl-C or SIGTERM. With --duration it runs headless for S seconds and ends with a JSON summary
+on stdout (status lines go to stderr, so the summary can be piped). A service that exits for a
+bad config, model or backend (exit codes 2, 3, 4) stops the whole stack: the supervisor exits
+with that code and the service's own error line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import threading
+import time
+from typing import cast
+
+import zenoh
+
+from common.bus import open_hub
+from common.config_file import load_config
+from common.contracts import MetricsAnswer
+from common.errors import BackendUnavailable, ConfigError, DecodeError, ModelError, StackError
+from common.keys import Keys
+from common.lifecycle import (
+    EXIT_BACKEND,
+    EXIT_CONFIG,
+    EXIT_MODEL,
+    run_main,
+    setup_logging,
+    stop_event,
+)
+from common.messages import ControllerStatus, GroundTruth, ServiceCounters, Twist
+from common.queries import query_metrics
+from common.settings import CameraSettings, Config
+from deploy.lock import acquire
+from deploy.processes import ServiceProcess, service_command
+from deploy.watchdog import Observation, check_settings, judge
+
+METRICS_TIMEOUT_S = 0.5  # the status line must not wait long for a missing metrics service
+
+
+class LiveView:
+    """What the supervisor shows and its watchdog judges: readiness from liveliness tokens (and
+    when one vanished), each service's last counters (its work loop's heartbeat), the latest
+    command, controller status and ground truth."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys) -> None:
+        self.keys = keys
+        self.ready: set[str] = set()
+        self.token_lost_at: dict[str, float] = {}
+        self.progress_at: dict[str, float] = {}
+        self.status: ControllerStatus | None = None
+        self.twist: Twist | None = None
+        self.truth: GroundTruth | None = None
+        self._lock = threading.Lock()
+        self._subs = [
+            session.liveliness().declare_subscriber(
+                keys.all_health(), self._on_health, history=True
+            ),
+            session.declare_subscriber(keys.all_counters(), self._on_counters),
+            session.declare_subscriber(keys.controller_status(), self._on_status),
+            session.declare_subscriber(keys.cmd_vel(), self._on_twist),
+            session.declare_subscriber(keys.sim_truth(), self._on_truth),
+        ]
+
+    def _on_health(self, sample: zenoh.Sample) -> None:
+        service = str(sample.key_expr).rsplit("/", 1)[-1]
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.ready.add(service)
+                self.token_lost_at.pop(service, None)
+            else:
+                self.ready.discard(service)
+                self.token_lost_at[service] = time.monotonic()
+
+    def _on_counters(self, sample: zenoh.Sample) -> None:
+        try:
+            ServiceCounters.decode(sample.payload.to_bytes())
+        except DecodeError:
+            return  # garbage is no sign of life
+        service = str(sample.key_expr).rsplit("/", 1)[-1]
+        with self._lock:
+            self.progress_at[service] = time.monotonic()
+
+    def _on_status(self, sample: zenoh.Sample) -> None:
+        try:
+            self.status = ControllerStatus.decode(sample.payload.to_bytes())
+        except DecodeError:
+            return  # the controller and metrics count garbage; the view just skips it
+
+    def _on_twist(self, sample: zenoh.Sample) -> None:
+        try:
+            self.twist = Twist.decode(sample.payload.to_bytes())
+        except DecodeError:
+            return
+
+    def _on_truth(self, sample: zenoh.Sample) -> None:
+        try:
+            self.truth = GroundTruth.decode(sample.payload.to_bytes())
+        except DecodeError:
+            return
+
+    def is_ready(self, service: str) -> bool:
+        with self._lock:
+            return service in self.ready
+
+    def observe(self, p: ServiceProcess) -> Observation:
+        """What the watchdog judges ``p`` by (deploy/watchdog.py)."""
+        with self._lock:
+            return Observation(
+                ready_at=p.ready_at,
+                token_lost_at=self.token_lost_at.get(p.name),
+                last_progress=self.progress_at.get(p.name),
+            )
+
+
+def status_line(
+    procs: list[ServiceProcess], view: LiveView, metrics: MetricsAnswer | None
+) -> str:
+    parts = []
+    for p in procs:
+        hung = f", {p.hangs} hung" if p.hangs else ""
+        parts.append(f"{p.name}:{p.state}" + (f"(r{p.restarts}{hung})" if p.restarts else ""))
+    line = " ".join(parts)
+    if metrics:
+        lat = metrics["latency_ms"]
+        line += (
+            f" | fps {metrics['fps']:.1f} det/frame {metrics['detections_per_frame']:.1f}"
+            f" e2e p50 {lat['end_to_end']['p50']:.0f} ms"
+        )
+    if view.status is not None:
+        s, t = view.status, view.twist
+        cmd = f" v={t.linear[0]:+.2f} w={t.angular[2]:+.2f}" if t else ""
+        target = f" {s.target}#{s.track_id}" if s.track_id >= 0 else f" {s.target}"
+        line += f" | {s.mode} {s.state}{target if s.target else ''}{cmd}"
+    if view.truth is not None:
+        x, y, theta = view.truth.robot
+        line += f" | pose x={x:+.2f} y={y:+.2f} th={math.degrees(theta):+.0f}deg"
+    return line
+
+
+def supervise(
+    config: Config, stop: threading.Event, duration_s: float | None, *, timeline: bool = False
+) -> int:
+    log = setup_logging("supervisor")
+    s = config.supervisor
+    keys = Keys(config.stack.prefix)
+    check_settings(config)
+    grace, progress = s.watchdog_grace_s, s.watchdog_progress_s
+    lock = acquire(s.lock_dir, config.zenoh.endpoint, config.stack.prefix)
+    session = open_hub(config)
+    view = LiveView(session, keys)
+    for warning in config_warnings(config):
+        log.warning("%s", warning)
+    procs = [ServiceProcess(n, service_command(n, config.path), s) for n in s.services]
+    log.info("hub on %s; starting %s", config.zenoh.endpoint, ", ".join(s.services))
+    for p in procs:
+        p.start()
+    end = time.monotonic() + duration_s if duration_s else None
+    next_status = time.monotonic()
+    last_metrics: MetricsAnswer | None = None
+    failed: ServiceProcess | None = None
+    try:
+        while failed is None and not stop.wait(0.1):
+            now = time.monotonic()
+            if end is not None and now >= end:
+                break
+            for p in procs:
+                event = p.poll(now)
+                if event:
+                    log.warning("%s", event)
+                if p.state == "starting" and view.is_ready(p.name):
+                    p.mark_ready(now)
+                elif p.state == "ready":
+                    why = judge(p.name, view.observe(p), now, grace_s=grace, progress_s=progress)
+                    if why:
+                        log.warning("%s", p.hung(why, now))
+                if p.state == "failed" and failed is None:
+                    failed = p  # restarting will not help: stop the stack and say why
+            if now >= next_status:
+                next_status = now + s.status_period_s
+                last_metrics = query_metrics(session, keys, METRICS_TIMEOUT_S) or last_metrics
+                # Status lines go to stderr: stdout carries only the --duration summary.
+                print(status_line(procs, view, last_metrics), file=sys.stderr, flush=True)
+    finally:
+        log.info("stopping")
+        for p in reversed(procs):
+            p.signal_stop()
+        deadline = time.monotonic() + s.stop_timeout_s
+        for p in procs:
+            p.wait_stopped(deadline)
+        session.close()
+        lock.close()
+    summary = {
+        "services": {p.name: {"exit_code": p.last_exit, "restarts": p.restarts} for p in procs},
+        "metrics": brief(last_metrics, timeline=timeline),
+    }
+    if duration_s:
+        print(json.dumps(summary, indent=2), flush=True)
+    if failed is not None:
+        raise service_failure(failed)
+    clean = all(p.last_exit == 0 for p in procs)
+    log.info("stopped; %s", "all services exited cleanly" if clean else f"exit codes {summary}")
+    return 0 if clean else 1
+
+
+def brief(metrics: MetricsAnswer | None, *, timeline: bool) -> MetricsAnswer | None:
+    """The metrics answer for the summary: without its per-second ``timeline`` arrays (a few
+    hundred lines for a minute's run) unless they were asked for."""
+    if metrics is None or timeline:
+        return metrics
+    return cast(MetricsAnswer, {k: v for k, v in metrics.items() if k != "timeline"})
+
+
+def config_warnings(config: Config) -> list[str]:
+    """Settings that are valid but will not do what their author meant."""
+    out = []
+    camera_changed = config.camera.source != CameraSettings().source
+    if camera_changed and "camera" not in config.supervisor.services:
+        out.append(
+            f"camera.source is {config.camera.source!r} but the camera service is not in "
+            f"supervisor.services {list(config.supervisor.services)}: the source is unused; "
+            'list "camera" there (in place of "sim") to use it'
+        )
+    return out
+
+
+def service_failure(p: ServiceProcess) -> StackError:
+    """The supervisor's own error for a service that failed for good: the service's words, and
+    the service's exit code (2 config, 3 model, 4 backend) through the matching error type."""
+    kinds: dict[int | None, type[StackError]] = {
+        EXIT_CONFIG: ConfigError,
+        EXIT_MODEL: ModelError,
+        EXIT_BACKEND: BackendUnavailable,
+    }
+    why = p.last_error or f"{p.name}: exited with code {p.last_exit}"
+    return kinds.get(p.last_exit, StackError)(f"{why} (exit code {p.last_exit}; not restarted)")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(prog="python -m deploy.supervisor", description=__doc__)
+    parser.add_argument("--config", help="stack config (default deploy/stack.toml)")
+    parser.add_argument("--duration", type=float, help="run headless for S seconds, then stop")
+    parser.add_argument(
+        "--timeline", action="store_true",
+        help="with --duration: keep the metrics' per-second timeline in the JSON summary",
+    )  # fmt: skip
+    args = parser.parse_args()
+    stop = stop_event()
+    config = load_config(args.config)
+    return supervise(config, stop, args.duration, timeline=args.timeline)
+
+
+if __name__ == "__main__":
+    run_main(main, "supervisor")

@@ -1,0 +1,70 @@
+"""zstack COMMAND [options]: one command line for every task of the stack.
+
+Each command runs the module that owns it, exactly as ``python -m <module> ...`` would, so the
+two spellings always agree (and ``python -m deploy.zstack`` works without the console script).
+Results meant for programs go to stdout; progress and status go to stderr.
+"""
+
+from __future__ import annotations
+
+import runpy
+import sys
+from collections.abc import Sequence
+
+from common.settings import SERVICES
+
+# command -> (module, the argv it starts with, help)
+COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
+    "run": ("deploy.supervisor", (), "start the stack under the supervisor (Ctrl-C stops it)"),
+    "serve": ("", (), "run one service: zstack serve camera|sim|detector|controller|metrics|..."),
+    "detect": ("services.detector", ("detect",), "detect on images or folders of images"),
+    "benchmark": ("services.detector", ("benchmark",), "time the detector's stages, per backend"),
+    "export": ("services.detector", ("export",), "build a TensorRT engine ahead of time"),
+    "fetch-model": ("services.detector", ("fetch-model",), "fetch and convert the default model"),
+    "query": ("services.metrics", ("query",), "print a running stack's metrics as JSON"),
+    "evaluate": ("services.metrics", ("evaluate",), "accuracy on a labelled dataset"),
+    "report": ("services.metrics", ("report",), "record a run and write report.md with plots"),
+    "scenario": ("services.sim", ("scenario",), "run the real stack against a scripted world"),
+    "scenarios": ("services.sim", ("list",), "name the scenarios"),
+    "estop": ("services.controller", ("estop",), "engage or release the emergency stop"),
+    "ros2-benchmark": ("services.ros2", ("benchmark",), "the ROS 2 bridge's added latency"),
+    "record": ("services.recorder", ("record",), "record the stack's keys to an MCAP file"),
+    "play": ("services.recorder", ("play",), "publish a recording's frames and scans, as live"),
+    "compare": ("services.recorder", ("compare",), "how two runs differ (or a replay)"),
+    "credentials": ("deploy.credentials", (), "write the secure profile's credentials"),
+}
+
+
+def usage() -> str:
+    lines = [(__doc__ or "").strip().splitlines()[0], "", "commands:"]
+    lines += [f"  {name:12} {text}" for name, (_, _, text) in COMMANDS.items()]
+    lines += ["", "zstack COMMAND --help shows a command's options."]
+    return "\n".join(lines)
+
+
+def resolve(argv: Sequence[str]) -> tuple[str, list[str]]:
+    """The module to run and its arguments for ``argv``; SystemExit(2) with usage if unknown."""
+    if not argv or argv[0] in ("-h", "--help"):
+        print(usage(), file=sys.stderr if not argv else sys.stdout)
+        raise SystemExit(0 if argv else 2)
+    command, rest = argv[0], list(argv[1:])
+    if command not in COMMANDS:
+        print(f"zstack: error: unknown command {command!r}\n\n{usage()}", file=sys.stderr)
+        raise SystemExit(2)
+    if command == "serve":
+        if not rest or rest[0] not in SERVICES:
+            print(f"zstack: error: serve needs one of {', '.join(SERVICES)}", file=sys.stderr)
+            raise SystemExit(2)
+        return f"services.{rest[0]}", ["serve", *rest[1:]]
+    module, lead, _ = COMMANDS[command]
+    return module, [*lead, *rest]
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    module, args = resolve(sys.argv[1:] if argv is None else argv)
+    sys.argv = [f"python -m {module}", *args]
+    runpy.run_module(module, run_name="__main__", alter_sys=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,99 @@
+"""The camera service: read a source at a fixed rate and publish Frame messages."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from common.bus import QoS
+from common.errors import ImageError
+from common.frames import image_to_frame
+from common.node import Node
+from common.settings import CameraSettings, Config
+from services.camera.reopen import ReopenHooks, ReopeningSource
+from services.camera.sources import FrameSource, open_source, resize
+
+
+def run(config: Config, stop: threading.Event) -> int:
+    """Publish frames until ``stop`` is set or the source ends; returns the exit code.
+
+    A source from which no frame at all can be read raises ConfigError (one line, exit 2: the
+    supervisor does not restart it). Unreadable frames among good ones are counted and skipped,
+    with the log rate limited per key (common/ratelimit.py, through Node.reject). A live device
+    that stops giving frames never ends: it is reopened every ``camera.reopen_period_s``
+    (services/camera/reopen.py).
+    """
+    settings = config.camera
+    with Node("camera", config) as node:
+
+        def on_bad(exc: ImageError) -> None:
+            node.reject("bad_images", str(exc))  # a looped folder repeats it: rate-limited
+
+        source = _reopening(
+            open_source(settings.source, loop=settings.loop, on_bad=on_bad), settings, node, stop
+        )
+        key = node.keys.frame(config.stack.camera)
+        publisher = node.publisher(key, QoS.SENSOR)
+        node.log.info("publishing %s on %s at %.1f Hz", source.description, key, settings.rate_hz)
+        node.ready()
+        period = 1.0 / settings.rate_hz
+        next_t = time.monotonic()
+        try:
+            while not stop.is_set():
+                try:
+                    image = source.read()
+                    if image is None:
+                        if not stop.is_set():  # else stopped while a lost device was awaited
+                            node.log.info("source ended")
+                        break
+                    # The header's stamp is the capture stamp every later latency is measured
+                    # from: taken as the image is read, before resizing and encoding.
+                    header = node.header(frame_id=settings.frame_id)
+                    frame = image_to_frame(
+                        resize(image, settings.resize),
+                        header,
+                        jpeg_quality=settings.jpeg_quality,
+                    )
+                    publisher.put(frame.encode())
+                    node.counters.add("frames_out")
+                except (ImageError, ValueError) as exc:
+                    # An unreadable file, or an image larger than a Frame may carry: skip it.
+                    on_bad(ImageError(f"{source.description}: {exc}"))
+                node.publish_counters()
+                next_t += period
+                # Never burst to catch up after a stall: a late frame is better than a flood.
+                next_t = max(next_t, time.monotonic())
+                stop.wait(next_t - time.monotonic())
+        finally:
+            source.close()
+    return 0
+
+
+def _reopening(
+    source: FrameSource, settings: CameraSettings, node: Node, stop: threading.Event
+) -> FrameSource:
+    """A live source wrapped to be reopened when it stops (counted: ``source_lost``,
+    ``source_reopened``, ``source_reopen_failed``); any other source as it is."""
+    if not source.live:
+        return source
+
+    def lost(line: str) -> None:
+        node.counters.add("source_lost")
+        node.log.warning("%s", line)
+
+    def reopened(line: str) -> None:
+        node.counters.add("source_reopened")
+        node.log.warning("%s", line)
+
+    def failed(line: str) -> None:
+        node.reject("source_reopen_failed", line)  # one per period: rate-limited
+
+    return ReopeningSource(
+        source,
+        lambda: open_source(settings.source, loop=settings.loop),
+        period_s=settings.reopen_period_s,
+        stop=stop,
+        hooks=ReopenHooks(
+            lost=lost, failed=failed, reopened=reopened, heartbeat=node.publish_counters
+        ),
+    )

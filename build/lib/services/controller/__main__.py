@@ -1,0 +1,60 @@
+"""python -m services.controller [serve] [--config FILE] [--mode track|follow]
+python -m services.controller estop engage|release [--reason TEXT] [--config FILE]
+
+serve (the default) runs the controller; estop latches or releases the emergency stop.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+from common.cli import Command, add_config, service_main
+from common.config_file import load_config
+from common.contracts import ControllerMode
+from common.lifecycle import run_main, setup_logging, stop_event
+
+
+def _serve_arguments(p: argparse.ArgumentParser) -> None:
+    add_config(p)
+    p.add_argument("--mode", choices=[m.value for m in ControllerMode], help="override mode")
+
+
+def serve(args: argparse.Namespace) -> int:
+    stop = stop_event()
+    config = load_config(args.config)
+    if args.mode:
+        controller = dataclasses.replace(config.controller, mode=ControllerMode(args.mode))
+        config = dataclasses.replace(config, controller=controller)
+    setup_logging("controller")
+    from services.controller import service
+
+    return service.run(config, stop)
+
+
+def _estop_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("action", choices=["engage", "release"])
+    p.add_argument("--reason", default="", help="why (logged by the controller)")
+    add_config(p)
+
+
+def estop(args: argparse.Namespace) -> int:
+    config = load_config(args.config)
+    setup_logging("estop", "WARNING")
+    from services.controller import service
+
+    return service.send_estop(config, args.action == "engage", args.reason)
+
+
+COMMANDS = [
+    Command("serve", "run the controller", _serve_arguments, serve),
+    Command("estop", "latch (engage) or release the emergency stop", _estop_arguments, estop),
+]
+
+
+def main() -> int:
+    return service_main("python -m services.controller", __doc__ or "", COMMANDS)
+
+
+if __name__ == "__main__":
+    run_main(main, "controller")

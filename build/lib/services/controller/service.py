@@ -1,0 +1,296 @@
+"""The controller service: latest detections and scan in, Twist and ControllerStatus out."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable
+from typing import Generic, Protocol, TypeVar
+
+import zenoh
+
+from common.bus import Publisher, QoS, open_session
+from common.clock import BOOT_ID, Stamp, now
+from common.contracts import ControllerMode, ControllerState, DetectorInfo
+from common.errors import DecodeError, StackError
+from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
+from common.keys import Keys
+from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
+from common.node import Node
+from common.settings import Config
+from services.controller.estop import EStopLatch
+from services.controller.policy import Command, Controller, Inputs, unknown_targets
+
+
+class _Stamped(Protocol):
+    @property
+    def header(self) -> Header: ...
+
+
+_S = TypeVar("_S", bound=_Stamped)
+
+# The longest the control loop goes without looking at the stop flag, whatever its rate.
+STOP_POLL_S = 0.1
+
+
+def wait_either(wake: threading.Event, stop: threading.Event, timeout_s: float) -> None:
+    """Return when ``wake`` is set, ``stop`` is set or ``timeout_s`` has passed, whichever
+    comes first. ``stop`` is looked at every ``STOP_POLL_S``: a stop (SIGTERM) is never left
+    waiting for a whole control period."""
+    deadline = time.monotonic() + timeout_s
+    while not stop.is_set():
+        left = deadline - time.monotonic()
+        if left <= 0 or wake.wait(min(left, STOP_POLL_S)):
+            return
+
+
+class Latest(Generic[_S]):
+    """The newest decoded message of one key and when it arrived (monotonic seconds).
+
+    Newest by capture stamp: a message captured before the one held (a late delivery, another
+    source's older view) never replaces it.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._msg: _S | None = None
+        self._t = 0.0
+        self.arrived = threading.Event()  # set on every new message; the loop clears it
+
+    def set(self, msg: _S) -> bool:
+        """Hold ``msg``; False (and nothing changes) when it is older than the one held."""
+        with self._lock:
+            if self._msg is not None and msg.header.stamp_ns < self._msg.header.stamp_ns:
+                return False
+            self._msg, self._t = msg, time.monotonic()
+        self.arrived.set()
+        return True
+
+    def get(self) -> tuple[_S | None, float]:
+        """The message and its age in seconds (inf when none has arrived)."""
+        with self._lock:
+            if self._msg is None:
+                return None, float("inf")
+            return self._msg, time.monotonic() - self._t
+
+
+def _age(msg: Header | None, arrival_age_s: float, at: Stamp) -> float:
+    """How old an input is for the dead-man: the later of its capture and its arrival."""
+    if msg is None:
+        return float("inf")
+    return max(arrival_age_s, capture_age_s(msg, at, BOOT_ID))
+
+
+def run(config: Config, stop: threading.Event) -> int:
+    """Run the control loop until ``stop`` is set.
+
+    A command goes out at least ``control_rate_hz`` times a second, and at once when new
+    detections arrive: waiting for the next tick would add up to a whole period of latency.
+    Inputs are judged on arrival (common/freshness.py): stale, future-stamped or replayed
+    detections and scans are counted and never acted on.
+    """
+    s = config.controller
+    tolerance = config.stack.clock_tolerance_s
+    with Node("controller", config, counters_period_s=s.counters_period_s) as node:
+        latch = EStopLatch(config.estop_path)
+        (node.log.warning if latch.engaged else node.log.info)("%s", latch.note)
+        dets: Latest[Detections] = Latest()
+        scan: Latest[LaserScan] = Latest()
+        det_key = node.keys.detections(config.stack.camera)
+        det_gate = FreshnessGate(s.detection_timeout_s, tolerance, BOOT_ID)
+        scan_gate = FreshnessGate(s.scan_timeout_s, tolerance, BOOT_ID)
+
+        def on_estop(sample: zenoh.Sample) -> None:
+            _on_estop(node, latch, sample, s.estop_release_max_age_s, tolerance)
+
+        subs = [
+            node.subscribe(
+                det_key, Detections.decode, _fresh_input(node, det_gate, dets, "detections")
+            ),
+            node.subscribe(
+                node.keys.scan(), LaserScan.decode, _fresh_input(node, scan_gate, scan, "scans")
+            ),
+            node.session.declare_subscriber(node.keys.estop(), on_estop),
+        ]
+        controller = Controller(s, config.camera.hfov_deg)
+        cmd_pub = node.publisher(node.keys.cmd_vel(), QoS.CONTROL)
+        status_pub = node.publisher(node.keys.controller_status(), QoS.TELEMETRY)
+        node.log.info("mode %s on %s, targets %s", s.mode, det_key, list(s.target_classes))
+        threading.Thread(
+            target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
+        ).start()
+        node.ready()
+        period = 1.0 / s.control_rate_hz
+        last_state: ControllerState | None = None
+        try:
+            while not stop.is_set():
+                dets.arrived.clear()  # before reading, so a message arriving now wakes us
+                # One instant per tick: the ages are judged at it and the command is stamped
+                # with it, so that a reader of cmd_vel can check the judgement exactly.
+                at = now()
+                tick = at.mono_ns / 1e9
+                d, d_arrival = dets.get()
+                sc, sc_arrival = scan.get()
+                d_age = _age(d.header if d is not None else None, d_arrival, at)
+                capture = capture_age_s(d.header, at, BOOT_ID) if d is not None else 0.0
+                inputs = Inputs(
+                    d, d_age, sc, _age(sc.header if sc is not None else None, sc_arrival, at),
+                    latch.engaged, min(max(0.0, capture), s.detection_timeout_s),
+                )  # fmt: skip
+                cmd = controller.step(inputs, tick)
+                _publish(node, cmd_pub, status_pub, cmd, s.mode, at)
+                if cmd.state != last_state:
+                    node.log.info("state %s: %s", cmd.state, cmd.reason)
+                    last_state = cmd.state
+                node.publish_counters()
+                wait_either(dets.arrived, stop, period - (time.monotonic() - tick))
+            # Leave the robot still: the last word on cmd_vel is always a stop.
+            stopped = Command(0.0, 0.0, ControllerState.STOPPED, "shutdown")
+            _publish(node, cmd_pub, status_pub, stopped, s.mode, now())
+        finally:
+            for sub in subs:
+                sub.undeclare()
+    return 0
+
+
+def _fresh_input(
+    node: Node, gate: FreshnessGate, latest: Latest[_S], name: str
+) -> Callable[[_S, zenoh.Sample], None]:
+    """A decoded message's fate: judge its freshness, keep it if fresh and newest, count the
+    rest (``<name>_in``, ``<name>_stale|future|replay|late``)."""
+
+    def on_message(msg: _S, _sample: zenoh.Sample) -> None:
+        verdict, age = gate.check(msg.header, now())
+        if verdict is not Verdict.FRESH:
+            node.reject(f"{name}_{verdict}", f"{verdict} {name} ({age:.2f} s) ignored")
+        elif latest.set(msg):
+            node.counters.add(f"{name}_in")
+        else:
+            node.reject(f"{name}_late", f"{name} older than the ones held ignored")
+
+    return on_message
+
+
+def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:
+    """Ask the detector for its model's classes (until one answers) and warn, once, about
+    target classes it cannot report."""
+    key = node.keys.detector_info(config.stack.camera)
+    while not stop.is_set():
+        for reply in node.session.get(key, timeout=2.0):
+            if reply.ok is None:
+                continue
+            try:
+                info: DetectorInfo = json.loads(reply.ok.payload.to_string())
+                classes = info["classes"]
+                if not (isinstance(classes, list) and all(isinstance(c, str) for c in classes)):
+                    raise TypeError(f"classes must be a list of names, got {classes!r:.80}")
+            except (ValueError, KeyError, TypeError) as exc:
+                node.bad_input(key, exc)
+                continue
+            targets = config.controller.target_classes
+            missing = unknown_targets(targets, classes)
+            if missing:
+                node.log.warning(
+                    "target class(es) %s are not among the model's %d classes (%s...): the "
+                    "robot will never see them; check controller.target_classes",
+                    missing, len(classes), ", ".join(classes[:5]),
+                )  # fmt: skip
+            return
+        stop.wait(2.0)
+
+
+def _on_estop(
+    node: Node, latch: EStopLatch, sample: zenoh.Sample, max_age_s: float, tolerance_s: float
+) -> None:
+    """Latch on an engage or on garbage; release only on a fresh release newer than the stop."""
+    at = now()
+    try:
+        msg = EStop.decode(sample.payload.to_bytes())
+    except DecodeError as exc:
+        # Garbage on the e-stop key is treated as a press: fail safe, not open.
+        node.bad_input(node.keys.estop(), exc)
+        msg = None
+    try:
+        if msg is None or msg.engaged:
+            by = msg.header.source if msg else "garbage"
+            reason = msg.reason if msg else "undecodable message on the e-stop key"
+            was = latch.engaged
+            latch.engage(msg.header.stamp_ns if msg else at.wall_ns, by, reason)
+            if not was:
+                node.log.warning("e-stop ENGAGED by %s: %s", by, reason or "-")
+            return
+        verdict, age = judge_age(msg.header, at, BOOT_ID, max_age_s, tolerance_s)
+        if verdict is not Verdict.FRESH:
+            node.reject("estop_release_refused", f"{verdict} e-stop release ({age:.2f} s) refused")
+        elif not latch.release(msg.header.stamp_ns, msg.header.source):
+            node.reject("estop_release_refused", "e-stop release older than the stop refused")
+        else:
+            node.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
+    except OSError as exc:
+        # The latch in memory holds; only its copy on disk failed. Say so loudly.
+        node.log.error("cannot save the e-stop state to %s: %s", latch.path, exc)
+
+
+def _publish(
+    node: Node,
+    cmd_pub: Publisher,
+    status_pub: Publisher,
+    cmd: Command,
+    mode: ControllerMode,
+    at: Stamp,
+) -> None:
+    twist = Twist(
+        header=node.header(at, frame_id="base_link"),
+        linear=(cmd.linear_x, 0.0, 0.0),
+        angular=(0.0, 0.0, cmd.angular_z),
+        input_stamp_ns=cmd.input_stamp_ns,
+    )
+    cmd_pub.put(twist.encode())
+    node.counters.add("commands_out")
+    if not cmd.is_zero:
+        node.counters.add("commands_nonzero")
+    status = ControllerStatus(
+        header=twist.header,
+        mode=mode,
+        target=cmd.target,
+        state=cmd.state,
+        reason=cmd.reason,
+        track_id=cmd.track_id,
+    )
+    status_pub.put(status.encode())
+
+
+def send_estop(config: Config, engaged: bool, reason: str) -> int:
+    """Publish one EStop and wait until the controller has seen it (its status says so)."""
+    keys = Keys(config.stack.prefix)
+    session = open_session(config.zenoh, "estop")
+    seen = threading.Event()
+
+    def on_status(sample: zenoh.Sample) -> None:
+        try:
+            state = ControllerStatus.decode(sample.payload.to_bytes()).state
+        except DecodeError:
+            return
+        if (state == ControllerState.ESTOP) == engaged:
+            seen.set()
+
+    sub = session.declare_subscriber(keys.controller_status(), on_status)
+    pub = Publisher(session, keys.estop(), QoS.CONTROL)
+    try:
+        # Repeat until acknowledged: the first put may race the peer mesh being formed. Each
+        # is stamped afresh, since the controller refuses a release that is not fresh.
+        for seq in range(1, 51):
+            at = now()
+            header = Header(
+                stamp_ns=at.wall_ns, frame_id="", seq=seq, source="estop-cli",
+                mono_ns=at.mono_ns, boot_id=BOOT_ID,
+            )  # fmt: skip
+            pub.put(EStop(header=header, engaged=engaged, reason=reason).encode())
+            if seen.wait(0.2):
+                print("e-stop engaged" if engaged else "e-stop released")
+                return 0
+        raise StackError("no controller acknowledged the e-stop within 10 s")
+    finally:
+        sub.undeclare()
+        session.close()

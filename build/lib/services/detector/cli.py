@@ -1,0 +1,343 @@
+"""Command line of the detector: ``detect``, ``benchmark``, ``fetch-model`` and ``export``.
+
+Each subcommand is registered by one function in :data:`SUBCOMMANDS`; a new one (``serve``)
+adds its register function there. Handlers take the parsed arguments and return an exit code.
+
+Exit codes: 0 success; 1 one or more images could not be read or written (the others were still
+processed); 2 bad arguments or settings, or a video or camera device that cannot be opened or
+gives not one frame; 3 a bad model (not a model, unknown output family,
+fetch failure); 4 a backend this machine lacks; 130 interrupted. Errors are one line on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from common.annotate import annotate
+from common.cli import with_default
+from common.errors import ConfigError, ImageError, StackError
+from common.images import list_images, load_image
+from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code, print_progress
+from common.settings import DetectorSettings
+from services.camera import CaptureSource, is_stream, open_stream
+from services.detector.backends import BACKEND_CHOICES
+from services.detector.device import backend_for
+from services.detector.model_files import ensure_default_model
+from services.detector.pipeline import Detector
+from services.detector.progress import ProgressBar
+from services.detector.results import result_json, result_text
+from services.detector.types import DetectionResult
+from services.detector.variants import sized_model
+from services.detector.video import detect_stream
+
+# The stack's shared exit codes (common/lifecycle.py); a failed image is the generic failure.
+EXIT_IMAGE_FAILED = EXIT_FAILED
+#: The thresholds' defaults: those of the settings, stated once there.
+_DEFAULTS = DetectorSettings()
+
+
+def _error(message: str) -> None:
+    print(f"error: {message}", file=sys.stderr)
+
+
+def _resolve_model(model: str | None, imgsz: int = 0) -> Path:
+    """The ``--model`` path, or the default model, fetched first if it is not there yet;
+    ``imgsz``: at that input size (the default model is rebuilt for it; another model must
+    have it already)."""
+    if imgsz:
+        return sized_model(DetectorSettings(model=model or "", imgsz=imgsz), print_progress)
+    if model is not None:
+        return Path(model)
+    return ensure_default_model(progress=print_progress)
+
+
+def _parse_classes(raw: str | None) -> tuple[str, ...] | None:
+    if raw is None:
+        return None
+    names = tuple(name.strip() for name in raw.split(",") if name.strip())
+    if not names:
+        raise ConfigError("--classes needs at least one class name, e.g. --classes person,cup")
+    return names
+
+
+def _show_backend_log() -> None:
+    """Show the backends' INFO lines (auto's choice, engine cache and build progress).
+
+    Only on this logger: ``serve`` configures the root logger itself, later.
+    """
+    logger = logging.getLogger("services.detector.backends")
+    if not logger.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
+        logger.propagate = False
+
+
+def _add_model_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
+    parser.add_argument(
+        "--backend", default="onnx", help=f"one of: {', '.join(BACKEND_CHOICES)} (default onnx)"
+    )
+
+
+# --- detect -------------------------------------------------------------------------------------
+
+
+def _save_annotated(
+    save_dir: Path, path: Path, image: npt.NDArray[np.uint8], result: DetectionResult
+) -> None:
+    target = save_dir / path.name
+    drawn = annotate(image, result.boxes, result.class_names)
+    ok, encoded = cv2.imencode(target.suffix or ".png", drawn)
+    if not ok:
+        raise ImageError(f"{target}: cannot encode the annotated image")
+    try:
+        encoded.tofile(target)
+    except OSError as exc:
+        raise ImageError(f"{target}: cannot write ({exc.strerror or exc})") from exc
+
+
+def _detect_image(det: Detector, path: Path, *, as_json: bool, save_dir: Path | None) -> bool:
+    """Detect on one image file and print the result; False (after one error line) when the
+    image cannot be read or its annotated copy cannot be written."""
+    try:
+        image = load_image(path)
+        result = det.detect(image)
+        print(result_json(str(path), result) if as_json else result_text(str(path), result))
+        if save_dir is not None:
+            _save_annotated(save_dir, path, image, result)
+    except ImageError as exc:
+        _error(str(exc))
+        return False
+    return True
+
+
+def run_detect(args: argparse.Namespace) -> int:
+    """Detect objects in images, folders of images, videos and camera devices, in order.
+
+    Bad images are reported and skipped (exit 1 at the end). A video or device that cannot be
+    opened, or that gives not one frame, stops with one line (exit 2).
+    """
+    settings = DetectorSettings(
+        conf=args.conf,
+        iou=args.iou,
+        max_det=args.max_det,
+        classes=_parse_classes(args.classes) or (),
+    )
+    save_dir = Path(args.save_dir) if args.save_dir else None
+    with contextlib.ExitStack() as opened:
+        # Videos and devices are opened before the model loads: a missing one is one line, now.
+        inputs: list[Path | tuple[str, CaptureSource]] = []
+        for spec in args.paths:
+            if is_stream(spec):
+                source = open_stream(spec)
+                opened.callback(source.close)
+                inputs.append((spec, source))
+            else:
+                inputs.extend(list_images([spec]))
+        if not inputs:
+            raise ImageError(f"no images found in {' '.join(args.paths)}")
+        if save_dir is not None:
+            save_dir.mkdir(parents=True, exist_ok=True)
+        backend, options = backend_for(args.backend, args.device)
+        _show_backend_log()
+        det = opened.enter_context(
+            Detector.open(
+                _resolve_model(args.model, args.imgsz),
+                backend=backend,
+                settings=settings,
+                **options,
+            )
+        )
+        images = [item for item in inputs if isinstance(item, Path)]
+        bar = ProgressBar("images", len(images), unit="images") if len(images) > 1 else None
+        failed = 0
+        for item in inputs:
+            if isinstance(item, Path):
+                failed += not _detect_image(det, item, as_json=args.json, save_dir=save_dir)
+                if bar is not None:
+                    bar.advance()
+            else:
+                detect_stream(*item, det, as_json=args.json, save_dir=save_dir)
+        if bar is not None:
+            bar.finish()
+    if failed and failed == len(images):
+        _error(f"none of the {failed} image(s) could be read")
+    elif failed:
+        _error(f"{failed} of {len(images)} image(s) failed")
+    return EXIT_IMAGE_FAILED if failed else EXIT_OK
+
+
+def _add_detect(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "detect", help="detect objects in images, folders, videos or a camera device"
+    )
+    p.add_argument(
+        "paths",
+        nargs="+",
+        metavar="PATH",
+        help="image file, folder of images, video file, device:N, /dev/videoN or a stream URL "
+        "(rtsp://, http://, ...)",
+    )
+    p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
+    p.add_argument(
+        "--backend",
+        choices=BACKEND_CHOICES,
+        help="onnx, openvino, cuda, tensorrt or auto (default: onnx; cuda with a GPU --device)",
+    )
+    p.add_argument("--device", help="cpu, N, cuda or cuda:N (as yolo's --device)")
+    p.add_argument(
+        "--imgsz",
+        type=int,
+        default=0,
+        help="input size, a multiple of 32 (default: the model's own; the default model is "
+        "rebuilt for it)",
+    )
+    p.add_argument("--conf", type=float, default=_DEFAULTS.conf, help="minimum score, 0..1")
+    p.add_argument("--iou", type=float, default=_DEFAULTS.iou, help="NMS IoU threshold, 0..1")
+    p.add_argument("--max-det", type=int, default=_DEFAULTS.max_det, help="detections per image")
+    p.add_argument("--classes", help="comma-separated class names to keep, e.g. person,cup")
+    p.add_argument(
+        "--json", action="store_true", help="one JSON object per image or frame per line"
+    )
+    p.add_argument(
+        "--save-dir",
+        help="write annotated copies of the images, and of videos (plus their .jsonl), here",
+    )
+    p.set_defaults(handler=run_detect)
+
+
+# --- benchmark (services/detector/bench.py) ----------------------------------------------------
+
+
+def run_benchmark(args: argparse.Namespace) -> int:
+    """Time each stage on each ``--backend`` and score their agreement (see bench.py)."""
+    from services.detector import bench
+
+    _show_backend_log()
+    return bench.run(args, _resolve_model)
+
+
+def _add_benchmark(subparsers: Any) -> None:
+    from services.detector import bench
+
+    p = subparsers.add_parser("benchmark", help="time each stage on one or more backends")
+    p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
+    bench.add_arguments(p)
+    p.set_defaults(handler=run_benchmark)
+
+
+# --- export -------------------------------------------------------------------------------------
+
+
+def run_export(args: argparse.Namespace) -> int:
+    """Build (or reuse) and cache an engine for ``--backend``, printing the engine's path."""
+    from services.detector.backends import import_backend
+
+    module = import_backend(args.backend)  # BackendUnavailable here on a machine without it
+    model = _resolve_model(args.model)
+    path = module.export_engine(
+        model,
+        print_progress,
+        precision=args.precision,
+        batch_profile=(1, args.batch, args.batch),
+        calib_dir=Path(args.calib) if args.calib else None,
+        cache_dir=Path(args.cache_dir) if args.cache_dir else None,
+        workspace_gb=args.workspace_gb,
+    )
+    print(path)
+    return EXIT_OK
+
+
+def _add_export(subparsers: Any) -> None:
+    p = subparsers.add_parser("export", help="build and cache a TensorRT engine for a model")
+    p.add_argument("--backend", choices=["tensorrt"], default="tensorrt", help="engine kind")
+    p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
+    p.add_argument("--precision", choices=["fp32", "fp16", "int8"], default="fp16")
+    p.add_argument("--calib", help="folder of calibration images (needed to build int8)")
+    p.add_argument("--batch", type=int, default=1, help="largest batch served (profile 1/N/N)")
+    p.add_argument("--workspace-gb", type=float, default=4.0, help="builder scratch memory")
+    p.add_argument("--cache-dir", help="engine cache folder (default: <models>/engines)")
+    p.set_defaults(handler=run_export)
+
+
+# --- fetch-model --------------------------------------------------------------------------------
+
+
+def run_fetch_model(args: argparse.Namespace) -> int:
+    """Fetch and convert the default model if needed, and print its path. With ``--config``,
+    only when that stack runs a detector on the default model (what ``make run`` asks)."""
+    if args.config:
+        from common.config_file import load_config
+
+        config = load_config(args.config)
+        if "detector" not in config.supervisor.services:
+            print_progress("fetch-model: the stack runs no detector: nothing to fetch")
+            return EXIT_OK
+        if config.detector.model:
+            print_progress(
+                f"fetch-model: detector.model is {config.detector.model}: nothing to fetch"
+            )
+            return EXIT_OK
+    models_dir = Path(args.models_dir) if args.models_dir else None
+    print(ensure_default_model(models_dir, progress=print_progress))
+    return EXIT_OK
+
+
+def _add_fetch_model(subparsers: Any) -> None:
+    p = subparsers.add_parser("fetch-model", help="fetch and convert the default model")
+    p.add_argument("--models-dir", help="where to put it (default: the stack's models folder)")
+    p.add_argument("--config", help="only if this stack config uses the default model")
+    p.set_defaults(handler=run_fetch_model)
+
+
+def _add_serve(subparsers: Any) -> None:
+    from services.detector.service import add_serve_command
+
+    add_serve_command(subparsers)
+
+
+#: Subcommand registrations, in help order.
+SUBCOMMANDS: list[Callable[[Any], None]] = [
+    _add_detect,
+    _add_benchmark,
+    _add_fetch_model,
+    _add_export,
+    _add_serve,
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every subcommand in :data:`SUBCOMMANDS`."""
+    parser = argparse.ArgumentParser(
+        prog="python -m services.detector", description="YOLO object detector"
+    )
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for register in SUBCOMMANDS:
+        register(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Parse ``argv`` (default ``sys.argv[1:]``), run the subcommand, return its exit code."""
+    names = ["detect", "benchmark", "fetch-model", "export", "serve"]
+    args = build_parser().parse_args(with_default(sys.argv[1:] if argv is None else argv, names))
+    handler: Callable[[argparse.Namespace], int] = args.handler
+    try:
+        return handler(args)
+    except StackError as exc:
+        _error(str(exc))
+        return exit_code(exc)
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED

@@ -1,0 +1,185 @@
+"""The fast profile: the fastest variant that keeps accuracy on the labelled photos.
+
+Candidates are every variant this machine can run: ONNX Runtime FP32 and INT8 at 640, 512, 480
+and 416, and the same on OpenVINO when that backend is installed. Each is timed (interleaved,
+round-robin in a shuffled order) and scored (AP50 on the hand-labelled photos); the choice is
+the fastest at p50 whose AP50 is at most ``fast_max_ap50_drop`` below FP32 at 640
+(:func:`choose`, pure). Measuring takes a minute or more, so the figures are cached beside the
+model, keyed by the model's sha256, the CPU (model and flags), the candidates and the
+calibration folder; a hit only re-runs :func:`choose`. The choice is logged in one line.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import random
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from common.errors import BackendUnavailable, ConfigError
+from common.files import atomic_write_bytes, sha256_file
+from common.images import load_sample
+from common.lifecycle import Progress, print_progress
+from common.machine import cpu_model
+from common.settings import DetectorSettings
+from services.detector.backends.base import BACKENDS, import_backend
+from services.detector.model_files import ensure_default_model
+from services.detector.variants import Variant, open_prepared
+
+log = logging.getLogger("services.detector.backends.fast_profile")
+
+SIZES = (640, 512, 480, 416)
+TIMED_RUNS = 20
+FORMAT = 1
+
+
+@dataclass(frozen=True, slots=True)
+class Figures:
+    """One measured variant: its label, p50 time of a full detect, AP50 on the labelled set."""
+
+    variant: str
+    p50_ms: float
+    ap50: float
+
+
+def choose(figures: Sequence[Figures], reference: str, max_drop: float) -> tuple[str, str]:
+    """``(chosen variant, one line saying why)``: the fastest whose AP50 is within
+    ``max_drop`` of ``reference``'s. ConfigError when the reference was not measured."""
+    by_name = {f.variant: f for f in figures}
+    ref = by_name.get(reference)
+    if ref is None:
+        raise ConfigError(f"fast profile: the reference {reference} was not measured")
+    keeps = [f for f in figures if f.ap50 >= ref.ap50 - max_drop - 1e-9]
+    best = min(keeps, key=lambda f: f.p50_ms)
+    faster_lost = sorted(
+        (f for f in figures if f.p50_ms < best.p50_ms and f not in keeps), key=lambda f: f.p50_ms
+    )
+    why = (
+        f"fast profile: {best.variant} (p50 {best.p50_ms:.1f} ms, "
+        f"{best.p50_ms / ref.p50_ms:.2f}x of {reference}'s {ref.p50_ms:.1f} ms; "
+        f"AP50 {best.ap50:.3f} vs {ref.ap50:.3f}, allowed drop {max_drop:g})"
+    )
+    if faster_lost:
+        lost = ", ".join(f"{f.variant} AP50 {f.ap50:.3f}" for f in faster_lost)
+        why += f"; faster but less accurate: {lost}"
+    return best.variant, why
+
+
+def candidates(sizes: Sequence[int] = SIZES) -> list[Variant]:
+    """Every variant this machine can run at ``sizes``, FP32 ONNX at the first size first."""
+    backends = ["onnx"]
+    if "openvino" in BACKENDS:
+        try:
+            import_backend("openvino")
+            backends.append("openvino")
+        except BackendUnavailable as exc:
+            log.info("fast profile: no openvino candidates (%s)", exc)
+    return [Variant(b, p, size) for b in backends for size in sizes for p in ("fp32", "int8")]
+
+
+def sizes_for(s: DetectorSettings) -> tuple[int, ...]:
+    """SIZES for the default model; a named model only runs at its own fixed size."""
+    if not s.model:
+        return SIZES
+    from services.detector.variants import model_input_hw
+
+    height, width = model_input_hw(Path(s.model))
+    if height is None or height != width:
+        raise ConfigError(
+            f"fast profile: {s.model} needs a fixed square input, has {height}x{width}"
+        )
+    return (height,)
+
+
+def cpu_flags() -> str:
+    """The CPU's feature flags (Linux), sorted; "" elsewhere."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("flags"):
+                return " ".join(sorted(line.split(":", 1)[1].split()))
+    except OSError:
+        return ""
+    return ""
+
+
+def cache_key(s: DetectorSettings, variants: Sequence[Variant]) -> dict[str, object]:
+    """What the measured figures depend on."""
+    model = Path(s.model) if s.model else ensure_default_model()
+    return {
+        "format": FORMAT,
+        "model_sha256": sha256_file(model),
+        "cpu": cpu_model(),
+        "cpu_flags": hashlib.sha256(cpu_flags().encode()).hexdigest()[:16],
+        "candidates": [v.label for v in variants],
+        "calibration_dir": s.calibration_dir,
+    }
+
+
+def measure(
+    s: DetectorSettings, variants: Sequence[Variant], progress: Progress, runs: int = TIMED_RUNS
+) -> list[Figures]:
+    """Time and score every variant; one whose INT8 build fell back to FP32 is left out."""
+    from services.detector.labelled_set import labelled_ap50
+
+    image = load_sample("chelsea")
+    dets, ap50 = {}, {}
+    try:
+        for v in variants:
+            progress(f"fast profile: preparing {v.label}")
+            det, note = open_prepared(v.settings(s), progress)
+            if note:
+                det.close()
+                continue
+            dets[v.label] = det
+            ap50[v.label] = labelled_ap50(det)
+            det.detect(image)  # warm-up
+        times: dict[str, list[float]] = {label: [] for label in dets}
+        order = list(dets)
+        progress(f"fast profile: timing {len(order)} variants, {runs} rounds")
+        for _ in range(runs):
+            random.shuffle(order)
+            for label in order:
+                t0 = time.perf_counter()
+                dets[label].detect(image)
+                times[label].append((time.perf_counter() - t0) * 1e3)
+    finally:
+        for det in dets.values():
+            det.close()
+    return [Figures(k, round(float(np.median(times[k])), 2), round(ap50[k], 4)) for k in dets]
+
+
+def cache_file(s: DetectorSettings) -> Path:
+    model = Path(s.model) if s.model else ensure_default_model()
+    return model.with_name(model.stem + ".fast-profile.json")
+
+
+def choose_fast(s: DetectorSettings, progress: Progress = print_progress) -> tuple[Variant, str]:
+    """The fast profile's variant for ``s`` and why (measured once, then cached)."""
+    variants = candidates(sizes_for(s))
+    reference = variants[0].label
+    key = cache_key(s, variants)
+    path = cache_file(s)
+    figures: list[Figures] | None = None
+    try:
+        stored = json.loads(path.read_text(encoding="utf-8"))
+        if stored.get("key") == key:
+            figures = [Figures(**f) for f in stored["figures"]]
+    except (OSError, ValueError, TypeError, KeyError):
+        figures = None
+    source = "cached figures"
+    if figures is None:
+        progress(f"fast profile: measuring {len(variants)} variants (once; cached in {path.name})")
+        figures = measure(s, variants, progress)
+        record = {"key": key, "figures": [asdict(f) for f in figures]}
+        atomic_write_bytes(path, json.dumps(record, indent=2).encode())
+        source = "measured now"
+    label, why = choose(figures, reference, s.fast_max_ap50_drop)
+    why = f"{why} [{source}]"
+    log.info("%s", why)
+    return Variant.parse(label), why

@@ -1,0 +1,149 @@
+"""What a loaded model is: input size, batch size, output family and class names.
+
+Everything comes from the model itself (its declared shapes and Ultralytics-style metadata),
+never from its file name. Dynamic dimensions are resolved in order: the declared shape, the
+``imgsz`` metadata, then :data:`DEFAULT_INPUT_SIZE`; a dynamic output shape is resolved by one
+probe inference on a blank batch.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.errors import ModelError
+from services.detector.backends import Backend, Dim
+from services.detector.coco import COCO80
+from services.detector.decode import Family, OutputLayout, detect_family
+
+#: Square input size used when neither the shape nor the metadata fixes it.
+DEFAULT_INPUT_SIZE = 640
+
+
+@dataclass(frozen=True, slots=True)
+class ModelInfo:
+    """The facts the pipeline needs about a model.
+
+    ``batch_size`` is the model's fixed batch, ``None`` when it takes any batch.
+    """
+
+    input_height: int
+    input_width: int
+    batch_size: int | None
+    layout: OutputLayout
+    names: tuple[str, ...]
+    output_shape: tuple[Dim, ...]
+
+    @property
+    def family(self) -> Family:
+        """The output family."""
+        return self.layout.family
+
+
+def _literal(raw: str | None) -> object:
+    """A metadata value as a Python literal, or None when absent or not a literal."""
+    if not raw:
+        return None
+    try:
+        return ast.literal_eval(raw)
+    except (ValueError, SyntaxError, MemoryError, RecursionError):
+        return None
+
+
+def parse_names(raw: str | None) -> dict[int, str] | None:
+    """Parse Ultralytics' ``names`` metadata (``"{0: 'person', ...}"`` or a list literal).
+
+    Returns ``None`` when absent or not a dict/list of names.
+    """
+    value = _literal(raw)
+    if isinstance(value, (list, tuple)):
+        value = dict(enumerate(value))
+    if not isinstance(value, dict) or not value:
+        return None
+    if not all(isinstance(k, int) and k >= 0 and isinstance(v, str) for k, v in value.items()):
+        return None
+    return {int(k): str(v) for k, v in value.items()}
+
+
+def parse_imgsz(raw: str | None) -> tuple[int, int] | None:
+    """Parse ``imgsz`` metadata (``"640"`` or ``"[384, 640]"``) into ``(height, width)``."""
+    value = _literal(raw)
+    if isinstance(value, int) and value > 0:
+        return value, value
+    if (
+        isinstance(value, (list, tuple))
+        and len(value) == 2
+        and all(isinstance(v, int) and v > 0 for v in value)
+    ):
+        return int(value[0]), int(value[1])
+    return None
+
+
+def _parse_bool(raw: str | None) -> bool | None:
+    if raw is None:
+        return None
+    return {"true": True, "1": True, "false": False, "0": False}.get(raw.strip().lower())
+
+
+def input_size(input_shape: Sequence[Dim], metadata: Mapping[str, str]) -> tuple[int, int]:
+    """``(height, width)`` of the network input; ``[B, 3, H, W]`` is checked.
+
+    A dynamic H or W falls back to the ``imgsz`` metadata, then to 640.
+    """
+    if len(input_shape) != 4 or input_shape[1] not in (3, None):
+        shown = ["?" if d is None else d for d in input_shape]
+        raise ModelError(f"model input shape {shown} is not [B, 3, H, W] (NCHW, 3 channels)")
+    meta_hw = parse_imgsz(metadata.get("imgsz"))
+    fallback = meta_hw or (DEFAULT_INPUT_SIZE, DEFAULT_INPUT_SIZE)
+    height = input_shape[2] if input_shape[2] is not None else fallback[0]
+    width = input_shape[3] if input_shape[3] is not None else fallback[1]
+    return height, width
+
+
+def class_names(parsed: dict[int, str] | None, num_classes: int | None) -> tuple[str, ...]:
+    """The model's class names: from metadata, else COCO-80 for 80 classes, else ``class_<i>``.
+
+    ``num_classes`` is ``None`` when the output shape does not say (end-to-end models); the
+    metadata then decides, and without it COCO-80 is assumed.
+    """
+    if num_classes is None:
+        num_classes = max(parsed) + 1 if parsed else len(COCO80)
+    if parsed is None:
+        if num_classes == len(COCO80):
+            return COCO80
+        return tuple(f"class_{i}" for i in range(num_classes))
+    return tuple(parsed.get(i, f"class_{i}") for i in range(num_classes))
+
+
+def read_model_info(backend: Backend) -> ModelInfo:
+    """Describe the model loaded in ``backend``.
+
+    Raises ModelError for an input that is not ``[B, 3, H, W]`` and UnknownModelFamily for an
+    output shape matching no family.
+    """
+    if not backend.output_shapes:
+        raise ModelError("the model has no outputs")
+    height, width = input_size(backend.input_shape, backend.metadata)
+    batch = backend.input_shape[0]
+    output_shape = backend.output_shapes[0]
+    if len(output_shape) == 3 and None in output_shape[1:]:
+        probe = np.zeros((batch or 1, 3, height, width), np.float32)
+        output_shape = (batch, *backend.infer(probe)[0].shape[1:])
+    names = parse_names(backend.metadata.get("names"))
+    layout = detect_family(
+        output_shape,
+        num_names=len(names) if names is not None and max(names) + 1 == len(names) else None,
+        input_hw=(height, width),
+        end2end=_parse_bool(backend.metadata.get("end2end")),
+    )
+    return ModelInfo(
+        input_height=height,
+        input_width=width,
+        batch_size=batch,
+        layout=layout,
+        names=class_names(names, layout.num_classes),
+        output_shape=output_shape,
+    )

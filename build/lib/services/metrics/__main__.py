@@ -1,0 +1,88 @@
+"""python -m services.metrics [serve|query|evaluate|report] ...
+
+serve (the default) runs the metrics service; query asks a running one and prints its JSON;
+evaluate scores a model on a labelled dataset (see docs/evaluation.md); report runs the stack
+for a while (or reads a saved session) and writes report.md with plots.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+
+from common.cli import Command, add_config, service_main
+from common.cli import build_parser as _build
+from common.config_file import load_config
+from common.lifecycle import run_main, setup_logging, stop_event
+
+
+def serve(args: argparse.Namespace) -> int:
+    stop = stop_event()
+    config = load_config(args.config)
+    setup_logging("metrics")
+    from services.metrics import service
+
+    return service.run(config, stop)
+
+
+def _query_arguments(p: argparse.ArgumentParser) -> None:
+    add_config(p)
+    p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait")
+
+
+def query(args: argparse.Namespace) -> int:
+    config = load_config(args.config)
+    setup_logging("metrics", "WARNING")
+    from services.metrics import service
+
+    answer = service.query(config, args.timeout)
+    print(json.dumps(answer, indent=2))
+    return 0
+
+
+def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
+    from services.metrics import evaluate
+
+    evaluate.add_arguments(p)
+
+
+def evaluate(args: argparse.Namespace) -> int:
+    from services.metrics import evaluate
+
+    return evaluate.run(args)  # Ctrl-C: KeyboardInterrupt, exit 130
+
+
+def _report_arguments(p: argparse.ArgumentParser) -> None:
+    from services.metrics import report
+
+    report.add_arguments(p)
+
+
+def report(args: argparse.Namespace) -> int:
+    stop = stop_event()
+    from services.metrics import report
+
+    setup_logging("report", "WARNING")
+    return report.run(args, stop)
+
+
+COMMANDS = [
+    Command("serve", "run the metrics service", add_config, serve),
+    Command("query", "ask a running metrics service and print its JSON", _query_arguments, query),
+    Command("evaluate", "accuracy on a labelled dataset", _evaluate_arguments, evaluate),
+    Command("report", "write report.md and plots of a run", _report_arguments, report),
+]
+DESCRIPTION = (__doc__ or "").split("\n\n", 1)[-1]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    return _build("python -m services.metrics", DESCRIPTION, COMMANDS)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return service_main("python -m services.metrics", DESCRIPTION, COMMANDS, argv)
+
+
+if __name__ == "__main__":
+    run_main(main, "metrics")

@@ -1,0 +1,68 @@
+"""What the metrics service believes, and how its answer stays JSON. Pure: no bus, no clock.
+
+Anyone on the bus can put on ``counters/<name>`` and on the detections keys (in the default
+peer mode nothing checks who). So the service believes counters only from a known service,
+on that service's own key, naming itself, in bounded numbers and with counts >= 0; and a
+detector's stage times only when finite and within a bound. The rest is refused and counted
+(``metrics.refused.<why>``). Under the secure profile the router lets only a service's own
+principal put on its counters key (common/security.py), so a key that names a service also
+names who sent it: see docs/security.md.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from common.messages import Detections, ServiceCounters
+
+#: The longest counter name believed (the stack's own are under 40 characters).
+MAX_NAME_CHARS = 80
+
+
+def refuse_counters(
+    msg: ServiceCounters, key: str, known: Iterable[str], max_names: int
+) -> str | None:
+    """Why ``msg``, heard on ``key`` (``.../counters/<service>``), is not believed; None if it
+    is. Reasons: ``unknown_service``, ``service_mismatch``, ``too_many_names``,
+    ``bad_name``, ``negative_count``."""
+    service = key.rsplit("/", 1)[-1]
+    if service not in known:
+        return "unknown_service"
+    if msg.service != service:
+        return "service_mismatch"
+    if len(msg.counters) > max_names:
+        return "too_many_names"
+    if any(not 0 < len(name) <= MAX_NAME_CHARS for name in msg.counters):
+        return "bad_name"
+    if any(value < 0 for value in msg.counters.values()):
+        return "negative_count"
+    return None
+
+
+def refuse_detections(msg: Detections, max_timing_ms: float) -> str | None:
+    """Why ``msg``'s figures are not believed (``bad_timing``: a stage time outside
+    0..``max_timing_ms``); None if they are. Non-finite times never decode at all."""
+    if any(not 0.0 <= ms <= max_timing_ms for ms in msg.timing_ms.values()):
+        return "bad_timing"
+    return None
+
+
+def finite(value: Any) -> Any:
+    """``value`` with every float that is NaN or infinite replaced by None (JSON null),
+    through dicts, lists and tuples."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite(v) for v in value]
+    return value
+
+
+def strict_json(value: Any) -> str:
+    """JSON that every parser accepts: no NaN, no Infinity (``json.dumps`` writes both by
+    default, and they are not JSON)."""
+    return json.dumps(finite(value), allow_nan=False)

@@ -1,0 +1,215 @@
+"""What each stack message becomes in a recording: MCAP channels, schemas and payloads. No I/O.
+
+Messages with a ROS 2 equivalent are written as ROS 2 CDR on the ROS topic the bridge uses
+(``[ros2]`` table, docs/ros2.md), with a ``ros2msg`` schema (the definition and its
+dependencies), so that Foxglove, rosbags and ``ros2 bag`` read them:
+
+    Frame (raw)        sensor_msgs/msg/Image              on ros2.image_topic
+    Frame (jpeg)       sensor_msgs/msg/CompressedImage    on ros2.image_topic + "/compressed"
+    LaserScan          sensor_msgs/msg/LaserScan          on ros2.scan_topic
+    Detections         vision_msgs/msg/Detection2DArray   on ros2.detections_topic
+    Twist              geometry_msgs/msg/TwistStamped     on ros2.cmd_vel_topic (stamped:
+                       a recording needs the command's time)
+
+Everything else, and what the ROS types cannot carry (the detector's timings, the frame's
+sequence, the command's ``input_stamp_ns``), is JSON on the stack's own key: Detections and
+Twist are written twice, once each way. A JSON channel has no schema record: rosbags (0.11)
+refuses to open a file with a ``jsonschema`` schema, so the JSON schema travels in the
+channel's metadata (``jsonschema``), with the message type (``stack_message``).
+
+An MCAP message's ``sequence`` is the stack header's ``seq``, its ``publish_time`` the header's
+stamp and its ``log_time`` when the recorder received it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import types
+import typing
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from common.codec import Message
+from common.messages import Detections, Frame, Header, LaserScan, Twist
+from common.ros2_settings import Ros2Settings
+from services.ros2 import (
+    COMPRESSED_IMAGE,
+    DETECTION_2D_ARRAY,
+    IMAGE,
+    LASER_SCAN,
+    TWIST_STAMPED,
+    RosDistro,
+    cdr_encode,
+    detections_to_ros,
+    frame_to_compressed_image,
+    frame_to_image,
+    scan_to_ros,
+    twist_to_ros,
+    typestore_for,
+)
+
+PROFILE = "ros2"  # the MCAP profile: ros2 readers take the CDR channels as theirs
+CDR, JSON = "cdr", "json"
+ROS2MSG = "ros2msg"
+STACK_MESSAGE = "stack_message"  # channel metadata: the stack's message type
+JSON_SCHEMA = "jsonschema"  # channel metadata: the JSON schema of a JSON channel
+
+
+@dataclass(frozen=True, slots=True)
+class Channel:
+    """One MCAP channel: its topic, encodings and schema (``schema_name`` "" for none)."""
+
+    topic: str
+    message_encoding: str
+    schema_name: str = ""
+    schema_encoding: str = ""
+    schema_data: bytes = b""
+    metadata: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Entry:
+    """One message to write: its channel, payload, and times."""
+
+    channel: Channel
+    data: bytes
+    sequence: int
+    publish_ns: int
+
+
+@functools.cache
+def ros2msg_schema(distro: RosDistro, ros_type: str) -> bytes:
+    """The ``ros2msg`` schema of ``ros_type``: its definition, then each dependency's after a
+    line of '=' and ``MSG: pkg/Name`` (what rosbag2 and Foxglove read)."""
+    text, _digest = typestore_for(distro).generate_msgdef(ros_type, ros_version=2)
+    return text.encode()
+
+
+def _json_type(hint: Any) -> dict[str, Any]:
+    """The JSON schema of one field's type hint, as :func:`to_json` writes it."""
+    origin = typing.get_origin(hint)
+    if origin is typing.Annotated:
+        return _json_type(typing.get_args(hint)[0])
+    if origin in (types.UnionType, typing.Union):
+        options = [_json_type(a) for a in typing.get_args(hint) if a is not type(None)]
+        return {"anyOf": [*options, {"type": "null"}]}
+    if origin is np.ndarray:
+        return {"type": "array"}
+    if origin is tuple:
+        return {"type": "array"}
+    if origin is dict:
+        return {"type": "object", "additionalProperties": _json_type(typing.get_args(hint)[1])}
+    if dataclasses.is_dataclass(hint):
+        return json_schema(hint)  # type: ignore[arg-type]
+    simple = {int: "integer", float: "number", str: "string", bool: "boolean"}
+    if hint in simple:
+        return {"type": simple[hint]}
+    raise TypeError(f"no JSON schema for {hint!r}")
+
+
+def json_schema(cls: type) -> dict[str, Any]:
+    """The JSON schema of a message class (or Header), from its dataclass fields."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    fields = [f.name for f in dataclasses.fields(cls)]
+    return {
+        "title": cls.__name__,
+        "type": "object",
+        "properties": {name: _json_type(hints[name]) for name in fields},
+    }
+
+
+def _plain(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind == "f" and not np.isfinite(value).all():
+            return _plain(value.tolist())  # per element, for the NaN and inf
+        return value.tolist()
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, float) and not np.isfinite(value):
+        return None  # JSON has no NaN or inf
+    return value
+
+
+def to_json(msg: Message) -> bytes:
+    """``msg`` as one JSON object, field by field (arrays as nested lists, NaN and inf as
+    null: JSON has neither)."""
+    return json.dumps(_plain(msg), separators=(",", ":"), allow_nan=False).encode()
+
+
+def json_channel(topic: str, cls: type[Message]) -> Channel:
+    """A JSON channel on ``topic`` for ``cls``, its schema in the channel's metadata."""
+    schema = json.dumps(json_schema(cls), separators=(",", ":"))
+    return Channel(
+        topic=topic,
+        message_encoding=JSON,
+        metadata=((STACK_MESSAGE, cls.__name__), (JSON_SCHEMA, schema)),
+    )
+
+
+class Translator:
+    """Turns each stack message into the entries a recording holds for it."""
+
+    def __init__(self, ros2: Ros2Settings) -> None:
+        self._distro = RosDistro(ros2.distro)
+        self._ros2 = ros2
+        self._channels: dict[tuple[str, str], Channel] = {}
+
+    def _ros_channel(self, topic: str, ros_type: str, stack_type: str) -> Channel:
+        key = (topic, ros_type)
+        if key not in self._channels:
+            self._channels[key] = Channel(
+                topic=topic,
+                message_encoding=CDR,
+                schema_name=ros_type,
+                schema_encoding=ROS2MSG,
+                schema_data=ros2msg_schema(self._distro, ros_type),
+                metadata=((STACK_MESSAGE, stack_type),),
+            )
+        return self._channels[key]
+
+    def _json_channel(self, key: str, cls: type[Message]) -> Channel:
+        if (key, "") not in self._channels:
+            self._channels[(key, "")] = json_channel(key, cls)
+        return self._channels[(key, "")]
+
+    def _ros(self, topic: str, ros_type: str, msg: Message, header: Header, ros: Any) -> Entry:
+        channel = self._ros_channel(topic, ros_type, type(msg).__name__)
+        data = cdr_encode(self._distro, ros_type, ros)
+        return Entry(channel, data, header.seq, header.stamp_ns)
+
+    def _json(self, key: str, msg: Message, header: Header) -> Entry:
+        return Entry(self._json_channel(key, type(msg)), to_json(msg), header.seq, header.stamp_ns)
+
+    def entries(self, key: str, msg: Message) -> list[Entry]:
+        """What to write for ``msg``, received on the stack key ``key``."""
+        header: Header = msg.header  # type: ignore[attr-defined]  # every message has one
+        d, r = self._distro, self._ros2
+        if isinstance(msg, Frame):
+            if msg.encoding == "jpeg":
+                topic = f"{r.image_topic.rstrip('/')}/compressed"
+                return [self._ros(topic, COMPRESSED_IMAGE, msg, header,
+                                  frame_to_compressed_image(d, msg))]  # fmt: skip
+            return [self._ros(r.image_topic, IMAGE, msg, header, frame_to_image(d, msg))]
+        if isinstance(msg, LaserScan):
+            return [self._ros(r.scan_topic, LASER_SCAN, msg, header, scan_to_ros(d, msg))]
+        if isinstance(msg, Detections):
+            ros = detections_to_ros(d, msg)
+            return [
+                self._ros(r.detections_topic, DETECTION_2D_ARRAY, msg, header, ros),
+                self._json(key, msg, header),
+            ]
+        if isinstance(msg, Twist):
+            ros = twist_to_ros(d, msg, stamped=True)
+            return [
+                self._ros(r.cmd_vel_topic, TWIST_STAMPED, msg, header, ros),
+                self._json(key, msg, header),
+            ]
+        return [self._json(key, msg, header)]

@@ -1,0 +1,42 @@
+"""``compare`` with one recording: play it through the running stack while recording what the
+stack makes of it, then compare the two (compare.py). Bus I/O: play.py and service.py.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from common.lifecycle import Progress
+from common.node import Node
+from common.settings import Config
+from services.recorder.play import play
+from services.recorder.service import SERVICE, Recorder
+
+SETTLE_S = 1.5  # the stack's last answers: recording ends once nothing new came for this long
+TAIL_MAX_S = 15.0
+
+
+def replay_and_record(
+    config: Config, source: Path, target: Path, stop: threading.Event, progress: Progress,
+    rate: float = 1.0,
+) -> Path:  # fmt: skip
+    """Play ``source`` onto the stack and record everything into ``target``."""
+    with Node(SERVICE, config) as node:
+        recorder = Recorder(node, target)
+        try:
+            play(config, source, stop, progress, rate=rate)
+            progress("waiting for the stack's last detections and commands")
+            written, quiet_since = -1, time.monotonic()
+            end = time.monotonic() + TAIL_MAX_S
+            while time.monotonic() < end and not stop.wait(0.1):
+                now = node.counters.get("written")
+                if now != written:
+                    written, quiet_since = now, time.monotonic()
+                elif time.monotonic() - quiet_since > SETTLE_S:
+                    break
+        finally:
+            recorder.close()
+    progress(recorder.progress())
+    return target

@@ -1,0 +1,123 @@
+"""A recorded run as compare.py needs it: detections per frame, commands, frame count.
+
+Read from the JSON channels our recorder writes (channels.py): ``Detections`` (with the frame's
+sequence number and the detector's timings) and ``Twist`` (with ``input_stamp_ns``). The first
+detections of each sequence number are kept (a looped replay repeats them).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from common.errors import DecodeError, RecordingError
+from services.recorder.reading import Input, Recording, input_kind
+
+
+@dataclass(frozen=True, slots=True)
+class FrameDetections:
+    """One frame's detections: ``xyxy`` (n, 4) float64 pixels, with class names and scores."""
+
+    seq: int
+    stamp_ns: int
+    class_names: tuple[str, ...]
+    xyxy: npt.NDArray[np.float64]
+    scores: npt.NDArray[np.float64]
+    timing_ms: dict[str, float] = field(default_factory=dict)
+    received_ns: int = 0
+    published_ns: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    stamp_ns: int
+    input_stamp_ns: int
+    linear: float  # m/s forward
+    angular: float  # rad/s about z
+
+
+@dataclass(slots=True)
+class Run:
+    path: Path
+    frames: int = 0
+    detections: dict[int, FrameDetections] = field(default_factory=dict)
+    commands: list[Command] = field(default_factory=list)
+    truncated: bool = False
+    # Which model produced the detections: "model (backend/device/precision)", in the order
+    # first seen (a run that changed model midway names both).
+    detectors: list[str] = field(default_factory=list)
+
+
+def detections_from_json(body: dict[str, Any]) -> FrameDetections:
+    """The detections of one ``Detections`` JSON message; DecodeError when it is not one."""
+    try:
+        header = body["header"]
+        xyxy = np.asarray(body["xyxy"], dtype=np.float64).reshape(-1, 4)
+        names = tuple(str(n) for n in body["class_names"])
+        scores = np.asarray(body["scores"], dtype=np.float64).reshape(-1)
+        if len(names) != len(xyxy) or len(scores) != len(xyxy):
+            raise ValueError("boxes, names and scores disagree in number")
+        return FrameDetections(
+            seq=int(header["seq"]),
+            stamp_ns=int(header["stamp_ns"]),
+            class_names=names,
+            xyxy=xyxy,
+            scores=scores,
+            timing_ms={str(k): float(v) for k, v in body.get("timing_ms", {}).items()},
+            received_ns=int(body.get("received_ns", 0)),
+            published_ns=int(body.get("published_ns", 0)),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise DecodeError(f"not a Detections message: {exc}") from exc
+
+
+def detector_name(body: dict[str, Any]) -> str:
+    """``model (backend)`` as a Detections JSON message names them; "unknown" when it does not."""
+    model, backend = str(body.get("model") or "unknown"), str(body.get("backend") or "")
+    return f"{model} ({backend})" if backend else model
+
+
+def command_from_json(body: dict[str, Any]) -> Command:
+    try:
+        return Command(
+            stamp_ns=int(body["header"]["stamp_ns"]),
+            input_stamp_ns=int(body.get("input_stamp_ns", 0)),
+            linear=float(body["linear"][0]),
+            angular=float(body["angular"][2]),
+        )
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise DecodeError(f"not a Twist message: {exc}") from exc
+
+
+def load_run(path: str | Path) -> Run:
+    """The run recorded in ``path``; RecordingError when it holds no detections to compare."""
+    run = Run(Path(path))
+    bad = 0
+    with Recording(path) as rec:
+        for record in rec.records():
+            kind = record.stack_type
+            try:
+                if kind == "Detections" and record.channel.message_encoding == "json":
+                    body = record.json()
+                    dets = detections_from_json(body)
+                    run.detections.setdefault(dets.seq, dets)
+                    detector = detector_name(body)
+                    if detector not in run.detectors:
+                        run.detectors.append(detector)
+                elif kind == "Twist" and record.channel.message_encoding == "json":
+                    run.commands.append(command_from_json(record.json()))
+                elif input_kind(record) is Input.FRAME:
+                    run.frames += 1
+            except DecodeError:
+                bad += 1
+        run.truncated = rec.truncated
+    if not run.detections:
+        raise RecordingError(
+            f"{path}: no detections to compare (this stack's recorder writes them as JSON on "
+            f"<prefix>/detector/<camera>/detections; {bad} unreadable)"
+        )
+    return run

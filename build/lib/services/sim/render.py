@@ -1,0 +1,113 @@
+"""A pinhole camera that renders the world from the robot: real photo cut-outs on a floor.
+
+Each target is a billboard: a cut-out of a real photo (scikit-image samples), scaled by its
+distance and placed by its bearing, standing on the floor. Obstacles are drawn as low grey boxes.
+Nearer things are drawn over farther ones. The camera looks along the robot's +x at
+``height_m`` above the floor, with square pixels and the configured horizontal field of view.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cache
+
+import cv2
+import numpy as np
+
+from common.images import Image, load_sample
+from services.sim.world import World
+
+# Crops (x1, y1, x2, y2) of the scikit-image photos, around the object each one shows.
+SPRITES: dict[str, tuple[str, tuple[int, int, int, int]]] = {
+    "person": ("cameraman", (0, 65, 330, 512)),
+    "cat": ("chelsea", (0, 0, 395, 300)),
+    "cup": ("coffee", (172, 17, 406, 296)),
+    "motorcycle": ("motorcycle", (83, 28, 689, 454)),
+}
+
+
+# Obstacles are low boxes (bins, crates): tall enough for the laser, low enough that a person
+# behind one stays in view.
+OBSTACLE_HEIGHT_M = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class CameraSpec:
+    width: int = 640
+    height: int = 480
+    hfov_deg: float = 60.0
+    height_m: float = 0.6
+
+    @property
+    def focal_px(self) -> float:
+        return (self.width / 2) / math.tan(math.radians(self.hfov_deg) / 2)
+
+
+@cache
+def sprite(name: str, mirror: bool = False) -> Image:
+    """The cut-out for a sprite name, as BGR (mirrored left-right when asked)."""
+    sample, (x1, y1, x2, y2) = SPRITES[name]
+    crop = np.ascontiguousarray(load_sample(sample)[y1:y2, x1:x2])
+    return np.ascontiguousarray(crop[:, ::-1]) if mirror else crop
+
+
+@cache
+def background(spec: CameraSpec) -> Image:
+    """A wall above the horizon and a floor below it, shaded so the scene is not flat."""
+    img = np.empty((spec.height, spec.width, 3), np.uint8)
+    horizon = spec.height // 2
+    wall = np.linspace(215, 180, horizon)[:, None]
+    floor = np.linspace(120, 165, spec.height - horizon)[:, None]
+    img[:horizon] = np.repeat(wall, spec.width, 1)[..., None] * np.array([1.0, 0.97, 0.9])
+    img[horizon:] = np.repeat(floor, spec.width, 1)[..., None] * np.array([0.8, 0.9, 1.0])
+    return img
+
+
+def _paste(canvas: Image, img: Image, left: float, top: float, width: float, height: float) -> None:
+    """Draw ``img`` scaled to (width, height) with its top-left at (left, top), clipped."""
+    w, h = round(width), round(height)
+    if w < 2 or h < 2 or w > 8 * canvas.shape[1] or h > 8 * canvas.shape[0]:
+        return
+    x0, y0 = round(left), round(top)
+    cx0, cy0 = max(x0, 0), max(y0, 0)
+    cx1, cy1 = min(x0 + w, canvas.shape[1]), min(y0 + h, canvas.shape[0])
+    if cx1 <= cx0 or cy1 <= cy0:
+        return
+    scaled = cv2.resize(
+        img, (w, h), interpolation=cv2.INTER_AREA if w < img.shape[1] else cv2.INTER_LINEAR
+    )
+    canvas[cy0:cy1, cx0:cx1] = scaled[cy0 - y0 : cy1 - y0, cx0 - x0 : cx1 - x0]
+
+
+def render(world: World, spec: CameraSpec) -> Image:
+    """The camera image of ``world`` from the robot's pose."""
+    canvas = background(spec).copy()
+    r = world.robot
+    c, s = math.cos(r.theta), math.sin(r.theta)
+    f, cx, cy = spec.focal_px, spec.width / 2, spec.height / 2
+    items: list[tuple[float, float, Image | None, float, float]] = []  # z, lateral, img, h, w
+    for tg, (tx, ty) in zip(world.targets, world.target_positions(), strict=True):
+        cut = sprite(tg.sprite, tg.mirror)
+        z, lateral = _to_camera(tx - r.x, ty - r.y, c, s)
+        items.append((z, lateral, cut, tg.height_m, tg.height_m * cut.shape[1] / cut.shape[0]))
+    for ob in world.obstacles:
+        z, lateral = _to_camera(ob.x - r.x, ob.y - r.y, c, s)
+        items.append((z, lateral, None, OBSTACLE_HEIGHT_M, 2 * ob.radius))
+    for z, lateral, img, h_m, w_m in sorted(items, key=lambda it: -it[0]):
+        if z < 0.3:
+            continue  # behind the camera or too close to render
+        u = cx - f * lateral / z
+        bottom = cy + f * spec.height_m / z
+        hp, wp = f * h_m / z, f * w_m / z
+        if img is None:
+            x0, x1 = round(u - wp / 2), round(u + wp / 2)
+            cv2.rectangle(canvas, (x0, round(bottom - hp)), (x1, round(bottom)), (90, 90, 95), -1)
+        else:
+            _paste(canvas, img, u - wp / 2, bottom - hp, wp, hp)
+    return canvas
+
+
+def _to_camera(dx: float, dy: float, c: float, s: float) -> tuple[float, float]:
+    """World offset -> (forward depth, lateral left) in the robot frame."""
+    return dx * c + dy * s, -dx * s + dy * c

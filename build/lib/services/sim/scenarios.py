@@ -1,0 +1,87 @@
+"""The scripted worlds the stack is proven on, and what each one must show. Pure.
+
+The robot starts at the origin facing +x. Distances are metres, times scenario seconds. Every
+scenario is run with the controller in ``follow`` mode on ``person``, keeping its distance by
+the laser in the target's bearing unless the scenario says otherwise; ``followed`` names the
+target the robot should end up following (None: it must stay still).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from services.sim.world import Obstacle, Robot, Target, World
+
+
+def person(id: str, *path: tuple[float, float, float], mirror: bool = False) -> Target:
+    return Target(id=id, name="person", sprite="person", height_m=1.7, path=path, mirror=mirror)
+
+
+DEMO_CENTRE = (4.0, 3.5)  # the demo's walk: a circle the person walks round, anticlockwise
+DEMO_RADIUS_M = 3.5
+DEMO_SPEED_MPS = 0.3  # well below the robot's speed limit, so the follower keeps up
+
+
+def demo_walker(points: int = 24) -> Target:
+    """The demo's person: starts 4 m straight ahead and walks a circle away from the robot,
+    forever, never towards it, so a follower keeps them in view for the whole run."""
+    cx, cy = DEMO_CENTRE
+    lap_s = 2 * math.pi * DEMO_RADIUS_M / DEMO_SPEED_MPS
+    path = tuple(
+        (lap_s * i / points,
+         cx + DEMO_RADIUS_M * math.cos(-math.pi / 2 + 2 * math.pi * i / points),
+         cy + DEMO_RADIUS_M * math.sin(-math.pi / 2 + 2 * math.pi * i / points))
+        for i in range(points + 1)
+    )  # fmt: skip
+    return Target(id="alice", name="person", sprite="person", height_m=1.7, path=path, loop=True)
+
+
+@dataclass(frozen=True, slots=True)
+class Scenario:
+    """A world, how long to run it, and its pass conditions."""
+
+    name: str
+    description: str
+    build: Callable[[], World]
+    duration_s: float
+    followed: str | None = "alice"
+    must_reach: bool = True
+    kill_detector_at_s: float | None = None
+    controller: dict[str, Any] = field(default_factory=lambda: {"distance_source": "laser"})
+
+
+SCENARIOS: dict[str, Scenario] = {
+    s.name: s
+    for s in (
+        Scenario("demo", "a person walking a slow loop ahead of the robot (make run)",
+                 lambda: World(Robot(), targets=[demo_walker()]), duration_s=1e9),
+        Scenario("ahead", "a person standing straight ahead",
+                 lambda: World(Robot(), targets=[person("alice", (0, 4.0, 0.0))]), 25.0),
+        Scenario("side", "a person standing off to the left",
+                 lambda: World(Robot(), targets=[person("alice", (0, 3.5, 1.4))]), 25.0),
+        Scenario("crossing", "a person walking across the view, right to left, then stopping",
+                 lambda: World(Robot(), targets=[person("alice", (0, 4.5, -1.2), (12, 4.5, 1.2))]),
+                 30.0),
+        Scenario("two_people",
+                 "alice ahead; bob walks in nearer and bigger: the lock must stay on alice",
+                 lambda: World(Robot(), targets=[
+                     person("alice", (0, 4.5, 0.0)),
+                     person("bob", (0, 2.8, -3.5), (4, 2.8, -3.5), (10, 3.0, -1.1), mirror=True)]),
+                 30.0),
+        Scenario("obstacle", "a low box between the robot and the person: stop short of it",
+                 lambda: World(Robot(), obstacles=[Obstacle(2.5, 0.0, 0.3)],
+                               targets=[person("alice", (0, 5.5, 0.3))]),
+                 25.0, must_reach=False,
+                 # by box height, so the laser's view of the box is the obstacle stop alone
+                 controller={"distance_source": "box"}),
+        Scenario("no_target", "nobody in view: the robot must not move",
+                 lambda: World(Robot(), obstacles=[Obstacle(3.0, 1.0, 0.3)]), 15.0,
+                 followed=None, must_reach=False),
+        Scenario("detector_dies", "the detector is killed mid-run: the robot must stop in time",
+                 lambda: World(Robot(), targets=[person("alice", (0, 7.0, 0.0))]), 20.0,
+                 must_reach=False, kill_detector_at_s=6.0),
+    )
+}  # fmt: skip

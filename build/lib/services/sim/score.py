@@ -1,0 +1,148 @@
+"""Scores a scenario run against the simulator's truth. Pure: recorded messages in, figures out.
+
+Figures:
+    success                 the scenario's pass conditions all hold (see ``verdict``)
+    time_to_reach_s         scenario time when the followed target was first within
+                            follow distance + tolerance (None if never)
+    final_distance_m        robot centre to the followed target's surface at the end (what a
+                            laser reads)
+    min_clearance_m         least distance from the robot centre to an obstacle's surface,
+                            as the laser measures it (None without obstacles)
+    mean_bearing_error_deg  mean |bearing of the followed target| while it was in view
+    stale_commands          non-zero commands acting on detections whose frame was captured
+                            longer than the detection timeout before the command was
+                            stamped: the controller's own rule (must be 0)
+    stop_after_kill_s       detector_dies: kill -> first zero command (None otherwise); the
+                            robot must have been moving in the second before the kill
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+from common.contracts import ScenarioResult
+from common.messages import Detections, GroundTruth, Twist
+from common.settings import ControllerSettings
+from services.sim.scenarios import Scenario
+from services.sim.world import World
+
+REACH_TOLERANCE_M = 0.4  # box-height ranging is coarse: +-0.4 m around the follow distance
+STOP_MARGIN_S = 0.5  # detector_dies: allowed on top of the detection timeout
+
+
+@dataclass
+class Recording:
+    """What the scenario runner heard, in arrival order."""
+
+    truths: list[GroundTruth] = field(default_factory=list)
+    twists: list[Twist] = field(default_factory=list)
+    detections: list[Detections] = field(default_factory=list)
+    kill_ns: int | None = None
+
+
+def _bearing_deg(truth: GroundTruth, i: int) -> float:
+    x, y, theta = truth.robot
+    tx, ty = truth.targets_xy[i]
+    b = math.atan2(ty - y, tx - x) - theta
+    return math.degrees(math.atan2(math.sin(b), math.cos(b)))
+
+
+def _distance(truth: GroundTruth, i: int, radius: float) -> float:
+    x, y, _ = truth.robot
+    tx, ty = truth.targets_xy[i]
+    return math.hypot(tx - x, ty - y) - radius
+
+
+def stale_commands(rec: Recording, timeout_s: float) -> int:
+    """Non-zero commands on inputs older than the timeout, judged as the controller judges them.
+
+    Each Twist carries the capture stamp of the frame it reacts to (``input_stamp_ns``) and is
+    stamped with the instant at which the controller judged that frame's age; both are wall
+    clock. The controller also applies the monotonic clock and the arrival time, each of which
+    can only make an input older, so any command counted here broke the controller's rule.
+    """
+    count = 0
+    for tw in rec.twists:
+        age_s = (tw.header.stamp_ns - tw.input_stamp_ns) / 1e9
+        if not tw.is_zero and (tw.input_stamp_ns <= 0 or age_s > timeout_s):
+            count += 1
+    return count
+
+
+def score(
+    scenario: Scenario, rec: Recording, world: World, s: ControllerSettings, hfov_deg: float
+) -> ScenarioResult:
+    """The figures of one run, and whether it passed."""
+    truths = [t for t in rec.truths if t.sim_time_s > 0]
+    if not truths:
+        return {"success": False, "reason": "no simulation time elapsed"}
+    clearance = min(
+        (
+            math.hypot(o.x - t.robot[0], o.y - t.robot[1]) - o.radius
+            for t in truths
+            for o in world.obstacles
+        ),
+        default=None,
+    )
+    out: ScenarioResult = {
+        "scenario": scenario.name,
+        "duration_s": truths[-1].sim_time_s,
+        "time_to_reach_s": None,
+        "final_distance_m": None,
+        "min_clearance_m": clearance,
+        "mean_bearing_error_deg": None,
+        "stale_commands": stale_commands(rec, s.detection_timeout_s),
+        "commands": len(rec.twists),
+        "nonzero_commands": sum(not t.is_zero for t in rec.twists),
+        "stop_after_kill_s": None,
+        "distance_travelled_m": sum(
+            math.hypot(b.robot[0] - a.robot[0], b.robot[1] - a.robot[1])
+            for a, b in itertools.pairwise(truths)
+        ),
+    }
+    if scenario.followed is not None:
+        i = truths[-1].target_ids.index(scenario.followed)
+        radius = world.targets[i].radius
+        reach = s.follow_distance_m + REACH_TOLERANCE_M
+        out["time_to_reach_s"] = next(
+            (t.sim_time_s for t in truths if _distance(t, i, radius) <= reach), None
+        )
+        out["final_distance_m"] = _distance(truths[-1], i, radius)
+        in_view = [
+            abs(_bearing_deg(t, i)) for t in truths if abs(_bearing_deg(t, i)) <= hfov_deg / 2
+        ]
+        out["mean_bearing_error_deg"] = sum(in_view) / len(in_view) if in_view else None
+    if rec.kill_ns is not None:
+        kill_ns = rec.kill_ns
+        before = [t for t in rec.twists if kill_ns - 1e9 <= t.header.stamp_ns < kill_ns]
+        out["moving_at_kill"] = any(not t.is_zero for t in before)
+        after = [t for t in rec.twists if t.header.stamp_ns >= kill_ns and t.is_zero]
+        if after:
+            out["stop_after_kill_s"] = (min(t.header.stamp_ns for t in after) - kill_ns) / 1e9
+    out["success"], out["checks"] = verdict(scenario, out, s)
+    return out
+
+
+def verdict(
+    scenario: Scenario, f: ScenarioResult, s: ControllerSettings
+) -> tuple[bool, dict[str, bool]]:
+    """The pass conditions, each named so a failure says which one."""
+    checks = {"no commands while stale": f["stale_commands"] == 0}
+    if f["min_clearance_m"] is not None:
+        checks["kept the safety distance"] = f["min_clearance_m"] >= s.safety_distance_m
+    if scenario.must_reach:
+        final = f["final_distance_m"]
+        checks["reached the stop distance"] = (
+            final is not None and abs(final - s.follow_distance_m) <= REACH_TOLERANCE_M
+        )
+    if scenario.followed is None:
+        checks["stayed still"] = f["nonzero_commands"] == 0 and f["distance_travelled_m"] < 0.05
+    if scenario.kill_detector_at_s is not None:
+        stop = f["stop_after_kill_s"]
+        checks["was moving when the detector died"] = bool(f.get("moving_at_kill"))
+        checks["stopped in time after the detector died"] = (
+            stop is not None and stop <= s.detection_timeout_s + STOP_MARGIN_S
+        )
+    return all(checks.values()), checks

@@ -1,0 +1,143 @@
+"""The simulated world: a unicycle robot, static obstacles and scripted targets. Pure.
+
+World frame: x forward at the start, y to the left, theta counter-clockwise (REP 103). The
+robot integrates the latest Twist under its own speed and acceleration limits, like a real
+base, and stops by itself when commands stop arriving (its watchdog).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+
+@dataclass(frozen=True, slots=True)
+class BaseLimits:
+    """The base's own limits: what the motors can do, whatever the controller asks."""
+
+    max_linear: float = 0.6
+    max_angular: float = 1.5
+    max_linear_accel: float = 1.5
+    max_angular_accel: float = 4.0
+    watchdog_s: float = 0.5
+
+
+@dataclass(slots=True)
+class Robot:
+    """Pose (x, y, theta) and current velocities (v, w)."""
+
+    x: float = 0.0
+    y: float = 0.0
+    theta: float = 0.0
+    v: float = 0.0
+    w: float = 0.0
+    radius: float = 0.25
+
+    def step(self, cmd: tuple[float, float], dt: float, lim: BaseLimits) -> None:
+        """Move towards the commanded (v, w) within the limits, then integrate the pose."""
+        v_goal = min(max(cmd[0], -lim.max_linear), lim.max_linear)
+        w_goal = min(max(cmd[1], -lim.max_angular), lim.max_angular)
+        dv = min(max(v_goal - self.v, -lim.max_linear_accel * dt), lim.max_linear_accel * dt)
+        dw = min(max(w_goal - self.w, -lim.max_angular_accel * dt), lim.max_angular_accel * dt)
+        self.v += dv
+        self.w += dw
+        # Exact unicycle integration over dt for constant (v, w).
+        if abs(self.w) > 1e-9:
+            r = self.v / self.w
+            self.x += r * (math.sin(self.theta + self.w * dt) - math.sin(self.theta))
+            self.y -= r * (math.cos(self.theta + self.w * dt) - math.cos(self.theta))
+        else:
+            self.x += self.v * dt * math.cos(self.theta)
+            self.y += self.v * dt * math.sin(self.theta)
+        self.theta = math.atan2(
+            math.sin(self.theta + self.w * dt), math.cos(self.theta + self.w * dt)
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Obstacle:
+    """A round obstacle (a pillar, a bin): centre and radius in metres."""
+
+    x: float
+    y: float
+    radius: float
+
+
+@dataclass(frozen=True, slots=True)
+class Target:
+    """Something the camera can see: a class, a cut-out, a size, and a scripted path.
+
+    ``path`` is a list of (t, x, y) waypoints; the target moves linearly between them and stays
+    at the last. One waypoint means it stands still. With ``loop`` the path repeats: its last
+    waypoint should equal its first.
+    """
+
+    id: str
+    name: str
+    sprite: str
+    height_m: float
+    path: tuple[tuple[float, float, float], ...]
+    radius: float = 0.25
+    mirror: bool = False
+    loop: bool = False
+
+    def position(self, t: float) -> tuple[float, float]:
+        pts = self.path
+        if self.loop and t > pts[0][0] and pts[-1][0] > pts[0][0]:
+            t = pts[0][0] + (t - pts[0][0]) % (pts[-1][0] - pts[0][0])
+        if t <= pts[0][0]:
+            return pts[0][1], pts[0][2]
+        for (t0, x0, y0), (t1, x1, y1) in itertools.pairwise(pts):
+            if t <= t1:
+                a = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
+                return x0 + a * (x1 - x0), y0 + a * (y1 - y0)
+        return pts[-1][1], pts[-1][2]
+
+
+@dataclass(slots=True)
+class World:
+    """Everything that exists, and the simulation clock."""
+
+    robot: Robot
+    obstacles: list[Obstacle] = field(default_factory=list)
+    targets: list[Target] = field(default_factory=list)
+    limits: BaseLimits = field(default_factory=BaseLimits)
+    t: float = 0.0
+    last_cmd: tuple[float, float] = (0.0, 0.0)
+    last_cmd_t: float = -math.inf
+
+    def command(self, v: float, w: float) -> None:
+        """A Twist arrived."""
+        self.last_cmd, self.last_cmd_t = (v, w), self.t
+
+    def advance(self, dt: float) -> None:
+        fresh = self.t - self.last_cmd_t <= self.limits.watchdog_s
+        self.robot.step(self.last_cmd if fresh else (0.0, 0.0), dt, self.limits)
+        self.t += dt
+
+    def target_positions(self) -> npt.NDArray[np.float64]:
+        if not self.targets:
+            return np.zeros((0, 2))
+        return np.array([tg.position(self.t) for tg in self.targets], np.float64)
+
+    def obstacle_circles(self) -> npt.NDArray[np.float64]:
+        """The obstacles alone as (x, y, r) rows, (m, 3)."""
+        rows = [(o.x, o.y, o.radius) for o in self.obstacles]
+        return np.array(rows, np.float64).reshape(-1, 3)
+
+    def circles(self) -> npt.NDArray[np.float64]:
+        """Every solid thing as (x, y, r) rows: obstacles and targets (the laser sees both)."""
+        rows = [(o.x, o.y, o.radius) for o in self.obstacles]
+        rows += [(*tg.position(self.t), tg.radius) for tg in self.targets]
+        return np.array(rows, np.float64).reshape(-1, 3)
+
+    def clearance(self) -> float:
+        """Distance from the robot's edge to the nearest obstacle's edge (inf if none)."""
+        if not self.obstacles:
+            return math.inf
+        r = self.robot
+        return min(math.hypot(o.x - r.x, o.y - r.y) - o.radius - r.radius for o in self.obstacles)

@@ -1,0 +1,172 @@
+"""The viewer service: the stack's keys in, a Foxglove WebSocket server out.
+
+Zenoh's callbacks convert the small messages (scan, command, controller status, truth) at
+once; frames and detections only go into the ``Pairing``, and the viewer's own encoder thread
+turns the newest pair into a JPEG and its annotations at ``image_rate_hz``, and only while a
+client watches them. Nothing here publishes on the stack's keys but the viewer's counters.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import foxglove
+import zenoh
+from foxglove.websocket import WebSocketServer
+
+from common.errors import ConfigError, ImageError
+from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
+from common.node import Node
+from common.queries import query_metrics
+from common.settings import Config
+from services.viewer import convert, scene
+from services.viewer.channels import Channels
+from services.viewer.pairing import Pairing
+
+SERVER_NAME = "zenoh-yolo-stack"
+
+
+def start_server(config: Config, context: foxglove.Context) -> WebSocketServer:
+    v = config.viewer
+    try:
+        return foxglove.start_server(name=SERVER_NAME, host=v.host, port=v.port, context=context)
+    except RuntimeError as exc:  # the SDK's error for an address in use or not ours
+        raise ConfigError(f"viewer.port: cannot listen on {v.host}:{v.port} ({exc})") from exc
+
+
+class Viewer:
+    """What the callbacks and the threads share: the channels, the pairing, the latest status
+    and the robot's path."""
+
+    def __init__(self, node: Node, channels: Channels, config: Config) -> None:
+        self.node = node
+        self.channels = channels
+        self.settings = config.viewer
+        self.pairing = Pairing()
+        self.locked_track = -1
+        self.trail = scene.PathTrail(self.settings.path_points)
+        self._scene_period_s = 1.0 / self.settings.scene_rate_hz
+        self._next_scene = 0.0
+
+    def on_frame(self, frame: Frame, _sample: zenoh.Sample) -> None:
+        self.node.counters.add("frames_in")
+        self.pairing.add_frame(frame)
+
+    def on_detections(self, dets: Detections, _sample: zenoh.Sample) -> None:
+        if not self.pairing.add_detections(dets, time.monotonic()):
+            self.node.counters.add("detections_unpaired")
+
+    def _unshowable(self, what: str, error: ValueError) -> None:
+        """A message that decoded but that Foxglove cannot carry (a stamp past 2106)."""
+        self.node.reject("unshowable", f"{what} not shown: {error}")
+
+    def on_scan(self, scan: LaserScan, _sample: zenoh.Sample) -> None:
+        try:
+            shown = convert.laser_scan(scan)
+        except ValueError as exc:
+            self._unshowable("scan", exc)
+            return
+        self.channels.scan.log(shown, log_time=scan.header.stamp_ns)
+
+    def on_twist(self, twist: Twist, _sample: zenoh.Sample) -> None:
+        self.channels.cmd_vel.log(convert.twist_json(twist), log_time=twist.header.stamp_ns)
+
+    def on_status(self, status: ControllerStatus, _sample: zenoh.Sample) -> None:
+        self.locked_track = status.track_id
+        self.channels.controller.log(convert.status_json(status), log_time=status.header.stamp_ns)
+
+    def on_truth(self, truth: GroundTruth, _sample: zenoh.Sample) -> None:
+        at = truth.header.stamp_ns
+        try:
+            pose = scene.transforms(truth)
+        except ValueError as exc:
+            self._unshowable("ground truth", exc)
+            return
+        self.trail.add(truth.robot[0], truth.robot[1])
+        self.channels.tf.log(pose, log_time=at)
+        now = time.monotonic()
+        if now >= self._next_scene:
+            self._next_scene = now + self._scene_period_s
+            self.channels.scene.log(scene.scene(truth, self.trail.points()), log_time=at)
+
+    def encode_loop(self, stop: threading.Event) -> None:
+        """Send the newest image and its annotations, at most ``image_rate_hz`` a second."""
+        period = 1.0 / self.settings.image_rate_hz
+        dropped = 0
+        while not stop.wait(period):
+            item = self.pairing.take(time.monotonic())
+            if self.pairing.dropped > dropped:
+                self.node.counters.add("images_dropped", self.pairing.dropped - dropped)
+                dropped = self.pairing.dropped
+            if item is None or not self.channels.watched():
+                continue
+            self.send(*item)
+
+    def send(self, frame: Frame, dets: Detections | None) -> None:
+        """Send ``frame`` as a JPEG, and ``dets`` as its annotations; a frame whose pixels
+        cannot be read is bad input, one Foxglove cannot carry is counted as unshowable."""
+        v = self.settings
+        try:
+            image = convert.compressed_image(frame, v.jpeg_quality, v.max_image_width)
+            marks = None
+            if dets is not None:
+                w, h = convert.scaled_size(frame.width, frame.height, v.max_image_width)
+                marks = convert.image_annotations(dets, w, h, self.locked_track)
+        except ImageError as exc:
+            self.node.bad_input("frame", exc)
+            return
+        except ValueError as exc:
+            self._unshowable("image", exc)
+            return
+        at = frame.header.stamp_ns
+        self.channels.image.log(image, log_time=at)
+        self.node.counters.add("images_out")
+        if marks is not None:
+            self.channels.annotations.log(marks, log_time=at)
+
+    def metrics_loop(self, stop: threading.Event) -> None:
+        """Ask the metrics service ``metrics_rate_hz`` times a second; publish its figures."""
+        period = 1.0 / self.settings.metrics_rate_hz
+        while not stop.wait(period):
+            answer = query_metrics(self.node.session, self.node.keys, min(period, 1.0))
+            if answer is not None:
+                self.channels.metrics.log(convert.metrics_json(answer), log_time=answer["stamp_ns"])
+
+
+def run(config: Config, stop: threading.Event) -> int:
+    """Serve the live view until ``stop`` is set."""
+    context = foxglove.Context()
+    channels = Channels(context)
+    with Node("viewer", config) as node:
+        server = start_server(config, context)
+        viewer = Viewer(node, channels, config)
+        keys, camera = node.keys, config.stack.camera
+        subs: list[Any] = [
+            node.subscribe(keys.frame(camera), Frame.decode, viewer.on_frame),
+            node.subscribe(keys.detections(camera), Detections.decode, viewer.on_detections),
+            node.subscribe(keys.scan(), LaserScan.decode, viewer.on_scan),
+            node.subscribe(keys.cmd_vel(), Twist.decode, viewer.on_twist),
+            node.subscribe(keys.controller_status(), ControllerStatus.decode, viewer.on_status),
+            node.subscribe(keys.sim_truth(), GroundTruth.decode, viewer.on_truth),
+        ]
+        threads = [
+            threading.Thread(target=viewer.encode_loop, args=(stop,), name="encode", daemon=True),
+            threading.Thread(target=viewer.metrics_loop, args=(stop,), name="metrics", daemon=True),
+        ]
+        for t in threads:
+            t.start()
+        node.log.info("foxglove live view on ws://%s:%d", config.viewer.host, server.port)
+        node.ready()
+        try:
+            while not stop.wait(0.5):
+                node.publish_counters()
+        finally:
+            node.log.info("stopping")
+            for sub in subs:
+                sub.undeclare()
+            for t in threads:
+                t.join(timeout=2.0)
+            server.stop()
+    return 0
