@@ -15,6 +15,27 @@ from dataclasses import dataclass
 
 CONFIG_HELP = "stack config (default deploy/stack.toml)"
 
+# Set by ``zstack`` before it runs a module's main: (the module's subcommand, or "" for a
+# module without any, and the words a user typed: "zstack scenarios"), so that usage lines and
+# help name the command the user ran, not the module behind it.
+_invoked_as: tuple[str, str] | None = None
+
+
+def invoked_as(subcommand: str, words: str) -> None:
+    global _invoked_as
+    _invoked_as = (subcommand, words)
+
+
+def program(default: str, subcommand: str = "") -> str:
+    """The name a parser shows: ``default`` (``python -m services.sim``, or that plus
+    ``subcommand``), or what the user typed when ``zstack`` ran it."""
+    if _invoked_as is not None:
+        if _invoked_as[0] == subcommand:
+            return _invoked_as[1]
+        if not subcommand:
+            return "zstack"
+    return f"{default} {subcommand}" if subcommand else default
+
 
 @dataclass(frozen=True, slots=True)
 class Command:
@@ -42,11 +63,13 @@ def build_parser(
     prog: str, description: str, commands: Sequence[Command]
 ) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog=program(prog),
+        description=description,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for c in commands:
-        p = sub.add_parser(c.name, help=c.help, description=c.help)
+        p = sub.add_parser(c.name, help=c.help, description=c.help, prog=program(prog, c.name))
         c.add_arguments(p)
         p.set_defaults(run=c.run)
     return parser

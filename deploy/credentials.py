@@ -24,6 +24,7 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
+from common.cli import program
 from common.errors import ConfigError
 from common.lifecycle import run_main
 from common.security import (
@@ -196,7 +197,9 @@ def generate(
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(prog="python -m deploy.credentials", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog=program("python -m deploy.credentials"), description=__doc__
+    )
     parser.add_argument("--dir", type=Path, default=DEFAULT_DIR, help="default: secrets/")
     parser.add_argument(
         "--host",

@@ -21,6 +21,7 @@ from typing import cast
 import zenoh
 
 from common.bus import open_hub
+from common.cli import program
 from common.config_file import load_config
 from common.contracts import MetricsAnswer
 from common.errors import BackendUnavailable, ConfigError, DecodeError, ModelError, StackError
@@ -242,7 +243,9 @@ def service_failure(p: ServiceProcess) -> StackError:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(prog="python -m deploy.supervisor", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog=program("python -m deploy.supervisor"), description=__doc__
+    )
     parser.add_argument("--config", help="stack config (default deploy/stack.toml)")
     parser.add_argument("--duration", type=float, help="run headless for S seconds, then stop")
     parser.add_argument(

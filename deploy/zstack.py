@@ -11,6 +11,7 @@ import runpy
 import sys
 from collections.abc import Sequence
 
+from common.cli import invoked_as
 from common.settings import SERVICES
 
 # command -> (module, the argv it starts with, help)
@@ -61,7 +62,11 @@ def resolve(argv: Sequence[str]) -> tuple[str, list[str]]:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    module, args = resolve(sys.argv[1:] if argv is None else argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    module, args = resolve(words)
+    lead = COMMANDS[words[0]][1] if words[0] != "serve" else ("serve",)
+    typed = f"zstack {words[0]}" if words[0] != "serve" else f"zstack serve {words[1]}"
+    invoked_as(lead[0] if lead else "", typed)  # usage lines name what the user typed
     sys.argv = [f"python -m {module}", *args]
     runpy.run_module(module, run_name="__main__", alter_sys=True)
 

@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.annotate import annotate
-from common.cli import with_default
+from common.cli import program, with_default
 from common.errors import ConfigError, ImageError, StackError
 from common.images import list_images, load_image
 from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code, print_progress
@@ -42,6 +42,7 @@ from services.detector.video import detect_stream
 
 # The stack's shared exit codes (common/lifecycle.py); a failed image is the generic failure.
 EXIT_IMAGE_FAILED = EXIT_FAILED
+PROG = "python -m services.detector"
 #: The thresholds' defaults: those of the settings, stated once there.
 _DEFAULTS = DetectorSettings()
 
@@ -181,7 +182,9 @@ def run_detect(args: argparse.Namespace) -> int:
 
 def _add_detect(subparsers: Any) -> None:
     p = subparsers.add_parser(
-        "detect", help="detect objects in images, folders, videos or a camera device"
+        "detect",
+        prog=program(PROG, "detect"),
+        help="detect objects in images, folders, videos or a camera device",
     )
     p.add_argument(
         "paths",
@@ -232,7 +235,9 @@ def run_benchmark(args: argparse.Namespace) -> int:
 def _add_benchmark(subparsers: Any) -> None:
     from services.detector import bench
 
-    p = subparsers.add_parser("benchmark", help="time each stage on one or more backends")
+    p = subparsers.add_parser(
+        "benchmark", prog=program(PROG, "benchmark"), help="time each stage on one or more backends"
+    )
     p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
     bench.add_arguments(p)
     p.set_defaults(handler=run_benchmark)
@@ -261,7 +266,9 @@ def run_export(args: argparse.Namespace) -> int:
 
 
 def _add_export(subparsers: Any) -> None:
-    p = subparsers.add_parser("export", help="build and cache a TensorRT engine for a model")
+    p = subparsers.add_parser(
+        "export", prog=program(PROG, "export"), help="build and cache a TensorRT engine for a model"
+    )
     p.add_argument("--backend", choices=["tensorrt"], default="tensorrt", help="engine kind")
     p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
     p.add_argument("--precision", choices=["fp32", "fp16", "int8"], default="fp16")
@@ -296,7 +303,9 @@ def run_fetch_model(args: argparse.Namespace) -> int:
 
 
 def _add_fetch_model(subparsers: Any) -> None:
-    p = subparsers.add_parser("fetch-model", help="fetch and convert the default model")
+    p = subparsers.add_parser(
+        "fetch-model", prog=program(PROG, "fetch-model"), help="fetch and convert the default model"
+    )
     p.add_argument("--models-dir", help="where to put it (default: the stack's models folder)")
     p.add_argument("--config", help="only if this stack config uses the default model")
     p.set_defaults(handler=run_fetch_model)
@@ -320,9 +329,7 @@ SUBCOMMANDS: list[Callable[[Any], None]] = [
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand in :data:`SUBCOMMANDS`."""
-    parser = argparse.ArgumentParser(
-        prog="python -m services.detector", description="YOLO object detector"
-    )
+    parser = argparse.ArgumentParser(prog=program(PROG), description="YOLO object detector")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for register in SUBCOMMANDS:
         register(subparsers)

@@ -12,6 +12,7 @@ import numpy.typing as npt
 import zenoh
 
 from common.bus import QoS
+from common.cli import program
 from common.clock import BOOT_ID, now
 from common.contracts import DetectorInfo
 from common.errors import DecodeError, ImageError, ImageTooLarge
@@ -205,7 +206,11 @@ def _run_serve(args: Any) -> int:
 
 def add_serve_command(subparsers: Any) -> None:
     """Register ``serve``: run the detector service on the bus (the supervisor uses this)."""
-    p = subparsers.add_parser("serve", help="run the detector service on the Zenoh bus")
+    p = subparsers.add_parser(
+        "serve",
+        prog=program("python -m services.detector", "serve"),
+        help="run the detector service on the Zenoh bus",
+    )
     p.add_argument("--config", help="stack config (default deploy/stack.toml)")
     p.add_argument(
         "--backend", help="override detector.backend: onnx, tensorrt, cuda, openvino or auto"

@@ -56,7 +56,7 @@ def serve(args: argparse.Namespace) -> int:
 
 
 def _scenario_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("name", help="scenario name (see 'list')")
+    p.add_argument("name", help="scenario name (zstack scenarios lists them)")
     add_config(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument(
@@ -94,8 +94,12 @@ def list_scenarios(args: argparse.Namespace) -> int:
 def _soak_arguments(p: argparse.ArgumentParser) -> None:
     add_config(p)
     p.add_argument("--duration", type=float, default=600.0, help="seconds (default 600)")
-    p.add_argument("--flood-hz", type=float, default=200.0,
-                   help="garbage messages a second, spread over every key (default 200)")
+    p.add_argument(
+        "--flood-hz",
+        type=float,
+        default=200.0,
+        help="garbage messages a second, spread over every key (default 200)",
+    )
     p.add_argument("--sample-s", type=float, default=10.0, help="seconds between samples")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -106,8 +110,9 @@ def soak(args: argparse.Namespace) -> int:
     setup_logging("soak", "WARNING")
     from services.sim.soak import run_soak, soak_table
 
-    result = run_soak(config, args.duration, args.flood_hz, args.sample_s,
-                      log=lambda m: print(m, file=sys.stderr))
+    result = run_soak(
+        config, args.duration, args.flood_hz, args.sample_s, log=lambda m: print(m, file=sys.stderr)
+    )
     print(json.dumps(result, indent=1) if args.json else soak_table(result))
     healthy = result["still_following"] and not any(result["restarts"].values())
     return 0 if healthy else 1
