@@ -171,7 +171,9 @@ class TrackerSettings:
     A frame whose stamp moved by more than ``max_stamp_jump_s`` beyond the time that really
     passed between arrivals (or went back) is ignored, not allowed to age every track out;
     after ``jumps_before_reset`` such frames in a row the stamps are believed and the tracks
-    restart (a camera clock that really stepped). ``enabled`` is the service's to read.
+    restart (a camera clock that really stepped). Only frames from another host are checked:
+    a frame from this host is tracked on its monotonic stamp, which cannot step
+    (services/detector/tracker.py). ``enabled`` is the service's to read.
     """
 
     enabled: bool = True

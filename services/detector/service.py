@@ -18,13 +18,13 @@ from common.contracts import DetectorInfo
 from common.errors import DecodeError, ImageError, ImageTooLarge
 from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
-from common.messages import Detections, Frame, now_ns
+from common.messages import Detections, Frame, Header, now_ns
 from common.node import Node
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
 from services.detector.mailbox import Mailbox
 from services.detector.pipeline import Detector
-from services.detector.tracker import Tracker
+from services.detector.tracker import Tracker, tracker_clock
 from services.detector.types import DetectionResult
 from services.detector.variants import variant_of
 
@@ -165,7 +165,7 @@ def run(config: Config, stop: threading.Event) -> int:
                 track_ids = (
                     None
                     if tracker is None
-                    else _track(node, tracker, result, frame.header.stamp_ns, received_ns)
+                    else _track(node, tracker, result, frame.header, received_ns)
                 )
                 pub.put(to_message(frame, result, detector, received_ns, track_ids).encode())
                 node.counters.add("detections_out")
@@ -177,11 +177,14 @@ def run(config: Config, stop: threading.Event) -> int:
 
 
 def _track(
-    node: Node, tracker: Tracker, result: DetectionResult, stamp_ns: int, received_ns: int
+    node: Node, tracker: Tracker, result: DetectionResult, header: Header, received_ns: int
 ) -> npt.NDArray[np.int32]:
     """Track ids for ``result``; a frame whose stamp jumped is counted, its ids left at -1."""
     ignored, resets = tracker.ignored_frames, tracker.resets
-    ids = tracker.update(result.boxes, stamp_ns / 1e9, received_ns / 1e9)
+    at, arrival = tracker_clock(
+        header.stamp_ns, header.mono_ns, header.boot_id, received_ns, BOOT_ID
+    )
+    ids = tracker.update(result.boxes, at, arrival)
     if tracker.ignored_frames > ignored:
         node.reject("tracker_stamp_jumps", "frame stamp jumped: the tracker ignored it")
     if tracker.resets > resets:

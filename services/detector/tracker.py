@@ -69,6 +69,23 @@ def _greedy_match(iou: npt.NDArray[np.float64], threshold: float) -> list[tuple[
     return pairs
 
 
+def tracker_clock(
+    stamp_ns: int, mono_ns: int, sender_boot: str, arrival_ns: int, boot_id: str
+) -> tuple[float, float | None]:
+    """The time a frame is tracked at, and its arrival for the stamp-jump check (seconds).
+
+    A frame from this host (same boot id) carries its capture instant on the monotonic clock,
+    which cannot step: it is used, and there is no jump to check for (None). Checking would
+    even do harm: the check compares stamp and arrival deltas, and at start-up, with every
+    service importing and loading on few cores, one frame delivered late made the next three
+    look like a clock that jumped, and the tracks restarted for nothing. A frame from another
+    host has only the wall clock, which NTP or an operator may step: checked.
+    """
+    if mono_ns > 0 and sender_boot == boot_id:
+        return mono_ns / 1e9, None
+    return stamp_ns / 1e9, arrival_ns / 1e9
+
+
 class Tracker:
     """Assigns a track id to each detection of a stream of frames of one camera."""
 
