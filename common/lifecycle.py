@@ -92,6 +92,8 @@ class StopEvent(threading.Event):
                 return self.is_set()
             if super().wait(min(left, SIGNAL_POLL_S)):
                 return True
+
+
 _PR_SET_PDEATHSIG = 1
 
 
@@ -147,8 +149,20 @@ def _die_with(supervisor_pid: int, event: threading.Event) -> None:
     threading.Thread(target=watch, name="supervisor-watch", daemon=True).start()
 
 
+def _interrupt(_signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def run_main(main: Callable[[], int], prog: str) -> None:
-    """Run ``main`` and exit with its code; a StackError becomes one line on stderr."""
+    """Run ``main`` and exit with its code; a StackError becomes one line on stderr.
+
+    SIGTERM is taken as Ctrl-C (KeyboardInterrupt, exit 130) unless something already handles
+    it: Python's default would end a command mid-step without running its cleanup (a
+    half-converted model, a temporary folder left in models/). A service's own handler
+    (stop_event) replaces this one when the service starts.
+    """
+    if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _interrupt)
     try:
         code = main()
         sys.stdout.flush()

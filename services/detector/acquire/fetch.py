@@ -10,6 +10,7 @@ graph and its weight shards, and translate the graph to ONNX with our own conver
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import tarfile
 import tempfile
@@ -92,6 +93,13 @@ def _cached_tarball(cache: Path, package: str, sha256: str, progress: Progress) 
     return cached
 
 
+# How a child stopped by SIGINT or SIGTERM exits: killed by it (negative) or, as npm does,
+# by its own handler with 128 + the signal's number.
+_STOPPED_BY_SIGNAL = frozenset(
+    code for sig in (signal.SIGINT, signal.SIGTERM) for code in (-sig, 128 + sig)
+)
+
+
 def npm_pack(package: str, dest: Path, progress: Progress = print_progress) -> Path:
     """Download ``package``'s tarball alone into ``dest`` with ``npm pack``; return its path."""
     progress(f"fetching {package} from the npm registry…")
@@ -109,6 +117,10 @@ def npm_pack(package: str, dest: Path, progress: Progress = print_progress) -> P
             f"npm pack {package} timed out after {NPM_TIMEOUT_S:.0f} s: "
             "is the npm registry reachable?"
         ) from exc
+    if result.returncode in _STOPPED_BY_SIGNAL:
+        # npm was stopped with us (Ctrl-C reaches the whole process group): an interruption,
+        # not a registry that failed to answer. Python may not have raised it yet.
+        raise KeyboardInterrupt
     if result.returncode != 0:
         raise ModelFetchError(
             f"npm pack {package} failed (is the npm registry reachable?): "

