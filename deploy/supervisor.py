@@ -37,6 +37,7 @@ from common.lifecycle import (
 from common.messages import ControllerStatus, GroundTruth, ServiceCounters, Twist
 from common.queries import query_metrics
 from common.settings import CameraSettings, Config
+from deploy.crosscheck import cross_check, model_classes
 from deploy.lock import acquire
 from deploy.processes import ServiceProcess, service_command
 from deploy.watchdog import Observation, check_settings, judge
@@ -151,6 +152,7 @@ def supervise(
     s = config.supervisor
     keys = Keys(config.stack.prefix)
     check_settings(config)
+    cross_check(config, model_classes)
     grace, progress = s.watchdog_grace_s, s.watchdog_progress_s
     lock = acquire(s.lock_dir, config.zenoh.endpoint, config.stack.prefix)
     session = open_hub(config)

@@ -15,13 +15,10 @@ from tests.integration.conftest import REPO, write_config
 pytestmark = pytest.mark.integration
 
 
-def test_warnings_for_an_unused_camera_source_and_a_class_the_model_lacks(
-    tmp_path: Path,
-) -> None:
+def test_a_warning_for_an_unused_camera_source(tmp_path: Path) -> None:
     config = write_config(
         tmp_path,
         camera={"source": "device:0"},  # set, but no camera service listed
-        controller={"target_classes": ["unicorn"]},
         supervisor={"services": ["detector", "controller"]},
     )
     done = subprocess.run(
@@ -30,8 +27,36 @@ def test_warnings_for_an_unused_camera_source_and_a_class_the_model_lacks(
     )  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     assert "camera.source is 'device:0' but the camera service is not in" in done.stderr
-    warned = [line for line in done.stderr.splitlines() if "are not among the model's" in line]
-    assert len(warned) == 1 and "['unicorn']" in warned[0], done.stderr[-3000:]
+
+
+@pytest.mark.parametrize(
+    ("tables", "expected"),
+    [
+        # A target the model lacks: refused with a suggestion, before anything starts.
+        (
+            {"controller": {"target_classes": ["persn"]}},
+            "controller.target_classes ['persn'] are not among the model's 80 classes "
+            "(did you mean 'persn' -> 'person'?)",
+        ),
+        # The detector's filter hides the controller's target: the robot would never move.
+        (
+            {"detector": {"classes": ["cup"]}},
+            "detector.classes ['cup'] filters out controller.target_classes ['person']",
+        ),
+    ],
+)
+def test_settings_that_cannot_work_together_are_refused(
+    tmp_path: Path, tables: dict[str, dict[str, object]], expected: str
+) -> None:
+    config = write_config(tmp_path, supervisor={"services": ["detector", "controller"]}, **tables)
+    done = subprocess.run(
+        [sys.executable, "-m", "deploy.supervisor", "--config", str(config), "--duration", "30"],
+        cwd=REPO, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr[-3000:]
+    errors = [line for line in done.stderr.splitlines() if "error:" in line]
+    assert len(errors) == 1 and expected in errors[0], done.stderr[-3000:]
+    assert "starting" not in done.stderr, done.stderr[-3000:]  # refused before any service
 
 
 def test_detect_json_into_a_closed_pipe_is_not_a_traceback(
