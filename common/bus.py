@@ -36,6 +36,7 @@ from common.security import (
     users_file,
 )
 from common.settings import Config, Ros2Settings, ZenohSettings
+from common.zenoh_errors import explain
 
 log = logging.getLogger(__name__)
 
@@ -187,7 +188,9 @@ def _open(conf: zenoh.Config, settings: ZenohSettings, where: str, principal: st
         return zenoh.open(conf)
     except zenoh.ZError as exc:
         auth = f" as {principal!r} ({settings.auth} auth)" if settings.auth != "none" else ""
-        raise ConfigError(f"cannot open a Zenoh session on {where}{auth}: {exc}") from exc
+        raise ConfigError(
+            f"cannot open a Zenoh session on {where}{auth}: {explain(str(exc))}"
+        ) from exc
 
 
 def open_session(settings: ZenohSettings, principal: str) -> zenoh.Session:
@@ -217,7 +220,8 @@ def open_ros_session(s: Ros2Settings, *, host: bool = False) -> zenoh.Session:
     except zenoh.ZError as exc:
         where = ", ".join(s.router)
         if host:
-            raise ConfigError(f"cannot host the ROS 2 router on {where}: {exc}") from exc
+            why = explain(str(exc))
+            raise ConfigError(f"cannot host the ROS 2 router on {where}: {why}") from exc
         raise StackError(
             f"no rmw_zenoh router answered on {where} within {s.router_timeout_s:.0f} s: "
             "start rmw_zenohd on the robot, or set ros2.router"

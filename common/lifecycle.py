@@ -22,6 +22,8 @@ EXIT_MODEL = 3
 EXIT_BACKEND = 4
 EXIT_INTERRUPTED = 130
 PERMANENT_FAILURES = frozenset({EXIT_CONFIG, EXIT_MODEL, EXIT_BACKEND})
+#: What asks a process to stop: Ctrl-C, and the supervisor's or the system's polite kill.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 class Closing:

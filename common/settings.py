@@ -77,7 +77,8 @@ class ZenohSettings:
     """
 
     mode: str = "peer"
-    endpoint: str = "tcp/127.0.0.1:7447"
+    # Not Zenoh's usual 7447: on a ROS 2 robot rmw_zenohd holds that one.
+    endpoint: str = "tcp/127.0.0.1:7448"
     connect: tuple[str, ...] = ()
     listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
     multicast_scouting: bool = False
@@ -181,9 +182,14 @@ class SupervisorSettings:
     The watchdog (deploy/watchdog.py) restarts a running service whose liveliness token has been
     gone for ``watchdog_grace_s``, or whose work loop has published no counters for
     ``watchdog_progress_s`` (0 turns that check off).
+
+    A service that fails for good (bad config, model or backend: exit codes 2..4) stops the
+    stack, unless it is ``optional``: then it is left stopped, said so once, and the rest runs
+    on (the live view whose port is taken must not stop a robot's perception).
     """
 
     services: tuple[str, ...] = ("camera", "detector", "controller", "metrics")
+    optional: tuple[str, ...] = ("viewer",)
     restart_backoff_s: float = 0.5
     restart_backoff_max_s: float = 10.0
     stop_timeout_s: float = 5.0
@@ -200,6 +206,7 @@ class SupervisorSettings:
         "watchdog_grace_s": (0.1, 60),
         "watchdog_progress_s": (0, 600),  # 0 = off
     }
+    LENGTHS: ClassVar[Bounds] = {"optional": (0, len(SERVICES))}
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.services) - set(SERVICES))
@@ -209,6 +216,12 @@ class SupervisorSettings:
                 f"got {list(self.services)}"
             )
         check_bounds(self, "supervisor", self.BOUNDS)
+        check_lengths(self, "supervisor", self.LENGTHS)
+        if set(self.optional) - set(SERVICES):
+            raise ConfigError(
+                f"supervisor.optional must name services among {', '.join(SERVICES)}, "
+                f"got {list(self.optional)}"
+            )
         if self.restart_backoff_max_s < self.restart_backoff_s:
             raise ConfigError(
                 f"supervisor.restart_backoff_max_s ({self.restart_backoff_max_s}) must not be "

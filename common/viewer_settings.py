@@ -27,7 +27,7 @@ class ViewerSettings:
     """
 
     host: str = "127.0.0.1"
-    port: int = 8765
+    port: int = 8766  # not 8765: foxglove_bridge's default on a ROS 2 robot
     image_rate_hz: float = 5.0
     jpeg_quality: int = 70
     max_image_width: int = 640

@@ -12,7 +12,9 @@ import difflib
 from collections.abc import Callable
 from pathlib import Path
 
+from common.coco import COCO80
 from common.errors import ConfigError
+from common.model_metadata import parse_names
 from common.settings import Config
 
 #: Reads the class names of the model the detector will load (None: unknown before it loads).
@@ -56,7 +58,6 @@ def model_classes(config: Config) -> tuple[str, ...] | None:
     """The class names of the detector's model: COCO's 80 for the default model, the
     ``names`` metadata of another ONNX file, None when that cannot be read here (another
     format, a file that is missing: the detector says so itself when it starts)."""
-    from services.detector.coco import COCO80
 
     if not config.detector.model:
         return COCO80
@@ -65,8 +66,6 @@ def model_classes(config: Config) -> tuple[str, ...] | None:
         return None
     import onnx
     from google.protobuf.message import DecodeError  # type: ignore[import-untyped]
-
-    from services.detector.model_info import parse_names
 
     try:
         model = onnx.load(str(path), load_external_data=False)

@@ -12,9 +12,8 @@ import time
 from dataclasses import dataclass, field
 from typing import IO
 
-from common.lifecycle import PERMANENT_FAILURES, SUPERVISOR_PID_ENV
+from common.lifecycle import PERMANENT_FAILURES, STOP_SIGNALS, SUPERVISOR_PID_ENV
 from common.settings import SupervisorSettings
-from services import STOP_SIGNALS
 
 
 def service_command(name: str, config_path: str) -> list[str]:

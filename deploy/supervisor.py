@@ -167,6 +167,7 @@ def supervise(
     next_status = time.monotonic()
     last_metrics: MetricsAnswer | None = None
     failed: ServiceProcess | None = None
+    optional, left_behind = set(s.optional), set[str]()
     try:
         while failed is None and not stop.wait(0.1):
             now = time.monotonic()
@@ -182,8 +183,13 @@ def supervise(
                     why = judge(p.name, view.observe(p), now, grace_s=grace, progress_s=progress)
                     if why:
                         log.warning("%s", p.hung(why, now))
-                if p.state == "failed" and failed is None:
+                if p.state == "failed" and failed is None and p.name not in optional:
                     failed = p  # restarting will not help: stop the stack and say why
+                elif p.state == "failed" and p.name not in left_behind:
+                    left_behind.add(p.name)
+                    why = p.last_error or f"exit code {p.last_exit}"
+                    log.error("%s failed for good (%s); it is optional: the stack runs on", p.name,
+                              why)  # fmt: skip
             if now >= next_status:
                 next_status = now + s.status_period_s
                 last_metrics = query_metrics(session, keys, METRICS_TIMEOUT_S) or last_metrics
@@ -206,9 +212,24 @@ def supervise(
         print(json.dumps(summary, indent=2), flush=True)
     if failed is not None:
         raise service_failure(failed)
-    clean = all(p.last_exit == 0 for p in procs)
-    log.info("stopped; %s", "all services exited cleanly" if clean else f"exit codes {summary}")
-    return 0 if clean else 1
+    unclean = [p for p in procs if p.last_exit != 0]
+    if not unclean:
+        log.info("stopped; all services exited cleanly")
+        return 0
+    log.warning("stopped; %s", "; ".join(_exit_words(p) for p in unclean))
+    return 1
+
+
+def _exit_words(p: ServiceProcess) -> str:
+    """How one service ended, in words: ``viewer exited with code 2 (port 8766 is taken)``."""
+    if p.last_exit is not None and p.last_exit < 0:
+        how = f"was killed by signal {-p.last_exit}"
+    else:
+        how = f"exited with code {p.last_exit}"
+    why = p.last_error
+    for prefix in (f"{p.name}: ", "error: "):
+        why = why.removeprefix(prefix)
+    return f"{p.name} {how}" + (f" ({why})" if why else "")
 
 
 def brief(metrics: MetricsAnswer | None, *, timeline: bool) -> MetricsAnswer | None:

@@ -3,6 +3,8 @@
 import os
 import signal
 
+from common.lifecycle import STOP_SIGNALS
+
 
 def _stop_while_starting(_signum: int, _frame: object) -> None:
     raise SystemExit(0)
@@ -16,7 +18,6 @@ def _stop_while_starting(_signum: int, _frame: object) -> None:
 # until here, where it ends the process quietly with exit code 0.
 # common.lifecycle.stop_event() replaces these handlers once the service runs. The variable is
 # set by the supervisor alone, so tests and tools that import services keep Python's handlers.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 if os.environ.get("STACK_SUPERVISOR_PID"):
     for _sig in STOP_SIGNALS:
         signal.signal(_sig, _stop_while_starting)

@@ -8,15 +8,15 @@ probe inference on a blank batch.
 
 from __future__ import annotations
 
-import ast
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from common.coco import COCO80
 from common.errors import ModelError
+from common.model_metadata import literal, parse_names
 from services.detector.backends import Backend, Dim
-from services.detector.coco import COCO80
 from services.detector.decode import Family, OutputLayout, detect_family
 
 #: Square input size used when neither the shape nor the metadata fixes it.
@@ -43,34 +43,9 @@ class ModelInfo:
         return self.layout.family
 
 
-def _literal(raw: str | None) -> object:
-    """A metadata value as a Python literal, or None when absent or not a literal."""
-    if not raw:
-        return None
-    try:
-        return ast.literal_eval(raw)
-    except (ValueError, SyntaxError, MemoryError, RecursionError):
-        return None
-
-
-def parse_names(raw: str | None) -> dict[int, str] | None:
-    """Parse Ultralytics' ``names`` metadata (``"{0: 'person', ...}"`` or a list literal).
-
-    Returns ``None`` when absent or not a dict/list of names.
-    """
-    value = _literal(raw)
-    if isinstance(value, (list, tuple)):
-        value = dict(enumerate(value))
-    if not isinstance(value, dict) or not value:
-        return None
-    if not all(isinstance(k, int) and k >= 0 and isinstance(v, str) for k, v in value.items()):
-        return None
-    return {int(k): str(v) for k, v in value.items()}
-
-
 def parse_imgsz(raw: str | None) -> tuple[int, int] | None:
     """Parse ``imgsz`` metadata (``"640"`` or ``"[384, 640]"``) into ``(height, width)``."""
-    value = _literal(raw)
+    value = literal(raw)
     if isinstance(value, int) and value > 0:
         return value, value
     if (

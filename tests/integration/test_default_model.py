@@ -14,7 +14,7 @@ import onnxruntime as ort
 import pytest
 from skimage import data
 
-from services.detector.coco import COCO80
+from common.coco import COCO80
 from services.detector.model_files import ensure_default_model
 
 pytestmark = pytest.mark.integration

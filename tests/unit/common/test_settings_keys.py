@@ -183,7 +183,7 @@ def test_make_run_installs_no_test_tools_and_no_torch() -> None:
         assert tool not in runtime, tool
     makefile = (REPO_ROOT / "Makefile").read_text()
     # The run target's venv gets the project alone; the dev extra only for tests and lint.
-    assert "pip install --quiet -e .\n" in makefile
+    assert "pip install --quiet -e . >&2\n" in makefile
     run_deps = next(line for line in makefile.splitlines() if line.startswith("run:"))
     setup_deps = next(line for line in makefile.splitlines() if line.startswith("setup:"))
     assert "DEV" not in run_deps and "DEV" not in setup_deps

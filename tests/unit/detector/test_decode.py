@@ -9,10 +9,10 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from common.coco import COCO80
 from common.errors import BackendUnavailable, ConfigError, ModelError, UnknownModelFamily
 from common.settings import DetectorSettings
 from services.detector.backends import BACKENDS, Dim, open_backend
-from services.detector.coco import COCO80
 from services.detector.decode import (
     Family,
     decode_end2end,

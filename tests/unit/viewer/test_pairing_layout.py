@@ -73,7 +73,7 @@ def test_viewer_settings_are_bounded(field: str, value: object) -> None:
 def test_the_default_stack_runs_the_viewer_on_loopback() -> None:
     cfg = load_config(DEFAULT_CONFIG, environ={})
     assert cfg.supervisor.services[-1] == "viewer"
-    assert (cfg.viewer.host, cfg.viewer.port) == ("127.0.0.1", 8765)
+    assert (cfg.viewer.host, cfg.viewer.port) == ("127.0.0.1", 8766)
 
 
 def test_the_shipped_layout_is_the_one_built_here() -> None:
