@@ -225,7 +225,11 @@ class LaserScan(Message):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ControllerStatus(Message):
-    """What the controller is doing and why: mode, target and state (e.g. "following")."""
+    """What the controller is doing and why: mode, target and state (e.g. "following").
+
+    ``estop_saved`` is False while the controller's e-stop latch could not be written to disk
+    (it holds in memory, and the controller stays stopped until it can save): the e-stop CLI
+    then says the stop is not durable."""
 
     TAG: ClassVar[str] = "ControllerStatus"
     VERSION: ClassVar[int] = 1
@@ -235,6 +239,7 @@ class ControllerStatus(Message):
     state: str
     reason: str = ""
     track_id: int = -1
+    estop_saved: bool = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

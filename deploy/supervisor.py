@@ -139,6 +139,8 @@ def status_line(
         cmd = f" v={t.linear[0]:+.2f} w={t.angular[2]:+.2f}" if t else ""
         target = f" {s.target}#{s.track_id}" if s.track_id >= 0 else f" {s.target}"
         line += f" | {s.mode} {s.state}{target if s.target else ''}{cmd}"
+        if s.state == "estop" or not s.estop_saved:
+            line += f" ({s.reason})"  # who stopped it, and whether the stop could be saved
     if view.truth is not None:
         x, y, theta = view.truth.robot
         line += f" | pose x={x:+.2f} y={y:+.2f} th={math.degrees(theta):+.0f}deg"

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 
 from common.cli import Command, add_config, service_main
 from common.config_file import load_config
 from common.contracts import ControllerMode
-from common.lifecycle import run_main, setup_logging, stop_event
+from common.errors import StackError
+from common.lifecycle import exit_code, run_main, setup_logging, stop_event
 
 
 def _serve_arguments(p: argparse.ArgumentParser) -> None:
@@ -39,11 +41,17 @@ def _estop_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def estop(args: argparse.Namespace) -> int:
-    config = load_config(args.config)
-    setup_logging("estop", "WARNING")
-    from services.controller import service
+    """The operator's e-stop command: its errors are its own ("estop: error: ..."), not the
+    controller service's."""
+    try:
+        config = load_config(args.config)
+        setup_logging("estop", "WARNING")
+        from services.controller import service
 
-    return service.send_estop(config, args.action == "engage", args.reason)
+        return service.send_estop(config, args.action == "engage", args.reason)
+    except StackError as exc:
+        print(f"estop: error: {exc}", file=sys.stderr)
+        return exit_code(exc)
 
 
 COMMANDS = [

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import threading
 import time
@@ -10,6 +11,7 @@ from typing import Generic, Protocol, TypeVar
 
 import zenoh
 
+from common import reach
 from common.bus import Publisher, QoS, open_session
 from common.clock import BOOT_ID, Stamp, now
 from common.contracts import ControllerMode, ControllerState, DetectorInfo
@@ -18,6 +20,7 @@ from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.keys import Keys
 from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
 from common.node import Node
+from common.queries import ready_services
 from common.settings import Config
 from services.controller.estop import EStopLatch
 from services.controller.policy import Command, Controller, Inputs, unknown_targets
@@ -93,8 +96,10 @@ def run(config: Config, stop: threading.Event) -> int:
     s = config.controller
     tolerance = config.stack.clock_tolerance_s
     with Node("controller", config, counters_period_s=s.counters_period_s) as node:
-        latch = EStopLatch(config.estop_path)
+        latch = EStopLatch(config.estop_path, now().wall_ns + int(tolerance * 1e9))
         (node.log.warning if latch.engaged else node.log.info)("%s", latch.note)
+        if not latch.saved:
+            node.log.error("the e-stop state cannot be saved: %s", latch.describe())
         dets: Latest[Detections] = Latest()
         scan: Latest[LaserScan] = Latest()
         det_key = node.keys.detections(config.stack.camera)
@@ -139,7 +144,9 @@ def run(config: Config, stop: threading.Event) -> int:
                     latch.engaged, min(max(0.0, capture), s.detection_timeout_s),
                 )  # fmt: skip
                 cmd = controller.step(inputs, tick)
-                _publish(node, cmd_pub, status_pub, cmd, s.mode, at)
+                if cmd.state == ControllerState.ESTOP:
+                    cmd = dataclasses.replace(cmd, reason=latch.describe())
+                _publish(node, cmd_pub, status_pub, cmd, s.mode, at, estop_saved=latch.saved)
                 if cmd.state != last_state:
                     node.log.info("state %s: %s", cmd.state, cmd.reason)
                     last_state = cmd.state
@@ -147,7 +154,7 @@ def run(config: Config, stop: threading.Event) -> int:
                 wait_either(dets.arrived, stop, period - (time.monotonic() - tick))
             # Leave the robot still: the last word on cmd_vel is always a stop.
             stopped = Command(0.0, 0.0, ControllerState.STOPPED, "shutdown")
-            _publish(node, cmd_pub, status_pub, stopped, s.mode, now())
+            _publish(node, cmd_pub, status_pub, stopped, s.mode, now(), estop_saved=latch.saved)
         finally:
             for sub in subs:
                 sub.undeclare()
@@ -203,33 +210,34 @@ def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:
 def _on_estop(
     node: Node, latch: EStopLatch, sample: zenoh.Sample, max_age_s: float, tolerance_s: float
 ) -> None:
-    """Latch on an engage or on garbage; release only on a fresh release newer than the stop."""
+    """Latch on an engage or on garbage; release only on a fresh release newer than the stop
+    that can be saved. A latch that cannot be saved holds in memory and says so loudly."""
     at = now()
+    latest_ns = at.wall_ns + int(tolerance_s * 1e9)  # no stamp the latch keeps is later
     try:
         msg = EStop.decode(sample.payload.to_bytes())
     except DecodeError as exc:
         # Garbage on the e-stop key is treated as a press: fail safe, not open.
         node.bad_input(node.keys.estop(), exc)
         msg = None
-    try:
-        if msg is None or msg.engaged:
-            by = msg.header.source if msg else "garbage"
-            reason = msg.reason if msg else "undecodable message on the e-stop key"
-            was = latch.engaged
-            latch.engage(msg.header.stamp_ns if msg else at.wall_ns, by, reason)
-            if not was:
-                node.log.warning("e-stop ENGAGED by %s: %s", by, reason or "-")
-            return
-        verdict, age = judge_age(msg.header, at, BOOT_ID, max_age_s, tolerance_s)
-        if verdict is not Verdict.FRESH:
-            node.reject("estop_release_refused", f"{verdict} e-stop release ({age:.2f} s) refused")
-        elif not latch.release(msg.header.stamp_ns, msg.header.source):
-            node.reject("estop_release_refused", "e-stop release older than the stop refused")
-        else:
-            node.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
-    except OSError as exc:
-        # The latch in memory holds; only its copy on disk failed. Say so loudly.
-        node.log.error("cannot save the e-stop state to %s: %s", latch.path, exc)
+    if msg is None or msg.engaged:
+        by = msg.header.source if msg else "garbage"
+        reason = msg.reason if msg else "undecodable message on the e-stop key"
+        was, was_saved = latch.engaged, latch.saved
+        saved = latch.engage(msg.header.stamp_ns if msg else at.wall_ns, by, reason, latest_ns)
+        if not was:
+            node.log.warning("e-stop ENGAGED by %s: %s", by, reason or "-")
+        if not saved and was_saved:
+            node.log.error("the e-stop is engaged but cannot be saved: %s", latch.describe())
+        return
+    verdict, age = judge_age(msg.header, at, BOOT_ID, max_age_s, tolerance_s)
+    if verdict is not Verdict.FRESH:
+        latch.refuse(f"{verdict} ({age:.2f} s)")
+        node.reject("estop_release_refused", f"{verdict} e-stop release ({age:.2f} s) refused")
+    elif not latch.release(msg.header.stamp_ns, msg.header.source):
+        node.reject("estop_release_refused", f"e-stop release refused: {latch.last_refusal}")
+    else:
+        node.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
 
 
 def _publish(
@@ -239,6 +247,8 @@ def _publish(
     cmd: Command,
     mode: ControllerMode,
     at: Stamp,
+    *,
+    estop_saved: bool,
 ) -> None:
     twist = Twist(
         header=node.header(at, frame_id="base_link"),
@@ -257,40 +267,101 @@ def _publish(
         state=cmd.state,
         reason=cmd.reason,
         track_id=cmd.track_id,
+        estop_saved=estop_saved,
     )
     status_pub.put(status.encode())
 
 
+# The e-stop command line: how long it repeats its message, how long a controller that answers
+# but keeps its old state is given before that counts as a refusal, how long it waits for a
+# first link to the stack before saying it reached nothing.
+ESTOP_ACK_TIMEOUT_S = 10.0
+ESTOP_VERDICT_S = 2.0
+ESTOP_LINK_TIMEOUT_S = 3.0
+ESTOP_REPEAT_S = 0.2
+
+
 def send_estop(config: Config, engaged: bool, reason: str) -> int:
-    """Publish one EStop and wait until the controller has seen it (its status says so)."""
+    """Publish an EStop until the controller's status acknowledges it; say truly what
+    happened. An engage the controller could not save, a release it refused, no link to the
+    stack and no controller at all are each one StackError line."""
     keys = Keys(config.stack.prefix)
     session = open_session(config.zenoh, "estop")
-    seen = threading.Event()
+    lock = threading.Lock()
+    heard: list[tuple[float, ControllerStatus]] = []  # the latest status and when it came
 
     def on_status(sample: zenoh.Sample) -> None:
         try:
-            state = ControllerStatus.decode(sample.payload.to_bytes()).state
+            status = ControllerStatus.decode(sample.payload.to_bytes())
         except DecodeError:
             return
-        if (state == ControllerState.ESTOP) == engaged:
-            seen.set()
+        with lock:
+            heard[:] = [(time.monotonic(), status)]
+
+    def latest() -> tuple[float, ControllerStatus] | None:
+        with lock:
+            return heard[0] if heard else None
 
     sub = session.declare_subscriber(keys.controller_status(), on_status)
     pub = Publisher(session, keys.estop(), QoS.CONTROL)
+    verb = "engage" if engaged else "release"
     try:
-        # Repeat until acknowledged: the first put may race the peer mesh being formed. Each
-        # is stamped afresh, since the controller refuses a release that is not fresh.
-        for seq in range(1, 51):
+        if not reach.connected(session, ESTOP_LINK_TIMEOUT_S):
+            raise StackError(
+                reach.unreached(
+                    f"cannot {verb} the e-stop: no link to the stack",
+                    config.zenoh,
+                    config.stack.prefix,
+                    "estop",
+                    linked=False,
+                )
+            )
+        start = time.monotonic()
+        seq = 0
+        while time.monotonic() - start < ESTOP_ACK_TIMEOUT_S:
+            # Repeated until acknowledged: the first put may race the mesh being formed. Each
+            # is stamped afresh, since the controller refuses a release that is not fresh.
+            seq += 1
             at = now()
             header = Header(
                 stamp_ns=at.wall_ns, frame_id="", seq=seq, source="estop-cli",
                 mono_ns=at.mono_ns, boot_id=BOOT_ID,
             )  # fmt: skip
             pub.put(EStop(header=header, engaged=engaged, reason=reason).encode())
-            if seen.wait(0.2):
-                print("e-stop engaged" if engaged else "e-stop released")
+            threading.Event().wait(ESTOP_REPEAT_S)
+            got = latest()
+            if got is None:
+                continue
+            arrived, status = got
+            if (status.state == ControllerState.ESTOP) == engaged:
+                if engaged and not status.estop_saved:
+                    raise StackError(
+                        "e-stop engaged: the robot is stopped, but the controller could NOT "
+                        f"save the stop ({status.reason}); it holds while the controller runs "
+                        "and until its state can be saved: fix the state folder, then engage "
+                        "again"
+                    )
+                print(f"e-stop {verb}d")
                 return 0
-        raise StackError("no controller acknowledged the e-stop within 10 s")
+            if not engaged and arrived - start >= ESTOP_VERDICT_S:
+                raise StackError(f"the controller refused the release: {status.reason}")
+        got = latest()
+        if got is None:
+            linked = reach.connected(session)
+            raise StackError(
+                reach.unreached(
+                    f"no controller acknowledged the e-stop within {ESTOP_ACK_TIMEOUT_S:.0f} s",
+                    config.zenoh,
+                    config.stack.prefix,
+                    "estop",
+                    linked=linked,
+                    ready=frozenset(ready_services(session, keys)) if linked else frozenset(),
+                )
+            )
+        raise StackError(
+            f"the controller answers but did not {verb} the e-stop within "
+            f"{ESTOP_ACK_TIMEOUT_S:.0f} s: {got[1].state} ({got[1].reason})"
+        )
     finally:
         sub.undeclare()
         session.close()
