@@ -27,12 +27,18 @@ def atomic_write_bytes(path: Path, payload: bytes, *, durable: bool = False) -> 
     (the e-stop's state must).
     """
     partial = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with partial.open("wb") as f:
-        f.write(payload)
-        if durable:
-            f.flush()
-            os.fsync(f.fileno())
-    os.replace(partial, path)
+    try:
+        with partial.open("wb") as f:
+            f.write(payload)
+            if durable:
+                f.flush()
+                os.fsync(f.fileno())
+        os.replace(partial, path)
+    except BaseException:
+        # A disk that refused the write (full, read-only) or a stop mid-write: no partial file
+        # is left beside the old one.
+        partial.unlink(missing_ok=True)
+        raise
     if durable:
         fd = os.open(path.parent, os.O_RDONLY)
         try:
