@@ -239,7 +239,8 @@ WIRE_KEYS = {
     "LaserScan": {
         "header", "angle_min", "angle_increment", "range_min", "range_max", "n", "ranges"
     },
-    "ControllerStatus": {"header", "mode", "target", "state", "reason", "track_id"},
+    "ControllerStatus": {"header", "mode", "target", "state", "reason", "track_id",
+                         "estop_saved"},
     "ServiceCounters": {"header", "service", "counters"},
     "EStop": {"header", "engaged", "reason"},
     "GroundTruth": {
