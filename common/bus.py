@@ -9,8 +9,12 @@ every message passes through it; that is where authentication and access control
 (common/security.py).
 
 QoS by role (:class:`QoS`): control and safety messages (cmd_vel, e-stop) go first, express,
-and block rather than drop under congestion; sensor data is dropped under congestion, so that a
-flood of frames can never hold back a stop.
+on the real-time queue; sensor data goes last, so that a flood of frames can never hold back a
+stop. Every role drops under congestion, control too: Zenoh honours the flag on every hop, and
+with "block" a router forwarding a command into one full link (a frozen listener) waits up to
+5 s, holding up every other receiver's control traffic behind it. A dropped copy is lost only
+for the receiver whose queue is full; the controller repeats cmd_vel every tick and the e-stop
+command repeats until acknowledged (docs/security.md, "QoS by role").
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import zenoh
 from common.errors import ConfigError, StackError
 from common.keys import Keys
 from common.security import (
+    LIVE_SENSORS,
     access_control,
     ca_file,
     cert_file,
@@ -46,7 +51,7 @@ HUB_PRINCIPAL = "supervisor"
 class QoS(Enum):
     """Publisher profiles by role: (priority, congestion control, express)."""
 
-    CONTROL = (zenoh.Priority.REAL_TIME, zenoh.CongestionControl.BLOCK, True)
+    CONTROL = (zenoh.Priority.REAL_TIME, zenoh.CongestionControl.DROP, True)
     PERCEPTION = (zenoh.Priority.DATA_HIGH, zenoh.CongestionControl.DROP, True)
     SENSOR = (zenoh.Priority.DATA, zenoh.CongestionControl.DROP, False)
     TELEMETRY = (zenoh.Priority.DATA_LOW, zenoh.CongestionControl.DROP, False)
@@ -109,9 +114,7 @@ def source_of(sample: zenoh.Sample) -> str:
 
 def _readable(path: Path, what: str) -> str:
     if not path.is_file():
-        raise ConfigError(
-            f"{what} {path} is missing: run `zstack credentials` (docs/security.md)"
-        )
+        raise ConfigError(f"{what} {path} is missing: run `zstack credentials` (docs/security.md)")
     return str(path)
 
 
@@ -233,7 +236,8 @@ def hub_access(config: Config) -> dict[str, Any]:
     z = config.zenoh
     if z.auth == "none":
         return {}
-    return access_control(Keys(config.stack.prefix), config.stack.camera, z.auth)
+    live = bool(LIVE_SENSORS & set(config.supervisor.services))
+    return access_control(Keys(config.stack.prefix), config.stack.camera, z.auth, live_sensors=live)
 
 
 def open_hub(config: Config) -> zenoh.Session:

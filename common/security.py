@@ -10,9 +10,16 @@ router, which knows the authenticated name of every link, and every message pass
 connects to, so rules by name cannot be enforced there; see docs/security.md.)
 
 Each process has its own principal and may publish only its own keys: only the controller puts
-``cmd_vel``, only the ``estop`` principal the e-stop, only the camera, the simulator, the ROS 2
-bridge and the recorder (playing a recording back) frames and scans, only stack services
-counters and health tokens. Anything not allowed is denied.
+``cmd_vel``, only the ``estop`` principal the e-stop, only the camera, the simulator and the
+ROS 2 bridge frames and scans, only stack services counters and health tokens. The recorder
+(playing a recording back) may put frames and scans only on a stack that runs no live sensor
+(no camera, simulator or ROS 2 bridge): a replay must never reach a live robot's keys.
+
+Each principal may also subscribe only to what it reads: the camera frames only to the
+detector, the live view, the recorder and the ROS 2 bridge. Zenoh allows a subscription only
+when its key expression lies within an allowed one, so a wider one (``<prefix>/**``) is denied
+whole, not trimmed. Queries and liveliness (health tokens) stay open to every principal.
+Anything not allowed is denied.
 """
 
 from __future__ import annotations
@@ -25,15 +32,25 @@ from common.keys import Keys
 # Every principal the credentials command creates. "estop" is the operator's e-stop tool,
 # "observer" may watch (subscribe, query) but publishes nothing: status lines, queries, tests.
 SERVICE_PRINCIPALS = (
-    "recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer"
+    "recorder",
+    "camera",
+    "sim",
+    "ros2",
+    "detector",
+    "controller",
+    "metrics",
+    "viewer",
 )
 PRINCIPALS = ("supervisor", *SERVICE_PRINCIPALS, "estop", "observer")
 
 AUTH_MODES = ("none", "password", "certificate")
 
-# Zenoh message kinds that only read (or announce interest); every principal may send them.
-_READ_MESSAGES = (
-    "declare_subscriber",
+#: The services that feed a live robot's sensors into the stack: while one of them runs, no
+#: recording may be played onto its keys.
+LIVE_SENSORS = frozenset({"camera", "sim", "ros2"})
+
+# Zenoh message kinds that only ask (or announce interest); every principal may send them.
+_ASK_MESSAGES = (
     "query",
     "declare_liveliness_subscriber",
     "liveliness_query",
@@ -44,7 +61,8 @@ _ALL_MESSAGES = (
     "reply",
     "declare_queryable",
     "liveliness_token",
-    *_READ_MESSAGES,
+    "declare_subscriber",
+    *_ASK_MESSAGES,
 )
 
 
@@ -76,39 +94,78 @@ def key_file(directory: Path, principal: str) -> Path:
     return directory / f"{principal}.key"
 
 
-def _principal_keys(keys: Keys, camera: str) -> dict[str, dict[str, tuple[str, ...]]]:
-    """What each principal may publish (``put``), announce (``token``) and serve (``serve``)."""
+def _principal_keys(
+    keys: Keys, camera: str, live_sensors: bool = True
+) -> dict[str, dict[str, tuple[str, ...]]]:
+    """What each principal may publish (``put``), announce (``token``), serve (``serve``) and
+    subscribe to (``read``). ``live_sensors``: the stack runs a camera, the simulator or the
+    ROS 2 bridge, so the recorder may not play frames or scans onto it."""
 
-    def service(name: str, *puts: str) -> dict[str, tuple[str, ...]]:
-        return {"put": (*puts, keys.counters(name)), "token": (keys.health(name),)}
+    def service(name: str, *puts: str, read: tuple[str, ...] = ()) -> dict[str, tuple[str, ...]]:
+        out = {"put": (*puts, keys.counters(name)), "token": (keys.health(name),)}
+        return {**out, "read": read} if read else out
 
+    frames = keys.frame(camera)
+    detections = keys.all_detections()
+    # Everything but the camera's pictures: what status lines, tests and tools watch.
+    watching = (
+        detections, keys.scan(), keys.cmd_vel(), keys.controller_status(), keys.estop(),
+        keys.sim_truth(), keys.all_counters(),
+    )  # fmt: skip
+    replay = () if live_sensors else (frames, keys.scan())
     return {
-        "camera": service("camera", keys.frame(camera)),
-        "sim": service("sim", keys.frame(camera), keys.scan(), keys.sim_truth()),
-        # The ROS 2 bridge feeds the robot's camera and laser into the stack.
-        "ros2": service("ros2", keys.frame(camera), keys.scan()),
-        # The recorder listens to everything; playing a recording back puts frames and scans.
-        "recorder": service("recorder", keys.frame(camera), keys.scan()),
+        "camera": service("camera", frames),
+        "sim": service("sim", frames, keys.scan(), keys.sim_truth(), read=(keys.cmd_vel(),)),
+        # The ROS 2 bridge feeds the robot's camera and laser into the stack, and the stack's
+        # detections and commands out to the robot.
+        "ros2": service("ros2", frames, keys.scan(), read=(frames, detections, keys.cmd_vel())),
+        # The recorder listens to everything; playing a recording back puts frames and scans,
+        # on a stack with no live sensor only.
+        "recorder": service("recorder", *replay, read=(f"{keys.prefix}/**",)),
         "detector": {
-            **service("detector", keys.detections(camera)),
+            **service("detector", keys.detections(camera), read=(frames,)),
             "serve": (keys.detector_info(camera),),
         },
-        "controller": service("controller", keys.cmd_vel(), keys.controller_status()),
-        "metrics": {**service("metrics"), "serve": (keys.metrics(),)},
-        # The live view only reads (and queries the metrics); it announces itself like a service.
-        "viewer": service("viewer"),
-        "estop": {"put": (keys.estop(),)},
+        "controller": service(
+            "controller",
+            keys.cmd_vel(),
+            keys.controller_status(),
+            read=(detections, keys.scan(), keys.estop()),
+        ),
+        "metrics": {
+            **service("metrics", read=(detections, keys.cmd_vel(), keys.all_counters())),
+            "serve": (keys.metrics(),),
+        },
+        # The live view reads what it shows (and queries the metrics); it announces itself.
+        "viewer": service(
+            "viewer",
+            read=(
+                frames,
+                detections,
+                keys.scan(),
+                keys.cmd_vel(),
+                keys.controller_status(),
+                keys.sim_truth(),
+            ),
+        ),
+        "estop": {"put": (keys.estop(),), "read": (keys.controller_status(),)},
         "supervisor": {},  # its own session lives inside the router: no rule applies to it
-        "observer": {},
+        "observer": {"read": watching},
     }
 
 
 def access_control(
-    keys: Keys, camera: str, auth: str, principals: tuple[str, ...] = PRINCIPALS
+    keys: Keys,
+    camera: str,
+    auth: str,
+    principals: tuple[str, ...] = PRINCIPALS,
+    *,
+    live_sensors: bool = True,
 ) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for the router: deny by default, then allow each
-    principal its own keys on ingress, reading for everyone, and everything on egress (the
-    router delivers only what it accepted)."""
+    principal its own keys on ingress (puts, tokens, queryables, subscriptions), queries and
+    liveliness for everyone, and everything on egress (the router delivers only what it
+    accepted, and only to subscriptions it accepted)."""
     if auth not in AUTH_MODES[1:]:
         raise ValueError(f"access control needs an authenticated mode, got {auth!r}")
     match = "usernames" if auth == "password" else "cert_common_names"
@@ -121,22 +178,29 @@ def access_control(
             "key_exprs": ["**"],
         },
         {
-            "id": "read",
-            "messages": list(_READ_MESSAGES),
+            "id": "ask",
+            "messages": list(_ASK_MESSAGES),
             "flows": ["ingress"],
             "permission": "allow",
             "key_exprs": ["**"],
         },
     ]
     subjects: list[dict[str, Any]] = [{"id": "everyone", match: list(principals)}]
-    policies: list[dict[str, Any]] = [{"rules": ["egress", "read"], "subjects": ["everyone"]}]
-    kinds = {"put": ["put"], "token": ["liveliness_token"], "serve": ["declare_queryable", "reply"]}
-    for principal, allowed in _principal_keys(keys, camera).items():
+    policies: list[dict[str, Any]] = [{"rules": ["egress", "ask"], "subjects": ["everyone"]}]
+    kinds = {
+        "put": ["put"],
+        "token": ["liveliness_token"],
+        "serve": ["declare_queryable", "reply"],
+        "read": ["declare_subscriber"],
+    }
+    for principal, allowed in _principal_keys(keys, camera, live_sensors).items():
         if principal not in principals:
             continue
         subjects.append({"id": principal, match: [principal]})
         ids = []
         for kind, key_exprs in allowed.items():
+            if not key_exprs:
+                continue
             rule_id = f"{principal}_{kind}"
             rules.append(
                 {
@@ -159,6 +223,13 @@ def access_control(
     }
 
 
-def may_put(keys: Keys, camera: str, principal: str) -> tuple[str, ...]:
+def may_put(
+    keys: Keys, camera: str, principal: str, *, live_sensors: bool = True
+) -> tuple[str, ...]:
     """The keys ``principal`` may put on (documentation and tests read the same table)."""
-    return _principal_keys(keys, camera).get(principal, {}).get("put", ())
+    return _principal_keys(keys, camera, live_sensors).get(principal, {}).get("put", ())
+
+
+def may_read(keys: Keys, camera: str, principal: str) -> tuple[str, ...]:
+    """The key expressions ``principal`` may subscribe to (within which any subscription)."""
+    return _principal_keys(keys, camera).get(principal, {}).get("read", ())

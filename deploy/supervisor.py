@@ -42,7 +42,13 @@ from deploy.lock import acquire
 from deploy.processes import ServiceProcess, service_command
 from deploy.watchdog import Observation, check_settings, judge
 
-METRICS_TIMEOUT_S = 0.5  # the status line must not wait long for a missing metrics service
+METRICS_TIMEOUT_S = 0.5
+# Said once at start-up without the secure profile (docs/security.md).
+OPEN_PROFILE_WARNING = (
+    "NO ACCESS CONTROL (auth = none): any process that reaches {endpoint} can drive the robot "
+    "and release its e-stop; on a real robot use the secure profile "
+    "(make credentials; make run CONFIG=deploy/secure.toml)"
+)  # the status line must not wait long for a missing metrics service
 
 
 class LiveView:
@@ -161,6 +167,8 @@ def supervise(
     view = LiveView(session, keys)
     for warning in config_warnings(config):
         log.warning("%s", warning)
+    if config.zenoh.auth == "none":
+        log.warning("%s", OPEN_PROFILE_WARNING.format(endpoint=config.zenoh.endpoint))
     procs = [ServiceProcess(n, service_command(n, config.path), s) for n in s.services]
     log.info("hub on %s; starting %s", config.zenoh.endpoint, ", ".join(s.services))
     for p in procs:

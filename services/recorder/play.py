@@ -20,11 +20,12 @@ from pathlib import Path
 
 from common.bus import Publisher, QoS, open_session
 from common.clock import BOOT_ID, now
-from common.errors import DecodeError, RecordingError, one_line
+from common.errors import DecodeError, RecordingError, StackError, one_line
 from common.keys import Keys
 from common.lifecycle import Progress
 from common.messages import Frame, Header, LaserScan
 from common.queries import ready_services
+from common.security import LIVE_SENSORS
 from common.settings import Config
 from services.recorder.reading import PLAYABLE, Input, Recording, check_playable, decode_input
 from services.recorder.timing import Schedule
@@ -71,7 +72,19 @@ def play(
     keys = Keys(config.stack.prefix)
     session = open_session(config.zenoh, PRINCIPAL)
     try:
-        if "detector" not in ready_services(session, keys, WAIT_FOR_DETECTOR_S):
+        ready = ready_services(session, keys, WAIT_FOR_DETECTOR_S)
+        live = sorted(ready & LIVE_SENSORS)
+        if live:
+            # A replay onto a live robot's keys would mix old frames and scans with its own:
+            # all-clear scans could blind its laser. Under the secure profile the router
+            # refuses these puts anyway (common/security.py); this says so before trying.
+            raise StackError(
+                f"refusing to play {path} onto stack {config.stack.prefix!r}: it runs a live "
+                f"sensor ({', '.join(live)}) and a replay would mix with or blind it; play into "
+                "a stack without camera, sim or ros2 (e.g. supervisor.services = "
+                '["detector", "controller", "metrics"])'
+            )
+        if "detector" not in ready:
             progress("no detector is ready on this stack: playing anyway")
         pubs = {
             Input.FRAME: Publisher(session, keys.frame(config.stack.camera), QoS.SENSOR),

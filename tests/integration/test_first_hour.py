@@ -27,6 +27,9 @@ def test_a_warning_for_an_unused_camera_source(tmp_path: Path) -> None:
     )  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     assert "camera.source is 'device:0' but the camera service is not in" in done.stderr
+    # Without the secure profile, one plain line says what that means.
+    warned = [ln for ln in done.stderr.splitlines() if "NO ACCESS CONTROL" in ln]
+    assert len(warned) == 1 and "can drive the robot and release its e-stop" in warned[0]
 
 
 @pytest.mark.parametrize(

@@ -43,12 +43,15 @@ def test_only_the_controller_puts_cmd_vel_and_only_estop_the_estop() -> None:
     assert putters == {"controller"}
     assert {p for p in PRINCIPALS if KEYS.estop() in _allowed(acl, p, "put")} == {"estop"}
     frames = {p for p in PRINCIPALS if KEYS.frame("front") in _allowed(acl, p, "put")}
-    # the camera, the simulator, the ROS 2 bridge or a recording played back
-    assert frames == {"camera", "sim", "ros2", "recorder"}
+    # the camera, the simulator or the ROS 2 bridge: a stack with a live sensor takes no replay
+    assert frames == {"camera", "sim", "ros2"}
     scans = {p for p in PRINCIPALS if KEYS.scan() in _allowed(acl, p, "put")}
-    assert scans == {"sim", "ros2", "recorder"}
+    assert scans == {"sim", "ros2"}
+    # A stack with no live sensor (a replay stack): a recording played back may feed it.
+    replay = access_control(KEYS, "front", "password", live_sensors=False)
+    assert {KEYS.frame("front"), KEYS.scan()} <= _allowed(replay, "recorder", "put")
     assert _allowed(acl, "observer", "put") == set()
-    # The live view reads everything but puts only its own counters.
+    # The live view puts only its own counters.
     assert _allowed(acl, "viewer", "put") == {KEYS.counters("viewer")}
     assert _allowed(acl, "viewer", "liveliness_token") == {KEYS.health("viewer")}
     assert _allowed(acl, "viewer", "declare_queryable") == set()
@@ -57,8 +60,17 @@ def test_only_the_controller_puts_cmd_vel_and_only_estop_the_estop() -> None:
     # Counters and health tokens: each stack service its own, nobody else.
     assert _allowed(acl, "metrics", "liveliness_token") == {KEYS.health("metrics")}
     assert KEYS.counters("estop") not in _allowed(acl, "estop", "put")
-    # Everyone may read.
-    assert _allowed(acl, "observer", "declare_subscriber") == {"**"}
+    # Each reads what it needs; the camera's pictures only the detector, the live view, the
+    # recorder and the ROS 2 bridge. Queries and liveliness stay open to all.
+    readers = {
+        p for p in PRINCIPALS if KEYS.frame("front") in _allowed(acl, p, "declare_subscriber")
+    }
+    assert readers == {"detector", "viewer", "ros2"}  # and the recorder, below
+    assert _allowed(acl, "recorder", "declare_subscriber") == {f"{KEYS.prefix}/**"}
+    assert KEYS.cmd_vel() in _allowed(acl, "observer", "declare_subscriber")
+    assert _allowed(acl, "camera", "declare_subscriber") == set()
+    assert _allowed(acl, "estop", "declare_subscriber") == {KEYS.controller_status()}
+    assert _allowed(acl, "camera", "query") == {"**"}
 
 
 def test_certificate_mode_matches_common_names() -> None:
@@ -113,7 +125,7 @@ def test_extends_loops_are_refused(tmp_path: Path) -> None:
         load_config(tmp_path / "a.toml", environ={})
 
 
-def test_control_publishers_are_express_high_priority_and_blocking() -> None:
+def test_control_publishers_are_express_high_priority_and_never_block() -> None:
     conf = zenoh.Config()
     conf.insert_json5("scouting/multicast/enabled", "false")
     with zenoh.open(conf) as session:
@@ -122,6 +134,8 @@ def test_control_publishers_are_express_high_priority_and_blocking() -> None:
         control = Publisher(session, "t/cmd_vel", QoS.CONTROL)
         sensor = Publisher(session, "t/frame", QoS.SENSOR)
         assert control._pub.priority == zenoh.Priority.REAL_TIME
-        assert control._pub.congestion_control == zenoh.CongestionControl.BLOCK
+        # DROP, not BLOCK: a blocked send holds up every other receiver behind one slow
+        # listener (docs/security.md, "QoS by role").
+        assert control._pub.congestion_control == zenoh.CongestionControl.DROP
         assert sensor._pub.congestion_control == zenoh.CongestionControl.DROP
         assert sensor._pub.priority == zenoh.Priority.DATA

@@ -1,0 +1,214 @@
+"""No listener, however slow or hostile, may delay control or safety messages: a subscriber
+frozen with SIGSTOP beside a secure stack (every message through the supervisor's router)
+must not stall the e-stop or cmd_vel. And what each principal may read is its own business:
+a principal that needs no camera frames cannot subscribe to them.
+"""
+
+from __future__ import annotations
+
+import itertools
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from common.bus import Publisher, QoS
+from common.clock import BOOT_ID, now
+from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan
+from common.security import may_read
+from deploy.credentials import generate
+from tests.integration.conftest import REPO, Stack, wait_for
+from tests.integration.test_safety import STACK, header, moving
+
+pytestmark = pytest.mark.integration
+
+ROUND_TRIP_LIMIT_S = 0.2  # the e-stop's round trip, engage or release, however slow a listener
+FROZEN_FOR_S = 25.0  # long past the point where the frozen link's queues are full (about 8 s)
+CMD_GAP_LIMIT_S = 0.5  # the longest cmd_vel may go quiet
+
+
+def secure_stack(make_stack, tmp_path: Path) -> Stack:  # type: ignore[no-untyped-def]
+    creds = tmp_path / "credentials"
+    generate(creds)
+    stack: Stack = make_stack(
+        zenoh={"mode": "client", "auth": "password", "credentials_dir": str(creds)}
+    )
+    stack.wait_ready(STACK)
+    return stack
+
+
+class EStopProbe:
+    """The e-stop's round trip, measured in-process: put an EStop as the ``estop`` principal
+    and time until the controller's status says it took effect."""
+
+    def __init__(self, stack: Stack) -> None:
+        self.session = stack.open("estop")
+        self._pub = Publisher(self.session, stack.keys.estop(), QoS.CONTROL)
+        self._state = ""
+        self._changed = threading.Condition()
+        self._sub = self.session.declare_subscriber(stack.keys.controller_status(), self._on)
+        self._seq = 0
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        state = ControllerStatus.decode(sample.payload.to_bytes()).state
+        with self._changed:
+            self._state = state
+            self._changed.notify_all()
+
+    def round_trip(self, engaged: bool, timeout_s: float = 10.0) -> float:
+        self._seq += 1
+        at = now()
+        header = Header(stamp_ns=at.wall_ns, frame_id="", seq=self._seq, source="estop-probe",
+                        mono_ns=at.mono_ns, boot_id=BOOT_ID)  # fmt: skip
+        start = time.monotonic()
+        self._pub.put(EStop(header=header, engaged=engaged, reason="probe").encode())
+        with self._changed:
+            done = self._changed.wait_for(
+                lambda: (self._state == "estop") == engaged, timeout=timeout_s
+            )
+        assert done, f"the controller never {'engaged' if engaged else 'released'}"
+        return time.monotonic() - start
+
+    def close(self) -> None:
+        self._sub.undeclare()
+        self.session.close()
+
+
+def start_listener(stack: Stack, principal: str, *key_exprs: str) -> subprocess.Popen[str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tests.integration.listener", "--config", str(stack.config_path),
+         "--principal", principal, *key_exprs],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    assert line.strip() == "subscribed", line + (proc.stderr.read() if proc.stderr else "")
+    return proc
+
+
+def test_a_frozen_listener_delays_no_stop(make_stack, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    stack = secure_stack(make_stack, tmp_path)
+    arrivals: list[float] = []
+    stack.session.declare_subscriber(
+        stack.keys.cmd_vel(), lambda _s: arrivals.append(time.monotonic())
+    )
+    _, cmds = stack.subscribe(stack.keys.cmd_vel())
+    wait_for(lambda: moving(cmds), 60, "the secure stack working: motion")
+    probe = EStopProbe(stack)
+    # The viewer may read all it shows: frames, detections, commands, status. Frozen, its link
+    # fills up with what the router still sends it.
+    listener = start_listener(stack, "viewer", *may_read(stack.keys, "front", "viewer"))
+    listener.send_signal(signal.SIGSTOP)
+    try:
+        trips: list[float] = []
+        frozen_at = time.monotonic()
+        while time.monotonic() - frozen_at < FROZEN_FOR_S:
+            trips.append(probe.round_trip(True))
+            trips.append(probe.round_trip(False))
+        gaps = [b - a for a, b in itertools.pairwise(arrivals) if a >= frozen_at]
+    finally:
+        listener.send_signal(signal.SIGCONT)
+        listener.send_signal(signal.SIGTERM)
+        listener.wait(20)
+        probe.close()
+    print(f"e-stop round trips: {len(trips)}, max {max(trips):.3f} s; longest cmd_vel gap "
+          f"{max(gaps, default=0):.3f} s")  # fmt: skip
+    assert "NO ACCESS CONTROL" not in stack.log()  # the secure profile has it
+    slow = [round(t, 3) for t in trips if t > ROUND_TRIP_LIMIT_S]
+    assert not slow, f"{len(slow)} of {len(trips)} e-stop round trips over 0.2 s: {slow[:10]}"
+    assert gaps and max(gaps) < CMD_GAP_LIMIT_S, f"cmd_vel went quiet for {max(gaps):.2f} s"
+    assert stack.stop() == 0, stack.log()
+
+
+def test_each_principal_reads_only_its_own(make_stack, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    stack = secure_stack(make_stack, tmp_path)
+    frames = stack.keys.frame("front")
+    heard: dict[str, list[str]] = {"observer": [], "observer-wide": [], "viewer": []}
+    sessions = {"viewer": stack.open("viewer")}
+    stack.session.declare_subscriber(frames, lambda s: heard["observer"].append(str(s.key_expr)))
+    stack.session.declare_subscriber(
+        f"{stack.keys.prefix}/**", lambda s: heard["observer-wide"].append(str(s.key_expr))
+    )
+    sessions["viewer"].declare_subscriber(frames, lambda s: heard["viewer"].append(""))
+    _, cmds = stack.subscribe(stack.keys.cmd_vel())
+    try:
+        # The control: the viewer, which shows the camera, gets frames; the observer still
+        # gets the commands it watches through a subscription of its own.
+        wait_for(lambda: len(heard["viewer"]) >= 3, 30, "frames at the live view")
+        wait_for(lambda: len(cmds) >= 3, 30, "commands at the observer")
+        # Neither the observer's subscription to the frames nor its wider one (which would
+        # include them) was accepted: the router sends the observer's session only what its
+        # accepted subscriptions cover (the wider one sees those samples too, locally).
+        assert heard["observer"] == []
+        assert frames not in heard["observer-wide"]
+        assert set(heard["observer-wide"]) <= {stack.keys.cmd_vel()}, set(heard["observer-wide"])
+    finally:
+        sessions["viewer"].close()
+    assert stack.stop() == 0, stack.log()
+
+
+def test_a_replay_never_reaches_a_live_robots_sensors(make_stack, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from tests.integration.test_recorder import _ros2_bag
+
+    creds = tmp_path / "credentials"
+    generate(creds)
+    secure = {"mode": "client", "auth": "password", "credentials_dir": str(creds)}
+    live: Stack = make_stack(
+        zenoh=secure, supervisor={"services": ["sim", "detector", "controller", "metrics"]}
+    )
+    live.wait_ready({"sim", "detector", "controller", "metrics"})
+    bag = _ros2_bag(tmp_path / "bag")
+    # The command line refuses, with one line, before it puts anything.
+    done = subprocess.run(
+        [sys.executable, "-m", "services.recorder", "play", str(bag), "--config",
+         str(live.config_path)],
+        cwd=REPO, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 1, done.stderr
+    (line,) = [ln for ln in done.stderr.splitlines() if "error" in ln]
+    assert "refusing to play" in line and "live sensor (sim)" in line, line
+    # And the router refuses what a recorder's credentials put there by other means.
+    _, scans = live.subscribe(live.keys.scan())
+    rogue = live.open("recorder")
+    try:
+        pub = rogue.declare_publisher(live.keys.scan())
+        clear = LaserScan(header=header(now().wall_ns, source="replayed"), angle_min=-3.14,
+                          angle_increment=0.0174, range_min=0.05, range_max=12.0,
+                          ranges=np.full(360, np.inf, np.float32))  # fmt: skip
+        wait_for(lambda: len(scans) > 20, 30, "the simulator's own scans")
+        for _ in range(50):
+            pub.put(clear.encode())
+        wait_for(lambda: len(scans) > 60, 30, "more of the simulator's scans")
+    finally:
+        rogue.close()
+    sources = {LaserScan.decode(s).header.source for s in list(scans)}
+    assert "replayed" not in sources and "sim" in sources, sources
+    assert live.stop() == 0, live.log()
+
+    # The control: a stack with no live sensor takes the same recording, played back.
+    replay: Stack = make_stack(
+        zenoh=secure, supervisor={"services": ["detector", "controller", "metrics"]}
+    )
+    replay.wait_ready({"detector", "controller", "metrics"})
+    _, dets = replay.subscribe(replay.keys.detections("front"))
+    player = subprocess.Popen(
+        [sys.executable, "-m", "services.recorder", "play", str(bag), "--loop", "--config",
+         str(replay.config_path)],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        wait_for(
+            lambda: any(Detections.decode(d).header.source == "replay" for d in list(dets)),
+            90,
+            "detections of the replayed frames",
+        )
+    finally:
+        player.send_signal(signal.SIGINT)
+        player.wait(20)
+    assert replay.stop() == 0, replay.log()
