@@ -30,6 +30,11 @@ from common.fields import Dim, NonNegativeInt, Shape
 # Limits that no real camera reaches; anything above is garbage, not a frame.
 MAX_IMAGE_SIDE = 16384
 MAX_DETECTIONS = 10000
+# A class name (COCO's longest is 14 characters, LVIS's about 40) and a model or backend name:
+# longer ones are refused where they enter, so that no receiver keeps megabytes of names.
+MAX_NAME_CHARS = 128
+# A velocity command's magnitude, m/s or rad/s: no base goes near it; 1e308 is garbage.
+MAX_COMMAND = 100.0
 MAX_SCAN_RAYS = 100_000
 
 FRAME_ENCODINGS: dict[str, int] = {"bgr8": 3, "rgb8": 3, "mono8": 1, "jpeg": 0}
@@ -129,6 +134,11 @@ class Detections(Message):
             raise ValueError(f"absurd image size {self.image_width}x{self.image_height}")
         if len(self.class_names) != n:
             raise ValueError(f"class_names must have {n} entries, got {len(self.class_names)}")
+        longest = max((len(name) for name in self.class_names), default=0)
+        if longest > MAX_NAME_CHARS:
+            raise ValueError(f"a class name of {longest} characters (at most {MAX_NAME_CHARS})")
+        if max(len(self.model), len(self.backend)) > 2 * MAX_NAME_CHARS:
+            raise ValueError(f"model or backend name over {2 * MAX_NAME_CHARS} characters")
 
     @classmethod
     def from_boxes(cls, boxes: Boxes, **fields: Any) -> Detections:
@@ -187,6 +197,9 @@ class Twist(Message):
         # A NaN reaching a motor driver that does not check is a runaway: refuse to build one.
         if not all(math.isfinite(v) for v in (*self.linear, *self.angular)):
             raise ValueError(f"velocities must be finite, got {self.linear} {self.angular}")
+        if any(abs(v) > MAX_COMMAND for v in (*self.linear, *self.angular)):
+            raise ValueError(f"velocities over {MAX_COMMAND:g} are garbage, got {self.linear} "
+                             f"{self.angular}")  # fmt: skip
 
     @property
     def is_zero(self) -> bool:

@@ -146,7 +146,9 @@ class MetricsSettings:
 
     What is believed (services/metrics/trust.py): counters only from a known service on its own
     key, at most ``max_counters_per_service`` names each; a detector's stage times only within
-    0..``max_timing_ms``. The rest is refused and counted as ``metrics.refused.<why>``.
+    0..``max_timing_ms``. The rest is refused and counted as ``metrics.refused.<why>``. At most
+    ``max_classes`` distinct class names are counted; a name beyond them is counted as
+    ``metrics.class_names_refused`` (names longer than 128 characters never decode).
     """
 
     window_s: float = 10.0
@@ -156,6 +158,7 @@ class MetricsSettings:
     prometheus_host: str = "127.0.0.1"
     max_counters_per_service: int = 256
     max_timing_ms: float = 1e6
+    max_classes: int = 1000
 
     BOUNDS: ClassVar[Bounds] = {
         "window_s": (0.1, 3600),
@@ -164,6 +167,7 @@ class MetricsSettings:
         "prometheus_port": (0, 65535),  # 0 = off
         "max_counters_per_service": (1, 2000),
         "max_timing_ms": (0.001, 1e9),
+        "max_classes": (1, 10000),
     }
 
     def __post_init__(self) -> None:

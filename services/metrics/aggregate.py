@@ -34,7 +34,7 @@ STAGES = (
     "detections_to_command",
     "end_to_end",
 )
-MAX_CLASSES = 1000  # distinct class names counted (COCO has 80)
+MAX_CLASSES = 1000  # distinct class names counted by default (COCO has 80, LVIS 1203)
 MAX_COUNTERS = 2000  # distinct "<service>.<counter>" names kept
 _RECENT = 512  # capture stamps remembered to pair Twists with the detections they react to
 #: Per-second timeline columns: detections messages, boxes, frames offered to the detector
@@ -58,9 +58,11 @@ class Aggregator:
         history_s: float = 600.0,
         on_latency: LatencyListener | None = None,
         max_counters_per_service: int = MAX_COUNTERS,
+        max_classes: int = MAX_CLASSES,
     ) -> None:
         self.window_s = window_s
         self.max_counters_per_service = max_counters_per_service
+        self.max_classes = max_classes
         self._names: Counter[str] = Counter()  # service -> its counter names kept
         self._lat = {stage: Window(window_s) for stage in STAGES}
         self._frames = Window(window_s)  # one sample per Detections message: value = n boxes
@@ -91,10 +93,16 @@ class Aggregator:
         self.model, self.backend = msg.model, msg.backend
         self._frames.add(now, float(len(msg)))
         self._timeline.add(now, frames=1.0, detections=float(len(msg)))
-        # Bounded: garbage that decodes can still name thousands of made-up classes.
-        self._classes.update(
-            n for n in msg.class_names if n in self._classes or len(self._classes) < MAX_CLASSES
-        )
+        # Bounded: garbage that decodes can still name thousands of made-up classes (each
+        # name is bounded in length where it enters: common.messages.MAX_NAME_CHARS).
+        refused = 0
+        for name in msg.class_names:
+            if name in self._classes or len(self._classes) < self.max_classes:
+                self._classes[name] += 1
+            else:
+                refused += 1
+        if refused:
+            self.count("class_names_refused", refused)
         for stage in DETECTOR_STAGES:
             if stage in msg.timing_ms:
                 self._record(stage, now, msg.timing_ms[stage])

@@ -46,6 +46,7 @@ def run(config: Config, stop: threading.Event) -> int:
         s.history_s,
         on_latency=listener,
         max_counters_per_service=s.max_counters_per_service,
+        max_classes=s.max_classes,
     )
     with Node("metrics", config) as node:
 

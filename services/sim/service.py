@@ -59,7 +59,13 @@ def run(config: Config, stop: threading.Event) -> int:
             """A velocity command reached the base, from ``source`` (a publisher's id)."""
             with lock:
                 active, new = sources.heard(source, time.monotonic())
-                world.command(twist.linear[0], twist.angular[2])
+                sane = world.command(twist.linear[0], twist.angular[2])
+            if not sane:
+                node.reject(
+                    "commands_out_of_range",
+                    f"cmd_vel v={twist.linear[0]:g} w={twist.angular[2]:g} is beyond what the "
+                    f"base takes (from {twist.header.source!r}): refused, the base stops",
+                )
             if active > 1:
                 node.reject(
                     "commands_from_several_sources",

@@ -24,6 +24,9 @@ class BaseLimits:
     max_linear_accel: float = 1.5
     max_angular_accel: float = 4.0
     watchdog_s: float = 0.5
+    # A command over this many times a limit is no command a sane controller sends: the base
+    # refuses it and stops, as real bases fault on out-of-range input rather than clamp it.
+    refuse_over: float = 2.0
 
 
 @dataclass(slots=True)
@@ -110,9 +113,14 @@ class World:
     last_cmd: tuple[float, float] = (0.0, 0.0)
     last_cmd_t: float = -math.inf
 
-    def command(self, v: float, w: float) -> None:
-        """A Twist arrived."""
-        self.last_cmd, self.last_cmd_t = (v, w), self.t
+    def command(self, v: float, w: float) -> bool:
+        """A Twist arrived; False (and the base stops) when it is beyond what the base takes."""
+        lim = self.limits
+        sane = abs(v) <= lim.max_linear * lim.refuse_over and abs(w) <= (
+            lim.max_angular * lim.refuse_over
+        )
+        self.last_cmd, self.last_cmd_t = ((v, w) if sane else (0.0, 0.0)), self.t
+        return sane
 
     def advance(self, dt: float) -> None:
         fresh = self.t - self.last_cmd_t <= self.limits.watchdog_s

@@ -32,12 +32,23 @@ def test_straight_line_and_arc() -> None:
 
 def test_base_limits_and_watchdog() -> None:
     w = World(Robot(), limits=BaseLimits(max_linear=0.6, max_linear_accel=1.0, watchdog_s=0.5))
-    w.command(5.0, 0.0)
+    assert w.command(1.0, 0.0)  # over the limit, not absurdly: clamped
     w.advance(0.1)
     assert w.robot.v == pytest.approx(0.1)  # acceleration limit
     for _ in range(20):
         w.advance(0.1)
     assert w.robot.v == pytest.approx(0.0)  # no command for 0.5 s: the base stopped itself
+
+
+def test_an_absurd_command_is_refused_and_the_base_stops() -> None:
+    w = World(Robot(), limits=BaseLimits(max_linear=0.6, max_angular=1.5, max_linear_accel=10.0))
+    assert w.command(0.5, 0.0)
+    w.advance(0.1)
+    assert w.robot.v == pytest.approx(0.5)
+    for v, turn in ((1e308, 0.0), (-50.0, 0.0), (0.0, 4.0)):
+        assert not w.command(v, turn)
+        w.advance(0.1)
+        assert w.robot.v == pytest.approx(0.0) and w.robot.w == pytest.approx(0.0)
 
 
 def test_laser_hits_the_nearest_surface() -> None:
