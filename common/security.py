@@ -27,7 +27,9 @@ from common.keys import Keys
 SERVICE_PRINCIPALS = (
     "recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer"
 )
-PRINCIPALS = ("supervisor", *SERVICE_PRINCIPALS, "estop", "observer")
+# The router's principal: the only one whose certificate may serve the TLS listener.
+ROUTER_PRINCIPAL = "supervisor"
+PRINCIPALS = (ROUTER_PRINCIPAL, *SERVICE_PRINCIPALS, "estop", "observer")
 
 AUTH_MODES = ("none", "password", "certificate")
 

@@ -2,10 +2,12 @@
 
 Creates the credentials of the secure profile in DIR (default ``secrets/``, git-ignored): a
 random password per principal plus the router's ``user:password`` dictionary, and a private CA
-with a key and certificate per principal (common name = principal). Every certificate names
-``localhost``, ``127.0.0.1`` and each --host, because the supervisor's certificate is served by
-the TLS listener and clients check the name they connect to. Existing credentials are kept
-unless --force is given.
+with a key and certificate per principal (common name = principal). Only the supervisor's
+certificate can serve the TLS listener: it alone names ``localhost``, ``127.0.0.1`` and each
+--host and allows server authentication. Every other certificate names no host and allows
+client authentication only, so a client that checks the router's name refuses it. DIR is made
+0700 and every secret 0600, whatever their modes were. Existing credentials are kept unless
+--force is given.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from common.errors import ConfigError
 from common.lifecycle import run_main
 from common.security import (
     PRINCIPALS,
+    ROUTER_PRINCIPAL,
     ca_file,
     ca_key_file,
     cert_file,
@@ -126,22 +129,63 @@ def _leaf_certificate(
     names: list[x509.GeneralName],
     days: int,
 ) -> x509.Certificate:
-    """A certificate for ``principal`` that serves a TLS listener and authenticates a client."""
-    purposes = [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]
+    """A certificate for ``principal``. The supervisor's serves the TLS listener (its host
+    names, server authentication) and authenticates it when its router connects to another
+    host's; every other principal's authenticates a client only and names no host, so no
+    client accepts it as the router's."""
     authority = x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key())
-    return (
+    builder = (
         _builder(principal, ca.subject, key, days)
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
         .add_extension(_key_usage(signs_certificates=False), critical=True)
-        .add_extension(x509.ExtendedKeyUsage(purposes), critical=False)
-        .add_extension(x509.SubjectAlternativeName(names), critical=False)
         .add_extension(authority, critical=False)
-        .sign(ca_key, hashes.SHA256())
+    )
+    purposes = [ExtendedKeyUsageOID.CLIENT_AUTH]
+    if principal == ROUTER_PRINCIPAL:
+        purposes.insert(0, ExtendedKeyUsageOID.SERVER_AUTH)
+        builder = builder.add_extension(x509.SubjectAlternativeName(names), critical=False)
+    return builder.add_extension(x509.ExtendedKeyUsage(purposes), critical=False).sign(
+        ca_key, hashes.SHA256()
     )
 
 
+def serves_tls(cert: x509.Certificate) -> bool:
+    """Whether ``cert`` may serve a TLS listener: it allows server authentication or names a
+    host (certificates made before only the supervisor's could did both)."""
+    try:
+        purposes = cert.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value
+    except x509.ExtensionNotFound:
+        return True  # no restriction: any purpose
+    try:
+        cert.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+    except x509.ExtensionNotFound:
+        return ExtendedKeyUsageOID.SERVER_AUTH in purposes
+    return True
+
+
+def server_capable(directory: Path) -> list[str]:
+    """The principals other than the supervisor whose certificate in ``directory`` could serve
+    as the router's (credentials made by an older version); unreadable files are skipped."""
+    found = []
+    for p in PRINCIPALS:
+        path = cert_file(directory, p)
+        if p == ROUTER_PRINCIPAL or not path.is_file():
+            continue
+        try:
+            cert = x509.load_pem_x509_certificate(path.read_bytes())
+        except (OSError, ValueError):
+            continue
+        if serves_tls(cert):
+            found.append(p)
+    return found
+
+
 def _write(path: Path, data: bytes, mode: int) -> Path:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
+    # O_NOFOLLOW: a link planted in the folder must not redirect a secret elsewhere.
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, mode)
+    except OSError as exc:
+        raise ConfigError(f"cannot write {path}: {exc.strerror}") from exc
     with os.fdopen(fd, "wb") as f:
         os.fchmod(f.fileno(), mode)  # with --force an existing file would keep its old mode
         f.write(data)
@@ -163,6 +207,12 @@ def generate(
     if days < 1:
         raise ConfigError(f"--days must be at least 1, got {days}")
     names = _subject_names(hosts)
+    if not force and (old := server_capable(directory)):
+        raise ConfigError(
+            f"the credentials in {directory} were made by an older version: {len(old)} "
+            f"principals' certificates ({old[0]}'s, ...) could serve as the router; re-run "
+            "with --force to replace them all (docs/security.md)"
+        )
     if not force and (existing := [f.name for f in _targets(directory) if f.exists()]):
         raise ConfigError(
             f"credentials already exist in {directory} ({', '.join(existing[:3])}"
@@ -170,9 +220,9 @@ def generate(
         )
     if directory.exists() and not directory.is_dir():
         raise ConfigError(f"{directory} exists and is not a directory")
-    if not directory.exists():
-        directory.mkdir(mode=0o700, parents=True)
-        directory.chmod(0o700)  # mkdir's mode is reduced by the umask
+    directory.mkdir(mode=0o700, parents=True, exist_ok=True)
+    # mkdir's mode is reduced by the umask, and a folder that existed keeps its own mode.
+    directory.chmod(0o700)
 
     written: list[Path] = []
     passwords = {p: secrets.token_urlsafe(24) for p in PRINCIPALS}
