@@ -26,6 +26,7 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
+from common.certificates import refuse_server_capable
 from common.errors import ConfigError
 from common.lifecycle import run_main
 from common.security import (
@@ -149,37 +150,6 @@ def _leaf_certificate(
     )
 
 
-def serves_tls(cert: x509.Certificate) -> bool:
-    """Whether ``cert`` may serve a TLS listener: it allows server authentication or names a
-    host (certificates made before only the supervisor's could did both)."""
-    try:
-        purposes = cert.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value
-    except x509.ExtensionNotFound:
-        return True  # no restriction: any purpose
-    try:
-        cert.extensions.get_extension_for_class(x509.SubjectAlternativeName)
-    except x509.ExtensionNotFound:
-        return ExtendedKeyUsageOID.SERVER_AUTH in purposes
-    return True
-
-
-def server_capable(directory: Path) -> list[str]:
-    """The principals other than the supervisor whose certificate in ``directory`` could serve
-    as the router's (credentials made by an older version); unreadable files are skipped."""
-    found = []
-    for p in PRINCIPALS:
-        path = cert_file(directory, p)
-        if p == ROUTER_PRINCIPAL or not path.is_file():
-            continue
-        try:
-            cert = x509.load_pem_x509_certificate(path.read_bytes())
-        except (OSError, ValueError):
-            continue
-        if serves_tls(cert):
-            found.append(p)
-    return found
-
-
 def _write(path: Path, data: bytes, mode: int) -> Path:
     # O_NOFOLLOW: a link planted in the folder must not redirect a secret elsewhere.
     try:
@@ -207,12 +177,8 @@ def generate(
     if days < 1:
         raise ConfigError(f"--days must be at least 1, got {days}")
     names = _subject_names(hosts)
-    if not force and (old := server_capable(directory)):
-        raise ConfigError(
-            f"the credentials in {directory} were made by an older version: {len(old)} "
-            f"principals' certificates ({old[0]}'s, ...) could serve as the router; re-run "
-            "with --force to replace them all (docs/security.md)"
-        )
+    if not force:
+        refuse_server_capable(directory)
     if not force and (existing := [f.name for f in _targets(directory) if f.exists()]):
         raise ConfigError(
             f"credentials already exist in {directory} ({', '.join(existing[:3])}"

@@ -10,9 +10,10 @@ import pytest
 import zenoh
 from cryptography import x509
 from cryptography.exceptions import InvalidSignature
-from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives import serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
+from common.certificates import server_capable, serves_tls
 from common.errors import ConfigError
 from common.lifecycle import run_main
 from common.security import (
@@ -26,8 +27,9 @@ from common.security import (
     users_file,
 )
 from deploy import credentials
-from deploy.credentials import generate, server_capable, serves_tls
+from deploy.credentials import generate
 from deploy.launch import free_port
+from tests.unit.common.test_certificates import old_style
 
 HOSTS = ("robot.local", "10.0.0.5")
 
@@ -121,34 +123,10 @@ def _purposes(cert: x509.Certificate) -> list[x509.ObjectIdentifier]:
     return list(cert.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value)
 
 
-def _old_style(directory: Path, principal: str) -> None:
-    """Re-issue ``principal``'s certificate as versions before this one did: host names and
-    server authentication, like the supervisor's."""
-    ca_key = serialization.load_pem_private_key(ca_key_file(directory).read_bytes(), None)
-    key = serialization.load_pem_private_key(key_file(directory, principal).read_bytes(), None)
-    router = _cert(cert_file(directory, ROUTER_PRINCIPAL))
-    purposes = router.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value
-    names = router.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
-    builder = (
-        x509.CertificateBuilder()
-        .subject_name(x509.Name([x509.NameAttribute(x509.NameOID.COMMON_NAME, principal)]))
-        .issuer_name(router.issuer)
-        .public_key(key.public_key())  # type: ignore[arg-type]
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(router.not_valid_before_utc)
-        .not_valid_after(router.not_valid_after_utc)
-        .add_extension(purposes, critical=False)
-        .add_extension(names, critical=False)
-    )
-    cert = builder.sign(ca_key, hashes.SHA256())  # type: ignore[arg-type]
-    cert_file(directory, principal).write_bytes(cert.public_bytes(serialization.Encoding.PEM))
-
-
 def test_old_server_capable_credentials_are_named_and_replaced_with_force(tmp_path: Path) -> None:
     generate(tmp_path)
-    _old_style(tmp_path, "viewer")
-    _old_style(tmp_path, "camera")
-    assert server_capable(tmp_path) == ["camera", "viewer"]
+    old_style(tmp_path, "viewer")
+    old_style(tmp_path, "camera")
     with pytest.raises(ConfigError, match=r"older version: 2 principals'.*--force"):
         generate(tmp_path)
     generate(tmp_path, force=True)
