@@ -51,7 +51,7 @@ def refuse_server_capable(directory: Path) -> None:
     """Raise ConfigError, one line, if ``directory`` holds credentials of the older kind."""
     if old := server_capable(directory):
         raise ConfigError(
-            f"the credentials in {directory} were made by an older version: {len(old)} "
-            f"principals' certificates ({old[0]}'s, ...) could serve as the router; make them "
-            "again with `zstack credentials --force` (docs/security.md)"
+            f"the credentials in {directory} were made by an older version: the "
+            f"certificates of {', '.join(old)} could serve as the router; make them again "
+            "with `zstack credentials --force` (docs/security.md)"
         )

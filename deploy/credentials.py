@@ -229,7 +229,8 @@ def main() -> int:
     names = ", ".join(dict.fromkeys((*DEFAULT_HOSTS, *args.host)))
     for line in (
         f"wrote {n} passwords and {users_file(directory).name} to {directory}",
-        f"wrote a CA and {n} certificates for {names}, valid {args.days} days, to {directory}",
+        f"wrote a CA and {n} certificates (only the supervisor's serves, for {names}), "
+        f"valid {args.days} days, to {directory}",
         f'use in the stack config: [zenoh] auth = "password" or "certificate", '
         f'credentials_dir = "{directory}"',
     ):

@@ -127,7 +127,7 @@ def test_old_server_capable_credentials_are_named_and_replaced_with_force(tmp_pa
     generate(tmp_path)
     old_style(tmp_path, "viewer")
     old_style(tmp_path, "camera")
-    with pytest.raises(ConfigError, match=r"older version: 2 principals'.*--force"):
+    with pytest.raises(ConfigError, match=r"certificates of camera, viewer could.*--force"):
         generate(tmp_path)
     generate(tmp_path, force=True)
     assert server_capable(tmp_path) == []
