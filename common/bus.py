@@ -29,10 +29,12 @@ from typing import Any
 
 import zenoh
 
+from common.certificates import refuse_server_capable
 from common.errors import ConfigError, StackError
 from common.keys import Keys
 from common.security import (
     LIVE_SENSORS,
+    ROUTER_PRINCIPAL,
     access_control,
     ca_file,
     cert_file,
@@ -45,7 +47,7 @@ from common.zenoh_errors import explain
 
 log = logging.getLogger(__name__)
 
-HUB_PRINCIPAL = "supervisor"
+HUB_PRINCIPAL = ROUTER_PRINCIPAL
 
 
 class QoS(Enum):
@@ -139,7 +141,13 @@ def _security(settings: ZenohSettings, principal: str, hub: bool) -> dict[str, A
             usrpwd["dictionary_file"] = _readable(users_file(creds), "user dictionary")
         out["transport/auth/usrpwd"] = usrpwd
     if settings.uses_tls:
-        tls: dict[str, Any] = {"root_ca_certificate": _readable(ca_file(creds), "CA certificate")}
+        refuse_server_capable(creds)  # any principal's certificate could pose as the router
+        tls: dict[str, Any] = {
+            "root_ca_certificate": _readable(ca_file(creds), "CA certificate"),
+            # Zenoh's default, stated: a client accepts only a certificate that names the host
+            # it dialled, which only the supervisor's does (deploy/credentials.py).
+            "verify_name_on_connect": True,
+        }
         if hub:
             tls["listen_certificate"] = _readable(cert_file(creds, principal), "certificate")
             tls["listen_private_key"] = _readable(key_file(creds, principal), "private key")
@@ -191,8 +199,15 @@ def _open(conf: zenoh.Config, settings: ZenohSettings, where: str, principal: st
         return zenoh.open(conf)
     except zenoh.ZError as exc:
         auth = f" as {principal!r} ({settings.auth} auth)" if settings.auth != "none" else ""
+        # A refused router certificate reads as "unable to connect": say what is accepted.
+        tls = (
+            f" (over TLS only a router with the {ROUTER_PRINCIPAL}'s certificate signed by "
+            f"{ca_file(settings.credentials_path)} is accepted)"
+            if settings.uses_tls and principal != ROUTER_PRINCIPAL
+            else ""
+        )
         raise ConfigError(
-            f"cannot open a Zenoh session on {where}{auth}: {explain(str(exc))}"
+            f"cannot open a Zenoh session on {where}{auth}{tls}: {explain(str(exc))}"
         ) from exc
 
 

@@ -41,7 +41,9 @@ SERVICE_PRINCIPALS = (
     "metrics",
     "viewer",
 )
-PRINCIPALS = ("supervisor", *SERVICE_PRINCIPALS, "estop", "observer")
+# The router's principal: the only one whose certificate may serve the TLS listener.
+ROUTER_PRINCIPAL = "supervisor"
+PRINCIPALS = (ROUTER_PRINCIPAL, *SERVICE_PRINCIPALS, "estop", "observer")
 
 AUTH_MODES = ("none", "password", "certificate")
 

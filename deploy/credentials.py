@@ -2,10 +2,12 @@
 
 Creates the credentials of the secure profile in DIR (default ``secrets/``, git-ignored): a
 random password per principal plus the router's ``user:password`` dictionary, and a private CA
-with a key and certificate per principal (common name = principal). Every certificate names
-``localhost``, ``127.0.0.1`` and each --host, because the supervisor's certificate is served by
-the TLS listener and clients check the name they connect to. Existing credentials are kept
-unless --force is given.
+with a key and certificate per principal (common name = principal). Only the supervisor's
+certificate can serve the TLS listener: it alone names ``localhost``, ``127.0.0.1`` and each
+--host and allows server authentication. Every other certificate names no host and allows
+client authentication only, so a client that checks the router's name refuses it. DIR is made
+0700 and every secret 0600, whatever their modes were. Existing credentials are kept unless
+--force is given.
 """
 
 from __future__ import annotations
@@ -24,11 +26,13 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
+from common.certificates import refuse_server_capable
 from common.cli import program
 from common.errors import ConfigError
 from common.lifecycle import run_main
 from common.security import (
     PRINCIPALS,
+    ROUTER_PRINCIPAL,
     ca_file,
     ca_key_file,
     cert_file,
@@ -127,22 +131,32 @@ def _leaf_certificate(
     names: list[x509.GeneralName],
     days: int,
 ) -> x509.Certificate:
-    """A certificate for ``principal`` that serves a TLS listener and authenticates a client."""
-    purposes = [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]
+    """A certificate for ``principal``. The supervisor's serves the TLS listener (its host
+    names, server authentication) and authenticates it when its router connects to another
+    host's; every other principal's authenticates a client only and names no host, so no
+    client accepts it as the router's."""
     authority = x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key())
-    return (
+    builder = (
         _builder(principal, ca.subject, key, days)
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
         .add_extension(_key_usage(signs_certificates=False), critical=True)
-        .add_extension(x509.ExtendedKeyUsage(purposes), critical=False)
-        .add_extension(x509.SubjectAlternativeName(names), critical=False)
         .add_extension(authority, critical=False)
-        .sign(ca_key, hashes.SHA256())
+    )
+    purposes = [ExtendedKeyUsageOID.CLIENT_AUTH]
+    if principal == ROUTER_PRINCIPAL:
+        purposes.insert(0, ExtendedKeyUsageOID.SERVER_AUTH)
+        builder = builder.add_extension(x509.SubjectAlternativeName(names), critical=False)
+    return builder.add_extension(x509.ExtendedKeyUsage(purposes), critical=False).sign(
+        ca_key, hashes.SHA256()
     )
 
 
 def _write(path: Path, data: bytes, mode: int) -> Path:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
+    # O_NOFOLLOW: a link planted in the folder must not redirect a secret elsewhere.
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, mode)
+    except OSError as exc:
+        raise ConfigError(f"cannot write {path}: {exc.strerror}") from exc
     with os.fdopen(fd, "wb") as f:
         os.fchmod(f.fileno(), mode)  # with --force an existing file would keep its old mode
         f.write(data)
@@ -164,6 +178,8 @@ def generate(
     if days < 1:
         raise ConfigError(f"--days must be at least 1, got {days}")
     names = _subject_names(hosts)
+    if not force:
+        refuse_server_capable(directory)
     if not force and (existing := [f.name for f in _targets(directory) if f.exists()]):
         raise ConfigError(
             f"credentials already exist in {directory} ({', '.join(existing[:3])}"
@@ -171,9 +187,9 @@ def generate(
         )
     if directory.exists() and not directory.is_dir():
         raise ConfigError(f"{directory} exists and is not a directory")
-    if not directory.exists():
-        directory.mkdir(mode=0o700, parents=True)
-        directory.chmod(0o700)  # mkdir's mode is reduced by the umask
+    directory.mkdir(mode=0o700, parents=True, exist_ok=True)
+    # mkdir's mode is reduced by the umask, and a folder that existed keeps its own mode.
+    directory.chmod(0o700)
 
     written: list[Path] = []
     passwords = {p: secrets.token_urlsafe(24) for p in PRINCIPALS}
@@ -216,7 +232,8 @@ def main() -> int:
     names = ", ".join(dict.fromkeys((*DEFAULT_HOSTS, *args.host)))
     for line in (
         f"wrote {n} passwords and {users_file(directory).name} to {directory}",
-        f"wrote a CA and {n} certificates for {names}, valid {args.days} days, to {directory}",
+        f"wrote a CA and {n} certificates (only the supervisor's serves, for {names}), "
+        f"valid {args.days} days, to {directory}",
         f'use in the stack config: [zenoh] auth = "password" or "certificate", '
         f'credentials_dir = "{directory}"',
     ):

@@ -11,11 +11,14 @@ import zenoh
 from cryptography import x509
 from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
+from cryptography.x509.oid import ExtendedKeyUsageOID
 
+from common.certificates import server_capable, serves_tls
 from common.errors import ConfigError
 from common.lifecycle import run_main
 from common.security import (
     PRINCIPALS,
+    ROUTER_PRINCIPAL,
     ca_file,
     ca_key_file,
     cert_file,
@@ -26,6 +29,7 @@ from common.security import (
 from deploy import credentials
 from deploy.credentials import generate
 from deploy.launch import free_port
+from tests.unit.common.test_certificates import old_style
 
 HOSTS = ("robot.local", "10.0.0.5")
 
@@ -90,19 +94,64 @@ def test_certificates_name_their_principal_and_are_signed_by_the_ca(
         assert 30 <= days <= 31
 
 
-def test_certificates_name_localhost_loopback_and_extra_hosts(
+def test_only_the_supervisors_certificate_names_hosts_and_serves(
     creds: tuple[Path, list[Path]],
 ) -> None:
     directory, _ = creds
+    router = _cert(cert_file(directory, ROUTER_PRINCIPAL))
+    san = router.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+    assert san.value.get_values_for_type(x509.DNSName) == ["localhost", "robot.local"]
+    assert san.value.get_values_for_type(x509.IPAddress) == [
+        ipaddress.ip_address("127.0.0.1"),
+        ipaddress.ip_address("10.0.0.5"),
+    ]
+    # Its router also connects to another host's router, as a client.
+    assert _purposes(router) == [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]
+    assert serves_tls(router)
     for p in PRINCIPALS:
-        san = _cert(cert_file(directory, p)).extensions.get_extension_for_class(
-            x509.SubjectAlternativeName
-        )
-        assert san.value.get_values_for_type(x509.DNSName) == ["localhost", "robot.local"]
-        assert san.value.get_values_for_type(x509.IPAddress) == [
-            ipaddress.ip_address("127.0.0.1"),
-            ipaddress.ip_address("10.0.0.5"),
-        ]
+        if p == ROUTER_PRINCIPAL:
+            continue
+        cert = _cert(cert_file(directory, p))
+        with pytest.raises(x509.ExtensionNotFound):
+            cert.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+        assert _purposes(cert) == [ExtendedKeyUsageOID.CLIENT_AUTH], p
+        assert not serves_tls(cert), p
+    assert server_capable(directory) == []
+
+
+def _purposes(cert: x509.Certificate) -> list[x509.ObjectIdentifier]:
+    return list(cert.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value)
+
+
+def test_old_server_capable_credentials_are_named_and_replaced_with_force(tmp_path: Path) -> None:
+    generate(tmp_path)
+    old_style(tmp_path, "viewer")
+    old_style(tmp_path, "camera")
+    with pytest.raises(ConfigError, match=r"certificates of camera, viewer could.*--force"):
+        generate(tmp_path)
+    generate(tmp_path, force=True)
+    assert server_capable(tmp_path) == []
+
+
+def test_an_existing_open_folder_and_files_become_private(tmp_path: Path) -> None:
+    directory = tmp_path / "secrets"
+    directory.mkdir()
+    directory.chmod(0o777)
+    password_file(directory, "camera").write_text("old\n")
+    password_file(directory, "camera").chmod(0o666)
+    generate(directory, force=True)
+    assert _mode(directory) == 0o700
+    assert _mode(password_file(directory, "camera")) == 0o600
+    assert _mode(users_file(directory)) == 0o600
+
+
+def test_a_link_in_the_folder_is_not_followed(tmp_path: Path) -> None:
+    directory, elsewhere = tmp_path / "secrets", tmp_path / "elsewhere"
+    directory.mkdir()
+    password_file(directory, "supervisor").symlink_to(elsewhere)
+    with pytest.raises(ConfigError, match=r"cannot write .*supervisor.password"):
+        generate(directory, force=True)
+    assert not elsewhere.exists()
 
 
 def test_another_ca_does_not_verify(creds: tuple[Path, list[Path]], tmp_path: Path) -> None:
