@@ -22,6 +22,11 @@ COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
     "benchmark": ("services.detector", ("benchmark",), "time the detector's stages, per backend"),
     "export": ("services.detector", ("export",), "build a TensorRT engine ahead of time"),
     "fetch-model": ("services.detector", ("fetch-model",), "fetch and convert the default model"),
+    "fast-profile": (
+        "services.detector",
+        ("fast-profile",),
+        "measure the CPU variants once; the fast profile starts from the cached choice",
+    ),
     "query": ("services.metrics", ("query",), "print a running stack's metrics as JSON"),
     "evaluate": ("services.metrics", ("evaluate",), "accuracy on a labelled dataset"),
     "report": ("services.metrics", ("report",), "record a run and write report.md with plots"),

@@ -284,7 +284,8 @@ def _add_export(subparsers: Any) -> None:
 
 def run_fetch_model(args: argparse.Namespace) -> int:
     """Fetch and convert the default model if needed, and print its path. With ``--config``,
-    only when that stack runs a detector on the default model (what ``make run`` asks)."""
+    only when that stack runs a detector on the default model, and then also measure the fast
+    profile if the config asks for it (what ``make run`` asks before it starts the stack)."""
     if args.config:
         from common.config_file import load_config
 
@@ -292,14 +293,46 @@ def run_fetch_model(args: argparse.Namespace) -> int:
         if "detector" not in config.supervisor.services:
             print_progress("fetch-model: the stack runs no detector: nothing to fetch")
             return EXIT_OK
-        if config.detector.model:
+        if not config.detector.model:
+            print(ensure_default_model(progress=print_progress))
+        else:
             print_progress(
                 f"fetch-model: detector.model is {config.detector.model}: nothing to fetch"
             )
-            return EXIT_OK
+        if config.detector.profile == "fast":
+            _measure_fast(config.detector)
+        return EXIT_OK
     models_dir = Path(args.models_dir) if args.models_dir else None
     print(ensure_default_model(models_dir, progress=print_progress))
     return EXIT_OK
+
+
+def _measure_fast(settings: DetectorSettings) -> str:
+    """Measure (or read from the cache) the fast profile's choice; its variant's label."""
+    from services.detector.fast_profile import choose_fast
+
+    variant, why = choose_fast(settings, print_progress, may_measure=True)
+    print_progress(why)
+    return variant.label
+
+
+def run_fast_profile(args: argparse.Namespace) -> int:
+    """Measure the CPU variants once, cache the fast profile's choice, print it."""
+    from common.config_file import load_config
+
+    config = load_config(args.config)
+    print(_measure_fast(config.detector))
+    return EXIT_OK
+
+
+def _add_fast_profile(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "fast-profile",
+        prog=program(PROG, "fast-profile"),
+        help="measure the CPU variants once and cache the fast profile's choice",
+    )
+    p.add_argument("--config", help="stack config (default deploy/stack.toml)")
+    p.set_defaults(handler=run_fast_profile)
 
 
 def _add_fetch_model(subparsers: Any) -> None:
@@ -322,6 +355,7 @@ SUBCOMMANDS: list[Callable[[Any], None]] = [
     _add_detect,
     _add_benchmark,
     _add_fetch_model,
+    _add_fast_profile,
     _add_export,
     _add_serve,
 ]
@@ -338,7 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default ``sys.argv[1:]``), run the subcommand, return its exit code."""
-    names = ["detect", "benchmark", "fetch-model", "export", "serve"]
+    names = ["detect", "benchmark", "fetch-model", "fast-profile", "export", "serve"]
     args = build_parser().parse_args(with_default(sys.argv[1:] if argv is None else argv, names))
     handler: Callable[[argparse.Namespace], int] = args.handler
     try:

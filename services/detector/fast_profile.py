@@ -4,9 +4,13 @@ Candidates are every variant this machine can run: ONNX Runtime FP32 and INT8 at
 and 416, and the same on OpenVINO when that backend is installed. Each is timed (interleaved,
 round-robin in a shuffled order) and scored (AP50 on the hand-labelled photos); the choice is
 the fastest at p50 whose AP50 is at most ``fast_max_ap50_drop`` below FP32 at 640
-(:func:`choose`, pure). Measuring takes a minute or more, so the figures are cached beside the
-model, keyed by the model's sha256, the CPU (model and flags), the candidates and the
-calibration folder; a hit only re-runs :func:`choose`. The choice is logged in one line.
+(:func:`choose`, pure). Measuring takes a minute or more, so it is a step of its own, run
+ahead of time (``zstack fast-profile``, and ``make run`` when the config asks for the fast
+profile), which prints its progress and stops at once on Ctrl-C or SIGTERM, leaving nothing
+half-written. The figures are cached beside the model, keyed by the model's sha256, the CPU
+(model and flags), the candidates and the calibration folder. The detector service only reads
+the cache: it never measures at start-up (a supervisor with a deadline would kill it midway);
+with no cache it stops with one line saying what to run. The choice is logged in one line.
 """
 
 from __future__ import annotations
@@ -159,8 +163,15 @@ def cache_file(s: DetectorSettings) -> Path:
     return model.with_name(model.stem + ".fast-profile.json")
 
 
-def choose_fast(s: DetectorSettings, progress: Progress = print_progress) -> tuple[Variant, str]:
-    """The fast profile's variant for ``s`` and why (measured once, then cached)."""
+#: What a user runs to measure the fast profile ahead of time.
+MEASURE_COMMAND = "zstack fast-profile"
+
+
+def choose_fast(
+    s: DetectorSettings, progress: Progress = print_progress, *, may_measure: bool = True
+) -> tuple[Variant, str]:
+    """The fast profile's variant for ``s`` and why: from the cache, or measured now when
+    ``may_measure`` (ConfigError naming :data:`MEASURE_COMMAND` when not, and nothing is cached)."""
     variants = candidates(sizes_for(s))
     reference = variants[0].label
     key = cache_key(s, variants)
@@ -173,6 +184,12 @@ def choose_fast(s: DetectorSettings, progress: Progress = print_progress) -> tup
     except (OSError, ValueError, TypeError, KeyError):
         figures = None
     source = "cached figures"
+    if figures is None and not may_measure:
+        raise ConfigError(
+            f'detector.profile = "fast" has not been measured for {path.stem.split(".")[0]} on '
+            f"this CPU: run `{MEASURE_COMMAND}` once (it takes a minute or two; `make run` "
+            'does it when the config asks for the fast profile), or set profile = "default"'
+        )
     if figures is None:
         progress(f"fast profile: measuring {len(variants)} variants (once; cached in {path.name})")
         figures = measure(s, variants, progress)

@@ -39,7 +39,7 @@ def open_detector(s: DetectorSettings) -> tuple[Detector, str]:
     if s.profile == "fast":
         from services.detector.fast_profile import choose_fast
 
-        variant, why = choose_fast(s)
+        variant, why = choose_fast(s, may_measure=False)  # measured ahead: zstack fast-profile
         det, note = open_prepared(variant.settings(s))
         return det, f"{why}; {note}" if note else why
     return open_prepared(s)

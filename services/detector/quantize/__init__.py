@@ -219,12 +219,45 @@ def quantized_model(
     return out
 
 
+SCRATCH_PREFIX = ".int8-"
+
+
+def remove_orphan_scratch(folder: Path) -> list[Path]:
+    """Remove the scratch folders of quantizations whose process is gone; return them."""
+    removed = []
+    for scratch in folder.glob(f"{SCRATCH_PREFIX}*"):
+        pid = scratch.name.removeprefix(SCRATCH_PREFIX).split("-", 1)[0]
+        if not scratch.is_dir() or (pid.isdigit() and _alive(int(pid))):
+            continue
+        shutil.rmtree(scratch, ignore_errors=True)
+        removed.append(scratch)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # someone else's process: alive
+    return True
+
+
 def _build(
     module: Any, model: Path, out: Path, frames: Sequence[npt.NDArray[np.float32]], keep: list[str]
 ) -> None:
-    """Quantize into a scratch folder, then move every file it wrote beside ``out``."""
+    """Quantize into a scratch folder, then move every file it wrote beside ``out``.
+
+    The folder is named after this process (``.int8-<pid>-...``): a quantization stopped by
+    SIGKILL cannot remove its own, so each build first removes those of processes that are
+    gone (a stop by SIGINT or SIGTERM removes its own on the way out).
+    """
     out.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=".int8-", dir=out.parent) as tmp:
+    remove_orphan_scratch(out.parent)
+    with tempfile.TemporaryDirectory(
+        prefix=f"{SCRATCH_PREFIX}{os.getpid()}-", dir=out.parent
+    ) as tmp:
         scratch = Path(tmp) / out.name
         try:
             module.quantize(model, scratch, frames, keep_float=keep)

@@ -16,7 +16,9 @@ The model's metadata (class names, input size) is copied into the IR's runtime i
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import sys
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -78,13 +80,15 @@ def quantize(
     ignored = openvino_names(ov_model, onnx_model, keep_float)
     # NNCF logs a line per ignored node on stdout; the caller prints its own progress.
     nncf.set_log_level(logging.WARNING)
-    quantized = nncf.quantize(
-        ov_model,
-        nncf.Dataset(list(frames)),
-        preset=nncf.QuantizationPreset.MIXED,
-        subset_size=len(frames),
-        ignored_scope=nncf.IgnoredScope(names=ignored),
-    )
+    # Its progress bar is drawn on stdout, which carries a command's result: move it to stderr.
+    with contextlib.redirect_stdout(sys.stderr):
+        quantized = nncf.quantize(
+            ov_model,
+            nncf.Dataset(list(frames)),
+            preset=nncf.QuantizationPreset.MIXED,
+            subset_size=len(frames),
+            ignored_scope=nncf.IgnoredScope(names=ignored),
+        )
     for prop in onnx_model.metadata_props:
         quantized.set_rt_info(prop.value, [METADATA_KEY, prop.key])
     out.parent.mkdir(parents=True, exist_ok=True)
