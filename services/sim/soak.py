@@ -27,11 +27,12 @@ from common.config_file import to_toml
 from common.keys import Keys
 from common.messages import GroundTruth
 from common.settings import SERVICES, Config
-from deploy.launch import service_pids, start_supervisor, stop_supervisor
+from deploy.launch import service_pids, start_supervisor, stop_supervisor, wait_ready
 from services.sim.runner import STOP_TIMEOUT_S, record_into, scenario_config
 from services.sim.scenarios import SCENARIOS
 from services.sim.score import Recording
 
+READY_TIMEOUT_S = 180.0  # the stack's start-up on a loaded 2-core machine
 WARM_UP_S = 60.0  # model load, caches and allocator pools settle before memory counts as "flat"
 IN_VIEW_MIN_FRACTION = 0.8  # "still following": the person in view this much of the last window
 FOLLOW_RANGE_M = 3.0  # ... and no further than this from the robot, on average
@@ -113,7 +114,11 @@ def summarise(
 ) -> dict[str, Any]:
     """The soak's verdicts from its samples and the simulator's truth. Pure."""
     samples = figures.samples
-    settled = [s for s in samples if s.t_s >= WARM_UP_S] or samples
+    # Memory is judged only after the warm-up (model load, caches, allocator pools); a run
+    # too short to have two samples after it judges no growth rather than count the load.
+    settled = [s for s in samples if s.t_s >= WARM_UP_S]
+    if len(settled) < 2:
+        settled = []
     memory: dict[str, dict[str, float]] = {}
     for name in sorted({n for s in samples for n in s.rss_mb}):
         series = [s.rss_mb[name] for s in settled if name in s.rss_mb]
@@ -134,6 +139,8 @@ def summarise(
     if half is not None and last is not None and last.t_s > half.t_s:
         log_rate = (last.log_bytes - half.log_bytes) / (last.t_s - half.t_s)
     end_time = truths[-1].sim_time_s if truths else 0.0
+    # The last minute, or the second half of a shorter run: what "still following" judges.
+    window_s = min(window_s, end_time / 2) if end_time > 0 else window_s
     fraction, mean_range = in_view_fraction(
         [t for t in truths if t.sim_time_s >= end_time - window_s], hfov_deg
     )
@@ -144,6 +151,8 @@ def summarise(
         "restarts": restarts,
         "log_bytes": last.log_bytes if last else 0,
         "log_bytes_per_s_second_half": log_rate,
+        "last_window_s": window_s,
+        "warm_up_s": WARM_UP_S,
         "last_window_in_view": fraction,
         "last_window_mean_range_m": mean_range,
         "still_following": fraction >= IN_VIEW_MIN_FRACTION and mean_range <= FOLLOW_RANGE_M,
@@ -181,7 +190,12 @@ def run_soak(
         session = open_session(config.zenoh, "observer")
         flooder = threading.Thread(target=_flood, args=(config, flood_hz, stop, figures))
         try:
-            subs = record_into(session, Keys(config.stack.prefix), config.stack.camera, rec)
+            keys = Keys(config.stack.prefix)
+            # The soak's clock starts once every service is ready: memory is judged from then
+            # (after the warm-up), never from before the model was loaded.
+            wait_ready(session, keys, set(config.supervisor.services), proc, READY_TIMEOUT_S,
+                       log_path=log_path)  # fmt: skip
+            subs = record_into(session, keys, config.stack.camera, rec)
             flooder.start()
             start = time.monotonic()
             while (now := time.monotonic() - start) < duration_s:
@@ -219,10 +233,19 @@ def soak_table(r: dict[str, Any]) -> str:
         f"log {r['log_bytes'] / 1e3:.0f} kB "
         f"({r['log_bytes_per_s_second_half']:.1f} B/s over the second half)",
         f"still following: {r['still_following']} (person in view "
-        f"{100 * r['last_window_in_view']:.0f} % of the last minute, mean range "
-        f"{r['last_window_mean_range_m']:.2f} m)",
+        f"{100 * r['last_window_in_view']:.0f} % of the last {r['last_window_s']:.0f} s, mean "
+        f"range {r['last_window_mean_range_m']:.2f} m)",
         "",
-        "| process | RSS after warm-up (MB) | at the end | max | growth | restarts |",
+    ]
+    if not r["memory"]:
+        lines.append(
+            f"memory: not judged: the run ended before two samples after the "
+            f"{r['warm_up_s']:.0f} s warm-up (the stack counts from when it was ready)"
+        )
+        return "\n".join(lines)
+    lines += [
+        f"| process | RSS {r['warm_up_s']:.0f} s after ready (MB) | at the end | max | growth "
+        "| restarts |",
         "|---|---|---|---|---|---|",
     ]
     for name, m in r["memory"].items():

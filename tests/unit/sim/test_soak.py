@@ -9,7 +9,7 @@ import pytest
 
 from common.errors import DecodeError
 from common.messages import GroundTruth, Header
-from services.sim.soak import Sample, SoakFigures, garbage, summarise
+from services.sim.soak import Sample, SoakFigures, garbage, soak_table, summarise
 from tests.unit.common.test_fuzz_decoders import MESSAGE_TYPES
 
 HDR = Header(stamp_ns=1, frame_id="world", source="sim", seq=0)
@@ -48,7 +48,19 @@ def test_flat_memory_bounded_log_and_following() -> None:
     assert r["memory"]["controller"]["growth_mb"] == 0.0
     assert r["log_bytes_per_s_second_half"] == pytest.approx(10.0)
     assert r["restarts"] == {"detector": 0}
-    assert r["still_following"] is True
+    assert r["still_following"] is True and r["last_window_s"] == 60.0
+
+
+def test_a_short_soak_judges_no_memory_growth_and_says_its_window() -> None:
+    figures = SoakFigures(flood_messages=10)
+    for t in (0, 10, 20, 30, 40):  # a 45 s run: nothing after the 60 s warm-up
+        figures.samples.append(Sample(float(t), {"detector": 100.0 + 5 * t}, 1000, {}))
+    truths = [truth(float(t), 0.0, (2.0, 0.2)) for t in range(0, 45)]
+    r = summarise(figures, truths, hfov_deg=60.0)
+    assert r["memory"] == {}  # the model's load is not "growth"
+    assert r["last_window_s"] == pytest.approx(22.0)  # the second half, not "the last minute"
+    table = soak_table({**r, "log": "x"})
+    assert "memory: not judged" in table and "of the last 22 s" in table
 
 
 def test_a_lost_person_or_a_restart_is_reported() -> None:
