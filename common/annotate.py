@@ -47,11 +47,12 @@ def annotate(
         text = f"{name} {score:.2f}" + (f" #{tid}" if tid >= 0 else "")
         (tw, th), base = cv2.getTextSize(text, _FONT, font_scale, max(1, thickness - 1))
         top = y1 - th - base if y1 - th - base >= 0 else y1  # inside the box at the top edge
-        cv2.rectangle(out, (x1, top), (x1 + tw, top + th + base), colour, cv2.FILLED)
+        left = max(0, min(x1, w - tw))  # a box at the right edge: the label moves in, whole
+        cv2.rectangle(out, (left, top), (left + tw, top + th + base), colour, cv2.FILLED)
         cv2.putText(
             out,
             text,
-            (x1, top + th),
+            (left, top + th),
             _FONT,
             font_scale,
             (0, 0, 0),

@@ -88,7 +88,8 @@ def latency_histogram(samples: Mapping[str, Sequence[float]], path: Path) -> Pat
                 label=f"{label}: p50 {p50:.0f} ms, p95 {p95:.0f} ms",
             )
             ax.axvline(p50, color=colour, linestyle="--", linewidth=1)
-        ax.legend(loc="upper right", fontsize=9)
+        # Below the axes, never over the bars.
+        fig.legend(loc="outside lower center", ncols=1, fontsize=9, frameon=False)
         ax.set_xlim(0, bins[-1])
     ax.set_title("Latency per frame (dashed: median)")
     ax.set_xlabel("latency (ms)")

@@ -146,6 +146,12 @@ def render_markdown(session: Session, plots: Mapping[str, Path]) -> str:
         figures = [_ms(p.get(q, 0.0)) for q in ("p50", "p95", "p99", "mean")]
         rows.append([f"`{stage}`", what, *figures, f"{p.get('count', 0):.0f}"])
     lines += _table(["stage", "covers", "p50", "p95", "p99", "mean", "samples"], rows)
+    lines += [
+        "",
+        "The samples are the frames whose detections the report received while it recorded; "
+        "the summary's frame counts are whole seconds of the per-second timeline, so the two "
+        "can differ by the frames of a part second at either end.",
+    ]
     means = segment_means(s["latency_ms"])
     parts = ", ".join(f"{seg} {_ms(means[seg])}" for seg, _ in SEGMENTS)
     lines += ["", f"The mean frame, in parts that add up (ms): {parts}."]

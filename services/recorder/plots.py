@@ -29,13 +29,15 @@ def comparison_plot(c: Comparison, name_a: str, name_b: str, path: Path) -> Path
     lat.set_xticks(x, [s.replace("_", " ") for s in stages], rotation=25, ha="right", fontsize=8)
     lat.set_ylabel("p50 latency (ms)")
     lat.set_title("Latency per stage")
-    lat.legend(fontsize=9)
+    # Below the axes, never over the bars.
+    fig.legend(loc="outside lower center", ncols=2, fontsize=9, frameon=False)
     if c.ious:
         hist.hist(c.ious, bins=np.linspace(c.iou_min, 1.0, 21).tolist(), color="#55a868")
     else:
         hist.text(0.5, 0.5, "no matched detections", ha="center", va="center",
                   transform=hist.transAxes)  # fmt: skip
-    hist.set_title(f"IoU of matched detections ({c.matched} of {max(c.detections)})")
+    # On two lines: the narrow right panel cut a one-line title off.
+    hist.set_title(f"IoU of matched detections\n({c.matched} of {max(c.detections)})")
     hist.set_xlabel("IoU")
     hist.set_ylabel("detections")
     fig.savefig(path, dpi=DPI)

@@ -105,6 +105,7 @@ def test_report_from_a_saved_session(tmp_path: Path) -> None:
         "![Throughput over time](fps_over_time.png)",
         "onnx/cpu/fp32",
         "tensorrt",
+        "can differ by the frames of a part second",  # why frames and samples disagree
     ):
         assert needle in md, needle  # fmt: skip
     # The saved copy reads back, and the timeline has one point per recorded second.
