@@ -36,6 +36,18 @@ BOX_THICKNESS_PX = 2.0
 LOCKED_THICKNESS_PX = 5.0
 LOCKED_COLOUR = Color(r=1.0, g=0.1, b=0.1, a=1.0)  # the controller's target stands out in red
 LABEL_FONT_PX = 14.0
+# A glyph's width as a share of the font size: enough to keep a label inside the image.
+GLYPH_WIDTH = 0.6
+
+
+def label_position(x1: float, y1: float, text: str, width: float) -> tuple[float, float]:
+    """Where a box's label goes. Foxglove's TextAnnotation ``position`` is the text's
+    *bottom-left* corner: above the box's top edge when there is room, else just inside the
+    box (a box touching the image's top, as the followed person at follow distance); moved
+    left so that it ends inside the image."""
+    y = y1 if y1 >= LABEL_FONT_PX else y1 + LABEL_FONT_PX
+    x = max(0.0, min(x1, width - GLYPH_WIDTH * LABEL_FONT_PX * len(text)))
+    return x, y
 _BLACK = Color(r=0.0, g=0.0, b=0.0, a=1.0)
 
 
@@ -118,11 +130,13 @@ def image_annotations(
                 thickness=LOCKED_THICKNESS_PX if locked else BOX_THICKNESS_PX,
             )
         )
+        text = label(name, score, tid, locked)
+        lx, ly = label_position(x1, y1, text, width)
         texts.append(
             TextAnnotation(
                 timestamp=ts,
-                position=Point2(x=x1, y=max(0.0, y1 - LABEL_FONT_PX)),
-                text=label(name, score, tid, locked),
+                position=Point2(x=lx, y=ly),
+                text=text,
                 font_size=LABEL_FONT_PX,
                 text_color=_BLACK,
                 background_color=colour,

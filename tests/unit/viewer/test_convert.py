@@ -146,3 +146,15 @@ def test_the_message_types_are_foxgloves_own() -> None:
         "foxglove.CompressedImage", "foxglove.ImageAnnotations", "foxglove.LaserScan",
         "foxglove.FrameTransforms", "foxglove.SceneUpdate",
     }  # fmt: skip
+
+
+def test_labels_stay_inside_the_image() -> None:
+    from services.viewer.convert import LABEL_FONT_PX, label_position
+
+    # Room above the box: the text's bottom-left corner on the box's top edge.
+    assert label_position(100.0, 50.0, "person 0.90", 640) == (100.0, 50.0)
+    # A box touching the image's top: the text inside the box, not above the image.
+    assert label_position(100.0, 0.0, "person 0.90 #1", 640)[1] == LABEL_FONT_PX
+    # A box at the right edge: the label moved left, whole.
+    x, _ = label_position(630.0, 50.0, "person 0.90", 640)
+    assert x < 630.0 and x + 0.6 * LABEL_FONT_PX * len("person 0.90") <= 640.0
