@@ -195,9 +195,8 @@ def _add_detect(subparsers: Any) -> None:
     )
     p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
     p.add_argument(
-        "--backend",
-        choices=BACKEND_CHOICES,
-        help="onnx, openvino, cuda, tensorrt or auto (default: onnx; cuda with a GPU --device)",
+        "--backend",  # checked when the backend opens: one line, not argparse's usage block
+        help=f"{', '.join(BACKEND_CHOICES)} (default: onnx; cuda with a GPU --device)",
     )
     p.add_argument("--device", help="cpu, N, cuda or cuda:N (as yolo's --device)")
     p.add_argument(

@@ -202,7 +202,7 @@ def twist_from_ros(msg: RosMessage, *, source: str, received_ns: int, seq: int =
     """A ``geometry_msgs/Twist`` or ``TwistStamped`` as the stack's Twist.
 
     A bare Twist has no stamp or frame: it is stamped ``received_ns`` in ``base_link``.
-    Non-finite velocities raise DecodeError: they must never reach a motor.
+    Non-finite or absurd velocities raise DecodeError: they must never reach a motor.
     """
     if msg.__msgtype__ == TWIST_STAMPED:
         header = header_from_ros(msg.header, source=source, seq=seq)
@@ -213,4 +213,7 @@ def twist_from_ros(msg: RosMessage, *, source: str, received_ns: int, seq: int =
     angular = (float(msg.angular.x), float(msg.angular.y), float(msg.angular.z))
     if not all(math.isfinite(v) for v in (*linear, *angular)):
         raise DecodeError(f"Twist: velocities must be finite, got {linear} {angular}")
-    return Twist(header=header, linear=linear, angular=angular)
+    try:
+        return Twist(header=header, linear=linear, angular=angular)
+    except ValueError as exc:  # beyond what any base takes (common.messages.MAX_COMMAND)
+        raise DecodeError(f"Twist: {exc}") from exc
