@@ -16,6 +16,7 @@ import contextlib
 import logging
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,7 @@ import numpy.typing as npt
 from common.annotate import annotate
 from common.cli import program, with_default
 from common.errors import ConfigError, ImageError, StackError
-from common.images import list_images, load_image
+from common.images import SAMPLES, Image, list_images, load_image, load_sample
 from common.lifecycle import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, exit_code, print_progress
 from common.settings import DetectorSettings
 from services.camera import CaptureSource, is_stream, open_stream
@@ -40,6 +41,10 @@ from services.detector.types import DetectionResult
 from services.detector.variants import sized_model
 from services.detector.video import detect_stream
 
+#: What ``detect`` looks at when given no PATH, as ``yolo predict`` has its bundled images: a
+#: scikit-image photo, in the camera's own ``sample:<name>`` form (common/images.py SAMPLES).
+SAMPLE_PREFIX = "sample:"
+DEFAULT_SAMPLE = f"{SAMPLE_PREFIX}chelsea"
 # The stack's shared exit codes (common/lifecycle.py); a failed image is the generic failure.
 EXIT_IMAGE_FAILED = EXIT_FAILED
 PROG = "python -m services.detector"
@@ -96,9 +101,9 @@ def _add_model_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _save_annotated(
-    save_dir: Path, path: Path, image: npt.NDArray[np.uint8], result: DetectionResult
+    save_dir: Path, name: str, image: npt.NDArray[np.uint8], result: DetectionResult
 ) -> None:
-    target = save_dir / path.name
+    target = save_dir / name
     drawn = annotate(image, result.boxes, result.class_names)
     ok, encoded = cv2.imencode(target.suffix or ".png", drawn)
     if not ok:
@@ -109,15 +114,38 @@ def _save_annotated(
         raise ImageError(f"{target}: cannot write ({exc.strerror or exc})") from exc
 
 
-def _detect_image(det: Detector, path: Path, *, as_json: bool, save_dir: Path | None) -> bool:
-    """Detect on one image file and print the result; False (after one error line) when the
-    image cannot be read or its annotated copy cannot be written."""
+@dataclass(frozen=True, slots=True)
+class SamplePhoto:
+    """A bundled photo named ``sample:<name>``: its name and its BGR pixels."""
+
+    name: str
+    image: Image
+
+    @classmethod
+    def open(cls, spec: str) -> SamplePhoto:
+        """Load ``spec``'s photo now (an unknown name is one line, before the model loads) and
+        say which on stderr: with no PATH the user did not name it."""
+        name = spec.removeprefix(SAMPLE_PREFIX)
+        photo = cls(name=name, image=load_sample(name))
+        print_progress(f"detect: {spec}: scikit-image's bundled {name!r} photo")
+        return photo
+
+
+def _detect_image(
+    det: Detector, item: Path | SamplePhoto, *, as_json: bool, save_dir: Path | None
+) -> bool:
+    """Detect on one image file or sample photo and print the result; False (after one error
+    line) when the image cannot be read or its annotated copy cannot be written."""
     try:
-        image = load_image(path)
+        if isinstance(item, Path):
+            label, image, save_name = str(item), load_image(item), item.name
+        else:
+            label, image = f"{SAMPLE_PREFIX}{item.name}", item.image
+            save_name = f"{item.name}.png"
         result = det.detect(image)
-        print(result_json(str(path), result) if as_json else result_text(str(path), result))
+        print(result_json(label, result) if as_json else result_text(label, result))
         if save_dir is not None:
-            _save_annotated(save_dir, path, image, result)
+            _save_annotated(save_dir, save_name, image, result)
     except ImageError as exc:
         _error(str(exc))
         return False
@@ -125,7 +153,8 @@ def _detect_image(det: Detector, path: Path, *, as_json: bool, save_dir: Path | 
 
 
 def run_detect(args: argparse.Namespace) -> int:
-    """Detect objects in images, folders of images, videos and camera devices, in order.
+    """Detect objects in images, folders of images, sample photos, videos and camera devices,
+    in order; with no PATH, in the bundled sample photo :data:`DEFAULT_SAMPLE`.
 
     Bad images are reported and skipped (exit 1 at the end). A video or device that cannot be
     opened, or that gives not one frame, stops with one line (exit 2).
@@ -138,10 +167,13 @@ def run_detect(args: argparse.Namespace) -> int:
     )
     save_dir = Path(args.save_dir) if args.save_dir else None
     with contextlib.ExitStack() as opened:
-        # Videos and devices are opened before the model loads: a missing one is one line, now.
-        inputs: list[Path | tuple[str, CaptureSource]] = []
-        for spec in args.paths:
-            if is_stream(spec):
+        # Samples, videos and devices are opened before the model loads: a missing one is one
+        # line, now.
+        inputs: list[Path | SamplePhoto | tuple[str, CaptureSource]] = []
+        for spec in args.paths or [DEFAULT_SAMPLE]:
+            if spec.startswith(SAMPLE_PREFIX):
+                inputs.append(SamplePhoto.open(spec))
+            elif is_stream(spec):
                 source = open_stream(spec)
                 opened.callback(source.close)
                 inputs.append((spec, source))
@@ -161,11 +193,11 @@ def run_detect(args: argparse.Namespace) -> int:
                 **options,
             )
         )
-        images = [item for item in inputs if isinstance(item, Path)]
+        images = [item for item in inputs if isinstance(item, Path | SamplePhoto)]
         bar = ProgressBar("images", len(images), unit="images") if len(images) > 1 else None
         failed = 0
         for item in inputs:
-            if isinstance(item, Path):
+            if isinstance(item, Path | SamplePhoto):
                 failed += not _detect_image(det, item, as_json=args.json, save_dir=save_dir)
                 if bar is not None:
                     bar.advance()
@@ -184,14 +216,15 @@ def _add_detect(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "detect",
         prog=program(PROG, "detect"),
-        help="detect objects in images, folders, videos or a camera device",
+        help="detect objects in images, folders, videos, a camera device or a bundled photo",
     )
     p.add_argument(
         "paths",
-        nargs="+",
+        nargs="*",
         metavar="PATH",
-        help="image file, folder of images, video file, device:N, /dev/videoN or a stream URL "
-        "(rtsp://, http://, ...)",
+        help="image file, folder of images, video file, device:N, /dev/videoN, a stream URL "
+        "(rtsp://, http://, ...) or a bundled photo sample:NAME "
+        f"({', '.join(SAMPLES)}); default: {DEFAULT_SAMPLE}",
     )
     p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
     p.add_argument(
