@@ -18,7 +18,11 @@ from common.settings import SERVICES
 COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
     "run": ("deploy.supervisor", (), "start the stack under the supervisor (Ctrl-C stops it)"),
     "serve": ("", (), "run one service: zstack serve camera|sim|detector|controller|metrics|..."),
-    "detect": ("services.detector", ("detect",), "detect on images or folders of images"),
+    "detect": (
+        "services.detector",
+        ("detect",),
+        "detect on photos, folders, videos, cameras or streams",
+    ),
     "benchmark": ("services.detector", ("benchmark",), "time the detector's stages, per backend"),
     "export": ("services.detector", ("export",), "build a TensorRT engine ahead of time"),
     "fetch-model": ("services.detector", ("fetch-model",), "fetch and convert the default model"),
