@@ -67,6 +67,18 @@ def person(h: Header, n: int = 1) -> Detections:
     )
 
 
+def restart_controller(stack: Stack) -> None:
+    """SIGKILL the controller and wait until the supervisor's new one is ready."""
+    [pid] = service_pids("controller", stack.config_path)
+    os.kill(pid, signal.SIGKILL)
+    wait_for(
+        lambda: [p for p in service_pids("controller", stack.config_path) if p != pid],
+        30,
+        "the supervisor to restart the controller",
+    )
+    wait_for(lambda: "controller" in stack.ready_services(), 60, "the new controller")
+
+
 def counters(raw: list[bytes]) -> dict[str, int]:
     return ServiceCounters.decode(raw[-1]).counters if raw else {}
 
@@ -79,14 +91,7 @@ def test_estop_survives_a_killed_controller_and_a_restarted_stack(make_stack, tm
     stack.estop("engage")
     engaged = len(cmds)
 
-    [pid] = service_pids("controller", stack.config_path)
-    os.kill(pid, signal.SIGKILL)
-    wait_for(
-        lambda: [p for p in service_pids("controller", stack.config_path) if p != pid],
-        30,
-        "the supervisor to restart the controller",
-    )
-    wait_for(lambda: "controller" in stack.ready_services(), 60, "the new controller")
+    restart_controller(stack)
     after_restart = len(cmds)
     wait_for(lambda: len(cmds) > after_restart + 40, 20, "commands of the restarted controller")
     assert moving(cmds, engaged) == [], "a command moved the robot while the e-stop was latched"

@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
-import signal
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -18,9 +16,8 @@ import pytest
 
 from common.clock import now
 from common.messages import ControllerStatus, EStop
-from deploy.launch import service_pids
 from tests.integration.conftest import REPO, Stack, wait_for
-from tests.integration.test_safety import STACK, header, moving, pause
+from tests.integration.test_safety import STACK, header, moving, pause, restart_controller
 
 pytestmark = pytest.mark.integration
 
@@ -51,17 +48,6 @@ def unwritable(folder: Path) -> Iterator[None]:
 
 def statuses_of(raw: list[bytes]) -> list[ControllerStatus]:
     return [ControllerStatus.decode(s) for s in list(raw)]
-
-
-def restart_controller(stack: Stack) -> None:
-    [pid] = service_pids("controller", stack.config_path)
-    os.kill(pid, signal.SIGKILL)
-    wait_for(
-        lambda: [p for p in service_pids("controller", stack.config_path) if p != pid],
-        30,
-        "the supervisor to restart the controller",
-    )
-    wait_for(lambda: "controller" in stack.ready_services(), 60, "the new controller")
 
 
 def test_a_stop_that_cannot_be_saved_is_still_a_stop(make_stack, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
