@@ -100,10 +100,9 @@ class EStopLatch:
             state = EStopState(state.engaged, latest_ns, state.by, state.reason)
             self.note += f"; its stamp was in the future, bounded to {latest_ns}"
         self.state = state
-        self.saved = True
-        self.save_error = ""
         self.last_refusal = ""
-        self._persist(state)  # proves the state can be kept; if not, stays engaged
+        self.save_error = self._write(state)  # proves the state can be kept; if not, engaged
+        self.saved = not self.save_error
         if not self.saved and not state.engaged:
             self.state = EStopState(True, latest_ns, "controller", "state cannot be saved")
             self.note += f"; cannot save it ({self.save_error}): latched until it can be"
@@ -112,14 +111,13 @@ class EStopLatch:
     def engaged(self) -> bool:
         return self.state.engaged
 
-    def _persist(self, state: EStopState) -> bool:
+    def _write(self, state: EStopState) -> str:
+        """Save ``state``; "" when done, else why not."""
         try:
             save(self.path, state)
         except OSError as exc:
-            self.saved, self.save_error = False, f"{exc.strerror or exc}: {self.path}"
-            return False
-        self.saved, self.save_error = True, ""
-        return True
+            return f"{exc.strerror or exc}: {self.path}"
+        return ""
 
     def engage(self, stamp_ns: int, by: str, reason: str, latest_ns: int) -> bool:
         """Latch (in memory first, so that a disk error cannot delay the stop), then persist;
@@ -127,7 +125,9 @@ class EStopLatch:
         since = min(max(stamp_ns, self.state.since_ns), latest_ns)
         with self._lock:
             self.state = EStopState(True, since, by[:MAX_REASON_CHARS], reason[:MAX_REASON_CHARS])
-            return self._persist(self.state)
+            self.save_error = self._write(self.state)
+            self.saved = not self.save_error
+            return self.saved
 
     def release(self, stamp_ns: int, by: str) -> bool:
         """Clear the latch if ``stamp_ns`` is after the engagement and the release can be
@@ -137,10 +137,12 @@ class EStopLatch:
                 self.last_refusal = "a release stamped before the stop it would clear"
                 return False
             released = EStopState(False, stamp_ns, by[:MAX_REASON_CHARS], "released")
-            if not self._persist(released):  # persisted before the robot may move again
-                self.last_refusal = f"the release cannot be saved ({self.save_error})"
+            error = self._write(released)  # persisted before the robot may move again
+            if error:
+                # The latch and what is on disk are as they were: only the release failed.
+                self.last_refusal = f"the release cannot be saved ({error})"
                 return False
-            self.state = released
+            self.state, self.saved, self.save_error = released, True, ""
             self.last_refusal = ""
             return True
 
