@@ -162,3 +162,9 @@ def access_control(
 def may_put(keys: Keys, camera: str, principal: str) -> tuple[str, ...]:
     """The keys ``principal`` may put on (documentation and tests read the same table)."""
     return _principal_keys(keys, camera).get(principal, {}).get("put", ())
+
+
+def viewer_token_file(directory: Path) -> Path:
+    """The live view's token (one line): under the secure profile a viewer client must send it
+    as the ``token`` query parameter of its WebSocket URL."""
+    return directory / "viewer-token"

@@ -205,9 +205,18 @@ def supervise(config: Config, stop: threading.Event, duration_s: float | None) -
     return 0 if clean else 1
 
 
+OPEN_BUS_WARNING = (
+    'default profile (zenoh.auth = "none"): any process that reaches zenoh.endpoint can drive '
+    "the robot and release its e-stop, with no credentials; use the secure profile "
+    "(docs/security.md) wherever that is not acceptable"
+)
+
+
 def config_warnings(config: Config) -> list[str]:
     """Settings that are valid but will not do what their author meant."""
     out = []
+    if config.zenoh.auth == "none":
+        out.append(OPEN_BUS_WARNING)
     camera_changed = config.camera.source != CameraSettings().source
     if camera_changed and "camera" not in config.supervisor.services:
         out.append(
