@@ -29,7 +29,8 @@ class ViewerSettings:
     ``Origin`` header (every browser page) only if that origin is in ``allowed_origins``
     (exact ``scheme://host[:port]``); a native client (no Origin) always; and under the secure
     profile (``zenoh.auth`` not "none") only with ``?token=`` the ``viewer-token`` file of
-    ``zenoh.credentials_dir`` in its URL.
+    ``zenoh.credentials_dir`` in its URL. A connection that has not sent its whole request
+    head within ``request_timeout_s`` is closed.
     """
 
     host: str = "127.0.0.1"
@@ -41,6 +42,7 @@ class ViewerSettings:
     scene_rate_hz: float = 5.0
     path_points: int = 1000
     allowed_origins: tuple[str, ...] = ("https://app.foxglove.dev",)
+    request_timeout_s: float = 5.0
 
     BOUNDS: ClassVar[Bounds] = {
         "port": (1, 65535),
@@ -50,6 +52,7 @@ class ViewerSettings:
         "metrics_rate_hz": (0.1, 10),
         "scene_rate_hz": (0.1, 50),
         "path_points": (2, 100_000),
+        "request_timeout_s": (0.1, 60),
     }
     LENGTHS: ClassVar[Bounds] = {"allowed_origins": (0, 100)}  # () lets in native clients only
 

@@ -14,7 +14,6 @@ from collections.abc import Callable
 from services.viewer.access import MAX_HEAD_BYTES, refusal
 
 FORBIDDEN = b"HTTP/1.1 403 Forbidden\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
-HEAD_TIMEOUT_S = 5.0  # a client that sends no request head in this time is dropped
 RELAY_CHUNK = 65536
 
 log = logging.getLogger("viewer.front")
@@ -32,13 +31,19 @@ async def _pipe(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> N
 
 
 class Front:
-    """Listens on ``host``:``port``; relays admitted clients to 127.0.0.1:``inner_port``."""
+    """Listens on ``host``:``port``; relays admitted clients to 127.0.0.1:``inner_port``; a
+    client that has not sent its request head within ``head_timeout_s`` is dropped."""
 
     def __init__(
-        self, host: str, port: int, inner_port: int, check: Callable[[bytes], str | None]
+        self,
+        host: str,
+        port: int,
+        inner_port: int,
+        check: Callable[[bytes], str | None],
+        head_timeout_s: float,
     ) -> None:
         self._host, self._port, self._inner = host, port, inner_port
-        self._check = check
+        self._check, self._head_timeout_s = check, head_timeout_s
         self._loop = asyncio.new_event_loop()
         self._server: asyncio.Server | None = None
         self._thread = threading.Thread(target=self._loop.run_forever, name="front", daemon=True)
@@ -64,7 +69,7 @@ class Front:
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         try:
-            head = await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), HEAD_TIMEOUT_S)
+            head = await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), self._head_timeout_s)
         except (asyncio.IncompleteReadError, asyncio.LimitOverrunError, TimeoutError) as exc:
             log.debug("no request head: %r", exc)
             writer.close()

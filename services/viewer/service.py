@@ -57,7 +57,8 @@ def viewer_token(config: Config) -> str | None:
 
 def start_front(config: Config, inner_port: int) -> Front:
     v = config.viewer
-    front = Front(v.host, v.port, inner_port, make_check(v.allowed_origins, viewer_token(config)))
+    check = make_check(v.allowed_origins, viewer_token(config))
+    front = Front(v.host, v.port, inner_port, check, v.request_timeout_s)
     try:
         front.start()
     except OSError as exc:
