@@ -47,8 +47,9 @@ def viewer_token(config: Config) -> str | None:
         token = path.read_text().strip()
     except OSError as exc:
         raise ConfigError(
-            f"viewer: cannot read the viewer token {path} ({exc.strerror}); "
-            "write it with python -m deploy.credentials"
+            f"viewer: cannot read the viewer token {path} ({exc.strerror}); credentials made "
+            "before it existed lack it: write one with umask 077; python3 -c 'import secrets; "
+            f"print(secrets.token_urlsafe(24))' > {path}"
         ) from exc
     if not token:
         raise ConfigError(f"viewer: the viewer token {path} is empty")

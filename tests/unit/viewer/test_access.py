@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from common.errors import ConfigError
@@ -76,3 +78,20 @@ def test_headers_are_case_insensitive() -> None:
 def test_allowed_origins_are_origins(bad: str) -> None:
     with pytest.raises(ConfigError, match=r"viewer\.allowed_origins"):
         ViewerSettings(allowed_origins=(bad,))
+
+
+def test_the_token_is_read_only_under_the_secure_profile(tmp_path: Path) -> None:
+    from common.settings import Config, ZenohSettings
+    from services.viewer.service import viewer_token
+
+    def config(auth: str) -> Config:
+        return Config(zenoh=ZenohSettings(mode="client", auth=auth, credentials_dir=str(tmp_path)))
+
+    assert viewer_token(config("none")) is None
+    with pytest.raises(ConfigError, match=r"cannot read the viewer token .*viewer-token"):
+        viewer_token(config("password"))
+    (tmp_path / "viewer-token").write_text("\n")
+    with pytest.raises(ConfigError, match=r"viewer-token is empty"):
+        viewer_token(config("password"))
+    (tmp_path / "viewer-token").write_text("s3cret\n")
+    assert viewer_token(config("password")) == "s3cret"
