@@ -235,3 +235,9 @@ def may_put(
 def may_read(keys: Keys, camera: str, principal: str) -> tuple[str, ...]:
     """The key expressions ``principal`` may subscribe to (within which any subscription)."""
     return _principal_keys(keys, camera).get(principal, {}).get("read", ())
+
+
+def viewer_token_file(directory: Path) -> Path:
+    """The live view's token (one line): under the secure profile a viewer client must send it
+    as the ``token`` query parameter of its WebSocket URL."""
+    return directory / "viewer-token"

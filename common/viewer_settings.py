@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from common.errors import ConfigError
-from common.setting_checks import Bounds, check_bounds
+from common.setting_checks import Bounds, check_bounds, check_lengths
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -24,6 +24,13 @@ class ViewerSettings:
     frames that arrive faster are dropped and counted. The metrics service is asked
     ``metrics_rate_hz`` times a second; the 3D scene (simulator only) is sent ``scene_rate_hz``
     times a second with the robot's last ``path_points`` positions as its path.
+
+    Who may connect (docs/security.md, "The live view"): a client whose request carries an
+    ``Origin`` header (every browser page) only if that origin is in ``allowed_origins``
+    (exact ``scheme://host[:port]``); a native client (no Origin) always; and under the secure
+    profile (``zenoh.auth`` not "none") only with ``?token=`` the ``viewer-token`` file of
+    ``zenoh.credentials_dir`` in its URL. A connection that has not sent its whole request
+    head within ``request_timeout_s`` is closed.
     """
 
     host: str = "127.0.0.1"
@@ -34,6 +41,8 @@ class ViewerSettings:
     metrics_rate_hz: float = 1.0
     scene_rate_hz: float = 5.0
     path_points: int = 1000
+    allowed_origins: tuple[str, ...] = ("https://app.foxglove.dev",)
+    request_timeout_s: float = 5.0
 
     BOUNDS: ClassVar[Bounds] = {
         "port": (1, 65535),
@@ -43,12 +52,21 @@ class ViewerSettings:
         "metrics_rate_hz": (0.1, 10),
         "scene_rate_hz": (0.1, 50),
         "path_points": (2, 100_000),
+        "request_timeout_s": (0.1, 60),
     }
+    LENGTHS: ClassVar[Bounds] = {"allowed_origins": (0, 100)}  # () lets in native clients only
 
     def __post_init__(self) -> None:
         if not self.host:
             raise ConfigError("viewer.host must not be empty")
         check_bounds(self, "viewer", self.BOUNDS)
+        check_lengths(self, "viewer", self.LENGTHS)
+        for origin in self.allowed_origins:
+            if origin == "*" or "://" not in origin:
+                raise ConfigError(
+                    f"viewer.allowed_origins: {origin!r} is not an origin "
+                    "(scheme://host[:port]; wildcards are not accepted)"
+                )
         if self.max_image_width != 0 and self.max_image_width < 64:
             raise ConfigError(
                 f"viewer.max_image_width must be 0 (keep) or 64..8192, got {self.max_image_width}"

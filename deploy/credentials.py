@@ -39,6 +39,7 @@ from common.security import (
     key_file,
     password_file,
     users_file,
+    viewer_token_file,
 )
 from common.settings import REPO_ROOT
 
@@ -164,7 +165,8 @@ def _write(path: Path, data: bytes, mode: int) -> Path:
 
 
 def _targets(directory: Path) -> list[Path]:
-    files = [users_file(directory), ca_file(directory), ca_key_file(directory)]
+    files = [users_file(directory), viewer_token_file(directory)]
+    files += [ca_file(directory), ca_key_file(directory)]
     for p in PRINCIPALS:
         files += [password_file(directory, p), cert_file(directory, p), key_file(directory, p)]
     return files
@@ -197,6 +199,8 @@ def generate(
         written.append(_write(password_file(directory, p), f"{password}\n".encode(), SECRET_MODE))
     users = "".join(f"{p}:{password}\n" for p, password in passwords.items())
     written.append(_write(users_file(directory), users.encode(), SECRET_MODE))
+    token = f"{secrets.token_urlsafe(24)}\n".encode()
+    written.append(_write(viewer_token_file(directory), token, SECRET_MODE))
 
     ca_key = _new_key()
     ca = _ca_certificate(ca_key, days)

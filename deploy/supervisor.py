@@ -43,12 +43,7 @@ from deploy.processes import ServiceProcess, service_command
 from deploy.watchdog import Observation, check_settings, judge
 
 METRICS_TIMEOUT_S = 0.5
-# Said once at start-up without the secure profile (docs/security.md).
-OPEN_PROFILE_WARNING = (
-    "NO ACCESS CONTROL (auth = none): any process that reaches {endpoint} can drive the robot "
-    "and release its e-stop; on a real robot use the secure profile "
-    "(make credentials; make run CONFIG=deploy/secure.toml)"
-)  # the status line must not wait long for a missing metrics service
+  # the status line must not wait long for a missing metrics service
 
 
 class LiveView:
@@ -167,8 +162,6 @@ def supervise(
     view = LiveView(session, keys)
     for warning in config_warnings(config):
         log.warning("%s", warning)
-    if config.zenoh.auth == "none":
-        log.warning("%s", OPEN_PROFILE_WARNING.format(endpoint=config.zenoh.endpoint))
     procs = [ServiceProcess(n, service_command(n, config.path), s) for n in s.services]
     log.info("hub on %s; starting %s", config.zenoh.endpoint, ", ".join(s.services))
     for p in procs:
@@ -250,9 +243,19 @@ def brief(metrics: MetricsAnswer | None, *, timeline: bool) -> MetricsAnswer | N
     return cast(MetricsAnswer, {k: v for k, v in metrics.items() if k != "timeline"})
 
 
+# Said once at start-up without the secure profile (docs/security.md).
+OPEN_BUS_WARNING = (
+    'NO ACCESS CONTROL (default profile, zenoh.auth = "none"): any process that reaches '
+    "zenoh.endpoint can drive the robot and release its e-stop, with no credentials; on a real "
+    "robot use the secure profile (make credentials; make run CONFIG=deploy/secure.toml)"
+)
+
+
 def config_warnings(config: Config) -> list[str]:
     """Settings that are valid but will not do what their author meant."""
     out = []
+    if config.zenoh.auth == "none":
+        out.append(OPEN_BUS_WARNING)
     camera_changed = config.camera.source != CameraSettings().source
     if camera_changed and "camera" not in config.supervisor.services:
         out.append(

@@ -20,20 +20,51 @@ from common.errors import ConfigError, ImageError
 from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
 from common.node import Node
 from common.queries import query_metrics
+from common.security import viewer_token_file
 from common.settings import Config
 from services.viewer import convert, scene
 from services.viewer.channels import Channels
+from services.viewer.front import Front, make_check
 from services.viewer.pairing import Pairing
 
 SERVER_NAME = "zenoh-yolo-stack"
 
 
-def start_server(config: Config, context: foxglove.Context) -> WebSocketServer:
-    v = config.viewer
+def start_server(context: foxglove.Context) -> WebSocketServer:
+    """The Foxglove server, on a private loopback port that only the front relays to."""
     try:
-        return foxglove.start_server(name=SERVER_NAME, host=v.host, port=v.port, context=context)
-    except RuntimeError as exc:  # the SDK's error for an address in use or not ours
+        return foxglove.start_server(name=SERVER_NAME, host="127.0.0.1", port=0, context=context)
+    except RuntimeError as exc:  # the SDK's error for an address it cannot bind
+        raise ConfigError(f"viewer: cannot start the Foxglove server ({exc})") from exc
+
+
+def viewer_token(config: Config) -> str | None:
+    """The token clients must send under the secure profile; None under the default one."""
+    if config.zenoh.auth == "none":
+        return None
+    path = viewer_token_file(config.zenoh.credentials_path)
+    try:
+        token = path.read_text().strip()
+    except OSError as exc:
+        raise ConfigError(
+            f"viewer: cannot read the viewer token {path} ({exc.strerror}); credentials made "
+            "before it existed lack it: write one with umask 077; python3 -c 'import secrets; "
+            f"print(secrets.token_urlsafe(24))' > {path}"
+        ) from exc
+    if not token:
+        raise ConfigError(f"viewer: the viewer token {path} is empty")
+    return token
+
+
+def start_front(config: Config, inner_port: int) -> Front:
+    v = config.viewer
+    check = make_check(v.allowed_origins, viewer_token(config))
+    front = Front(v.host, v.port, inner_port, check, v.request_timeout_s)
+    try:
+        front.start()
+    except OSError as exc:
         raise ConfigError(f"viewer.port: cannot listen on {v.host}:{v.port} ({exc})") from exc
+    return front
 
 
 class Viewer:
@@ -140,7 +171,8 @@ def run(config: Config, stop: threading.Event) -> int:
     context = foxglove.Context()
     channels = Channels(context)
     with Node("viewer", config) as node:
-        server = start_server(config, context)
+        server = start_server(context)
+        front = start_front(config, server.port)
         viewer = Viewer(node, channels, config)
         keys, camera = node.keys, config.stack.camera
         subs: list[Any] = [
@@ -157,7 +189,7 @@ def run(config: Config, stop: threading.Event) -> int:
         ]
         for t in threads:
             t.start()
-        node.log.info("foxglove live view on ws://%s:%d", config.viewer.host, server.port)
+        node.log.info("foxglove live view on ws://%s:%d", config.viewer.host, config.viewer.port)
         node.ready()
         try:
             while not stop.wait(0.5):
@@ -168,5 +200,6 @@ def run(config: Config, stop: threading.Event) -> int:
                 sub.undeclare()
             for t in threads:
                 t.join(timeout=2.0)
+            front.stop()
             server.stop()
     return 0

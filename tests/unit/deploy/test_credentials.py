@@ -25,6 +25,7 @@ from common.security import (
     key_file,
     password_file,
     users_file,
+    viewer_token_file,
 )
 from deploy import credentials
 from deploy.credentials import generate
@@ -51,7 +52,7 @@ def _cert(path: Path) -> x509.Certificate:
 def test_writes_every_file_with_private_modes(creds: tuple[Path, list[Path]]) -> None:
     directory, written = creds
     assert _mode(directory) == 0o700
-    secret = [users_file(directory), ca_key_file(directory)]
+    secret = [users_file(directory), viewer_token_file(directory), ca_key_file(directory)]
     public = [ca_file(directory)]
     for p in PRINCIPALS:
         secret += [password_file(directory, p), key_file(directory, p)]

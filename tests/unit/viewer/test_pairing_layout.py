@@ -89,10 +89,8 @@ def test_the_shipped_layout_is_the_one_built_here() -> None:
 def test_a_port_in_use_is_one_config_error() -> None:
     import socket
 
-    import foxglove
-
     from common.settings import Config
-    from services.viewer.service import start_server
+    from services.viewer.service import start_front
 
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
@@ -100,4 +98,4 @@ def test_a_port_in_use_is_one_config_error() -> None:
         port = taken.getsockname()[1]
         config = Config(viewer=ViewerSettings(port=port))
         with pytest.raises(ConfigError, match=f"viewer.port: cannot listen on 127.0.0.1:{port}"):
-            start_server(config, foxglove.Context())
+            start_front(config, inner_port=1)
