@@ -150,6 +150,23 @@ def test_each_principal_reads_only_its_own(make_stack, tmp_path: Path) -> None: 
         assert set(heard["observer-wide"]) <= {stack.keys.cmd_vel()}, set(heard["observer-wide"])
     finally:
         sessions["viewer"].close()
+    # An operator's e-stop without the secure config (peer mode, no credentials) reaches
+    # nothing: it says so within seconds, naming what it tried and the likely fix.
+    plain = tmp_path / "plain.toml"
+    plain.write_text(
+        f'[zenoh]\nendpoint = "{stack.config.zenoh.endpoint}"\nmulticast_scouting = false\n'
+        f'[stack]\nprefix = "{stack.keys.prefix}"\n'
+    )
+    started = time.monotonic()
+    done = subprocess.run(
+        [sys.executable, "-m", "services.controller", "estop", "engage", "--config", str(plain)],
+        cwd=REPO, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert done.returncode != 0 and time.monotonic() - started < 10, done.stderr
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith("estop: error: cannot engage the e-stop: no link"), line
+    assert stack.config.zenoh.endpoint in line and "no auth" in line, line
+    assert "--config deploy/secure.toml" in line, line
     assert stack.stop() == 0, stack.log()
 
 
