@@ -43,7 +43,7 @@ from deploy.processes import ServiceProcess, service_command
 from deploy.watchdog import Observation, check_settings, judge
 
 METRICS_TIMEOUT_S = 0.5
-  # the status line must not wait long for a missing metrics service
+# the status line must not wait long for a missing metrics service
 
 
 class LiveView:
@@ -121,9 +121,7 @@ class LiveView:
             )
 
 
-def status_line(
-    procs: list[ServiceProcess], view: LiveView, metrics: MetricsAnswer | None
-) -> str:
+def status_line(procs: list[ServiceProcess], view: LiveView, metrics: MetricsAnswer | None) -> str:
     parts = []
     for p in procs:
         hung = f", {p.hangs} hung" if p.hangs else ""

@@ -111,8 +111,15 @@ def fps_over_time(timeline: TimelineSeries, path: Path) -> Path:
         offered = np.asarray(timeline["offered_fps"], float)
         fps = np.asarray(timeline["fps"], float)
         edges = np.append(t, t[-1] + period)  # a step per period, the last one drawn in full
-        ax.bar(t, dropped, width=period * 0.9, align="edge", color="#c44e52", alpha=0.35,
-               label="dropped (a newer frame arrived)")
+        ax.bar(
+            t,
+            dropped,
+            width=period * 0.9,
+            align="edge",
+            color="#c44e52",
+            alpha=0.35,
+            label="dropped (a newer frame arrived)",
+        )
         ax.stairs(offered, edges, color="#8c8c8c", label="offered to the detector")
         ax.stairs(fps, edges, color="#4c72b0", linewidth=2, label="detected (detections sent)")
         ax.set_xlim(0, edges[-1])

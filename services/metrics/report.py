@@ -35,7 +35,6 @@ STAGE_ROWS = (
 )
 
 
-
 def _read_json(path: Path) -> Any:
     try:
         return json.loads(path.read_text(encoding="utf-8"))
@@ -61,9 +60,11 @@ def load_benchmarks(paths: Sequence[str]) -> list[BackendBenchmark]:
         except OSError as exc:
             raise ConfigError(f"{path}: cannot read ({exc.strerror or exc})") from exc
         try:
-            items = [json.loads(text)] if text.startswith("{") and "\n{" not in text else [
-                json.loads(line) for line in text.splitlines() if line.strip()
-            ]
+            items = (
+                [json.loads(text)]
+                if text.startswith("{") and "\n{" not in text
+                else [json.loads(line) for line in text.splitlines() if line.strip()]
+            )
         except json.JSONDecodeError as exc:
             raise ConfigError(f"{path}: not benchmark JSON ({exc})") from exc
         for item in items:

@@ -48,6 +48,8 @@ def label_position(x1: float, y1: float, text: str, width: float) -> tuple[float
     y = y1 if y1 >= LABEL_FONT_PX else y1 + LABEL_FONT_PX
     x = max(0.0, min(x1, width - GLYPH_WIDTH * LABEL_FONT_PX * len(text)))
     return x, y
+
+
 _BLACK = Color(r=0.0, g=0.0, b=0.0, a=1.0)
 
 

@@ -144,7 +144,9 @@ def test_rogue_counters_are_refused(stack: Stack) -> None:
         pubs = [
             (matched(rogue, stack.keys.counters(key)), service)
             for key, service in (
-                ("rogue", "rogue"), ("rogue", "detector"), ("detector", "detector")
+                ("rogue", "rogue"),
+                ("rogue", "detector"),
+                ("detector", "detector"),
             )
         ]
 

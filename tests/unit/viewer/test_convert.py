@@ -34,9 +34,7 @@ def _decode(msg: Any) -> dict[str, Any]:
 def _frame(width: int = 640, height: int = 480) -> Frame:
     image = np.zeros((height, width, 3), np.uint8)
     image[:, : width // 2] = (0, 0, 255)  # left half red, so that a flip would show
-    return Frame(
-        header=HEADER, encoding="bgr8", width=width, height=height, data=image.tobytes()
-    )
+    return Frame(header=HEADER, encoding="bgr8", width=width, height=height, data=image.tobytes())
 
 
 def test_image_is_a_jpeg_scaled_to_the_width_limit() -> None:
