@@ -22,6 +22,11 @@ from common.settings import Config
 _M = TypeVar("_M")
 
 
+# What a bad-input counter may add to "bad_input.": 80 characters in all, the longest name the
+# metrics service believes (services/metrics/trust.py).
+MAX_WHERE_CHARS = 80 - len("bad_input.")
+
+
 class Node(Closing):
     """A service's presence on the bus.
 
@@ -112,10 +117,17 @@ class Node(Closing):
         )
         self._counters_pub.put(msg.encode())
 
-    def bad_input(self, key: str, error: Exception) -> None:
-        """Log (rate-limited per key), count and drop one bad message."""
+    def bad_input(self, key: str, error: Exception, *, topic: str = "") -> None:
+        """Log (rate-limited per key), count and drop one bad message.
+
+        It is counted as ``bad_input`` and ``bad_input.<where>``: ``topic`` when given (the
+        ROS 2 bridge names the ROS topic: its keys end in a 64-hex type hash), else the key's
+        last chunk; cut to ``MAX_WHERE_CHARS`` so that the name always fits the metrics
+        service's limit.
+        """
         self.counters.add("bad_input")
-        self.counters.add(f"bad_input.{key.rsplit('/', 1)[-1]}")
+        where = topic.strip("/").replace("/", ".") if topic else key.rsplit("/", 1)[-1]
+        self.counters.add(f"bad_input.{where[:MAX_WHERE_CHARS]}")
         self._log_limited(key, "bad_input", "dropped bad input on %s: %s", key, error)
 
     def reject(self, counter: str, message: str, *, key: str = "") -> None:

@@ -24,7 +24,12 @@ from common.node import Node
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES, Config
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
-from services.metrics.trust import refuse_counters, refuse_detections, strict_json
+from services.metrics.trust import (
+    refuse_counters,
+    refuse_detections,
+    split_counters,
+    strict_json,
+)
 
 OBSERVER = "observer"  # the principal that asks: it may read and query, never put
 
@@ -83,6 +88,13 @@ def run(config: Config, stop: threading.Event) -> int:
         def refuse_counters_of(msg: ServiceCounters, heard_on: str) -> str | None:
             return refuse_counters(msg, heard_on, SERVICES, s.max_counters_per_service)
 
+        def feed_counters(msg: ServiceCounters) -> None:
+            kept, refused = split_counters(msg)
+            for why, n in refused.items():
+                agg.count(f"refused.{why}", n)
+                node.reject(f"refused.{why}", f"{n} of {msg.service}'s counters refused: {why}")
+            agg.on_counters(kept, now())
+
         keys = node.keys
         subs = [
             node.session.declare_subscriber(
@@ -99,12 +111,7 @@ def run(config: Config, stop: threading.Event) -> int:
             ),
             node.session.declare_subscriber(
                 keys.all_counters(),
-                handler(
-                    "counters",
-                    ServiceCounters.decode,
-                    lambda m: agg.on_counters(m, now()),
-                    refuse_counters_of,
-                ),
+                handler("counters", ServiceCounters.decode, feed_counters, refuse_counters_of),
             ),
         ]
 

@@ -11,8 +11,10 @@ names who sent it: see docs/security.md.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+from collections import Counter
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -25,9 +27,9 @@ MAX_NAME_CHARS = 80
 def refuse_counters(
     msg: ServiceCounters, key: str, known: Iterable[str], max_names: int
 ) -> str | None:
-    """Why ``msg``, heard on ``key`` (``.../counters/<service>``), is not believed; None if it
-    is. Reasons: ``unknown_service``, ``service_mismatch``, ``too_many_names``,
-    ``bad_name``, ``negative_count``."""
+    """Why ``msg``, heard on ``key`` (``.../counters/<service>``), is not believed at all; None
+    if it is. Reasons: ``unknown_service``, ``service_mismatch``, ``too_many_names``. A bad
+    name or count spoils only itself (:func:`split_counters`), never the service's others."""
     service = key.rsplit("/", 1)[-1]
     if service not in known:
         return "unknown_service"
@@ -35,11 +37,25 @@ def refuse_counters(
         return "service_mismatch"
     if len(msg.counters) > max_names:
         return "too_many_names"
-    if any(not 0 < len(name) <= MAX_NAME_CHARS for name in msg.counters):
-        return "bad_name"
-    if any(value < 0 for value in msg.counters.values()):
-        return "negative_count"
     return None
+
+
+def split_counters(msg: ServiceCounters) -> tuple[ServiceCounters, Counter[str]]:
+    """``msg`` with only the counters that can be believed, and how many were left out, by
+    reason: ``bad_name`` (empty or over MAX_NAME_CHARS), ``negative_count``. One refused name
+    once froze every counter of the ROS 2 bridge: now it costs only itself."""
+    kept: dict[str, int] = {}
+    refused: Counter[str] = Counter()
+    for name, value in msg.counters.items():
+        if not 0 < len(name) <= MAX_NAME_CHARS:
+            refused["bad_name"] += 1
+        elif value < 0:
+            refused["negative_count"] += 1
+        else:
+            kept[name] = value
+    if not refused:
+        return msg, refused
+    return dataclasses.replace(msg, counters=kept), refused
 
 
 def refuse_detections(msg: Detections, max_timing_ms: float) -> str | None:

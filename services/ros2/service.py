@@ -60,15 +60,16 @@ def run(config: Config, stop: threading.Event) -> int:
         subs: list[_Subscriber] = []
 
         def inbound(
-            ros_type: str, convert: Callable[[str, memoryview], bytes]
+            ros_type: str, convert: Callable[[str, memoryview], bytes], topic: str
         ) -> Callable[[str, memoryview], None]:
-            """A ROS-side callback: decode, translate, publish on the stack; count garbage."""
+            """A ROS-side callback: decode, translate, publish on the stack; count garbage
+            (as ``bad_input.<topic>``: the key's last chunk is the type hash)."""
 
             def on_payload(key: str, cdr: memoryview) -> None:
                 try:
                     payload = convert(ros_type, cdr)
                 except DecodeError as exc:
-                    node.bad_input(key, exc)
+                    node.bad_input(key, exc, topic=topic)
                     return
                 node.counters.add(f"{ros_type.rsplit('/', 1)[-1].lower()}_in")
                 pubs[ros_type].put(payload)
@@ -87,7 +88,10 @@ def run(config: Config, stop: threading.Event) -> int:
                 return frame.encode()
 
             graph.subscribe(
-                s.image_topic, image_type, inbound(image_type, to_frame), SENSOR_DATA_QOS
+                s.image_topic,
+                image_type,
+                inbound(image_type, to_frame, s.image_topic),
+                SENSOR_DATA_QOS,
             )
         if s.scan_in:
             pubs[LASER_SCAN] = node.publisher(keys.scan(), QoS.SENSOR)
@@ -96,7 +100,12 @@ def run(config: Config, stop: threading.Event) -> int:
                 scan: LaserScan = scan_from_ros(cdr_decode(s.distro, ros_type, cdr), source="ros2")
                 return scan.encode()
 
-            graph.subscribe(s.scan_topic, LASER_SCAN, inbound(LASER_SCAN, to_scan), SENSOR_DATA_QOS)
+            graph.subscribe(
+                s.scan_topic,
+                LASER_SCAN,
+                inbound(LASER_SCAN, to_scan, s.scan_topic),
+                SENSOR_DATA_QOS,
+            )
         if s.debug_image_out:
             subs.append(_debug_images(node, graph, config))
         if s.detections_out:
@@ -148,9 +157,7 @@ def _debug_images(node: Node, graph: RosGraph, config: Config) -> _Subscriber:
             return
         due = time.monotonic() + period_s
         try:
-            drawn = debug_image(
-                frame, dets, s.debug_jpeg_quality, config.detector.max_frame_pixels
-            )
+            drawn = debug_image(frame, dets, s.debug_jpeg_quality, config.detector.max_frame_pixels)
         except ImageError as exc:
             node.bad_input(frame_key, exc)
             return

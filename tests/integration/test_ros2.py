@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 import os
 import struct
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -200,6 +202,31 @@ def test_a_ros2_robot_feeds_the_stack_and_obeys_it(make_stack, tmp_path: Path) -
         assert "ros2" in stack.ready_services()
         n = len(dets)
         wait_for(lambda: len(dets) > n + 2, 30, "detections to go on after the garbage")
+
+        # ... and `zstack query` shows it by topic, while the bridge's other counters go on
+        # (a counter named after the key's type hash once froze them all, refused).
+        def queried() -> dict[str, int]:
+            done = subprocess.run(
+                [sys.executable, "-m", "deploy.zstack", "query", "--config",
+                 str(stack.config_path)],
+                cwd=REPO, capture_output=True, text=True, timeout=60,
+            )  # fmt: skip
+            assert done.returncode == 0, done.stderr
+            counters: dict[str, int] = json.loads(done.stdout)["counters"]
+            return counters
+
+        first = wait_for(
+            lambda: (c := queried()).get("ros2.bad_input.camera.rgb.image_raw", 0) >= 5 and c,
+            30,
+            "the image topic's bad input in zstack query",
+        )
+        assert first.get("ros2.bad_input.scan", 0) >= 5, first
+        assert not [k for k in first if "RIHS01" in k or k.startswith("metrics.refused")], first
+        wait_for(
+            lambda: queried().get("ros2.image_in", 0) > first["ros2.image_in"],
+            30,
+            "the bridge's other counters to go on",
+        )
         assert stack.stop() == 0, stack.log()
     finally:
         stop.set()

@@ -12,7 +12,12 @@ from common.errors import ConfigError
 from common.messages import Detections, Header, ServiceCounters
 from common.settings import SERVICES, MetricsSettings
 from services.metrics.aggregate import Aggregator
-from services.metrics.trust import refuse_counters, refuse_detections, strict_json
+from services.metrics.trust import (
+    refuse_counters,
+    refuse_detections,
+    split_counters,
+    strict_json,
+)
 
 HEADER = Header(stamp_ns=1, frame_id="", seq=1, source="x")
 KEY = "stack/counters/detector"
@@ -33,14 +38,26 @@ def no_constants(name: str) -> float:
         (counters("rogue"), "stack/counters/rogue", "unknown_service"),
         (counters("camera"), KEY, "service_mismatch"),
         (counters(**{f"n{i}": 1 for i in range(11)}), KEY, "too_many_names"),
-        (counters(**{"x" * 81: 1}), KEY, "bad_name"),
-        (counters(frames_in=-1), KEY, "negative_count"),
+        # A bad name or count does not spoil the message: only itself (split_counters).
+        (counters(**{"x" * 81: 1}), KEY, None),
+        (counters(frames_in=-1), KEY, None),
     ],
 )
 def test_counters_are_believed_only_from_known_services(
     msg: ServiceCounters, key: str, why: str | None
 ) -> None:
     assert refuse_counters(msg, key, SERVICES, max_names=10) == why
+
+
+def test_a_bad_name_or_count_costs_only_itself() -> None:
+    # The ROS 2 bridge's name for bad input on a Jazzy key once was 81 characters, and every
+    # counter of the bridge was refused with it from then on.
+    msg = counters(image_in=7, frames_in=-1, **{"bad_input.RIHS01_" + "f" * 64: 1})
+    kept, refused = split_counters(msg)
+    assert kept.counters == {"image_in": 7} and kept.service == "detector"
+    assert refused == {"bad_name": 1, "negative_count": 1}
+    fine = counters(image_in=7)
+    assert split_counters(fine) == (fine, {})
 
 
 def test_stage_times_outside_the_bound_are_refused() -> None:
