@@ -43,7 +43,7 @@ class BackendName(StrEnum):
     TENSORRT = "tensorrt"
     CUDA = "cuda"  # our ONNX interpreter on PyTorch CUDA
     OPENVINO = "openvino"  # OpenVINO on the CPU (an optional extra)
-    AUTO = "auto"  # tensorrt, then cuda, then openvino (Intel CPUs only), then onnx
+    AUTO = "auto"  # tensorrt, then cuda, then openvino (CPUs with VNNI or AMX), then onnx
 
 
 # --- The JSON the stack writes ------------------------------------------------------------------

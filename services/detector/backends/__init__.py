@@ -6,7 +6,7 @@ table in :mod:`.base` is what lets CPU-only machines import the detector cleanly
 write its module and add one row: pre- and post-processing do not change.
 
 ``auto`` is not a row: :func:`open_backend` hands it to :mod:`.select`, which probes the rows
-in order of speed (tensorrt, cuda, openvino on suitable Intel CPUs, onnx) and loads the first
+in order of speed (tensorrt, cuda, openvino on CPUs with VNNI or AMX, onnx) and loads the first
 that works here.
 """
 

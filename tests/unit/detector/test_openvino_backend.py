@@ -26,20 +26,23 @@ INTEL_AVX2 = cpuinfo("GenuineIntel", "fpu sse2 avx avx2 fma")
 INTEL_AVX512_VNNI = cpuinfo("GenuineIntel", "avx2 avx512f avx512bw avx512_vnni")
 INTEL_ALDER_LAKE = cpuinfo("GenuineIntel", "avx2 avx_vnni")
 INTEL_SAPPHIRE_RAPIDS = cpuinfo("GenuineIntel", "avx512f amx_bf16 amx_tile amx_int8")
+# The machine of docs/benchmarks.md where OpenVINO INT8 at 480 ran at 0.30x ONNX Runtime's time.
+AMD_ZEN4_VNNI = cpuinfo("AuthenticAMD", "avx2 avx512f avx512bw avx512_vnni avx512_bf16")
 
 
-@pytest.mark.parametrize("info", [INTEL_AVX512_VNNI, INTEL_ALDER_LAKE, INTEL_SAPPHIRE_RAPIDS])
-def test_intel_cpus_with_vnni_or_amx_suit_openvino(info: str) -> None:
+@pytest.mark.parametrize(
+    "info", [INTEL_AVX512_VNNI, INTEL_ALDER_LAKE, INTEL_SAPPHIRE_RAPIDS, AMD_ZEN4_VNNI]
+)
+def test_cpus_with_vnni_or_amx_suit_openvino_whatever_the_vendor(info: str) -> None:
     assert sel.openvino_cpu_reason(info) is None
 
 
 @pytest.mark.parametrize(
     ("info", "reason"),
     [
-        (AMD_ZEN3, "OpenVINO: not an Intel CPU (AuthenticAMD)"),
-        (INTEL_AVX2, "OpenVINO: this Intel CPU has neither VNNI nor AMX"),
-        ("", "OpenVINO: not an Intel CPU (vendor unknown)"),
-        (cpuinfo("AuthenticAMD", "avx512_vnni"), "OpenVINO: not an Intel CPU (AuthenticAMD)"),
+        (AMD_ZEN3, "OpenVINO: this CPU has neither VNNI nor AMX"),
+        (INTEL_AVX2, "OpenVINO: this CPU has neither VNNI nor AMX"),
+        ("", "OpenVINO: the CPU's instruction flags are unknown"),
     ],
 )
 def test_other_cpus_keep_onnx_and_say_why(info: str, reason: str) -> None:
@@ -52,7 +55,7 @@ def test_the_probe_reads_the_cpu_then_looks_for_the_runtime(
     amd, intel = tmp_path / "amd", tmp_path / "intel"
     amd.write_text(AMD_ZEN3)
     intel.write_text(INTEL_AVX512_VNNI)
-    assert sel.probe_openvino(amd) == "OpenVINO: not an Intel CPU (AuthenticAMD)"
+    assert sel.probe_openvino(amd) == "OpenVINO: this CPU has neither VNNI nor AMX"
     assert sel.probe_openvino(tmp_path / "none") == (
         f"OpenVINO: cannot read {tmp_path / 'none'} to check the CPU"
     )

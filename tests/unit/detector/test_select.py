@@ -23,7 +23,7 @@ from services.detector.backends import select as sel
 
 NO_TRT = "TensorRT not installed"
 NO_TORCH_GPU = "CUDA backend: PyTorch has no CUDA device"
-NOT_INTEL = "OpenVINO: not an Intel CPU (AuthenticAMD)"
+NOT_INTEL = "OpenVINO: this CPU has neither VNNI nor AMX"
 
 
 def probes(**results: str | None) -> dict[str, sel.Probe]:
