@@ -1,7 +1,8 @@
 """The rmw_zenoh wire format: data keys, the per-sample attachment and the liveliness tokens.
 
 Everything here is read from rmw_zenoh's released sources (Humble 0.1.9, Jazzy 0.2.10, Kilted
-0.6.7, Rolling 0.12.0); /work/shared/ROS2_ZENOH.md has the facts and their sources. The
+0.6.7, Rolling 0.12.0: ``liveliness_utils.cpp``, ``attachment_helpers.cpp``); docs/ros2.md
+states the format. The
 distributions differ only in the type hash: ``TypeHashNotSupported`` on Humble, REP-2016's
 ``RIHS01_<sha256>`` from Jazzy on. No zenoh here: these are the strings and bytes a session puts.
 """
@@ -9,12 +10,13 @@ distributions differ only in the type hash: ``TypeHashNotSupported`` on Humble, 
 from __future__ import annotations
 
 import functools
-import hashlib
 import re
 import struct
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Literal
+
+import xxhash
 
 from common.errors import DecodeError
 from common.ros2_settings import RosDistro
@@ -75,12 +77,17 @@ def data_key(
     return f"{domain_id}/{name}/{dds_type(ros_type)}/{type_hash(distro, ros_type)}"
 
 
-def gid_for(text: str) -> bytes:
-    """A stable 16-byte GID for the entity named by ``text`` (e.g. its liveliness token).
+def gid_for(token: str) -> bytes:
+    """The 16-byte GID rmw_zenoh gives the entity whose liveliness token is ``token``.
 
-    rmw_zenoh hashes the token with XXH3-128; receivers only need it stable per publisher.
+    rmw_zenoh_cpp (``liveliness_utils.cpp``, ``Entity``'s constructor) hashes the whole
+    liveliness key expression with XXH3-128 (seed 0, default secret: its
+    ``simplified_xxhash3.cpp`` is the portable reference code) and copies ``low64`` then
+    ``high64``, each in the host's little-endian order. So a ROS 2 graph that derives the
+    bridge's GID from its token finds the same GID in the bridge's samples.
     """
-    return hashlib.blake2b(text.encode("utf-8"), digest_size=GID_SIZE).digest()
+    digest = xxhash.xxh3_128_intdigest(token.encode("utf-8"))
+    return digest.to_bytes(GID_SIZE, "little")  # low64 LE, then high64 LE
 
 
 @dataclass(frozen=True, slots=True)

@@ -20,6 +20,7 @@ from typing import Any
 import cv2
 import numpy as np
 import pytest
+import xxhash
 import zenoh
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from skimage import data
@@ -186,7 +187,18 @@ def test_a_ros2_robot_feeds_the_stack_and_obeys_it(make_stack, tmp_path: Path) -
             )
             return tokens if node and endpoints else []
 
-        wait_for(graph_tokens, 20, "the bridge's node and endpoint liveliness tokens")
+        tokens = wait_for(graph_tokens, 20, "the bridge's node and endpoint liveliness tokens")
+        # Each sample's GID is the one a ROS 2 graph derives from the publisher's token (XXH3-128
+        # of the token, as rmw_zenoh_cpp's liveliness_utils.cpp): here, on the cmd_vel samples.
+        cmd_gids: list[bytes] = []
+        robot.node.declare_subscriber(
+            f"0/cmd_vel/geometry_msgs::msg::dds_::Twist_/{TWIST_HASH}",
+            lambda s: cmd_gids.append(s.attachment.to_bytes()[17:33]) if s.attachment else None,
+        )
+        (cmd_token,) = [t for t in tokens if "/MP/" in t and "/%cmd_vel/" in t]
+        expected = xxhash.xxh3_128_intdigest(cmd_token.encode()).to_bytes(16, "little")
+        wait_for(lambda: cmd_gids, 20, "cmd_vel samples with their attachment")
+        assert set(cmd_gids) == {expected}, (cmd_token, cmd_gids[:1], expected)
 
         # Garbage on the ROS keys is counted, and the bridge stays up.
         for _ in range(5):

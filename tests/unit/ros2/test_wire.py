@@ -6,6 +6,7 @@ import os
 from typing import Any
 
 import pytest
+import xxhash
 
 from common.errors import DecodeError
 from common.ros2_settings import RosDistro
@@ -126,6 +127,16 @@ def test_gid_is_16_stable_bytes_per_name() -> None:
     assert len(gid_for(token)) == 16
     assert gid_for(token) == gid_for(token)
     assert gid_for(token) != gid_for(token + "x")
+
+
+def test_gid_is_rmw_zenohs_xxh3_128_low64_then_high64() -> None:
+    # xxHash's own sanity vector for XXH3-128 of no bytes (seed 0): low64 0x6001C324468D497F,
+    # high64 0x99AA06D3014798D8. rmw_zenoh copies low64 then high64, each little-endian.
+    assert gid_for("") == bytes.fromhex("7f498d4624c30160" "d8984701d306aa99")
+    token = "@ros2_lv/0/abc/0/1/MP/%/%/node/%cmd_vel/t/h/::,10:,:,:,,"
+    h = xxhash.xxh3_128_intdigest(token.encode())
+    low, high = h & (2**64 - 1), h >> 64
+    assert gid_for(token) == low.to_bytes(8, "little") + high.to_bytes(8, "little")
 
 
 def _parse_qos(text: str) -> list[list[str]]:
