@@ -10,7 +10,7 @@ The pure layer, exported here for other packages (the simulator plays a ROS robo
 and the one I/O piece other packages need: ``RosGraph``, a node in a ROS 2 graph (``graph.py``:
 the session, its publishers and subscribers, their liveliness tokens). The translation modules
 import no zenoh.
-The wire-format facts and their sources: /work/shared/ROS2_ZENOH.md.
+The wire-format facts and their sources: docs/ros2.md and services/ros2/wire.py.
 """
 
 from typing import TYPE_CHECKING, Any

@@ -1,7 +1,7 @@
 """A ROS 2 robot, played with plain Zenoh and rosbags only, feeds the stack and obeys it.
 
 Nothing here uses the bridge's own wire module: the keys, the attachment and the decoding come
-from the rmw_zenoh format as documented (shared/ROS2_ZENOH.md) and from rosbags, a CDR
+from the rmw_zenoh format as documented (docs/ros2.md) and from rosbags, a CDR
 implementation we did not write.
 """
 

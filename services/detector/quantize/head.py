@@ -3,7 +3,7 @@
 The default model's output mixes box coordinates in input pixels (0..640) with probabilities
 (0..1) in one tensor, and its decode (grid offsets, anchors, strides, the box scale) runs inside
 the graph. Quantizing those ops gives one scale to both ranges, and every score rounds to 0
-(/work/shared/CPU_FAST.md, pitfall 1). So the last convolutions (the detect layer) and everything
+(docs/detector.md, "INT8"). So the last convolutions (the detect layer) and everything
 after them stay float; the backbone and neck, where the time goes, are quantized. The rule is
 structural (no Conv depends on the node), so it needs no naming convention. Both quantizers
 (ONNX Runtime's and NNCF for OpenVINO) take this list.

@@ -1,4 +1,4 @@
-"""rmw_zenoh's wire format as /work/shared/ROS2_ZENOH.md gives it, on Humble and on Jazzy."""
+"""rmw_zenoh's wire format as docs/ros2.md gives it, on Humble and on Jazzy."""
 
 from __future__ import annotations
 
