@@ -3,10 +3,10 @@
 NNCF (OpenVINO's own quantization tool) calibrates activation ranges on the given frames and
 inserts FakeQuantize ops that OpenVINO's CPU plugin runs as INT8 kernels. The MIXED preset
 (symmetric weights, asymmetric activations) suits the SiLU activations of YOLO models better
-than the default symmetric one (docs/benchmarks.md, "Earlier CPU measurements").
-``keep_float`` (from :func:`services.detector.quantize.head.head_nodes`) names ONNX nodes;
-OpenVINO's importer keeps those names as its ops' friendly names, except that a convolution
-with a bias becomes ``<name>/WithoutBiases`` plus an Add called ``<name>``, and a node whose output is a graph
+than the default symmetric one (docs/benchmarks.md, "Earlier CPU measurements"). ``keep_float``
+(from :func:`services.detector.quantize.head.head_nodes`) names ONNX nodes; OpenVINO's importer
+keeps those names as its ops' friendly names, except that a convolution with a bias becomes
+``<name>/WithoutBiases`` plus an Add called ``<name>``, and a node whose output is a graph
 output takes the output's name (``output0/Mul`` becomes ``output0``). :func:`openvino_names`
 maps one to the other, and refuses a name it cannot find.
 
