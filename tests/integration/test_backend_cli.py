@@ -102,7 +102,9 @@ def test_serve_refuses_an_unknown_backend_with_one_line(tmp_path: Path) -> None:
 @pytest.mark.skipif(
     probe_tensorrt() is None or probe_cuda() is None, reason="a GPU backend is usable here"
 )
-def test_detect_auto_falls_back_to_a_cpu_backend_and_says_so(default_model: Path, photos: Path) -> None:
+def test_detect_auto_falls_back_to_a_cpu_backend_and_says_so(
+    default_model: Path, photos: Path
+) -> None:
     proc = run_cli("detect", photos, "--model", default_model, "--backend", "auto", "--json")
     assert proc.returncode == 0, proc.stderr
     # Without a GPU: OpenVINO on a CPU with VNNI or AMX (the dev extra installs it), else onnx.
