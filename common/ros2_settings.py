@@ -48,7 +48,10 @@ class Ros2Settings:
     ``debug_image_out`` publishes each frame with its detections drawn on it (boxes, class,
     score, track id) as a jpeg ``CompressedImage`` on ``debug_image_topic``, at most
     ``debug_image_rate_hz`` times a second, at ``debug_jpeg_quality``.
-    ``router_timeout_s`` bounds the wait for the router at start-up.
+    ``router_timeout_s`` bounds the wait for the router at start-up. A command on cmd_vel
+    faster than ``max_command_linear`` (m/s) or ``max_command_angular`` (rad/s), the most
+    the controller's own settings allow, is no command a sane controller sends: the bridge
+    sends the robot zero instead and counts ``commands_out_of_range``.
     """
 
     router: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
@@ -72,12 +75,16 @@ class Ros2Settings:
     debug_image_rate_hz: float = 5.0
     debug_jpeg_quality: int = 80
     router_timeout_s: float = 5.0
+    max_command_linear: float = 5.0
+    max_command_angular: float = 10.0
 
     BOUNDS: ClassVar[Bounds] = {
         "domain_id": (0, 232),  # the DDS domain ids that map to valid ports
         "debug_image_rate_hz": (0.1, 100),
         "debug_jpeg_quality": (1, 100),
         "router_timeout_s": (0.1, 300),
+        "max_command_linear": (0.01, 100),
+        "max_command_angular": (0.01, 100),
     }
     LENGTHS: ClassVar[Bounds] = {"router": (1, 16), "listen": (0, 16)}
 

@@ -14,6 +14,7 @@ commands zero.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from collections.abc import Callable
@@ -50,6 +51,13 @@ from services.ros2.wire import SENSOR_DATA_QOS
 _Subscriber = zenoh.Subscriber[None]
 
 _IDLE_S = 1.0  # how often the loop publishes counters and looks at the stop flag
+
+
+def command_in_range(twist: Twist, max_linear: float, max_angular: float) -> bool:
+    """Whether every component of ``twist`` is within the bounds (m/s, rad/s)."""
+    return all(abs(v) <= max_linear for v in twist.linear) and all(
+        abs(w) <= max_angular for w in twist.angular
+    )
 
 
 def run(config: Config, stop: threading.Event) -> int:
@@ -122,6 +130,14 @@ def run(config: Config, stop: threading.Event) -> int:
             cmd_pub = graph.publisher(s.cmd_vel_topic, twist_type)
 
             def on_cmd(twist: Twist, _sample: zenoh.Sample) -> None:
+                if not command_in_range(twist, s.max_command_linear, s.max_command_angular):
+                    # When in doubt, zero: the robot gets a stop, never the absurd command.
+                    node.reject(
+                        "commands_out_of_range",
+                        f"cmd_vel {twist.linear} {twist.angular} from {twist.header.source!r} "
+                        "is beyond ros2.max_command_*: the robot is sent zero",
+                    )
+                    twist = dataclasses.replace(twist, linear=(0.0,) * 3, angular=(0.0,) * 3)
                 cmd_pub.put(twist_to_ros(s.distro, twist, stamped=s.twist_stamped))
                 node.counters.add("commands_out")
 

@@ -25,7 +25,7 @@ import zenoh
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from skimage import data
 
-from common.messages import ServiceCounters
+from common.messages import Header, ServiceCounters, Twist
 from tests.integration.conftest import REPO, Stack, free_port, wait_for
 
 pytestmark = pytest.mark.integration
@@ -165,6 +165,26 @@ def test_a_ros2_robot_feeds_the_stack_and_obeys_it(make_stack, tmp_path: Path) -
             30,
             "a cmd_vel reacting to the person",
         )
+
+        # An absurd command on the stack's cmd_vel (anyone may put there without the secure
+        # profile) reaches the robot as zero, never as it is.
+        rogue = stack.session.declare_publisher(stack.keys.cmd_vel())
+        absurd = Twist(header=Header(stamp_ns=time.time_ns(), frame_id="base_link", seq=1,
+                                     source="rogue"), linear=(50.0, 0.0, 0.0))  # fmt: skip
+        wait_for(
+            lambda: (
+                rogue.put(absurd.encode())
+                or (
+                    counts
+                    and ServiceCounters.decode(counts[-1]).counters.get("commands_out_of_range", 0)
+                    >= 3
+                )
+            ),
+            20,
+            "the bridge to refuse the absurd commands",
+            poll=0.1,
+        )
+        assert all(abs(c.linear.x) <= 5.0 for c in list(cmds)), "50 m/s reached the robot"
 
         # The debug image: the frame with its boxes drawn, a jpeg as RViz and Foxglove take it.
         wait_for(lambda: debug, 30, "an annotated CompressedImage on /detections/image")
