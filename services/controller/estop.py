@@ -122,8 +122,8 @@ class EStopLatch:
     def engage(self, stamp_ns: int, by: str, reason: str, latest_ns: int) -> bool:
         """Latch (in memory first, so that a disk error cannot delay the stop), then persist;
         False when the latch could not be saved (it holds in memory all the same)."""
-        since = min(max(stamp_ns, self.state.since_ns), latest_ns)
-        with self._lock:
+        with self._lock:  # the state read and the state written under one lock
+            since = min(max(stamp_ns, self.state.since_ns), latest_ns)
             self.state = EStopState(True, since, by[:MAX_REASON_CHARS], reason[:MAX_REASON_CHARS])
             self.save_error = self._write(self.state)
             self.saved = not self.save_error
