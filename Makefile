@@ -28,7 +28,7 @@ setup: $(STAMP) model
 # The default model, fetched only when the config uses it. Its path goes to stderr: with
 # `make run ARGS="--duration S"` stdout carries the run's JSON summary and nothing else.
 model: $(STAMP)
-	@$(PY) -m services.detector fetch-model --config $(or $(CONFIG),deploy/stack.toml) >&2
+	@$(PY) -m tools.detector fetch-model --config $(or $(CONFIG),deploy/stack.toml) >&2
 
 run: setup
 	@$(PY) -m deploy.supervisor $(CONFIG_ARG) $(ARGS)
@@ -41,18 +41,18 @@ lint: $(DEV_STAMP)
 	$(PY) -m mypy
 
 test: $(DEV_STAMP) lint
-	$(PY) -m services.detector fetch-model
+	$(PY) -m tools.detector fetch-model
 	$(PY) -m pytest -q
 
 unit: $(DEV_STAMP)
 	$(PY) -m pytest -q tests/unit
 
 integration: $(DEV_STAMP)
-	$(PY) -m services.detector fetch-model
+	$(PY) -m tools.detector fetch-model
 	$(PY) -m pytest -q -m integration
 
 benchmark: setup
-	$(PY) -m services.detector benchmark --runs 50
+	$(PY) -m tools.detector benchmark --runs 50
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache

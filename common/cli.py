@@ -1,4 +1,5 @@
-"""One command-line shape for every service: ``python -m services.<name> COMMAND [options]``.
+"""One command-line shape for every entry point: ``python -m services.<name> COMMAND [options]``
+and ``python -m tools.<name> COMMAND [options]``.
 
 A service lists its commands; ``serve`` (run the service on the bus) comes first and is the
 default, so ``python -m services.camera --config X`` and ``... serve --config X`` are the same,
@@ -76,11 +77,25 @@ def build_parser(
 
 
 def service_main(
-    prog: str, description: str, commands: Sequence[Command], argv: Sequence[str] | None = None
+    prog: str,
+    description: str,
+    commands: Sequence[Command],
+    argv: Sequence[str] | None = None,
+    default: str | None = "serve",
 ) -> int:
-    """Parse ``argv`` (default ``sys.argv[1:]``) and run the chosen command."""
-    args = sys.argv[1:] if argv is None else argv
+    """Parse ``argv`` (default ``sys.argv[1:]``) and run the chosen command; ``default`` is
+    the command run when none is named (a tool has none: ``default=None``)."""
+    args = list(sys.argv[1:] if argv is None else argv)
     names = [c.name for c in commands]
-    parsed = build_parser(prog, description, commands).parse_args(with_default(args, names))
+    if default is not None:
+        args = with_default(args, names, default)
+    parsed = build_parser(prog, description, commands).parse_args(args)
     run: Callable[[argparse.Namespace], int] = parsed.run
     return run(parsed)
+
+
+def replay_rate(text: str) -> float:
+    rate = float(text)
+    if not 0.01 <= rate <= 100:
+        raise argparse.ArgumentTypeError(f"the rate must be within 0.01..100, got {text}")
+    return rate

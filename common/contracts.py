@@ -119,7 +119,7 @@ class DetectorInfo(TypedDict):
 
 
 class ScenarioResult(TypedDict, total=False):
-    """A scenario's figures (``zstack scenario NAME --json``); see services/sim/score.py."""
+    """A scenario's figures (``zstack scenario NAME --json``); see tools/scenarios/score.py."""
 
     success: bool
     reason: str

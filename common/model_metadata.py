@@ -30,3 +30,7 @@ def parse_names(raw: str | None) -> dict[int, str] | None:
     if not all(isinstance(k, int) and k >= 0 and isinstance(v, str) for k, v in value.items()):
         return None
     return {int(k): str(v) for k, v in value.items()}
+
+
+#: Where an OpenVINO IR keeps the ONNX model's metadata (class names, imgsz) in its rt_info.
+OPENVINO_METADATA_KEY = "detector_metadata"

@@ -69,9 +69,7 @@ class LogLimiter:
         now = self._clock()
         with self._lock:
             state = self._keys.get(key)
-            if state is None or (
-                not state.suppressed and now - state.last_seen >= self.period_s
-            ):
+            if state is None or (not state.suppressed and now - state.last_seen >= self.period_s):
                 state = _KeyState(window_start=now, last_seen=now)
                 self._keys[key] = state
                 while len(self._keys) > self._max_keys:

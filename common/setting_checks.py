@@ -82,12 +82,6 @@ def check_lengths(settings: object, table: str, lengths: Bounds) -> None:
             raise ConfigError(f"{table}.{field} must have {what}, got {shown}")
 
 
-
-
-
-
-
-
 def enum_field(settings: object, name: str, kind: type[StrEnum], where: str) -> None:
     """Turn a plain string field into its enum member (settings built in code pass strings)."""
     value = getattr(settings, name)

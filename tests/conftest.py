@@ -14,6 +14,6 @@ def default_model() -> Path:
     A machine that cannot fetch it fails here with the fetch error: the real-model tests must
     run, never be skipped quietly.
     """
-    from services.detector.model_files import ensure_default_model
+    from modelprep.files import ensure_default_model
 
     return ensure_default_model()

@@ -13,7 +13,7 @@ The detection path: ``service.py`` (the Zenoh I/O) -> ``pipeline.py`` (``preproc
 the CPU path.
 """
 
-from services.detector.model_files import ensure_default_model
+from modelprep.files import ensure_default_model
 from services.detector.pipeline import Detector
 from services.detector.types import DetectionResult
 

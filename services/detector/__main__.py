@@ -1,6 +1,48 @@
-"""Entry point: ``python -m services.detector COMMAND ...`` (see cli.py)."""
+"""python -m services.detector [serve] [--config FILE] [--backend NAME] [--model FILE]
 
-from common.lifecycle import run_main
-from services.detector.cli import main
+serve (the default) runs the detector service on the Zenoh bus: newest frame in, detections out.
+What people run on photos, videos and models (detect, benchmark, fetch-model, fast-profile,
+export) is ``python -m tools.detector`` (``zstack detect`` ...).
+"""
 
-run_main(main, "detector")
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+from common.cli import Command, add_config, service_main
+from common.config_file import load_config
+from common.lifecycle import run_main, setup_logging, stop_event
+
+
+def _serve_arguments(p: argparse.ArgumentParser) -> None:
+    add_config(p)
+    p.add_argument(
+        "--backend", help="override detector.backend: onnx, tensorrt, cuda, openvino or auto"
+    )
+    p.add_argument("--model", help="override detector.model")
+
+
+def serve(args: argparse.Namespace) -> int:
+    stop = stop_event()
+    config = load_config(args.config)
+    overrides = {k: v for k, v in (("backend", args.backend), ("model", args.model)) if v}
+    if overrides:
+        config = dataclasses.replace(
+            config, detector=dataclasses.replace(config.detector, **overrides)
+        )
+    setup_logging("detector")
+    from services.detector.service import run
+
+    return run(config, stop)
+
+
+COMMANDS = [Command("serve", "run the detector service on the Zenoh bus", _serve_arguments, serve)]
+
+
+def main() -> int:
+    return service_main("python -m services.detector", __doc__ or "", COMMANDS)
+
+
+if __name__ == "__main__":
+    run_main(main, "detector")

@@ -18,25 +18,20 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import random
-import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
-
 from common.errors import BackendUnavailable, ConfigError
 from common.files import atomic_write_bytes, sha256_file
-from common.images import load_sample
 from common.lifecycle import Progress, print_progress
 from common.machine import cpu_model
 from common.settings import DetectorSettings
-from services.detector.backends.base import BACKENDS, import_backend
-from services.detector.model_files import ensure_default_model
-from services.detector.variants import Variant, open_prepared
+from modelprep.files import ensure_default_model
+from runtimes.base import BACKENDS, import_backend
+from services.detector.variants import Variant
 
-log = logging.getLogger("services.detector.backends.fast_profile")
+log = logging.getLogger("runtimes.fast_profile")
 
 SIZES = (640, 512, 480, 416)
 TIMED_RUNS = 20
@@ -125,39 +120,6 @@ def cache_key(s: DetectorSettings, variants: Sequence[Variant]) -> dict[str, obj
     }
 
 
-def measure(
-    s: DetectorSettings, variants: Sequence[Variant], progress: Progress, runs: int = TIMED_RUNS
-) -> list[Figures]:
-    """Time and score every variant; one whose INT8 build fell back to FP32 is left out."""
-    from services.detector.labelled_set import labelled_ap50
-
-    image = load_sample("chelsea")
-    dets, ap50 = {}, {}
-    try:
-        for v in variants:
-            progress(f"fast profile: preparing {v.label}")
-            det, note = open_prepared(v.settings(s), progress)
-            if note:
-                det.close()
-                continue
-            dets[v.label] = det
-            ap50[v.label] = labelled_ap50(det)
-            det.detect(image)  # warm-up
-        times: dict[str, list[float]] = {label: [] for label in dets}
-        order = list(dets)
-        progress(f"fast profile: timing {len(order)} variants, {runs} rounds")
-        for _ in range(runs):
-            random.shuffle(order)
-            for label in order:
-                t0 = time.perf_counter()
-                dets[label].detect(image)
-                times[label].append((time.perf_counter() - t0) * 1e3)
-    finally:
-        for det in dets.values():
-            det.close()
-    return [Figures(k, round(float(np.median(times[k])), 2), round(ap50[k], 4)) for k in dets]
-
-
 def cache_file(s: DetectorSettings) -> Path:
     model = Path(s.model) if s.model else ensure_default_model()
     return model.with_name(model.stem + ".fast-profile.json")
@@ -167,11 +129,17 @@ def cache_file(s: DetectorSettings) -> Path:
 MEASURE_COMMAND = "zstack fast-profile"
 
 
+#: Times and scores variants: (settings, variants, progress) -> their figures. The one that
+#: does it is a tool (tools/detector/fast_profile.py); the detector service never measures.
+Measure = Callable[[DetectorSettings, Sequence[Variant], Progress], list[Figures]]
+
+
 def choose_fast(
-    s: DetectorSettings, progress: Progress = print_progress, *, may_measure: bool = True
+    s: DetectorSettings, progress: Progress = print_progress, *, measure: Measure | None = None
 ) -> tuple[Variant, str]:
     """The fast profile's variant for ``s`` and why: from the cache, or measured now when
-    ``may_measure`` (ConfigError naming :data:`MEASURE_COMMAND` when not, and nothing is cached)."""
+    ``measure`` is given (ConfigError naming :data:`MEASURE_COMMAND` when it is not, and nothing is
+    cached)."""
     variants = candidates(sizes_for(s))
     reference = variants[0].label
     key = cache_key(s, variants)
@@ -184,13 +152,14 @@ def choose_fast(
     except (OSError, ValueError, TypeError, KeyError):
         figures = None
     source = "cached figures"
-    if figures is None and not may_measure:
-        raise ConfigError(
-            f'detector.profile = "fast" has not been measured for {path.stem.split(".")[0]} on '
-            f"this CPU: run `{MEASURE_COMMAND}` once (it takes a minute or two; `make run` "
-            'does it when the config asks for the fast profile), or set profile = "default"'
-        )
     if figures is None:
+        if measure is None:
+            raise ConfigError(
+                f'detector.profile = "fast" has not been measured for {path.stem.split(".")[0]} '
+                f"on this CPU: run `{MEASURE_COMMAND}` once (it takes a minute or two; `make "
+                "run` does it when the config asks for the fast profile), or set profile = "
+                '"default"'
+            )
         progress(f"fast profile: measuring {len(variants)} variants (once; cached in {path.name})")
         figures = measure(s, variants, progress)
         record = {"key": key, "figures": [asdict(f) for f in figures]}

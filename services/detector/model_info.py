@@ -8,19 +8,16 @@ probe inference on a blank batch.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from common.coco import COCO80
 from common.errors import ModelError
-from common.model_metadata import literal, parse_names
-from services.detector.backends import Backend, Dim
+from common.model_metadata import parse_names
+from runtimes import Backend, Dim
+from runtimes.base import input_size
 from services.detector.decode import Family, OutputLayout, detect_family
-
-#: Square input size used when neither the shape nor the metadata fixes it.
-DEFAULT_INPUT_SIZE = 640
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,39 +40,10 @@ class ModelInfo:
         return self.layout.family
 
 
-def parse_imgsz(raw: str | None) -> tuple[int, int] | None:
-    """Parse ``imgsz`` metadata (``"640"`` or ``"[384, 640]"``) into ``(height, width)``."""
-    value = literal(raw)
-    if isinstance(value, int) and value > 0:
-        return value, value
-    if (
-        isinstance(value, (list, tuple))
-        and len(value) == 2
-        and all(isinstance(v, int) and v > 0 for v in value)
-    ):
-        return int(value[0]), int(value[1])
-    return None
-
-
 def _parse_bool(raw: str | None) -> bool | None:
     if raw is None:
         return None
     return {"true": True, "1": True, "false": False, "0": False}.get(raw.strip().lower())
-
-
-def input_size(input_shape: Sequence[Dim], metadata: Mapping[str, str]) -> tuple[int, int]:
-    """``(height, width)`` of the network input; ``[B, 3, H, W]`` is checked.
-
-    A dynamic H or W falls back to the ``imgsz`` metadata, then to 640.
-    """
-    if len(input_shape) != 4 or input_shape[1] not in (3, None):
-        shown = ["?" if d is None else d for d in input_shape]
-        raise ModelError(f"model input shape {shown} is not [B, 3, H, W] (NCHW, 3 channels)")
-    meta_hw = parse_imgsz(metadata.get("imgsz"))
-    fallback = meta_hw or (DEFAULT_INPUT_SIZE, DEFAULT_INPUT_SIZE)
-    height = input_shape[2] if input_shape[2] is not None else fallback[0]
-    width = input_shape[3] if input_shape[3] is not None else fallback[1]
-    return height, width
 
 
 def class_names(parsed: dict[int, str] | None, num_classes: int | None) -> tuple[str, ...]:

@@ -11,13 +11,13 @@ import numpy as np
 import numpy.typing as npt
 
 from common.boxes import Boxes
+from common.letterbox import Letterbox, Preprocessor, unletterbox
 from common.lifecycle import Closing
 from common.settings import DetectorSettings
-from services.detector.backends import Backend, open_backend
+from runtimes import Backend, open_backend
 from services.detector.decode import Family, decode, sane_outputs
 from services.detector.model_info import ModelInfo, read_model_info
 from services.detector.postprocess import class_mask, select
-from services.detector.preprocess import Letterbox, Preprocessor, unletterbox
 from services.detector.types import DetectionResult, StageTiming
 
 

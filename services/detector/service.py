@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import threading
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 import zenoh
 
 from common.bus import QoS
-from common.cli import program
 from common.clock import BOOT_ID, now
 from common.contracts import DetectorInfo
 from common.errors import DecodeError, ImageError, ImageTooLarge
@@ -39,7 +36,7 @@ def open_detector(s: DetectorSettings) -> tuple[Detector, str]:
     if s.profile == "fast":
         from services.detector.fast_profile import choose_fast
 
-        variant, why = choose_fast(s, may_measure=False)  # measured ahead: zstack fast-profile
+        variant, why = choose_fast(s)  # measured ahead: zstack fast-profile
         det, note = open_prepared(variant.settings(s))
         return det, f"{why}; {note}" if note else why
     return open_prepared(s)
@@ -190,33 +187,3 @@ def _track(
     if tracker.resets > resets:
         node.reject("tracker_resets", "frame stamps jumped for good: tracks restarted")
     return ids
-
-
-def _run_serve(args: Any) -> int:
-    from common.config_file import load_config
-    from common.lifecycle import setup_logging, stop_event
-
-    stop = stop_event()
-    config = load_config(args.config)
-    overrides = {k: v for k, v in (("backend", args.backend), ("model", args.model)) if v}
-    if overrides:
-        config = dataclasses.replace(
-            config, detector=dataclasses.replace(config.detector, **overrides)
-        )
-    setup_logging("detector")
-    return run(config, stop)
-
-
-def add_serve_command(subparsers: Any) -> None:
-    """Register ``serve``: run the detector service on the bus (the supervisor uses this)."""
-    p = subparsers.add_parser(
-        "serve",
-        prog=program("python -m services.detector", "serve"),
-        help="run the detector service on the Zenoh bus",
-    )
-    p.add_argument("--config", help="stack config (default deploy/stack.toml)")
-    p.add_argument(
-        "--backend", help="override detector.backend: onnx, tensorrt, cuda, openvino or auto"
-    )
-    p.add_argument("--model", help="override detector.model")
-    p.set_defaults(handler=_run_serve)

@@ -3,7 +3,7 @@
 A *variant* is ``backend:precision:imgsz`` (``onnx:int8:480``). :func:`prepare` turns
 DetectorSettings into one: the model at that input size (the default model is rebuilt for it;
 a named model must already have it), then, for ``int8`` on a runtime we quantize for
-(:data:`QUANT_RUNTIMES`), the INT8 model from :mod:`services.detector.quantize`. An INT8 model
+(:data:`QUANT_RUNTIMES`), the INT8 model from :mod:`modelprep.quantize`. An INT8 model
 that cannot be built leaves the detector on FP32, with one warning line and a ``note``.
 """
 
@@ -19,11 +19,11 @@ from common.contracts import BackendName
 from common.errors import ConfigError, ModelError
 from common.lifecycle import Progress, print_progress
 from common.settings import DetectorSettings
-from services.detector.backends.select import backend_options
-from services.detector.model_files import NATIVE_IMGSZ, ensure_default_model
+from modelprep.files import NATIVE_IMGSZ, ensure_default_model
+from runtimes.select import backend_options
 from services.detector.pipeline import Detector
 
-log = logging.getLogger("services.detector.backends.variants")
+log = logging.getLogger("runtimes.variants")
 
 #: Backend -> the runtime whose quantizer builds its INT8 model.
 QUANT_RUNTIMES = {"onnx": "onnxruntime", "openvino": "openvino"}
@@ -113,7 +113,7 @@ def finds_objects(reference: Path, backend: str) -> Callable[[Path], str | None]
     the FP32 ``reference`` does (a quantization that wiped the scores finds nothing)."""
 
     def check(candidate: Path) -> str | None:
-        from services.detector.backends.calibration import calibration_photos
+        from modelprep.quantize.calibration import calibration_photos
 
         photos = [image for label, image in calibration_photos() if label.endswith(":full")]
         with (
@@ -144,7 +144,7 @@ def prepare(s: DetectorSettings, progress: Progress = print_progress) -> Prepare
     options = backend_options(replace(s, precision=""))
     if s.precision != "int8":
         return Prepared(model, s.backend, options)
-    from services.detector.quantize import QuantizationFailed, quantized_model
+    from modelprep.quantize import QuantizationFailed, quantized_model
 
     try:
         quantized = quantized_model(

@@ -1,8 +1,8 @@
-"""python -m services.metrics [serve|query|evaluate|report] ...
+"""python -m services.metrics [serve|query] ...
 
-serve (the default) runs the metrics service; query asks a running one and prints its JSON;
-evaluate scores a model on a labelled dataset (see docs/evaluation.md); report runs the stack
-for a while (or reads a saved session) and writes report.md with plots.
+serve (the default) runs the metrics service; query asks a running one and prints its JSON.
+Accuracy on a labelled dataset is ``python -m tools.evaluation``; a report of a run,
+``python -m tools.report``.
 """
 
 from __future__ import annotations
@@ -41,37 +41,9 @@ def query(args: argparse.Namespace) -> int:
     return 0
 
 
-def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
-    from services.metrics import evaluate
-
-    evaluate.add_arguments(p)
-
-
-def evaluate(args: argparse.Namespace) -> int:
-    from services.metrics import evaluate
-
-    return evaluate.run(args)  # Ctrl-C: KeyboardInterrupt, exit 130
-
-
-def _report_arguments(p: argparse.ArgumentParser) -> None:
-    from services.metrics import report
-
-    report.add_arguments(p)
-
-
-def report(args: argparse.Namespace) -> int:
-    stop = stop_event()
-    from services.metrics import report
-
-    setup_logging("report", "WARNING")
-    return report.run(args, stop)
-
-
 COMMANDS = [
     Command("serve", "run the metrics service", add_config, serve),
     Command("query", "ask a running metrics service and print its JSON", _query_arguments, query),
-    Command("evaluate", "accuracy on a labelled dataset", _evaluate_arguments, evaluate),
-    Command("report", "write report.md and plots of a run", _report_arguments, report),
 ]
 DESCRIPTION = (__doc__ or "").split("\n\n", 1)[-1]
 

@@ -21,23 +21,8 @@ def serve(args: argparse.Namespace) -> int:
     return run(config, stop)
 
 
-def _benchmark_arguments(p: argparse.ArgumentParser) -> None:
-    from services.ros2 import bench
-
-    bench.add_arguments(p)
-
-
-def benchmark(args: argparse.Namespace) -> int:
-    setup_logging("ros2-bench", "WARNING")
-    from services.ros2 import bench
-
-    return bench.main(args)
-
-
 COMMANDS = [
     Command("serve", "bridge the stack and a ROS 2 graph", add_config, serve),
-    Command("benchmark", "the bridge's added latency against the direct path",
-            _benchmark_arguments, benchmark),
 ]  # fmt: skip
 
 

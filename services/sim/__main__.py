@@ -1,49 +1,16 @@
 """python -m services.sim [serve] [--config FILE]
-python -m services.sim scenario NAME [--json] [--config FILE]
-python -m services.sim list
-python -m services.sim soak [--duration S] [--flood-hz HZ] [--json] [--config FILE]
 
-serve (the default) runs the simulator as the stack's camera, laser and base. scenario runs the
-real stack (every service over Zenoh) against a scripted world and prints its figures.
+serve (the default) runs the simulator as the stack's camera, laser and base. The scripted
+scenarios and the soak that run the whole stack against it are ``python -m tools.scenarios``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import signal
-import sys
-from typing import Any
 
 from common.cli import Command, add_config, service_main
 from common.config_file import load_config
-from common.contracts import ScenarioResult
 from common.lifecycle import run_main, setup_logging, stop_event
-
-
-def _print_text(r: ScenarioResult) -> None:
-    def fmt(v: Any) -> str:
-        return "-" if v is None else f"{v:.2f}" if isinstance(v, float) else str(v)
-
-    print(f"scenario {r['scenario']}: {'PASS' if r['success'] else 'FAIL'}")
-    for key in (
-        "time_to_reach_s",
-        "final_distance_m",
-        "min_clearance_m",
-        "mean_bearing_error_deg",
-        "stale_commands",
-        "stop_after_kill_s",
-        "distance_travelled_m",
-        "duration_s",
-    ):
-        print(f"  {key:24} {fmt(r.get(key))}")
-    for check, ok in r.get("checks", {}).items():
-        print(f"  [{'x' if ok else ' '}] {check}")
-    print(f"  log: {r['log']}")
-
-
-def _interrupt(signum: int, _frame: object) -> None:
-    raise KeyboardInterrupt
 
 
 def serve(args: argparse.Namespace) -> int:
@@ -55,75 +22,8 @@ def serve(args: argparse.Namespace) -> int:
     return run(config, stop)
 
 
-def _scenario_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("name", help="scenario name (zstack scenarios lists them)")
-    add_config(p)
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument(
-        "--ros2",
-        action="store_true",
-        help="play a ROS 2 robot: every frame, scan and command through the ros2 bridge",
-    )
-
-
-def scenario(args: argparse.Namespace) -> int:
-    # Ctrl-C or SIGTERM interrupt the run; the runner then stops the stack it started.
-    signal.signal(signal.SIGTERM, _interrupt)
-    config = load_config(args.config)
-    setup_logging("scenario", "WARNING")
-    from services.sim.runner import run_scenario
-
-    result = run_scenario(
-        config, args.name, log=lambda m: print(m, file=sys.stderr), ros2=args.ros2
-    )
-    if args.json:
-        print(json.dumps(result))
-    else:
-        _print_text(result)
-    return 0 if result["success"] else 1
-
-
-def list_scenarios(args: argparse.Namespace) -> int:
-    from services.sim.scenarios import SCENARIOS
-
-    for name, sc in SCENARIOS.items():
-        print(f"{name:14} {sc.description}")
-    return 0
-
-
-def _soak_arguments(p: argparse.ArgumentParser) -> None:
-    add_config(p)
-    p.add_argument("--duration", type=float, default=600.0, help="seconds (default 600)")
-    p.add_argument(
-        "--flood-hz",
-        type=float,
-        default=200.0,
-        help="garbage messages a second, spread over every key (default 200)",
-    )
-    p.add_argument("--sample-s", type=float, default=10.0, help="seconds between samples")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-
-
-def soak(args: argparse.Namespace) -> int:
-    signal.signal(signal.SIGTERM, _interrupt)
-    config = load_config(args.config)
-    setup_logging("soak", "WARNING")
-    from services.sim.soak import run_soak, soak_table
-
-    result = run_soak(
-        config, args.duration, args.flood_hz, args.sample_s, log=lambda m: print(m, file=sys.stderr)
-    )
-    print(json.dumps(result, indent=1) if args.json else soak_table(result))
-    healthy = result["still_following"] and not any(result["restarts"].values())
-    return 0 if healthy else 1
-
-
 COMMANDS = [
     Command("serve", "run the simulated robot (camera, laser and base)", add_config, serve),
-    Command("scenario", "run the real stack against a scripted world", _scenario_arguments,
-            scenario),
-    Command("list", "name the scenarios", lambda p: None, list_scenarios),
-    Command("soak", "the stack for a long run under a garbage flood", _soak_arguments, soak),
 ]  # fmt: skip
 
 

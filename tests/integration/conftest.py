@@ -22,7 +22,7 @@ from common.config_file import load_config
 from common.errors import ConfigError, StackError
 from common.keys import Keys
 from common.queries import query_metrics, ready_services
-from deploy.launch import free_port, start_supervisor, stop_supervisor, wait_ready
+from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 
 REPO = Path(__file__).resolve().parents[2]
 STARTUP_S = 120.0  # model load and warm-up on a loaded 2-core CI machine

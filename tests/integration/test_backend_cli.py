@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from skimage import data
 
-from services.detector.backends.select import probe_cuda, probe_tensorrt
+from runtimes.select import probe_cuda, probe_tensorrt
 from tests.integration.conftest import REPO, write_config
 
 pytestmark = pytest.mark.integration
@@ -41,9 +41,14 @@ def photos(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
+def _module(command: str | Path) -> str:
+    """``serve`` is the detector service's; every other command is the detector tool's."""
+    return "services.detector" if command == "serve" else "tools.detector"
+
+
 def run_cli(*args: str | Path, timeout: float = 240) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "services.detector", *map(str, args)],
+        [sys.executable, "-m", _module(args[0]), *map(str, args)],
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -108,7 +113,7 @@ def test_detect_auto_falls_back_to_a_cpu_backend_and_says_so(
     proc = run_cli("detect", photos, "--model", default_model, "--backend", "auto", "--json")
     assert proc.returncode == 0, proc.stderr
     # Without a GPU: OpenVINO on a CPU with VNNI or AMX (the dev extra installs it), else onnx.
-    from services.detector.backends import select
+    from runtimes import select
 
     cpu_suits = select.openvino_cpu_reason(select.CPUINFO.read_text()) is None
     assert f"falling back to {'openvino' if cpu_suits else 'onnx'} (CPU)" in proc.stderr

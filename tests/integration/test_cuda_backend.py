@@ -15,9 +15,9 @@ import pytest
 import torch
 from skimage import data
 
-from services.detector.backends import BACKENDS
-from services.detector.backends import cuda as cuda_backend
-from services.detector.backends.onnx import OnnxBackend
+from runtimes import BACKENDS
+from runtimes import cuda as cuda_backend
+from runtimes.onnx import OnnxBackend
 from services.detector.pipeline import Detector
 from services.detector.types import DetectionResult
 

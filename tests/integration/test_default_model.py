@@ -15,7 +15,7 @@ import pytest
 from skimage import data
 
 from common.coco import COCO80
-from services.detector.model_files import ensure_default_model
+from modelprep.files import ensure_default_model
 
 pytestmark = pytest.mark.integration
 

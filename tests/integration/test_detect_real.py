@@ -87,9 +87,14 @@ def test_yolov8_layout_on_nudenet_weights() -> None:
 # --- the command line ---------------------------------------------------------------------------
 
 
+def _module(command: str | Path) -> str:
+    """``serve`` is the detector service's; every other command is the detector tool's."""
+    return "services.detector" if command == "serve" else "tools.detector"
+
+
 def run_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "services.detector", *map(str, args)],
+        [sys.executable, "-m", _module(args[0]), *map(str, args)],
         cwd=REPO,
         capture_output=True,
         text=True,

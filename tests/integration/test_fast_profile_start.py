@@ -31,7 +31,7 @@ def _supervise(config: Path, seconds: int) -> subprocess.CompletedProcess[str]:
 
 
 def _fast_profile(config: Path) -> list[str]:
-    return [sys.executable, "-m", "services.detector", "fast-profile", "--config", str(config)]
+    return [sys.executable, "-m", "tools.detector", "fast-profile", "--config", str(config)]
 
 
 def test_measured_ahead_started_from_the_cache(tmp_path: Path, default_model: Path) -> None:

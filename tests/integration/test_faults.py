@@ -8,8 +8,8 @@ import signal
 import pytest
 
 from common.messages import ControllerStatus, Detections, Twist
-from deploy.launch import service_pids
 from tests.integration.conftest import Stack, wait_for
+from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration
 

@@ -69,7 +69,7 @@ def test_detect_json_into_a_closed_pipe_is_not_a_traceback(
         cv2.imwrite(str(tmp_path / f"{i}.png"), cv2.cvtColor(data.chelsea(), cv2.COLOR_RGB2BGR))
     # `detect --json | head -1`: the reader leaves after one line.
     detect = subprocess.Popen(
-        [sys.executable, "-m", "services.detector", "detect", str(tmp_path),
+        [sys.executable, "-m", "tools.detector", "detect", str(tmp_path),
          "--model", str(default_model), "--json"],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
     )  # fmt: skip
@@ -88,7 +88,7 @@ def test_taken_ports_on_a_ros2_robot(tmp_path: Path) -> None:
     one clean line naming the port, not Zenoh's Rust source paths."""
     import socket
 
-    from deploy.launch import free_port
+    from tools.launch import free_port
 
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))

@@ -21,10 +21,10 @@ from common.clock import BOOT_ID, now
 from common.frames import image_to_frame
 from common.images import load_sample
 from common.messages import Detections, Frame, Header, ServiceCounters
-from deploy.launch import service_pids
 from tests.integration.conftest import Stack, wait_for, write_config
 from tests.unit.common.test_pixel_budget import bomb
 from tests.unit.detector.test_nonfinite import constant_model
+from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration
 

@@ -22,7 +22,7 @@ def _interrupt_at(models: Path, line_part: str, sig: int, *, group: bool) -> tup
     """Run fetch-model into ``models``; send ``sig`` once it prints ``line_part`` (to its whole
     process group, as a terminal's Ctrl-C does, when ``group``)."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "services.detector", "fetch-model", "--models-dir", str(models)],
+        [sys.executable, "-m", "tools.detector", "fetch-model", "--models-dir", str(models)],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, process_group=0,
     )  # fmt: skip
     assert proc.stderr is not None

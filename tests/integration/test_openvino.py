@@ -12,10 +12,10 @@ import numpy.typing as npt
 import pytest
 from skimage import data
 
+from common.letterbox import Preprocessor
+from modelprep.quantize.head import head_nodes
+from modelprep.quantize.nncf_int8 import quantize
 from services.detector.pipeline import Detector
-from services.detector.preprocess import Preprocessor
-from services.detector.quantize.head import head_nodes
-from services.detector.quantize.nncf_int8 import quantize
 from tests.integration.test_detect_real import CHELSEA_CAT, COFFEE_CUP, bgr, box_iou
 
 pytestmark = pytest.mark.integration

@@ -22,12 +22,12 @@ from rosbags.rosbag2 import Writer as BagWriter
 from common.frames import image_to_frame
 from common.images import load_sample
 from common.messages import Detections, Header, LaserScan
-from deploy.launch import service_pids
-from services.recorder.compare import match_frame
 from services.recorder.reading import Recording
-from services.recorder.runs import FrameDetections, load_run
 from services.ros2 import RosDistro, cdr_encode, frame_to_image, scan_to_ros, typestore_for
 from tests.integration.conftest import REPO, Stack, wait_for
+from tools.compare.compare import match_frame
+from tools.compare.runs import FrameDetections, load_run
+from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration
 
@@ -148,8 +148,11 @@ def test_record_read_replay_and_bad_files(make_stack, tmp_path: Path) -> None:  
     _, replayed = fresh.subscribe(fresh.keys.detections("front"))
     player = _recorder(fresh, "play", str(recording), "--loop")
     decoded = lambda: [Detections.decode(raw) for raw in list(replayed)]  # noqa: E731
-    wait_for(lambda: len(set(_matches(recorded, decoded()))) >= 2, 90,
-             lambda: f"replayed frames to match the recording ({len(replayed)} detections)")
+    wait_for(
+        lambda: len(set(_matches(recorded, decoded()))) >= 2,
+        90,
+        lambda: f"replayed frames to match the recording ({len(replayed)} detections)",
+    )
     player.send_signal(signal.SIGINT)
     assert player.wait(20) == 0
     assert {d.header.source for d in decoded()} == {"replay"}
@@ -159,8 +162,11 @@ def test_record_read_replay_and_bad_files(make_stack, tmp_path: Path) -> None:  
     bag = _ros2_bag(tmp_path / "bag")
     done = _recorder(fresh, "play", str(bag))
     assert done.wait(60) == 0, done.stderr.read() if done.stderr else ""
-    wait_for(lambda: any("person" in d.class_names for d in decoded()), 30,
-             "the astronaut of the ROS 2 bag detected as a person")
+    wait_for(
+        lambda: any("person" in d.class_names for d in decoded()),
+        30,
+        "the astronaut of the ROS 2 bag detected as a person",
+    )
 
     # 4. Bad files: one line and a non-zero exit.
     (tmp_path / "text.mcap").write_text("not a recording\n")

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from deploy.launch import free_port
 from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
+from tools.launch import free_port
 
 pytestmark = pytest.mark.integration
 
@@ -43,7 +43,7 @@ def test_report_records_a_real_run_and_prometheus_sees_it(tmp_path: Path) -> Non
     out = tmp_path / "report"
     env = {k: v for k, v in os.environ.items() if not k.startswith("STACK__")}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "services.metrics", "report", "--config", str(config),
+        [sys.executable, "-m", "tools.report", "report", "--config", str(config),
          "--duration", str(RECORD_S), "--out", str(out)],
         cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         start_new_session=True,

@@ -25,8 +25,8 @@ from common.messages import (
     ServiceCounters,
     Twist,
 )
-from deploy.launch import service_pids
 from tests.integration.conftest import REPO, Stack, wait_for
+from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration
 

@@ -22,8 +22,8 @@ from common.contracts import ControllerState
 from common.keys import Keys
 from common.messages import ControllerStatus, Header
 from deploy.credentials import generate
-from deploy.launch import free_port
 from tests.integration.conftest import REPO, write_config
+from tools.launch import free_port
 
 pytestmark = pytest.mark.integration
 

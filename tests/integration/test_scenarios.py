@@ -1,5 +1,5 @@
 """Every scenario runs the real stack (sim, detector, controller, metrics over Zenoh) through
-``python -m services.sim scenario NAME --json``, and states its own pass condition here."""
+``python -m tools.scenarios scenario NAME --json``, and states its own pass condition here."""
 
 from __future__ import annotations
 
@@ -13,9 +13,9 @@ from typing import Any
 import pytest
 
 from common.settings import ControllerSettings
-from deploy.launch import free_port
-from services.sim.score import REACH_TOLERANCE_M, STOP_MARGIN_S
 from tests.integration.conftest import REPO
+from tools.launch import free_port
+from tools.scenarios.score import REACH_TOLERANCE_M, STOP_MARGIN_S
 
 pytestmark = pytest.mark.integration
 
@@ -24,7 +24,7 @@ DEFAULTS = ControllerSettings()
 
 def run(name: str, *extra: str, env: dict[str, str] | None = None) -> dict[str, Any]:
     done = subprocess.run(
-        [sys.executable, "-m", "services.sim", "scenario", name, "--json", *extra],
+        [sys.executable, "-m", "tools.scenarios", "scenario", name, "--json", *extra],
         cwd=REPO,
         capture_output=True,
         text=True,

@@ -31,8 +31,8 @@ from typing import IO, Any
 
 import pytest
 
-from deploy.launch import service_pids
 from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
+from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration
 

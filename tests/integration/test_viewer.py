@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 import websockets
 
-from deploy.launch import free_port
 from services.viewer import channels as ch
 from tests.foxglove_client import SUBPROTOCOL, decode_channel_message, split_message_frame
 from tests.integration.conftest import Stack, wait_for
+from tools.launch import free_port
 
 pytestmark = pytest.mark.integration
 
@@ -36,7 +36,9 @@ async def _watch(port: int, deadline: float) -> dict[str, Any]:
     decoded message of each topic, an image and annotations that hold a person's box."""
     got: dict[str, Any] = {}
     async with websockets.connect(
-        f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], max_size=None  # type: ignore[list-item]
+        f"ws://127.0.0.1:{port}",
+        subprotocols=[SUBPROTOCOL],
+        max_size=None,  # type: ignore[list-item]
     ) as ws:
         assert ws.subprotocol == SUBPROTOCOL
         advertised: dict[str, dict[str, Any]] = {}
@@ -90,7 +92,8 @@ def test_foxglove_client_sees_the_camera_and_a_person(make_stack) -> None:  # ty
     assert adv[ch.IMAGE]["schemaName"] == "foxglove.CompressedImage"
     assert adv[ch.ANNOTATIONS]["schemaName"] == "foxglove.ImageAnnotations"
     assert (adv[ch.METRICS]["encoding"], adv[ch.METRICS]["schemaEncoding"]) == (
-        "json", "jsonschema"
+        "json",
+        "jsonschema",
     )
 
     image = got[ch.IMAGE]

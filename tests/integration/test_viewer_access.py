@@ -18,10 +18,10 @@ from websockets.exceptions import InvalidStatus
 from websockets.typing import Origin, Subprotocol
 
 from deploy.credentials import generate
-from deploy.launch import free_port
 from services.viewer import channels as ch
 from tests.foxglove_client import SUBPROTOCOL, split_message_frame
 from tests.integration.conftest import Stack
+from tools.launch import free_port
 
 pytestmark = pytest.mark.integration
 

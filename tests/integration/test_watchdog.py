@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from common.messages import Detections
-from deploy.launch import service_pids
 from tests.integration.conftest import Stack, wait_for
+from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration
 

@@ -94,10 +94,10 @@ GRAPH = import_graph()
 
 
 def test_the_graph_sees_top_level_function_level_and_relative_imports() -> None:
-    assert "services.metrics.yolo_dataset" in GRAPH["services.metrics.datasets"]
+    assert "tools.evaluation.yolo_dataset" in GRAPH["tools.evaluation.datasets"]
     # imported inside ensure_default_model, only when the model must be fetched
-    assert "services.detector.acquire.fetch" in GRAPH["services.detector.model_files"]
-    assert "services.detector.backends.base" in GRAPH["services.detector.backends.select"]
+    assert "modelprep.acquire.fetch" in GRAPH["modelprep.files"]
+    assert "runtimes.base" in GRAPH["runtimes.select"]
 
 
 def test_find_cycles_reports_each_cycle_once() -> None:
@@ -112,7 +112,7 @@ def test_no_import_cycles() -> None:
 
 def _allowed(module: str, target: str) -> bool:
     """common imports only common; deploy only common and deploy; a service its own package,
-    common, another service's package root (its public API) and deploy.launch."""
+    common, another service's package root (its public API) and tools.launch."""
     top = module.split(".")[0]
     target_top = target.split(".")[0]
     if top == "common" or target_top == "common":
@@ -120,7 +120,7 @@ def _allowed(module: str, target: str) -> bool:
     if top == "deploy":
         return target_top == "deploy"
     if target_top == "deploy":
-        return target == "deploy.launch"
+        return target == "tools.launch"
     own = ".".join(module.split(".")[:2])
     return target == own or target.startswith(f"{own}.") or target.count(".") == 1
 
@@ -136,9 +136,9 @@ def test_layers_and_no_service_imports_another_services_internals() -> None:
 
 
 def test_the_layering_rule_refuses_internals_and_allows_public_packages() -> None:
-    assert not _allowed("services.metrics.evaluate", "services.detector.pipeline")
-    assert _allowed("services.metrics.evaluate", "services.detector")
-    assert not _allowed("services.sim.runner", "deploy.processes")
-    assert _allowed("services.sim.runner", "deploy.launch")
+    assert not _allowed("tools.evaluation.evaluate", "services.detector.pipeline")
+    assert _allowed("tools.evaluation.evaluate", "services.detector")
+    assert not _allowed("tools.scenarios.runner", "deploy.processes")
+    assert _allowed("tools.scenarios.runner", "tools.launch")
     assert not _allowed("common.frames", "services.detector")
     assert not _allowed("deploy.supervisor", "services.metrics")

@@ -29,8 +29,8 @@ from common.security import (
 )
 from deploy import credentials
 from deploy.credentials import generate
-from deploy.launch import free_port
 from tests.unit.common.test_certificates import old_style
+from tools.launch import free_port
 
 HOSTS = ("robot.local", "10.0.0.5")
 

@@ -15,7 +15,7 @@ import pytest
 
 from common.errors import StackError
 from common.keys import Keys
-from deploy.launch import free_port, stop_supervisor, wait_ready
+from tools.launch import free_port, stop_supervisor, wait_ready
 
 KEYS = Keys("test")
 

@@ -7,8 +7,8 @@ import pytest
 from faster_coco_eval import COCO, COCOeval_faster
 
 from common.boxes import Boxes
-from services.detector.agreement import score
 from services.detector.types import DetectionResult
+from tools.evaluation.agreement import score
 
 NAMES = ("person", "bicycle", "car")
 

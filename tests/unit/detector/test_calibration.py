@@ -10,13 +10,13 @@ import pytest
 from skimage import data
 
 from common.errors import ConfigError, ImageError
-from services.detector.backends.calibration import (
+from common.letterbox import Preprocessor
+from modelprep.quantize.calibration import (
     batch_count,
     calibration_batches,
     calibration_digest,
     calibration_images,
 )
-from services.detector.preprocess import Preprocessor
 
 SIZE = 64  # a small network input keeps the test fast; the letterbox logic is the same
 

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import pytest
 
-from services.detector import model_files
+from modelprep import files as model_files
 
 ROOT = Path(__file__).resolve().parents[3]
 #: Never imported on the CPU path: the npm fetch and TF.js translator, the torch interpreter.
-OFF_THE_CPU_PATH = ("services.detector.acquire", "services.detector.onnx_torch", "torch")
+OFF_THE_CPU_PATH = ("modelprep.acquire", "runtimes.onnx_torch", "torch")
 
 
 def _modules_after(code: str, env: dict[str, str] | None = None) -> set[str]:
@@ -45,9 +45,9 @@ def _off_the_path(modules: set[str]) -> list[str]:
 def test_importing_the_cpu_path_imports_no_acquisition_and_no_interpreter() -> None:
     modules = _modules_after(
         "import services.detector, services.detector.service, services.detector.pipeline, "
-        "services.detector.backends.onnx, services.detector.cli"
+        "runtimes.onnx, tools.detector.cli"
     )
-    assert "services.detector.backends.onnx" in modules  # the check sees what was imported
+    assert "runtimes.onnx" in modules  # the check sees what was imported
     assert _off_the_path(modules) == []
 
 
@@ -83,4 +83,4 @@ def test_a_missing_default_model_imports_the_acquisition_to_fetch_it(tmp_path: P
         "    pass\n",
         env={model_files.MODELS_DIR_ENV: str(tmp_path), "PATH": str(tmp_path)},
     )
-    assert "services.detector.acquire.fetch" in modules
+    assert "modelprep.acquire.fetch" in modules

@@ -12,7 +12,8 @@ import pytest
 from common.coco import COCO80
 from common.errors import BackendUnavailable, ConfigError, ModelError, UnknownModelFamily
 from common.settings import DetectorSettings
-from services.detector.backends import BACKENDS, Dim, open_backend
+from runtimes import BACKENDS, Dim, open_backend
+from runtimes.base import input_size, parse_imgsz
 from services.detector.decode import (
     Family,
     decode_end2end,
@@ -23,8 +24,6 @@ from services.detector.decode import (
 )
 from services.detector.model_info import (
     class_names,
-    input_size,
-    parse_imgsz,
     parse_names,
     read_model_info,
 )
@@ -282,6 +281,6 @@ def test_open_backend_errors() -> None:
 
 
 def test_missing_runtime_is_backend_unavailable(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(BACKENDS, "ghost", "services.detector.backends.no_such_runtime")
+    monkeypatch.setitem(BACKENDS, "ghost", "runtimes.no_such_runtime")
     with pytest.raises(BackendUnavailable, match="backend 'ghost' is unavailable"):
         open_backend("ghost", "model.onnx")

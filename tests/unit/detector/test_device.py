@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from common.errors import ConfigError
-from services.detector.device import backend_for, gpu_index
+from tools.detector.device import backend_for, gpu_index
 
 
 def test_device_names() -> None:

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from common.errors import ConfigError
-from services.detector.backends import engine_cache
-from services.detector.backends.engine_cache import BuildOptions, EngineKey, check, store
+from runtimes import engine_cache
+from runtimes.engine_cache import BuildOptions, EngineKey, check, store
 
 KEY = EngineKey(
     model_name="yolov5s-coco",

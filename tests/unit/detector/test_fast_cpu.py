@@ -12,9 +12,9 @@ from onnx import TensorProto, helper, numpy_helper
 
 from common.errors import ConfigError, ModelError
 from common.settings import DetectorSettings
-from services.detector.acquire.tfjs_resize import check_size, grid_offsets
+from modelprep.acquire.tfjs_resize import check_size, grid_offsets
+from modelprep.quantize import QuantizationFailed, head_nodes, quantized_model
 from services.detector.fast_profile import Figures, choose
-from services.detector.quantize import QuantizationFailed, head_nodes, quantized_model
 from services.detector.variants import Variant, prepare, sized_model
 
 

@@ -21,10 +21,10 @@ from onnx import TensorProto, helper, numpy_helper
 from skimage import data
 
 from common.errors import BackendUnavailable, ConfigError, ModelError
-from services.detector.backends import BACKENDS, open_backend
-from services.detector.backends import cuda as cuda_backend
-from services.detector.onnx_torch.interpreter import OPS, build_module, load_module
-from services.detector.preprocess import Preprocessor
+from common.letterbox import Preprocessor
+from runtimes import BACKENDS, open_backend
+from runtimes import cuda as cuda_backend
+from runtimes.onnx_torch.interpreter import OPS, build_module, load_module
 
 RNG = np.random.default_rng(0)
 F32 = np.float32
@@ -345,16 +345,16 @@ def test_reason_names_a_cpu_build(monkeypatch: pytest.MonkeyPatch, tiny_model: P
 def test_missing_torch_is_backend_unavailable(
     monkeypatch: pytest.MonkeyPatch, tiny_model: Path
 ) -> None:
-    monkeypatch.setitem(BACKENDS, "cuda", "services.detector.backends.cuda")
+    monkeypatch.setitem(BACKENDS, "cuda", "runtimes.cuda")
     monkeypatch.setitem(sys.modules, "torch", None)  # makes `import torch` fail
     for name in (
-        "backends.cuda",
+        "cuda",
         "onnx_torch",
         "onnx_torch.interpreter",
         "onnx_torch.tensor_ops",
         "onnx_torch.spatial_ops",
     ):
-        monkeypatch.delitem(sys.modules, f"services.detector.{name}", raising=False)
+        monkeypatch.delitem(sys.modules, f"runtimes.{name}", raising=False)
     with pytest.raises(BackendUnavailable, match="PyTorch is not installed"):
         open_backend("cuda", tiny_model)
 

@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 
 from common.errors import BackendUnavailable, ConfigError
-from services.detector.backends import open_backend
-from services.detector.backends import select as sel
+from runtimes import open_backend
+from runtimes import select as sel
 
-MODULE = "services.detector.backends.openvino"
+MODULE = "runtimes.openvino"
 
 
 def cpuinfo(vendor: str, flags: str) -> str:

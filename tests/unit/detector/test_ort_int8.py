@@ -12,7 +12,7 @@ import onnxruntime as ort
 import pytest
 from onnx import TensorProto, helper, numpy_helper
 
-from services.detector.quantize.ort_int8 import quantize
+from modelprep.quantize.ort_int8 import quantize
 
 
 def _conv_model(path: Path) -> None:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from common.errors import ImageError
-from services.detector.preprocess import (
+from common.letterbox import (
     PAD_VALUE,
     Preprocessor,
     check_bgr_image,

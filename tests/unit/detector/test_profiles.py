@@ -9,7 +9,7 @@ import pytest
 from onnx import TensorProto, helper
 
 from common.errors import ConfigError, ModelError
-from services.detector.backends.profiles import (
+from runtimes.profiles import (
     BatchProfile,
     batch_profile,
     calibration_shape,

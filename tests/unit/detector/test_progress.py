@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import io
 
-from services.detector.progress import ProgressBar, progress_line
+from tools.detector.progress import ProgressBar, progress_line
 
 
 def test_progress_line_with_and_without_a_total() -> None:

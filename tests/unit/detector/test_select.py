@@ -12,14 +12,14 @@ import pytest
 
 from common.errors import BackendUnavailable, ConfigError
 from common.settings import DetectorSettings
-from services.detector.backends import (
+from runtimes import (
     BACKEND_CHOICES,
     BACKENDS,
     Backend,
     open_backend,
     supported_options,
 )
-from services.detector.backends import select as sel
+from runtimes import select as sel
 
 NO_TRT = "TensorRT not installed"
 NO_TORCH_GPU = "CUDA backend: PyTorch has no CUDA device"

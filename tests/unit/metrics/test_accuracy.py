@@ -9,13 +9,13 @@ import pytest
 from faster_coco_eval import COCO, COCOeval_faster
 
 from common.boxes import Boxes
-from services.metrics.accuracy import (
+from tools.evaluation.accuracy import (
     ImageDetections,
     evaluate,
     match_categories,
     to_results,
 )
-from services.metrics.labelled import DatasetError
+from tools.evaluation.labelled import DatasetError
 
 NAMES = {1: "person", 2: "cat", 5: "cup"}
 

@@ -10,9 +10,9 @@ import cv2
 import numpy as np
 import pytest
 
-from services.metrics.datasets import load_dataset
-from services.metrics.labelled import DatasetError
-from services.metrics.yolo_dataset import read_class_names
+from tools.evaluation.datasets import load_dataset
+from tools.evaluation.labelled import DatasetError
+from tools.evaluation.yolo_dataset import read_class_names
 
 
 def _image(path: Path, width: int, height: int) -> Path:
@@ -168,7 +168,7 @@ def test_yolo_without_names_or_with_images_option(tmp_path: Path) -> None:
 
 
 def test_only_classes_the_model_knows_are_scored(tmp_path: Path) -> None:
-    from services.metrics.evaluate import ground_truth_for
+    from tools.evaluation.evaluate import ground_truth_for
 
     ds = load_dataset(_coco(tmp_path))
     gt, mapping, excluded = ground_truth_for(ds, ("person", "dog"))

@@ -12,7 +12,7 @@ REPO = Path(__file__).resolve().parents[3]
 
 def _evaluate(*args: str) -> subprocess.CompletedProcess[str]:
     # A model path that does not exist: the dataset must be refused before it is looked at.
-    cmd = [sys.executable, "-m", "services.metrics", "evaluate", "--model", "/nonexistent.onnx"]
+    cmd = [sys.executable, "-m", "tools.evaluation", "evaluate", "--model", "/nonexistent.onnx"]
     return subprocess.run(
         [*cmd, *args], cwd=REPO, capture_output=True, text=True, timeout=60, check=False
     )
@@ -21,7 +21,7 @@ def _evaluate(*args: str) -> subprocess.CompletedProcess[str]:
 def _one_line_error(proc: subprocess.CompletedProcess[str]) -> str:
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("metrics: error: "), proc.stderr
+    assert len(lines) == 1 and lines[0].startswith("evaluate: error: "), proc.stderr
     assert "Traceback" not in proc.stderr
     return lines[0]
 
@@ -39,7 +39,7 @@ def test_missing_image(tmp_path: Path) -> None:
 
 
 def test_the_shipped_labels_without_their_photos_name_the_script() -> None:
-    ann = REPO / "tests" / "data" / "skimage_coco" / "annotations.json"
+    ann = REPO / "tools" / "evaluation" / "data" / "skimage_coco.json"
     line = _one_line_error(_evaluate("--dataset", str(ann)))
     assert f"write its photos with `python {ann.parent / 'write_images.py'} DIR`" in line
 

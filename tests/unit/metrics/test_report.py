@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -15,11 +16,10 @@ import pytest
 
 from common.errors import ConfigError
 from common.messages import Detections, Header, ServiceCounters, Twist
-from services.metrics import report
-from services.metrics.__main__ import build_parser
 from services.metrics.aggregate import Aggregator
-from services.metrics.report import load_benchmarks, read_session, write_report
-from services.metrics.session import check_session, snapshot_session
+from tools.report import report
+from tools.report.report import load_benchmarks, read_session, write_report
+from tools.report.session import check_session, snapshot_session
 
 MS = 1_000_000
 REPO = Path(__file__).resolve().parents[3]
@@ -73,7 +73,9 @@ def _bench(name: str, inference: float) -> dict[str, Any]:
 
 def _report(*argv: str) -> int:
     """The report command in-process (its own stop event: pytest keeps its Ctrl-C)."""
-    return report.run(build_parser().parse_args(["report", *argv]), threading.Event())
+    parser = argparse.ArgumentParser(prog="python -m tools.report")
+    report.add_arguments(parser)
+    return report.run(parser.parse_args(list(argv)), threading.Event())
 
 
 def _check_png(path: Path) -> None:
@@ -152,19 +154,19 @@ def test_a_bad_session_file_is_one_line_from_the_command(tmp_path: Path) -> None
     path = tmp_path / "s.json"
     path.write_text("[1, 2]")
     proc = subprocess.run(
-        [sys.executable, "-m", "services.metrics", "report", "--from", str(path),
+        [sys.executable, "-m", "tools.report", "report", "--from", str(path),
          "--out", str(tmp_path / "out")],
         cwd=REPO, capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert proc.returncode == 2
-    expected = f"metrics: error: {path}: not a session file (expected a JSON object)"
+    expected = f"report: error: {path}: not a session file (expected a JSON object)"
     assert proc.stderr.strip() == expected
 
 
 def test_bad_benchmark_files_and_option_mixes_are_refused(tmp_path: Path) -> None:
     path = tmp_path / "b.json"
     path.write_text('{"p95_ms": {}}')
-    with pytest.raises(ConfigError, match=r"not `services\.detector benchmark --json` output"):
+    with pytest.raises(ConfigError, match=r"not `tools\.detector benchmark --json` output"):
         load_benchmarks([str(path)])
     with pytest.raises(ConfigError, match="--from reads a saved session"):
         _report("--from", str(path), "--duration", "5", "--out", str(tmp_path))
@@ -192,7 +194,7 @@ def test_the_report_says_where_each_benchmark_ran(tmp_path: Path) -> None:
 
 
 def test_summary_counts_detected_offered_and_dropped_over_one_span() -> None:
-    from services.metrics.report import _summary_rows
+    from tools.report.report import _summary_rows
 
     session = _session()
     tl = session["summary"]["timeline"]

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.recorder.compare import compare_runs, iou_matrix, match_frame, report_markdown
-from services.recorder.runs import Command, FrameDetections, Run, detector_name
+from tools.compare.compare import compare_runs, iou_matrix, match_frame, report_markdown
+from tools.compare.runs import Command, FrameDetections, Run, detector_name
 
 
 def _frame(seq: int, boxes: list[tuple[str, list[float]]], stamp: int = 0) -> FrameDetections:

@@ -9,8 +9,8 @@ import pytest
 
 from common.errors import DecodeError
 from common.messages import GroundTruth, Header
-from services.sim.soak import Sample, SoakFigures, garbage, soak_table, summarise
 from tests.unit.common.test_fuzz_decoders import MESSAGE_TYPES
+from tools.scenarios.soak import Sample, SoakFigures, garbage, soak_table, summarise
 
 HDR = Header(stamp_ns=1, frame_id="world", source="sim", seq=0)
 

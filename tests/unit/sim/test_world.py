@@ -12,8 +12,8 @@ from common.settings import ControllerSettings
 from services.sim.laser import LaserSpec, cast
 from services.sim.render import CameraSpec, render
 from services.sim.scenarios import SCENARIOS, person
-from services.sim.score import Recording, score, stale_commands
 from services.sim.world import BaseLimits, Obstacle, Robot, World
+from tools.scenarios.score import Recording, score, stale_commands
 
 FREE = BaseLimits(max_linear=9, max_angular=9, max_linear_accel=1e9, max_angular_accel=1e9)
 

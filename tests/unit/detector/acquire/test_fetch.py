@@ -15,8 +15,8 @@ import pytest
 
 from common.errors import ModelFetchError
 from common.files import sha256_file
-from services.detector import model_files
-from services.detector.acquire import fetch
+from modelprep import files as model_files
+from modelprep.acquire import fetch
 from tests.unit.detector.acquire.tfjs_models import Array, TfjsModel, fused_conv
 
 RNG = np.random.default_rng(7)

@@ -17,7 +17,7 @@ import onnxruntime as ort
 import pytest
 
 from common.errors import ModelError
-from services.detector.acquire.tfjs_to_onnx import convert_tfjs_to_onnx
+from modelprep.acquire.tfjs_to_onnx import convert_tfjs_to_onnx
 from tests.unit.detector.acquire.tfjs_models import TfjsModel, fused_conv
 
 Array = npt.NDArray[Any]

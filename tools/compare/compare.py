@@ -1,0 +1,196 @@
+"""How two runs differ: detections matched per frame by class and IoU, the commands given for
+the same frames, and latency per stage. Pure: runs in, figures and markdown out.
+
+Frames are matched by their sequence number, which a replay keeps (play.py): recording A of a
+live run and recording B of A played back name each frame alike. In each frame, detections are
+paired greedily, highest IoU first, only within one class and at ``iou_min`` or more.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from tools.compare.runs import Command, FrameDetections, Run
+
+#: The stages whose latency is compared: name -> what it covers.
+STAGES: dict[str, str] = {
+    "preprocess": "letterbox and normalise",
+    "inference": "the model",
+    "postprocess": "decode and NMS",
+    "capture_to_detector": "capture -> the detector took the frame",
+    "capture_to_detections": "capture -> detections sent",
+    "capture_to_command": "capture -> first command reacting to the frame",
+}
+
+
+def iou_matrix(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """IoU of every box in ``a`` (n, 4) with every box in ``b`` (m, 4), xyxy: (n, m)."""
+    lo = np.maximum(a[:, None, :2], b[None, :, :2])
+    hi = np.minimum(a[:, None, 2:], b[None, :, 2:])
+    inter = np.prod(np.clip(hi - lo, 0, None), axis=2)
+    area_a = np.prod(np.clip(a[:, 2:] - a[:, :2], 0, None), axis=1)
+    area_b = np.prod(np.clip(b[:, 2:] - b[:, :2], 0, None), axis=1)
+    union = area_a[:, None] + area_b[None, :] - inter
+    return np.where(union > 0, inter / np.where(union > 0, union, 1), 0.0)
+
+
+def match_frame(
+    a: FrameDetections, b: FrameDetections, iou_min: float
+) -> list[tuple[int, int, float]]:
+    """Pairs (i in a, j in b, IoU) of one class each, greedily by IoU, each box used once."""
+    if not len(a.xyxy) or not len(b.xyxy):
+        return []
+    iou = iou_matrix(a.xyxy, b.xyxy)
+    same = np.array([[na == nb for nb in b.class_names] for na in a.class_names])
+    iou = np.where(same, iou, -1.0)
+    pairs: list[tuple[int, int, float]] = []
+    for flat in np.argsort(-iou, axis=None):
+        i, j = divmod(int(flat), iou.shape[1])
+        if iou[i, j] < iou_min:
+            break
+        if any(i == p or j == q for p, q, _ in pairs):
+            continue
+        pairs.append((i, j, float(iou[i, j])))
+    return pairs
+
+
+def latencies_ms(run: Run) -> dict[str, list[float]]:
+    """Every stage's latencies in ``run``, in ms (a stage not recorded is an empty list)."""
+    out: dict[str, list[float]] = {stage: [] for stage in STAGES}
+    for d in run.detections.values():
+        for stage in ("preprocess", "inference", "postprocess"):
+            if stage in d.timing_ms:
+                out[stage].append(d.timing_ms[stage])
+        if d.received_ns:
+            out["capture_to_detector"].append((d.received_ns - d.stamp_ns) / 1e6)
+        if d.published_ns:
+            out["capture_to_detections"].append((d.published_ns - d.stamp_ns) / 1e6)
+    for stamp, cmd in first_commands(run).items():
+        out["capture_to_command"].append((cmd.stamp_ns - stamp) / 1e6)
+    return out
+
+
+def first_commands(run: Run) -> dict[int, Command]:
+    """The first command reacting to each frame, by the frame's capture stamp."""
+    firsts: dict[int, Command] = {}
+    for cmd in sorted(run.commands, key=lambda c: c.stamp_ns):
+        if cmd.input_stamp_ns > 0:
+            firsts.setdefault(cmd.input_stamp_ns, cmd)
+    return firsts
+
+
+def commands_by_seq(run: Run) -> dict[int, Command]:
+    by_stamp = first_commands(run)
+    return {
+        seq: by_stamp[d.stamp_ns] for seq, d in run.detections.items() if d.stamp_ns in by_stamp
+    }
+
+
+@dataclass(slots=True)
+class Comparison:
+    iou_min: float
+    frames: tuple[int, int] = (0, 0)  # detected frames in A, in B
+    frames_both: int = 0
+    detections: tuple[int, int] = (0, 0)  # detections in the frames both runs detected on
+    matched: int = 0
+    ious: list[float] = field(default_factory=list)
+    per_class: dict[str, tuple[int, int, int]] = field(default_factory=dict)  # a, b, matched
+    command_pairs: int = 0
+    dv: list[float] = field(default_factory=list)  # |linear A - linear B|, m/s
+    dw: list[float] = field(default_factory=list)  # |angular A - angular B|, rad/s
+    latency_ms: dict[str, tuple[list[float], list[float]]] = field(default_factory=dict)
+    detectors: tuple[list[str], list[str]] = field(default_factory=lambda: ([], []))
+
+    @property
+    def match_rate(self) -> float:
+        """Matched detections over the larger side's count (1.0 when both found nothing)."""
+        most = max(self.detections)
+        return self.matched / most if most else 1.0
+
+
+def compare_runs(a: Run, b: Run, iou_min: float = 0.5) -> Comparison:
+    out = Comparison(
+        iou_min=iou_min,
+        frames=(len(a.detections), len(b.detections)),
+        detectors=(a.detectors, b.detectors),
+    )
+    both = sorted(set(a.detections) & set(b.detections))
+    out.frames_both = len(both)
+    count_a: Counter[str] = Counter()
+    count_b: Counter[str] = Counter()
+    count_m: Counter[str] = Counter()
+    for seq in both:
+        da, db = a.detections[seq], b.detections[seq]
+        count_a.update(da.class_names)
+        count_b.update(db.class_names)
+        for i, _j, iou in match_frame(da, db, iou_min):
+            count_m[da.class_names[i]] += 1
+            out.ious.append(iou)
+    out.detections = (sum(count_a.values()), sum(count_b.values()))
+    out.matched = sum(count_m.values())
+    out.per_class = {
+        name: (count_a[name], count_b[name], count_m[name])
+        for name in sorted(set(count_a) | set(count_b))
+    }
+    cmd_a, cmd_b = commands_by_seq(a), commands_by_seq(b)
+    for seq in sorted(set(cmd_a) & set(cmd_b)):
+        out.dv.append(abs(cmd_a[seq].linear - cmd_b[seq].linear))
+        out.dw.append(abs(cmd_a[seq].angular - cmd_b[seq].angular))
+    out.command_pairs = len(out.dv)
+    lat_a, lat_b = latencies_ms(a), latencies_ms(b)
+    out.latency_ms = {stage: (lat_a[stage], lat_b[stage]) for stage in STAGES}
+    return out
+
+
+def _stat(values: list[float], q: float) -> str:
+    return f"{np.percentile(values, q):.1f}" if values else "-"
+
+
+def _mean_max(values: list[float]) -> str:
+    return f"{np.mean(values):.3f} / {np.max(values):.3f}" if values else "-"
+
+
+def report_markdown(c: Comparison, name_a: str, name_b: str, plot: str = "") -> str:
+    """The comparison as a short markdown report (``plot``: a PNG beside it to show)."""
+    mean_iou = f"Mean IoU of the matched: {np.mean(c.ious):.3f}." if c.ious else ""
+    lines = [
+        f"# {name_a} vs {name_b}",
+        "",
+        f"Detector: A {', '.join(c.detectors[0]) or 'unknown'}; "
+        f"B {', '.join(c.detectors[1]) or 'unknown'}.",
+        "",
+        f"Frames detected on: A {c.frames[0]}, B {c.frames[1]}, both {c.frames_both} "
+        "(matched by sequence number).",
+        "",
+        "## Detections",
+        "",
+        f"In the frames both detected on: A {c.detections[0]}, B {c.detections[1]}, "
+        f"matched {c.matched} (same class, IoU >= {c.iou_min:g}): "
+        f"**{100 * c.match_rate:.1f} %** of the larger side. {mean_iou}",
+        "",
+        "| class | A | B | matched |",
+        "|---|---:|---:|---:|",
+        *(f"| {n} | {a} | {b} | {m} |" for n, (a, b, m) in c.per_class.items()),
+        "",
+        "## Commands",
+        "",
+        f"First command reacting to the same frame, {c.command_pairs} frames: "
+        f"|dv| mean / max {_mean_max(c.dv)} m/s, |dw| mean / max {_mean_max(c.dw)} rad/s.",
+        "",
+        "## Latency per stage (ms)",
+        "",
+        "| stage | A p50 | B p50 | A p95 | B p95 | what |",
+        "|---|---:|---:|---:|---:|---|",
+        *(
+            f"| {stage} | {_stat(la, 50)} | {_stat(lb, 50)} | {_stat(la, 95)} | "
+            f"{_stat(lb, 95)} | {STAGES[stage]} |"
+            for stage, (la, lb) in c.latency_ms.items()
+        ),
+    ]
+    if plot:
+        lines += ["", f"![latency and IoU]({plot})"]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,51 @@
+"""Measuring the fast profile: every candidate variant timed and scored on the labelled photos.
+
+The detector service only reads the cached choice (services/detector/fast_profile.py); this is
+what ``zstack fast-profile`` runs ahead of time.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from common.images import load_sample
+from common.lifecycle import Progress
+from common.settings import DetectorSettings
+from services.detector.fast_profile import TIMED_RUNS, Figures
+from services.detector.variants import Variant, open_prepared
+from tools.evaluation.labelled_set import labelled_ap50
+
+
+def measure(
+    s: DetectorSettings, variants: Sequence[Variant], progress: Progress, runs: int = TIMED_RUNS
+) -> list[Figures]:
+    """Time and score every variant; one whose INT8 build fell back to FP32 is left out."""
+    image = load_sample("chelsea")
+    dets, ap50 = {}, {}
+    try:
+        for v in variants:
+            progress(f"fast profile: preparing {v.label}")
+            det, note = open_prepared(v.settings(s), progress)
+            if note:
+                det.close()
+                continue
+            dets[v.label] = det
+            ap50[v.label] = labelled_ap50(det)
+            det.detect(image)  # warm-up
+        times: dict[str, list[float]] = {label: [] for label in dets}
+        order = list(dets)
+        progress(f"fast profile: timing {len(order)} variants, {runs} rounds")
+        for _ in range(runs):
+            random.shuffle(order)
+            for label in order:
+                t0 = time.perf_counter()
+                dets[label].detect(image)
+                times[label].append((time.perf_counter() - t0) * 1e3)
+    finally:
+        for det in dets.values():
+            det.close()
+    return [Figures(k, round(float(np.median(times[k])), 2), round(ap50[k], 4)) for k in dets]

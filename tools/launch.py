@@ -1,0 +1,135 @@
+"""Running a stack from outside it: a private port, the supervisor as a child, readiness, a
+clean stop, and the PIDs of the services it started.
+
+Every tool here writes the whole config it wants (the user's, with the user's environment
+overrides already applied, plus its private port) and the supervisor reads only that file.
+
+The scenario runner (``tools/scenarios/runner.py``), the report's recorder
+(``tools/report/session.py``) and the integration tests start stacks this way. The
+supervisor gets a process group of its own, so a Ctrl-C at the terminal reaches only the caller,
+which then stops the stack with one SIGINT, as a person would. It stays in the caller's session,
+as its services stay in its own: CPU priorities rank processes within a session only
+(common/priority.py), and a benchmark's recorder must rank as the service would.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import IO
+
+import zenoh
+
+from common.config_file import ENV_PREFIX, to_toml
+from common.errors import StackError
+from common.keys import Keys
+from common.queries import ready_services
+from common.settings import REPO_ROOT, Config
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago (for a private Zenoh endpoint)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def start_supervisor(
+    config_path: str | Path, log: IO[bytes], env: Mapping[str, str] | None = None
+) -> subprocess.Popen[bytes]:
+    """Start ``python -m deploy.supervisor --config config_path`` in a process group of its own.
+
+    Its output (stdout and stderr, unbuffered) goes to ``log``; ``env`` replaces this process's
+    environment when given. The file is the whole truth: ``STACK__*`` overrides are taken out
+    of the supervisor's environment, so that an endpoint exported in the caller's shell cannot
+    move a stack that a tool started on a private port (a caller folds the overrides it wants
+    into the file it writes: :func:`write_config`).
+    """
+    base = os.environ if env is None else env
+    clean = {k: v for k, v in base.items() if not k.startswith(ENV_PREFIX)}
+    return subprocess.Popen(
+        [sys.executable, "-m", "deploy.supervisor", "--config", str(config_path)],
+        cwd=REPO_ROOT,
+        env={**clean, "PYTHONUNBUFFERED": "1"},
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        process_group=0,
+        stdin=subprocess.DEVNULL,
+    )
+
+
+def write_config(config: Config, path: Path) -> Path:
+    """Write ``config`` as it was loaded (the file and the environment's overrides together)
+    to ``path``: what a tool hands the supervisor it starts."""
+    path.write_text(to_toml(config))
+    return path
+
+
+def wait_ready(
+    session: zenoh.Session,
+    keys: Keys,
+    services: set[str],
+    proc: subprocess.Popen[bytes],
+    timeout_s: float,
+    *,
+    stop: threading.Event | None = None,
+    log_path: Path | None = None,
+    poll_s: float = 0.2,
+) -> None:
+    """Wait until every one of ``services`` holds its health token.
+
+    Raises StackError when the supervisor exits first or ``timeout_s`` passes (naming
+    ``log_path`` when given), and KeyboardInterrupt when ``stop`` is set.
+    """
+    see = f"; see {log_path}" if log_path is not None else ""
+    deadline = time.monotonic() + timeout_s
+    pause = stop if stop is not None else threading.Event()  # never set: wait() is the poll
+    while not services <= ready_services(session, keys):
+        if proc.poll() is not None:
+            raise StackError(f"the stack exited ({proc.returncode}) before it was ready{see}")
+        if time.monotonic() > deadline:
+            raise StackError(f"the stack was not ready within {timeout_s:.0f} s{see}")
+        if pause.wait(poll_s):
+            raise KeyboardInterrupt
+
+
+def stop_supervisor(
+    proc: subprocess.Popen[bytes], timeout_s: float, sig: int = signal.SIGINT
+) -> bool:
+    """Signal the supervisor (SIGINT, as Ctrl-C would) and wait ``timeout_s`` for it to exit.
+
+    True when it exited in time (its code is then ``proc.returncode``); otherwise its whole
+    process group is killed, and False is returned.
+    """
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    try:
+        proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        return False
+    return True
+
+
+def service_pids(service: str, config_path: str | Path) -> list[int]:
+    """PIDs of ``python -m services.<service> ... --config <config_path>`` (Linux /proc)."""
+    want = (f"services.{service}".encode(), str(config_path).encode())
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            argv = (entry / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue  # the process ended while we looked
+        if all(w in argv for w in want):
+            pids.append(int(entry.name))
+    return pids

@@ -1,0 +1,160 @@
+"""``python -m tools.scenarios scenario NAME``: run the real stack against a scripted world.
+
+The runner writes a private stack config (a free port, a unique key prefix, the simulator in
+place of the camera, the controller in follow mode), starts it under the supervisor, records
+the truth, the commands and the detections, stops it, and scores the run (tools/scenarios/score.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import subprocess
+import tempfile
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from common.bus import open_session
+from common.config_file import to_toml
+from common.contracts import ControllerMode, ScenarioResult
+from common.errors import DecodeError, StackError
+from common.keys import Keys
+from common.messages import Detections, GroundTruth, Twist
+from common.settings import Config
+from services.sim.scenarios import SCENARIOS, Scenario
+from tools.launch import free_port, service_pids, start_supervisor, stop_supervisor
+from tools.scenarios.score import Recording, score
+
+STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
+STOP_TIMEOUT_S = 30.0  # then the whole stack is killed
+
+
+def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Config:
+    """``base`` made private to one run of ``scenario``. With ``ros2`` the simulator plays a
+    ROS 2 robot on a private router, and the ``ros2`` bridge carries its sensors and commands."""
+    zenoh_s = dataclasses.replace(
+        base.zenoh,
+        endpoint=f"tcp/127.0.0.1:{free_port()}",
+        connect=(),
+        listen=("tcp/127.0.0.1:0",),
+    )
+    controller = dataclasses.replace(
+        base.controller,
+        mode=ControllerMode.FOLLOW,
+        target_classes=("person",),
+        **scenario.controller,
+    )
+    bridge = ("ros2",) if ros2 else ()
+    return dataclasses.replace(
+        base,
+        zenoh=zenoh_s,
+        stack=dataclasses.replace(base.stack, prefix=f"sim/{uuid.uuid4().hex[:8]}"),
+        controller=controller,
+        sim=dataclasses.replace(
+            base.sim,
+            scenario=scenario.name,
+            ros2_robot=ros2,
+            wait_for=(*base.sim.wait_for, *bridge),
+        ),
+        ros2=dataclasses.replace(
+            base.ros2,
+            router=(f"tcp/127.0.0.1:{free_port()}",) if ros2 else base.ros2.router,
+        ),
+        supervisor=dataclasses.replace(
+            base.supervisor, services=("sim", *bridge, "detector", "controller", "metrics")
+        ),
+    )
+
+
+def record_into(session: zenoh.Session, keys: Keys, camera: str, rec: Recording) -> list[Any]:
+    """Subscribe to the truth, commands and detections, appending each to ``rec``."""
+    lock = threading.Lock()
+
+    def recorder(decode: Any, into: list[Any]) -> Any:
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                msg = decode(sample.payload.to_bytes())
+            except DecodeError:
+                return  # the services count garbage; the recorder only scores real messages
+            with lock:
+                into.append(msg)
+
+        return on_sample
+
+    return [
+        session.declare_subscriber(keys.sim_truth(), recorder(GroundTruth.decode, rec.truths)),
+        session.declare_subscriber(keys.cmd_vel(), recorder(Twist.decode, rec.twists)),
+        session.declare_subscriber(
+            keys.detections(camera), recorder(Detections.decode, rec.detections)
+        ),
+    ]
+
+
+def run_scenario(base: Config, name: str, log: Any = None, ros2: bool = False) -> ScenarioResult:
+    """Run scenario ``name`` on the real stack (``ros2``: through the ROS 2 bridge, the
+    simulator playing a ROS 2 robot); returns its figures (see score.py)."""
+    if name not in SCENARIOS or name == "demo":
+        known = ", ".join(n for n in SCENARIOS if n != "demo")
+        raise StackError(f"unknown scenario {name!r}; choose one of {known}")
+    scenario = SCENARIOS[name]
+    config = scenario_config(base, scenario, ros2)
+    workdir = Path(tempfile.mkdtemp(prefix=f"scenario-{name}-"))
+    config_path = workdir / "stack.toml"
+    config_path.write_text(to_toml(config))
+    rec = Recording()
+    with (workdir / "stack.log").open("wb") as stack_log:
+        proc = start_supervisor(config_path, stack_log)
+        try:
+            session = open_session(config.zenoh, "observer")
+            try:
+                subs = record_into(session, Keys(config.stack.prefix), config.stack.camera, rec)
+                _drive(proc, scenario, rec, config_path, log)
+                for sub in subs:
+                    sub.undeclare()
+            finally:
+                session.close()
+        finally:
+            stop_supervisor(proc, STOP_TIMEOUT_S)  # whatever happened, never leave it running
+    result = score(scenario, rec, scenario.build(), config.controller, config.camera.hfov_deg)
+    result["log"] = str(workdir / "stack.log")
+    result["supervisor_exit_code"] = proc.returncode
+    return result
+
+
+def _sim_time(rec: Recording) -> float:
+    return rec.truths[-1].sim_time_s if rec.truths else 0.0
+
+
+def _drive(
+    proc: subprocess.Popen[bytes], scenario: Scenario, rec: Recording, config_path: Path, log: Any
+) -> None:
+    """Wait for the scenario clock to run its course, killing the detector when scripted."""
+    start = time.monotonic()
+    pause = threading.Event()
+    while _sim_time(rec) <= 0:
+        if proc.poll() is not None:
+            raise StackError(
+                f"the stack exited during start-up (see {config_path.parent}/stack.log)"
+            )
+        if time.monotonic() - start > STARTUP_TIMEOUT_S:
+            raise StackError(f"the stack did not start within {STARTUP_TIMEOUT_S:.0f} s")
+        pause.wait(0.1)
+    if log:
+        log(f"{scenario.name}: running for {scenario.duration_s:.0f} s of scenario time")
+    while _sim_time(rec) < scenario.duration_s:
+        if proc.poll() is not None:
+            raise StackError("the stack exited during the scenario")
+        kill_at = scenario.kill_detector_at_s
+        if kill_at is not None and rec.kill_ns is None and _sim_time(rec) >= kill_at:
+            for pid in service_pids("detector", config_path):
+                os.kill(pid, signal.SIGKILL)
+            rec.kill_ns = time.time_ns()
+            if log:
+                log(f"{scenario.name}: killed the detector at t={_sim_time(rec):.1f} s")
+        pause.wait(0.05)
