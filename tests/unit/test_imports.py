@@ -1,62 +1,143 @@
-"""The import graph of the project's own modules (common, services, deploy), read with ``ast``.
+"""The import graph of the project's own modules, read with ``ast``, and the rules it must keep.
 
-Every ``import`` and ``from ... import`` counts as an edge, at module level or inside a function
-(a lazy import still ties the two modules together). ``from pkg import name`` points at the
-submodule ``pkg.name`` when there is one, else at ``pkg``. A package's ``__init__`` is the
-package's own module; importing ``a.b.c`` is not counted as importing ``a`` or ``a.b``.
+Edges. Every ``import`` and ``from ... import`` counts, at module level or inside a function (a
+lazy import still ties the two modules together), relative ones resolved. ``from pkg import
+name`` points at the submodule ``pkg.name`` when there is one, else at ``pkg``. A package's
+``__init__`` is the package's own module; importing ``a.b.c`` is not counted as importing ``a``
+or ``a.b``. An import through ``importlib`` counts too: ``import_module("a.b")`` with a literal,
+and the string values of a table such as runtimes/base.py's ``BACKENDS`` (name -> module) that
+name a project module, absolutely or as a submodule of the table's own module (modelprep
+/quantize's ``RUNTIMES``, imported as ``f"{__name__}.{module}"``). Running a module as a program
+(``python -m``, ``runpy`` in deploy/zstack.py) is not an import.
+
+Units. For package cycles and layers each module belongs to one unit: ``common``, ``runtimes``
+and ``deploy`` are one unit each; below ``services``, ``tools`` and ``modelprep`` each second
+level is one (``services.detector``, ``tools.evaluation``, ``modelprep.quantize``, and a module
+directly in the folder is its own: ``tools.launch``, ``modelprep.files``).
+
+Layers: who may import whom (``_allowed`` is exactly this table).
+
+=============  ==========================================================================
+importer       may import
+=============  ==========================================================================
+common         common
+runtimes       common, runtimes, modelprep
+modelprep.X    common, modelprep
+services.X     common, runtimes, modelprep, its own package, another service's package root
+               (``services.Y``, its public API, never its internals); never tools or deploy
+tools.X        anything but deploy (a tool starts the supervisor as a process)
+deploy         common, deploy
+=============  ==========================================================================
+
+No production module reads anything under tests/: no import of ``tests``, and no string that
+is a path into it (``"tests/..."``, a ``"tests"`` path part); docstrings and comments may
+mention tests.
 """
 
 from __future__ import annotations
 
 import ast
-from collections.abc import Iterator, Mapping
+import itertools
+import re
+from collections.abc import Container, Iterable, Iterator, Mapping
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGES = ("common", "services", "deploy")
+PACKAGES = ("common", "runtimes", "modelprep", "services", "tools", "deploy")
+#: Units that are a whole top-level package (the others are split at the second level).
+WHOLE = ("common", "runtimes", "deploy")
 
-Graph = dict[str, set[str]]
+#: Module -> the project modules it imports, each with the line of its first import there.
+Graph = dict[str, dict[str, int]]
 
 
-def module_name(path: Path) -> str:
-    parts = path.relative_to(ROOT).with_suffix("").parts
+def module_name(path: Path, root: Path = ROOT) -> str:
+    parts = path.relative_to(root).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def _imported(tree: ast.Module, module: str, is_package: bool) -> Iterator[tuple[str, str]]:
-    """``(base, name)`` per imported name: ``from base import name``; ``import x`` is (x, "")."""
+def _resolve(module: str, is_package: bool, level: int, name: str) -> str:
+    """``name`` imported ``level`` dots up from ``module`` (``from ..x import`` is level 2)."""
+    if not level:
+        return name
+    package = module if is_package else module.rpartition(".")[0]
+    for _ in range(level - 1):
+        package = package.rpartition(".")[0]
+    return f"{package}.{name}" if name else package
+
+
+def _is_import_module(call: ast.Call) -> bool:
+    func = call.func
+    name = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", "")
+    return name == "import_module"
+
+
+def _literal(node: ast.expr) -> str | None:
+    return node.value if isinstance(node, ast.Constant) and isinstance(node.value, str) else None
+
+
+def _import_module_package(call: ast.Call) -> str | None:
+    """The literal ``package`` a relative ``import_module(name, package)`` resolves against."""
+    if len(call.args) > 1:
+        return _literal(call.args[1])
+    return next((_literal(k.value) for k in call.keywords if k.arg == "package"), None)
+
+
+def _imported(
+    tree: ast.Module, module: str, is_package: bool, known: Container[str]
+) -> Iterator[tuple[str, int]]:
+    """``(target, line)`` per candidate target; targets not ``known`` are dropped later."""
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             for alias in node.names:
-                yield alias.name, ""
+                yield alias.name, node.lineno
         elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:  # relative: resolved against this module's package
-                package = module if is_package else module.rpartition(".")[0]
-                for _ in range(node.level - 1):
-                    package = package.rpartition(".")[0]
-                base = f"{package}.{base}" if base else package
+            base = _resolve(module, is_package, node.level, node.module or "")
             for alias in node.names:
-                yield base, alias.name
+                sub = f"{base}.{alias.name}"
+                yield (sub if sub in known else base), node.lineno
+        elif isinstance(node, ast.Call) and _is_import_module(node) and node.args:
+            name, package = _literal(node.args[0]), _import_module_package(node)
+            if name is not None:
+                level = len(name) - len(name.lstrip("."))
+                anchor, anchor_is_package = (package, True) if package else (module, is_package)
+                yield _resolve(anchor, anchor_is_package, level, name[level:]), node.lineno
+        elif isinstance(node, ast.Dict) and node.values:
+            # a table of module names, imported lazily by name (BACKENDS, RUNTIMES)
+            names = [_literal(value) for value in node.values]
+            for name, value in zip(names, node.values, strict=True):
+                if name is not None and all(n is not None for n in names):
+                    for target in (name, f"{module}.{name}"):
+                        if target in known:
+                            yield target, value.lineno
 
 
-def import_graph() -> Graph:
-    """Module -> the project modules it imports."""
-    paths = {module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+def import_graph(sources: Mapping[str, tuple[str, bool]]) -> Graph:
+    """Module -> its project imports, from ``{module: (source, is_package)}``."""
     graph: Graph = {}
-    for module, path in sorted(paths.items()):
-        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
-        edges = set()
-        for base, name in _imported(tree, module, path.name == "__init__.py"):
-            target = f"{base}.{name}" if f"{base}.{name}" in paths else base
-            if target in paths and target != module:
-                edges.add(target)
+    for module, (source, is_package) in sorted(sources.items()):
+        tree = ast.parse(source, filename=module)
+        edges: dict[str, int] = {}
+        for target, line in _imported(tree, module, is_package, sources):
+            if target in sources and target != module:
+                edges[target] = min(line, edges.get(target, line))
         graph[module] = edges
     return graph
 
 
-def find_cycles(graph: Mapping[str, set[str]]) -> list[list[str]]:
-    """The strongly connected components with more than one module (Tarjan), each sorted."""
+def production_sources(root: Path = ROOT) -> dict[str, Path]:
+    return {module_name(p, root): p for pkg in PACKAGES for p in sorted((root / pkg).rglob("*.py"))}
+
+
+def project_graph() -> Graph:
+    paths = production_sources()
+    return import_graph(
+        {m: (p.read_text(encoding="utf-8"), p.name == "__init__.py") for m, p in paths.items()}
+    )
+
+
+def find_cycles(graph: Mapping[str, Iterable[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one node (Tarjan), each sorted."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -90,14 +171,141 @@ def find_cycles(graph: Mapping[str, set[str]]) -> list[list[str]]:
     return sorted(cycles)
 
 
-GRAPH = import_graph()
+def unit(module: str) -> str:
+    """The package unit a module belongs to (see the module docstring)."""
+    parts = module.split(".")
+    return parts[0] if parts[0] in WHOLE else ".".join(parts[:2])
 
 
-def test_the_graph_sees_top_level_function_level_and_relative_imports() -> None:
+#: Unit -> unit -> one module edge behind it: ``(module, target, line)``.
+UnitGraph = dict[str, dict[str, tuple[str, str, int]]]
+
+
+def unit_graph(graph: Graph) -> UnitGraph:
+    units: UnitGraph = {unit(m): {} for m in graph}
+    for module, targets in sorted(graph.items()):
+        for target, line in sorted(targets.items()):
+            here, there = unit(module), unit(target)
+            if here != there:
+                units[here].setdefault(there, (module, target, line))
+    return units
+
+
+def _a_cycle(graph: Mapping[str, Iterable[str]], members: list[str]) -> list[str]:
+    """One cycle through ``members`` (a strongly connected component), starting at its first."""
+    inside = set(members)
+    start = members[0]
+    came_from: dict[str, str] = {}
+    frontier = [start]
+    while frontier:  # breadth first: the shortest way back to start
+        nxt_frontier = []
+        for node in frontier:
+            for nxt in sorted(graph[node]):
+                if nxt == start:
+                    path = [node]
+                    while path[-1] != start:
+                        path.append(came_from[path[-1]])
+                    return [*reversed(path), start]
+                if nxt in inside and nxt not in came_from:
+                    came_from[nxt] = node
+                    nxt_frontier.append(nxt)
+        frontier = nxt_frontier
+    raise AssertionError(f"{members} is not strongly connected")
+
+
+def describe_unit_cycles(units: UnitGraph) -> list[str]:
+    """Each package cycle as one line per hop, with a module edge that makes the hop."""
+    lines = []
+    for members in find_cycles(units):
+        path = _a_cycle(units, members)
+        lines.append(f"package cycle among {', '.join(members)}:")
+        for here, there in itertools.pairwise(path):
+            module, target, line = units[here][there]
+            lines.append(f"  {here} -> {there}: {module} imports {target} (line {line})")
+    return lines
+
+
+def describe_module_cycles(graph: Graph) -> list[str]:
+    lines = []
+    for members in find_cycles(graph):
+        path = _a_cycle(graph, members)
+        lines.append(f"module cycle among {', '.join(members)}:")
+        for here, there in itertools.pairwise(path):
+            lines.append(f"  {here} imports {there} (line {graph[here][there]})")
+    return lines
+
+
+def _allowed(module: str, target: str) -> bool:
+    """The layers table of the module docstring."""
+    top, target_top = module.split(".")[0], target.split(".")[0]
+    if top == "common":
+        return target_top == "common"
+    if top == "runtimes":
+        return target_top in ("common", "runtimes", "modelprep")
+    if top == "modelprep":
+        return target_top in ("common", "modelprep")
+    if top == "services":
+        if target_top in ("common", "runtimes", "modelprep"):
+            return True
+        if target_top != "services":
+            return False  # tools, deploy
+        own = unit(module)
+        return target == own or target.startswith(f"{own}.") or target.count(".") == 1
+    if top == "tools":
+        return target_top != "deploy"
+    if top == "deploy":
+        return target_top in ("common", "deploy")
+    raise AssertionError(f"{module} is in no layer")
+
+
+GRAPH = project_graph()
+
+
+def _sources(files: Mapping[str, str]) -> dict[str, tuple[str, bool]]:
+    """Synthetic sources for :func:`import_graph`, keyed by path: ``{"pkg/__init__.py": ...}``."""
+    root = Path("/synthetic")
+    return {
+        module_name(root / path, root): (source, path.endswith("__init__.py"))
+        for path, source in files.items()
+    }
+
+
+# -- the checker sees what it must --------------------------------------------------------------
+
+
+def test_the_graph_sees_top_level_and_function_level_imports() -> None:
     assert "tools.evaluation.yolo_dataset" in GRAPH["tools.evaluation.datasets"]
     # imported inside ensure_default_model, only when the model must be fetched
     assert "modelprep.acquire.fetch" in GRAPH["modelprep.files"]
     assert "runtimes.base" in GRAPH["runtimes.select"]
+    # (no production module imports relatively today; the synthetic test below covers them)
+
+
+def test_the_graph_sees_the_backend_tables_behind_importlib() -> None:
+    # BACKENDS: name -> module, imported by import_backend with importlib
+    assert {"runtimes.onnx", "runtimes.openvino", "runtimes.cuda", "runtimes.tensorrt"} <= set(
+        GRAPH["runtimes.base"]
+    )
+    # RUNTIMES: runtime -> a submodule of modelprep.quantize, imported by f"{__name__}.{name}"
+    assert {"modelprep.quantize.ort_int8", "modelprep.quantize.nncf_int8"} <= set(
+        GRAPH["modelprep.quantize"]
+    )
+
+
+def test_the_graph_sees_import_module_with_a_literal_and_relative_imports() -> None:
+    sources = _sources(
+        {
+            "pkg/__init__.py": "",
+            "pkg/a.py": "import importlib\ndef f():\n    return importlib.import_module('pkg.b')\n",
+            "pkg/b.py": "from importlib import import_module\nx = import_module('.c', 'pkg')\n",
+            "pkg/c.py": "def g():\n    from . import a\n",
+        }
+    )
+    graph = import_graph(sources)
+    assert graph["pkg.a"] == {"pkg.b": 3}
+    assert graph["pkg.b"] == {"pkg.c": 2}
+    assert graph["pkg.c"] == {"pkg.a": 2}
+    assert find_cycles(graph) == [["pkg.a", "pkg.b", "pkg.c"]]
 
 
 def test_find_cycles_reports_each_cycle_once() -> None:
@@ -105,40 +313,204 @@ def test_find_cycles_reports_each_cycle_once() -> None:
     assert find_cycles(graph) == [["a", "b", "c"], ["e", "f"]]
 
 
-def test_no_import_cycles() -> None:
-    cycles = find_cycles(GRAPH)
-    assert cycles == [], "import cycles:\n" + "\n".join(" <-> ".join(c) for c in cycles)
+def test_units_are_the_whole_package_or_its_second_level() -> None:
+    assert unit("runtimes.onnx_torch.ops") == "runtimes"
+    assert unit("deploy.supervisor") == "deploy"
+    assert unit("common.boxes") == "common"
+    assert unit("services.detector.pipeline") == "services.detector"
+    assert unit("services.detector") == "services.detector"
+    assert unit("tools.evaluation.datasets") == "tools.evaluation"
+    assert unit("tools.launch") == "tools.launch"
+    assert unit("modelprep.quantize.nncf_int8") == "modelprep.quantize"
 
 
-def _allowed(module: str, target: str) -> bool:
-    """common imports only common; deploy only common and deploy; a service its own package,
-    common, another service's package root (its public API) and tools.launch."""
-    top = module.split(".")[0]
-    target_top = target.split(".")[0]
-    if top == "common" or target_top == "common":
-        return target_top == "common"
-    if top == "deploy":
-        return target_top == "deploy"
-    if target_top == "deploy":
-        return target == "tools.launch"
-    own = ".".join(module.split(".")[:2])
-    return target == own or target.startswith(f"{own}.") or target.count(".") == 1
+def test_a_package_cycle_through_a_function_level_import_is_caught() -> None:
+    # the cycle issue 21 found: evaluation imports the detector at module level, and the
+    # detector imports evaluation only inside a function; no module cycle, a package one
+    sources = _sources(
+        {
+            "services/detector/__init__.py": "",
+            "services/detector/labelled.py": (
+                "def f():\n    from tools.evaluation.metrics import g\n"
+            ),
+            "tools/evaluation/__init__.py": "",
+            "tools/evaluation/metrics.py": "def g(): ...\n",
+            "tools/evaluation/evaluate.py": "import services.detector\n",
+        }
+    )
+    graph = import_graph(sources)
+    assert find_cycles(graph) == []
+    lines = describe_unit_cycles(unit_graph(graph))
+    assert lines == [
+        "package cycle among services.detector, tools.evaluation:",
+        "  services.detector -> tools.evaluation: services.detector.labelled imports "
+        "tools.evaluation.metrics (line 2)",
+        "  tools.evaluation -> services.detector: tools.evaluation.evaluate imports "
+        "services.detector (line 1)",
+    ]
+
+
+def test_a_cycle_hidden_behind_importlib_is_caught() -> None:
+    # the openvino <-> quantize cycle issue 21 found: one side a table of module names
+    sources = _sources(
+        {
+            "runtimes/__init__.py": "",
+            "runtimes/openvino.py": (
+                "def f():\n    from modelprep.quantize import quantized_model\n"
+            ),
+            "modelprep/__init__.py": "",
+            "modelprep/quantize/__init__.py": (
+                'RUNTIMES = {\n    "openvino": "runtimes.openvino",\n}\n'
+            ),
+        }
+    )
+    graph = import_graph(sources)
+    assert graph["modelprep.quantize"] == {"runtimes.openvino": 2}
+    assert find_cycles(graph) == [["modelprep.quantize", "runtimes.openvino"]]
+    assert describe_unit_cycles(unit_graph(graph))[0] == (
+        "package cycle among modelprep.quantize, runtimes:"
+    )
+
+
+def test_the_layering_rule_refuses_what_the_table_refuses() -> None:
+    # services never import tools or deploy, even lazily
+    assert not _allowed("services.metrics.service", "tools.launch")
+    assert not _allowed("services.sim.runner", "tools.scenarios.runner")
+    assert not _allowed("services.recorder", "deploy.processes")
+    assert not _allowed("services.detector.service", "deploy")
+    # nor another service's internals
+    assert not _allowed("services.metrics.service", "services.detector.pipeline")
+    assert _allowed("services.metrics.service", "services.detector")
+    # tools anything but deploy
+    assert _allowed("tools.evaluation.evaluate", "services.detector.pipeline")
+    assert _allowed("tools.scenarios.runner", "tools.launch")
+    assert not _allowed("tools.scenarios.runner", "deploy.processes")
+    # the lower floors
+    assert not _allowed("common.frames", "services.detector")
+    assert not _allowed("common.frames", "runtimes.base")
+    assert not _allowed("runtimes.base", "services.detector")
+    assert _allowed("runtimes.openvino", "modelprep.quantize")
+    assert not _allowed("modelprep.quantize", "runtimes.base")
+    assert not _allowed("deploy.supervisor", "services.metrics")
+    assert not _allowed("deploy.supervisor", "tools.launch")
+
+
+def test_a_service_importing_tools_or_deploy_inside_a_function_is_reported() -> None:
+    sources = _sources(
+        {
+            "services/sim/__init__.py": "",
+            "services/sim/runner.py": (
+                "def f():\n    import tools.launch\n    from deploy import lock\n"
+            ),
+            "tools/__init__.py": "",
+            "tools/launch.py": "",
+            "deploy/__init__.py": "",
+            "deploy/lock.py": "",
+        }
+    )
+    graph = import_graph(sources)
+    wrong = [(m, t) for m, ts in graph.items() for t in ts if not _allowed(m, t)]
+    assert sorted(wrong) == [
+        ("services.sim.runner", "deploy.lock"),
+        ("services.sim.runner", "tools.launch"),
+    ]
+
+
+# -- the project keeps the rules ----------------------------------------------------------------
+
+
+def test_no_module_cycles() -> None:
+    lines = describe_module_cycles(GRAPH)
+    assert lines == [], "import cycles:\n" + "\n".join(lines)
+
+
+def test_no_package_cycles() -> None:
+    lines = describe_unit_cycles(unit_graph(GRAPH))
+    assert lines == [], "package cycles:\n" + "\n".join(lines)
 
 
 def test_layers_and_no_service_imports_another_services_internals() -> None:
     wrong = sorted(
-        f"{module} imports {target}"
+        f"{module} imports {target} (line {line})"
         for module, targets in GRAPH.items()
-        for target in targets
+        for target, line in targets.items()
         if not _allowed(module, target)
     )
-    assert wrong == []
+    assert wrong == [], "imports across the layers:\n" + "\n".join(wrong)
 
 
-def test_the_layering_rule_refuses_internals_and_allows_public_packages() -> None:
-    assert not _allowed("tools.evaluation.evaluate", "services.detector.pipeline")
-    assert _allowed("tools.evaluation.evaluate", "services.detector")
-    assert not _allowed("tools.scenarios.runner", "deploy.processes")
-    assert _allowed("tools.scenarios.runner", "tools.launch")
-    assert not _allowed("common.frames", "services.detector")
-    assert not _allowed("deploy.supervisor", "services.metrics")
+# -- nothing in production reads tests/ ---------------------------------------------------------
+
+#: A path into tests/ (``tests/x``, ``../tests``, a ``"tests"`` part) or a module under it.
+TESTS_PATH = re.compile(r"(?:^|[/\\])tests(?:[/\\]|$)|^tests\.")
+
+
+def _docstrings(tree: ast.Module) -> set[int]:
+    """The ids of the docstring nodes (module, class and function docstrings)."""
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            body = node.body
+            if (
+                body
+                and isinstance(body[0], ast.Expr)
+                and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)
+            ):
+                found.add(id(body[0].value))
+    return found
+
+
+def references_to_tests(source: str) -> list[tuple[int, str]]:
+    """``(line, what)`` for each import of ``tests`` and each string that is a path into it."""
+    tree = ast.parse(source)
+    docstrings = _docstrings(tree)
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            names = [node.module or ""]
+        elif (
+            isinstance(node, ast.Constant)
+            and isinstance(node.value, str)
+            and id(node) not in docstrings
+        ):
+            if TESTS_PATH.search(node.value):
+                found.append((node.lineno, repr(node.value)))
+            continue
+        else:
+            continue
+        found += [(node.lineno, f"import {n}") for n in names if n.split(".")[0] == "tests"]
+    return sorted(found)
+
+
+def test_the_tests_path_check_sees_paths_and_ignores_docstrings() -> None:
+    source = '''"""Reads tests/data/x.json? No: the docstring only mentions it."""
+from pathlib import Path
+import tests.conftest
+ROOT = Path(__file__).resolve().parents[2]
+A = ROOT / "tests" / "data"
+B = Path("tests", "data")
+C = "tests/data/annotations.json"
+D = f"{ROOT}/tests/unit"
+E = "the tests pass"  # a comment on tests/data is fine
+def f():
+    """A docstring naming tests/unit is fine."""
+'''
+    assert references_to_tests(source) == [
+        (3, "import tests.conftest"),
+        (5, "'tests'"),
+        (6, "'tests'"),
+        (7, "'tests/data/annotations.json'"),
+        (8, "'/tests/unit'"),
+    ]
+
+
+def test_no_production_module_reads_anything_under_tests() -> None:
+    found = sorted(
+        f"{path.relative_to(ROOT)}:{line}: {what}"
+        for path in production_sources().values()
+        for line, what in references_to_tests(path.read_text(encoding="utf-8"))
+    )
+    assert found == [], "production code reaching into tests/:\n" + "\n".join(found)
