@@ -16,17 +16,9 @@ from pathlib import Path
 from typing import Any
 
 from common.errors import ConfigError
-from runtimes.base import (
-    AUTO,
-    BACKEND_CHOICES,
-    BACKENDS,
-    Backend,
-    Dim,
-    import_backend,
-    load_function,
-    supported_options,
-)
+from runtimes.base import AUTO, BACKEND_CHOICES, Backend, Dim
 from runtimes.select import open_auto
+from runtimes.table import BACKENDS, import_backend, load_function, supported_options
 
 __all__ = [
     "AUTO",

@@ -1,34 +1,20 @@
-"""The backend Protocol and the table of backends, with no backend imported.
-
-Kept apart from the package's ``__init__`` so that :mod:`.select` (which ``open_backend`` calls
-for ``auto``) and each runtime module can import these names without importing back the module
-that imports them.
+"""The backend Protocol, its names and the input-shape helpers: what every runtime module
+imports. The table of runtime modules is :mod:`.table`, which no runtime imports (no cycle).
 """
 
 from __future__ import annotations
 
-import importlib
-import inspect
-from collections.abc import Callable, Mapping, Sequence
-from types import ModuleType
+from collections.abc import Mapping, Sequence
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
 
 from common.contracts import BackendName
-from common.errors import BackendUnavailable, ConfigError, ModelError
+from common.errors import ModelError
 from common.model_metadata import literal
 
 Dim = int | None  # None: a dynamic dimension (named or unknown in the model)
-
-#: Backend name -> module, imported only when that backend is asked for.
-BACKENDS: dict[str, str] = {
-    BackendName.ONNX: "runtimes.onnx",
-    BackendName.TENSORRT: "runtimes.tensorrt",
-    BackendName.CUDA: "runtimes.cuda",
-    BackendName.OPENVINO: "runtimes.openvino",
-}
 
 #: The name that picks the best backend this machine can run (see :mod:`.select`).
 AUTO = BackendName.AUTO
@@ -84,36 +70,6 @@ class Backend(Protocol):
     def close(self) -> None:
         """Release the runtime's resources; the backend is unusable afterwards."""
         ...
-
-
-def import_backend(name: str) -> ModuleType:
-    """Import the module of the backend called ``name``.
-
-    Raises ConfigError for a name not in :data:`BACKENDS`, and BackendUnavailable when its
-    runtime cannot be imported here (a module may also raise BackendUnavailable itself, with
-    a better reason than the bare ImportError).
-    """
-    module_name = BACKENDS.get(name)
-    if module_name is None:
-        raise ConfigError(f"unknown backend {name!r}; valid backends: {', '.join(BACKEND_CHOICES)}")
-    try:
-        return importlib.import_module(module_name)
-    except ImportError as exc:
-        raise BackendUnavailable(f"backend {name!r} is unavailable on this machine: {exc}") from exc
-
-
-def load_function(name: str) -> Callable[..., Backend]:
-    """The ``load`` function of backend ``name`` (see :func:`import_backend` for errors)."""
-    load: Callable[..., Backend] = import_backend(name).load
-    return load
-
-
-def supported_options(load: Callable[..., Backend]) -> frozenset[str] | None:
-    """The keyword options ``load`` takes; None when it takes any (``**options``)."""
-    params = list(inspect.signature(load).parameters.values())[1:]  # [0] is the model path
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
-        return None
-    return frozenset(p.name for p in params)
 
 
 #: Square input size used when neither the shape nor the metadata fixes it.

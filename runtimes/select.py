@@ -19,18 +19,13 @@ import importlib.util
 import logging
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 from common.errors import BackendUnavailable, ConfigError
 from common.settings import DetectorSettings
-from runtimes.base import (
-    AUTO,
-    BACKENDS,
-    Backend,
-    load_function,
-    supported_options,
-)
+from runtimes.base import AUTO, Backend
+from runtimes.cudart import cuda_device_count, import_cudart
+from runtimes.table import BACKENDS, load_function, supported_options
 
 log = logging.getLogger(__name__)
 
@@ -50,27 +45,6 @@ def _find(module: str) -> bool:
         return importlib.util.find_spec(module) is not None
     except (ImportError, ValueError):  # a parent package is missing or broken
         return False
-
-
-def import_cudart() -> ModuleType:
-    """The CUDA runtime bindings of ``cuda-python``, whichever layout is installed.
-
-    cuda-python 12.6 and later put them at ``cuda.bindings.runtime``; older releases at
-    ``cuda.cudart``. Raises ImportError when neither is there.
-    """
-    try:
-        return importlib.import_module("cuda.bindings.runtime")
-    except ImportError:
-        return importlib.import_module("cuda.cudart")
-
-
-def cuda_device_count(cudart: ModuleType) -> tuple[int, str]:
-    """``(number of CUDA devices, "" or the error)`` as the CUDA runtime sees them."""
-    err, count = cudart.cudaGetDeviceCount()
-    if err != cudart.cudaError_t.cudaSuccess:
-        _, text = cudart.cudaGetErrorString(err)
-        return 0, text.decode() if isinstance(text, bytes) else str(text)
-    return int(count), ""
 
 
 def probe_tensorrt() -> str | None:

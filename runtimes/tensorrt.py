@@ -39,9 +39,9 @@ except ImportError as exc:
 from modelprep.quantize import calibration as calib_data
 from runtimes import engine_cache
 from runtimes.base import Backend, Dim
+from runtimes.cudart import cuda_device_count, import_cudart
 from runtimes.engine_cache import BuildOptions
 from runtimes.profiles import ProfileShapes, calibration_shape, model_profile
-from runtimes.select import cuda_device_count, import_cudart
 
 try:
     cudart = import_cudart()

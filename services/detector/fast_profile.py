@@ -28,7 +28,7 @@ from common.lifecycle import Progress, print_progress
 from common.machine import cpu_model
 from common.settings import DetectorSettings
 from modelprep.files import ensure_default_model
-from runtimes.base import BACKENDS, import_backend
+from runtimes.table import BACKENDS, import_backend
 from services.detector.variants import Variant
 
 log = logging.getLogger("runtimes.fast_profile")

@@ -5,7 +5,7 @@ lazy import still ties the two modules together), relative ones resolved. ``from
 name`` points at the submodule ``pkg.name`` when there is one, else at ``pkg``. A package's
 ``__init__`` is the package's own module; importing ``a.b.c`` is not counted as importing ``a``
 or ``a.b``. An import through ``importlib`` counts too: ``import_module("a.b")`` with a literal,
-and the string values of a table such as runtimes/base.py's ``BACKENDS`` (name -> module) that
+and the string values of a table such as runtimes/table.py's ``BACKENDS`` (name -> module) that
 name a project module, absolutely or as a submodule of the table's own module (modelprep
 /quantize's ``RUNTIMES``, imported as ``f"{__name__}.{module}"``). Running a module as a program
 (``python -m``, ``runpy`` in deploy/zstack.py) is not an import.
@@ -284,7 +284,7 @@ def test_the_graph_sees_top_level_and_function_level_imports() -> None:
 def test_the_graph_sees_the_backend_tables_behind_importlib() -> None:
     # BACKENDS: name -> module, imported by import_backend with importlib
     assert {"runtimes.onnx", "runtimes.openvino", "runtimes.cuda", "runtimes.tensorrt"} <= set(
-        GRAPH["runtimes.base"]
+        GRAPH["runtimes.table"]
     )
     # RUNTIMES: runtime -> a submodule of modelprep.quantize, imported by f"{__name__}.{name}"
     assert {"modelprep.quantize.ort_int8", "modelprep.quantize.nncf_int8"} <= set(
