@@ -7,19 +7,30 @@ them. Which image the pixels belong to is the producer's to say: the network inp
 candidates, the original image after post-processing and in messages.
 
 The decoder's candidates, post-processing, the detector's result, the tracker's input, the
-Detections message and the evaluator all carry :class:`Boxes`; :func:`check_boxes` is the one
-function that validates such arrays, and :func:`valid_rows` the one definition of a box that
-may be kept.
+Detections message, the evaluator and the recording comparison all carry :class:`Boxes`;
+:func:`check_boxes` is the one function that validates such arrays, and :func:`valid_rows` the
+one definition of a box that may be kept.
+
+The field annotations are also the wire layout (common/fields.py): a Detections message carries
+its Boxes inline, each array as a key of the message body beside the row count ``n``, which a
+decoder bounds by ``MAX_DETECTIONS`` before reading any array.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import numpy.typing as npt
+
+from common.fields import Dim, Shape
+
+# The most detections one message carries; a Boxes in memory (the decoder's candidates) may
+# hold more.
+MAX_DETECTIONS = 10000
+N_DETECTIONS = Dim("n", 0, MAX_DETECTIONS)
 
 
 def _describe(value: Any) -> str:
@@ -99,10 +110,16 @@ class Boxes:
     box or a row count that disagrees between arrays.
     """
 
-    xyxy: npt.NDArray[np.float32] = dataclasses.field(default_factory=_empty_xyxy)
-    scores: npt.NDArray[np.float32] = dataclasses.field(default_factory=_empty_scores)
-    class_ids: npt.NDArray[np.int32] = dataclasses.field(default_factory=_empty_ids)
-    track_ids: npt.NDArray[np.int32] | None = None
+    xyxy: Annotated[npt.NDArray[np.float32], Shape(N_DETECTIONS, 4)] = dataclasses.field(
+        default_factory=_empty_xyxy
+    )
+    scores: Annotated[npt.NDArray[np.float32], Shape(N_DETECTIONS)] = dataclasses.field(
+        default_factory=_empty_scores
+    )
+    class_ids: Annotated[npt.NDArray[np.int32], Shape(N_DETECTIONS)] = dataclasses.field(
+        default_factory=_empty_ids
+    )
+    track_ids: Annotated[npt.NDArray[np.int32], Shape(N_DETECTIONS)] | None = None
 
     def __post_init__(self) -> None:
         check_boxes(self.xyxy, self.scores, self.class_ids, self.track_ids)

@@ -10,6 +10,10 @@ The type hints it knows, how each travels, and what a decoder accepts:
 - ``float``: a number (an int is taken as a float), NaN and inf included.
 - ``str``, ``bool``, ``bytes``: exactly that type; bytes stay bytes.
 - a dataclass (``Header``): a map, by these same rules.
+- ``Annotated[SomeDataclass, Inline()]``: no map of its own; its fields (and counts) are keys
+  of the enclosing body, by these same rules (Detections' ``boxes``: xyxy, scores ... beside
+  the header). It is always written whole, so a decoder requires each of its fields but those
+  that may be None.
 - ``tuple[X, ...]`` or ``tuple[X, X, X]``: a list (of exactly that length) of plain values.
 - ``dict[str, V]``: a map with str keys; V a plain value or another such dict.
 - ``Annotated[npt.NDArray[np.float32], Shape(...)]``: raw little-endian bytes of that dtype,
@@ -79,6 +83,12 @@ class Shape:
         object.__setattr__(self, "dims", dims)
 
 
+@dataclass(frozen=True, slots=True)
+class Inline:
+    """A dataclass field whose own fields travel as keys of its parent's body, not as a map of
+    their own: ``boxes: Annotated[Boxes, Inline()]``."""
+
+
 NonNegativeInt = Annotated[int, Range(lo=0)]
 
 
@@ -103,20 +113,27 @@ _Counts = tuple[tuple[Dim, int], ...]
 class _Plan:
     """How one dataclass travels, as flat tuples for a tight loop on every message."""
 
-    encoders: tuple[tuple[str, Encoder | None, _Counts], ...]  # None: the value as it is
-    decoders: tuple[tuple[str, Decoder, bool], ...]  # bool: required (no default)
+    # enc None: the value as it is; inline: enc returns keys to merge into the body.
+    encoders: tuple[tuple[str, Encoder | None, _Counts, bool], ...]  # (name, enc, counts, inline)
+    # An inline field's decoder reads the enclosing body itself.
+    decoders: tuple[tuple[str, Decoder, bool, bool], ...]  # (name, dec, required, inline)
     dims: tuple[Dim, ...]
+    keys: frozenset[str]  # every key the body holds: fields, counts, inline fields' keys
 
 
-_PLANS: dict[type, _Plan] = {}
+# By (class, travels inline): an inline struct's fields are all required (see the docstring).
+_PLANS: dict[tuple[type, bool], _Plan] = {}
 
 
 def encode_struct(obj: Any) -> dict[str, Any]:
     """The wire body of dataclass ``obj``: every field by name, plus its counts."""
-    plan = _PLANS.get(type(obj)) or _plan(type(obj))
+    plan = _PLANS.get((type(obj), False)) or _plan(type(obj))
     out: dict[str, Any] = {}
-    for name, enc, counts in plan.encoders:
+    for name, enc, counts, inline in plan.encoders:
         v = getattr(obj, name)
+        if inline:
+            out.update(enc(v))  # type: ignore[misc]  # an inline field always has an encoder
+            continue
         if counts:
             for dim, axis in counts:
                 out[dim.name] = int(v.shape[axis])
@@ -132,8 +149,14 @@ def decode_struct(cls: type[T], body: Mapping[str, Any], where: str) -> T:
         raise DecodeError(f"{'.'.join((where, *exc.path))}: {exc.reason}") from None
 
 
-def _decode(cls: type[T], body: Mapping[str, Any]) -> T:
-    plan = _PLANS.get(cls) or _plan(cls)
+def inline_fields(cls: type) -> frozenset[str]:
+    """The names of the fields of dataclass ``cls`` that travel inline (``Inline``)."""
+    plan = _PLANS.get((cls, False)) or _plan(cls)
+    return frozenset(name for name, _, _, inline in plan.encoders if inline)
+
+
+def _decode(cls: type[T], body: Mapping[str, Any], whole: bool = False) -> T:
+    plan = _PLANS.get((cls, whole)) or _plan(cls, whole)
     dims: dict[str, int] = {}
     for dim in plan.dims:
         v = body.get(dim.name)
@@ -143,7 +166,10 @@ def _decode(cls: type[T], body: Mapping[str, Any]) -> T:
             raise _Bad(f"{v} is outside [{dim.lo}, {dim.hi}]", (dim.name,))
         dims[dim.name] = v
     kwargs: dict[str, Any] = {}
-    for name, dec, required in plan.decoders:
+    for name, dec, required, inline in plan.decoders:
+        if inline:
+            kwargs[name] = dec(body, dims)  # its keys are this body's: paths need no prefix
+            continue
         if name not in body:
             if required:
                 raise _Bad("missing field", (name,))
@@ -155,18 +181,29 @@ def _decode(cls: type[T], body: Mapping[str, Any]) -> T:
     return cls(**kwargs)
 
 
-def _plan(cls: type) -> _Plan:
-    """Compile the encoders and decoders of dataclass ``cls`` from its type hints."""
+def _plan(cls: type, whole: bool = False) -> _Plan:
+    """Compile the encoders and decoders of dataclass ``cls`` from its type hints; ``whole``:
+    ``cls`` travels inline, so every field that may not be None is required."""
     if not dataclasses.is_dataclass(cls):
         raise TypeError(f"{cls.__name__} is not a dataclass")
     hints = get_type_hints(cls, include_extras=True)
-    encoders: list[tuple[str, Encoder | None, _Counts]] = []
-    decoders: list[tuple[str, Decoder, bool]] = []
+    encoders: list[tuple[str, Encoder | None, _Counts, bool]] = []
+    decoders: list[tuple[str, Decoder, bool, bool]] = []
     placed: set[str] = set()
     dims: dict[str, Dim] = {}
+    keys: list[str] = []
     for f in dataclasses.fields(cls):
         hint = hints[f.name]
-        enc, dec = _converter(hint, (), f"{cls.__name__}.{f.name}")
+        where = f"{cls.__name__}.{f.name}"
+        inner = _inline_type(hint, where)
+        if inner is not None:
+            inner_plan = _plan(inner, whole=True)
+            encoders.append((f.name, encode_struct, (), True))
+            decoders.append((f.name, _inline_decoder(inner), True, True))
+            keys.extend(inner_plan.keys)
+            continue
+        keys.append(f.name)
+        enc, dec = _converter(hint, (), where)
         here: list[tuple[Dim, int]] = []
         shape, optional = _shape_of(hint)
         for axis, d in enumerate(shape.dims if shape else ()):
@@ -177,16 +214,39 @@ def _plan(cls: type) -> _Plan:
                     placed.add(d.name)
                     here.append((d, axis))
         required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
-        encoders.append((f.name, enc, tuple(here)))
-        decoders.append((f.name, dec, required))
+        encoders.append((f.name, enc, tuple(here), False))
+        decoders.append((f.name, dec, required or (whole and not optional), False))
     for name in dims:
         if name in {e[0] for e in encoders}:
             raise TypeError(f"{cls.__name__}: Dim {name!r} has a field's name")
         if name not in placed:
             raise TypeError(f"{cls.__name__}: Dim {name!r} sizes no array that is always there")
-    plan = _Plan(tuple(encoders), tuple(decoders), tuple(dims.values()))
-    _PLANS[cls] = plan
+    keys.extend(dims)
+    if len(set(keys)) != len(keys):
+        twice = sorted({k for k in keys if keys.count(k) > 1})
+        raise TypeError(f"{cls.__name__}: keys {twice} would travel twice (an inline field's?)")
+    plan = _Plan(tuple(encoders), tuple(decoders), tuple(dims.values()), frozenset(keys))
+    _PLANS[(cls, whole)] = plan
     return plan
+
+
+def _inline_type(hint: Any, where: str) -> type | None:
+    """The dataclass of an ``Annotated[X, Inline()]`` field, or None for any other field."""
+    if get_origin(hint) is not Annotated or not any(
+        isinstance(m, Inline) for m in get_args(hint)[1:]
+    ):
+        return None
+    inner = get_args(hint)[0]
+    if not (isinstance(inner, type) and dataclasses.is_dataclass(inner)):
+        raise TypeError(f"{where}: only a dataclass travels inline, got {inner}")
+    return inner
+
+
+def _inline_decoder(cls: type) -> Decoder:
+    def decode(body: Any, dims: Mapping[str, int]) -> Any:
+        return _decode(cls, body, whole=True)
+
+    return decode
 
 
 def _shape_of(hint: Any) -> tuple[Shape | None, bool]:

@@ -23,13 +23,12 @@ from typing import Annotated, Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from common.boxes import Boxes, check_boxes
+from common.boxes import MAX_DETECTIONS, Boxes
 from common.codec import Message
-from common.fields import Dim, NonNegativeInt, Shape
+from common.fields import Dim, Inline, NonNegativeInt, Shape
 
 # Limits that no real camera reaches; anything above is garbage, not a frame.
 MAX_IMAGE_SIDE = 16384
-MAX_DETECTIONS = 10000
 # A class name (COCO's longest is 14 characters, LVIS's about 40) and a model or backend name:
 # longer ones are refused where they enter, so that no receiver keeps megabytes of names.
 MAX_NAME_CHARS = 128
@@ -40,8 +39,7 @@ MAX_SCAN_RAYS = 100_000
 FRAME_ENCODINGS: dict[str, int] = {"bgr8": 3, "rgb8": 3, "mono8": 1, "jpeg": 0}
 
 # The counts that size a message's arrays; each travels on the wire as "n", and is checked
-# against its bounds before any array is read.
-N_DETECTIONS = Dim("n", 0, MAX_DETECTIONS)
+# against its bounds before any array is read (Detections' is common.boxes.N_DETECTIONS).
 N_RAYS = Dim("n", 1, MAX_SCAN_RAYS)
 N_TARGETS = Dim("n", 0, MAX_DETECTIONS)
 
@@ -101,10 +99,10 @@ class Detections(Message):
     """The detections of one frame: ``vision_msgs/Detection2DArray`` as a struct of arrays.
 
     ``header`` is the frame's header, unchanged, so latency is measured from the capture stamp.
-    Boxes are ``xyxy`` (n, 4) float32 in pixels of the ``image_width`` x ``image_height`` image.
-    ``track_ids`` is (n,) int32 with -1 where no tracker has assigned an id, or None.
-    The arrays are those of :class:`common.boxes.Boxes`, flat here because they are the wire
-    layout, and checked by the same ``check_boxes``; ``from_boxes`` and ``boxes`` convert.
+    ``boxes`` (common/boxes.py) are in pixels of the ``image_width`` x ``image_height`` image,
+    with ``track_ids`` -1 where no tracker has assigned an id, or None; ``class_names`` names
+    each row. The boxes travel inline: ``xyxy``, ``scores``, ``class_ids``, ``track_ids`` and
+    their count ``n`` are keys of the message body itself (docs/messages.md).
     ``timing_ms`` holds the detector's stages (preprocess, inference, postprocess);
     ``received_ns`` and ``published_ns`` are when the detector took and sent the frame.
     """
@@ -114,11 +112,8 @@ class Detections(Message):
     header: Header
     image_width: int
     image_height: int
-    class_ids: Annotated[npt.NDArray[np.int32], Shape(N_DETECTIONS)]
+    boxes: Annotated[Boxes, Inline()]
     class_names: tuple[str, ...]
-    scores: Annotated[npt.NDArray[np.float32], Shape(N_DETECTIONS)]
-    xyxy: Annotated[npt.NDArray[np.float32], Shape(N_DETECTIONS, 4)]
-    track_ids: Annotated[npt.NDArray[np.int32], Shape(N_DETECTIONS)] | None = None
     timing_ms: dict[str, float] = field(default_factory=dict)
     model: str = ""
     backend: str = ""
@@ -126,8 +121,7 @@ class Detections(Message):
     published_ns: NonNegativeInt = 0
 
     def __post_init__(self) -> None:
-        check_boxes(self.xyxy, self.scores, self.class_ids, self.track_ids)
-        n = len(self.xyxy)
+        n = len(self.boxes)
         if n > MAX_DETECTIONS:
             raise ValueError(f"{n} detections is over the limit of {MAX_DETECTIONS}")
         if not (0 < self.image_width <= MAX_IMAGE_SIDE and 0 < self.image_height <= MAX_IMAGE_SIDE):
@@ -140,37 +134,20 @@ class Detections(Message):
         if max(len(self.model), len(self.backend)) > 2 * MAX_NAME_CHARS:
             raise ValueError(f"model or backend name over {2 * MAX_NAME_CHARS} characters")
 
-    @classmethod
-    def from_boxes(cls, boxes: Boxes, **fields: Any) -> Detections:
-        """The message carrying ``boxes``; ``fields`` are its other fields (header,
-        image_width, image_height, class_names, ...), by name."""
-        return cls(
-            xyxy=boxes.xyxy,
-            scores=boxes.scores,
-            class_ids=boxes.class_ids,
-            track_ids=boxes.track_ids,
-            **fields,
-        )
-
-    @property
-    def boxes(self) -> Boxes:
-        """The detections as the one struct of arrays (common/boxes.py)."""
-        return Boxes(
-            xyxy=self.xyxy, scores=self.scores, class_ids=self.class_ids, track_ids=self.track_ids
-        )
-
     def __len__(self) -> int:
-        return len(self.xyxy)
+        return len(self.boxes)
 
     @property
     def centers(self) -> npt.NDArray[np.float32]:
         """Box centres (n, 2) in pixels, as ``BoundingBox2D.center``."""
-        return ((self.xyxy[:, :2] + self.xyxy[:, 2:]) / 2).astype(np.float32)
+        xyxy = self.boxes.xyxy
+        return ((xyxy[:, :2] + xyxy[:, 2:]) / 2).astype(np.float32)
 
     @property
     def sizes(self) -> npt.NDArray[np.float32]:
         """Box sizes (n, 2) width and height in pixels, as ``BoundingBox2D.size_x/size_y``."""
-        return (self.xyxy[:, 2:] - self.xyxy[:, :2]).astype(np.float32)
+        xyxy = self.boxes.xyxy
+        return (xyxy[:, 2:] - xyxy[:, :2]).astype(np.float32)
 
     def _wire_extras(self) -> dict[str, Any]:
         # (n, 4) float32 cx, cy, w, h for readers in other languages; decode ignores it.

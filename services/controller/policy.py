@@ -66,7 +66,7 @@ def candidates(
     if len(dets) == 0:
         return np.empty(0, dtype=np.intp)
     mask = np.isin(np.asarray(dets.class_names, dtype=object), classes)
-    return np.flatnonzero(mask & (dets.scores >= min_score))
+    return np.flatnonzero(mask & (dets.boxes.scores >= min_score))
 
 
 def unknown_targets(targets: tuple[str, ...], model_classes: list[str]) -> list[str]:
@@ -93,7 +93,7 @@ def box_distance(dets: Detections, i: int, hfov_deg: float, target_height_m: flo
 
 def box_clipped(dets: Detections, i: int, margin_px: float = 2.0) -> bool:
     """Whether box ``i`` touches the top or bottom image edge (its height is then cut)."""
-    y1, y2 = float(dets.xyxy[i, 1]), float(dets.xyxy[i, 3])
+    y1, y2 = float(dets.boxes.xyxy[i, 1]), float(dets.boxes.xyxy[i, 3])
     return y1 <= margin_px or y2 >= dets.image_height - margin_px
 
 
@@ -228,8 +228,8 @@ class Controller:
         if self.s.mode is ControllerMode.TRACK:
             offsets = np.abs(dets.centers[idx, 0] - dets.image_width / 2.0)
             return int(idx[int(np.argmin(offsets))])
-        if dets.track_ids is not None and self.locked_id >= 0:
-            locked = idx[dets.track_ids[idx] == self.locked_id]
+        if dets.boxes.track_ids is not None and self.locked_id >= 0:
+            locked = idx[dets.boxes.track_ids[idx] == self.locked_id]
             if locked.size:
                 return int(locked[0])
             return None  # the locked target is out of view: never jump to another one
@@ -267,7 +267,7 @@ class Controller:
             self.locked_id, self.last_aim = -1, None
             self.pid.reset()
             return stop(ControllerState.SEARCHING, f"no {'/'.join(classes)} in view", stamp)
-        track_id = -1 if dets.track_ids is None else int(dets.track_ids[best])
+        track_id = -1 if dets.boxes.track_ids is None else int(dets.boxes.track_ids[best])
         if s.mode is ControllerMode.FOLLOW and self.locked_id < 0 and track_id >= 0:
             self.locked_id = track_id
         self.last_seen = now

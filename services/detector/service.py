@@ -51,11 +51,11 @@ def to_message(
 ) -> Detections:
     """The Detections message for ``frame``: its header, the result, the detector's stamps."""
     t = result.timing
-    return Detections.from_boxes(
-        result.boxes.with_track_ids(track_ids),
+    return Detections(
         header=frame.header,
         image_width=frame.width,
         image_height=frame.height,
+        boxes=result.boxes.with_track_ids(track_ids),
         class_names=tuple(result.class_names),
         timing_ms={
             "preprocess": t.preprocess_ms,

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from common.codec import Message
+from common.fields import inline_fields
 from common.messages import Detections, Frame, Header, LaserScan, Twist
 from common.ros2_settings import Ros2Settings
 from services.ros2 import (
@@ -112,19 +113,31 @@ def _json_type(hint: Any) -> dict[str, Any]:
 
 
 def json_schema(cls: type) -> dict[str, Any]:
-    """The JSON schema of a message class (or Header), from its dataclass fields."""
+    """The JSON schema of a message class (or Header), from its dataclass fields; the fields of
+    an inline one (Detections' boxes) are properties of the message itself, as on the wire."""
     hints = typing.get_type_hints(cls, include_extras=True)
-    fields = [f.name for f in dataclasses.fields(cls)]
-    return {
-        "title": cls.__name__,
-        "type": "object",
-        "properties": {name: _json_type(hints[name]) for name in fields},
-    }
+    inline = inline_fields(cls)
+    properties: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        schema = _json_type(hints[f.name])
+        if f.name in inline:
+            properties.update(schema["properties"])
+        else:
+            properties[f.name] = schema
+    return {"title": cls.__name__, "type": "object", "properties": properties}
 
 
 def _plain(value: Any) -> Any:
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        inline = inline_fields(type(value))
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(value):
+            plain = _plain(getattr(value, f.name))
+            if f.name in inline:
+                out.update(plain)  # its fields beside the message's own, as on the wire
+            else:
+                out[f.name] = plain
+        return out
     if isinstance(value, np.ndarray):
         if value.dtype.kind == "f" and not np.isfinite(value).all():
             return _plain(value.tolist())  # per element, for the NaN and inf

@@ -155,11 +155,12 @@ def detections_to_ros(distro: RosDistro, dets: Detections) -> RosMessage:
         ),
         covariance=np.zeros(36, dtype=np.float64),
     )
-    xyxy = dets.xyxy.astype(np.float64)
+    boxes = dets.boxes
+    xyxy = boxes.xyxy.astype(np.float64)
     centers = ((xyxy[:, :2] + xyxy[:, 2:]) / 2).tolist()
     sizes = (xyxy[:, 2:] - xyxy[:, :2]).tolist()
-    scores = dets.scores.astype(np.float64).tolist()
-    tracks = [-1] * len(dets) if dets.track_ids is None else dets.track_ids.tolist()
+    scores = boxes.scores.astype(np.float64).tolist()
+    tracks = [-1] * len(dets) if boxes.track_ids is None else boxes.track_ids.tolist()
     detection2d = types["vision_msgs/msg/Detection2D"]
     hypothesis_with_pose = types["vision_msgs/msg/ObjectHypothesisWithPose"]
     hypothesis = types["vision_msgs/msg/ObjectHypothesis"]

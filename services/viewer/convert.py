@@ -111,13 +111,14 @@ def image_annotations(
     track id is ``locked_track`` (the controller's target; -1: none) is drawn thicker, in red."""
     ts = stamp(dets.header.stamp_ns)
     sx, sy = width / dets.image_width, height / dets.image_height
-    xyxy = (dets.xyxy.astype(np.float64) * np.array([sx, sy, sx, sy])).tolist()
+    boxes = dets.boxes
+    xyxy = (boxes.xyxy.astype(np.float64) * np.array([sx, sy, sx, sy])).tolist()
     n = len(xyxy)
-    tracks = dets.track_ids.tolist() if dets.track_ids is not None else [-1] * n
+    tracks = boxes.track_ids.tolist() if boxes.track_ids is not None else [-1] * n
     points: list[PointsAnnotation] = []
     texts: list[TextAnnotation] = []
     for (x1, y1, x2, y2), name, score, cid, tid in zip(
-        xyxy, dets.class_names, dets.scores.tolist(), dets.class_ids.tolist(), tracks,
+        xyxy, dets.class_names, boxes.scores.tolist(), boxes.class_ids.tolist(), tracks,
         strict=True,
     ):  # fmt: skip
         locked = tid >= 0 and tid == locked_track

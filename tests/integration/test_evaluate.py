@@ -68,12 +68,10 @@ def test_evaluate_agrees_with_the_evaluator_on_the_same_detections(
     coco_gt = COCO(str(ANNOTATIONS))
     category = {c["name"]: c["id"] for c in coco_gt.dataset["categories"]}
     results = [
-        {"image_id": d.image_id, "category_id": category[name], "score": float(s),
+        {"image_id": image_id, "category_id": category[names[c]], "score": float(s),
          "bbox": [float(x1), float(y1), float(x2 - x1), float(y2 - y1)]}
-        for d in detections
-        for name, s, (x1, y1, x2, y2) in zip(
-            d.class_names, d.boxes.scores, d.boxes.xyxy, strict=True
-        )
+        for image_id, boxes in detections.items()
+        for c, s, (x1, y1, x2, y2) in zip(boxes.class_ids, boxes.scores, boxes.xyxy, strict=True)
     ]  # fmt: skip
     direct = COCOeval_faster(coco_gt, coco_gt.loadRes(results), "bbox", print_function=_silent)
     direct.evaluate()

@@ -11,6 +11,7 @@ import msgpack
 import numpy as np
 import pytest
 
+from common.boxes import Boxes
 from common.clock import now
 from common.messages import Detections, GroundTruth, Twist
 from tests.integration.conftest import Stack, wait_for
@@ -36,10 +37,12 @@ def _flood_message(i: int) -> bytes:
         header=header(now().wall_ns, source="flood"),
         image_width=640,
         image_height=480,
-        class_ids=np.arange(n, dtype=np.int32),
+        boxes=Boxes(
+            xyxy=np.tile(np.array([[10, 10, 20, 20]], np.float32), (n, 1)),
+            scores=np.full(n, 0.9, np.float32),
+            class_ids=np.arange(n, dtype=np.int32),
+        ),
         class_names=("x",) * n,
-        scores=np.full(n, 0.9, np.float32),
-        xyxy=np.tile(np.array([[10, 10, 20, 20]], np.float32), (n, 1)),
     )
     names = [f"{i}-{k}-" + "x" * NAME_BYTES for k in range(n)]
     return _with_body(valid.encode(), class_names=names)

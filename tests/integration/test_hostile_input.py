@@ -12,10 +12,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
 import zenoh
 
+from common.boxes import Boxes
 from common.bus import Publisher, QoS
 from common.clock import BOOT_ID, now
 from common.frames import image_to_frame
@@ -175,14 +175,16 @@ def test_an_absurd_stage_time_is_refused_and_the_answer_stays_json(stack: Stack)
 
     rogue = stack.open("observer")
     try:
-        empty = np.zeros(0, np.float32)
         pub = matched(rogue, stack.keys.detections("front"))
         for seq in range(3):  # several, so that a mean of them would overflow to infinity
             dets = Detections(
-                header=header("rogue", seq + 1), image_width=8, image_height=8,
-                class_ids=empty.astype(np.int32), class_names=(), scores=empty,
-                xyxy=empty.reshape(0, 4), timing_ms={"inference": 1e308},
-            )  # fmt: skip
+                header=header("rogue", seq + 1),
+                image_width=8,
+                image_height=8,
+                boxes=Boxes(),
+                class_names=(),
+                timing_ms={"inference": 1e308},
+            )
             pub.put(dets.encode())
         wait_for(
             lambda: counter(stack, "metrics.refused.bad_timing") == 3,

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from common.boxes import Boxes
 from common.clock import BOOT_ID, now
 from common.messages import (
     ControllerStatus,
@@ -60,10 +61,12 @@ def person(h: Header, n: int = 1) -> Detections:
         header=h,
         image_width=640,
         image_height=480,
-        class_ids=np.zeros(n, np.int32),
+        boxes=Boxes(
+            xyxy=np.tile(np.array([[280, 100, 360, 400]], np.float32), (n, 1)),
+            scores=np.full(n, 0.9, np.float32),
+            class_ids=np.zeros(n, np.int32),
+        ),
         class_names=("person",) * n,
-        scores=np.full(n, 0.9, np.float32),
-        xyxy=np.tile(np.array([[280, 100, 360, 400]], np.float32), (n, 1)),
     )
 
 

@@ -59,8 +59,9 @@ def test_stack_detects_reacts_and_stops_cleanly(make_stack) -> None:  # type: ig
     assert d.header.source == "camera" and d.header.stamp_ns < d.published_ns
     assert d.timing_ms["inference"] > 0
     i = d.class_names.index("person")
-    assert iou(d.xyxy[i], CAMERAMAN_BOX) >= 0.5, f"person box {d.xyxy[i]} is not on the man"
-    assert d.track_ids is not None and d.track_ids[i] > 0, "the tracker gave no track id"
+    box, tracks = d.boxes.xyxy[i], d.boxes.track_ids
+    assert iou(box, CAMERAMAN_BOX) >= 0.5, f"person box {box} is not on the man"
+    assert tracks is not None and tracks[i] > 0, "the tracker gave no track id"
 
     def reaction() -> Twist | None:
         stamps = {Detections.decode(r).header.stamp_ns for r in list(dets)}

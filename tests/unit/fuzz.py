@@ -26,6 +26,7 @@ import zenoh
 from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 
+from common.boxes import Boxes
 from common.codec import Message
 from common.messages import (
     ControllerStatus,
@@ -84,11 +85,22 @@ def samples(stamp_ns: int | None = 1_700_000_000_000_000_000) -> dict[type[Messa
     n = 2
     xyxy = np.array([[1, 2, 30, 40], [5, 6, 7, 8]], np.float32)
     dets = Detections(
-        header=h, image_width=64, image_height=48, class_ids=np.arange(n, dtype=np.int32),
-        class_names=("person", "cup"), scores=np.array([0.9, 0.4], np.float32), xyxy=xyxy,
-        track_ids=np.array([3, -1], np.int32), timing_ms={"inference": 1.5}, model="m",
-        backend="onnx/cpu/fp32", received_ns=1, published_ns=2,
-    )  # fmt: skip
+        header=h,
+        image_width=64,
+        image_height=48,
+        boxes=Boxes(
+            xyxy=xyxy,
+            scores=np.array([0.9, 0.4], np.float32),
+            class_ids=np.arange(n, dtype=np.int32),
+            track_ids=np.array([3, -1], np.int32),
+        ),
+        class_names=("person", "cup"),
+        timing_ms={"inference": 1.5},
+        model="m",
+        backend="onnx/cpu/fp32",
+        received_ns=1,
+        published_ns=2,
+    )
     return {
         Frame: [
             Frame(header=h, encoding="bgr8", width=4, height=2, data=bytes(range(24))),

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from common.boxes import Boxes
 from common.bus import open_session
 from common.config_file import to_toml
 from common.keys import Keys
@@ -81,10 +82,16 @@ def _detections(stamp_ns: int) -> Detections:
     xy = rng.uniform(0, 500, (10, 2)).astype(np.float32)
     return Detections(
         header=Header(stamp_ns=stamp_ns, frame_id="camera", seq=0, source="bench"),
-        image_width=640, image_height=480, class_ids=np.zeros(10, np.int32),
-        class_names=("person",) * 10, scores=np.full(10, 0.8, np.float32),
-        xyxy=np.hstack([xy, xy + 100]), track_ids=np.arange(10, dtype=np.int32),
-    )  # fmt: skip
+        image_width=640,
+        image_height=480,
+        boxes=Boxes(
+            xyxy=np.hstack([xy, xy + 100]),
+            scores=np.full(10, 0.8, np.float32),
+            class_ids=np.zeros(10, np.int32),
+            track_ids=np.arange(10, dtype=np.int32),
+        ),
+        class_names=("person",) * 10,
+    )
 
 
 def _summary(samples: list[float]) -> dict[str, float]:

@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from tools.compare.runs import Command, FrameDetections, Run
+from common.messages import Detections
+from tools.compare.runs import Command, Run
 
 #: The stages whose latency is compared: name -> what it covers.
 STAGES: dict[str, str] = {
@@ -38,13 +39,12 @@ def iou_matrix(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.ND
     return np.where(union > 0, inter / np.where(union > 0, union, 1), 0.0)
 
 
-def match_frame(
-    a: FrameDetections, b: FrameDetections, iou_min: float
-) -> list[tuple[int, int, float]]:
+def match_frame(a: Detections, b: Detections, iou_min: float) -> list[tuple[int, int, float]]:
     """Pairs (i in a, j in b, IoU) of one class each, greedily by IoU, each box used once."""
-    if not len(a.xyxy) or not len(b.xyxy):
+    if not len(a) or not len(b):
         return []
-    iou = iou_matrix(a.xyxy, b.xyxy)
+    # float64 here only: the IoUs compared against iou_min and reported.
+    iou = iou_matrix(a.boxes.xyxy.astype(np.float64), b.boxes.xyxy.astype(np.float64))
     same = np.array([[na == nb for nb in b.class_names] for na in a.class_names])
     iou = np.where(same, iou, -1.0)
     pairs: list[tuple[int, int, float]] = []
@@ -66,9 +66,9 @@ def latencies_ms(run: Run) -> dict[str, list[float]]:
             if stage in d.timing_ms:
                 out[stage].append(d.timing_ms[stage])
         if d.received_ns:
-            out["capture_to_detector"].append((d.received_ns - d.stamp_ns) / 1e6)
+            out["capture_to_detector"].append((d.received_ns - d.header.stamp_ns) / 1e6)
         if d.published_ns:
-            out["capture_to_detections"].append((d.published_ns - d.stamp_ns) / 1e6)
+            out["capture_to_detections"].append((d.published_ns - d.header.stamp_ns) / 1e6)
     for stamp, cmd in first_commands(run).items():
         out["capture_to_command"].append((cmd.stamp_ns - stamp) / 1e6)
     return out
@@ -86,7 +86,9 @@ def first_commands(run: Run) -> dict[int, Command]:
 def commands_by_seq(run: Run) -> dict[int, Command]:
     by_stamp = first_commands(run)
     return {
-        seq: by_stamp[d.stamp_ns] for seq, d in run.detections.items() if d.stamp_ns in by_stamp
+        seq: by_stamp[d.header.stamp_ns]
+        for seq, d in run.detections.items()
+        if d.header.stamp_ns in by_stamp
     }
 
 

@@ -1,8 +1,9 @@
 """A recorded run as compare.py needs it: detections per frame, commands, frame count.
 
-Read from the JSON channels our recorder writes (channels.py): ``Detections`` (with the frame's
-sequence number and the detector's timings) and ``Twist`` (with ``input_stamp_ns``). The first
-detections of each sequence number are kept (a looped replay repeats them).
+Read from the JSON channels our recorder writes (services/recorder/channels.py): ``Detections``
+(with the frame's sequence number and the detector's timings), read back into the message
+itself, and ``Twist`` (with ``input_stamp_ns``). The first detections of each sequence number
+are kept (a looped replay repeats them).
 """
 
 from __future__ import annotations
@@ -12,24 +13,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from common.boxes import Boxes
 from common.errors import DecodeError, RecordingError
+from common.messages import Detections, Header
 from services.recorder.reading import Input, Recording, input_kind
-
-
-@dataclass(frozen=True, slots=True)
-class FrameDetections:
-    """One frame's detections: ``xyxy`` (n, 4) float64 pixels, with class names and scores."""
-
-    seq: int
-    stamp_ns: int
-    class_names: tuple[str, ...]
-    xyxy: npt.NDArray[np.float64]
-    scores: npt.NDArray[np.float64]
-    timing_ms: dict[str, float] = field(default_factory=dict)
-    received_ns: int = 0
-    published_ns: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,7 +32,7 @@ class Command:
 class Run:
     path: Path
     frames: int = 0
-    detections: dict[int, FrameDetections] = field(default_factory=dict)
+    detections: dict[int, Detections] = field(default_factory=dict)  # by the frame's seq
     commands: list[Command] = field(default_factory=list)
     truncated: bool = False
     # Which model produced the detections: "model (backend/device/precision)", in the order
@@ -52,22 +40,35 @@ class Run:
     detectors: list[str] = field(default_factory=list)
 
 
-def detections_from_json(body: dict[str, Any]) -> FrameDetections:
-    """The detections of one ``Detections`` JSON message; DecodeError when it is not one."""
+def detections_from_json(body: dict[str, Any]) -> Detections:
+    """The ``Detections`` message a JSON channel holds (channels.to_json wrote it, its boxes'
+    arrays as lists beside the other fields); DecodeError when it is not one."""
     try:
-        header = body["header"]
-        xyxy = np.asarray(body["xyxy"], dtype=np.float64).reshape(-1, 4)
-        names = tuple(str(n) for n in body["class_names"])
-        scores = np.asarray(body["scores"], dtype=np.float64).reshape(-1)
-        if len(names) != len(xyxy) or len(scores) != len(xyxy):
-            raise ValueError("boxes, names and scores disagree in number")
-        return FrameDetections(
-            seq=int(header["seq"]),
-            stamp_ns=int(header["stamp_ns"]),
-            class_names=names,
-            xyxy=xyxy,
-            scores=scores,
+        h = body["header"]
+        header = Header(
+            stamp_ns=int(h["stamp_ns"]),
+            frame_id=str(h["frame_id"]),
+            seq=int(h["seq"]),
+            source=str(h["source"]),
+            mono_ns=int(h.get("mono_ns", 0)),
+            boot_id=str(h.get("boot_id", "")),
+        )
+        tracks = body.get("track_ids")
+        boxes = Boxes(
+            xyxy=np.asarray(body["xyxy"], dtype=np.float32).reshape(-1, 4),
+            scores=np.asarray(body["scores"], dtype=np.float32).reshape(-1),
+            class_ids=np.asarray(body["class_ids"], dtype=np.int32).reshape(-1),
+            track_ids=None if tracks is None else np.asarray(tracks, dtype=np.int32).reshape(-1),
+        )
+        return Detections(
+            header=header,
+            image_width=int(body["image_width"]),
+            image_height=int(body["image_height"]),
+            boxes=boxes,
+            class_names=tuple(str(n) for n in body["class_names"]),
             timing_ms={str(k): float(v) for k, v in body.get("timing_ms", {}).items()},
+            model=str(body.get("model", "")),
+            backend=str(body.get("backend", "")),
             received_ns=int(body.get("received_ns", 0)),
             published_ns=int(body.get("published_ns", 0)),
         )
@@ -104,7 +105,7 @@ def load_run(path: str | Path) -> Run:
                 if kind == "Detections" and record.channel.message_encoding == "json":
                     body = record.json()
                     dets = detections_from_json(body)
-                    run.detections.setdefault(dets.seq, dets)
+                    run.detections.setdefault(dets.header.seq, dets)
                     detector = detector_name(body)
                     if detector not in run.detectors:
                         run.detectors.append(detector)

@@ -18,7 +18,7 @@ every score, and a high floor cuts the curve short. The threshold only applies t
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -32,16 +32,6 @@ from tools.evaluation.labelled import DatasetError
 #: Where precision and recall are read by default: the stack's own detector.conf.
 DEFAULT_CONF_THRESHOLD = DetectorSettings().conf
 MATCH_IOU = 0.5
-
-
-@dataclass(frozen=True, slots=True)
-class ImageDetections:
-    """The detections of one dataset image: its ``boxes`` (in the image's pixels) and the
-    class name of each."""
-
-    image_id: int
-    boxes: Boxes
-    class_names: tuple[str, ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,22 +85,25 @@ def match_categories(
 
 
 def to_results(
-    detections: Iterable[ImageDetections], name_to_category: Mapping[str, int]
+    detections: Mapping[int, Boxes], names: Sequence[str], name_to_category: Mapping[str, int]
 ) -> list[dict[str, Any]]:
-    """COCO result dicts (image_id, category_id, bbox x/y/w/h, score); classes the dataset
-    does not label are left out, as COCO evaluates only the dataset's categories."""
+    """COCO result dicts (image_id, category_id, bbox x/y/w/h, score) of ``detections``, the
+    boxes of each image by image id (in its pixels), whose class ids index ``names``, the
+    model's class names. Classes the dataset does not label are left out, as COCO evaluates
+    only the dataset's categories."""
+    category = [name_to_category.get(name) for name in names]
     results = []
-    for det in detections:
-        for box, score, name in zip(
-            det.boxes.xyxy.tolist(), det.boxes.scores.tolist(), det.class_names, strict=True
+    for image_id, boxes in detections.items():
+        for box, score, class_id in zip(
+            boxes.xyxy.tolist(), boxes.scores.tolist(), boxes.class_ids.tolist(), strict=True
         ):
-            cid = name_to_category.get(name)
+            cid = category[class_id]
             if cid is None:
                 continue
             x1, y1, x2, y2 = box
             results.append(
                 {
-                    "image_id": det.image_id,
+                    "image_id": image_id,
                     "category_id": cid,
                     "bbox": [x1, y1, x2 - x1, y2 - y1],
                     "score": score,

@@ -9,15 +9,16 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from common.boxes import Boxes
 from common.lifecycle import Progress, print_progress
 from common.settings import DetectorSettings
 from tools.evaluation.accuracy import (
     DEFAULT_CONF_THRESHOLD,
     AccuracyReport,
-    ImageDetections,
     evaluate,
     match_categories,
     to_results,
@@ -31,14 +32,15 @@ DEFAULT_EVAL_CONF = 0.001
 
 def detect_dataset(
     detector: Any, dataset: LabelledSet, progress: Progress | None = None
-) -> list[ImageDetections]:
-    """Run ``detector`` (a services.detector Detector) on every image of ``dataset``.
+) -> dict[int, Boxes]:
+    """Run ``detector`` (a services.detector Detector) on every image of ``dataset``: the
+    boxes found in each, by image id; their class ids index ``detector.names``.
 
     Raises DatasetError when an image's real size differs from the size its labels assume.
     """
     from common.images import load_image
 
-    out = []
+    out: dict[int, Boxes] = {}
     for n, item in enumerate(dataset.images, 1):
         image = load_image(item.path)
         height, width = image.shape[:2]
@@ -47,8 +49,7 @@ def detect_dataset(
                 f"{dataset.source}: image {item.path} is {width}x{height}, "
                 f"but its labels are for {item.width}x{item.height}"
             )
-        result = detector.detect(image)
-        out.append(ImageDetections(item.id, result.boxes, tuple(result.class_names)))
+        out[item.id] = detector.detect(image).boxes
         if progress is not None and n % 100 == 0:
             progress(f"evaluate: {n}/{len(dataset.images)} images")
     return out
@@ -70,12 +71,13 @@ def ground_truth_for(
 def score(
     dataset: LabelledSet,
     model_names: tuple[str, ...],
-    detections: list[ImageDetections],
+    detections: Mapping[int, Boxes],
     conf_threshold: float = DEFAULT_CONF_THRESHOLD,
 ) -> AccuracyReport:
-    """Score ``detections`` of ``dataset`` for a model with ``model_names`` (by class name)."""
+    """Score ``detections`` of ``dataset`` (boxes by image id) for a model with
+    ``model_names``, which its class ids index (matched to the dataset by class name)."""
     ground_truth, name_to_category, excluded = ground_truth_for(dataset, model_names)
-    results = to_results(detections, name_to_category)
+    results = to_results(detections, model_names, name_to_category)
     return evaluate(ground_truth, results, conf_threshold, excluded)
 
 

@@ -29,7 +29,6 @@ MATCH_IOU = 0.5
 
 def labelled_ap50(det: Detector) -> float:
     """COCO AP50 of ``det`` on the labelled photos."""
-    from tools.evaluation.accuracy import ImageDetections
     from tools.evaluation.datasets import load_dataset
     from tools.evaluation.evaluate import score
 
@@ -40,10 +39,9 @@ def labelled_ap50(det: Detector) -> float:
     try:
         with tempfile.TemporaryDirectory(prefix="labelled-") as tmp:
             dataset = load_dataset(LABELLED_SET, _written(Path(tmp)))
-            found = []
-            for item in dataset.images:
-                result = det.detect(load_sample(item.path.stem))
-                found.append(ImageDetections(item.id, result.boxes, tuple(result.class_names)))
+            found = {
+                item.id: det.detect(load_sample(item.path.stem)).boxes for item in dataset.images
+            }
     finally:
         det.settings = saved
     return float(score(dataset, det.names, found).map50)

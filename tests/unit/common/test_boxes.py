@@ -100,8 +100,8 @@ HEADER = Header(stamp_ns=1_700_000_000_000_000_000, frame_id="camera", seq=3, so
 @pytest.mark.parametrize("track_ids", [TRACKS, None])
 def test_detections_round_trip_through_the_struct(track_ids: Any) -> None:
     boxes = Boxes(xyxy=XYXY, scores=SCORES, class_ids=IDS, track_ids=track_ids)
-    msg = Detections.from_boxes(
-        boxes,
+    msg = Detections(
+        boxes=boxes,
         header=HEADER,
         image_width=640,
         image_height=480,
@@ -109,9 +109,9 @@ def test_detections_round_trip_through_the_struct(track_ids: Any) -> None:
         model="m.onnx",
     )
     assert (msg.model, msg.class_names, len(msg)) == ("m.onnx", ("person", "cup"), 2)
-    # The wire layout is the flat fields, unchanged.
-    assert msg.xyxy is XYXY and msg.scores is SCORES and msg.class_ids is IDS
-    assert msg.track_ids is track_ids
+    # The message holds the very arrays; on the wire they are flat keys (test_messages).
+    assert msg.boxes.xyxy is XYXY and msg.boxes.scores is SCORES and msg.boxes.class_ids is IDS
+    assert msg.boxes.track_ids is track_ids
     for back in (msg.boxes, Detections.decode(msg.encode()).boxes):
         for name in ("xyxy", "scores", "class_ids"):
             np.testing.assert_array_equal(getattr(back, name), getattr(boxes, name))
@@ -132,10 +132,8 @@ def test_detections_validate_through_the_same_check() -> None:
             header=HEADER,
             image_width=640,
             image_height=480,
-            class_ids=IDS,
+            boxes=Boxes(xyxy=bad, scores=SCORES, class_ids=IDS),
             class_names=("a", "b"),
-            scores=SCORES,
-            xyxy=bad,
         )
     assert str(from_message.value) == str(from_struct.value)
     with pytest.raises(ValueError, match=r"class_ids must be a \(2,\) int32 array"):
@@ -143,14 +141,12 @@ def test_detections_validate_through_the_same_check() -> None:
             header=HEADER,
             image_width=640,
             image_height=480,
-            class_ids=IDS.astype(np.int64),
+            boxes=Boxes(xyxy=XYXY, scores=SCORES, class_ids=IDS.astype(np.int64)),
             class_names=("a", "b"),
-            scores=SCORES,
-            xyxy=XYXY,
         )
     with pytest.raises(ValueError, match="class_names must have 2 entries, got 1"):
-        Detections.from_boxes(
-            Boxes(xyxy=XYXY, scores=SCORES, class_ids=IDS),
+        Detections(
+            boxes=Boxes(xyxy=XYXY, scores=SCORES, class_ids=IDS),
             header=HEADER,
             image_width=640,
             image_height=480,
@@ -159,8 +155,8 @@ def test_detections_validate_through_the_same_check() -> None:
 
 
 def test_a_decoded_message_that_breaks_the_check_is_a_decode_error() -> None:
-    good = Detections.from_boxes(
-        Boxes(xyxy=XYXY, scores=SCORES, class_ids=IDS),
+    good = Detections(
+        boxes=Boxes(xyxy=XYXY, scores=SCORES, class_ids=IDS),
         header=HEADER,
         image_width=640,
         image_height=480,

@@ -13,7 +13,7 @@ import pytest
 
 from common.codec import Message
 from common.errors import DecodeError
-from common.fields import Dim, NonNegativeInt, Range, Shape
+from common.fields import Dim, Inline, NonNegativeInt, Range, Shape, inline_fields
 from common.messages import Header
 
 HEADER = Header(stamp_ns=1_700_000_000_000_000_000, frame_id="x", seq=1, source="test")
@@ -217,3 +217,54 @@ def test_a_field_with_no_wire_format_is_refused_at_first_use() -> None:
         NoShape(values=np.zeros(1, np.float32)).encode()
     with pytest.raises(TypeError, match="no wire format"):
         AList(values=[1]).encode()
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Pair:
+    """A struct that travels inline: its keys sit in the enclosing body."""
+
+    left: Annotated[npt.NDArray[np.float32], Shape(N)] = field(
+        default_factory=lambda: np.zeros(0, np.float32)
+    )
+    label: str = ""
+    extra: int | None = None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WithPair(Message):
+    TAG: ClassVar[str] = "WithPair"
+    header: Header
+    pair: Annotated[Pair, Inline()]
+    count: int = 0
+
+
+def test_an_inline_struct_travels_as_keys_of_the_body_and_comes_back_whole() -> None:
+    msg = WithPair(header=HEADER, pair=Pair(left=np.array([1.5, 2.0], np.float32), label="a"))
+    body = _body(msg.encode())
+    assert set(body) == {"header", "n", "left", "label", "extra", "count"} and body["n"] == 2
+    back = WithPair.decode(msg.encode())
+    assert np.array_equal(back.pair.left, msg.pair.left) and back.pair.label == "a"
+    assert inline_fields(WithPair) == {"pair"} and inline_fields(Pair) == frozenset()
+
+
+def test_an_inline_struct_s_fields_are_required_and_errors_name_them() -> None:
+    good = _body(WithPair(header=HEADER, pair=Pair(label="a")).encode())
+    for key in ("left", "label", "n"):
+        with pytest.raises(DecodeError, match=rf"WithPair\.{key}: "):
+            WithPair.decode(_pack("WithPair", 1, {k: v for k, v in good.items() if k != key}))
+    assert WithPair.decode(_pack("WithPair", 1, {**good, "extra": None})).pair.extra is None
+    del good["extra"]  # it may be None, so it may be missing
+    assert WithPair.decode(_pack("WithPair", 1, good)).pair.extra is None
+    with pytest.raises(DecodeError, match=r"WithPair\.left: 2 values do not fit shape \(1,\)"):
+        WithPair.decode(_pack("WithPair", 1, {**good, "n": 1, "left": b"\x00" * 8}))
+
+
+def test_an_inline_struct_whose_keys_clash_is_refused_at_first_use() -> None:
+    @dataclass(frozen=True, slots=True, kw_only=True)
+    class Clash(Message):
+        TAG: ClassVar[str] = "Clash"
+        pair: Annotated[Pair, Inline()]
+        label: str
+
+    with pytest.raises(TypeError, match=r"\['label'\] would travel twice"):
+        Clash(pair=Pair(), label="x").encode()

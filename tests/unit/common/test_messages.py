@@ -9,6 +9,7 @@ import msgpack
 import numpy as np
 import pytest
 
+from common.boxes import Boxes
 from common.codec import Message
 from common.errors import DecodeError
 from common.messages import (
@@ -35,11 +36,13 @@ def _detections(n: int = 3, tracks: bool = True) -> Detections:
         header=HEADER,
         image_width=640,
         image_height=480,
-        class_ids=np.arange(n, dtype=np.int32),
+        boxes=Boxes(
+            xyxy=np.hstack([xy, xy + 20]),
+            scores=rng.uniform(0, 1, n).astype(np.float32),
+            class_ids=np.arange(n, dtype=np.int32),
+            track_ids=np.arange(n, dtype=np.int32) if tracks else None,
+        ),
         class_names=tuple(f"c{i}" for i in range(n)),
-        scores=rng.uniform(0, 1, n).astype(np.float32),
-        xyxy=np.hstack([xy, xy + 20]),
-        track_ids=np.arange(n, dtype=np.int32) if tracks else None,
         timing_ms={"inference": 80.5},
         model="m.onnx",
         backend="onnx/cpu/fp32",
@@ -120,8 +123,8 @@ def test_detections_carry_centre_and_size() -> None:
     d = _detections()
     body = msgpack.unpackb(d.encode())["d"]
     cs = np.frombuffer(body["center_size"], "<f4").reshape(-1, 4)
-    np.testing.assert_allclose(cs[:, :2], (d.xyxy[:, :2] + d.xyxy[:, 2:]) / 2)
-    np.testing.assert_allclose(cs[:, 2:], d.xyxy[:, 2:] - d.xyxy[:, :2])
+    np.testing.assert_allclose(cs[:, :2], (d.boxes.xyxy[:, :2] + d.boxes.xyxy[:, 2:]) / 2)
+    np.testing.assert_allclose(cs[:, 2:], d.boxes.xyxy[:, 2:] - d.boxes.xyxy[:, :2])
 
 
 @pytest.mark.parametrize("cls", [type(m) for m in MESSAGES[::2]] + [Twist, LaserScan])
@@ -193,10 +196,12 @@ def test_constructor_validates_shapes() -> None:
             header=HEADER,
             image_width=10,
             image_height=10,
-            class_ids=np.zeros(2, np.int32),
+            boxes=Boxes(
+                xyxy=np.zeros((3, 4), np.float32),
+                scores=np.zeros(2, np.float32),
+                class_ids=np.zeros(2, np.int32),
+            ),
             class_names=("a", "b"),
-            scores=np.zeros(2, np.float32),
-            xyxy=np.zeros((3, 4), np.float32),
         )
 
 
@@ -211,10 +216,8 @@ def test_detections_and_twists_refuse_non_finite_or_inverted_values() -> None:
                 header=HEADER,
                 image_width=640,
                 image_height=480,
-                class_ids=good.class_ids,
+                boxes=Boxes(xyxy=bad, scores=good.boxes.scores, class_ids=good.boxes.class_ids),
                 class_names=good.class_names,
-                scores=good.scores,
-                xyxy=bad,
             )
     body = msgpack.unpackb(good.encode())
     body["d"]["timing_ms"] = {"inference": float("nan")}

@@ -9,6 +9,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from common.boxes import Boxes
 from common.messages import Detections, Header, LaserScan
 from common.settings import ControllerSettings
 from services.controller.policy import (
@@ -46,11 +47,13 @@ def dets(
         header=HEADER,
         image_width=width,
         image_height=H,
-        class_ids=np.zeros(n, np.int32),
+        boxes=Boxes(
+            xyxy=xyxy,
+            scores=np.array([b[1] for b in boxes], np.float32),
+            class_ids=np.zeros(n, np.int32),
+            track_ids=None if tracks is None else np.array(tracks, np.int32),
+        ),
         class_names=tuple(b[0] for b in boxes),
-        scores=np.array([b[1] for b in boxes], np.float32),
-        xyxy=xyxy,
-        track_ids=None if tracks is None else np.array(tracks, np.int32),
     )
 
 

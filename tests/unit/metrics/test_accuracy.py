@@ -10,7 +10,6 @@ from faster_coco_eval import COCO, COCOeval_faster
 
 from common.boxes import Boxes
 from tools.evaluation.accuracy import (
-    ImageDetections,
     evaluate,
     match_categories,
     to_results,
@@ -39,16 +38,16 @@ def _gt(boxes: list[tuple[int, int, list[float]]], crowd: frozenset[int] = froze
     }
 
 
-def _dets(image_id: int, rows: list[tuple[str, float, list[float]]]) -> ImageDetections:
-    """Detections from (name, score, xyxy) rows."""
-    return ImageDetections(
-        image_id=image_id,
-        boxes=Boxes(
-            xyxy=np.array([r[2] for r in rows], np.float32).reshape(-1, 4),
-            scores=np.array([r[1] for r in rows], np.float32),
-            class_ids=np.zeros(len(rows), np.int32),  # the evaluator goes by class name
-        ),
-        class_names=tuple(r[0] for r in rows),
+#: The model's class names, which the class ids index; the evaluator matches them by name.
+MODEL_NAMES = ("person", "cat", "cup", "dog")
+
+
+def _dets(rows: list[tuple[str, float, list[float]]]) -> Boxes:
+    """One image's detections from (name, score, xyxy) rows."""
+    return Boxes(
+        xyxy=np.array([r[2] for r in rows], np.float32).reshape(-1, 4),
+        scores=np.array([r[1] for r in rows], np.float32),
+        class_ids=np.array([MODEL_NAMES.index(r[0]) for r in rows], np.int32),
     )
 
 
@@ -61,11 +60,11 @@ def _silent(*_args: object) -> None:
 
 def test_perfect_detections_score_one() -> None:
     gt = _gt([(1, 1, [10, 10, 50, 80]), (2, 2, [100, 20, 60, 40])])
-    dets = [
-        _dets(1, [("person", 0.9, [10, 10, 60, 90])]),
-        _dets(2, [("cat", 0.8, [100, 20, 160, 60])]),
-    ]
-    report = evaluate(gt, to_results(dets, MAP))
+    dets = {
+        1: _dets([("person", 0.9, [10, 10, 60, 90])]),
+        2: _dets([("cat", 0.8, [100, 20, 160, 60])]),
+    }
+    report = evaluate(gt, to_results(dets, MODEL_NAMES, MAP))
     assert report.map50 == pytest.approx(1.0) and report.map50_95 == pytest.approx(1.0)
     assert report.precision == 1.0 and report.recall == 1.0
     assert set(report.per_class) == {"person", "cat"}  # cup has no labels: no AP, not averaged
@@ -73,11 +72,11 @@ def test_perfect_detections_score_one() -> None:
 
 def test_precision_and_recall_are_read_at_the_threshold() -> None:
     gt = _gt([(1, 1, [10, 10, 50, 80]), (2, 1, [100, 10, 50, 80])])
-    dets = [
-        _dets(1, [("person", 0.9, [10, 10, 60, 90]), ("person", 0.8, [150, 0, 199, 99])]),
-        _dets(2, [("person", 0.1, [100, 10, 150, 90]), ("cup", 0.7, [0, 0, 20, 20])]),
-    ]
-    report = evaluate(gt, to_results(dets, MAP), conf_threshold=0.25)
+    dets = {
+        1: _dets([("person", 0.9, [10, 10, 60, 90]), ("person", 0.8, [150, 0, 199, 99])]),
+        2: _dets([("person", 0.1, [100, 10, 150, 90]), ("cup", 0.7, [0, 0, 20, 20])]),
+    }
+    report = evaluate(gt, to_results(dets, MODEL_NAMES, MAP), conf_threshold=0.25)
     person = report.per_class["person"]
     assert (person.detections, person.true_positives, person.labels) == (2, 1, 2)
     assert person.precision == 0.5 and person.recall == 0.5
@@ -89,11 +88,11 @@ def test_precision_and_recall_are_read_at_the_threshold() -> None:
 
 def test_a_detection_on_a_crowd_region_is_neither_right_nor_wrong() -> None:
     gt = _gt([(1, 1, [10, 10, 50, 80]), (2, 1, [100, 10, 80, 80])], crowd=frozenset({2}))
-    dets = [
-        _dets(1, [("person", 0.9, [10, 10, 60, 90])]),
-        _dets(2, [("person", 0.9, [110, 20, 150, 60])]),
-    ]
-    report = evaluate(gt, to_results(dets, MAP))
+    dets = {
+        1: _dets([("person", 0.9, [10, 10, 60, 90])]),
+        2: _dets([("person", 0.9, [110, 20, 150, 60])]),
+    }
+    report = evaluate(gt, to_results(dets, MODEL_NAMES, MAP))
     assert report.precision == 1.0 and report.recall == 1.0 and report.labels == 1
 
 
@@ -110,18 +109,17 @@ def test_agrees_with_the_evaluator_called_directly() -> None:
                 box = [x + dx, y + dy, min(x + dx + 40, 200), min(y + dy + 30, 100)]
                 rows[image].append((name, float(rng.uniform(0.01, 1)), box))
     gt = _gt(labels)
-    dets = [_dets(i, r) for i, r in rows.items()]
-    report = evaluate(gt, to_results(dets, MAP))
+    dets = {i: _dets(r) for i, r in rows.items()}
+    report = evaluate(gt, to_results(dets, MODEL_NAMES, MAP))
 
     coco_gt = COCO(gt)
     results = []
-    for d in dets:
-        b = d.boxes
-        for name, score, (x1, y1, x2, y2) in zip(d.class_names, b.scores, b.xyxy, strict=True):
+    for image_id, b in dets.items():
+        for class_id, score, (x1, y1, x2, y2) in zip(b.class_ids, b.scores, b.xyxy, strict=True):
             xywh = [float(x1), float(y1), float(x2 - x1), float(y2 - y1)]
-            cid = MAP[name]
+            cid = MAP[MODEL_NAMES[class_id]]
             results.append(
-                {"image_id": d.image_id, "category_id": cid, "bbox": xywh, "score": float(score)}
+                {"image_id": image_id, "category_id": cid, "bbox": xywh, "score": float(score)}
             )
     direct = COCOeval_faster(coco_gt, coco_gt.loadRes(results), "bbox", print_function=_silent)
     direct.evaluate()
@@ -138,8 +136,8 @@ def test_agrees_with_the_evaluator_called_directly() -> None:
 def test_categories_map_by_name_and_unknown_ones_are_reported() -> None:
     mapping, excluded = match_categories({1: "Person", 2: "robot", 3: "cup"}, ("person", "cup"))
     assert mapping == {"person": 1, "cup": 3} and excluded == ("robot",)
-    dets = [_dets(1, [("person", 0.9, [0, 0, 5, 5]), ("dog", 0.9, [0, 0, 5, 5])])]
-    assert [r["category_id"] for r in to_results(dets, mapping)] == [1]
+    dets = {1: _dets([("person", 0.9, [0, 0, 5, 5]), ("dog", 0.9, [0, 0, 5, 5])])}
+    assert [r["category_id"] for r in to_results(dets, MODEL_NAMES, mapping)] == [1]
 
 
 def test_nothing_to_score_is_a_dataset_error() -> None:

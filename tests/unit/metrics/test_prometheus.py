@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
+from common.boxes import Boxes
 from common.messages import Detections, Header, ServiceCounters
 from services.metrics.aggregate import Aggregator
 from services.metrics.prometheus import PrometheusExporter
@@ -57,10 +58,12 @@ def test_scrape_shows_gauges_counters_and_latency_histogram(
                 header=Header(stamp_ns=stamp, frame_id="c", seq=i, source="camera"),
                 image_width=64,
                 image_height=48,
-                class_ids=np.zeros(1, np.int32),
+                boxes=Boxes(
+                    xyxy=np.array([[0, 0, 10, 10]], np.float32),
+                    scores=np.ones(1, np.float32),
+                    class_ids=np.zeros(1, np.int32),
+                ),
                 class_names=("person",),
-                scores=np.ones(1, np.float32),
-                xyxy=np.array([[0, 0, 10, 10]], np.float32),
                 timing_ms={"preprocess": 2.0, "inference": 80.0, "postprocess": 1.0},
                 received_ns=stamp + 5 * MS,
                 published_ns=stamp + 90 * MS,

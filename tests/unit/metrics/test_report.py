@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
+from common.boxes import Boxes
 from common.errors import ConfigError
 from common.messages import Detections, Header, ServiceCounters, Twist
 from services.metrics.aggregate import Aggregator
@@ -39,10 +40,12 @@ def _session(seconds: int = 12) -> dict[str, Any]:
             header=Header(stamp_ns=stamp, frame_id="camera", seq=i, source="camera"),
             image_width=512,
             image_height=512,
-            class_ids=np.zeros(1, np.int32),
+            boxes=Boxes(
+                xyxy=np.array([[0, 60, 330, 512]], np.float32),
+                scores=np.full(1, 0.8, np.float32),
+                class_ids=np.zeros(1, np.int32),
+            ),
             class_names=("person",),
-            scores=np.full(1, 0.8, np.float32),
-            xyxy=np.array([[0, 60, 330, 512]], np.float32),
             timing_ms={"preprocess": 4.0, "inference": infer, "postprocess": 1.0},
             model="yolov5s-coco.onnx",
             backend="onnx/cpu/fp32",

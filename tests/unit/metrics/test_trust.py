@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 import math
 
-import numpy as np
 import pytest
 
+from common.boxes import Boxes
 from common.errors import ConfigError
 from common.messages import Detections, Header, ServiceCounters
 from common.settings import SERVICES, MetricsSettings
@@ -62,12 +62,14 @@ def test_a_bad_name_or_count_costs_only_itself() -> None:
 
 def test_stage_times_outside_the_bound_are_refused() -> None:
     def dets(ms: float) -> Detections:
-        empty = np.zeros(0, np.int32)
         return Detections(
-            header=HEADER, image_width=4, image_height=4, class_ids=empty, class_names=(),
-            scores=np.zeros(0, np.float32), xyxy=np.zeros((0, 4), np.float32),
+            header=HEADER,
+            image_width=4,
+            image_height=4,
+            boxes=Boxes(),
+            class_names=(),
             timing_ms={"inference": ms},
-        )  # fmt: skip
+        )
 
     assert refuse_detections(dets(12.5), 1e6) is None
     assert refuse_detections(dets(1e308), 1e6) == "bad_timing"

@@ -8,6 +8,7 @@ import json
 import numpy as np
 from rosbags.typesys import get_types_from_msg
 
+from common.boxes import Boxes
 from common.messages import ControllerStatus, Detections, Frame, Header, LaserScan, Twist
 from common.ros2_settings import Ros2Settings
 from services.recorder.channels import (
@@ -25,13 +26,20 @@ HEADER = Header(stamp_ns=1_700_000_000_123_456_789, frame_id="camera", seq=7, so
 
 def _detections() -> Detections:
     return Detections(
-        header=HEADER, image_width=640, image_height=480,
-        class_ids=np.array([0, 2], np.int32), class_names=("person", "car"),
-        scores=np.array([0.9, 0.5], np.float32),
-        xyxy=np.array([[10, 20, 110, 220], [300, 300, 400, 350]], np.float32),
-        track_ids=np.array([3, -1], np.int32), timing_ms={"inference": 12.5},
-        received_ns=HEADER.stamp_ns + 5_000_000, published_ns=HEADER.stamp_ns + 30_000_000,
-    )  # fmt: skip
+        header=HEADER,
+        image_width=640,
+        image_height=480,
+        boxes=Boxes(
+            xyxy=np.array([[10, 20, 110, 220], [300, 300, 400, 350]], np.float32),
+            scores=np.array([0.9, 0.5], np.float32),
+            class_ids=np.array([0, 2], np.int32),
+            track_ids=np.array([3, -1], np.int32),
+        ),
+        class_names=("person", "car"),
+        timing_ms={"inference": 12.5},
+        received_ns=HEADER.stamp_ns + 5_000_000,
+        published_ns=HEADER.stamp_ns + 30_000_000,
+    )
 
 
 def test_the_ros2msg_schema_names_every_dependency_and_parses_back() -> None:

@@ -7,19 +7,26 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from common.boxes import Boxes
+from common.messages import Detections, Header
 from tools.compare.compare import compare_runs, iou_matrix, match_frame, report_markdown
-from tools.compare.runs import Command, FrameDetections, Run, detector_name
+from tools.compare.runs import Command, Run, detector_name
 
 
-def _frame(seq: int, boxes: list[tuple[str, list[float]]], stamp: int = 0) -> FrameDetections:
-    return FrameDetections(
-        seq=seq,
-        stamp_ns=stamp or seq * 1_000_000_000,
+def _frame(seq: int, boxes: list[tuple[str, list[float]]], stamp: int = 0) -> Detections:
+    stamp_ns = stamp or seq * 1_000_000_000
+    return Detections(
+        header=Header(stamp_ns=stamp_ns, frame_id="camera", seq=seq, source="camera"),
+        image_width=640,
+        image_height=480,
+        boxes=Boxes(
+            xyxy=np.array([b for _, b in boxes], dtype=np.float32).reshape(-1, 4),
+            scores=np.full(len(boxes), 0.9, np.float32),
+            class_ids=np.zeros(len(boxes), np.int32),  # compare goes by class name
+        ),
         class_names=tuple(name for name, _ in boxes),
-        xyxy=np.array([b for _, b in boxes], dtype=np.float64).reshape(-1, 4),
-        scores=np.full(len(boxes), 0.9),
         timing_ms={"inference": 10.0 * seq},
-        received_ns=(stamp or seq * 1_000_000_000) + 2_000_000,
+        received_ns=stamp_ns + 2_000_000,
     )
 
 

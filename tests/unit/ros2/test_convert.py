@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from common.boxes import Boxes
 from common.errors import DecodeError
 from common.messages import Detections, Frame, Header, LaserScan, Twist
 from common.ros2_settings import RosDistro
@@ -172,11 +173,13 @@ def make_detections(n: int = 10, tracks: bool = True) -> Detections:
         header=header(),
         image_width=640,
         image_height=480,
-        class_ids=np.zeros(n, dtype=np.int32),
+        boxes=Boxes(
+            xyxy=np.hstack([xy, xy + wh]),
+            scores=rng.uniform(0.3, 1.0, n).astype(np.float32),
+            class_ids=np.zeros(n, dtype=np.int32),
+            track_ids=track_ids,
+        ),
         class_names=tuple("person" if i % 2 else "dog" for i in range(n)),
-        scores=rng.uniform(0.3, 1.0, n).astype(np.float32),
-        xyxy=np.hstack([xy, xy + wh]),
-        track_ids=track_ids,
     )
 
 
@@ -192,9 +195,9 @@ def test_detections_out(distro: RosDistro) -> None:
         assert len(det.results) == 1
         hypothesis = det.results[0].hypothesis
         assert hypothesis.class_id == dets.class_names[i]
-        assert hypothesis.score == pytest.approx(float(dets.scores[i]))
+        assert hypothesis.score == pytest.approx(float(dets.boxes.scores[i]))
         assert det.results[0].pose.pose.orientation.w == 1.0
-        x1, y1, x2, y2 = dets.xyxy[i].astype(float)
+        x1, y1, x2, y2 = dets.boxes.xyxy[i].astype(float)
         assert det.bbox.center.position.x == pytest.approx((x1 + x2) / 2)
         assert det.bbox.center.position.y == pytest.approx((y1 + y2) / 2)
         assert (det.bbox.size_x, det.bbox.size_y) == pytest.approx((x2 - x1, y2 - y1))

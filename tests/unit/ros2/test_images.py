@@ -210,8 +210,8 @@ def test_debug_image_draws_the_detections_on_their_frame() -> None:
         class_ids=np.zeros(1, np.int32),
         track_ids=np.array([7], np.int32),
     )
-    dets = Detections.from_boxes(
-        boxes, header=header, image_width=160, image_height=120, class_names=("person",)
+    dets = Detections(
+        header=header, image_width=160, image_height=120, boxes=boxes, class_names=("person",)
     )
     cache = FrameCache(size=3)
     for stamp in (1, 2, 5, 9):

@@ -17,6 +17,7 @@ from foxglove.messages import (
     SceneUpdate,
 )
 
+from common.boxes import Boxes
 from common.errors import ImageError
 from common.messages import Detections, Frame, GroundTruth, Header
 from common.messages import LaserScan as StackScan
@@ -60,11 +61,13 @@ def _detections() -> Detections:
         header=HEADER,
         image_width=640,
         image_height=480,
-        class_ids=np.array([0, 56], np.int32),
+        boxes=Boxes(
+            xyxy=np.array([[100, 40, 300, 440], [400, 200, 600, 400]], np.float32),
+            scores=np.array([0.9, 0.5], np.float32),
+            class_ids=np.array([0, 56], np.int32),
+            track_ids=np.array([5, -1], np.int32),
+        ),
         class_names=("person", "chair"),
-        scores=np.array([0.9, 0.5], np.float32),
-        xyxy=np.array([[100, 40, 300, 440], [400, 200, 600, 400]], np.float32),
-        track_ids=np.array([5, -1], np.int32),
     )
 
 

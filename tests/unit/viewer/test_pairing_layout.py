@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
 
+from common.boxes import Boxes
 from common.config_file import load_config
 from common.errors import ConfigError
 from common.messages import Detections, Frame, Header
@@ -22,11 +22,13 @@ def _frame(stamp_ns: int) -> Frame:
 
 def _dets(stamp_ns: int) -> Detections:
     header = Header(stamp_ns=stamp_ns, frame_id="camera", seq=stamp_ns, source="sim")
-    empty = np.zeros(0, np.int32)
     return Detections(
-        header=header, image_width=4, image_height=2, class_ids=empty, class_names=(),
-        scores=np.zeros(0, np.float32), xyxy=np.zeros((0, 4), np.float32),
-    )  # fmt: skip
+        header=header,
+        image_width=4,
+        image_height=2,
+        boxes=Boxes(),
+        class_names=(),
+    )
 
 
 def test_a_frame_goes_out_with_the_detections_made_on_it() -> None:
