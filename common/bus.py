@@ -1,7 +1,8 @@
 """The one place where a Zenoh configuration is built, a session opened and a publisher declared.
 
-Only service I/O modules (``services/*/service.py``), the supervisor and the command-line
-clients import this module; the logic modules never touch the bus.
+Only service I/O modules (``services/*/service.py``, and ``services/ros2/graph.py`` for a ROS 2
+graph's session), the supervisor and the command-line clients import this module; the logic
+modules never touch the bus (tests/unit/test_bus_io.py).
 
 Topology. In ``peer`` mode (the default) the supervisor listens on ``zenoh.endpoint``, services
 connect there and then mesh directly. In ``client`` mode the supervisor is a Zenoh router and

@@ -1,4 +1,9 @@
-"""What every service process has: a Zenoh session, its keys, counters and a health token."""
+"""What every service process has: a Zenoh session, its keys, counters and a health token.
+
+``Tally`` is the part without the bus: the counters and the rate-limited log that a handler
+reports bad and refused input to. A service's handlers take a Tally, so that a test builds one
+and calls a handler directly; ``Node`` is a Tally with a session.
+"""
 
 from __future__ import annotations
 
@@ -27,7 +32,61 @@ _M = TypeVar("_M")
 MAX_WHERE_CHARS = 80 - len("bad_input.")
 
 
-class Node(Closing):
+#: What a handler publishes through: a declared publisher's ``put``, or a list's ``append``.
+Put = Callable[[bytes], object]
+
+
+class Tally:
+    """A service's counters and its log of dropped input: what its handlers report to. No bus."""
+
+    def __init__(self, service: str, config: Config) -> None:
+        self.service = service
+        self.config = config
+        self.keys = Keys(config.stack.prefix)
+        self.counters = Counters()
+        self.log = logging.getLogger(service)
+        self.log_limit = LogLimiter()  # bad input's log lines, per key (common/ratelimit.py)
+
+    def decode(self, key: str, decode: Callable[[bytes], _M], payload: bytes) -> _M | None:
+        """``decode(payload)``; None for garbage, counted as bad input on ``key`` and dropped
+        (never raised into Zenoh's thread)."""
+        try:
+            return decode(payload)
+        except DecodeError as exc:
+            self.bad_input(key, exc)
+            return None
+
+    def bad_input(self, key: str, error: Exception, *, topic: str = "") -> None:
+        """Log (rate-limited per key), count and drop one bad message.
+
+        It is counted as ``bad_input`` and ``bad_input.<where>``: ``topic`` when given (the
+        ROS 2 bridge names the ROS topic: its keys end in a 64-hex type hash), else the key's
+        last chunk; cut to ``MAX_WHERE_CHARS`` so that the name always fits the metrics
+        service's limit.
+        """
+        self.counters.add("bad_input")
+        where = topic.strip("/").replace("/", ".") if topic else key.rsplit("/", 1)[-1]
+        self.counters.add(f"bad_input.{where[:MAX_WHERE_CHARS]}")
+        self._log_limited(key, "bad_input", "dropped bad input on %s: %s", key, error)
+
+    def reject(self, counter: str, message: str, *, key: str = "") -> None:
+        """Count one message that was fine as bytes but unfit to act on (stale, replayed,
+        oversize ...). Always counted; logged in full only for the first few per ``key``
+        (default: the counter), then summarised once a period (common/ratelimit.py), so that
+        a flood cannot fill the log while the count stays exact."""
+        self.counters.add(counter)
+        self._log_limited(key or counter, counter, "%s (%s)", message, counter)
+
+    def _log_limited(self, key: str, reason: str, fmt: str, *args: object) -> None:
+        # Per key and counter: a flood of garbage cannot hide the first bombs on the same key.
+        admit = self.log_limit.admit(reason if key == reason else f"{key} ({reason})", reason)
+        if admit.summary:
+            self.log.warning("%s", admit.summary)
+        if admit.log:
+            self.log.warning(fmt, *args)
+
+
+class Node(Tally, Closing):
     """A service's presence on the bus.
 
     ``ready()`` declares the liveliness token ``<prefix>/health/<service>``; the supervisor and
@@ -36,12 +95,7 @@ class Node(Closing):
     """
 
     def __init__(self, service: str, config: Config, *, counters_period_s: float = 1.0) -> None:
-        self.service = service
-        self.config = config
-        self.keys = Keys(config.stack.prefix)
-        self.counters = Counters()
-        self.log = logging.getLogger(service)
-        self.log_limit = LogLimiter()  # bad input's log lines, per key (common/ratelimit.py)
+        super().__init__(service, config)
         self.session = open_session(config.zenoh, service)
         self._token: zenoh.LivelinessToken | None = None
         self._counters_pub = self.publisher(self.keys.counters(service), QoS.TELEMETRY)
@@ -74,21 +128,19 @@ class Node(Closing):
             key=key,
         )
 
-    def subscribe(
-        self, key: str, decode: Callable[[bytes], _M], handle: Callable[[_M, zenoh.Sample], None]
+    def subscribe(self, key: str, handle: Callable[[bytes], None]) -> zenoh.Subscriber[None]:
+        """Subscribe to ``key``: ``handle`` gets each sample's payload (and decodes it itself,
+        through ``Tally.decode``)."""
+        return self.session.declare_subscriber(key, lambda sample: handle(_payload(sample)))
+
+    def subscribe_keyed(
+        self, key: str, handle: Callable[[str, bytes], None]
     ) -> zenoh.Subscriber[None]:
-        """Subscribe to ``key``: each sample is decoded, garbage is counted as bad input and
-        dropped (never raised into Zenoh's thread), and the message goes to ``handle``."""
-
-        def on_sample(sample: zenoh.Sample) -> None:
-            try:
-                msg = decode(sample.payload.to_bytes())
-            except DecodeError as exc:
-                self.bad_input(key, exc)
-                return
-            handle(msg, sample)
-
-        return self.session.declare_subscriber(key, on_sample)
+        """Subscribe to ``key`` (a wildcard, say): ``handle(key, payload)`` gets the key each
+        sample came on with its payload."""
+        return self.session.declare_subscriber(
+            key, lambda sample: handle(str(sample.key_expr), _payload(sample))
+        )
 
     def header(self, stamp: Stamp | None = None, frame_id: str = "") -> Header:
         """A header for a message this service originates, stamped on both clocks (now, unless
@@ -117,35 +169,6 @@ class Node(Closing):
         )
         self._counters_pub.put(msg.encode())
 
-    def bad_input(self, key: str, error: Exception, *, topic: str = "") -> None:
-        """Log (rate-limited per key), count and drop one bad message.
-
-        It is counted as ``bad_input`` and ``bad_input.<where>``: ``topic`` when given (the
-        ROS 2 bridge names the ROS topic: its keys end in a 64-hex type hash), else the key's
-        last chunk; cut to ``MAX_WHERE_CHARS`` so that the name always fits the metrics
-        service's limit.
-        """
-        self.counters.add("bad_input")
-        where = topic.strip("/").replace("/", ".") if topic else key.rsplit("/", 1)[-1]
-        self.counters.add(f"bad_input.{where[:MAX_WHERE_CHARS]}")
-        self._log_limited(key, "bad_input", "dropped bad input on %s: %s", key, error)
-
-    def reject(self, counter: str, message: str, *, key: str = "") -> None:
-        """Count one message that was fine as bytes but unfit to act on (stale, replayed,
-        oversize ...). Always counted; logged in full only for the first few per ``key``
-        (default: the counter), then summarised once a period (common/ratelimit.py), so that
-        a flood cannot fill the log while the count stays exact."""
-        self.counters.add(counter)
-        self._log_limited(key or counter, counter, "%s (%s)", message, counter)
-
-    def _log_limited(self, key: str, reason: str, fmt: str, *args: object) -> None:
-        # Per key and counter: a flood of garbage cannot hide the first bombs on the same key.
-        admit = self.log_limit.admit(reason if key == reason else f"{key} ({reason})", reason)
-        if admit.summary:
-            self.log.warning("%s", admit.summary)
-        if admit.log:
-            self.log.warning(fmt, *args)
-
     def close(self) -> None:
         for line in self.log_limit.drain():
             self.log.warning("%s", line)
@@ -153,3 +176,7 @@ class Node(Closing):
         if self._token is not None:
             self._token.undeclare()
         self.session.close()
+
+
+def _payload(sample: zenoh.Sample) -> bytes:
+    return sample.payload.to_bytes()

@@ -6,7 +6,6 @@ import dataclasses
 import json
 import threading
 import time
-from collections.abc import Callable
 from typing import Generic, Protocol, TypeVar
 
 import zenoh
@@ -19,7 +18,7 @@ from common.errors import DecodeError, StackError
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.keys import Keys
 from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
-from common.node import Node
+from common.node import Node, Tally
 from common.queries import ready_services
 from common.settings import Config
 from services.controller.estop import EStopLatch
@@ -85,6 +84,79 @@ def _age(msg: Header | None, arrival_age_s: float, at: Stamp) -> float:
     return max(arrival_age_s, capture_age_s(msg, at, BOOT_ID))
 
 
+class ControllerHandlers:
+    """What the controller does with each input as it arrives: detections and scans are judged
+    (common/freshness.py) and the newest fresh one is held for the control loop; an e-stop
+    message latches or releases the stop, kept on disk (controller/estop.py)."""
+
+    def __init__(self, config: Config, tally: Tally) -> None:
+        s = config.controller
+        self.tally = tally
+        self.tolerance_s = config.stack.clock_tolerance_s
+        self.estop_release_max_age_s = s.estop_release_max_age_s
+        self.latch = EStopLatch(config.estop_path, now().wall_ns + int(self.tolerance_s * 1e9))
+        self.dets: Latest[Detections] = Latest()
+        self.scan: Latest[LaserScan] = Latest()
+        self._det_key = tally.keys.detections(config.stack.camera)
+        self._det_gate = FreshnessGate(s.detection_timeout_s, self.tolerance_s, BOOT_ID)
+        self._scan_gate = FreshnessGate(s.scan_timeout_s, self.tolerance_s, BOOT_ID)
+
+    def on_detections(self, payload: bytes) -> None:
+        msg = self.tally.decode(self._det_key, Detections.decode, payload)
+        if msg is not None:
+            self._fresh_input(msg, self._det_gate, self.dets, "detections")
+
+    def on_scan(self, payload: bytes) -> None:
+        msg = self.tally.decode(self.tally.keys.scan(), LaserScan.decode, payload)
+        if msg is not None:
+            self._fresh_input(msg, self._scan_gate, self.scan, "scans")
+
+    def _fresh_input(self, msg: _S, gate: FreshnessGate, latest: Latest[_S], name: str) -> None:
+        """A decoded message's fate: judge its freshness, keep it if fresh and newest, count
+        the rest (``<name>_in``, ``<name>_stale|future|replay|late``)."""
+        verdict, age = gate.check(msg.header, now())
+        if verdict is not Verdict.FRESH:
+            self.tally.reject(f"{name}_{verdict}", f"{verdict} {name} ({age:.2f} s) ignored")
+        elif latest.set(msg):
+            self.tally.counters.add(f"{name}_in")
+        else:
+            self.tally.reject(f"{name}_late", f"{name} older than the ones held ignored")
+
+    def on_estop(self, payload: bytes) -> None:
+        """Latch on an engage or on garbage; release only on a fresh release newer than the
+        stop that can be saved. A latch that cannot be saved holds in memory and says so
+        loudly."""
+        tally, latch = self.tally, self.latch
+        at = now()
+        latest_ns = at.wall_ns + int(self.tolerance_s * 1e9)  # no stamp the latch keeps is later
+        try:
+            msg = EStop.decode(payload)
+        except DecodeError as exc:
+            # Garbage on the e-stop key is treated as a press: fail safe, not open.
+            tally.bad_input(tally.keys.estop(), exc)
+            msg = None
+        if msg is None or msg.engaged:
+            by = msg.header.source if msg else "garbage"
+            reason = msg.reason if msg else "undecodable message on the e-stop key"
+            was, was_saved = latch.engaged, latch.saved
+            saved = latch.engage(msg.header.stamp_ns if msg else at.wall_ns, by, reason, latest_ns)
+            if not was:
+                tally.log.warning("e-stop ENGAGED by %s: %s", by, reason or "-")
+            if not saved and was_saved:
+                tally.log.error("the e-stop is engaged but cannot be saved: %s", latch.describe())
+            return
+        verdict, age = judge_age(
+            msg.header, at, BOOT_ID, self.estop_release_max_age_s, self.tolerance_s
+        )
+        if verdict is not Verdict.FRESH:
+            latch.refuse(f"{verdict} ({age:.2f} s)")
+            tally.reject("estop_release_refused", f"{verdict} e-stop release ({age:.2f} s) refused")
+        elif not latch.release(msg.header.stamp_ns, msg.header.source):
+            tally.reject("estop_release_refused", f"e-stop release refused: {latch.last_refusal}")
+        else:
+            tally.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
+
+
 def run(config: Config, stop: threading.Event) -> int:
     """Run the control loop until ``stop`` is set.
 
@@ -94,29 +166,17 @@ def run(config: Config, stop: threading.Event) -> int:
     detections and scans are counted and never acted on.
     """
     s = config.controller
-    tolerance = config.stack.clock_tolerance_s
     with Node("controller", config, counters_period_s=s.counters_period_s) as node:
-        latch = EStopLatch(config.estop_path, now().wall_ns + int(tolerance * 1e9))
+        handlers = ControllerHandlers(config, node)
+        latch, dets, scan = handlers.latch, handlers.dets, handlers.scan
         (node.log.warning if latch.engaged else node.log.info)("%s", latch.note)
         if not latch.saved:
             node.log.error("the e-stop state cannot be saved: %s", latch.describe())
-        dets: Latest[Detections] = Latest()
-        scan: Latest[LaserScan] = Latest()
         det_key = node.keys.detections(config.stack.camera)
-        det_gate = FreshnessGate(s.detection_timeout_s, tolerance, BOOT_ID)
-        scan_gate = FreshnessGate(s.scan_timeout_s, tolerance, BOOT_ID)
-
-        def on_estop(sample: zenoh.Sample) -> None:
-            _on_estop(node, latch, sample, s.estop_release_max_age_s, tolerance)
-
         subs = [
-            node.subscribe(
-                det_key, Detections.decode, _fresh_input(node, det_gate, dets, "detections")
-            ),
-            node.subscribe(
-                node.keys.scan(), LaserScan.decode, _fresh_input(node, scan_gate, scan, "scans")
-            ),
-            node.session.declare_subscriber(node.keys.estop(), on_estop),
+            node.subscribe(det_key, handlers.on_detections),
+            node.subscribe(node.keys.scan(), handlers.on_scan),
+            node.subscribe(node.keys.estop(), handlers.on_estop),
         ]
         controller = Controller(s, config.camera.hfov_deg)
         cmd_pub = node.publisher(node.keys.cmd_vel(), QoS.CONTROL)
@@ -161,24 +221,6 @@ def run(config: Config, stop: threading.Event) -> int:
     return 0
 
 
-def _fresh_input(
-    node: Node, gate: FreshnessGate, latest: Latest[_S], name: str
-) -> Callable[[_S, zenoh.Sample], None]:
-    """A decoded message's fate: judge its freshness, keep it if fresh and newest, count the
-    rest (``<name>_in``, ``<name>_stale|future|replay|late``)."""
-
-    def on_message(msg: _S, _sample: zenoh.Sample) -> None:
-        verdict, age = gate.check(msg.header, now())
-        if verdict is not Verdict.FRESH:
-            node.reject(f"{name}_{verdict}", f"{verdict} {name} ({age:.2f} s) ignored")
-        elif latest.set(msg):
-            node.counters.add(f"{name}_in")
-        else:
-            node.reject(f"{name}_late", f"{name} older than the ones held ignored")
-
-    return on_message
-
-
 def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:
     """Ask the detector for its model's classes (until one answers) and warn, once, about
     target classes it cannot report."""
@@ -205,39 +247,6 @@ def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:
                 )  # fmt: skip
             return
         stop.wait(2.0)
-
-
-def _on_estop(
-    node: Node, latch: EStopLatch, sample: zenoh.Sample, max_age_s: float, tolerance_s: float
-) -> None:
-    """Latch on an engage or on garbage; release only on a fresh release newer than the stop
-    that can be saved. A latch that cannot be saved holds in memory and says so loudly."""
-    at = now()
-    latest_ns = at.wall_ns + int(tolerance_s * 1e9)  # no stamp the latch keeps is later
-    try:
-        msg = EStop.decode(sample.payload.to_bytes())
-    except DecodeError as exc:
-        # Garbage on the e-stop key is treated as a press: fail safe, not open.
-        node.bad_input(node.keys.estop(), exc)
-        msg = None
-    if msg is None or msg.engaged:
-        by = msg.header.source if msg else "garbage"
-        reason = msg.reason if msg else "undecodable message on the e-stop key"
-        was, was_saved = latch.engaged, latch.saved
-        saved = latch.engage(msg.header.stamp_ns if msg else at.wall_ns, by, reason, latest_ns)
-        if not was:
-            node.log.warning("e-stop ENGAGED by %s: %s", by, reason or "-")
-        if not saved and was_saved:
-            node.log.error("the e-stop is engaged but cannot be saved: %s", latch.describe())
-        return
-    verdict, age = judge_age(msg.header, at, BOOT_ID, max_age_s, tolerance_s)
-    if verdict is not Verdict.FRESH:
-        latch.refuse(f"{verdict} ({age:.2f} s)")
-        node.reject("estop_release_refused", f"{verdict} e-stop release ({age:.2f} s) refused")
-    elif not latch.release(msg.header.stamp_ns, msg.header.source):
-        node.reject("estop_release_refused", f"e-stop release refused: {latch.last_refusal}")
-    else:
-        node.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
 
 
 def _publish(

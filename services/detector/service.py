@@ -16,7 +16,7 @@ from common.errors import DecodeError, ImageError, ImageTooLarge
 from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, Header, now_ns
-from common.node import Node
+from common.node import Node, Tally
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
 from services.detector.mailbox import Mailbox
@@ -69,6 +69,39 @@ def to_message(
     )
 
 
+class DetectorHandlers:
+    """What the detector does with a frame as it arrives: decode it, count it, and leave it in
+    the mailbox that the detection loop takes the newest frame from."""
+
+    def __init__(self, config: Config, tally: Tally) -> None:
+        self.settings = config.detector
+        self.tally = tally
+        self.frame_key = tally.keys.frame(config.stack.camera)
+        self.mailbox: Mailbox[Frame] = Mailbox()
+        self.gaps = SeqGaps()
+
+    def on_frame(self, payload: bytes) -> None:
+        # Decode here, not in the loop: garbage must be counted even when a newer frame would
+        # have replaced it in the mailbox before the loop looked at it; and an oversize frame
+        # must never displace a real one there.
+        counters = self.tally.counters
+        counters.add("frames_in")
+        try:
+            frame = Frame.decode(payload)
+            missed = self.gaps.observe(frame.header)
+            if missed:
+                counters.add("frames_missed", missed)
+            check_pixel_budget(frame, self.settings.max_frame_pixels)
+        except DecodeError as exc:
+            self.tally.bad_input(self.frame_key, exc)
+            return
+        except ImageTooLarge as exc:
+            self.tally.reject("frames_oversize", str(exc), key=self.frame_key)
+            return
+        if self.mailbox.put(frame):
+            counters.add("dropped")
+
+
 def run(config: Config, stop: threading.Event) -> int:
     """Detect on the newest frame until ``stop`` is set."""
     s = config.detector
@@ -84,33 +117,10 @@ def run(config: Config, stop: threading.Event) -> int:
             detector.info.input_height,
             f": {note}" if note else "",
         )
-        frame_key = node.keys.frame(config.stack.camera)
-        mailbox: Mailbox[Frame] = Mailbox()
+        handlers = DetectorHandlers(config, node)
+        frame_key, mailbox = handlers.frame_key, handlers.mailbox
         tracker = Tracker(config.tracker) if config.tracker.enabled else None
-
-        gaps = SeqGaps()
-
-        def on_frame(sample: zenoh.Sample) -> None:
-            # Decode here, not in the loop: garbage must be counted even when a newer frame
-            # would have replaced it in the mailbox before the loop looked at it; and an
-            # oversize frame must never displace a real one there.
-            node.counters.add("frames_in")
-            try:
-                frame = Frame.decode(sample.payload.to_bytes())
-                missed = gaps.observe(frame.header)
-                if missed:
-                    node.counters.add("frames_missed", missed)
-                check_pixel_budget(frame, s.max_frame_pixels)
-            except DecodeError as exc:
-                node.bad_input(frame_key, exc)
-                return
-            except ImageTooLarge as exc:
-                node.reject("frames_oversize", str(exc), key=frame_key)
-                return
-            if mailbox.put(frame):
-                node.counters.add("dropped")
-
-        sub = node.session.declare_subscriber(frame_key, on_frame)
+        sub = node.subscribe(frame_key, handlers.on_frame)
         pub = node.publisher(node.keys.detections(config.stack.camera), QoS.PERCEPTION)
         gate = FreshnessGate(s.max_frame_age_s, config.stack.clock_tolerance_s, BOOT_ID)
         info = json.dumps(

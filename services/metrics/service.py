@@ -10,7 +10,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TypeVar
 
 import zenoh
 
@@ -20,7 +20,7 @@ from common.contracts import MetricsAnswer
 from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, ServiceCounters, Twist
-from common.node import Node
+from common.node import Node, Tally
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES, Config
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
@@ -31,14 +31,89 @@ from services.metrics.trust import (
     strict_json,
 )
 
+_M = TypeVar("_M")
+
 OBSERVER = "observer"  # the principal that asks: it may read and query, never put
+
+
+class MetricsHandlers:
+    """What the metrics service does with each message: decode it, refuse what it cannot trust
+    (services/metrics/trust.py), feed the rest to the aggregator. Zenoh calls back on its own
+    threads: the aggregator is only touched under ``lock``."""
+
+    def __init__(
+        self, config: Config, tally: Tally, on_latency: LatencyListener | None = None
+    ) -> None:
+        s = self.settings = config.metrics
+        self.tally = tally
+        self.agg = Aggregator(
+            s.window_s,
+            s.history_s,
+            on_latency=on_latency,
+            max_counters_per_service=s.max_counters_per_service,
+            max_classes=s.max_classes,
+        )
+        self.lock = threading.Lock()
+
+    def on_detections(self, key: str, payload: bytes) -> None:
+        """``key``: the one the sample came on (a camera's)."""
+        max_timing_ms = self.settings.max_timing_ms
+        self._take(
+            "detections", Detections.decode, key, payload,
+            lambda m: self.agg.on_detections(m, time.monotonic()),
+            lambda m, _k: refuse_detections(m, max_timing_ms),
+        )  # fmt: skip
+
+    def on_cmd_vel(self, payload: bytes) -> None:
+        key = self.tally.keys.cmd_vel()
+        self._take(
+            "cmd_vel", Twist.decode, key, payload, lambda m: self.agg.on_twist(m, time.monotonic())
+        )
+
+    def on_counters(self, key: str, payload: bytes) -> None:
+        """``key``: the one the sample came on, which must name the service that counts."""
+        limit = self.settings.max_counters_per_service
+        self._take(
+            "counters", ServiceCounters.decode, key, payload, self._feed_counters,
+            lambda m, heard_on: refuse_counters(m, heard_on, SERVICES, limit),
+        )  # fmt: skip
+
+    def _feed_counters(self, msg: ServiceCounters) -> None:
+        kept, refused = split_counters(msg)
+        for why, n in refused.items():
+            self.agg.count(f"refused.{why}", n)
+            self.tally.reject(f"refused.{why}", f"{n} of {msg.service}'s counters refused: {why}")
+        self.agg.on_counters(kept, time.monotonic())
+
+    def _take(
+        self,
+        name: str,
+        decode: Callable[[bytes], _M],
+        heard_on: str,
+        payload: bytes,
+        feed: Callable[[_M], None],
+        refuse: Callable[[_M, str], str | None] = lambda _m, _k: None,
+    ) -> None:
+        try:
+            msg = decode(payload)
+        except DecodeError as exc:
+            self.tally.bad_input(name, exc)
+            with self.lock:
+                self.agg.count("bad_input")
+            return
+        why = refuse(msg, heard_on)
+        if why is not None:
+            self.tally.reject(f"refused.{why}", f"{name} on {heard_on} refused: {why}", key=name)
+            with self.lock:
+                self.agg.count(f"refused.{why}")
+            return
+        with self.lock:
+            feed(msg)
 
 
 def run(config: Config, stop: threading.Event) -> int:
     """Serve metrics until ``stop`` is set."""
     s = config.metrics
-    lock = threading.Lock()  # Zenoh calls back on its own threads
-    now = time.monotonic
     exporter = None
     listener: LatencyListener | None = None
     if s.prometheus_port:
@@ -46,73 +121,19 @@ def run(config: Config, stop: threading.Event) -> int:
 
         exporter = PrometheusExporter()
         listener = exporter.observe
-    agg = Aggregator(
-        s.window_s,
-        s.history_s,
-        on_latency=listener,
-        max_counters_per_service=s.max_counters_per_service,
-        max_classes=s.max_classes,
-    )
     with Node("metrics", config) as node:
+        handlers = MetricsHandlers(config, node, listener)
+        agg, lock = handlers.agg, handlers.lock
 
         def answer() -> MetricsAnswer:
             with lock:
-                return agg.answer(node.header(), now(), time.time() - time.monotonic())
-
-        def handler(
-            key: str,
-            decode: Callable[[bytes], Any],
-            feed: Callable[[Any], None],
-            refuse: Callable[[Any, str], str | None] = lambda _m, _k: None,
-        ) -> Any:
-            def on_sample(sample: zenoh.Sample) -> None:
-                try:
-                    msg = decode(sample.payload.to_bytes())
-                except DecodeError as exc:
-                    node.bad_input(key, exc)
-                    with lock:
-                        agg.count("bad_input")
-                    return
-                heard_on = str(sample.key_expr)
-                why = refuse(msg, heard_on)
-                if why is not None:
-                    node.reject(f"refused.{why}", f"{key} on {heard_on} refused: {why}", key=key)
-                    with lock:
-                        agg.count(f"refused.{why}")
-                    return
-                with lock:
-                    feed(msg)
-
-            return on_sample
-
-        def refuse_counters_of(msg: ServiceCounters, heard_on: str) -> str | None:
-            return refuse_counters(msg, heard_on, SERVICES, s.max_counters_per_service)
-
-        def feed_counters(msg: ServiceCounters) -> None:
-            kept, refused = split_counters(msg)
-            for why, n in refused.items():
-                agg.count(f"refused.{why}", n)
-                node.reject(f"refused.{why}", f"{n} of {msg.service}'s counters refused: {why}")
-            agg.on_counters(kept, now())
+                return agg.answer(node.header(), time.monotonic(), time.time() - time.monotonic())
 
         keys = node.keys
         subs = [
-            node.session.declare_subscriber(
-                keys.all_detections(),
-                handler(
-                    "detections",
-                    Detections.decode,
-                    lambda m: agg.on_detections(m, now()),
-                    lambda m, _k: refuse_detections(m, s.max_timing_ms),
-                ),
-            ),
-            node.session.declare_subscriber(
-                keys.cmd_vel(), handler("cmd_vel", Twist.decode, lambda m: agg.on_twist(m, now()))
-            ),
-            node.session.declare_subscriber(
-                keys.all_counters(),
-                handler("counters", ServiceCounters.decode, feed_counters, refuse_counters_of),
-            ),
+            node.subscribe_keyed(keys.all_detections(), handlers.on_detections),
+            node.subscribe(keys.cmd_vel(), handlers.on_cmd_vel),
+            node.subscribe_keyed(keys.all_counters(), handlers.on_counters),
         ]
 
         def on_query(query: zenoh.Query) -> None:
@@ -128,7 +149,7 @@ def run(config: Config, stop: threading.Event) -> int:
         try:
             while not stop.wait(s.report_period_s):
                 with lock:
-                    snap = agg.snapshot(node.header(), now())
+                    snap = agg.snapshot(node.header(), time.monotonic())
                 node.log.info("%s", report_line(snap))
         finally:
             if exporter is not None:

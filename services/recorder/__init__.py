@@ -6,6 +6,7 @@ writer.py     the bounded queue, the writer thread, chunks flushed as they finis
 reading.py    reading ours and rosbag2's MCAP files; corrupt, truncated, foreign: one line
 timing.py     a replay's clock and restamping
 runs.py, compare.py, plots.py   a recorded run; matching detections, commands, latency
-service.py, play.py, replay.py  the bus I/O: record, play, replay while recording
+service.py    the bus I/O: record, and play what play.py reads back at its recorded timing
+play.py       a recording's frames and scans, restamped, for service.py to publish
 bench.py      the stack with and without the recorder, side by side
 """

@@ -59,9 +59,9 @@ def play(args: argparse.Namespace) -> int:
     stop = stop_event()
     config = load_config(args.config)
     setup_logging("play", "WARNING")
-    from services.recorder import play as player
+    from services.recorder import service
 
-    played = player.play(config, args.file, stop, print_progress, rate=args.rate, loop=args.loop,
+    played = service.play(config, args.file, stop, print_progress, rate=args.rate, loop=args.loop,
                          topics=args.topics)  # fmt: skip
     return 0 if played.frames + played.scans else 1
 

@@ -1,6 +1,7 @@
-"""Playing a recording back onto the bus: its frames and scans, on the stack's own keys, at
-their original timing (times 1/rate), restamped to now (timing.py), as the camera or the
-simulator would publish them. The detector and the controller then run on recorded data.
+"""Playing a recording back: its frames and scans, for the stack's own keys, at their original
+timing (times 1/rate), restamped to now (timing.py), as the camera or the simulator would
+publish them. The detector and the controller then run on recorded data. No zenoh here:
+``service.play`` opens the session and publishes what :func:`one_pass` hands it.
 
 The file is read once to check it (reading.py) before anything is published. Each frame keeps
 its recorded sequence number (the MCAP message's ``sequence``, our recorder writes the stack
@@ -14,27 +15,20 @@ from __future__ import annotations
 import dataclasses
 import logging
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from common.bus import Publisher, QoS, open_session
 from common.clock import BOOT_ID, now
-from common.errors import DecodeError, RecordingError, StackError, one_line
-from common.keys import Keys
-from common.lifecycle import Progress
+from common.errors import DecodeError, RecordingError, one_line
 from common.messages import Frame, Header, LaserScan
-from common.queries import ready_services
-from common.security import LIVE_SENSORS
 from common.settings import Config
 from services.recorder.reading import PLAYABLE, Input, Recording, check_playable, decode_input
 from services.recorder.timing import Schedule
 
 log = logging.getLogger("recorder")
 
-PRINCIPAL = "recorder"
 SOURCE = "replay"
-WAIT_FOR_DETECTOR_S = 5.0  # a replay with no detector up still plays, after saying so
 
 
 @dataclass(slots=True)
@@ -57,61 +51,17 @@ def playable_topics(path: Path, topics: Sequence[str] | None) -> list[str]:
     return [topic for topic, enc, schema in channels if enc == "cdr" and schema in PLAYABLE]
 
 
-def play(
-    config: Config,
-    path: Path,
-    stop: threading.Event,
-    progress: Progress,
-    *,
-    rate: float = 1.0,
-    loop: bool = False,
-    topics: Sequence[str] | None = None,
-) -> Played:
-    """Publish the recording's frames and scans until it ends (or ``stop``; ``loop``: again)."""
-    chosen = playable_topics(path, topics)
-    keys = Keys(config.stack.prefix)
-    session = open_session(config.zenoh, PRINCIPAL)
-    try:
-        ready = ready_services(session, keys, WAIT_FOR_DETECTOR_S)
-        live = sorted(ready & LIVE_SENSORS)
-        if live:
-            # A replay onto a live robot's keys would mix old frames and scans with its own:
-            # all-clear scans could blind its laser. Under the secure profile the router
-            # refuses these puts anyway (common/security.py); this says so before trying.
-            raise StackError(
-                f"refusing to play {path} onto stack {config.stack.prefix!r}: it runs a live "
-                f"sensor ({', '.join(live)}) and a replay would mix with or blind it; play into "
-                "a stack without camera, sim or ros2 (e.g. supervisor.services = "
-                '["detector", "controller", "metrics"])'
-            )
-        if "detector" not in ready:
-            progress("no detector is ready on this stack: playing anyway")
-        pubs = {
-            Input.FRAME: Publisher(session, keys.frame(config.stack.camera), QoS.SENSOR),
-            Input.SCAN: Publisher(session, keys.scan(), QoS.SENSOR),
-        }
-        played = Played()
-        while not stop.is_set():
-            _one_pass(config, path, chosen, rate, pubs, stop, played)
-            played.passes += 1
-            progress(f"played {path}: {played.frames} frames, {played.scans} scans"
-                     f" ({played.passes} pass{'es' if played.passes > 1 else ''})")  # fmt: skip
-            if not loop:
-                break
-        return played
-    finally:
-        session.close()
-
-
-def _one_pass(
+def one_pass(
     config: Config,
     path: Path,
     topics: list[str],
     rate: float,
-    pubs: dict[Input, Publisher],
+    put: Callable[[Input, bytes], object],
     stop: threading.Event,
     played: Played,
 ) -> None:
+    """Publish ``topics`` of ``path`` once, through ``put``, at their recorded timing over
+    ``rate``; counted in ``played``. RecordingError for a truncated file, after playing it."""
     schedule: Schedule | None = None
     distro = config.ros2.distro
     with Recording(path) as rec:
@@ -138,7 +88,7 @@ def _one_pass(
             )  # fmt: skip
             out: Frame | LaserScan = dataclasses.replace(msg, header=header)
             kind = Input.FRAME if isinstance(out, Frame) else Input.SCAN
-            pubs[kind].put(out.encode())
+            put(kind, out.encode())
             if kind is Input.FRAME:
                 played.frames += 1
             else:

@@ -11,18 +11,20 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Sequence
 from datetime import datetime
+from functools import partial
 from math import inf
 from pathlib import Path
 
 import zenoh
 
 from common import reach
+from common.bus import Publisher, QoS, open_session
 from common.codec import Message
 from common.errors import StackError
 from common.keys import Keys
-from common.lifecycle import EXIT_FAILED, EXIT_OK, Progress
+from common.lifecycle import EXIT_FAILED, EXIT_OK, Closing, Progress
 from common.messages import (
     ControllerStatus,
     Detections,
@@ -33,11 +35,15 @@ from common.messages import (
     ServiceCounters,
     Twist,
 )
-from common.node import Node
+from common.node import Node, Tally
 from common.priority import lower_priority
+from common.queries import ready_services
 from common.recorder_settings import TIME_FIELD
+from common.security import LIVE_SENSORS
 from common.settings import REPO_ROOT, Config
 from services.recorder.channels import Translator
+from services.recorder.play import Played, one_pass, playable_topics
+from services.recorder.reading import Input
 from services.recorder.writer import Decode, McapFile, QueuedRecorder
 
 SERVICE = "recorder"
@@ -66,39 +72,42 @@ def default_path(config: Config, at: datetime | None = None) -> Path:
     return folder / s.file_pattern.replace(TIME_FIELD, stamp)
 
 
-class Recorder:
-    """A recording in progress on ``node``'s session; :meth:`close` finishes the file."""
+class Recorder(Closing):
+    """A recording in progress: :meth:`on_sample` queues what a subscriber hears for the writer
+    thread (writer.py), :meth:`listen` subscribes it to every key on a node's session, and
+    :meth:`close` finishes the file."""
 
-    def __init__(self, node: Node, path: Path) -> None:
-        config = node.config
-        self.node = node
+    def __init__(self, tally: Tally, path: Path) -> None:
+        config = tally.config
+        self.tally = tally
         self.path = path
         self._queued = QueuedRecorder(
             McapFile(path, config.recorder), Translator(config.ros2), config.recorder,
-            node.counters,
+            tally.counters,
         )  # fmt: skip
         self._subs: list[zenoh.Subscriber[None]] = []
-        self._own = node.keys.counters(SERVICE)
+        self._own = tally.keys.counters(SERVICE)
         self.heard = 0  # samples from the stack: every key but the recorder's own counters
-        for key, cls in subscriptions(node.keys, config.stack.camera).items():
-            self._subs.append(node.session.declare_subscriber(key, self._offer(cls.decode)))
 
-    def _offer(self, decode: Decode) -> Callable[[zenoh.Sample], None]:
-        def on_sample(sample: zenoh.Sample) -> None:
-            # Zenoh's thread: copy the bytes and queue them, nothing else.
-            key = str(sample.key_expr)
-            if key != self._own:
-                self.heard += 1  # one writer per subscriber thread; a count, never a decision
-            self._queued.offer(key, sample.payload.to_bytes(), time.time_ns(), decode)
+    def listen(self, node: Node) -> Recorder:
+        """Subscribe to every key of :func:`subscriptions` on ``node``'s session."""
+        for key, cls in subscriptions(node.keys, node.config.stack.camera).items():
+            self._subs.append(node.subscribe_keyed(key, partial(self.on_sample, decode=cls.decode)))
+        return self
 
-        return on_sample
+    def on_sample(self, key: str, payload: bytes, decode: Decode) -> None:
+        """Zenoh's thread: queue the bytes heard on ``key`` (decoded later, on the writer
+        thread, by ``decode``), nothing else."""
+        if key != self._own:
+            self.heard += 1  # one writer per subscriber thread; a count, never a decision
+        self._queued.offer(key, payload, time.time_ns(), decode)
 
     @property
     def failed(self) -> Exception | None:
         return self._queued.failed
 
     def progress(self) -> str:
-        c = self.node.counters
+        c = self.tally.counters
         mb = self._queued.file.bytes_written / 1e6
         line = (
             f"recording {self.path}: {c.get('written')} messages, {mb:.1f} MB written, "
@@ -134,7 +143,7 @@ def record(
     priority = lower_priority(config.recorder.nice, config.recorder.sched_idle)
     with Node(SERVICE, config) as node:
         node.log.info("CPU priority: %s", priority)
-        recorder = Recorder(node, path)
+        recorder = Recorder(node, path).listen(node)
         node.ready()
         progress(f"recording to {path}")
         period = config.recorder.progress_period_s
@@ -172,3 +181,55 @@ def record(
                 )
             )
         return code
+
+
+# The player joins as the recorder's principal, which may publish frames and scans.
+PLAY_PRINCIPAL = SERVICE
+WAIT_FOR_DETECTOR_S = 5.0  # a replay with no detector up still plays, after saying so
+
+
+def play(
+    config: Config,
+    path: Path,
+    stop: threading.Event,
+    progress: Progress,
+    *,
+    rate: float = 1.0,
+    loop: bool = False,
+    topics: Sequence[str] | None = None,
+) -> Played:
+    """Publish the recording's frames and scans (play.py) until it ends (or ``stop``;
+    ``loop``: again)."""
+    chosen = playable_topics(path, topics)
+    keys = Keys(config.stack.prefix)
+    session = open_session(config.zenoh, PLAY_PRINCIPAL)
+    try:
+        ready = ready_services(session, keys, WAIT_FOR_DETECTOR_S)
+        live = sorted(ready & LIVE_SENSORS)
+        if live:
+            # A replay onto a live robot's keys would mix old frames and scans with its own:
+            # all-clear scans could blind its laser. Under the secure profile the router
+            # refuses these puts anyway (common/security.py); this says so before trying.
+            raise StackError(
+                f"refusing to play {path} onto stack {config.stack.prefix!r}: it runs a live "
+                f"sensor ({', '.join(live)}) and a replay would mix with or blind it; play into "
+                "a stack without camera, sim or ros2 (e.g. supervisor.services = "
+                '["detector", "controller", "metrics"])'
+            )
+        if "detector" not in ready:
+            progress("no detector is ready on this stack: playing anyway")
+        pubs = {
+            Input.FRAME: Publisher(session, keys.frame(config.stack.camera), QoS.SENSOR),
+            Input.SCAN: Publisher(session, keys.scan(), QoS.SENSOR),
+        }
+        played = Played()
+        while not stop.is_set():
+            one_pass(config, path, chosen, rate, lambda kind, b: pubs[kind].put(b), stop, played)
+            played.passes += 1
+            progress(f"played {path}: {played.frames} frames, {played.scans} scans"
+                     f" ({played.passes} pass{'es' if played.passes > 1 else ''})")  # fmt: skip
+            if not loop:
+                break
+        return played
+    finally:
+        session.close()

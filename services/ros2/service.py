@@ -17,14 +17,13 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
-from collections.abc import Callable
 
 import zenoh
 
-from common.bus import Publisher, QoS
+from common.bus import QoS
 from common.errors import DecodeError, ImageError
-from common.messages import Detections, Frame, LaserScan, Twist
-from common.node import Node
+from common.messages import Detections, Frame, Twist
+from common.node import Node, Put, Tally
 from common.ros2_settings import ImageFormat
 from common.settings import Config
 from services.ros2.convert import (
@@ -33,6 +32,7 @@ from services.ros2.convert import (
     TWIST,
     TWIST_STAMPED,
     cdr_decode,
+    cdr_encode,
     detections_to_ros,
     scan_from_ros,
     twist_to_ros,
@@ -48,8 +48,6 @@ from services.ros2.images import (
 )
 from services.ros2.wire import SENSOR_DATA_QOS
 
-_Subscriber = zenoh.Subscriber[None]
-
 _IDLE_S = 1.0  # how often the loop publishes counters and looks at the stop flag
 
 
@@ -60,88 +58,148 @@ def command_in_range(twist: Twist, max_linear: float, max_angular: float) -> boo
     )
 
 
+class RosInbound:
+    """A ROS topic into the stack: CDR in, the stack's message out through ``put``. Garbage is
+    counted as ``bad_input.<topic>`` (the key's last chunk is the type hash)."""
+
+    def __init__(self, config: Config, tally: Tally, ros_type: str, topic: str, put: Put) -> None:
+        self.distro = config.ros2.distro
+        self.tally = tally
+        self.ros_type = ros_type
+        self.topic = topic
+        self.put = put
+        self._counter = f"{ros_type.rsplit('/', 1)[-1].lower()}_in"
+
+    def on_payload(self, key: str, cdr: memoryview) -> None:
+        """``key``: the rmw_zenoh data key the sample came on."""
+        try:
+            msg = cdr_decode(self.distro, self.ros_type, cdr)
+            if self.ros_type == LASER_SCAN:
+                payload = scan_from_ros(msg, source="ros2").encode()
+            elif self.ros_type == IMAGE:
+                payload = frame_from_image(msg, source="ros2").encode()
+            else:
+                payload = frame_from_compressed_image(msg, source="ros2").encode()
+        except DecodeError as exc:
+            self.tally.bad_input(key, exc, topic=self.topic)
+            return
+        self.tally.counters.add(self._counter)
+        self.put(payload)
+
+
+class DetectionsToRos:
+    """The detector's Detections out as vision_msgs/Detection2DArray CDR, through ``put``."""
+
+    def __init__(self, config: Config, tally: Tally, put: Put) -> None:
+        self.distro = config.ros2.distro
+        self.tally = tally
+        self.put = put
+        self.key = tally.keys.detections(config.stack.camera)
+
+    def on_detections(self, payload: bytes) -> None:
+        dets = self.tally.decode(self.key, Detections.decode, payload)
+        if dets is None:
+            return
+        self.put(cdr_encode(self.distro, DETECTION_2D_ARRAY, detections_to_ros(self.distro, dets)))
+        self.tally.counters.add("detections_out")
+
+
+class CommandsToRos:
+    """The controller's Twist out as geometry_msgs Twist or TwistStamped CDR, through ``put``;
+    a command beyond ``ros2.max_command_*`` goes out as zero."""
+
+    def __init__(self, config: Config, tally: Tally, put: Put) -> None:
+        self.settings = config.ros2
+        self.tally = tally
+        self.put = put
+        self.ros_type = TWIST_STAMPED if self.settings.twist_stamped else TWIST
+
+    def on_cmd_vel(self, payload: bytes) -> None:
+        s = self.settings
+        twist = self.tally.decode(self.tally.keys.cmd_vel(), Twist.decode, payload)
+        if twist is None:
+            return
+        if not command_in_range(twist, s.max_command_linear, s.max_command_angular):
+            # When in doubt, zero: the robot gets a stop, never the absurd command.
+            self.tally.reject(
+                "commands_out_of_range",
+                f"cmd_vel {twist.linear} {twist.angular} from {twist.header.source!r} "
+                "is beyond ros2.max_command_*: the robot is sent zero",
+            )
+            twist = dataclasses.replace(twist, linear=(0.0,) * 3, angular=(0.0,) * 3)
+        msg = twist_to_ros(s.distro, twist, stamped=s.twist_stamped)
+        self.put(cdr_encode(s.distro, self.ros_type, msg))
+        self.tally.counters.add("commands_out")
+
+
+class DebugImages:
+    """Each frame with its detections drawn on it, as CompressedImage CDR through ``put``, at
+    most ``ros2.debug_image_rate_hz``."""
+
+    def __init__(self, config: Config, tally: Tally, put: Put) -> None:
+        self.settings = config.ros2
+        self.max_frame_pixels = config.detector.max_frame_pixels
+        self.tally = tally
+        self.put = put
+        self.frame_key = tally.keys.frame(config.stack.camera)
+        self.detections_key = tally.keys.detections(config.stack.camera)
+        self.frames = FrameCache()
+        self._period_s = 1.0 / self.settings.debug_image_rate_hz
+        self._due = 0.0
+
+    def on_frame(self, payload: bytes) -> None:
+        frame = self.tally.decode(self.frame_key, Frame.decode, payload)
+        if frame is not None:
+            self.frames.add(frame)
+
+    def on_detections(self, payload: bytes) -> None:
+        s = self.settings
+        dets = self.tally.decode(self.detections_key, Detections.decode, payload)
+        if dets is None:
+            return
+        frame = self.frames.take(dets.header.stamp_ns)
+        if frame is None or time.monotonic() < self._due:
+            return
+        self._due = time.monotonic() + self._period_s
+        try:
+            drawn = debug_image(frame, dets, s.debug_jpeg_quality, self.max_frame_pixels)
+        except ImageError as exc:
+            self.tally.bad_input(self.frame_key, exc)
+            return
+        image = frame_to_compressed_image(s.distro, drawn)
+        self.put(cdr_encode(s.distro, COMPRESSED_IMAGE, image))
+        self.tally.counters.add("debug_images_out")
+
+
 def run(config: Config, stop: threading.Event) -> int:
     """Bridge until ``stop`` is set."""
     s = config.ros2
     with Node("ros2", config) as node, RosGraph(s) as graph:
-        keys = node.keys
-        subs: list[_Subscriber] = []
-
-        def inbound(
-            ros_type: str, convert: Callable[[str, memoryview], bytes], topic: str
-        ) -> Callable[[str, memoryview], None]:
-            """A ROS-side callback: decode, translate, publish on the stack; count garbage
-            (as ``bad_input.<topic>``: the key's last chunk is the type hash)."""
-
-            def on_payload(key: str, cdr: memoryview) -> None:
-                try:
-                    payload = convert(ros_type, cdr)
-                except DecodeError as exc:
-                    node.bad_input(key, exc, topic=topic)
-                    return
-                node.counters.add(f"{ros_type.rsplit('/', 1)[-1].lower()}_in")
-                pubs[ros_type].put(payload)
-
-            return on_payload
-
-        pubs: dict[str, Publisher] = {}
+        keys, camera = node.keys, config.stack.camera
+        subs: list[zenoh.Subscriber[None]] = []
         if s.image_in:
             image_type = IMAGE if s.image_format is ImageFormat.RAW else COMPRESSED_IMAGE
-            pubs[image_type] = node.publisher(keys.frame(config.stack.camera), QoS.SENSOR)
-
-            def to_frame(ros_type: str, cdr: memoryview) -> bytes:
-                msg = cdr_decode(s.distro, ros_type, cdr)
-                convert = frame_from_image if ros_type == IMAGE else frame_from_compressed_image
-                frame: Frame = convert(msg, source="ros2")
-                return frame.encode()
-
-            graph.subscribe(
-                s.image_topic,
-                image_type,
-                inbound(image_type, to_frame, s.image_topic),
-                SENSOR_DATA_QOS,
-            )
+            frames = node.publisher(keys.frame(camera), QoS.SENSOR)
+            image_in = RosInbound(config, node, image_type, s.image_topic, frames.put)
+            graph.subscribe(s.image_topic, image_type, image_in.on_payload, SENSOR_DATA_QOS)
         if s.scan_in:
-            pubs[LASER_SCAN] = node.publisher(keys.scan(), QoS.SENSOR)
-
-            def to_scan(ros_type: str, cdr: memoryview) -> bytes:
-                scan: LaserScan = scan_from_ros(cdr_decode(s.distro, ros_type, cdr), source="ros2")
-                return scan.encode()
-
-            graph.subscribe(
-                s.scan_topic,
-                LASER_SCAN,
-                inbound(LASER_SCAN, to_scan, s.scan_topic),
-                SENSOR_DATA_QOS,
-            )
+            scans = node.publisher(keys.scan(), QoS.SENSOR)
+            scan_in = RosInbound(config, node, LASER_SCAN, s.scan_topic, scans.put)
+            graph.subscribe(s.scan_topic, LASER_SCAN, scan_in.on_payload, SENSOR_DATA_QOS)
         if s.debug_image_out:
-            subs.append(_debug_images(node, graph, config))
+            debug = graph.publisher(s.debug_image_topic, COMPRESSED_IMAGE)
+            drawn = DebugImages(config, node, debug.put_cdr)
+            subs.append(node.subscribe(keys.detections(camera), drawn.on_detections))
+            subs.append(node.subscribe(keys.frame(camera), drawn.on_frame))
         if s.detections_out:
             det_pub = graph.publisher(s.detections_topic, DETECTION_2D_ARRAY)
-
-            def on_detections(dets: Detections, _sample: zenoh.Sample) -> None:
-                det_pub.put(detections_to_ros(s.distro, dets))
-                node.counters.add("detections_out")
-
-            det_key = keys.detections(config.stack.camera)
-            subs.append(node.subscribe(det_key, Detections.decode, on_detections))
+            dets_out = DetectionsToRos(config, node, det_pub.put_cdr)
+            subs.append(node.subscribe(keys.detections(camera), dets_out.on_detections))
         if s.cmd_vel_out:
             twist_type = TWIST_STAMPED if s.twist_stamped else TWIST
             cmd_pub = graph.publisher(s.cmd_vel_topic, twist_type)
-
-            def on_cmd(twist: Twist, _sample: zenoh.Sample) -> None:
-                if not command_in_range(twist, s.max_command_linear, s.max_command_angular):
-                    # When in doubt, zero: the robot gets a stop, never the absurd command.
-                    node.reject(
-                        "commands_out_of_range",
-                        f"cmd_vel {twist.linear} {twist.angular} from {twist.header.source!r} "
-                        "is beyond ros2.max_command_*: the robot is sent zero",
-                    )
-                    twist = dataclasses.replace(twist, linear=(0.0,) * 3, angular=(0.0,) * 3)
-                cmd_pub.put(twist_to_ros(s.distro, twist, stamped=s.twist_stamped))
-                node.counters.add("commands_out")
-
-            subs.append(node.subscribe(keys.cmd_vel(), Twist.decode, on_cmd))
+            cmds_out = CommandsToRos(config, node, cmd_pub.put_cdr)
+            subs.append(node.subscribe(keys.cmd_vel(), cmds_out.on_cmd_vel))
         node.log.info(
             "in the ROS 2 graph (%s, domain %d) via %s as %s%s",
             s.distro, s.domain_id, ", ".join(s.router), s.namespace.rstrip("/"), s.node,
@@ -154,34 +212,3 @@ def run(config: Config, stop: threading.Event) -> int:
             for sub in subs:
                 sub.undeclare()
     return 0
-
-
-def _debug_images(node: Node, graph: RosGraph, config: Config) -> _Subscriber:
-    """Publish each frame with its detections drawn on it, at most ``debug_image_rate_hz``.
-    Returns the frames' subscriber; the detections' one is undeclared with the graph."""
-    s = config.ros2
-    frames = FrameCache()
-    frame_key = node.keys.frame(config.stack.camera)
-    pub = graph.publisher(s.debug_image_topic, COMPRESSED_IMAGE)
-    period_s = 1.0 / s.debug_image_rate_hz
-    due = 0.0
-
-    def on_detections(dets: Detections, _sample: zenoh.Sample) -> None:
-        nonlocal due
-        frame = frames.take(dets.header.stamp_ns)
-        if frame is None or time.monotonic() < due:
-            return
-        due = time.monotonic() + period_s
-        try:
-            drawn = debug_image(frame, dets, s.debug_jpeg_quality, config.detector.max_frame_pixels)
-        except ImageError as exc:
-            node.bad_input(frame_key, exc)
-            return
-        pub.put(frame_to_compressed_image(s.distro, drawn))
-        node.counters.add("debug_images_out")
-
-    dets_sub = node.subscribe(
-        node.keys.detections(config.stack.camera), Detections.decode, on_detections
-    )
-    graph.on_close(dets_sub.undeclare)
-    return node.subscribe(frame_key, Frame.decode, lambda f, _s: frames.add(f))

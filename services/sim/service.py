@@ -1,23 +1,44 @@
-"""The simulator service: the robot's camera, laser and base, driven by cmd_vel over Zenoh."""
+"""The simulator service: the robot's camera, laser and base, driven by cmd_vel over Zenoh.
+
+The robot talks either way a robot may: the stack's own messages (``StackRobot``), or ROS 2 over
+rmw_zenoh (``RosRobot``: sensor_msgs Image and LaserScan, geometry_msgs Twist or TwistStamped,
+through a router it hosts), so that every frame, scan and command passes through the ``ros2``
+bridge service. Either way its velocity commands go through ``SimHandlers``.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
+from collections.abc import Callable
 from contextlib import ExitStack
+from typing import Protocol
 
 import numpy as np
 
-from common.bus import Publisher, QoS
+from common.bus import Publisher, QoS, source_of
 from common.command_sources import CommandSources
-from common.errors import ConfigError
+from common.errors import ConfigError, DecodeError
 from common.frames import image_to_frame
-from common.messages import GroundTruth, LaserScan, Twist
-from common.node import Node
+from common.lifecycle import Closing
+from common.messages import Frame, GroundTruth, LaserScan, Twist
+from common.node import Node, Tally
 from common.settings import Config
+from services.ros2 import (
+    IMAGE,
+    LASER_SCAN,
+    SENSOR_DATA_QOS,
+    TWIST,
+    TWIST_STAMPED,
+    RosGraph,
+    cdr_decode,
+    frame_to_image,
+    scan_to_ros,
+    twist_from_ros,
+)
 from services.sim.laser import LaserSpec, cast
 from services.sim.render import CameraSpec, render
-from services.sim.robot_io import RosRobot, SensorOutput, StackRobot
 from services.sim.scenarios import SCENARIOS
 from services.sim.world import World
 
@@ -34,6 +55,85 @@ class Clock:
             return False
         self.next = max(self.next + self.period, t)
         return True
+
+
+OnCommand = Callable[[Twist, str], None]
+
+
+class SimHandlers:
+    """The velocity commands that reach the simulated base, decoded: the stack's Twist (from
+    the publisher ``source``) or ROS 2's (through the router the robot hosts). Garbage is
+    counted as bad input; a command goes to ``on_command(twist, source)``."""
+
+    def __init__(self, config: Config, tally: Tally, on_command: OnCommand) -> None:
+        self.distro = config.ros2.distro
+        self.ros_type = TWIST_STAMPED if config.ros2.twist_stamped else TWIST
+        self.tally = tally
+        self.on_command = on_command
+
+    def on_cmd_vel(self, payload: bytes, source: str) -> None:
+        twist = self.tally.decode(self.tally.keys.cmd_vel(), Twist.decode, payload)
+        if twist is not None:
+            self.on_command(twist, source)
+
+    def on_ros_cmd_vel(self, key: str, cdr: memoryview) -> None:
+        """``key``: the rmw_zenoh data key the sample came on."""
+        try:
+            msg = cdr_decode(self.distro, self.ros_type, cdr)
+            twist = twist_from_ros(msg, source="ros2", received_ns=time.time_ns())
+        except DecodeError as exc:
+            self.tally.bad_input(key, exc)
+            return
+        self.on_command(twist, "ros2")
+
+
+class SensorOutput(Protocol):
+    def frame(self, frame: Frame) -> None: ...
+    def scan(self, scan: LaserScan) -> None: ...
+
+
+class StackRobot:
+    """Sensors on the stack's keys; commands from the controller's cmd_vel key."""
+
+    def __init__(self, config: Config, node: Node, handlers: SimHandlers) -> None:
+        keys = node.keys
+        self._frame = node.publisher(keys.frame(config.stack.camera), QoS.SENSOR)
+        self._scan = node.publisher(keys.scan(), QoS.SENSOR)
+        self._sub = node.session.declare_subscriber(
+            keys.cmd_vel(),
+            lambda sample: handlers.on_cmd_vel(sample.payload.to_bytes(), source_of(sample)),
+        )
+
+    def frame(self, frame: Frame) -> None:
+        self._frame.put(frame.encode())
+
+    def scan(self, scan: LaserScan) -> None:
+        self._scan.put(scan.encode())
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+class RosRobot(Closing):
+    """Sensors as ROS 2 messages on the rmw_zenoh keys of ``config.ros2``'s topics; commands
+    taken from its cmd_vel topic. Hosts the graph's router on ``ros2.router``."""
+
+    def __init__(self, config: Config, handlers: SimHandlers) -> None:
+        s = config.ros2
+        self._distro = s.distro
+        self._graph = RosGraph(dataclasses.replace(s, node="sim_robot"), host=True)
+        self._image = self._graph.publisher(s.image_topic, IMAGE, SENSOR_DATA_QOS)
+        self._scan = self._graph.publisher(s.scan_topic, LASER_SCAN, SENSOR_DATA_QOS)
+        self._graph.subscribe(s.cmd_vel_topic, handlers.ros_type, handlers.on_ros_cmd_vel)
+
+    def frame(self, frame: Frame) -> None:
+        self._image.put(frame_to_image(self._distro, frame))
+
+    def scan(self, scan: LaserScan) -> None:
+        self._scan.put(scan_to_ros(self._distro, scan))
+
+    def close(self) -> None:
+        self._graph.close()
 
 
 def build_world(config: Config) -> World:
@@ -76,12 +176,13 @@ def run(config: Config, stop: threading.Event) -> int:
                     node.log.warning("another publisher on cmd_vel: %s", sources.active())
 
         truth_pub = node.publisher(keys.sim_truth(), QoS.TELEMETRY)
+        handlers = SimHandlers(config, node, command)
         out: SensorOutput
         if s.ros2_robot:
             # The robot speaks ROS 2: it hosts the graph's router, as a robot runs rmw_zenohd.
-            out = closing.enter_context(RosRobot(config, node, command))
+            out = closing.enter_context(RosRobot(config, handlers))
         else:
-            stack_robot = StackRobot(config, node, command)
+            stack_robot = StackRobot(config, node, handlers)
             closing.callback(stack_robot.close)
             out = stack_robot
 

@@ -10,15 +10,14 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any
 
 import foxglove
-import zenoh
 from foxglove.websocket import WebSocketServer
 
+from common.contracts import MetricsAnswer
 from common.errors import ConfigError, ImageError
 from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
-from common.node import Node
+from common.node import Node, Tally
 from common.queries import query_metrics
 from common.security import viewer_token_file
 from common.settings import Config
@@ -68,11 +67,12 @@ def start_front(config: Config, inner_port: int) -> Front:
 
 
 class Viewer:
-    """What the callbacks and the threads share: the channels, the pairing, the latest status
-    and the robot's path."""
+    """The viewer's handlers and what they and the threads share: the channels, the pairing,
+    the latest status and the robot's path. Each ``on_*`` takes a payload as it came off the
+    bus; garbage is counted as bad input on its key."""
 
-    def __init__(self, node: Node, channels: Channels, config: Config) -> None:
-        self.node = node
+    def __init__(self, tally: Tally, channels: Channels, config: Config) -> None:
+        self.tally = tally
         self.channels = channels
         self.settings = config.viewer
         self.pairing = Pairing()
@@ -80,20 +80,30 @@ class Viewer:
         self.trail = scene.PathTrail(self.settings.path_points)
         self._scene_period_s = 1.0 / self.settings.scene_rate_hz
         self._next_scene = 0.0
+        keys, camera = tally.keys, config.stack.camera
+        self._frame_key = keys.frame(camera)
+        self._detections_key = keys.detections(camera)
 
-    def on_frame(self, frame: Frame, _sample: zenoh.Sample) -> None:
-        self.node.counters.add("frames_in")
+    def on_frame(self, payload: bytes) -> None:
+        frame = self.tally.decode(self._frame_key, Frame.decode, payload)
+        if frame is None:
+            return
+        self.tally.counters.add("frames_in")
         self.pairing.add_frame(frame)
 
-    def on_detections(self, dets: Detections, _sample: zenoh.Sample) -> None:
-        if not self.pairing.add_detections(dets, time.monotonic()):
-            self.node.counters.add("detections_unpaired")
+    def on_detections(self, payload: bytes) -> None:
+        dets = self.tally.decode(self._detections_key, Detections.decode, payload)
+        if dets is not None and not self.pairing.add_detections(dets, time.monotonic()):
+            self.tally.counters.add("detections_unpaired")
 
     def _unshowable(self, what: str, error: ValueError) -> None:
         """A message that decoded but that Foxglove cannot carry (a stamp past 2106)."""
-        self.node.reject("unshowable", f"{what} not shown: {error}")
+        self.tally.reject("unshowable", f"{what} not shown: {error}")
 
-    def on_scan(self, scan: LaserScan, _sample: zenoh.Sample) -> None:
+    def on_scan(self, payload: bytes) -> None:
+        scan = self.tally.decode(self.tally.keys.scan(), LaserScan.decode, payload)
+        if scan is None:
+            return
         try:
             shown = convert.laser_scan(scan)
         except ValueError as exc:
@@ -101,14 +111,24 @@ class Viewer:
             return
         self.channels.scan.log(shown, log_time=scan.header.stamp_ns)
 
-    def on_twist(self, twist: Twist, _sample: zenoh.Sample) -> None:
+    def on_twist(self, payload: bytes) -> None:
+        twist = self.tally.decode(self.tally.keys.cmd_vel(), Twist.decode, payload)
+        if twist is None:
+            return
         self.channels.cmd_vel.log(convert.twist_json(twist), log_time=twist.header.stamp_ns)
 
-    def on_status(self, status: ControllerStatus, _sample: zenoh.Sample) -> None:
+    def on_status(self, payload: bytes) -> None:
+        key = self.tally.keys.controller_status()
+        status = self.tally.decode(key, ControllerStatus.decode, payload)
+        if status is None:
+            return
         self.locked_track = status.track_id
         self.channels.controller.log(convert.status_json(status), log_time=status.header.stamp_ns)
 
-    def on_truth(self, truth: GroundTruth, _sample: zenoh.Sample) -> None:
+    def on_truth(self, payload: bytes) -> None:
+        truth = self.tally.decode(self.tally.keys.sim_truth(), GroundTruth.decode, payload)
+        if truth is None:
+            return
         at = truth.header.stamp_ns
         try:
             pose = scene.transforms(truth)
@@ -129,7 +149,7 @@ class Viewer:
         while not stop.wait(period):
             item = self.pairing.take(time.monotonic())
             if self.pairing.dropped > dropped:
-                self.node.counters.add("images_dropped", self.pairing.dropped - dropped)
+                self.tally.counters.add("images_dropped", self.pairing.dropped - dropped)
                 dropped = self.pairing.dropped
             if item is None or not self.channels.watched():
                 continue
@@ -146,24 +166,29 @@ class Viewer:
                 w, h = convert.scaled_size(frame.width, frame.height, v.max_image_width)
                 marks = convert.image_annotations(dets, w, h, self.locked_track)
         except ImageError as exc:
-            self.node.bad_input("frame", exc)
+            self.tally.bad_input("frame", exc)
             return
         except ValueError as exc:
             self._unshowable("image", exc)
             return
         at = frame.header.stamp_ns
         self.channels.image.log(image, log_time=at)
-        self.node.counters.add("images_out")
+        self.tally.counters.add("images_out")
         if marks is not None:
             self.channels.annotations.log(marks, log_time=at)
 
-    def metrics_loop(self, stop: threading.Event) -> None:
-        """Ask the metrics service ``metrics_rate_hz`` times a second; publish its figures."""
-        period = 1.0 / self.settings.metrics_rate_hz
-        while not stop.wait(period):
-            answer = query_metrics(self.node.session, self.node.keys, min(period, 1.0))
-            if answer is not None:
-                self.channels.metrics.log(convert.metrics_json(answer), log_time=answer["stamp_ns"])
+    def on_metrics(self, answer: MetricsAnswer) -> None:
+        """The metrics service's answer to the metrics loop's question, shown."""
+        self.channels.metrics.log(convert.metrics_json(answer), log_time=answer["stamp_ns"])
+
+
+def metrics_loop(node: Node, viewer: Viewer, stop: threading.Event) -> None:
+    """Ask the metrics service ``metrics_rate_hz`` times a second; show its figures."""
+    period = 1.0 / viewer.settings.metrics_rate_hz
+    while not stop.wait(period):
+        answer = query_metrics(node.session, node.keys, min(period, 1.0))
+        if answer is not None:
+            viewer.on_metrics(answer)
 
 
 def run(config: Config, stop: threading.Event) -> int:
@@ -175,17 +200,19 @@ def run(config: Config, stop: threading.Event) -> int:
         front = start_front(config, server.port)
         viewer = Viewer(node, channels, config)
         keys, camera = node.keys, config.stack.camera
-        subs: list[Any] = [
-            node.subscribe(keys.frame(camera), Frame.decode, viewer.on_frame),
-            node.subscribe(keys.detections(camera), Detections.decode, viewer.on_detections),
-            node.subscribe(keys.scan(), LaserScan.decode, viewer.on_scan),
-            node.subscribe(keys.cmd_vel(), Twist.decode, viewer.on_twist),
-            node.subscribe(keys.controller_status(), ControllerStatus.decode, viewer.on_status),
-            node.subscribe(keys.sim_truth(), GroundTruth.decode, viewer.on_truth),
+        subs = [
+            node.subscribe(keys.frame(camera), viewer.on_frame),
+            node.subscribe(keys.detections(camera), viewer.on_detections),
+            node.subscribe(keys.scan(), viewer.on_scan),
+            node.subscribe(keys.cmd_vel(), viewer.on_twist),
+            node.subscribe(keys.controller_status(), viewer.on_status),
+            node.subscribe(keys.sim_truth(), viewer.on_truth),
         ]
         threads = [
             threading.Thread(target=viewer.encode_loop, args=(stop,), name="encode", daemon=True),
-            threading.Thread(target=viewer.metrics_loop, args=(stop,), name="metrics", daemon=True),
+            threading.Thread(
+                target=metrics_loop, args=(node, viewer, stop), name="metrics", daemon=True
+            ),
         ]
         for t in threads:
             t.start()

@@ -1,5 +1,6 @@
 """What the property-based (hypothesis) fuzz tests share: payload strategies, a valid sample of
-every message type to mutate, and a bus-less way to drive a service's subscription handlers.
+every message type to mutate, and a loop that feeds a service's handler payloads and checks its
+``bad_input`` count.
 
 Payloads: random bytes; valid msgpack of the wrong shape; the right envelope around a random
 body; valid messages with a value swapped for a wrong type, a huge int, a NaN or inf float, huge
@@ -12,9 +13,7 @@ examples and ``STACK_FUZZ_SCALE=10`` ten times as many.
 from __future__ import annotations
 
 import os
-import threading
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from dataclasses import replace
 from datetime import timedelta
 from typing import Any
@@ -22,12 +21,12 @@ from typing import Any
 import cv2
 import msgpack
 import numpy as np
-import zenoh
-from hypothesis import HealthCheck, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from common.boxes import Boxes
 from common.codec import Message
+from common.errors import DecodeError
 from common.messages import (
     ControllerStatus,
     Detections,
@@ -41,6 +40,7 @@ from common.messages import (
     Twist,
     now_ns,
 )
+from common.node import Tally
 from services.ros2.convert import LASER_SCAN, TWIST, TWIST_STAMPED, scan_from_ros, twist_from_ros
 from services.ros2.images import (
     COMPRESSED_IMAGE,
@@ -291,89 +291,52 @@ def edge_stamped(cls: type[Message]) -> list[bytes]:
     ]
 
 
-# ---------------------------------------------------------------------------- a bus in a box
+# ---------------------------------------------------------------------------- feeding a handler
+
+HANDLER_EXAMPLES = 50  # per handler: about 750 payloads in all, in a few seconds
 
 
-class FakePayload:
-    def __init__(self, data: bytes) -> None:
-        self._data = data
-
-    def to_bytes(self) -> bytes:
-        return self._data
-
-
-class FakeSample:
-    """What a subscriber's callback reads of a zenoh.Sample."""
-
-    source_info = None
-
-    def __init__(self, key: str, data: bytes) -> None:
-        self.key_expr = key
-        self.payload = FakePayload(data)
-
-
-class _Liveliness:
-    def __init__(self, real: Any, tokens: list[str]) -> None:
-        self._real, self._tokens = real, tokens
-
-    def declare_token(self, key: str) -> Any:
-        self._tokens.append(str(key))
-        return self._real.declare_token(key)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._real, name)
-
-
-class RecordingSession:
-    """A real Zenoh session that reaches nobody (no endpoints, no scouting), which records
-    every subscriber's callback, so that a test hands it payloads itself, synchronously, and
-    every liveliness token, so that a test knows when a service is ready."""
-
-    def __init__(self) -> None:
-        conf = zenoh.Config()
-        for path, value in (
-            ("listen/endpoints", "[]"),
-            ("connect/endpoints", "[]"),
-            ("scouting/multicast/enabled", "false"),
-        ):
-            conf.insert_json5(path, value)
-        self.real = zenoh.open(conf)
-        self.handlers: list[tuple[str, Callable[[Any], None]]] = []
-        self.tokens: list[str] = []
-        self._lock = threading.Lock()
-
-    def declare_subscriber(self, key: str, handler: Callable[[Any], None], **kw: Any) -> Any:
-        with self._lock:
-            self.handlers.append((str(key), handler))
-        return self.real.declare_subscriber(key, lambda _s: None, **kw)
-
-    def liveliness(self) -> _Liveliness:
-        return _Liveliness(self.real.liveliness(), self.tokens)
-
-    def handlers_of(self, part: str) -> list[tuple[str, Callable[[Any], None]]]:
-        """The (key, callback) of every subscription whose key contains ``part``."""
-        with self._lock:
-            return [(k, h) for k, h in self.handlers if part in k]
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.real, name)
-
-
-@contextmanager
-def sessions(monkeypatch: Any, *modules: str) -> Iterator[list[RecordingSession]]:
-    """Every session that ``open_session`` or ``open_ros_session`` opens in ``modules`` (the
-    names they were imported under) is a RecordingSession; yields them, in order."""
-    opened: list[RecordingSession] = []
-
-    def open_recording(*_args: Any, **_kw: Any) -> RecordingSession:
-        session = RecordingSession()
-        opened.append(session)
-        return session
-
-    for module in modules:
-        monkeypatch.setattr(module, open_recording)
+def rejected_by(decode: Callable[[bytes], Any], payload: bytes) -> bool:
     try:
-        yield opened
-    finally:
-        for session in opened:
-            session.real.close()
+        decode(payload)
+    except DecodeError:
+        return True
+    return False
+
+
+def fuzz_handler(
+    tally: Tally,
+    feed: Callable[[bytes], None],
+    key: str,
+    decode: Callable[[bytes], Any],
+    strategy: st.SearchStrategy[bytes],
+    examples: int = HANDLER_EXAMPLES,
+) -> int:
+    """Feed a handler (``feed``: it, called with one payload) generated payloads: ``bad_input``
+    grows by one exactly for each that ``decode`` rejects; an exception escaping the handler
+    fails the test. ``key`` names the handler's key in failures. Returns how many it was fed."""
+    counts = {"rejected": 0, "taken": 0}
+
+    @fuzz(examples)
+    @given(payload=strategy)
+    def check(payload: bytes) -> None:
+        before = tally.counters.get("bad_input")
+        feed(payload)
+        rejected = rejected_by(decode, payload)
+        assert tally.counters.get("bad_input") - before == int(rejected), key
+        counts["rejected" if rejected else "taken"] += 1
+
+    check()
+    assert counts["rejected"] > 0, f"{key}: no payload was rejected: {counts}"
+    return counts["rejected"] + counts["taken"]
+
+
+def message_handler(
+    tally: Tally,
+    feed: Callable[[bytes], None],
+    key: str,
+    cls: type[Message],
+    examples: int = HANDLER_EXAMPLES,
+) -> int:
+    """Fuzz the handler of ``cls`` messages on ``key`` with ``cls``'s payloads."""
+    return fuzz_handler(tally, feed, key, cls.decode, message_payloads(cls, fresh=True), examples)

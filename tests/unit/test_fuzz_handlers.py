@@ -1,29 +1,28 @@
 """Property-based fuzzing of every subscribed key's handler (issue 13, item 7).
 
-Each service runs for real (its ``run``, in a thread) on a Zenoh session that reaches nobody;
-the test hands each of its subscription callbacks generated payloads itself, one at a time.
-Nothing may raise, and the service's ``bad_input`` counter must grow by exactly one for each
-payload the key's decoder rejects, and stay put for every other.
+Each service's handlers are an object (``services/<name>/service.py``) built here with plain
+collaborators: a ``Tally`` for the counters and a list for what would be published. The test
+hands each handler generated payloads itself, one at a time, as Zenoh's callback would. Nothing
+may raise, and the ``bad_input`` counter must grow by exactly one for each payload the key's
+decoder rejects, and stay put for every other.
 """
 
 from __future__ import annotations
 
-import threading
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-import pytest
 
 from common.messages import Detections, EStop, Frame, LaserScan, ServiceCounters, Twist
-from common.node import Node
+from common.node import Tally
 from common.settings import Config, ControllerSettings, Ros2Settings, SimSettings
-from services.controller import service as controller
-from services.detector import service as detector
-from services.detector.types import DetectionResult
-from services.metrics import service as metrics
-from services.ros2 import service as ros2
+from services.controller.service import ControllerHandlers
+from services.detector.service import DetectorHandlers
+from services.metrics.service import MetricsHandlers
+from services.ros2 import data_key
 from services.ros2.convert import (
     LASER_SCAN,
     TWIST,
@@ -33,103 +32,98 @@ from services.ros2.convert import (
     twist_to_ros,
 )
 from services.ros2.images import IMAGE, frame_to_image
-from services.sim.robot_io import RosRobot, StackRobot
-from tests.unit.fuzz import RecordingSession, payloads, samples, sessions, to_stack
-from tests.unit.fuzz_serving import (
-    NODE_SESSION,
-    ROS_SESSION,
-    fuzz_handler,
-    message_handler,
-    serving,
-)
+from services.ros2.service import CommandsToRos, DebugImages, DetectionsToRos, RosInbound
+from services.sim.service import SimHandlers
+from tests.unit.fuzz import fuzz_handler, message_handler, payloads, samples, to_stack
 
 
-def test_the_controllers_handlers(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+def test_the_controllers_handlers(tmp_path: Path) -> None:
     config = Config(controller=ControllerSettings(estop_file=str(tmp_path / "estop.json")))
-    with serving(monkeypatch, controller, config) as (node, (session,)):
-        message_handler(node, session, "/detections", Detections)
-        message_handler(node, session, "/scan", LaserScan)
-        message_handler(node, session, "/estop", EStop)
+    tally = Tally("controller", config)
+    handlers = ControllerHandlers(config, tally)
+    keys = tally.keys
+    message_handler(tally, handlers.on_detections, keys.detections(config.stack.camera), Detections)
+    message_handler(tally, handlers.on_scan, keys.scan(), LaserScan)
+    message_handler(tally, handlers.on_estop, keys.estop(), EStop)
     # Garbage on the e-stop key is a press: fail safe. The latch is on disk.
     assert '"engaged": true' in (tmp_path / "estop.json").read_text()
 
 
-def test_the_metrics_services_handlers(monkeypatch: pytest.MonkeyPatch) -> None:
-    with serving(monkeypatch, metrics, Config()) as (node, (session,)):
-        message_handler(node, session, "/detections", Detections)
-        message_handler(node, session, "/cmd_vel", Twist)
-        message_handler(node, session, "/counters/", ServiceCounters)
+def test_the_metrics_services_handlers() -> None:
+    config = Config()
+    tally = Tally("metrics", config)
+    handlers = MetricsHandlers(config, tally)
+    keys = tally.keys
+    detections, counters = keys.all_detections(), keys.all_counters()
+    message_handler(tally, partial(handlers.on_detections, detections), detections, Detections)
+    message_handler(tally, handlers.on_cmd_vel, keys.cmd_vel(), Twist)
+    message_handler(tally, partial(handlers.on_counters, counters), counters, ServiceCounters)
 
 
-class _IdleMailbox:
-    """The detector's mailbox, never handing a frame to the loop: the handler alone is fuzzed
-    here (what the loop does with a frame's pixels: tests/unit/common/test_fuzz_decoders.py)."""
-
-    def put(self, _frame: Frame) -> bool:
-        return False
-
-    def take(self, timeout_s: float) -> None:
-        threading.Event().wait(timeout_s)
-
-
-def test_the_detectors_handler(monkeypatch: pytest.MonkeyPatch) -> None:
-    stub = SimpleNamespace(
-        backend=SimpleNamespace(name="stub", device="cpu", precision="fp32"),
-        model_path=Path("stub.onnx"),
-        names=("person",),
-        info=SimpleNamespace(input_height=640, input_width=640),
-        detect=lambda image: DetectionResult(
-            names=("person",), image_width=image.shape[1], image_height=image.shape[0]
-        ),
-        close=lambda: None,
-    )
-    monkeypatch.setattr(detector, "open_detector", lambda _s: (stub, ""))
-    monkeypatch.setattr(detector, "Mailbox", _IdleMailbox)
-    with serving(monkeypatch, detector, Config()) as (node, (session,)):
-        before = node.counters.get("frames_in")
-        fed = message_handler(node, session, "/frame", Frame)
-        assert node.counters.get("frames_in") - before == fed
+def test_the_detectors_handler() -> None:
+    # The handler alone is fuzzed here: nothing takes frames from its mailbox (what the loop
+    # does with a frame's pixels: tests/unit/common/test_fuzz_decoders.py).
+    config = Config()
+    tally = Tally("detector", config)
+    handlers = DetectorHandlers(config, tally)
+    before = tally.counters.get("frames_in")
+    fed = message_handler(tally, handlers.on_frame, handlers.frame_key, Frame)
+    assert tally.counters.get("frames_in") - before == fed
 
 
 def _ros_handler(
-    node: Node, graph: RecordingSession, part: str, ros_type: str, valid: list[Any]
+    tally: Tally,
+    on_payload: Callable[[str, memoryview], None],
+    topic: str,
+    ros_type: str,
+    valid: list[Any],
 ) -> None:
+    s = Ros2Settings()
+
     def decode(payload: bytes) -> Any:
-        return to_stack(cdr_decode(Ros2Settings().distro, ros_type, payload))
+        return to_stack(cdr_decode(s.distro, ros_type, payload))
 
-    cdr = [cdr_encode(Ros2Settings().distro, ros_type, m) for m in valid]
-    [(key, handler)] = graph.handlers_of(part)
+    key = data_key(s.domain_id, topic, ros_type, s.distro, s.namespace)
+    cdr = [cdr_encode(s.distro, ros_type, m) for m in valid]
     strategy = payloads(ros_type, cdr, msgpack_shapes=False)
-    fuzz_handler(node, handler, key, decode, strategy)
+    fuzz_handler(tally, lambda payload: on_payload(key, memoryview(payload)), key, decode, strategy)
 
 
-def test_the_ros2_bridges_handlers(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_ros2_bridges_handlers() -> None:
     config = Config(ros2=Ros2Settings(debug_image_out=True))
-    distro = config.ros2.distro
+    s = config.ros2
+    tally = Tally("ros2", config)
+    keys, camera = tally.keys, config.stack.camera
+    sent: list[bytes] = []  # what would be published, on the stack or to the robot
+    debug = DebugImages(config, tally, sent.append)
+    dets_out = DetectionsToRos(config, tally, sent.append)
+    cmds_out = CommandsToRos(config, tally, sent.append)
     fresh = samples(stamp_ns=None)
-    with serving(monkeypatch, ros2, config, ROS_SESSION) as (node, (stack, graph)):
-        message_handler(node, stack, "/detections", Detections)  # the ROS and debug images
-        message_handler(node, stack, "/cmd_vel", Twist)
-        message_handler(node, stack, "/frame", Frame)  # the debug images' frames
-        images = [frame_to_image(distro, f) for f in fresh[Frame] if f.encoding != "jpeg"]
-        _ros_handler(node, graph, "::Image_", IMAGE, images)
-        scans = [scan_to_ros(distro, s) for s in fresh[LaserScan]]
-        _ros_handler(node, graph, "::LaserScan_", LASER_SCAN, scans)
+    # The ROS and debug images' detections, then the commands, then the debug images' frames.
+    message_handler(tally, debug.on_detections, keys.detections(camera), Detections)
+    message_handler(tally, dets_out.on_detections, keys.detections(camera), Detections)
+    message_handler(tally, cmds_out.on_cmd_vel, keys.cmd_vel(), Twist)
+    message_handler(tally, debug.on_frame, keys.frame(camera), Frame)
+    images = [frame_to_image(s.distro, f) for f in fresh[Frame] if f.encoding != "jpeg"]
+    image_in = RosInbound(config, tally, IMAGE, s.image_topic, sent.append)
+    _ros_handler(tally, image_in.on_payload, s.image_topic, IMAGE, images)
+    scans = [scan_to_ros(s.distro, scan) for scan in fresh[LaserScan]]
+    scan_in = RosInbound(config, tally, LASER_SCAN, s.scan_topic, sent.append)
+    _ros_handler(tally, scan_in.on_payload, s.scan_topic, LASER_SCAN, scans)
 
 
-def test_the_simulated_robots_command_handlers(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_simulated_robots_command_handlers() -> None:
     config = Config(sim=SimSettings(ros2_robot=True))
+    tally = Tally("sim", config)
     commands: list[Twist] = []
 
     def on_command(twist: Twist, _source: str) -> None:
         assert all(np.isfinite((*twist.linear, *twist.angular)))
         commands.append(twist)
 
-    with sessions(monkeypatch, NODE_SESSION, ROS_SESSION) as opened, Node("sim", config) as node:
-        stack_robot = StackRobot(config, node, on_command)
-        with RosRobot(config, node, on_command):
-            message_handler(node, opened[0], "/cmd_vel", Twist)
-            twists = [twist_to_ros(config.ros2.distro, t) for t in samples(None)[Twist]]
-            _ros_handler(node, opened[1], "::Twist_", TWIST, twists)
-        stack_robot.close()
+    handlers = SimHandlers(config, tally, on_command)
+    cmd_vel = tally.keys.cmd_vel()
+    message_handler(tally, partial(handlers.on_cmd_vel, source="fuzz"), cmd_vel, Twist)
+    twists = [twist_to_ros(config.ros2.distro, t) for t in samples(None)[Twist]]
+    _ros_handler(tally, handlers.on_ros_cmd_vel, config.ros2.cmd_vel_topic, TWIST, twists)
     assert commands  # valid commands got through to the robot

@@ -1,24 +1,25 @@
 """Property-based fuzzing of the viewer's and the recorder's subscription handlers, in the
-style of test_fuzz_handlers.py: the service runs for real (in a thread, on a Zenoh session
-that reaches nobody) and the test hands each callback generated payloads itself.
+style of test_fuzz_handlers.py: the service's handler object (``Viewer``, ``Recorder``) is built
+with plain collaborators and the test hands each handler generated payloads itself.
 
-The viewer decodes in Zenoh's callback (``Node.subscribe``): ``bad_input`` grows by exactly
-one for each payload the decoder rejects, and what it takes becomes Foxglove messages without
-raising. The recorder's callbacks only queue the raw bytes; decoding and the JSON and CDR
-conversion happen on its writer thread, so there a payload is "rejected" when it cannot be
-converted: the writer must survive every payload, count each once (``written`` or
-``bad_input``), and leave a file the ``mcap`` reader reads from end to end.
+The viewer decodes in Zenoh's callback: ``bad_input`` grows by exactly one for each payload the
+decoder rejects, and what it takes becomes Foxglove messages without raising. The recorder's
+callbacks only queue the raw bytes; decoding and the JSON and CDR conversion happen on its
+writer thread, so there a payload is "rejected" when it cannot be converted: the writer must
+survive every payload, count each once (``written`` or ``bad_input``), and leave a file the
+``mcap`` reader reads from end to end.
 """
 
 from __future__ import annotations
 
 import json
-import socket
 import threading
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import pytest
+import foxglove
 from hypothesis import given
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -26,22 +27,21 @@ from mcap_ros2.decoder import DecoderFactory
 from common.codec import Message
 from common.errors import DecodeError
 from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
-from common.node import Node
+from common.node import Tally
 from common.settings import Config, ViewerSettings
 from services.recorder import service as recorder
 from services.recorder.channels import JSON, Translator
 from services.viewer import service as viewer
+from services.viewer.channels import Channels
 from services.viewer.convert import MAX_STAMP_S
 from tests.unit.fuzz import (
     EDGE_STAMPS_NS,
-    FakeSample,
-    RecordingSession,
     edge_stamped,
     fuzz,
+    fuzz_handler,
     message_payloads,
     samples,
 )
-from tests.unit.fuzz_serving import fuzz_handler, serving, wait_until
 
 EXAMPLES = 30  # per subscription: the viewer's 6 and the recorder's 8
 WRITER_S = 10.0  # the most one payload may wait for the recorder's writer thread
@@ -49,52 +49,49 @@ WRITER_S = 10.0  # the most one payload may wait for the recorder's writer threa
 STAMPED_IN_CALLBACK = (LaserScan, GroundTruth)
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
+def wait_until(condition: Callable[[], Any], what: str, within_s: float) -> None:
+    deadline, pause = time.monotonic() + within_s, threading.Event()
+    while not condition():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        pause.wait(0.002)
 
 
 def past_foxglove(stamp_ns: int) -> bool:
     return stamp_ns // 1_000_000_000 > MAX_STAMP_S
 
 
-def test_the_viewers_handlers_and_encoder(monkeypatch: pytest.MonkeyPatch) -> None:
-    made: list[viewer.Viewer] = []
-
-    class Recorded(viewer.Viewer):
-        def __init__(self, *args: Any, **kw: Any) -> None:
-            super().__init__(*args, **kw)
-            made.append(self)
-
-    monkeypatch.setattr(viewer, "Viewer", Recorded)
-    config = Config(viewer=ViewerSettings(port=free_port(), max_image_width=64))
-    with serving(monkeypatch, viewer, config) as (node, (session,)):
-        before = node.counters.get("frames_in")
-        fed = _viewer_handler(node, session, "/frame", Frame)
-        rejected = node.counters.get("bad_input.frame")
-        assert node.counters.get("frames_in") - before == fed - rejected
-        for part, cls in [
-            ("/detections", Detections),
-            ("/scan", LaserScan),
-            ("/cmd_vel", Twist),
-            ("/controller/status", ControllerStatus),
-            ("/sim/truth", GroundTruth),
-        ]:
-            _viewer_handler(node, session, part, cls)
-        _fuzz_the_encoder(made[0])
+def test_the_viewers_handlers_and_encoder() -> None:
+    config = Config(viewer=ViewerSettings(max_image_width=64))
+    tally = Tally("viewer", config)
+    live = viewer.Viewer(tally, Channels(foxglove.Context()), config)
+    keys, camera = tally.keys, config.stack.camera
+    before = tally.counters.get("frames_in")
+    fed = _viewer_handler(tally, live.on_frame, keys.frame(camera), Frame)
+    rejected = tally.counters.get("bad_input.frame")
+    assert tally.counters.get("frames_in") - before == fed - rejected
+    for on_payload, key, cls in [
+        (live.on_detections, keys.detections(camera), Detections),
+        (live.on_scan, keys.scan(), LaserScan),
+        (live.on_twist, keys.cmd_vel(), Twist),
+        (live.on_status, keys.controller_status(), ControllerStatus),
+        (live.on_truth, keys.sim_truth(), GroundTruth),
+    ]:
+        _viewer_handler(tally, on_payload, key, cls)
+    _fuzz_the_encoder(live)
 
 
-def _viewer_handler(node: Node, session: RecordingSession, part: str, cls: type[Message]) -> int:
-    """Fuzz the one subscription on ``part``, then feed it every edge stamp: valid, so never
-    bad input; past Foxglove's timestamps, counted as unshowable where the callback converts."""
-    [(key, handler)] = session.handlers_of(part)
-    fed = fuzz_handler(node, handler, key, cls.decode, message_payloads(cls, fresh=True), EXAMPLES)
-    c = node.counters
+def _viewer_handler(
+    tally: Tally, on_payload: Callable[[bytes], None], key: str, cls: type[Message]
+) -> int:
+    """Fuzz the handler of ``key``, then feed it every edge stamp: valid, so never bad input;
+    past Foxglove's timestamps, counted as unshowable where the callback converts."""
+    fed = fuzz_handler(
+        tally, on_payload, key, cls.decode, message_payloads(cls, fresh=True), EXAMPLES
+    )
+    c = tally.counters
     before = (c.get("bad_input"), c.get("unshowable"))
     for payload in edge_stamped(cls):
-        handler(FakeSample(key, payload))
+        on_payload(payload)
     past = sum(past_foxglove(at) for at in EDGE_STAMPS_NS) if cls in STAMPED_IN_CALLBACK else 0
     assert (c.get("bad_input"), c.get("unshowable")) == (before[0], before[1] + past), key
     return fed + len(EDGE_STAMPS_NS)
@@ -112,7 +109,7 @@ OUTCOMES = ("images_out", "bad_input", "unshowable")
 
 def _sent(live: viewer.Viewer, frame: Frame, dets: Detections | None) -> str:
     """``live.send``: which one of OUTCOMES it counted."""
-    c = live.node.counters
+    c = live.tally.counters
     before = {name: c.get(name) for name in OUTCOMES}
     live.send(frame, dets)
     grew = [name for name in OUTCOMES if c.get(name) != before[name]]
@@ -160,14 +157,14 @@ class _Ledger:
 
 
 def _recorded(
-    node: Node, rec: recorder.Recorder, handler: Any, key: str, cls: type[Message],
-    payload: bytes, ledger: _Ledger,
+    tally: Tally, rec: recorder.Recorder, key: str, cls: type[Message], payload: bytes,
+    ledger: _Ledger,
 ) -> None:  # fmt: skip
     """Feed one payload and wait for the writer to take it: it must still run, and have
     counted the payload once, as ``written`` or, if it cannot convert it, as ``bad_input``."""
-    c = node.counters
+    c = tally.counters
     before = {name: c.get(name) for name in ("received", "written", "bad_input")}
-    handler(FakeSample(key, payload))
+    rec.on_sample(key, payload, cls.decode)
     assert c.get("received") == before["received"] + 1
     wait_until(
         lambda: (
@@ -179,7 +176,7 @@ def _recorded(
     )
     assert rec.failed is None, f"the writer thread died on {payload[:64]!r}: {rec.failed!r}"
     try:  # what the writer should make of it
-        entries = Translator(node.config.ros2).entries(key, cls.decode(payload))
+        entries = Translator(tally.config.ros2).entries(key, cls.decode(payload))
     except (DecodeError, ValueError):  # garbage, or a stamp no ROS Time holds (2038)
         assert c.get("bad_input") - before["bad_input"] == 1, key
         assert c.get("written") == before["written"], key
@@ -192,19 +189,18 @@ def _recorded(
 
 
 def _fuzz_recorded(
-    node: Node, rec: recorder.Recorder, key: str, cls: type[Message], ledger: _Ledger
+    tally: Tally, rec: recorder.Recorder, key: str, cls: type[Message], ledger: _Ledger
 ) -> None:
-    handler = next(h for k, h in node.session.handlers if k == key)
     concrete = key.replace("*", "fuzz")  # a sample arrives on a key, never on a wildcard
 
     @fuzz(EXAMPLES)
     @given(payload=message_payloads(cls, fresh=True))
     def check(payload: bytes) -> None:
-        _recorded(node, rec, handler, concrete, cls, payload, ledger)
+        _recorded(tally, rec, concrete, cls, payload, ledger)
 
     check()
     for payload in edge_stamped(cls):
-        _recorded(node, rec, handler, concrete, cls, payload, ledger)
+        _recorded(tally, rec, concrete, cls, payload, ledger)
 
 
 def _read_back(path: Path) -> int:
@@ -226,26 +222,16 @@ def _read_back(path: Path) -> int:
     return count
 
 
-def test_the_recorders_handlers_and_writer(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+def test_the_recorders_handlers_and_writer(tmp_path: Path) -> None:
     path = tmp_path / "fuzz.mcap"
-    made: list[recorder.Recorder] = []
-
-    class Recorded(recorder.Recorder):
-        def __init__(self, *args: Any, **kw: Any) -> None:
-            super().__init__(*args, **kw)
-            made.append(self)
-
-    def run(config: Config, stop: threading.Event) -> int:
-        return recorder.record(config, path, stop, lambda _line: None)
-
-    monkeypatch.setattr(recorder, "Recorder", Recorded)
     config, ledger = Config(), _Ledger()
-    with serving(monkeypatch, recorder, config, run=run) as (node, _sessions):
-        keys = recorder.subscriptions(node.keys, config.stack.camera)
+    tally = Tally(recorder.SERVICE, config)
+    with recorder.Recorder(tally, path) as rec:
+        keys = recorder.subscriptions(tally.keys, config.stack.camera)
         for key, cls in keys.items():
-            _fuzz_recorded(node, made[0], key, cls, ledger)
-        c = node.counters
+            _fuzz_recorded(tally, rec, key, cls, ledger)
+        c = tally.counters
         assert c.get("dropped") == 0
         assert (c.get("written"), c.get("bad_input")) == (ledger.written, ledger.rejected)
     assert ledger.rejected > 0 and ledger.written > 0, vars(ledger)
-    assert _read_back(path) == ledger.entries  # closed by the service: the file is complete
+    assert _read_back(path) == ledger.entries  # closed by the recorder: the file is complete

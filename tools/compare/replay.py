@@ -1,5 +1,5 @@
 """``compare`` with one recording: play it through the running stack while recording what the
-stack makes of it, then compare the two (compare.py). Bus I/O: play.py and service.py.
+stack makes of it, then compare the two (compare.py). Bus I/O: services/recorder/service.py.
 """
 
 from __future__ import annotations
@@ -11,8 +11,7 @@ from pathlib import Path
 from common.lifecycle import Progress
 from common.node import Node
 from common.settings import Config
-from services.recorder.play import play
-from services.recorder.service import SERVICE, Recorder
+from services.recorder.service import SERVICE, Recorder, play
 
 SETTLE_S = 1.5  # the stack's last answers: recording ends once nothing new came for this long
 TAIL_MAX_S = 15.0
@@ -24,7 +23,7 @@ def replay_and_record(
 ) -> Path:  # fmt: skip
     """Play ``source`` onto the stack and record everything into ``target``."""
     with Node(SERVICE, config) as node:
-        recorder = Recorder(node, target)
+        recorder = Recorder(node, target).listen(node)
         try:
             play(config, source, stop, progress, rate=rate)
             progress("waiting for the stack's last detections and commands")

@@ -1,0 +1,86 @@
+"""Who touches the bus inside services/ (docs/architecture.md, "Handlers and the bus"), read with
+``ast``: in each service package only ``service.py`` does, and besides it only
+``services/ros2/graph.py``, the session a node holds in a robot's ROS 2 graph.
+
+A module touches the bus when it imports zenoh or the stack's session modules (at module level
+or inside a function), imports the ROS 2 graph, or reaches for a session: an attribute named
+``session`` or ``declare_*``, or a call ``.liveliness()``.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Iterator
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+#: What opens a session, holds one or asks one (common/bus.py, node.py, queries.py, reach.py).
+BUS_MODULES = frozenset(
+    {"zenoh", "common.bus", "common.node", "common.queries", "common.reach", "services.ros2.graph"}
+)
+#: The ROS 2 graph's I/O, which services.ros2 exports by name (lazily).
+GRAPH_NAMES = frozenset({"RosGraph", "RosPublisher", "graph"})
+
+#: Beside every services/<name>/service.py.
+ALLOWED = {
+    "services/ros2/graph.py": "the ROS 2 graph's own session, for the bridge and the simulator",
+    "services/ros2/__init__.py": "re-exports RosGraph (imported on first use), touches nothing",
+}
+
+
+def _touches(tree: ast.Module) -> Iterator[str]:
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.split(".")[0] == "zenoh" or alias.name in BUS_MODULES:
+                    yield f"line {node.lineno}: import {alias.name}"
+        elif isinstance(node, ast.ImportFrom) and node.module is not None:
+            names = {alias.name for alias in node.names}
+            if (
+                node.module.split(".")[0] == "zenoh"
+                or node.module in BUS_MODULES
+                or (node.module == "services.ros2" and names & GRAPH_NAMES)
+                or (node.module == "common" and {"bus", "node", "queries", "reach"} & names)
+            ):
+                yield f"line {node.lineno}: from {node.module} import {', '.join(sorted(names))}"
+        elif isinstance(node, ast.Attribute) and (
+            node.attr == "session" or node.attr.startswith("declare_")
+        ):
+            yield f"line {node.lineno}: .{node.attr}"
+        elif (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr == "liveliness"
+            and not node.args
+        ):
+            yield f"line {node.lineno}: .liveliness()"
+
+
+def bus_modules() -> dict[str, list[str]]:
+    """Every module under services/ that touches the bus, with where."""
+    found = {}
+    for path in sorted((ROOT / "services").rglob("*.py")):
+        where = list(_touches(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))))
+        if where:
+            found[path.relative_to(ROOT).as_posix()] = where
+    return found
+
+
+def test_only_service_modules_and_the_ros2_graph_touch_the_bus() -> None:
+    offenders = {
+        module: where
+        for module, where in bus_modules().items()
+        if Path(module).name != "service.py" and module not in ALLOWED
+    }
+    assert not offenders, (
+        "only services/<name>/service.py (and the modules in ALLOWED) may touch the bus; move "
+        f"the I/O there and hand the logic bytes: {offenders}"
+    )
+
+
+def test_the_rule_sees_the_bus() -> None:
+    # The check is not blind: the modules that do touch the bus are found.
+    found = bus_modules()
+    assert {"services/ros2/graph.py", "services/detector/service.py"} <= found.keys()
+    assert set(ALLOWED) <= found.keys(), "an allowed module no longer touches the bus: drop it"
