@@ -8,10 +8,10 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from dataclasses import dataclass, field
 from typing import IO
 
+from common.clock import mono_s
 from common.lifecycle import PERMANENT_FAILURES, STOP_SIGNALS, SUPERVISOR_PID_ENV
 from common.settings import SupervisorSettings
 
@@ -87,7 +87,7 @@ class ServiceProcess:
             )
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-        self.started_at = time.monotonic()
+        self.started_at = mono_s()
         self.state = "starting"
         assert self.proc.stderr is not None
         self._forwarder = threading.Thread(
@@ -166,7 +166,7 @@ class ServiceProcess:
             self.state = "exited"
             return
         try:
-            self.last_exit = self.proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+            self.last_exit = self.proc.wait(timeout=max(0.0, deadline - mono_s()))
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.last_exit = self.proc.wait()

@@ -20,13 +20,13 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import IO
 
 import zenoh
 
+from common.clock import mono_s
 from common.config_file import ENV_PREFIX, to_toml
 from common.errors import StackError
 from common.keys import Keys
@@ -89,12 +89,12 @@ def wait_ready(
     ``log_path`` when given), and KeyboardInterrupt when ``stop`` is set.
     """
     see = f"; see {log_path}" if log_path is not None else ""
-    deadline = time.monotonic() + timeout_s
+    deadline = mono_s() + timeout_s
     pause = stop if stop is not None else threading.Event()  # never set: wait() is the poll
     while not services <= ready_services(session, keys):
         if proc.poll() is not None:
             raise StackError(f"the stack exited ({proc.returncode}) before it was ready{see}")
-        if time.monotonic() > deadline:
+        if mono_s() > deadline:
             raise StackError(f"the stack was not ready within {timeout_s:.0f} s{see}")
         if pause.wait(poll_s):
             raise KeyboardInterrupt

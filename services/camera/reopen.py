@@ -15,11 +15,11 @@ start-up (one line, exit 2), since only a device that worked is worth waiting fo
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
+from common.clock import mono_s
 from common.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -68,7 +68,7 @@ class ReopeningSource:
         period_s: float,
         stop: StopEvent,
         hooks: ReopenHooks,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] = mono_s,
     ) -> None:
         if period_s <= 0:
             raise ValueError("period_s must be > 0")

@@ -16,6 +16,7 @@ import zenoh
 
 from common import reach
 from common.bus import open_session
+from common.clock import mono_s, mono_to_unix_s
 from common.contracts import MetricsAnswer
 from common.errors import DecodeError, StackError
 from common.keys import Keys
@@ -38,7 +39,7 @@ def run(config: Config, stop: threading.Event) -> int:
     """Serve metrics until ``stop`` is set."""
     s = config.metrics
     lock = threading.Lock()  # Zenoh calls back on its own threads
-    now = time.monotonic
+    now = mono_s
     exporter = None
     listener: LatencyListener | None = None
     if s.prometheus_port:
@@ -57,7 +58,7 @@ def run(config: Config, stop: threading.Event) -> int:
 
         def answer() -> MetricsAnswer:
             with lock:
-                return agg.answer(node.header(), now(), time.time() - time.monotonic())
+                return agg.answer(node.header(), now(), mono_to_unix_s())
 
         def handler(
             key: str,
@@ -145,8 +146,8 @@ def query(config: Config, timeout_s: float) -> MetricsAnswer:
     session = open_session(config.zenoh, OBSERVER)
     keys = Keys(config.stack.prefix)
     try:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
+        deadline = mono_s() + timeout_s
+        while mono_s() < deadline:
             answer = query_metrics(session, keys, 1.0)
             if answer is not None:
                 return answer

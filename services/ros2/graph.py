@@ -8,13 +8,13 @@ token that ``ros2 node list`` / ``ros2 topic list`` read (services/ros2/wire.py 
 from __future__ import annotations
 
 import itertools
-import time
 from collections.abc import Callable
 from typing import Literal
 
 import zenoh
 
 from common.bus import open_ros_session
+from common.clock import wall_ns
 from common.lifecycle import Closing
 from common.ros2_settings import Ros2Settings
 from services.ros2.convert import RosMessage, cdr_encode
@@ -46,7 +46,7 @@ class RosPublisher:
         self.put_cdr(cdr_encode(self._distro, self.ros_type, msg))
 
     def put_cdr(self, payload: bytes) -> None:
-        attachment = Attachment(next(self._seq), time.time_ns(), self._gid)
+        attachment = Attachment(next(self._seq), wall_ns(), self._gid)
         self._pub.put(payload, attachment=attachment.encode())
 
     def close(self) -> None:

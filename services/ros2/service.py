@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import dataclasses
 import threading
-import time
 from collections.abc import Callable
 
 import zenoh
 
 from common.bus import Publisher, QoS
+from common.clock import mono_s
 from common.errors import DecodeError, ImageError
 from common.messages import Detections, Frame, LaserScan, Twist
 from common.node import Node
@@ -169,9 +169,9 @@ def _debug_images(node: Node, graph: RosGraph, config: Config) -> _Subscriber:
     def on_detections(dets: Detections, _sample: zenoh.Sample) -> None:
         nonlocal due
         frame = frames.take(dets.header.stamp_ns)
-        if frame is None or time.monotonic() < due:
+        if frame is None or mono_s() < due:
             return
-        due = time.monotonic() + period_s
+        due = mono_s() + period_s
         try:
             drawn = debug_image(frame, dets, s.debug_jpeg_quality, config.detector.max_frame_pixels)
         except ImageError as exc:

@@ -9,13 +9,13 @@ and command passes through the ``ros2`` bridge service.
 from __future__ import annotations
 
 import dataclasses
-import time
 from collections.abc import Callable
 from typing import Protocol
 
 import zenoh
 
 from common.bus import QoS, source_of
+from common.clock import wall_ns
 from common.errors import DecodeError
 from common.lifecycle import Closing
 from common.messages import Frame, LaserScan, Twist
@@ -80,7 +80,7 @@ class RosRobot(Closing):
         def on_payload(key: str, cdr: memoryview) -> None:
             try:
                 msg = cdr_decode(s.distro, twist_type, cdr)
-                twist = twist_from_ros(msg, source="ros2", received_ns=time.time_ns())
+                twist = twist_from_ros(msg, source="ros2", received_ns=wall_ns())
             except DecodeError as exc:
                 node.bad_input(key, exc)
                 return

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import threading
-import time
 from contextlib import ExitStack
 
 import numpy as np
 
 from common.bus import Publisher, QoS
+from common.clock import mono_s
 from common.command_sources import CommandSources
 from common.errors import ConfigError
 from common.frames import image_to_frame
@@ -58,7 +58,7 @@ def run(config: Config, stop: threading.Event) -> int:
         def command(twist: Twist, source: str) -> None:
             """A velocity command reached the base, from ``source`` (a publisher's id)."""
             with lock:
-                active, new = sources.heard(source, time.monotonic())
+                active, new = sources.heard(source, mono_s())
                 sane = world.command(twist.linear[0], twist.angular[2])
             if not sane:
                 node.reject(
@@ -97,10 +97,10 @@ def run(config: Config, stop: threading.Event) -> int:
         node.ready()
         dt = 1.0 / s.physics_hz
         started = False
-        boot = next_tick = next_check = time.monotonic()
+        boot = next_tick = next_check = mono_s()
         try:
             while not stop.is_set():
-                now = time.monotonic()
+                now = mono_s()
                 if not started and now >= next_check:
                     # Until the detector and controller are ready the world stands still at
                     # t=0 but its sensors publish on the wall clock, so the detector warms up
@@ -116,8 +116,8 @@ def run(config: Config, stop: threading.Event) -> int:
                     t = world.t if started else now - boot
                     _publish_due(node, world, t, clocks, out, truth_pub, camera, laser, rng, config)
                 node.publish_counters()
-                next_tick = max(next_tick + dt, time.monotonic() - dt)
-                stop.wait(max(0.0, next_tick - time.monotonic()))
+                next_tick = max(next_tick + dt, mono_s() - dt)
+                stop.wait(max(0.0, next_tick - mono_s()))
         finally:
             node.log.info("stopping")
     return 0

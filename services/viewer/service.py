@@ -9,13 +9,13 @@ client watches them. Nothing here publishes on the stack's keys but the viewer's
 from __future__ import annotations
 
 import threading
-import time
 from typing import Any
 
 import foxglove
 import zenoh
 from foxglove.websocket import WebSocketServer
 
+from common.clock import mono_s
 from common.errors import ConfigError, ImageError
 from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
 from common.node import Node
@@ -86,7 +86,7 @@ class Viewer:
         self.pairing.add_frame(frame)
 
     def on_detections(self, dets: Detections, _sample: zenoh.Sample) -> None:
-        if not self.pairing.add_detections(dets, time.monotonic()):
+        if not self.pairing.add_detections(dets, mono_s()):
             self.node.counters.add("detections_unpaired")
 
     def _unshowable(self, what: str, error: ValueError) -> None:
@@ -117,7 +117,7 @@ class Viewer:
             return
         self.trail.add(truth.robot[0], truth.robot[1])
         self.channels.tf.log(pose, log_time=at)
-        now = time.monotonic()
+        now = mono_s()
         if now >= self._next_scene:
             self._next_scene = now + self._scene_period_s
             self.channels.scene.log(scene.scene(truth, self.trail.points()), log_time=at)
@@ -127,7 +127,7 @@ class Viewer:
         period = 1.0 / self.settings.image_rate_hz
         dropped = 0
         while not stop.wait(period):
-            item = self.pairing.take(time.monotonic())
+            item = self.pairing.take(mono_s())
             if self.pairing.dropped > dropped:
                 self.node.counters.add("images_dropped", self.pairing.dropped - dropped)
                 dropped = self.pairing.dropped

@@ -27,6 +27,7 @@ from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 
 from common.boxes import Boxes
+from common.clock import wall_ns
 from common.codec import Message
 from common.messages import (
     ControllerStatus,
@@ -39,7 +40,6 @@ from common.messages import (
     MetricsSnapshot,
     ServiceCounters,
     Twist,
-    now_ns,
 )
 from services.ros2.convert import LASER_SCAN, TWIST, TWIST_STAMPED, scan_from_ros, twist_from_ros
 from services.ros2.images import (
@@ -67,7 +67,7 @@ def fuzz(examples: int) -> settings:
 
 
 def header(stamp_ns: int | None = None) -> Header:
-    at = now_ns() if stamp_ns is None else stamp_ns
+    at = wall_ns() if stamp_ns is None else stamp_ns
     return Header(stamp_ns=at, frame_id="camera", seq=7, source="fuzz", mono_ns=5, boot_id="b")
 
 

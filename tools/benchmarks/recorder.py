@@ -20,13 +20,13 @@ import subprocess
 import sys
 import tempfile
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from common.bus import open_session
+from common.clock import mono_s
 from common.config_file import load_config, to_toml
 from common.errors import StackError
 from common.keys import Keys
@@ -59,7 +59,7 @@ class _Phase:
     def reset(self) -> None:
         with self._lock:
             self.frames = 0
-            self.start = time.monotonic()
+            self.start = mono_s()
             self.latency_ms: list[float] = []
             self.detections_ms: list[float] = []
             self.stages_ms: dict[str, list[float]] = {s: [] for s in STAGES}
@@ -82,7 +82,7 @@ class _Phase:
 
     def take(self) -> tuple[int, float, list[float], list[float], dict[str, list[float]]]:
         with self._lock:
-            elapsed = time.monotonic() - self.start
+            elapsed = mono_s() - self.start
             stages = {s: list(v) for s, v in self.stages_ms.items()}
             return self.frames, elapsed, list(self.latency_ms), list(self.detections_ms), stages
 

@@ -13,7 +13,6 @@ import signal
 import subprocess
 import tempfile
 import threading
-import time
 import uuid
 from pathlib import Path
 from typing import Any
@@ -21,6 +20,7 @@ from typing import Any
 import zenoh
 
 from common.bus import open_session
+from common.clock import mono_s, wall_ns
 from common.config_file import to_toml
 from common.contracts import ControllerMode, ScenarioResult
 from common.errors import DecodeError, StackError
@@ -135,14 +135,14 @@ def _drive(
     proc: subprocess.Popen[bytes], scenario: Scenario, rec: Recording, config_path: Path, log: Any
 ) -> None:
     """Wait for the scenario clock to run its course, killing the detector when scripted."""
-    start = time.monotonic()
+    start = mono_s()
     pause = threading.Event()
     while _sim_time(rec) <= 0:
         if proc.poll() is not None:
             raise StackError(
                 f"the stack exited during start-up (see {config_path.parent}/stack.log)"
             )
-        if time.monotonic() - start > STARTUP_TIMEOUT_S:
+        if mono_s() - start > STARTUP_TIMEOUT_S:
             raise StackError(f"the stack did not start within {STARTUP_TIMEOUT_S:.0f} s")
         pause.wait(0.1)
     if log:
@@ -154,7 +154,7 @@ def _drive(
         if kill_at is not None and rec.kill_ns is None and _sim_time(rec) >= kill_at:
             for pid in service_pids("detector", config_path):
                 os.kill(pid, signal.SIGKILL)
-            rec.kill_ns = time.time_ns()
+            rec.kill_ns = wall_ns()
             if log:
                 log(f"{scenario.name}: killed the detector at t={_sim_time(rec):.1f} s")
         pause.wait(0.05)

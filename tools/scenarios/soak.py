@@ -15,7 +15,6 @@ import math
 import random
 import tempfile
 import threading
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,6 +22,7 @@ from typing import Any
 import msgpack
 
 from common.bus import open_session
+from common.clock import mono_s
 from common.config_file import to_toml
 from common.keys import Keys
 from common.messages import GroundTruth
@@ -165,12 +165,12 @@ def _flood(config: Config, rate_hz: float, stop: threading.Event, figures: SoakF
     session = open_session(config.zenoh, "observer")
     try:
         period = 1.0 / rate_hz
-        next_at = time.monotonic()
+        next_at = mono_s()
         while not stop.is_set():
             session.put(rng.choice(targets), garbage(rng))
             figures.flood_messages += 1
             next_at += period
-            stop.wait(max(0.0, next_at - time.monotonic()))
+            stop.wait(max(0.0, next_at - mono_s()))
     finally:
         session.close()
 
@@ -197,8 +197,8 @@ def run_soak(
                        log_path=log_path)  # fmt: skip
             subs = record_into(session, keys, config.stack.camera, rec)
             flooder.start()
-            start = time.monotonic()
-            while (now := time.monotonic() - start) < duration_s:
+            start = mono_s()
+            while (now := mono_s() - start) < duration_s:
                 if proc.poll() is not None:
                     raise RuntimeError(f"the stack exited during the soak (see {log_path})")
                 pids = {n: p[0] for n in config.supervisor.services
