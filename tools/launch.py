@@ -32,6 +32,7 @@ from common.errors import StackError
 from common.keys import Keys
 from common.queries import ready_services
 from common.settings import REPO_ROOT, Config
+from common.spawn import spawn, stop_child
 
 
 def free_port() -> int:
@@ -44,7 +45,8 @@ def free_port() -> int:
 def start_supervisor(
     config_path: str | Path, log: IO[bytes], env: Mapping[str, str] | None = None
 ) -> subprocess.Popen[bytes]:
-    """Start ``python -m deploy.supervisor --config config_path`` in a process group of its own.
+    """Start ``python -m deploy.supervisor --config config_path`` in a process group of its own
+    (common/spawn.py).
 
     Its output (stdout and stderr, unbuffered) goes to ``log``; ``env`` replaces this process's
     environment when given. The file is the whole truth: ``STACK__*`` overrides are taken out
@@ -54,14 +56,12 @@ def start_supervisor(
     """
     base = os.environ if env is None else env
     clean = {k: v for k, v in base.items() if not k.startswith(ENV_PREFIX)}
-    return subprocess.Popen(
+    return spawn(
         [sys.executable, "-m", "deploy.supervisor", "--config", str(config_path)],
+        env=clean,
         cwd=REPO_ROOT,
-        env={**clean, "PYTHONUNBUFFERED": "1"},
         stdout=log,
         stderr=subprocess.STDOUT,
-        process_group=0,
-        stdin=subprocess.DEVNULL,
     )
 
 
@@ -108,15 +108,7 @@ def stop_supervisor(
     True when it exited in time (its code is then ``proc.returncode``); otherwise its whole
     process group is killed, and False is returned.
     """
-    if proc.poll() is None:
-        proc.send_signal(sig)
-    try:
-        proc.wait(timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
-        return False
-    return True
+    return stop_child(proc, timeout_s, sig, whole_group=True)
 
 
 def service_pids(service: str, config_path: str | Path) -> list[int]:
