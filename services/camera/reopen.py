@@ -31,8 +31,9 @@ if TYPE_CHECKING:
 HEARTBEAT_S = 0.5
 
 
-class StopEvent(Protocol):
-    """What the wait needs of a ``threading.Event``."""
+class EventLike(Protocol):
+    """What the wait needs of a ``threading.Event`` (common.lifecycle.StopEvent is one; a test
+    passes a fake clock's)."""
 
     def is_set(self) -> bool: ...
 
@@ -66,7 +67,7 @@ class ReopeningSource:
         factory: Callable[[], FrameSource],
         *,
         period_s: float,
-        stop: StopEvent,
+        stop: EventLike,
         hooks: ReopenHooks,
         clock: Callable[[], float] = mono_s,
     ) -> None:

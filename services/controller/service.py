@@ -22,7 +22,7 @@ from common.node import Node
 from common.queries import ready_services
 from common.settings import Config
 from services.controller.estop import EStopLatch
-from services.controller.policy import Command, Controller, Inputs, unknown_targets
+from services.controller.policy import Controller, Inputs, VelocityCommand, unknown_targets
 
 
 class _Stamped(Protocol):
@@ -152,7 +152,7 @@ def run(config: Config, stop: threading.Event) -> int:
                 node.publish_counters()
                 wait_either(dets.arrived, stop, period - (mono_s() - tick))
             # Leave the robot still: the last word on cmd_vel is always a stop.
-            stopped = Command(0.0, 0.0, ControllerState.STOPPED, "shutdown")
+            stopped = VelocityCommand(0.0, 0.0, ControllerState.STOPPED, "shutdown")
             _publish(node, cmd_pub, status_pub, stopped, s.mode, now(), estop_saved=latch.saved)
         finally:
             for sub in subs:
@@ -243,7 +243,7 @@ def _publish(
     node: Node,
     cmd_pub: Publisher,
     status_pub: Publisher,
-    cmd: Command,
+    cmd: VelocityCommand,
     mode: ControllerMode,
     at: Stamp,
     *,

@@ -29,7 +29,7 @@ from common.messages import Detections, GroundTruth, Twist
 from common.settings import Config
 from services.sim.scenarios import SCENARIOS, Scenario
 from tools.launch import free_port, service_pids, start_supervisor, stop_supervisor
-from tools.scenarios.score import Recording, score
+from tools.scenarios.score import ScenarioLog, score
 
 STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
 STOP_TIMEOUT_S = 30.0  # then the whole stack is killed
@@ -72,7 +72,7 @@ def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Con
     )
 
 
-def record_into(session: zenoh.Session, keys: Keys, camera: str, rec: Recording) -> list[Any]:
+def record_into(session: zenoh.Session, keys: Keys, camera: str, rec: ScenarioLog) -> list[Any]:
     """Subscribe to the truth, commands and detections, appending each to ``rec``."""
     lock = threading.Lock()
 
@@ -107,7 +107,7 @@ def run_scenario(base: Config, name: str, log: Any = None, ros2: bool = False) -
     workdir = Path(tempfile.mkdtemp(prefix=f"scenario-{name}-"))
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))
-    rec = Recording()
+    rec = ScenarioLog()
     with (workdir / "stack.log").open("wb") as stack_log:
         proc = start_supervisor(config_path, stack_log)
         try:
@@ -127,12 +127,12 @@ def run_scenario(base: Config, name: str, log: Any = None, ros2: bool = False) -
     return result
 
 
-def _sim_time(rec: Recording) -> float:
+def _sim_time(rec: ScenarioLog) -> float:
     return rec.truths[-1].sim_time_s if rec.truths else 0.0
 
 
 def _drive(
-    proc: subprocess.Popen[bytes], scenario: Scenario, rec: Recording, config_path: Path, log: Any
+    proc: subprocess.Popen[bytes], scenario: Scenario, rec: ScenarioLog, config_path: Path, log: Any
 ) -> None:
     """Wait for the scenario clock to run its course, killing the detector when scripted."""
     start = mono_s()

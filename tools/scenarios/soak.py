@@ -30,7 +30,7 @@ from common.settings import SERVICES, Config
 from services.sim.scenarios import SCENARIOS
 from tools.launch import service_pids, start_supervisor, stop_supervisor, wait_ready
 from tools.scenarios.runner import STOP_TIMEOUT_S, record_into, scenario_config
-from tools.scenarios.score import Recording
+from tools.scenarios.score import ScenarioLog
 
 READY_TIMEOUT_S = 180.0  # the stack's start-up on a loaded 2-core machine
 WARM_UP_S = 60.0  # model load, caches and allocator pools settle before memory counts as "flat"
@@ -184,7 +184,7 @@ def run_soak(
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))
     log_path = workdir / "stack.log"
-    figures, rec, stop = SoakFigures(), Recording(), threading.Event()
+    figures, rec, stop = SoakFigures(), ScenarioLog(), threading.Event()
     with log_path.open("wb") as stack_log:
         proc = start_supervisor(config_path, stack_log)
         session = open_session(config.zenoh, "observer")
