@@ -1,12 +1,18 @@
-"""Stamps on two clocks: the wall clock every host shares (roughly) and this host's monotonic one.
+"""The stack's clocks: the one module that reads them (tests/unit/common/test_clock_only.py).
 
+Stamps on two clocks: the wall clock every host shares (roughly) and this host's monotonic one.
 A message carries both. A receiver on the same boot of the same host judges age on the monotonic
 clock too, which no NTP step or operator's ``date`` moves; a receiver on another host can only
 use the wall clock, which must then be synchronised (docs/security.md, "Clocks").
+
+Which clock for what: :func:`wall_ns` for stamps that cross processes, :func:`mono_s` for
+deadlines, periods and ages within a process, :func:`perf_s` (with :func:`ms_since`) for timing
+stages, :func:`local_now` and :func:`utc_now` for dates that people read.
 """
 
 from __future__ import annotations
 
+import datetime
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,3 +39,49 @@ class Stamp:
 
 def now() -> Stamp:
     return Stamp(time.time_ns(), time.monotonic_ns())
+
+
+def wall_ns() -> int:
+    """Wall-clock time in ns since the Unix epoch: the stamp messages carry across processes."""
+    return time.time_ns()
+
+
+def mono_ns() -> int:
+    """This host's monotonic clock in ns; compares only within one boot (:data:`BOOT_ID`)."""
+    return time.monotonic_ns()
+
+
+def mono_s() -> float:
+    """This host's monotonic clock in seconds: deadlines, periods and ages within a process."""
+    return time.monotonic()
+
+
+def mono_to_unix_s() -> float:
+    """What to add to a :func:`mono_s` reading to get Unix seconds (as the wall clock is now)."""
+    return time.time() - time.monotonic()
+
+
+def perf_s() -> float:
+    """The finest timer, in seconds, for timing a stage; only differences between readings
+    mean anything."""
+    return time.perf_counter()
+
+
+def perf_ns() -> int:
+    """:func:`perf_s` in integer ns."""
+    return time.perf_counter_ns()
+
+
+def ms_since(start_perf_s: float) -> float:
+    """Milliseconds since ``start_perf_s``, a :func:`perf_s` reading."""
+    return (time.perf_counter() - start_perf_s) * 1e3
+
+
+def local_now() -> datetime.datetime:
+    """The local date and time (naive), for names a person reads: a recording's file name."""
+    return datetime.datetime.now()
+
+
+def utc_now() -> datetime.datetime:
+    """The date and time in UTC (aware), for what is written down: certificates, reports."""
+    return datetime.datetime.now(datetime.UTC)

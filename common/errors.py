@@ -2,15 +2,22 @@
 
     StackError                   base of everything we raise on purpose
     ├── ConfigError              bad settings or stack config: exit non-zero with one line
+    │   └── DatasetError         a labelled dataset that cannot be evaluated
+    │                            (tools/evaluation/labelled.py)
     ├── DecodeError              bytes on a Zenoh key that are not a valid message
     ├── ImageError               a missing, unreadable or corrupt image
     │   └── ImageTooLarge        an image over the pixel budget, refused before decoding
     ├── ModelError               a file that is not a usable model
     │   ├── UnknownModelFamily   an output shape that matches no known YOLO family
-    │   └── ModelFetchError      the default model could not be fetched or converted
+    │   ├── ModelFetchError      the default model could not be fetched or converted
+    │   └── QuantizationFailed   no working INT8 model could be made: stay on FP32
+    │                            (modelprep/quantize)
     ├── BackendUnavailable       a runtime (TensorRT, CUDA, ...) that this machine lacks
     └── RecordingError           a file that is not a readable MCAP recording, or holds nothing
                                  that can be played
+
+Every subclass of StackError in the project is drawn here, under its base
+(tests/unit/common/test_errors.py checks it); the ones defined outside this module name it.
 
 Library errors are translated at the boundary (``raise ModelError(...) from exc``) so callers
 only ever catch these. Command-line entry points print ``str(error)`` as one line and exit

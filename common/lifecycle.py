@@ -8,10 +8,10 @@ import os
 import signal
 import sys
 import threading
-import time
 from collections.abc import Callable
 from typing import Self
 
+from common.clock import mono_s
 from common.errors import BackendUnavailable, ConfigError, ModelError, StackError
 
 # Exit codes shared by every entry point. 2..4 mean "restarting will not help".
@@ -87,9 +87,9 @@ class StopEvent(threading.Event):
     """
 
     def wait(self, timeout: float | None = None) -> bool:
-        deadline = None if timeout is None else time.monotonic() + timeout
+        deadline = None if timeout is None else mono_s() + timeout
         while True:
-            left = SIGNAL_POLL_S if deadline is None else deadline - time.monotonic()
+            left = SIGNAL_POLL_S if deadline is None else deadline - mono_s()
             if left <= 0:
                 return self.is_set()
             if super().wait(min(left, SIGNAL_POLL_S)):

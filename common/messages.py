@@ -8,7 +8,7 @@ Each field is declared once, here: its name and type are its wire format (common
 and each message type has its own schema version, ``VERSION`` (common/codec.py). To add a field,
 declare it with a default; bump the version only for a change older readers would misread.
 
-Units: times are integer nanoseconds since the Unix epoch (``time.time_ns()``); image
+Units: times are integer nanoseconds since the Unix epoch (``common.clock.wall_ns()``); image
 coordinates are pixels of the image the detections were made on, origin top-left, x right,
 y down; angles are radians, counter-clockwise positive (REP 103); ranges are metres.
 """
@@ -16,7 +16,6 @@ y down; angles are radians, counter-clockwise positive (REP 103); ranges are met
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from typing import Annotated, Any, ClassVar
 
@@ -42,11 +41,6 @@ FRAME_ENCODINGS: dict[str, int] = {"bgr8": 3, "rgb8": 3, "mono8": 1, "jpeg": 0}
 # against its bounds before any array is read (Detections' is common.boxes.N_DETECTIONS).
 N_RAYS = Dim("n", 1, MAX_SCAN_RAYS)
 N_TARGETS = Dim("n", 0, MAX_DETECTIONS)
-
-
-def now_ns() -> int:
-    """Wall-clock time in ns, the stamp used across processes."""
-    return time.time_ns()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

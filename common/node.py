@@ -8,14 +8,13 @@ and calls a handler directly; ``Node`` is a Tally with a session.
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable
 from typing import TypeVar
 
 import zenoh
 
 from common.bus import Publisher, QoS, open_session
-from common.clock import BOOT_ID, Stamp, now
+from common.clock import BOOT_ID, Stamp, mono_s, now
 from common.counters import Counters
 from common.errors import DecodeError
 from common.keys import Keys
@@ -158,7 +157,7 @@ class Node(Tally, Closing):
         )
 
     def publish_counters(self, *, force: bool = False) -> None:
-        now = time.monotonic()
+        now = mono_s()
         if not force and now < self._counters_next:
             return
         self._counters_next = now + self._counters_period_s

@@ -8,7 +8,7 @@ as each thread inherits it.
 Both rank a process only against those in its own **session**: with the kernel's autogroup
 scheduling (``/proc/sys/kernel/sched_autogroup_enabled``, on by default where it is built in),
 the CPU is first shared fairly between sessions. That is why the supervisor starts every
-service in a process group of its own but in the supervisor's session (deploy/processes.py): a
+service in a process group of its own but in the supervisor's session (common/spawn.py): a
 recorder in a session of its own, however niced, took as much CPU in the middle of an inference
 as it wanted, and slowed the detector by 5 to 10 % (docs/benchmarks.md).
 """

@@ -8,10 +8,11 @@ dropped and why, the counters say *how much*.
 from __future__ import annotations
 
 import threading
-import time
 from collections import Counter, OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
+
+from common.clock import mono_s
 
 #: Lines logged in full per key before the limiter starts summarising.
 LOG_BURST = 5
@@ -52,7 +53,7 @@ class LogLimiter:
         self,
         burst: int = LOG_BURST,
         period_s: float = LOG_PERIOD_S,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] = mono_s,
         max_keys: int = MAX_KEYS,
     ) -> None:
         if burst < 0 or period_s <= 0 or max_keys < 1:

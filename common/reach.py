@@ -12,6 +12,7 @@ import time
 
 import zenoh
 
+from common.clock import mono_s
 from common.settings import ZenohSettings
 
 # How often to look at the session's links while waiting for the first one.
@@ -29,12 +30,12 @@ def describe(settings: ZenohSettings, prefix: str, principal: str) -> str:
 
 def connected(session: zenoh.Session, timeout_s: float = 0.0) -> bool:
     """True once ``session`` is linked to a router or a peer, waiting up to ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
+    deadline = mono_s() + timeout_s
     while True:
         info = session.info
         if any(True for _ in info.routers_zid()) or any(True for _ in info.peers_zid()):
             return True
-        if time.monotonic() >= deadline:
+        if mono_s() >= deadline:
             return False
         time.sleep(LINK_POLL_S)
 

@@ -28,6 +28,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from common.certificates import refuse_server_capable
 from common.cli import program
+from common.clock import utc_now
 from common.errors import ConfigError
 from common.lifecycle import run_main
 from common.security import (
@@ -85,7 +86,7 @@ def _key_pem(key: PrivateKey) -> bytes:
 def _builder(
     subject: str, issuer: x509.Name, key: PrivateKey, days: int
 ) -> x509.CertificateBuilder:
-    now = datetime.datetime.now(datetime.UTC)
+    now = utc_now()
     public_key = key.public_key()
     return (
         x509.CertificateBuilder()

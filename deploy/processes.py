@@ -8,12 +8,13 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from dataclasses import dataclass, field
 from typing import IO
 
-from common.lifecycle import PERMANENT_FAILURES, STOP_SIGNALS, SUPERVISOR_PID_ENV
+from common.clock import mono_s
+from common.lifecycle import PERMANENT_FAILURES, SUPERVISOR_PID_ENV
 from common.settings import SupervisorSettings
+from common.spawn import ask_to_stop, spawn, wait_or_kill
 
 
 def service_command(name: str, config_path: str) -> list[str]:
@@ -66,28 +67,20 @@ class ServiceProcess:
 
     def start(self) -> None:
         # The PID tells the service whom it must not outlive (common/lifecycle.py).
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", SUPERVISOR_PID_ENV: str(os.getpid())}
-        # A process group of its own: a Ctrl-C at the terminal reaches the supervisor only, which
-        # then stops the services in order instead of all of them dying at once. The same
-        # session as ours, though: with the kernel's autogroup scheduling the CPU is shared
-        # between sessions first, and a service's priority (the recorder's nice, SCHED_IDLE)
-        # ranks it against the detector only within one (common/priority.py).
-        # Its stdout goes to our stderr: our stdout carries only the --duration summary.
-        # It starts with the stop signals blocked (a child inherits the mask): a stop sent while
-        # its interpreter starts stays pending until services/__init__.py can take it quietly.
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
-        try:
-            self.proc = subprocess.Popen(
-                self.command,
-                env=env,
-                process_group=0,
-                stdin=subprocess.DEVNULL,
-                stdout=sys.stderr.fileno(),
-                stderr=subprocess.PIPE,
-            )
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-        self.started_at = time.monotonic()
+        env = {**os.environ, SUPERVISOR_PID_ENV: str(os.getpid())}
+        # A process group of its own in our session (common/spawn.py: a Ctrl-C reaches the
+        # supervisor only, which then stops the services in order; CPU priorities rank them
+        # within our session). Its stdout goes to our stderr: our stdout carries only the
+        # --duration summary. It starts with the stop signals blocked: a stop sent while its
+        # interpreter starts stays pending until services/__init__.py can take it quietly.
+        self.proc = spawn(
+            self.command,
+            env=env,
+            stdout=sys.stderr.fileno(),
+            stderr=subprocess.PIPE,
+            stop_signals_blocked=True,
+        )
+        self.started_at = mono_s()
         self.state = "starting"
         assert self.proc.stderr is not None
         self._forwarder = threading.Thread(
@@ -157,18 +150,15 @@ class ServiceProcess:
         return f"{self.name}: exited with code {code}; restarting in {delay:.1f} s"
 
     def signal_stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
+        if self.proc is not None:
+            ask_to_stop(self.proc)
 
     def wait_stopped(self, deadline: float) -> None:
         """Wait for the process to exit by ``deadline``, then kill it."""
         if self.proc is None:
             self.state = "exited"
             return
-        try:
-            self.last_exit = self.proc.wait(timeout=max(0.0, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.last_exit = self.proc.wait()
+        wait_or_kill(self.proc, deadline - mono_s())
+        self.last_exit = self.proc.returncode
         self.state = "exited"
         self._forwarder.join(timeout=1.0)  # pass on its last words before we exit

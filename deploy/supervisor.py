@@ -15,13 +15,13 @@ import json
 import math
 import sys
 import threading
-import time
 from typing import cast
 
 import zenoh
 
 from common.bus import open_hub
 from common.cli import program
+from common.clock import mono_s
 from common.config_file import load_config
 from common.contracts import MetricsAnswer
 from common.errors import BackendUnavailable, ConfigError, DecodeError, ModelError, StackError
@@ -78,7 +78,7 @@ class LiveView:
                 self.token_lost_at.pop(service, None)
             else:
                 self.ready.discard(service)
-                self.token_lost_at[service] = time.monotonic()
+                self.token_lost_at[service] = mono_s()
 
     def _on_counters(self, sample: zenoh.Sample) -> None:
         try:
@@ -87,7 +87,7 @@ class LiveView:
             return  # garbage is no sign of life
         service = str(sample.key_expr).rsplit("/", 1)[-1]
         with self._lock:
-            self.progress_at[service] = time.monotonic()
+            self.progress_at[service] = mono_s()
 
     def _on_status(self, sample: zenoh.Sample) -> None:
         try:
@@ -164,14 +164,14 @@ def supervise(
     log.info("hub on %s; starting %s", config.zenoh.endpoint, ", ".join(s.services))
     for p in procs:
         p.start()
-    end = time.monotonic() + duration_s if duration_s else None
-    next_status = time.monotonic()
+    end = mono_s() + duration_s if duration_s else None
+    next_status = mono_s()
     last_metrics: MetricsAnswer | None = None
     failed: ServiceProcess | None = None
     optional, left_behind = set(s.optional), set[str]()
     try:
         while failed is None and not stop.wait(0.1):
-            now = time.monotonic()
+            now = mono_s()
             if end is not None and now >= end:
                 break
             for p in procs:
@@ -200,7 +200,7 @@ def supervise(
         log.info("stopping")
         for p in reversed(procs):
             p.signal_stop()
-        deadline = time.monotonic() + s.stop_timeout_s
+        deadline = mono_s() + s.stop_timeout_s
         for p in procs:
             p.wait_stopped(deadline)
         session.close()

@@ -17,7 +17,6 @@ from __future__ import annotations
 import ctypes
 import logging
 import threading
-import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import MappingProxyType
@@ -36,6 +35,7 @@ except ImportError as exc:
         "TensorRT is not installed (pip install tensorrt-cu12 on a machine with an NVIDIA driver)"
     ) from exc
 
+from common.clock import mono_s
 from modelprep.quantize import calibration as calib_data
 from runtimes import engine_cache
 from runtimes.base import Backend, Dim
@@ -193,11 +193,11 @@ def _build(
         config.set_calibration_profile(calib_profile)
     monitor = _ProgressMonitor()
     config.progress_monitor = monitor
-    stop, start = threading.Event(), time.monotonic()
+    stop, start = threading.Event(), mono_s()
 
     def heartbeat() -> None:
         while not stop.wait(HEARTBEAT_S):
-            elapsed = f"building engine: {time.monotonic() - start:.0f} s"
+            elapsed = f"building engine: {mono_s() - start:.0f} s"
             progress(f"{elapsed}: {monitor.current}" if monitor.current else elapsed)
 
     progress(
@@ -213,7 +213,7 @@ def _build(
         beat.join()
     if serialized is None:
         raise ModelError(f"{model_path}: TensorRT could not build an engine (see its log above)")
-    progress(f"engine built in {time.monotonic() - start:.0f} s")
+    progress(f"engine built in {mono_s() - start:.0f} s")
     return bytes(serialized)
 
 

@@ -14,8 +14,8 @@ def _stop_while_starting(_signum: int, _frame: object) -> None:
 # stack stopping early: another service failed, or Ctrl-C right after `make run`). Python's
 # default SIGINT handler would end it with a KeyboardInterrupt traceback from some import, and
 # a stop is not an error. So the supervisor starts each service with SIGINT and SIGTERM
-# blocked (deploy/processes.py): a stop sent while the interpreter starts waits, pending,
-# until here, where it ends the process quietly with exit code 0.
+# blocked (deploy/processes.py, common/spawn.py): a stop sent while the interpreter starts
+# waits, pending, until here, where it ends the process quietly with exit code 0.
 # common.lifecycle.stop_event() replaces these handlers once the service runs. The variable is
 # set by the supervisor alone, so tests and tools that import services keep Python's handlers.
 if os.environ.get("STACK_SUPERVISOR_PID"):

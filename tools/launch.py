@@ -20,18 +20,19 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import IO
 
 import zenoh
 
+from common.clock import mono_s
 from common.config_file import ENV_PREFIX, to_toml
 from common.errors import StackError
 from common.keys import Keys
 from common.queries import ready_services
 from common.settings import REPO_ROOT, Config
+from common.spawn import spawn, stop_child
 
 
 def free_port() -> int:
@@ -44,7 +45,8 @@ def free_port() -> int:
 def start_supervisor(
     config_path: str | Path, log: IO[bytes], env: Mapping[str, str] | None = None
 ) -> subprocess.Popen[bytes]:
-    """Start ``python -m deploy.supervisor --config config_path`` in a process group of its own.
+    """Start ``python -m deploy.supervisor --config config_path`` in a process group of its own
+    (common/spawn.py).
 
     Its output (stdout and stderr, unbuffered) goes to ``log``; ``env`` replaces this process's
     environment when given. The file is the whole truth: ``STACK__*`` overrides are taken out
@@ -54,14 +56,12 @@ def start_supervisor(
     """
     base = os.environ if env is None else env
     clean = {k: v for k, v in base.items() if not k.startswith(ENV_PREFIX)}
-    return subprocess.Popen(
+    return spawn(
         [sys.executable, "-m", "deploy.supervisor", "--config", str(config_path)],
+        env=clean,
         cwd=REPO_ROOT,
-        env={**clean, "PYTHONUNBUFFERED": "1"},
         stdout=log,
         stderr=subprocess.STDOUT,
-        process_group=0,
-        stdin=subprocess.DEVNULL,
     )
 
 
@@ -89,12 +89,12 @@ def wait_ready(
     ``log_path`` when given), and KeyboardInterrupt when ``stop`` is set.
     """
     see = f"; see {log_path}" if log_path is not None else ""
-    deadline = time.monotonic() + timeout_s
+    deadline = mono_s() + timeout_s
     pause = stop if stop is not None else threading.Event()  # never set: wait() is the poll
     while not services <= ready_services(session, keys):
         if proc.poll() is not None:
             raise StackError(f"the stack exited ({proc.returncode}) before it was ready{see}")
-        if time.monotonic() > deadline:
+        if mono_s() > deadline:
             raise StackError(f"the stack was not ready within {timeout_s:.0f} s{see}")
         if pause.wait(poll_s):
             raise KeyboardInterrupt
@@ -108,15 +108,7 @@ def stop_supervisor(
     True when it exited in time (its code is then ``proc.returncode``); otherwise its whole
     process group is killed, and False is returned.
     """
-    if proc.poll() is None:
-        proc.send_signal(sig)
-    try:
-        proc.wait(timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
-        return False
-    return True
+    return stop_child(proc, timeout_s, sig, whole_group=True)
 
 
 def service_pids(service: str, config_path: str | Path) -> list[int]:

@@ -15,11 +15,11 @@ start-up (one line, exit 2), since only a device that worked is worth waiting fo
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
+from common.clock import mono_s
 from common.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -31,8 +31,9 @@ if TYPE_CHECKING:
 HEARTBEAT_S = 0.5
 
 
-class StopEvent(Protocol):
-    """What the wait needs of a ``threading.Event``."""
+class EventLike(Protocol):
+    """What the wait needs of a ``threading.Event`` (common.lifecycle.StopEvent is one; a test
+    passes a fake clock's)."""
 
     def is_set(self) -> bool: ...
 
@@ -66,9 +67,9 @@ class ReopeningSource:
         factory: Callable[[], FrameSource],
         *,
         period_s: float,
-        stop: StopEvent,
+        stop: EventLike,
         hooks: ReopenHooks,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] = mono_s,
     ) -> None:
         if period_s <= 0:
             raise ValueError("period_s must be > 0")

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import threading
-import time
 
 from common.bus import QoS
+from common.clock import mono_s
 from common.errors import ImageError
 from common.frames import image_to_frame
 from common.node import Node
@@ -37,7 +37,7 @@ def run(config: Config, stop: threading.Event) -> int:
         node.log.info("publishing %s on %s at %.1f Hz", source.description, key, settings.rate_hz)
         node.ready()
         period = 1.0 / settings.rate_hz
-        next_t = time.monotonic()
+        next_t = mono_s()
         try:
             while not stop.is_set():
                 try:
@@ -62,8 +62,8 @@ def run(config: Config, stop: threading.Event) -> int:
                 node.publish_counters()
                 next_t += period
                 # Never burst to catch up after a stall: a late frame is better than a flood.
-                next_t = max(next_t, time.monotonic())
-                stop.wait(next_t - time.monotonic())
+                next_t = max(next_t, mono_s())
+                stop.wait(next_t - mono_s())
         finally:
             source.close()
     return 0

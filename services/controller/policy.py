@@ -23,7 +23,7 @@ from services.controller.pid import PID, PIDGains
 
 
 @dataclass(frozen=True, slots=True)
-class Command:
+class VelocityCommand:
     """What to send: velocities plus the state and reason the status message reports."""
 
     linear_x: float
@@ -55,8 +55,8 @@ class Inputs:
     capture_age_s: float = 0.0
 
 
-def stop(state: ControllerState, reason: str, input_stamp_ns: int = 0) -> Command:
-    return Command(0.0, 0.0, state, reason, input_stamp_ns=input_stamp_ns)
+def stop(state: ControllerState, reason: str, input_stamp_ns: int = 0) -> VelocityCommand:
+    return VelocityCommand(0.0, 0.0, state, reason, input_stamp_ns=input_stamp_ns)
 
 
 def candidates(
@@ -155,14 +155,14 @@ class Controller:
         self.limits = Limits(s.max_linear, s.max_angular, s.max_linear_accel, s.max_angular_accel)
         self.locked_id = -1
         self.last_seen = -math.inf
-        self.last_aim: Command | None = None
+        self.last_aim: VelocityCommand | None = None
         self.previous = (0.0, 0.0)
         self.last_step: float | None = None
         self.stopping_m = 0.0
         self.turns: deque[tuple[float, float]] = deque(maxlen=1024)  # (time, w) commanded
         self.last_bearing: tuple[float, float] | None = None  # (bearing, when captured)
 
-    def step(self, inp: Inputs, now: float) -> Command:
+    def step(self, inp: Inputs, now: float) -> VelocityCommand:
         """The command for this tick; ``now`` is a monotonic time in seconds."""
         # The first tick may accelerate for one nominal period, like every later one.
         dt = 1.0 / self.s.control_rate_hz if self.last_step is None else now - self.last_step
@@ -194,12 +194,14 @@ class Controller:
         v, w = limit(self.previous, (aim.linear_x, aim.angular_z), dt, self.limits)
         self.previous = (v, w)
         self.turns.append((now, w))
-        return Command(v, w, aim.state, aim.reason, aim.target, aim.track_id, aim.input_stamp_ns)
+        return VelocityCommand(
+            v, w, aim.state, aim.reason, aim.target, aim.track_id, aim.input_stamp_ns
+        )
 
     def _clearance(self, scan: LaserScan) -> float:
         return sector_clearance(scan, self.s.sector_width_deg, self.s.robot_width_m / 2)
 
-    def _halt(self, cmd: Command) -> Command:
+    def _halt(self, cmd: VelocityCommand) -> VelocityCommand:
         """Zero at once (safety stops bypass the acceleration limit) and forget the target."""
         self.previous = (0.0, 0.0)
         self.pid.reset()
@@ -237,7 +239,7 @@ class Controller:
 
     def _aim(
         self, dets: Detections, scan: LaserScan | None, now: float, dt: float, captured: float
-    ) -> Command:
+    ) -> VelocityCommand:
         s = self.s
         classes = s.target_classes if s.mode is ControllerMode.TRACK else s.target_classes[:1]
         stamp = dets.header.stamp_ns
@@ -255,7 +257,7 @@ class Controller:
                 if self.last_bearing is not None:
                     seen, when = self.last_bearing
                     angular = self.pid.update(seen - self.rotation_since(when, now), dt)
-                return Command(
+                return VelocityCommand(
                     linear,
                     angular,
                     ControllerState.HOLDING,
@@ -280,7 +282,7 @@ class Controller:
         )
         name = dets.class_names[best]
         if s.mode is ControllerMode.TRACK:
-            aim = Command(
+            aim = VelocityCommand(
                 s.forward_speed if centred else 0.0,
                 angular,
                 ControllerState.TRACKING if centred else ControllerState.TURNING,
@@ -304,12 +306,12 @@ class Controller:
         centred: bool,
         name: str,
         track_id: int,
-    ) -> Command:
+    ) -> VelocityCommand:
         s = self.s
         stamp = dets.header.stamp_ns
 
-        def turn_only(state: ControllerState, reason: str) -> Command:
-            return Command(0.0, angular, state, reason, name, track_id, stamp)
+        def turn_only(state: ControllerState, reason: str) -> VelocityCommand:
+            return VelocityCommand(0.0, angular, state, reason, name, track_id, stamp)
 
         distance = math.inf
         if s.distance_source is DistanceSource.LASER:
@@ -340,7 +342,7 @@ class Controller:
         if clearance <= s.safety_distance_m + self.stopping_m:
             return turn_only(ControllerState.BLOCKED, f"obstacle at {clearance:.2f} m")
         speed = min(s.max_linear, s.distance_gain * (distance - s.follow_distance_m))
-        return Command(
+        return VelocityCommand(
             speed,
             angular,
             ControllerState.FOLLOWING,

@@ -5,14 +5,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import threading
-import time
 from typing import Generic, Protocol, TypeVar
 
 import zenoh
 
 from common import reach
 from common.bus import Publisher, QoS, open_session
-from common.clock import BOOT_ID, Stamp, now
+from common.clock import BOOT_ID, Stamp, mono_s, now
 from common.contracts import ControllerMode, ControllerState, DetectorInfo
 from common.errors import DecodeError, StackError
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
@@ -22,7 +21,7 @@ from common.node import Node, Tally
 from common.queries import ready_services
 from common.settings import Config
 from services.controller.estop import EStopLatch
-from services.controller.policy import Command, Controller, Inputs, unknown_targets
+from services.controller.policy import Controller, Inputs, VelocityCommand, unknown_targets
 
 
 class _Stamped(Protocol):
@@ -40,9 +39,9 @@ def wait_either(wake: threading.Event, stop: threading.Event, timeout_s: float) 
     """Return when ``wake`` is set, ``stop`` is set or ``timeout_s`` has passed, whichever
     comes first. ``stop`` is looked at every ``STOP_POLL_S``: a stop (SIGTERM) is never left
     waiting for a whole control period."""
-    deadline = time.monotonic() + timeout_s
+    deadline = mono_s() + timeout_s
     while not stop.is_set():
-        left = deadline - time.monotonic()
+        left = deadline - mono_s()
         if left <= 0 or wake.wait(min(left, STOP_POLL_S)):
             return
 
@@ -65,7 +64,7 @@ class Latest(Generic[_S]):
         with self._lock:
             if self._msg is not None and msg.header.stamp_ns < self._msg.header.stamp_ns:
                 return False
-            self._msg, self._t = msg, time.monotonic()
+            self._msg, self._t = msg, mono_s()
         self.arrived.set()
         return True
 
@@ -74,7 +73,7 @@ class Latest(Generic[_S]):
         with self._lock:
             if self._msg is None:
                 return None, float("inf")
-            return self._msg, time.monotonic() - self._t
+            return self._msg, mono_s() - self._t
 
 
 def _age(msg: Header | None, arrival_age_s: float, at: Stamp) -> float:
@@ -211,9 +210,9 @@ def run(config: Config, stop: threading.Event) -> int:
                     node.log.info("state %s: %s", cmd.state, cmd.reason)
                     last_state = cmd.state
                 node.publish_counters()
-                wait_either(dets.arrived, stop, period - (time.monotonic() - tick))
+                wait_either(dets.arrived, stop, period - (mono_s() - tick))
             # Leave the robot still: the last word on cmd_vel is always a stop.
-            stopped = Command(0.0, 0.0, ControllerState.STOPPED, "shutdown")
+            stopped = VelocityCommand(0.0, 0.0, ControllerState.STOPPED, "shutdown")
             _publish(node, cmd_pub, status_pub, stopped, s.mode, now(), estop_saved=latch.saved)
         finally:
             for sub in subs:
@@ -253,7 +252,7 @@ def _publish(
     node: Node,
     cmd_pub: Publisher,
     status_pub: Publisher,
-    cmd: Command,
+    cmd: VelocityCommand,
     mode: ControllerMode,
     at: Stamp,
     *,
@@ -305,7 +304,7 @@ def send_estop(config: Config, engaged: bool, reason: str) -> int:
         except DecodeError:
             return
         with lock:
-            heard[:] = [(time.monotonic(), status)]
+            heard[:] = [(mono_s(), status)]
 
     def latest() -> tuple[float, ControllerStatus] | None:
         with lock:
@@ -325,9 +324,9 @@ def send_estop(config: Config, engaged: bool, reason: str) -> int:
                     linked=False,
                 )
             )
-        start = time.monotonic()
+        start = mono_s()
         seq = 0
-        while time.monotonic() - start < ESTOP_ACK_TIMEOUT_S:
+        while mono_s() - start < ESTOP_ACK_TIMEOUT_S:
             # Repeated until acknowledged: the first put may race the mesh being formed. Each
             # is stamped afresh, since the controller refuses a release that is not fresh.
             seq += 1

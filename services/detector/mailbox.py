@@ -8,14 +8,15 @@ keeps them visible.
 from __future__ import annotations
 
 import threading
-import time
 from typing import Generic, TypeVar
+
+from common.clock import wall_ns
 
 _T = TypeVar("_T")
 
 
 class Mailbox(Generic[_T]):
-    """Holds at most one item, with its arrival time (``time.time_ns()``)."""
+    """Holds at most one item, with its arrival time (``common.clock.wall_ns()``)."""
 
     def __init__(self) -> None:
         self._cond = threading.Condition()
@@ -27,7 +28,7 @@ class Mailbox(Generic[_T]):
         with self._cond:
             dropped = self._payload is not None
             self._payload = payload
-            self._received_ns = time.time_ns()
+            self._received_ns = wall_ns()
             self._cond.notify()
         return dropped
 

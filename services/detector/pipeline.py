@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -11,6 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.boxes import Boxes
+from common.clock import ms_since, perf_s
 from common.letterbox import Letterbox, Preprocessor, unletterbox
 from common.lifecycle import Closing
 from common.settings import DetectorSettings
@@ -19,10 +19,6 @@ from services.detector.decode import Family, decode, sane_outputs
 from services.detector.model_info import ModelInfo, read_model_info
 from services.detector.postprocess import class_mask, select
 from services.detector.types import DetectionResult, StageTiming
-
-
-def _ms_since(start: float) -> float:
-    return (time.perf_counter() - start) * 1e3
 
 
 class Detector(Closing):
@@ -96,21 +92,21 @@ class Detector(Closing):
         return self._pre.run(images)
 
     def _run_batch(self, images: list[npt.NDArray[np.uint8]]) -> list[DetectionResult]:
-        t0 = time.perf_counter()
+        t0 = perf_s()
         batch, boxes = self._pre.run(images)
-        pre_ms = _ms_since(t0)
-        t1 = time.perf_counter()
+        pre_ms = ms_since(t0)
+        t1 = perf_s()
         output = self.backend.infer(batch)[0]
-        infer_ms = _ms_since(t1) / len(images)
-        t2 = time.perf_counter()
+        infer_ms = ms_since(t1) / len(images)
+        t2 = perf_s()
         s = self.settings
         output = output[: len(images)]
         sane = sane_outputs(output)
         candidates = decode(self.info.layout, output, s.conf, len(self.names), self._class_mask)
-        decode_ms = _ms_since(t2) / len(images)
+        decode_ms = ms_since(t2) / len(images)
         results = []
         for cands, lb, ok in zip(candidates, boxes, sane.tolist(), strict=True):
-            t3 = time.perf_counter()
+            t3 = perf_s()
             kept = select(
                 cands,
                 iou=s.iou,
@@ -120,7 +116,7 @@ class Detector(Closing):
             timing = StageTiming(
                 preprocess_ms=pre_ms / len(images),
                 inference_ms=infer_ms,
-                postprocess_ms=decode_ms + _ms_since(t3),
+                postprocess_ms=decode_ms + ms_since(t3),
             )
             results.append(
                 DetectionResult(

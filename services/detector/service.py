@@ -10,12 +10,12 @@ import numpy.typing as npt
 import zenoh
 
 from common.bus import QoS
-from common.clock import BOOT_ID, now
+from common.clock import BOOT_ID, now, wall_ns
 from common.contracts import DetectorInfo
 from common.errors import DecodeError, ImageError, ImageTooLarge
 from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
-from common.messages import Detections, Frame, Header, now_ns
+from common.messages import Detections, Frame, Header
 from common.node import Node, Tally
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
@@ -65,7 +65,7 @@ def to_message(
         model=det.model_path.name,
         backend=f"{det.backend.name}/{det.backend.device}/{det.backend.precision}",
         received_ns=received_ns,
-        published_ns=now_ns(),
+        published_ns=wall_ns(),
     )
 
 

@@ -184,7 +184,7 @@ class Aggregator:
 
         ``drop_rate`` covers the window (dropped / offered frames, 0 when none were offered);
         ``drop_rate_total`` the detector's counters since it started. The timeline's ``t`` is
-        the caller's clock plus ``clock_to_unix`` (pass ``time.time() - time.monotonic()`` for
+        the caller's clock plus ``clock_to_unix`` (pass ``common.clock.mono_to_unix_s()`` for
         Unix seconds), from the detector's first counters (before them, offered and dropped
         frames are unknown) to :data:`TIMELINE_SETTLE_S` ago; ``fps`` and ``offered_fps`` are
         per second, ``dropped`` a count per period.

@@ -16,6 +16,7 @@ import zenoh
 
 from common import reach
 from common.bus import open_session
+from common.clock import mono_s, mono_to_unix_s
 from common.contracts import MetricsAnswer
 from common.errors import DecodeError, StackError
 from common.keys import Keys
@@ -60,15 +61,13 @@ class MetricsHandlers:
         max_timing_ms = self.settings.max_timing_ms
         self._take(
             "detections", Detections.decode, key, payload,
-            lambda m: self.agg.on_detections(m, time.monotonic()),
+            lambda m: self.agg.on_detections(m, mono_s()),
             lambda m, _k: refuse_detections(m, max_timing_ms),
         )  # fmt: skip
 
     def on_cmd_vel(self, payload: bytes) -> None:
         key = self.tally.keys.cmd_vel()
-        self._take(
-            "cmd_vel", Twist.decode, key, payload, lambda m: self.agg.on_twist(m, time.monotonic())
-        )
+        self._take("cmd_vel", Twist.decode, key, payload, lambda m: self.agg.on_twist(m, mono_s()))
 
     def on_counters(self, key: str, payload: bytes) -> None:
         """``key``: the one the sample came on, which must name the service that counts."""
@@ -83,7 +82,7 @@ class MetricsHandlers:
         for why, n in refused.items():
             self.agg.count(f"refused.{why}", n)
             self.tally.reject(f"refused.{why}", f"{n} of {msg.service}'s counters refused: {why}")
-        self.agg.on_counters(kept, time.monotonic())
+        self.agg.on_counters(kept, mono_s())
 
     def _take(
         self,
@@ -127,7 +126,7 @@ def run(config: Config, stop: threading.Event) -> int:
 
         def answer() -> MetricsAnswer:
             with lock:
-                return agg.answer(node.header(), time.monotonic(), time.time() - time.monotonic())
+                return agg.answer(node.header(), mono_s(), mono_to_unix_s())
 
         keys = node.keys
         subs = [
@@ -149,7 +148,7 @@ def run(config: Config, stop: threading.Event) -> int:
         try:
             while not stop.wait(s.report_period_s):
                 with lock:
-                    snap = agg.snapshot(node.header(), time.monotonic())
+                    snap = agg.snapshot(node.header(), mono_s())
                 node.log.info("%s", report_line(snap))
         finally:
             if exporter is not None:
@@ -166,8 +165,8 @@ def query(config: Config, timeout_s: float) -> MetricsAnswer:
     session = open_session(config.zenoh, OBSERVER)
     keys = Keys(config.stack.prefix)
     try:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
+        deadline = mono_s() + timeout_s
+        while mono_s() < deadline:
             answer = query_metrics(session, keys, 1.0)
             if answer is not None:
                 return answer

@@ -10,7 +10,6 @@ service as ``recorder.*``; a progress line says messages, MB and drops.
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Sequence
 from datetime import datetime
 from functools import partial
@@ -21,6 +20,7 @@ import zenoh
 
 from common import reach
 from common.bus import Publisher, QoS, open_session
+from common.clock import local_now, mono_s, wall_ns
 from common.codec import Message
 from common.errors import StackError
 from common.keys import Keys
@@ -66,7 +66,7 @@ def subscriptions(keys: Keys, camera: str) -> dict[str, type[Message]]:
 def default_path(config: Config, at: datetime | None = None) -> Path:
     """``recorder.output_dir / recorder.file_pattern`` with ``{time}`` filled in."""
     s = config.recorder
-    stamp = (at or datetime.now()).strftime("%Y%m%d-%H%M%S")
+    stamp = (at or local_now()).strftime("%Y%m%d-%H%M%S")
     folder = Path(s.output_dir).expanduser()
     folder = folder if folder.is_absolute() else REPO_ROOT / folder
     return folder / s.file_pattern.replace(TIME_FIELD, stamp)
@@ -100,7 +100,7 @@ class Recorder(Closing):
         thread, by ``decode``), nothing else."""
         if key != self._own:
             self.heard += 1  # one writer per subscriber thread; a count, never a decision
-        self._queued.offer(key, payload, time.time_ns(), decode)
+        self._queued.offer(key, payload, wall_ns(), decode)
 
     @property
     def failed(self) -> Exception | None:
@@ -147,22 +147,22 @@ def record(
         node.ready()
         progress(f"recording to {path}")
         period = config.recorder.progress_period_s
-        end = time.monotonic() + duration_s if duration_s > 0 else float("inf")
-        next_line = time.monotonic() + period
-        warn_at = time.monotonic() + config.recorder.silence_warning_s if require_stack else inf
+        end = mono_s() + duration_s if duration_s > 0 else float("inf")
+        next_line = mono_s() + period
+        warn_at = mono_s() + config.recorder.silence_warning_s if require_stack else inf
         where = reach.describe(config.zenoh, config.stack.prefix, SERVICE)
         code = EXIT_OK
         try:
-            while not stop.is_set() and time.monotonic() < end:
-                stop.wait(min(0.2, max(0.0, end - time.monotonic())))
+            while not stop.is_set() and mono_s() < end:
+                stop.wait(min(0.2, max(0.0, end - mono_s())))
                 node.publish_counters()
                 if recorder.failed is not None:
                     code = EXIT_FAILED
                     break
-                if time.monotonic() >= next_line:
+                if mono_s() >= next_line:
                     next_line += period
                     progress(recorder.progress())
-                if recorder.heard == 0 and time.monotonic() >= warn_at:
+                if recorder.heard == 0 and mono_s() >= warn_at:
                     warn_at = inf
                     progress(f"warning: nothing heard from the stack yet at {where}")
         finally:

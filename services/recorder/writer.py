@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -21,6 +20,7 @@ from typing import IO
 
 from mcap.writer import CompressionType, Writer
 
+from common.clock import mono_s
 from common.codec import Message
 from common.counters import Counters
 from common.errors import ConfigError, DecodeError, one_line
@@ -61,7 +61,7 @@ class McapFile(Closing):
         self._schemas: dict[tuple[str, bytes], int] = {}
         self._channels: dict[Channel, int] = {}
         self._flush_period_s = settings.flush_period_s
-        self._next_flush = time.monotonic() + self._flush_period_s
+        self._next_flush = mono_s() + self._flush_period_s
         self._flushed_at = 0
         self.messages = 0
 
@@ -101,7 +101,7 @@ class McapFile(Closing):
 
     def tick(self) -> None:
         """Close the chunk in progress once ``flush_period_s`` has passed since the last."""
-        now = time.monotonic()
+        now = mono_s()
         if now >= self._next_flush:
             self._next_flush = now + self._flush_period_s
             self._writer.flush()  # type: ignore[no-untyped-call]  # mcap's own

@@ -8,20 +8,20 @@ token that ``ros2 node list`` / ``ros2 topic list`` read (services/ros2/wire.py 
 from __future__ import annotations
 
 import itertools
-import time
 from collections.abc import Callable
 from typing import Literal
 
 import zenoh
 
 from common.bus import open_ros_session
+from common.clock import wall_ns
 from common.lifecycle import Closing
 from common.ros2_settings import Ros2Settings
 from services.ros2.convert import RosMessage, cdr_encode
 from services.ros2.wire import (
     DEFAULT_QOS,
     Attachment,
-    QoS,
+    RosQoS,
     data_key,
     endpoint_token,
     gid_for,
@@ -32,7 +32,7 @@ from services.ros2.wire import (
 class RosPublisher:
     """One ROS 2 publisher: CDR payload plus attachment on the rmw_zenoh data key."""
 
-    def __init__(self, graph: RosGraph, topic: str, ros_type: str, qos: QoS) -> None:
+    def __init__(self, graph: RosGraph, topic: str, ros_type: str, qos: RosQoS) -> None:
         self.ros_type = ros_type
         self._distro = graph.settings.distro
         self.key = graph.key(topic, ros_type)
@@ -46,7 +46,7 @@ class RosPublisher:
         self.put_cdr(cdr_encode(self._distro, self.ros_type, msg))
 
     def put_cdr(self, payload: bytes) -> None:
-        attachment = Attachment(next(self._seq), time.time_ns(), self._gid)
+        attachment = Attachment(next(self._seq), wall_ns(), self._gid)
         self._pub.put(payload, attachment=attachment.encode())
 
     def close(self) -> None:
@@ -74,7 +74,7 @@ class RosGraph(Closing):
         s = self.settings
         return data_key(s.domain_id, topic, ros_type, s.distro, s.namespace)
 
-    def token(self, kind: Literal["MP", "MS"], topic: str, ros_type: str, qos: QoS) -> str:
+    def token(self, kind: Literal["MP", "MS"], topic: str, ros_type: str, qos: RosQoS) -> str:
         s = self.settings
         return endpoint_token(
             kind, domain_id=s.domain_id, zid=self._zid, nid=self._nid, eid=next(self._eid),
@@ -82,7 +82,7 @@ class RosGraph(Closing):
             distro=s.distro, qos=qos,
         )  # fmt: skip
 
-    def publisher(self, topic: str, ros_type: str, qos: QoS = DEFAULT_QOS) -> RosPublisher:
+    def publisher(self, topic: str, ros_type: str, qos: RosQoS = DEFAULT_QOS) -> RosPublisher:
         pub = RosPublisher(self, topic, ros_type, qos)
         self._closers.append(pub.close)
         return pub
@@ -92,7 +92,7 @@ class RosGraph(Closing):
         topic: str,
         ros_type: str,
         on_payload: Callable[[str, memoryview], None],
-        qos: QoS = DEFAULT_QOS,
+        qos: RosQoS = DEFAULT_QOS,
     ) -> str:
         """Call ``on_payload(key, cdr)`` for each sample on ``topic``; returns the data key.
 

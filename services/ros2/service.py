@@ -16,11 +16,11 @@ from __future__ import annotations
 
 import dataclasses
 import threading
-import time
 
 import zenoh
 
 from common.bus import QoS
+from common.clock import mono_s
 from common.errors import DecodeError, ImageError
 from common.messages import Detections, Frame, Twist
 from common.node import Node, Put, Tally
@@ -158,9 +158,9 @@ class DebugImages:
         if dets is None:
             return
         frame = self.frames.take(dets.header.stamp_ns)
-        if frame is None or time.monotonic() < self._due:
+        if frame is None or mono_s() < self._due:
             return
-        self._due = time.monotonic() + self._period_s
+        self._due = mono_s() + self._period_s
         try:
             drawn = debug_image(frame, dets, s.debug_jpeg_quality, self.max_frame_pixels)
         except ImageError as exc:

@@ -154,8 +154,9 @@ _ZENOH_DEFAULT_DEPTH = 42
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class QoS:
-    """A QoS profile as a liveliness token carries it. Durations in ns; None is infinite.
+class RosQoS:
+    """A ROS 2 QoS profile as a liveliness token carries it (not common.bus.QoS, our roles).
+    Durations in ns; None is infinite.
 
     The defaults are ROS's default profile (reliable, volatile, keep last 10).
     """
@@ -177,9 +178,9 @@ class QoS:
                 raise ValueError(f"QoS durations must be >= 0 ns, got {ns}")
 
 
-DEFAULT_QOS = QoS()
+DEFAULT_QOS = RosQoS()
 # rmw_qos_profile_sensor_data: what camera and lidar drivers publish with.
-SENSOR_DATA_QOS = QoS(reliability=Reliability.BEST_EFFORT, depth=5)
+SENSOR_DATA_QOS = RosQoS(reliability=Reliability.BEST_EFFORT, depth=5)
 
 
 def _field(value: int, default: int) -> str:
@@ -191,7 +192,7 @@ def _duration(ns: int | None) -> str:
     return f"{_field(sec, _INFINITE[0])},{_field(nsec, _INFINITE[1])}"
 
 
-def qos_string(qos: QoS = DEFAULT_QOS) -> str:
+def qos_string(qos: RosQoS = DEFAULT_QOS) -> str:
     """The token's QoS chunk, ``R:D:H,depth:dl_s,dl_ns:ls_s,ls_ns:lv,lv_s,lv_ns``, with each
     field equal to rmw_zenoh's default left empty (so ROS's default profile is ``::,10:,:,:,,``).
     """
@@ -254,7 +255,7 @@ def endpoint_token(
     topic: str,
     ros_type: str,
     distro: RosDistro,
-    qos: QoS = DEFAULT_QOS,
+    qos: RosQoS = DEFAULT_QOS,
     enclave: str = "/",
 ) -> str:
     """A publisher's (MP) or subscriber's (MS) liveliness key, 13 chunks: the node's, then

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import threading
-import time
 from collections.abc import Callable
 from contextlib import ExitStack
 from typing import Protocol
@@ -18,6 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from common.bus import Publisher, QoS, source_of
+from common.clock import mono_s, wall_ns
 from common.command_sources import CommandSources
 from common.errors import ConfigError, DecodeError
 from common.frames import image_to_frame
@@ -80,7 +80,7 @@ class SimHandlers:
         """``key``: the rmw_zenoh data key the sample came on."""
         try:
             msg = cdr_decode(self.distro, self.ros_type, cdr)
-            twist = twist_from_ros(msg, source="ros2", received_ns=time.time_ns())
+            twist = twist_from_ros(msg, source="ros2", received_ns=wall_ns())
         except DecodeError as exc:
             self.tally.bad_input(key, exc)
             return
@@ -158,7 +158,7 @@ def run(config: Config, stop: threading.Event) -> int:
         def command(twist: Twist, source: str) -> None:
             """A velocity command reached the base, from ``source`` (a publisher's id)."""
             with lock:
-                active, new = sources.heard(source, time.monotonic())
+                active, new = sources.heard(source, mono_s())
                 sane = world.command(twist.linear[0], twist.angular[2])
             if not sane:
                 node.reject(
@@ -198,10 +198,10 @@ def run(config: Config, stop: threading.Event) -> int:
         node.ready()
         dt = 1.0 / s.physics_hz
         started = False
-        boot = next_tick = next_check = time.monotonic()
+        boot = next_tick = next_check = mono_s()
         try:
             while not stop.is_set():
-                now = time.monotonic()
+                now = mono_s()
                 if not started and now >= next_check:
                     # Until the detector and controller are ready the world stands still at
                     # t=0 but its sensors publish on the wall clock, so the detector warms up
@@ -217,8 +217,8 @@ def run(config: Config, stop: threading.Event) -> int:
                     t = world.t if started else now - boot
                     _publish_due(node, world, t, clocks, out, truth_pub, camera, laser, rng, config)
                 node.publish_counters()
-                next_tick = max(next_tick + dt, time.monotonic() - dt)
-                stop.wait(max(0.0, next_tick - time.monotonic()))
+                next_tick = max(next_tick + dt, mono_s() - dt)
+                stop.wait(max(0.0, next_tick - mono_s()))
         finally:
             node.log.info("stopping")
     return 0

@@ -9,11 +9,11 @@ client watches them. Nothing here publishes on the stack's keys but the viewer's
 from __future__ import annotations
 
 import threading
-import time
 
 import foxglove
 from foxglove.websocket import WebSocketServer
 
+from common.clock import mono_s
 from common.contracts import MetricsAnswer
 from common.errors import ConfigError, ImageError
 from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
@@ -93,7 +93,7 @@ class Viewer:
 
     def on_detections(self, payload: bytes) -> None:
         dets = self.tally.decode(self._detections_key, Detections.decode, payload)
-        if dets is not None and not self.pairing.add_detections(dets, time.monotonic()):
+        if dets is not None and not self.pairing.add_detections(dets, mono_s()):
             self.tally.counters.add("detections_unpaired")
 
     def _unshowable(self, what: str, error: ValueError) -> None:
@@ -137,7 +137,7 @@ class Viewer:
             return
         self.trail.add(truth.robot[0], truth.robot[1])
         self.channels.tf.log(pose, log_time=at)
-        now = time.monotonic()
+        now = mono_s()
         if now >= self._next_scene:
             self._next_scene = now + self._scene_period_s
             self.channels.scene.log(scene.scene(truth, self.trail.points()), log_time=at)
@@ -147,7 +147,7 @@ class Viewer:
         period = 1.0 / self.settings.image_rate_hz
         dropped = 0
         while not stop.wait(period):
-            item = self.pairing.take(time.monotonic())
+            item = self.pairing.take(mono_s())
             if self.pairing.dropped > dropped:
                 self.tally.counters.add("images_dropped", self.pairing.dropped - dropped)
                 dropped = self.pairing.dropped

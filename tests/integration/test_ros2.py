@@ -54,7 +54,7 @@ def _zenoh(mode: str, **endpoints: list[str]) -> zenoh.Session:
     return zenoh.open(conf)
 
 
-class Robot:
+class RobotSide:
     """The robot's side: rmw_zenohd's stand-in (a router) and a node publishing its camera
     and laser, with the attachment every rmw_zenoh sample carries."""
 
@@ -102,7 +102,7 @@ class Robot:
 
 def test_a_ros2_robot_feeds_the_stack_and_obeys_it(make_stack, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    robot = Robot(endpoint)
+    robot = RobotSide(endpoint)
     stop = threading.Event()
     try:
         stack: Stack = make_stack(
@@ -285,7 +285,7 @@ def test_no_router_is_one_line_and_a_lost_router_is_survived(make_stack, tmp_pat
 
     # The router goes away while the stack runs, and comes back.
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    robot = Robot(endpoint)
+    robot = RobotSide(endpoint)
     stop = threading.Event()
     stack: Stack = make_stack(
         supervisor={"services": sorted(ROS_SERVICES)}, ros2={"router": [endpoint]}
@@ -317,7 +317,7 @@ def test_no_router_is_one_line_and_a_lost_router_is_survived(make_stack, tmp_pat
         robot.close()  # the robot's router and node are gone
         wait_for(lambda: state() == "stale", 5, "the dead-man stop while the router is gone")
         assert "ros2" in stack.ready_services(), stack.log()
-        robot = Robot(endpoint)  # back, on the same endpoint
+        robot = RobotSide(endpoint)  # back, on the same endpoint
         current["robot"] = robot
         wait_for(lambda: state() in acting, 60, "acting on the person once the router is back")
         assert stack.stop() == 0, stack.log()

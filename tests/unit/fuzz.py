@@ -25,6 +25,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from common.boxes import Boxes
+from common.clock import wall_ns
 from common.codec import Message
 from common.errors import DecodeError
 from common.messages import (
@@ -38,7 +39,6 @@ from common.messages import (
     MetricsSnapshot,
     ServiceCounters,
     Twist,
-    now_ns,
 )
 from common.node import Tally
 from services.ros2.convert import LASER_SCAN, TWIST, TWIST_STAMPED, scan_from_ros, twist_from_ros
@@ -67,7 +67,7 @@ def fuzz(examples: int) -> settings:
 
 
 def header(stamp_ns: int | None = None) -> Header:
-    at = now_ns() if stamp_ns is None else stamp_ns
+    at = wall_ns() if stamp_ns is None else stamp_ns
     return Header(stamp_ns=at, frame_id="camera", seq=7, source="fuzz", mono_ns=5, boot_id="b")
 
 

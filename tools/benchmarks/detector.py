@@ -19,7 +19,6 @@ import dataclasses
 import json
 import os
 import platform
-import time
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from pathlib import Path
@@ -28,6 +27,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from common.clock import ms_since, perf_s
 from common.contracts import BackendBenchmark, BenchmarkReport
 from common.errors import ConfigError, ImageError
 from common.images import list_images, load_image, load_sample
@@ -134,14 +134,14 @@ def _one_round(det: Detector, image: npt.NDArray[np.uint8], bare_input: Any, fir
     """One detect call and one bare run, in the order ``first`` says."""
 
     def timed_detect() -> tuple[DetectionResult, float]:
-        t0 = time.perf_counter()
+        t0 = perf_s()
         result = det.detect(image)
-        return result, (time.perf_counter() - t0) * 1e3
+        return result, ms_since(t0)
 
     def timed_bare() -> float:
-        t0 = time.perf_counter()
+        t0 = perf_s()
         det.backend.infer(bare_input)
-        return (time.perf_counter() - t0) * 1e3
+        return ms_since(t0)
 
     if first:
         result, total_ms = timed_detect()

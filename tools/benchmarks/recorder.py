@@ -13,26 +13,25 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
 import re
-import signal
 import subprocess
 import sys
 import tempfile
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from common.bus import open_session
+from common.clock import mono_s
 from common.config_file import load_config, to_toml
 from common.errors import StackError
 from common.keys import Keys
 from common.machine import machine_info
 from common.messages import Detections, Twist
 from common.settings import REPO_ROOT, Config, ZenohSettings
+from common.spawn import spawn, stop_child
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 
 STARTUP_S = 180.0
@@ -59,7 +58,7 @@ class _Phase:
     def reset(self) -> None:
         with self._lock:
             self.frames = 0
-            self.start = time.monotonic()
+            self.start = mono_s()
             self.latency_ms: list[float] = []
             self.detections_ms: list[float] = []
             self.stages_ms: dict[str, list[float]] = {s: [] for s in STAGES}
@@ -82,7 +81,7 @@ class _Phase:
 
     def take(self) -> tuple[int, float, list[float], list[float], dict[str, list[float]]]:
         with self._lock:
-            elapsed = time.monotonic() - self.start
+            elapsed = mono_s() - self.start
             stages = {s: list(v) for s, v in self.stages_ms.items()}
             return self.frames, elapsed, list(self.latency_ms), list(self.detections_ms), stages
 
@@ -190,14 +189,15 @@ def _run(
         for k in range(args.rounds):
             for condition in ("without", "with"):
                 recorder = None
+                out, err_path = workdir / f"bench-{k}.mcap", workdir / f"bench-{k}.log"
                 if condition == "with":
-                    out = workdir / f"bench-{k}.mcap"
-                    recorder = subprocess.Popen(
-                        [sys.executable, "-m", "services.recorder", "record", "--config",
-                         str(path), "--out", str(out)],
-                        cwd=REPO_ROOT, stderr=subprocess.PIPE, env={**os.environ},
-                        process_group=0,  # in the stack's session, as the service runs
-                    )  # fmt: skip
+                    with err_path.open("wb") as err:  # the child holds its own descriptor
+                        # In the stack's session, as the service runs (common/spawn.py).
+                        recorder = spawn(
+                            [sys.executable, "-m", "services.recorder", "record", "--config",
+                             str(path), "--out", str(out)],
+                            cwd=REPO_ROOT, stderr=err,
+                        )  # fmt: skip
                     wait_ready(session, keys, {"recorder"}, proc, 60.0, stop=stop)
                 phase.reset()
                 if stop.wait(args.phase):
@@ -205,9 +205,8 @@ def _run(
                 took = phase.take()
                 totals[condition] = _add(totals[condition], took)
                 if recorder is not None:
-                    recorder.send_signal(signal.SIGINT)
-                    _, err = recorder.communicate(timeout=60)
-                    found = re.findall(r"(\d+) dropped", err.decode(errors="replace"))
+                    stop_child(recorder, 60.0)
+                    found = re.findall(r"(\d+) dropped", err_path.read_text(errors="replace"))
                     dropped += int(found[-1]) if found else 0
                     recorded += out.stat().st_size / 1e6
                     out.unlink()

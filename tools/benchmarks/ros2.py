@@ -22,7 +22,6 @@ import statistics
 import sys
 import tempfile
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +29,7 @@ import numpy as np
 
 from common.boxes import Boxes
 from common.bus import open_session
+from common.clock import perf_ns, wall_ns
 from common.config_file import to_toml
 from common.keys import Keys
 from common.machine import machine_info
@@ -63,7 +63,7 @@ class _Arrivals:
 
     def arrived(self, stamp_ns: int) -> None:
         with self._cond:
-            self._at[stamp_ns] = time.perf_counter_ns()
+            self._at[stamp_ns] = perf_ns()
             self._cond.notify_all()
 
     def wait(self, stamp_ns: int) -> int | None:
@@ -136,7 +136,7 @@ def run(runs: int, progress: Any = print) -> dict[str, Any]:
                                                        "dets_direct", "dets_bridge")}  # fmt: skip
         lost = dict.fromkeys(lat, 0)
         for i in range(runs):
-            stamp = time.time_ns()
+            stamp = wall_ns()
             pairs = (
                 ("frame_bridge", lambda s=stamp: image_pub.put(
                     frame_to_image(config.ros2.distro, _frame(s, pixels))), frames),
@@ -147,7 +147,7 @@ def run(runs: int, progress: Any = print) -> dict[str, Any]:
             )  # fmt: skip
             for name, send, arrivals in pairs if i % 2 else reversed(pairs):
                 offset = {"frame_bridge": 0, "frame_direct": 1, "dets_bridge": 2}[name]
-                t0 = time.perf_counter_ns()
+                t0 = perf_ns()
                 send()
                 at = arrivals.wait(stamp + offset)
                 if name == "dets_bridge":

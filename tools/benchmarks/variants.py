@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import json
 import random
-import time
 from contextlib import ExitStack
 from typing import Any
 
 import numpy as np
 
+from common.clock import ms_since, perf_s
 from common.errors import ConfigError
 from common.images import SAMPLES, load_sample
 from common.lifecycle import print_progress
@@ -59,10 +59,10 @@ def run_variants(args: Any) -> int:
         for i in range(args.warmup + args.runs):
             random.shuffle(order)
             for label in order:
-                t0 = time.perf_counter()
+                t0 = perf_s()
                 dets[label].detect(image)
                 if i >= args.warmup:
-                    times[label].append((time.perf_counter() - t0) * 1e3)
+                    times[label].append(ms_since(t0))
         reference = [dets[REFERENCE.label].detect(p) for p in photos]
         ref_p50 = float(np.percentile(times[REFERENCE.label], 50))
         for label, det in dets.items():

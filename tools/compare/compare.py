@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Detections
-from tools.compare.runs import Command, Run
+from tools.compare.runs import CommandRecord, Run
 
 #: The stages whose latency is compared: name -> what it covers.
 STAGES: dict[str, str] = {
@@ -74,16 +74,16 @@ def latencies_ms(run: Run) -> dict[str, list[float]]:
     return out
 
 
-def first_commands(run: Run) -> dict[int, Command]:
+def first_commands(run: Run) -> dict[int, CommandRecord]:
     """The first command reacting to each frame, by the frame's capture stamp."""
-    firsts: dict[int, Command] = {}
+    firsts: dict[int, CommandRecord] = {}
     for cmd in sorted(run.commands, key=lambda c: c.stamp_ns):
         if cmd.input_stamp_ns > 0:
             firsts.setdefault(cmd.input_stamp_ns, cmd)
     return firsts
 
 
-def commands_by_seq(run: Run) -> dict[int, Command]:
+def commands_by_seq(run: Run) -> dict[int, CommandRecord]:
     by_stamp = first_commands(run)
     return {
         seq: by_stamp[d.header.stamp_ns]

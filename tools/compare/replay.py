@@ -5,9 +5,9 @@ stack makes of it, then compare the two (compare.py). Bus I/O: services/recorder
 from __future__ import annotations
 
 import threading
-import time
 from pathlib import Path
 
+from common.clock import mono_s
 from common.lifecycle import Progress
 from common.node import Node
 from common.settings import Config
@@ -27,13 +27,13 @@ def replay_and_record(
         try:
             play(config, source, stop, progress, rate=rate)
             progress("waiting for the stack's last detections and commands")
-            written, quiet_since = -1, time.monotonic()
-            end = time.monotonic() + TAIL_MAX_S
-            while time.monotonic() < end and not stop.wait(0.1):
+            written, quiet_since = -1, mono_s()
+            end = mono_s() + TAIL_MAX_S
+            while mono_s() < end and not stop.wait(0.1):
                 now = node.counters.get("written")
                 if now != written:
-                    written, quiet_since = now, time.monotonic()
-                elif time.monotonic() - quiet_since > SETTLE_S:
+                    written, quiet_since = now, mono_s()
+                elif mono_s() - quiet_since > SETTLE_S:
                     break
         finally:
             recorder.close()

@@ -21,7 +21,9 @@ from services.recorder.reading import Input, Recording, input_kind
 
 
 @dataclass(frozen=True, slots=True)
-class Command:
+class CommandRecord:
+    """One velocity command as a recording holds it (the controller's is VelocityCommand)."""
+
     stamp_ns: int
     input_stamp_ns: int
     linear: float  # m/s forward
@@ -33,7 +35,7 @@ class Run:
     path: Path
     frames: int = 0
     detections: dict[int, Detections] = field(default_factory=dict)  # by the frame's seq
-    commands: list[Command] = field(default_factory=list)
+    commands: list[CommandRecord] = field(default_factory=list)
     truncated: bool = False
     # Which model produced the detections: "model (backend/device/precision)", in the order
     # first seen (a run that changed model midway names both).
@@ -82,9 +84,9 @@ def detector_name(body: dict[str, Any]) -> str:
     return f"{model} ({backend})" if backend else model
 
 
-def command_from_json(body: dict[str, Any]) -> Command:
+def command_from_json(body: dict[str, Any]) -> CommandRecord:
     try:
-        return Command(
+        return CommandRecord(
             stamp_ns=int(body["header"]["stamp_ns"]),
             input_stamp_ns=int(body.get("input_stamp_ns", 0)),
             linear=float(body["linear"][0]),

@@ -7,11 +7,11 @@ what ``zstack fast-profile`` runs ahead of time.
 from __future__ import annotations
 
 import random
-import time
 from collections.abc import Sequence
 
 import numpy as np
 
+from common.clock import ms_since, perf_s
 from common.images import load_sample
 from common.lifecycle import Progress
 from common.settings import DetectorSettings
@@ -42,9 +42,9 @@ def measure(
         for _ in range(runs):
             random.shuffle(order)
             for label in order:
-                t0 = time.perf_counter()
+                t0 = perf_s()
                 dets[label].detect(image)
-                times[label].append((time.perf_counter() - t0) * 1e3)
+                times[label].append(ms_since(t0))
     finally:
         for det in dets.values():
             det.close()

@@ -9,9 +9,10 @@ in place, which would also tangle with the results on stdout in a terminal), at 
 from __future__ import annotations
 
 import sys
-import time
 from collections.abc import Callable
 from typing import TextIO
+
+from common.clock import mono_s
 
 #: At most one progress update per this many seconds (the last one is always written).
 PROGRESS_PERIOD_S = 1.0
@@ -47,7 +48,7 @@ class ProgressBar:
         unit: str = "frames",
         stream: TextIO | None = None,
         period_s: float = PROGRESS_PERIOD_S,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] = mono_s,
     ) -> None:
         self._label = label
         self._total = total

@@ -12,9 +12,7 @@ A session is plain JSON (``session.json``) that ``report --from`` reads back.
 
 from __future__ import annotations
 
-import datetime
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, cast
@@ -22,6 +20,7 @@ from typing import Any, cast
 import zenoh
 
 from common.bus import open_session
+from common.clock import mono_s, utc_now, wall_ns
 from common.config_file import load_config
 from common.contracts import Session
 from common.errors import ConfigError, DecodeError
@@ -91,7 +90,7 @@ def _listen(session: zenoh.Session, keys: Keys, agg: Aggregator, lock: threading
             except DecodeError:
                 return
             with lock:
-                feed(msg, time.monotonic())
+                feed(msg, mono_s())
 
         return on_sample
 
@@ -139,10 +138,10 @@ def record(
             lock = threading.Lock()
             agg = Aggregator(duration_s + _WINDOW_MARGIN_S, duration_s + _WINDOW_MARGIN_S)
             subs = _listen(session, keys, agg, lock)
-            start = time.monotonic()
+            start = mono_s()
             stop.wait(duration_s)
             with lock:
-                session_data = snapshot_session(agg, start, time.monotonic())
+                session_data = snapshot_session(agg, start, mono_s())
             for sub in subs:
                 sub.undeclare()
             has_metrics = "metrics" in config.supervisor.services
@@ -162,11 +161,11 @@ def record(
 def snapshot_session(agg: Aggregator, start: float, now: float) -> Session:
     """The recorded part of a session: ``agg``'s answer and samples between ``start`` and
     ``now`` (its clock), timeline times in seconds since ``start``."""
-    header = Header(stamp_ns=time.time_ns(), frame_id="", seq=0, source="report")
+    header = Header(stamp_ns=wall_ns(), frame_id="", seq=0, source="report")
     samples = agg.latency_samples(now)
     return Session(
         version=SESSION_VERSION,
-        created=datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        created=utc_now().isoformat(timespec="seconds"),
         duration_s=round(now - start, 3),
         detector={"model": agg.model, "backend": agg.backend},
         summary=agg.answer(header, now, clock_to_unix=-start),

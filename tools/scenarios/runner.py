@@ -13,7 +13,6 @@ import signal
 import subprocess
 import tempfile
 import threading
-import time
 import uuid
 from pathlib import Path
 from typing import Any
@@ -21,6 +20,7 @@ from typing import Any
 import zenoh
 
 from common.bus import open_session
+from common.clock import mono_s, wall_ns
 from common.config_file import to_toml
 from common.contracts import ControllerMode, ScenarioResult
 from common.errors import DecodeError, StackError
@@ -29,7 +29,7 @@ from common.messages import Detections, GroundTruth, Twist
 from common.settings import Config
 from services.sim.scenarios import SCENARIOS, Scenario
 from tools.launch import free_port, service_pids, start_supervisor, stop_supervisor
-from tools.scenarios.score import Recording, score
+from tools.scenarios.score import ScenarioLog, score
 
 STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
 STOP_TIMEOUT_S = 30.0  # then the whole stack is killed
@@ -72,7 +72,7 @@ def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Con
     )
 
 
-def record_into(session: zenoh.Session, keys: Keys, camera: str, rec: Recording) -> list[Any]:
+def record_into(session: zenoh.Session, keys: Keys, camera: str, rec: ScenarioLog) -> list[Any]:
     """Subscribe to the truth, commands and detections, appending each to ``rec``."""
     lock = threading.Lock()
 
@@ -107,7 +107,7 @@ def run_scenario(base: Config, name: str, log: Any = None, ros2: bool = False) -
     workdir = Path(tempfile.mkdtemp(prefix=f"scenario-{name}-"))
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))
-    rec = Recording()
+    rec = ScenarioLog()
     with (workdir / "stack.log").open("wb") as stack_log:
         proc = start_supervisor(config_path, stack_log)
         try:
@@ -127,22 +127,22 @@ def run_scenario(base: Config, name: str, log: Any = None, ros2: bool = False) -
     return result
 
 
-def _sim_time(rec: Recording) -> float:
+def _sim_time(rec: ScenarioLog) -> float:
     return rec.truths[-1].sim_time_s if rec.truths else 0.0
 
 
 def _drive(
-    proc: subprocess.Popen[bytes], scenario: Scenario, rec: Recording, config_path: Path, log: Any
+    proc: subprocess.Popen[bytes], scenario: Scenario, rec: ScenarioLog, config_path: Path, log: Any
 ) -> None:
     """Wait for the scenario clock to run its course, killing the detector when scripted."""
-    start = time.monotonic()
+    start = mono_s()
     pause = threading.Event()
     while _sim_time(rec) <= 0:
         if proc.poll() is not None:
             raise StackError(
                 f"the stack exited during start-up (see {config_path.parent}/stack.log)"
             )
-        if time.monotonic() - start > STARTUP_TIMEOUT_S:
+        if mono_s() - start > STARTUP_TIMEOUT_S:
             raise StackError(f"the stack did not start within {STARTUP_TIMEOUT_S:.0f} s")
         pause.wait(0.1)
     if log:
@@ -154,7 +154,7 @@ def _drive(
         if kill_at is not None and rec.kill_ns is None and _sim_time(rec) >= kill_at:
             for pid in service_pids("detector", config_path):
                 os.kill(pid, signal.SIGKILL)
-            rec.kill_ns = time.time_ns()
+            rec.kill_ns = wall_ns()
             if log:
                 log(f"{scenario.name}: killed the detector at t={_sim_time(rec):.1f} s")
         pause.wait(0.05)

@@ -33,7 +33,7 @@ STOP_MARGIN_S = 0.5  # detector_dies: allowed on top of the detection timeout
 
 
 @dataclass
-class Recording:
+class ScenarioLog:
     """What the scenario runner heard, in arrival order."""
 
     truths: list[GroundTruth] = field(default_factory=list)
@@ -55,7 +55,7 @@ def _distance(truth: GroundTruth, i: int, radius: float) -> float:
     return math.hypot(tx - x, ty - y) - radius
 
 
-def stale_commands(rec: Recording, timeout_s: float) -> int:
+def stale_commands(rec: ScenarioLog, timeout_s: float) -> int:
     """Non-zero commands on inputs older than the timeout, judged as the controller judges them.
 
     Each Twist carries the capture stamp of the frame it reacts to (``input_stamp_ns``) and is
@@ -72,7 +72,7 @@ def stale_commands(rec: Recording, timeout_s: float) -> int:
 
 
 def score(
-    scenario: Scenario, rec: Recording, world: World, s: ControllerSettings, hfov_deg: float
+    scenario: Scenario, rec: ScenarioLog, world: World, s: ControllerSettings, hfov_deg: float
 ) -> ScenarioResult:
     """The figures of one run, and whether it passed."""
     truths = [t for t in rec.truths if t.sim_time_s > 0]

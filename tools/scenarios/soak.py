@@ -15,7 +15,6 @@ import math
 import random
 import tempfile
 import threading
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,6 +22,7 @@ from typing import Any
 import msgpack
 
 from common.bus import open_session
+from common.clock import mono_s
 from common.config_file import to_toml
 from common.keys import Keys
 from common.messages import GroundTruth
@@ -30,7 +30,7 @@ from common.settings import SERVICES, Config
 from services.sim.scenarios import SCENARIOS
 from tools.launch import service_pids, start_supervisor, stop_supervisor, wait_ready
 from tools.scenarios.runner import STOP_TIMEOUT_S, record_into, scenario_config
-from tools.scenarios.score import Recording
+from tools.scenarios.score import ScenarioLog
 
 READY_TIMEOUT_S = 180.0  # the stack's start-up on a loaded 2-core machine
 WARM_UP_S = 60.0  # model load, caches and allocator pools settle before memory counts as "flat"
@@ -165,12 +165,12 @@ def _flood(config: Config, rate_hz: float, stop: threading.Event, figures: SoakF
     session = open_session(config.zenoh, "observer")
     try:
         period = 1.0 / rate_hz
-        next_at = time.monotonic()
+        next_at = mono_s()
         while not stop.is_set():
             session.put(rng.choice(targets), garbage(rng))
             figures.flood_messages += 1
             next_at += period
-            stop.wait(max(0.0, next_at - time.monotonic()))
+            stop.wait(max(0.0, next_at - mono_s()))
     finally:
         session.close()
 
@@ -184,7 +184,7 @@ def run_soak(
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))
     log_path = workdir / "stack.log"
-    figures, rec, stop = SoakFigures(), Recording(), threading.Event()
+    figures, rec, stop = SoakFigures(), ScenarioLog(), threading.Event()
     with log_path.open("wb") as stack_log:
         proc = start_supervisor(config_path, stack_log)
         session = open_session(config.zenoh, "observer")
@@ -197,8 +197,8 @@ def run_soak(
                        log_path=log_path)  # fmt: skip
             subs = record_into(session, keys, config.stack.camera, rec)
             flooder.start()
-            start = time.monotonic()
-            while (now := time.monotonic() - start) < duration_s:
+            start = mono_s()
+            while (now := mono_s() - start) < duration_s:
                 if proc.poll() is not None:
                     raise RuntimeError(f"the stack exited during the soak (see {log_path})")
                 pids = {n: p[0] for n in config.supervisor.services

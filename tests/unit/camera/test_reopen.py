@@ -66,7 +66,7 @@ class FakeTime:
         return self.is_set()
 
 
-class Recorder:
+class HookCalls:
     """The hooks, recording each call and the fake time it came at."""
 
     def __init__(self, time_: FakeTime) -> None:
@@ -110,7 +110,7 @@ def _values(source: FrameSource, n: int) -> list[int | None]:
 
 def test_a_live_source_that_ends_is_reopened_and_frames_continue() -> None:
     t = FakeTime()
-    rec = Recorder(t)
+    rec = HookCalls(t)
     first, second = FakeSource(_image(1)), FakeSource(_image(2), _image(3))
     factory, calls = _factory(t, second)
     src = ReopeningSource(first, factory, period_s=1.0, stop=t, hooks=rec.hooks, clock=t.clock)
@@ -125,7 +125,7 @@ def test_a_live_source_that_ends_is_reopened_and_frames_continue() -> None:
 @pytest.mark.parametrize("period", [1.0, 60.0])
 def test_failed_attempts_are_retried_at_the_period_with_heartbeats(period: float) -> None:
     t = FakeTime()
-    rec = Recorder(t)
+    rec = HookCalls(t)
     missing = ConfigError(f"{DEVICE}: no such device")
     factory, calls = _factory(t, missing, missing, FakeSource(_image(7)))
     src = ReopeningSource(
@@ -144,7 +144,7 @@ def test_failed_attempts_are_retried_at_the_period_with_heartbeats(period: float
 
 def test_stop_during_the_wait_returns_promptly() -> None:
     stop = threading.Event()
-    rec = Recorder(FakeTime())
+    rec = HookCalls(FakeTime())
     factory, calls = _factory(FakeTime(), *[ConfigError("gone")] * 100)
     first = FakeSource(_image(1))
     src = ReopeningSource(first, factory, period_s=30.0, stop=stop, hooks=rec.hooks)
@@ -160,7 +160,7 @@ def test_stop_during_the_wait_returns_promptly() -> None:
 
 def test_stop_between_attempts_ends_the_wait() -> None:
     t = FakeTime(stop_at=2.5)
-    rec = Recorder(t)
+    rec = HookCalls(t)
     factory, calls = _factory(t, ConfigError("gone"), ConfigError("gone"))
     src = ReopeningSource(
         FakeSource(_image(1)), factory, period_s=1.0, stop=t, hooks=rec.hooks, clock=t.clock
@@ -171,7 +171,7 @@ def test_stop_between_attempts_ends_the_wait() -> None:
 
 def test_a_reopened_source_without_a_first_frame_is_still_lost() -> None:
     t = FakeTime()
-    rec = Recorder(t)
+    rec = HookCalls(t)
     blank = FakeSource(ConfigError(f"{DEVICE}: not one frame could be read"))
     empty = FakeSource()  # opens, then read() gives None at once
     factory, calls = _factory(t, blank, empty, FakeSource(_image(5)))
@@ -186,7 +186,7 @@ def test_a_reopened_source_without_a_first_frame_is_still_lost() -> None:
 
 def test_a_config_error_after_frames_is_a_loss_too() -> None:
     t = FakeTime()
-    rec = Recorder(t)
+    rec = HookCalls(t)
     failing = FakeSource(_image(1), ConfigError(f"{DEVICE}: not one frame could be read"))
     factory, calls = _factory(t, FakeSource(_image(4)))
     src = ReopeningSource(failing, factory, period_s=1.0, stop=t, hooks=rec.hooks, clock=t.clock)
@@ -196,7 +196,7 @@ def test_a_config_error_after_frames_is_a_loss_too() -> None:
 
 def test_a_device_that_never_gave_a_frame_fails_as_at_start_up() -> None:
     t = FakeTime()
-    rec = Recorder(t)
+    rec = HookCalls(t)
     factory, calls = _factory(t)
     src = ReopeningSource(
         FakeSource(ConfigError(f"{DEVICE}: not one frame could be read")),

@@ -10,7 +10,7 @@ import pytest
 from common.boxes import Boxes
 from common.messages import Detections, Header
 from tools.compare.compare import compare_runs, iou_matrix, match_frame, report_markdown
-from tools.compare.runs import Command, Run, detector_name
+from tools.compare.runs import CommandRecord, Run, detector_name
 
 
 def _frame(seq: int, boxes: list[tuple[str, list[float]]], stamp: int = 0) -> Detections:
@@ -56,10 +56,10 @@ def test_compare_runs_counts_matches_commands_and_latency() -> None:
         2: _frame(2, [("person", [30, 30, 40, 40])], stamp=51_000_000_000),
     })  # fmt: skip
     a.commands = [
-        Command(1_100_000_000, 1_000_000_000, 0.3, 0.1),
-        Command(1_200_000_000, 1_000_000_000, 0.0, 0.0),
+        CommandRecord(1_100_000_000, 1_000_000_000, 0.3, 0.1),
+        CommandRecord(1_200_000_000, 1_000_000_000, 0.0, 0.0),
     ]  # a later repeat: ignored
-    b.commands = [Command(50_150_000_000, 50_000_000_000, 0.2, -0.1)]  # fmt: skip
+    b.commands = [CommandRecord(50_150_000_000, 50_000_000_000, 0.2, -0.1)]  # fmt: skip
     a.detectors = ["yolov5s-coco.onnx (onnx/cpu/fp32)"]
     b.detectors = [detector_name({"model": "yolov5s-coco-480.onnx", "backend": "onnx/cpu/int8"})]
     c = compare_runs(a, b, iou_min=0.5)

@@ -18,8 +18,8 @@ from services.ros2.wire import (
     Durability,
     History,
     Liveliness,
-    QoS,
     Reliability,
+    RosQoS,
     data_key,
     dds_type,
     endpoint_token,
@@ -155,30 +155,30 @@ def _parse_qos(text: str) -> list[list[str]]:
     ("qos", "expected"),
     [
         (DEFAULT_QOS, "::,10:,:,:,,"),
-        (QoS(depth=10), "::,10:,:,:,,"),
-        (QoS(depth=42), "::,:,:,:,,"),
+        (RosQoS(depth=10), "::,10:,:,:,,"),
+        (RosQoS(depth=42), "::,:,:,:,,"),
         (SENSOR_DATA_QOS, "2::,5:,:,:,,"),
-        (QoS(durability=Durability.TRANSIENT_LOCAL, depth=1), ":1:,1:,:,:,,"),
-        (QoS(history=History.KEEP_ALL), "::2,10:,:,:,,"),
-        (QoS(reliability=Reliability.BEST_EFFORT, depth=1), "2::,1:,:,:,,"),
-        (QoS(deadline_ns=1_500_000_000), "::,10:1,500000000:,:,,"),
-        (QoS(lifespan_ns=2_000_000_000), "::,10:,:2,0:,,"),
+        (RosQoS(durability=Durability.TRANSIENT_LOCAL, depth=1), ":1:,1:,:,:,,"),
+        (RosQoS(history=History.KEEP_ALL), "::2,10:,:,:,,"),
+        (RosQoS(reliability=Reliability.BEST_EFFORT, depth=1), "2::,1:,:,:,,"),
+        (RosQoS(deadline_ns=1_500_000_000), "::,10:1,500000000:,:,,"),
+        (RosQoS(lifespan_ns=2_000_000_000), "::,10:,:2,0:,,"),
         (
-            QoS(liveliness=Liveliness.MANUAL_BY_TOPIC, liveliness_lease_ns=3_000_000_001),
+            RosQoS(liveliness=Liveliness.MANUAL_BY_TOPIC, liveliness_lease_ns=3_000_000_001),
             "::,10:,:,:3,3,1",
         ),
     ],
 )
-def test_qos_strings(qos: QoS, expected: str) -> None:
+def test_qos_strings(qos: RosQoS, expected: str) -> None:
     assert qos_string(qos) == expected
     _parse_qos(expected)
 
 
 def test_qos_refuses_negative_values() -> None:
     with pytest.raises(ValueError):
-        QoS(depth=-1)
+        RosQoS(depth=-1)
     with pytest.raises(ValueError):
-        QoS(deadline_ns=-1)
+        RosQoS(deadline_ns=-1)
 
 
 def test_mangle() -> None:

@@ -13,7 +13,7 @@ from services.sim.laser import LaserSpec, cast
 from services.sim.render import CameraSpec, render
 from services.sim.scenarios import SCENARIOS, person
 from services.sim.world import BaseLimits, Obstacle, Robot, World
-from tools.scenarios.score import Recording, score, stale_commands
+from tools.scenarios.score import ScenarioLog, score, stale_commands
 
 FREE = BaseLimits(max_linear=9, max_angular=9, max_linear_accel=1e9, max_angular_accel=1e9)
 
@@ -91,7 +91,7 @@ def _twist(t_ns: int, v: float, input_ns: int = 0) -> Twist:
 
 def test_stale_commands_counts_moving_commands_on_frames_older_than_the_timeout() -> None:
     s = 1_000_000_000
-    rec = Recording(
+    rec = ScenarioLog(
         twists=[
             _twist(int(1.5 * s), 0.3, input_ns=1 * s),  # 0.5 s old: fresh
             _twist(3 * s, 0.0, input_ns=1 * s),  # zero: fine however old
@@ -117,11 +117,11 @@ def test_score_reach_and_verdict() -> None:
         )
         for t, x in ((0.5, 0.0), (5.0, 2.0), (9.0, 2.8))
     ]
-    result = score(sc, Recording(truths=truths), sc.build(), s, 60.0)
+    result = score(sc, ScenarioLog(truths=truths), sc.build(), s, 60.0)
     assert result["final_distance_m"] == pytest.approx(4.0 - 2.8 - 0.25)
     assert result["time_to_reach_s"] == 9.0
     assert result["success"] and result["checks"]["reached the stop distance"]
-    far = score(sc, Recording(truths=truths[:2]), sc.build(), s, 60.0)
+    far = score(sc, ScenarioLog(truths=truths[:2]), sc.build(), s, 60.0)
     assert not far["success"]
 
 
@@ -138,7 +138,7 @@ def test_min_clearance_is_to_the_obstacle_surface() -> None:
         )
     ]
     world = World(Robot(), obstacles=[Obstacle(2.5, 0.0, 0.3)], targets=sc.build().targets)
-    result = score(sc, Recording(truths=truths), world, ControllerSettings(), 60.0)
+    result = score(sc, ScenarioLog(truths=truths), world, ControllerSettings(), 60.0)
     assert result["min_clearance_m"] == pytest.approx(0.5)
 
 
