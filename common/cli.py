@@ -4,7 +4,13 @@ and ``python -m tools.<name> COMMAND [options]``.
 A service lists its commands; ``serve`` (run the service on the bus) comes first and is the
 default, so ``python -m services.camera --config X`` and ``... serve --config X`` are the same,
 and the supervisor starts every service as ``python -m services.<name> serve --config FILE``.
+A module of one command may leave its name out: its options are then the module's own, and its
+usage and help name the module (``python -m deploy.supervisor --duration 5``, ``zstack run``).
 Results meant for programs go to stdout; progress and status go to stderr.
+
+A module's ``__main__`` lists its :class:`Command` entries and calls :func:`service_main`; each
+command's ``run`` turns the parsed arguments into typed values (keyword arguments or a frozen
+options dataclass of the module that does the work) and calls it: no namespace goes further.
 """
 
 from __future__ import annotations
@@ -76,6 +82,19 @@ def build_parser(
     return parser
 
 
+def build_single_parser(prog: str, description: str, command: Command) -> argparse.ArgumentParser:
+    """The parser of a module of one command run without naming it: the command's options are
+    the module's own."""
+    parser = argparse.ArgumentParser(
+        prog=program(prog),
+        description=description,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    command.add_arguments(parser)
+    parser.set_defaults(run=command.run)
+    return parser
+
+
 def service_main(
     prog: str,
     description: str,
@@ -87,9 +106,13 @@ def service_main(
     the command run when none is named (a tool has none: ``default=None``)."""
     args = list(sys.argv[1:] if argv is None else argv)
     names = [c.name for c in commands]
-    if default is not None:
-        args = with_default(args, names, default)
-    parsed = build_parser(prog, description, commands).parse_args(args)
+    if default is not None and names == [default] and (not args or args[0] != default):
+        parser = build_single_parser(prog, description, commands[0])
+    else:
+        if default is not None:
+            args = with_default(args, names, default)
+        parser = build_parser(prog, description, commands)
+    parsed = parser.parse_args(args)
     run: Callable[[argparse.Namespace], int] = parsed.run
     return run(parsed)
 

@@ -27,7 +27,7 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from common.certificates import refuse_server_capable
-from common.cli import program
+from common.cli import Command, service_main
 from common.clock import utc_now
 from common.errors import ConfigError
 from common.lifecycle import run_main
@@ -217,33 +217,53 @@ def generate(
     return written
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(
-        prog=program("python -m deploy.credentials"), description=__doc__
-    )
-    parser.add_argument("--dir", type=Path, default=DEFAULT_DIR, help="default: secrets/")
-    parser.add_argument(
+def say_written(directory: Path, hosts: tuple[str, ...], days: int) -> None:
+    """What :func:`generate` wrote, and how to use it, on stderr."""
+    n = len(PRINCIPALS)
+    names = ", ".join(dict.fromkeys((*DEFAULT_HOSTS, *hosts)))
+    for line in (
+        f"wrote {n} passwords and {users_file(directory).name} to {directory}",
+        f"wrote a CA and {n} certificates (only the supervisor's serves, for {names}), "
+        f"valid {days} days, to {directory}",
+        f'use in the stack config: [zenoh] auth = "password" or "certificate", '
+        f'credentials_dir = "{directory}"',
+    ):
+        print(f"credentials: {line}", file=sys.stderr)
+
+
+# --- the command line: python -m deploy.credentials (zstack credentials) ------------------------
+
+
+def _credentials_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dir", type=Path, default=DEFAULT_DIR, help="default: secrets/")
+    p.add_argument(
         "--host",
         action="append",
         default=[],
         help="another name or IP address the supervisor is reached at (repeatable)",
     )
-    parser.add_argument("--force", action="store_true", help="replace existing credentials")
-    parser.add_argument("--days", type=int, default=DEFAULT_DAYS, help="certificate validity")
-    args = parser.parse_args()
+    p.add_argument("--force", action="store_true", help="replace existing credentials")
+    p.add_argument("--days", type=int, default=DEFAULT_DAYS, help="certificate validity")
+
+
+def _credentials(args: argparse.Namespace) -> int:
     directory: Path = args.dir.resolve()
-    generate(directory, tuple(args.host), args.days, args.force)
-    n = len(PRINCIPALS)
-    names = ", ".join(dict.fromkeys((*DEFAULT_HOSTS, *args.host)))
-    for line in (
-        f"wrote {n} passwords and {users_file(directory).name} to {directory}",
-        f"wrote a CA and {n} certificates (only the supervisor's serves, for {names}), "
-        f"valid {args.days} days, to {directory}",
-        f'use in the stack config: [zenoh] auth = "password" or "certificate", '
-        f'credentials_dir = "{directory}"',
-    ):
-        print(f"credentials: {line}", file=sys.stderr)
+    hosts = tuple(args.host)
+    generate(directory, hosts, args.days, args.force)
+    say_written(directory, hosts, args.days)
     return 0
+
+
+COMMANDS = [
+    Command("credentials", "write the secure profile's credentials", _credentials_arguments,
+            _credentials),
+]  # fmt: skip
+
+
+def main() -> int:
+    return service_main(
+        "python -m deploy.credentials", __doc__ or "", COMMANDS, default="credentials"
+    )
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ from typing import cast
 import zenoh
 
 from common.bus import open_hub
-from common.cli import program
+from common.cli import Command, add_config, service_main
 from common.clock import mono_s
 from common.config_file import load_config
 from common.contracts import MetricsAnswer
@@ -276,20 +276,31 @@ def service_failure(p: ServiceProcess) -> StackError:
     return kinds.get(p.last_exit, StackError)(f"{why} (exit code {p.last_exit}; not restarted)")
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(
-        prog=program("python -m deploy.supervisor"), description=__doc__
-    )
-    parser.add_argument("--config", help="stack config (default deploy/stack.toml)")
-    parser.add_argument("--duration", type=float, help="run headless for S seconds, then stop")
-    parser.add_argument(
+# --- the command line: python -m deploy.supervisor (zstack run) --------------------------------
+
+
+def _run_arguments(p: argparse.ArgumentParser) -> None:
+    add_config(p)
+    p.add_argument("--duration", type=float, help="run headless for S seconds, then stop")
+    p.add_argument(
         "--timeline", action="store_true",
         help="with --duration: keep the metrics' per-second timeline in the JSON summary",
     )  # fmt: skip
-    args = parser.parse_args()
+
+
+def _run(args: argparse.Namespace) -> int:
     stop = stop_event()
     config = load_config(args.config)
     return supervise(config, stop, args.duration, timeline=args.timeline)
+
+
+COMMANDS = [
+    Command("run", "start the stack under the supervisor (Ctrl-C stops it)", _run_arguments, _run)
+]
+
+
+def main() -> int:
+    return service_main("python -m deploy.supervisor", __doc__ or "", COMMANDS, default="run")
 
 
 if __name__ == "__main__":

@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 
 from common.cli import Command, add_config, service_main
 from common.config_file import load_config
-from common.lifecycle import run_main, setup_logging, stop_event
+from common.errors import StackError
+from common.lifecycle import exit_code, run_main, setup_logging, stop_event
 
 
 def _serve_arguments(p: argparse.ArgumentParser) -> None:
@@ -41,7 +43,13 @@ COMMANDS = [Command("serve", "run the detector service on the Zenoh bus", _serve
 
 
 def main() -> int:
-    return service_main("python -m services.detector", __doc__ or "", COMMANDS)
+    """The command's exit code; a StackError is one line, ``error: ...``, as the detector's
+    commands write it (the supervisor names the service: ``detector: error: ...``)."""
+    try:
+        return service_main("python -m services.detector", __doc__ or "", COMMANDS)
+    except StackError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return exit_code(exc)
 
 
 if __name__ == "__main__":

@@ -26,7 +26,7 @@ FPS = 5.0
 SIZE = (448, 300)  # chelsea (451x300) cropped to an even width, which every codec accepts
 
 
-def run(*args: str | Path, module: str = "services.detector") -> subprocess.CompletedProcess[str]:
+def run(*args: str | Path, module: str = "tools.detector") -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", module, *map(str, args)],
         cwd=REPO,

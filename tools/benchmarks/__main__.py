@@ -15,9 +15,10 @@ from common.lifecycle import run_main, setup_logging, stop_event
 
 
 def _recorder_arguments(p: argparse.ArgumentParser) -> None:
-    from tools.benchmarks import recorder
-
-    recorder.add_arguments(p)
+    p.add_argument("--config", help="the stack to run (default deploy/stack.toml)")
+    p.add_argument("--rounds", type=int, default=3, help="phases of each condition (default 3)")
+    p.add_argument("--phase", type=float, default=20.0, help="seconds per phase (default 20)")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
 def recorder(args: argparse.Namespace) -> int:
@@ -25,20 +26,19 @@ def recorder(args: argparse.Namespace) -> int:
     logging.getLogger().setLevel(logging.WARNING)
     from tools.benchmarks import recorder as bench
 
-    return bench.main(args, stop)
+    return bench.main(args.config, args.rounds, args.phase, args.json, stop)
 
 
 def _ros2_arguments(p: argparse.ArgumentParser) -> None:
-    from tools.benchmarks import ros2
-
-    ros2.add_arguments(p)
+    p.add_argument("--runs", type=int, default=200, help="messages per path (default 200)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def ros2(args: argparse.Namespace) -> int:
     setup_logging("ros2-bench", "WARNING")
     from tools.benchmarks import ros2 as bench
 
-    return bench.main(args)
+    return bench.main(args.runs, args.json)
 
 
 COMMANDS = [

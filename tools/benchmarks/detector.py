@@ -14,13 +14,13 @@ that a box scored 0.249 instead of 0.251 still counts as found, as COCO evaluati
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import os
 import platform
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +32,6 @@ from common.contracts import BackendBenchmark, BenchmarkReport
 from common.errors import ConfigError, ImageError
 from common.images import list_images, load_image, load_sample
 from common.machine import cpu_model
-from common.settings import DetectorSettings
 from services.detector.pipeline import Detector
 from services.detector.types import DetectionResult
 
@@ -44,30 +43,21 @@ CANDIDATE_CONF = 0.001
 REFERENCE = "onnx"  # ONNX Runtime on the CPU runs the model as exported: FP32 for ours
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    """The benchmark's own options (the command line adds ``--model``)."""
-    p.add_argument(
-        "--backend",
-        action="append",
-        help="backend to time: onnx, tensorrt, cuda, openvino or auto; repeat to compare "
-        "(default onnx)",
-    )
-    p.add_argument("--runs", type=int, default=50, help="timed runs (default 50)")
-    p.add_argument("--warmup", type=int, default=5, help="untimed runs first (default 5)")
-    p.add_argument("--image", help="image to time on (default: scikit-image chelsea)")
-    p.add_argument(
-        "--images",
-        help="folder of photos for the agreement score (default: six scikit-image photos)",
-    )
-    p.add_argument(
-        "--conf", type=float, default=DetectorSettings().conf, help="reference threshold"
-    )
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument(
-        "--variants",
-        help="compare backend:precision:size variants instead, e.g. "
-        "onnx:fp32:640,onnx:int8:480,onnx:fp32:416 (bench_variants.py)",
-    )
+@dataclass(frozen=True, slots=True, kw_only=True)
+class BenchmarkOptions:
+    """What ``benchmark`` was asked: the model, the backends (empty: the reference alone), the
+    rounds, the image timed and the photos scored, the reference's threshold, the output; or,
+    with ``variants``, the backend:precision:size variants to compare instead."""
+
+    model: str | None
+    backends: tuple[str, ...]
+    runs: int
+    warmup: int
+    image: str | None  # None: scikit-image chelsea
+    images: str | None  # None: the six scikit-image photos of SAMPLE_IMAGES
+    conf: float
+    as_json: bool
+    variants: str | None
 
 
 def machine() -> dict[str, Any]:
@@ -163,34 +153,43 @@ def _detect_all(
         det.settings = saved
 
 
-def run(args: argparse.Namespace, resolve_model: Callable[[str | None], Path]) -> int:
+def run(options: BenchmarkOptions, resolve_model: Callable[[str | None], Path]) -> int:
     """Time every requested backend in one interleaved loop, then score agreement."""
-    if args.variants:
+    if options.variants:
         from tools.benchmarks.variants import run_variants
 
-        return run_variants(args)
-    if args.runs < 1 or args.warmup < 0:
-        raise ConfigError(f"--runs must be >= 1 and --warmup >= 0, got {args.runs}, {args.warmup}")
-    if not 0 <= args.conf <= 1:
-        raise ConfigError(f"--conf must be a number in [0, 1], got {args.conf}")
-    # Imported here: every command line parse imports this module, not only benchmark's.
+        return run_variants(
+            options.variants,
+            model=options.model,
+            conf=options.conf,
+            runs=options.runs,
+            warmup=options.warmup,
+            as_json=options.as_json,
+        )
+    if options.runs < 1 or options.warmup < 0:
+        raise ConfigError(
+            f"--runs must be >= 1 and --warmup >= 0, got {options.runs}, {options.warmup}"
+        )
+    if not 0 <= options.conf <= 1:
+        raise ConfigError(f"--conf must be a number in [0, 1], got {options.conf}")
+    # Imported here: the variants comparison above does without it.
     from tools.evaluation.agreement import score
 
-    labels = list(dict.fromkeys(args.backend or [REFERENCE]))  # repeated names run once
-    image = load_image(args.image) if args.image else _sample("chelsea")
-    photos = agreement_images(args.images)
-    model = resolve_model(args.model)
+    labels = list(dict.fromkeys(options.backends or [REFERENCE]))  # repeated names run once
+    image = load_image(options.image) if options.image else _sample("chelsea")
+    photos = agreement_images(options.images)
+    model = resolve_model(options.model)
     with ExitStack() as stack:
         dets = {name: stack.enter_context(Detector.open(model, backend=name)) for name in labels}
         timings = {name: _Timings() for name in labels}
         bare_inputs = {name: det.preprocess([image])[0].copy() for name, det in dets.items()}
-        for i in range(args.warmup + args.runs):
+        for i in range(options.warmup + options.runs):
             for k in range(len(labels)):  # rotate the start so no backend always runs first
                 name = labels[(i + k) % len(labels)]
                 result, total_ms, bare_ms = _one_round(
                     dets[name], image, bare_inputs[name], i % 2 == 0
                 )
-                if i >= args.warmup:
+                if i >= options.warmup:
                     timings[name].add(result, total_ms, bare_ms)
         reports = {name: timings[name].report(dets[name]) for name in labels}
         ref = next(
@@ -202,7 +201,7 @@ def run(args: argparse.Namespace, resolve_model: Callable[[str | None], Path]) -
             None,
         ) or stack.enter_context(Detector.open(model, backend=REFERENCE))
         pictures = [img for _, img in photos]
-        truth = _detect_all(ref, pictures, args.conf)
+        truth = _detect_all(ref, pictures, options.conf)
         for name, det in dets.items():
             reports[name]["agreement"] = score(
                 truth, _detect_all(det, pictures, CANDIDATE_CONF)
@@ -210,28 +209,28 @@ def run(args: argparse.Namespace, resolve_model: Callable[[str | None], Path]) -
         first = dets[labels[0]]
         report: BenchmarkReport = {
             **reports[labels[0]],
-            "runs": args.runs,
-            "warmup": args.warmup,
+            "runs": options.runs,
+            "warmup": options.warmup,
             "model": {
                 "path": str(model),
                 "family": first.info.family.value,
                 "input": [first.info.input_height, first.info.input_width],
             },
             "image": {
-                "path": args.image or "skimage:chelsea",
+                "path": options.image or "skimage:chelsea",
                 "width": image.shape[1],
                 "height": image.shape[0],
             },
             "agreement_reference": {
                 "backend": f"{ref.backend.name}/{ref.backend.device}/{ref.backend.precision}",
-                "conf": args.conf,
+                "conf": options.conf,
                 "candidate_conf": CANDIDATE_CONF,
                 "images": [label for label, _ in photos],
             },
             "backends": reports,
             "machine": machine(),
         }
-    print(json.dumps(report) if args.json else format_table(reports))
+    print(json.dumps(report) if options.as_json else format_table(reports))
     return 0
 
 

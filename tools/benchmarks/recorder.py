@@ -10,7 +10,6 @@ Prints each condition's FPS and latency p50 over all its phases, and their ratio
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import re
@@ -39,13 +38,6 @@ WARMUP_S = 10.0
 STACK = ("sim", "detector", "controller", "metrics")
 #: Where a frame's time to detections goes: capture -> the detector took it, then its stages.
 STAGES = ("transport", "preprocess", "inference", "postprocess")
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", help="the stack to run (default deploy/stack.toml)")
-    p.add_argument("--rounds", type=int, default=3, help="phases of each condition (default 3)")
-    p.add_argument("--phase", type=float, default=20.0, help="seconds per phase (default 20)")
-    p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
 class _Phase:
@@ -122,18 +114,22 @@ def _add(total: list[Any], took: tuple[Any, ...]) -> list[Any]:
     return out
 
 
-def main(args: argparse.Namespace, stop: threading.Event) -> int:
-    if args.rounds < 1 or args.phase <= 0:
+def main(
+    config_path: str | None, rounds: int, phase_s: float, as_json: bool, stop: threading.Event
+) -> int:
+    """Run the stack of ``config_path`` (None: deploy/stack.toml) for ``rounds`` phases of
+    ``phase_s`` seconds in each condition, and print the figures (as JSON with ``as_json``)."""
+    if rounds < 1 or phase_s <= 0:
         raise StackError("--rounds must be >= 1 and --phase > 0")
     with tempfile.TemporaryDirectory(prefix="recorder-bench-") as tmp:
         workdir = Path(tmp)
-        config = _config(load_config(args.config), workdir)
+        config = _config(load_config(config_path), workdir)
         path = workdir / "stack.toml"
         path.write_text(to_toml(dataclasses.replace(config, path=str(path))))
         with (workdir / "stack.log").open("wb") as log:
             proc = start_supervisor(path, log)
         try:
-            figures = _run(config, path, proc, workdir, args, stop)
+            figures = _run(config, path, proc, workdir, rounds, phase_s, stop)
         finally:
             stop_supervisor(proc, 30.0)
     off, on = figures["without"], figures["with"]
@@ -141,7 +137,7 @@ def main(args: argparse.Namespace, stop: threading.Event) -> int:
     figures["e2e_p50_ratio"] = on["e2e_p50_ms"] / off["e2e_p50_ms"]
     figures["detections_p50_ratio"] = on["detections_p50_ms"] / off["detections_p50_ms"]
     figures["machine"] = machine_info()
-    if args.json:
+    if as_json:
         print(json.dumps(figures, indent=2))
         return 0
     print(f"{'':18}{'without':>10}{'with':>10}{'ratio':>8}")
@@ -158,14 +154,14 @@ def main(args: argparse.Namespace, stop: threading.Event) -> int:
     for stage in STAGES:
         a, b = off[f"{stage}_p50_ms"], on[f"{stage}_p50_ms"]
         print(f"{'  ' + stage + ' p50':18}{a:10.1f}{b:10.1f}{b / a if a else float('nan'):8.3f}")
-    print(f"({args.rounds} phases of {args.phase:.0f} s each; recorder wrote "
+    print(f"({rounds} phases of {phase_s:.0f} s each; recorder wrote "
           f"{figures['recorded_mb']:.1f} MB, dropped {figures['dropped']})")  # fmt: skip
     return 0
 
 
 def _run(
     config: Config, path: Path, proc: subprocess.Popen[bytes], workdir: Path,
-    args: argparse.Namespace, stop: threading.Event,
+    rounds: int, phase_s: float, stop: threading.Event,
 ) -> dict[str, Any]:  # fmt: skip
     keys = Keys(config.stack.prefix)
     phase = _Phase()
@@ -186,7 +182,7 @@ def _run(
             c: [0, 0.0, [], [], {s: [] for s in STAGES}] for c in ("without", "with")
         }
         dropped, recorded = 0, 0.0
-        for k in range(args.rounds):
+        for k in range(rounds):
             for condition in ("without", "with"):
                 recorder = None
                 out, err_path = workdir / f"bench-{k}.mcap", workdir / f"bench-{k}.log"
@@ -200,7 +196,7 @@ def _run(
                         )  # fmt: skip
                     wait_ready(session, keys, {"recorder"}, proc, 60.0, stop=stop)
                 phase.reset()
-                if stop.wait(args.phase):
+                if stop.wait(phase_s):
                     raise KeyboardInterrupt
                 took = phase.take()
                 totals[condition] = _add(totals[condition], took)
@@ -212,7 +208,7 @@ def _run(
                     out.unlink()
         return {
             **{c: _summary(*totals[c]) for c in totals},
-            "rounds": args.rounds, "phase_s": args.phase, "dropped": dropped,
+            "rounds": rounds, "phase_s": phase_s, "dropped": dropped,
             "recorded_mb": recorded,
         }  # fmt: skip
     finally:

@@ -15,7 +15,6 @@ bridge's added p50, with the machine it ran on.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import statistics
@@ -191,12 +190,15 @@ def _ros_stamp(config: Config, cdr: memoryview) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
-def main(args: argparse.Namespace) -> int:
+def main(runs: int, as_json: bool) -> int:
+    """Measure ``runs`` messages per path and print the figures (one JSON object with
+    ``as_json``)."""
+
     def progress(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
-    result = run(args.runs, progress)
-    if args.json:
+    result = run(runs, progress)
+    if as_json:
         print(json.dumps(result))
         return 0
     for name, figures in result["paths"].items():
@@ -206,8 +208,3 @@ def main(args: argparse.Namespace) -> int:
     print(f"bridge adds at p50: frames in {added['frames_in']:+.3f} ms, "
           f"detections out {added['detections_out']:+.3f} ms")  # fmt: skip
     return 0
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--runs", type=int, default=200, help="messages per path (default 200)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")

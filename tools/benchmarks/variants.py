@@ -35,14 +35,17 @@ def parse_variants(text: str) -> list[Variant]:
     return list(dict.fromkeys([REFERENCE, *variants]))
 
 
-def run_variants(args: Any) -> int:
-    """Time, score and print every variant of ``args.variants``."""
+def run_variants(
+    spec: str, *, model: str | None, conf: float, runs: int, warmup: int, as_json: bool
+) -> int:
+    """Time, score and print every variant of ``spec`` (``--variants``): ``warmup`` untimed
+    rounds, then ``runs`` timed ones; one JSON object with ``as_json``, else a table."""
     from tools.evaluation.labelled_set import labelled_ap50, matched_boxes
 
-    if args.runs < 1 or args.warmup < 0:
-        raise ConfigError(f"--runs must be >= 1 and --warmup >= 0, got {args.runs}, {args.warmup}")
-    variants = parse_variants(args.variants)
-    base = DetectorSettings(model=args.model or "", conf=args.conf)
+    if runs < 1 or warmup < 0:
+        raise ConfigError(f"--runs must be >= 1 and --warmup >= 0, got {runs}, {warmup}")
+    variants = parse_variants(spec)
+    base = DetectorSettings(model=model or "", conf=conf)
     image = load_sample("chelsea")
     photos = [load_sample(name) for name in SAMPLES]
     rows: dict[str, dict[str, Any]] = {}
@@ -55,13 +58,13 @@ def run_variants(args: Any) -> int:
             rows[v.label] = {"runs_as": variant_of(det), "note": note}
         times: dict[str, list[float]] = {label: [] for label in dets}
         order = list(dets)
-        print_progress(f"benchmark: {len(order)} variants, {args.warmup}+{args.runs} rounds")
-        for i in range(args.warmup + args.runs):
+        print_progress(f"benchmark: {len(order)} variants, {warmup}+{runs} rounds")
+        for i in range(warmup + runs):
             random.shuffle(order)
             for label in order:
                 t0 = perf_s()
                 dets[label].detect(image)
-                if i >= args.warmup:
+                if i >= warmup:
                     times[label].append(ms_since(t0))
         reference = [dets[REFERENCE.label].detect(p) for p in photos]
         ref_p50 = float(np.percentile(times[REFERENCE.label], 50))
@@ -77,8 +80,8 @@ def run_variants(args: Any) -> int:
             )
     from common.machine import machine_info
 
-    report = {"runs": args.runs, "warmup": args.warmup, "variants": rows, "machine": machine_info()}
-    print(json.dumps(report) if args.json else format_rows(rows))
+    report = {"runs": runs, "warmup": warmup, "variants": rows, "machine": machine_info()}
+    print(json.dumps(report) if as_json else format_rows(rows))
     return 0
 
 

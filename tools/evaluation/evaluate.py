@@ -7,9 +7,9 @@ mAP; ``--conf-threshold`` (0.25, the stack's default) is where precision and rec
 
 from __future__ import annotations
 
-import argparse
 import json
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -107,52 +107,48 @@ def _check_fraction(name: str, value: float) -> None:
         raise DatasetError(f"{name} must be within 0..1, got {value}")
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclass(frozen=True, slots=True, kw_only=True)
+class EvaluateOptions:
+    """What ``evaluate`` was asked: the dataset, the model and its backend, the thresholds
+    (``conf``: the floor of the detections fed to mAP; ``conf_threshold``: where precision and
+    recall are read), and the output."""
+
+    dataset: str  # a COCO JSON file or a YOLO folder
+    images: str | None  # COCO: the folder its file_names are relative to
+    model: str | None  # None: the default model, fetched
+    backend: str
+    conf: float
+    iou: float
+    conf_threshold: float
+    as_json: bool
+
+
+def run(options: EvaluateOptions) -> int:
     """The ``evaluate`` command: load, detect, score, print."""
     from services.detector import Detector, ensure_default_model
 
-    for name in ("conf", "iou", "conf_threshold"):
-        _check_fraction(f"--{name.replace('_', '-')}", getattr(args, name))
-    dataset = load_dataset(args.dataset, args.images)
-    model = Path(args.model) if args.model else ensure_default_model(progress=print_progress)
+    for name, value in (
+        ("--conf", options.conf),
+        ("--iou", options.iou),
+        ("--conf-threshold", options.conf_threshold),
+    ):
+        _check_fraction(name, value)
+    dataset = load_dataset(options.dataset, options.images)
+    model = Path(options.model) if options.model else ensure_default_model(progress=print_progress)
     # max_det keeps its one default, 300 (Ultralytics' own): COCO then keeps the best 100 per
     # image and class.
-    settings = DetectorSettings(conf=args.conf, iou=args.iou)
-    with Detector.open(model, backend=args.backend, settings=settings) as detector:
+    settings = DetectorSettings(conf=options.conf, iou=options.iou)
+    with Detector.open(model, backend=options.backend, settings=settings) as detector:
         names = detector.names
         ground_truth_for(dataset, names)  # before the run: nothing to score is an error now
         detections = detect_dataset(detector, dataset, print_progress)
-    report = score(dataset, names, detections, args.conf_threshold)
+    report = score(dataset, names, detections, options.conf_threshold)
     if report.excluded_categories:
         unknown = ", ".join(report.excluded_categories)
         print_progress(f"evaluate: not scored, the model has no such class: {unknown}")
-    if args.json:
-        extra = {"dataset": str(dataset.source), "model": str(model), "backend": args.backend}
+    if options.as_json:
+        extra = {"dataset": str(dataset.source), "model": str(model), "backend": options.backend}
         print(json.dumps({**report.to_json_dict(), **extra}))
     else:
         print(format_text(report, str(dataset.source)))
     return 0
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    default_iou = DetectorSettings().iou
-    parser.add_argument("--dataset", required=True, help="COCO JSON file or YOLO folder")
-    parser.add_argument("--images", help="COCO: folder the file_names are relative to")
-    parser.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model)")
-    parser.add_argument("--backend", default="onnx", help="detector backend (default onnx)")
-    parser.add_argument(
-        "--conf",
-        type=float,
-        default=DEFAULT_EVAL_CONF,
-        help=f"score floor of the detections fed to mAP (default {DEFAULT_EVAL_CONF})",
-    )
-    parser.add_argument(
-        "--iou", type=float, default=default_iou, help=f"NMS IoU (default {default_iou})"
-    )
-    parser.add_argument(
-        "--conf-threshold",
-        type=float,
-        default=DEFAULT_CONF_THRESHOLD,
-        help=f"score at which precision and recall are read (default {DEFAULT_CONF_THRESHOLD})",
-    )
-    parser.add_argument("--json", action="store_true", help="print one JSON object")

@@ -1,4 +1,4 @@
-"""python -m tools.report [report] [--duration S | --session FILE] [options]
+"""python -m tools.report [report] [--duration S | --from FILE] [options]
 
 report (the only command) runs the stack for a while (or reads a saved session) and writes
 report.md with plots.
@@ -13,17 +13,42 @@ from common.lifecycle import run_main, setup_logging, stop_event
 
 
 def _report_arguments(p: argparse.ArgumentParser) -> None:
-    from tools.report import report
+    from tools.report.report import DEFAULT_DURATION_S, DEFAULT_STARTUP_TIMEOUT_S
 
-    report.add_arguments(p)
+    p.add_argument("--out", required=True, help="folder for report.md, plots, session.json")
+    p.add_argument("--config", help="stack config to run (default deploy/stack.toml)")
+    p.add_argument(
+        "--duration", type=float, help=f"seconds to record (default {DEFAULT_DURATION_S:.0f})"
+    )
+    p.add_argument("--from", dest="from_file", metavar="FILE", help="a saved session.json")
+    p.add_argument(
+        "--benchmark",
+        action="append",
+        metavar="FILE",
+        help="detector `benchmark --json` output; repeat to compare backends",
+    )
+    p.add_argument(
+        "--startup-timeout",
+        type=float,
+        default=DEFAULT_STARTUP_TIMEOUT_S,
+        help=f"seconds to wait for the stack to be ready (default {DEFAULT_STARTUP_TIMEOUT_S:.0f})",
+    )
 
 
 def report(args: argparse.Namespace) -> int:
     stop = stop_event()
-    from tools.report import report
+    from tools.report.report import ReportOptions, run
 
     setup_logging("report", "WARNING")
-    return report.run(args, stop)
+    options = ReportOptions(
+        out=args.out,
+        config=args.config,
+        duration_s=args.duration,
+        from_file=args.from_file,
+        benchmarks=tuple(args.benchmark or ()),
+        startup_timeout_s=args.startup_timeout,
+    )
+    return run(options, stop)
 
 
 COMMANDS = [Command("report", "write report.md and plots of a run", _report_arguments, report)]

@@ -9,10 +9,10 @@ the plots, and ``session.json`` so the report can be regenerated without running
 
 from __future__ import annotations
 
-import argparse
 import json
 import threading
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
@@ -23,6 +23,7 @@ from tools.report.plots import SEGMENTS, benchmark_label, segment_means
 from tools.report.session import check_session
 
 DEFAULT_DURATION_S = 30.0
+DEFAULT_STARTUP_TIMEOUT_S = 180.0
 #: Stage name, and what it covers, in the order a frame goes through them.
 STAGE_ROWS = (
     ("capture_to_detector", "capture \u2192 the frame reached the detector"),
@@ -226,43 +227,38 @@ def write_report(session: Session, out: Path) -> list[Path]:
     return [report, *made.values(), saved]
 
 
-def run(args: argparse.Namespace, stop: threading.Event) -> int:
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReportOptions:
+    """What ``report`` was asked: the output folder; either a run to record (its stack config,
+    seconds, and how long the stack may take to start) or a saved session to read
+    (``from_file``); and detector benchmark files to compare."""
+
+    out: str
+    config: str | None = None
+    duration_s: float | None = None  # None: DEFAULT_DURATION_S
+    from_file: str | None = None
+    benchmarks: tuple[str, ...] = ()
+    startup_timeout_s: float = DEFAULT_STARTUP_TIMEOUT_S
+
+
+def run(options: ReportOptions, stop: threading.Event) -> int:
     """The ``report`` command."""
-    out = Path(args.out)
-    if args.from_file:
-        if args.config or args.duration is not None:
+    out = Path(options.out)
+    if options.from_file:
+        if options.config or options.duration_s is not None:
             raise ConfigError("--from reads a saved session; --config and --duration are for a run")
-        session = read_session(Path(args.from_file))
+        session = read_session(Path(options.from_file))
     else:
         from tools.report.session import record  # zenoh: only when recording
 
         out.mkdir(parents=True, exist_ok=True)
-        duration = DEFAULT_DURATION_S if args.duration is None else args.duration
+        duration = DEFAULT_DURATION_S if options.duration_s is None else options.duration_s
         log = out / "supervisor.log"
-        session = record(args.config, duration, log, stop, print_progress, args.startup_timeout)
-    if args.benchmark:
-        session["benchmarks"] = load_benchmarks(args.benchmark)
+        session = record(
+            options.config, duration, log, stop, print_progress, options.startup_timeout_s
+        )
+    if options.benchmarks:
+        session["benchmarks"] = load_benchmarks(options.benchmarks)
     for path in write_report(session, out):
         print(path)
     return 0
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", required=True, help="folder for report.md, plots, session.json")
-    parser.add_argument("--config", help="stack config to run (default deploy/stack.toml)")
-    parser.add_argument(
-        "--duration", type=float, help=f"seconds to record (default {DEFAULT_DURATION_S:.0f})"
-    )
-    parser.add_argument("--from", dest="from_file", metavar="FILE", help="a saved session.json")
-    parser.add_argument(
-        "--benchmark",
-        action="append",
-        metavar="FILE",
-        help="detector `benchmark --json` output; repeat to compare backends",
-    )
-    parser.add_argument(
-        "--startup-timeout",
-        type=float,
-        default=180.0,
-        help="seconds to wait for the stack to be ready (default 180)",
-    )

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -19,7 +18,7 @@ from common.errors import ConfigError
 from common.messages import Detections, Header, ServiceCounters, Twist
 from services.metrics.aggregate import Aggregator
 from tools.report import report
-from tools.report.report import load_benchmarks, read_session, write_report
+from tools.report.report import ReportOptions, load_benchmarks, read_session, write_report
 from tools.report.session import check_session, snapshot_session
 
 MS = 1_000_000
@@ -74,11 +73,9 @@ def _bench(name: str, inference: float) -> dict[str, Any]:
             "backend": {"name": name, "device": "cpu", "precision": "fp32"}}  # fmt: skip
 
 
-def _report(*argv: str) -> int:
+def _report(options: ReportOptions) -> int:
     """The report command in-process (its own stop event: pytest keeps its Ctrl-C)."""
-    parser = argparse.ArgumentParser(prog="python -m tools.report")
-    report.add_arguments(parser)
-    return report.run(parser.parse_args(list(argv)), threading.Event())
+    return report.run(options, threading.Event())
 
 
 def _check_png(path: Path) -> None:
@@ -125,7 +122,8 @@ def test_report_command_reads_a_session_and_benchmarks(tmp_path: Path) -> None:
     bench.write_text("\n".join(json.dumps(_bench(n, 50.0)) for n in ("onnx", "openvino")))
     out = tmp_path / "out"
     session = str(tmp_path / "s.json")
-    assert _report("--from", session, "--out", str(out), "--benchmark", str(bench)) == 0
+    options = ReportOptions(from_file=session, out=str(out), benchmarks=(str(bench),))
+    assert _report(options) == 0
     assert (out / "backend_comparison.png").is_file()
     assert not (out / "supervisor.log").exists()  # nothing was run
 
@@ -172,7 +170,7 @@ def test_bad_benchmark_files_and_option_mixes_are_refused(tmp_path: Path) -> Non
     with pytest.raises(ConfigError, match=r"not `tools\.detector benchmark --json` output"):
         load_benchmarks([str(path)])
     with pytest.raises(ConfigError, match="--from reads a saved session"):
-        _report("--from", str(path), "--duration", "5", "--out", str(tmp_path))
+        _report(ReportOptions(from_file=str(path), duration_s=5, out=str(tmp_path)))
 
 
 def test_a_side_by_side_benchmark_gives_one_entry_per_backend(tmp_path: Path) -> None:
