@@ -18,7 +18,7 @@ import pytest
 
 from common.errors import ModelError
 from modelprep.acquire.tfjs_to_onnx import convert_tfjs_to_onnx
-from tests.unit.detector.acquire.tfjs_models import TfjsModel, fused_conv
+from tests.unit.modelprep.acquire.tfjs_models import TfjsModel, fused_conv
 
 Array = npt.NDArray[Any]
 RNG = np.random.default_rng(7)

@@ -17,7 +17,7 @@ from common.errors import ModelFetchError
 from common.files import sha256_file
 from modelprep import files as model_files
 from modelprep.acquire import fetch
-from tests.unit.detector.acquire.tfjs_models import Array, TfjsModel, fused_conv
+from tests.unit.modelprep.acquire.tfjs_models import Array, TfjsModel, fused_conv
 
 RNG = np.random.default_rng(7)
 

@@ -22,7 +22,7 @@ from tools.report.report import ReportOptions, load_benchmarks, read_session, wr
 from tools.report.session import check_session, snapshot_session
 
 MS = 1_000_000
-REPO = Path(__file__).resolve().parents[3]
+REPO = Path(__file__).resolve().parents[4]
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
