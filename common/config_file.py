@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from common.errors import ConfigError
+from common.perception_settings import CameraSettings
 from common.settings import DEFAULT_CONFIG, Config
 
 ENV_PREFIX = "STACK__"
@@ -83,6 +84,10 @@ def _env_overrides(environ: Mapping[str, str]) -> dict[str, dict[str, Any]]:
         parts = name[len(ENV_PREFIX) :].lower().split("__")
         if len(parts) != 2:
             raise ConfigError(f"{name}: overrides look like {ENV_PREFIX}<TABLE>__<FIELD>")
+        if parts[0] == CAMERAS:
+            raise ConfigError(
+                f"{name}: the [{CAMERAS}.<name>] tables are set in the config file only"
+            )
         if parts[0] == "path" or parts[0] not in hints:
             known = sorted(set(hints) - {"path"})
             raise ConfigError(f"{name}: there is no table [{parts[0]}]; known: {known}")
@@ -152,8 +157,8 @@ def load_config(path: str | Path | None = None, environ: Mapping[str, str] | Non
     unknown = sorted(set(data) - tables)
     if unknown:
         raise ConfigError(f"{cfg_path}: unknown table(s) {unknown}; known: {sorted(tables)}")
-    built: dict[str, Any] = {}
-    for table in tables:
+    built: dict[str, Any] = {"cameras": _cameras(cfg_path, data)}
+    for table in tables - {CAMERAS}:
         values = data.get(table, {})
         if not isinstance(values, dict):
             raise ConfigError(f"{cfg_path}: [{table}] must be a table")
@@ -165,6 +170,23 @@ def load_config(path: str | Path | None = None, environ: Mapping[str, str] | Non
         return Config(path=str(cfg_path), **built)
     except ConfigError as exc:
         raise _blame(exc, "sim", overrides.get("sim", {})) from exc
+
+
+CAMERAS = "cameras"  # [cameras.<name>]: the further cameras, each [camera] with its changes
+
+
+def _cameras(cfg_path: Path, data: Mapping[str, Any]) -> tuple[tuple[str, CameraSettings], ...]:
+    """The ``[cameras.<name>]`` tables, each laid over the [camera] table, in file order."""
+    tables = data.get(CAMERAS, {})
+    if not isinstance(tables, dict):
+        raise ConfigError(f"{cfg_path}: [{CAMERAS}] must hold tables, [{CAMERAS}.<name>]")
+    first = data.get("camera", {})
+    out = []
+    for name, values in tables.items():
+        if not isinstance(values, dict):
+            raise ConfigError(f"{cfg_path}: {CAMERAS}.{name} must be a table, [{CAMERAS}.{name}]")
+        out.append((name, _build(CameraSettings, f"{CAMERAS}.{name}", {**first, **values})))
+    return tuple(out)
 
 
 def _toml_value(value: Any) -> str:
@@ -183,13 +205,19 @@ def to_toml(config: Config) -> str:
     """The whole config as TOML that :func:`load_config` reads back to an equal Config."""
     lines: list[str] = []
     for table in dataclasses.fields(Config):
-        if table.name == "path":
+        if table.name in ("path", CAMERAS):
             continue
         lines.append(f"[{table.name}]")
         section = getattr(config, table.name)
         lines += [
             f"{f.name} = {_toml_value(getattr(section, f.name))}"
             for f in dataclasses.fields(section)
+        ]
+        lines.append("")
+    for name, camera in config.cameras:
+        lines.append(f"[{CAMERAS}.{name}]")
+        lines += [
+            f"{f.name} = {_toml_value(getattr(camera, f.name))}" for f in dataclasses.fields(camera)
         ]
         lines.append("")
     return "\n".join(lines)

@@ -38,6 +38,9 @@ class CameraSettings:
     ``resize`` is (width, height), or (0, 0) to keep the source size. ``jpeg_quality`` 0 sends
     raw bgr8; 1..100 sends JPEG at that quality. ``hfov_deg`` is the horizontal field of view,
     which turns a pixel column into a bearing (the controller and the simulator use it).
+    ``mount_yaw_deg`` is where the camera looks on the robot, counter-clockwise from the robot's
+    forward axis (front 0, left 90, rear 180 or -180): the controller turns a bearing in the
+    image into one in the robot's frame with it, and the simulator renders with it.
     A device or stream that gave frames and then stops (unplugged, reset) is reopened every
     ``reopen_period_s`` until it gives frames again (services/camera/reopen.py); one that gives
     none at start-up stops the camera with one line.
@@ -50,12 +53,14 @@ class CameraSettings:
     frame_id: str = "camera"
     loop: bool = True
     hfov_deg: float = 60.0
+    mount_yaw_deg: float = 0.0
     reopen_period_s: float = 1.0
 
     BOUNDS: ClassVar[Bounds] = {
         "rate_hz": (0.1, 1000),
         "jpeg_quality": (0, 100),
         "hfov_deg": (1, 179),
+        "mount_yaw_deg": (-180, 180),
         "reopen_period_s": (0.05, 60),
     }
 

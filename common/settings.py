@@ -13,6 +13,7 @@ common/recorder_settings.py. All are re-exported here, so
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -48,6 +49,20 @@ __all__ = [
 REPO_ROOT = Path(__file__).resolve().parent.parent
 # Runnable by the supervisor, and started in this order: the recorder first, so that it hears
 # the others from their start; the viewer after what it watches.
+#: The most cameras one stack serves (one detector process serves them all).
+MAX_CAMERAS = 16
+_CAMERA_NAME = re.compile(r"[a-z0-9][a-z0-9_]{0,31}")
+
+
+def check_camera_name(name: str) -> None:
+    """A camera name is a key chunk, a process name and a file name: ``[a-z0-9_]``, 1..32."""
+    if not _CAMERA_NAME.fullmatch(name):
+        raise ConfigError(
+            f"camera name {name!r} must be 1..32 of a-z, 0-9 and _ (starting with a letter or "
+            "digit): it names keys, processes and files"
+        )
+
+
 SERVICES = ("recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
 # zenoh.max_payload_bytes: a counters message must fit; Zenoh refuses to receive above 1 GiB.
@@ -241,6 +256,9 @@ class Config:
     zenoh: ZenohSettings = field(default_factory=ZenohSettings)
     stack: StackSettings = field(default_factory=StackSettings)
     camera: CameraSettings = field(default_factory=CameraSettings)
+    #: Further cameras, ``[cameras.<name>]`` tables: each is [camera] with its own changes
+    #: (common/config_file.py builds them). The first camera is ``stack.camera`` = [camera].
+    cameras: tuple[tuple[str, CameraSettings], ...] = ()
     detector: DetectorSettings = field(default_factory=DetectorSettings)
     tracker: TrackerSettings = field(default_factory=TrackerSettings)
     controller: ControllerSettings = field(default_factory=ControllerSettings)
@@ -252,11 +270,34 @@ class Config:
     supervisor: SupervisorSettings = field(default_factory=SupervisorSettings)
 
     def __post_init__(self) -> None:
+        names = [self.stack.camera, *(name for name, _ in self.cameras)]
+        if len(names) > MAX_CAMERAS:
+            raise ConfigError(f"at most {MAX_CAMERAS} cameras, got {len(names)}: {names}")
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ConfigError(
+                f"camera names must differ: {twice} named twice (stack.camera is the first "
+                "camera, [cameras.<name>] the others)"
+            )
+        for name in names:
+            check_camera_name(name)
         unknown = sorted(set(self.sim.wait_for) - set(SERVICES))
         if unknown:
             raise ConfigError(
                 f"sim.wait_for must name services among {', '.join(SERVICES)}, got {unknown}"
             )
+
+    @property
+    def all_cameras(self) -> dict[str, CameraSettings]:
+        """Every camera by name, the first (``stack.camera``, the [camera] table) first."""
+        return {self.stack.camera: self.camera, **dict(self.cameras)}
+
+    def camera_settings(self, name: str) -> CameraSettings:
+        """The settings of camera ``name``; ConfigError naming the known ones otherwise."""
+        cameras = self.all_cameras
+        if name not in cameras:
+            raise ConfigError(f"no camera {name!r} in the config; known: {list(cameras)}")
+        return cameras[name]
 
     @property
     def estop_path(self) -> Path:
