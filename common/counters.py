@@ -28,3 +28,9 @@ class Counters:
     def snapshot(self) -> dict[str, int]:
         with self._lock:
             return dict(self._counts)
+
+
+def per_camera(name: str, camera: str) -> str:
+    """The name of counter ``name`` for one camera: ``frames_in.rear`` (a service that serves
+    several cameras keeps its totals under the plain names and each camera's under these)."""
+    return f"{name}.{camera}"

@@ -63,6 +63,13 @@ def check_camera_name(name: str) -> None:
         )
 
 
+def camera_service(first: str, camera: str) -> str:
+    """The service (process, health token, counters, principal) of ``camera``: ``camera`` for
+    the first camera (``stack.camera``), as a one-camera stack has always named it, and
+    ``camera_<name>`` for each further one."""
+    return "camera" if camera == first else f"camera_{camera}"
+
+
 SERVICES = ("recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
 # zenoh.max_payload_bytes: a counters message must fit; Zenoh refuses to receive above 1 GiB.
@@ -291,6 +298,11 @@ class Config:
     def all_cameras(self) -> dict[str, CameraSettings]:
         """Every camera by name, the first (``stack.camera``, the [camera] table) first."""
         return {self.stack.camera: self.camera, **dict(self.cameras)}
+
+    @property
+    def camera_services(self) -> dict[str, str]:
+        """Every camera's service name (see :func:`camera_service`) by camera name."""
+        return {c: camera_service(self.stack.camera, c) for c in self.all_cameras}
 
     def camera_settings(self, name: str) -> CameraSettings:
         """The settings of camera ``name``; ConfigError naming the known ones otherwise."""
