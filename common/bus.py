@@ -34,13 +34,14 @@ from common.certificates import refuse_server_capable
 from common.errors import ConfigError, StackError
 from common.keys import Keys
 from common.security import (
-    LIVE_SENSORS,
     ROUTER_PRINCIPAL,
     access_control,
     ca_file,
     cert_file,
     key_file,
     password_file,
+    running_sensors,
+    stack_principals,
     users_file,
 )
 from common.settings import Config, Ros2Settings, ZenohSettings
@@ -117,7 +118,13 @@ def source_of(sample: zenoh.Sample) -> str:
 
 def _readable(path: Path, what: str) -> str:
     if not path.is_file():
-        raise ConfigError(f"{what} {path} is missing: run `zstack credentials` (docs/security.md)")
+        fix = "run `zstack credentials`"
+        if ca_file(path.parent).is_file():  # a folder made for fewer cameras, or not all copied
+            fix = (
+                "make them again for the config's cameras with `zstack credentials --config "
+                "FILE --force`, or copy the file from where they were made"
+            )
+        raise ConfigError(f"{what} {path} is missing: {fix} (docs/security.md)")
     return str(path)
 
 
@@ -252,11 +259,34 @@ def hub_access(config: Config) -> dict[str, Any]:
     z = config.zenoh
     if z.auth == "none":
         return {}
-    live = bool(LIVE_SENSORS & set(config.supervisor.services))
-    return access_control(Keys(config.stack.prefix), config.stack.camera, z.auth, live_sensors=live)
+    live = bool(running_sensors(config.supervisor.services))
+    keys = Keys(config.stack.prefix)
+    return access_control(keys, config.camera_services, z.auth, live_sensors=live)
+
+
+def check_credentials(config: Config) -> None:
+    """With passwords, the router's dictionary must name every principal of this stack: one
+    made for fewer cameras would refuse a further camera's process. ConfigError, one line,
+    naming the command that makes them again."""
+    z = config.zenoh
+    if z.auth != "password":
+        return  # certificates: the router needs only the CA; each client checks its own files
+    path = Path(_readable(users_file(z.credentials_path), "user dictionary"))
+    try:
+        known = {line.split(":", 1)[0] for line in path.read_text(encoding="utf-8").splitlines()}
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read {path}: {exc}") from exc
+    missing = [p for p in stack_principals(config.camera_services) if p not in known]
+    if missing:
+        raise ConfigError(
+            f"the credentials in {z.credentials_path} have no principal {', '.join(missing)} "
+            f"(made for fewer cameras?): make them again with `zstack credentials --config "
+            f"{config.path or 'FILE'} --force` (docs/security.md)"
+        )
 
 
 def open_hub(config: Config) -> zenoh.Session:
     """The supervisor's session: the endpoint every service joins, enforcing access control."""
+    check_credentials(config)
     conf = zenoh_config(config.zenoh, HUB_PRINCIPAL, access=hub_access(config))
     return _open(conf, config.zenoh, config.zenoh.endpoint, HUB_PRINCIPAL)

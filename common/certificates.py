@@ -13,7 +13,7 @@ from cryptography import x509
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from common.errors import ConfigError
-from common.security import PRINCIPALS, ROUTER_PRINCIPAL, cert_file
+from common.security import ROUTER_PRINCIPAL, ca_file, cert_file
 
 
 def serves_tls(cert: x509.Certificate) -> bool:
@@ -34,9 +34,13 @@ def server_capable(directory: Path) -> list[str]:
     """The principals other than the supervisor whose certificate in ``directory`` could serve
     as the router's (credentials made by an older version); unreadable files are skipped."""
     found = []
-    for p in PRINCIPALS:
-        path = cert_file(directory, p)
-        if p == ROUTER_PRINCIPAL or not path.is_file():
+    # Every principal's certificate there, a further camera's (``camera_<name>``) too.
+    paths = sorted(directory.glob("*.pem")) if directory.is_dir() else []
+    for path in paths:
+        p = path.stem
+        if path in (ca_file(directory), cert_file(directory, ROUTER_PRINCIPAL)):
+            continue
+        if not path.is_file():
             continue
         try:
             cert = x509.load_pem_x509_certificate(path.read_bytes())

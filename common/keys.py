@@ -55,8 +55,14 @@ class Keys:
     def detector_info(self, camera: str) -> str:
         return f"{self.prefix}/detector/{_check_chunks('camera name', camera)}/info"
 
+    def all_frames(self) -> str:
+        return f"{self.prefix}/camera/*/frame"
+
     def all_detections(self) -> str:
         return f"{self.prefix}/detector/*/detections"
+
+    def all_detector_info(self) -> str:
+        return f"{self.prefix}/detector/*/info"
 
     def scan(self) -> str:
         return f"{self.prefix}/scan"

@@ -10,10 +10,13 @@ router, which knows the authenticated name of every link, and every message pass
 connects to, so rules by name cannot be enforced there; see docs/security.md.)
 
 Each process has its own principal and may publish only its own keys: only the controller puts
-``cmd_vel``, only the ``estop`` principal the e-stop, only the camera, the simulator and the
-ROS 2 bridge frames and scans, only stack services counters and health tokens. The recorder
-(playing a recording back) may put frames and scans only on a stack that runs no live sensor
-(no camera, simulator or ROS 2 bridge): a replay must never reach a live robot's keys.
+``cmd_vel``, only the ``estop`` principal the e-stop, only the cameras, the simulator and the
+ROS 2 bridge frames and scans, only stack services counters and health tokens. Each camera
+process is a principal of its own (``camera`` for the first camera, ``camera_<name>`` for each
+further one, common.settings.camera_service) and may put only its own camera's frames; the
+detector puts every camera's detections and no frame. The recorder (playing a recording back)
+may put frames and scans only on a stack that runs no live sensor (no camera, simulator or
+ROS 2 bridge): a replay must never reach a live robot's keys.
 
 Each principal may also subscribe only to what it reads: the camera frames only to the
 detector, the live view, the recorder and the ROS 2 bridge. Zenoh allows a subscription only
@@ -24,6 +27,7 @@ Anything not allowed is denied.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -43,12 +47,16 @@ SERVICE_PRINCIPALS = (
 )
 # The router's principal: the only one whose certificate may serve the TLS listener.
 ROUTER_PRINCIPAL = "supervisor"
+#: The principals of a one-camera stack; :func:`stack_principals` adds one per further camera.
 PRINCIPALS = (ROUTER_PRINCIPAL, *SERVICE_PRINCIPALS, "estop", "observer")
+#: The first camera's principal; a further camera's is ``camera_<name>``.
+FIRST_CAMERA_PRINCIPAL = "camera"
 
 AUTH_MODES = ("none", "password", "certificate")
 
 #: The services that feed a live robot's sensors into the stack: while one of them runs, no
-#: recording may be played onto its keys.
+#: recording may be played onto its keys. Every further camera's ``camera_<name>`` too
+#: (:func:`running_sensors`).
 LIVE_SENSORS = frozenset({"camera", "sim", "ros2"})
 
 # Zenoh message kinds that only ask (or announce interest); every principal may send them.
@@ -66,6 +74,32 @@ _ALL_MESSAGES = (
     "declare_subscriber",
     *_ASK_MESSAGES,
 )
+
+
+def running_sensors(services: Iterable[str]) -> list[str]:
+    """Those of ``services`` that feed a live robot's sensors (any camera, the simulator, the
+    ROS 2 bridge), sorted."""
+    return sorted(
+        s for s in set(services) if s in LIVE_SENSORS or s.startswith(f"{FIRST_CAMERA_PRINCIPAL}_")
+    )
+
+
+def camera_services(cameras: str | Mapping[str, str]) -> dict[str, str]:
+    """``{camera: its service (and principal)}``: ``cameras`` as ``Config.camera_services``
+    gives it, the first camera first, or the one camera's name for a one-camera stack."""
+    if isinstance(cameras, str):
+        return {cameras: FIRST_CAMERA_PRINCIPAL}
+    if not cameras:
+        raise ValueError("a stack has at least one camera")
+    return dict(cameras)
+
+
+def stack_principals(cameras: str | Mapping[str, str]) -> tuple[str, ...]:
+    """Every principal of a stack with ``cameras`` (see :func:`camera_services`): PRINCIPALS,
+    with each further camera's principal after ``camera``. What ``zstack credentials`` makes."""
+    further = [s for s in camera_services(cameras).values() if s != FIRST_CAMERA_PRINCIPAL]
+    at = PRINCIPALS.index(FIRST_CAMERA_PRINCIPAL) + 1
+    return (*PRINCIPALS[:at], *further, *PRINCIPALS[at:])
 
 
 def users_file(directory: Path) -> Path:
@@ -97,36 +131,49 @@ def key_file(directory: Path, principal: str) -> Path:
 
 
 def _principal_keys(
-    keys: Keys, camera: str, live_sensors: bool = True
+    keys: Keys, cameras: str | Mapping[str, str], live_sensors: bool = True
 ) -> dict[str, dict[str, tuple[str, ...]]]:
     """What each principal may publish (``put``), announce (``token``), serve (``serve``) and
-    subscribe to (``read``). ``live_sensors``: the stack runs a camera, the simulator or the
-    ROS 2 bridge, so the recorder may not play frames or scans onto it."""
+    subscribe to (``read``). ``cameras``: see :func:`camera_services`. ``live_sensors``: the
+    stack runs a camera, the simulator or the ROS 2 bridge, so the recorder may not play frames
+    or scans onto it."""
 
     def service(name: str, *puts: str, read: tuple[str, ...] = ()) -> dict[str, tuple[str, ...]]:
         out = {"put": (*puts, keys.counters(name)), "token": (keys.health(name),)}
         return {**out, "read": read} if read else out
 
-    frames = keys.frame(camera)
+    services = camera_services(cameras)
+    # Puts name each configured camera's key: nobody may put on a camera the stack does not
+    # have. Reads and the detector's info take the wildcard, so that one subscription (or
+    # queryable) for every camera is accepted as well as one per camera; nobody can put on
+    # an unconfigured camera's key, so the wildcard reads nothing more.
+    frames = tuple(keys.frame(c) for c in services)
+    all_frames = keys.all_frames()
     detections = keys.all_detections()
     # Everything but the camera's pictures: what status lines, tests and tools watch.
     watching = (
         detections, keys.scan(), keys.cmd_vel(), keys.controller_status(), keys.estop(),
         keys.sim_truth(), keys.all_counters(),
     )  # fmt: skip
-    replay = () if live_sensors else (frames, keys.scan())
+    replay = () if live_sensors else (*frames, keys.scan())
+    # Each camera process puts its own camera's frames only, and reads nothing.
+    camera_rules = {name: service(name, keys.frame(c)) for c, name in services.items()}
     return {
-        "camera": service("camera", frames),
-        "sim": service("sim", frames, keys.scan(), keys.sim_truth(), read=(keys.cmd_vel(),)),
-        # The ROS 2 bridge feeds the robot's camera and laser into the stack, and the stack's
+        **camera_rules,
+        # The simulator renders every camera from one world.
+        "sim": service("sim", *frames, keys.scan(), keys.sim_truth(), read=(keys.cmd_vel(),)),
+        # The ROS 2 bridge feeds the robot's cameras and laser into the stack, and the stack's
         # detections and commands out to the robot.
-        "ros2": service("ros2", frames, keys.scan(), read=(frames, detections, keys.cmd_vel())),
+        "ros2": service(
+            "ros2", *frames, keys.scan(), read=(all_frames, detections, keys.cmd_vel())
+        ),
         # The recorder listens to everything; playing a recording back puts frames and scans,
         # on a stack with no live sensor only.
         "recorder": service("recorder", *replay, read=(f"{keys.prefix}/**",)),
+        # One detector serves every camera: it reads frames and puts detections, never frames.
         "detector": {
-            **service("detector", keys.detections(camera), read=(frames,)),
-            "serve": (keys.detector_info(camera),),
+            **service("detector", *(keys.detections(c) for c in services), read=(all_frames,)),
+            "serve": (keys.all_detector_info(),),
         },
         "controller": service(
             "controller",
@@ -142,7 +189,7 @@ def _principal_keys(
         "viewer": service(
             "viewer",
             read=(
-                frames,
+                all_frames,
                 detections,
                 keys.scan(),
                 keys.cmd_vel(),
@@ -158,18 +205,22 @@ def _principal_keys(
 
 def access_control(
     keys: Keys,
-    camera: str,
+    cameras: str | Mapping[str, str],
     auth: str,
-    principals: tuple[str, ...] = PRINCIPALS,
+    principals: tuple[str, ...] | None = None,
     *,
     live_sensors: bool = True,
 ) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for the router: deny by default, then allow each
     principal its own keys on ingress (puts, tokens, queryables, subscriptions), queries and
     liveliness for everyone, and everything on egress (the router delivers only what it
-    accepted, and only to subscriptions it accepted)."""
+    accepted, and only to subscriptions it accepted). ``cameras``: see
+    :func:`camera_services`; ``principals`` (default: :func:`stack_principals`) limits the
+    rules to those named."""
     if auth not in AUTH_MODES[1:]:
         raise ValueError(f"access control needs an authenticated mode, got {auth!r}")
+    if principals is None:
+        principals = stack_principals(cameras)
     match = "usernames" if auth == "password" else "cert_common_names"
     rules: list[dict[str, Any]] = [
         {
@@ -195,7 +246,7 @@ def access_control(
         "serve": ["declare_queryable", "reply"],
         "read": ["declare_subscriber"],
     }
-    for principal, allowed in _principal_keys(keys, camera, live_sensors).items():
+    for principal, allowed in _principal_keys(keys, cameras, live_sensors).items():
         if principal not in principals:
             continue
         subjects.append({"id": principal, match: [principal]})
@@ -226,15 +277,15 @@ def access_control(
 
 
 def may_put(
-    keys: Keys, camera: str, principal: str, *, live_sensors: bool = True
+    keys: Keys, cameras: str | Mapping[str, str], principal: str, *, live_sensors: bool = True
 ) -> tuple[str, ...]:
     """The keys ``principal`` may put on (documentation and tests read the same table)."""
-    return _principal_keys(keys, camera, live_sensors).get(principal, {}).get("put", ())
+    return _principal_keys(keys, cameras, live_sensors).get(principal, {}).get("put", ())
 
 
-def may_read(keys: Keys, camera: str, principal: str) -> tuple[str, ...]:
+def may_read(keys: Keys, cameras: str | Mapping[str, str], principal: str) -> tuple[str, ...]:
     """The key expressions ``principal`` may subscribe to (within which any subscription)."""
-    return _principal_keys(keys, camera).get(principal, {}).get("read", ())
+    return _principal_keys(keys, cameras).get(principal, {}).get("read", ())
 
 
 def viewer_token_file(directory: Path) -> Path:

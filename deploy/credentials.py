@@ -1,13 +1,16 @@
-"""python -m deploy.credentials [--dir DIR] [--host NAME_OR_IP ...] [--force] [--days N]
+"""python -m deploy.credentials [--config FILE] [--dir DIR] [--host ADDR ...] [--force] [--days N]
 
-Creates the credentials of the secure profile in DIR (default ``secrets/``, git-ignored): a
-random password per principal plus the router's ``user:password`` dictionary, and a private CA
-with a key and certificate per principal (common name = principal). Only the supervisor's
-certificate can serve the TLS listener: it alone names ``localhost``, ``127.0.0.1`` and each
---host and allows server authentication. Every other certificate names no host and allows
-client authentication only, so a client that checks the router's name refuses it. DIR is made
-0700 and every secret 0600, whatever their modes were. Existing credentials are kept unless
---force is given.
+Creates the credentials of the secure profile in DIR (default: the config's
+``zenoh.credentials_dir``, ``secrets/``, git-ignored): a random password per principal plus the
+router's ``user:password`` dictionary, and a private CA with a key and certificate per principal
+(common name = principal). The principals are those of the config's stack: one per camera
+(``camera``, and ``camera_<name>`` for each further camera), one per other service, ``estop``,
+``observer`` and the supervisor. Only the supervisor's certificate can serve the TLS listener:
+it alone names ``localhost``, ``127.0.0.1`` and each --host and allows server authentication.
+Every other certificate names no host and allows client authentication only, so a client that
+checks the router's name refuses it. DIR is made 0700 and every secret 0600, whatever their
+modes were. Existing credentials are kept unless --force is given (needed, too, to add the
+principal of a camera added to the config).
 """
 
 from __future__ import annotations
@@ -27,8 +30,9 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from common.certificates import refuse_server_capable
-from common.cli import Command, service_main
+from common.cli import Command, add_config, service_main
 from common.clock import utc_now
+from common.config_file import load_config
 from common.errors import ConfigError
 from common.lifecycle import run_main
 from common.security import (
@@ -39,12 +43,11 @@ from common.security import (
     cert_file,
     key_file,
     password_file,
+    stack_principals,
     users_file,
     viewer_token_file,
 )
-from common.settings import REPO_ROOT
 
-DEFAULT_DIR = REPO_ROOT / "secrets"
 DEFAULT_DAYS = 825  # the longest validity that browsers and most TLS stacks still accept
 DEFAULT_HOSTS = ("localhost", "127.0.0.1")
 SECRET_MODE = 0o600
@@ -165,25 +168,33 @@ def _write(path: Path, data: bytes, mode: int) -> Path:
     return path
 
 
-def _targets(directory: Path) -> list[Path]:
+def _targets(directory: Path, principals: tuple[str, ...]) -> list[Path]:
     files = [users_file(directory), viewer_token_file(directory)]
     files += [ca_file(directory), ca_key_file(directory)]
-    for p in PRINCIPALS:
+    for p in principals:
         files += [password_file(directory, p), cert_file(directory, p), key_file(directory, p)]
     return files
 
 
 def generate(
-    directory: Path, hosts: tuple[str, ...] = (), days: int = DEFAULT_DAYS, force: bool = False
+    directory: Path,
+    hosts: tuple[str, ...] = (),
+    days: int = DEFAULT_DAYS,
+    force: bool = False,
+    principals: tuple[str, ...] = PRINCIPALS,
 ) -> list[Path]:
     """Write passwords, the user dictionary, a CA and one certificate per principal into
-    ``directory`` (created 0700; secrets 0600). Returns the files written, in order."""
+    ``directory`` (created 0700; secrets 0600). ``principals``: a one-camera stack's by
+    default; ``stack_principals(config.camera_services)`` for a config's. Returns the files
+    written, in order."""
+    if ROUTER_PRINCIPAL not in principals:
+        raise ValueError(f"the principals must include the router's, {ROUTER_PRINCIPAL!r}")
     if days < 1:
         raise ConfigError(f"--days must be at least 1, got {days}")
     names = _subject_names(hosts)
     if not force:
         refuse_server_capable(directory)
-    if not force and (existing := [f.name for f in _targets(directory) if f.exists()]):
+    if not force and (existing := [f.name for f in _targets(directory, principals) if f.exists()]):
         raise ConfigError(
             f"credentials already exist in {directory} ({', '.join(existing[:3])}"
             f"{', ...' if len(existing) > 3 else ''}); pass --force to replace them"
@@ -195,7 +206,7 @@ def generate(
     directory.chmod(0o700)
 
     written: list[Path] = []
-    passwords = {p: secrets.token_urlsafe(24) for p in PRINCIPALS}
+    passwords = {p: secrets.token_urlsafe(24) for p in principals}
     for p, password in passwords.items():
         written.append(_write(password_file(directory, p), f"{password}\n".encode(), SECRET_MODE))
     users = "".join(f"{p}:{password}\n" for p, password in passwords.items())
@@ -208,7 +219,7 @@ def generate(
     written.append(_write(ca_key_file(directory), _key_pem(ca_key), SECRET_MODE))
     ca_pem = ca.public_bytes(serialization.Encoding.PEM)
     written.append(_write(ca_file(directory), ca_pem, PUBLIC_MODE))
-    for p in PRINCIPALS:
+    for p in principals:
         key = _new_key()
         cert = _leaf_certificate(p, key, ca, ca_key, names, days)
         written.append(_write(key_file(directory, p), _key_pem(key), SECRET_MODE))
@@ -217,9 +228,11 @@ def generate(
     return written
 
 
-def say_written(directory: Path, hosts: tuple[str, ...], days: int) -> None:
+def say_written(
+    directory: Path, hosts: tuple[str, ...], days: int, principals: tuple[str, ...] = PRINCIPALS
+) -> None:
     """What :func:`generate` wrote, and how to use it, on stderr."""
-    n = len(PRINCIPALS)
+    n = len(principals)
     names = ", ".join(dict.fromkeys((*DEFAULT_HOSTS, *hosts)))
     for line in (
         f"wrote {n} passwords and {users_file(directory).name} to {directory}",
@@ -235,7 +248,8 @@ def say_written(directory: Path, hosts: tuple[str, ...], days: int) -> None:
 
 
 def _credentials_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dir", type=Path, default=DEFAULT_DIR, help="default: secrets/")
+    add_config(p)  # its cameras name the camera principals; its credentials_dir the folder
+    p.add_argument("--dir", type=Path, help="default: the config's zenoh.credentials_dir")
     p.add_argument(
         "--host",
         action="append",
@@ -247,10 +261,12 @@ def _credentials_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _credentials(args: argparse.Namespace) -> int:
-    directory: Path = args.dir.resolve()
+    config = load_config(args.config)
+    directory: Path = (args.dir or config.zenoh.credentials_path).resolve()
     hosts = tuple(args.host)
-    generate(directory, hosts, args.days, args.force)
-    say_written(directory, hosts, args.days)
+    principals = stack_principals(config.camera_services)
+    generate(directory, hosts, args.days, args.force, principals)
+    say_written(directory, hosts, args.days, principals)
     return 0
 
 

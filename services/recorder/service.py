@@ -39,7 +39,7 @@ from common.node import Node, Tally
 from common.priority import lower_priority
 from common.queries import ready_services
 from common.recorder_settings import TIME_FIELD
-from common.security import LIVE_SENSORS
+from common.security import running_sensors
 from common.settings import REPO_ROOT, Config
 from services.recorder.channels import Translator
 from services.recorder.play import Played, one_pass, playable_topics
@@ -205,7 +205,7 @@ def play(
     session = open_session(config.zenoh, PLAY_PRINCIPAL)
     try:
         ready = ready_services(session, keys, WAIT_FOR_DETECTOR_S)
-        live = sorted(ready & LIVE_SENSORS)
+        live = running_sensors(ready)
         if live:
             # A replay onto a live robot's keys would mix old frames and scans with its own:
             # all-clear scans could blind its laser. Under the secure profile the router

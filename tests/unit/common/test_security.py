@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -12,8 +13,15 @@ from common.bus import QoS, hub_access, open_session, zenoh_config
 from common.config_file import load_config
 from common.errors import ConfigError
 from common.keys import Keys
-from common.security import PRINCIPALS, access_control, may_put
-from common.settings import REPO_ROOT, ZenohSettings
+from common.security import (
+    PRINCIPALS,
+    access_control,
+    may_put,
+    may_read,
+    running_sensors,
+    stack_principals,
+)
+from common.settings import REPO_ROOT, ZenohSettings, camera_service
 
 KEYS = Keys("robot1")
 
@@ -34,6 +42,14 @@ def _allowed(acl: dict, principal: str, message: str) -> set[str]:
                 if message in rule["messages"] and "ingress" in rule["flows"]:
                     out |= set(rule["key_exprs"])
     return out
+
+
+def _may(acl: dict, principal: str, message: str, key: str) -> bool:
+    """Whether ``principal`` may send ``message`` on ``key`` (a key within an allowed one)."""
+    return any(
+        zenoh.KeyExpr(allowed).includes(zenoh.KeyExpr(key))
+        for allowed in _allowed(acl, principal, message)
+    )
 
 
 def test_only_the_controller_puts_cmd_vel_and_only_estop_the_estop() -> None:
@@ -62,10 +78,8 @@ def test_only_the_controller_puts_cmd_vel_and_only_estop_the_estop() -> None:
     assert KEYS.counters("estop") not in _allowed(acl, "estop", "put")
     # Each reads what it needs; the camera's pictures only the detector, the live view, the
     # recorder and the ROS 2 bridge. Queries and liveliness stay open to all.
-    readers = {
-        p for p in PRINCIPALS if KEYS.frame("front") in _allowed(acl, p, "declare_subscriber")
-    }
-    assert readers == {"detector", "viewer", "ros2"}  # and the recorder, below
+    readers = {p for p in PRINCIPALS if _may(acl, p, "declare_subscriber", KEYS.frame("front"))}
+    assert readers == {"detector", "viewer", "ros2", "recorder"}
     assert _allowed(acl, "recorder", "declare_subscriber") == {f"{KEYS.prefix}/**"}
     assert KEYS.cmd_vel() in _allowed(acl, "observer", "declare_subscriber")
     assert _allowed(acl, "camera", "declare_subscriber") == set()
@@ -139,3 +153,109 @@ def test_control_publishers_are_express_high_priority_and_never_block() -> None:
         assert control._pub.congestion_control == zenoh.CongestionControl.DROP
         assert sensor._pub.congestion_control == zenoh.CongestionControl.DROP
         assert sensor._pub.priority == zenoh.Priority.DATA
+
+
+def _cameras(*names: str) -> dict[str, str]:
+    """``Config.camera_services`` for cameras ``names``, the first first."""
+    return {c: camera_service(names[0], c) for c in names}
+
+
+@pytest.mark.parametrize("names", [("front", "rear"), ("front", "rear", "left")])
+def test_each_camera_principal_puts_only_its_own_frames(names: tuple[str, ...]) -> None:
+    cameras = _cameras(*names)
+    principals = stack_principals(cameras)
+    assert principals[: PRINCIPALS.index("camera") + len(names)] == (
+        *PRINCIPALS[: PRINCIPALS.index("camera")],
+        "camera",
+        *(f"camera_{n}" for n in names[1:]),
+    )
+    assert set(principals) == set(PRINCIPALS) | {f"camera_{n}" for n in names[1:]}
+    acl = access_control(KEYS, cameras, "password")
+    everyone = next(s for s in acl["subjects"] if s["id"] == "everyone")
+    assert everyone["usernames"] == list(principals)
+    for camera, principal in cameras.items():
+        # Its own frames, counters and health token; nothing else, and it reads nothing.
+        own = {KEYS.frame(camera), KEYS.counters(principal)}
+        assert _allowed(acl, principal, "put") == own
+        assert set(may_put(KEYS, cameras, principal)) == own
+        assert _allowed(acl, principal, "liveliness_token") == {KEYS.health(principal)}
+        assert _allowed(acl, principal, "declare_subscriber") == set()
+        assert _allowed(acl, principal, "declare_queryable") == set()
+        for other in set(names) - {camera}:
+            assert not _may(acl, principal, "put", KEYS.frame(other))
+            assert not _may(acl, principal, "put", KEYS.detections(other))
+        # Who else may put this camera's frames: the simulator and the ROS 2 bridge.
+        putters = {p for p in principals if _may(acl, p, "put", KEYS.frame(camera))}
+        assert putters == {principal, "sim", "ros2"}
+        readers = {p for p in principals if _may(acl, p, "declare_subscriber", KEYS.frame(camera))}
+        assert readers == {"detector", "viewer", "ros2", "recorder"}
+        # Detections: the detector alone puts them; the controller, metrics, viewer, recorder
+        # and ROS 2 bridge read them (and the observer: status lines and tests).
+        dets = KEYS.detections(camera)
+        assert {p for p in principals if _may(acl, p, "put", dets)} == {"detector"}
+        readers = {p for p in principals if _may(acl, p, "declare_subscriber", dets)}
+        assert readers == {"controller", "metrics", "viewer", "recorder", "ros2", "observer"}
+        info = KEYS.detector_info(camera)
+        assert {p for p in principals if _may(acl, p, "declare_queryable", info)} == {"detector"}
+    # The detector: every camera's detections and its own counters, never a frame.
+    detector = {*(KEYS.detections(c) for c in names), KEYS.counters("detector")}
+    assert _allowed(acl, "detector", "put") == detector
+    assert _allowed(acl, "detector", "declare_subscriber") == {KEYS.all_frames()}
+    # A camera the stack does not have: nobody may put its frames or its detections.
+    assert not [p for p in principals if _may(acl, p, "put", KEYS.frame("ghost"))]
+    assert not [p for p in principals if _may(acl, p, "put", KEYS.detections("ghost"))]
+
+
+def test_a_replay_reaches_every_camera_only_on_a_stack_without_live_sensors() -> None:
+    cameras = _cameras("front", "rear", "left")
+    live = access_control(KEYS, cameras, "password")
+    replay = access_control(KEYS, cameras, "password", live_sensors=False)
+    assert _allowed(live, "recorder", "put") == {KEYS.counters("recorder")}
+    assert _allowed(replay, "recorder", "put") == {
+        *(KEYS.frame(c) for c in cameras),
+        KEYS.scan(),
+        KEYS.counters("recorder"),
+    }
+    # A further camera's process is a live sensor too.
+    assert running_sensors({"camera_rear", "detector", "metrics"}) == ["camera_rear"]
+    assert running_sensors({"camera", "sim", "ros2", "controller"}) == ["camera", "ros2", "sim"]
+    assert running_sensors({"detector", "controller", "recorder"}) == []
+
+
+def test_one_camera_is_the_stack_it_always_was() -> None:
+    one = access_control(KEYS, "front", "password")
+    assert one == access_control(KEYS, {"front": "camera"}, "password")
+    assert stack_principals("front") == PRINCIPALS
+    assert may_read(KEYS, "front", "camera") == ()
+    with pytest.raises(ValueError, match="at least one camera"):
+        stack_principals({})
+
+
+def test_the_hub_refuses_credentials_made_for_fewer_cameras(tmp_path: Path) -> None:
+    from common.bus import check_credentials
+    from deploy.credentials import generate
+
+    creds = tmp_path / "creds"
+    generate(creds)  # one camera's principals only
+    config_path = tmp_path / "two.toml"
+    config_path.write_text(
+        f'[zenoh]\nmode = "client"\nauth = "password"\ncredentials_dir = "{creds}"\n'
+        '[stack]\ncamera = "front"\n[cameras.rear]\nmount_yaw_deg = 180.0\n'
+    )
+    config = load_config(config_path, environ={})
+    with pytest.raises(ConfigError) as refused:
+        check_credentials(config)
+    line = str(refused.value)
+    assert "\n" not in line and "camera_rear" in line, line
+    assert f"zstack credentials --config {config_path} --force" in line, line
+    # A session of the missing principal says the same, in its own words.
+    with pytest.raises(
+        ConfigError, match=r"camera_rear.password is missing.*--config FILE --force"
+    ):
+        open_session(config.zenoh, "camera_rear")
+    generate(creds, force=True, principals=stack_principals(config.camera_services))
+    check_credentials(config)
+    # With certificates the router needs only the CA: nothing to check there.
+    tls = dataclasses.replace(config.zenoh, auth="certificate", endpoint="tls/127.0.0.1:7448")
+    generate(creds, force=True)
+    check_credentials(dataclasses.replace(config, zenoh=tls))

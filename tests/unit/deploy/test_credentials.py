@@ -24,6 +24,7 @@ from common.security import (
     cert_file,
     key_file,
     password_file,
+    stack_principals,
     users_file,
     viewer_token_file,
 )
@@ -195,6 +196,42 @@ def test_cli_refuses_existing_with_one_line_and_exit_2(
     assert second.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("credentials: error: ")
+
+
+def test_cli_makes_a_principal_per_camera_of_the_config(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    creds = tmp_path / "creds"
+    config = tmp_path / "three.toml"
+    config.write_text(
+        f'[zenoh]\ncredentials_dir = "{creds}"\n[stack]\ncamera = "front"\n'
+        "[cameras.rear]\nmount_yaw_deg = 180.0\n[cameras.left]\nmount_yaw_deg = 90.0\n"
+    )
+    monkeypatch.setattr(sys, "argv", ["credentials", "--config", str(config)])
+    with pytest.raises(SystemExit) as done:
+        run_main(credentials.main, "credentials")
+    assert done.value.code == 0, capsys.readouterr().err
+    assert f"wrote {len(PRINCIPALS) + 2} passwords" in capsys.readouterr().err
+    users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
+    assert users == list(stack_principals({"front": "camera", "rear": "camera_rear",
+                                           "left": "camera_left"}))  # fmt: skip
+    ca = _cert(ca_file(creds))
+    for p in ("camera_rear", "camera_left"):
+        assert _mode(password_file(creds, p)) == 0o600
+        cert = _cert(cert_file(creds, p))
+        cert.verify_directly_issued_by(ca)
+        assert [n.value for n in cert.subject.get_attributes_for_oid(x509.NameOID.COMMON_NAME)] == [
+            p
+        ]
+        assert _purposes(cert) == [ExtendedKeyUsageOID.CLIENT_AUTH]  # never the router's
+    # Again without --force: refused, in one line, the folder kept.
+    with pytest.raises(SystemExit) as again:
+        run_main(credentials.main, "credentials")
+    assert again.value.code == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    # An old-style further camera's certificate is found like any other.
+    old_style(creds, "camera_rear")
+    assert server_capable(creds) == ["camera_rear"]
 
 
 @pytest.mark.integration
