@@ -17,17 +17,27 @@ from common.setting_checks import Bounds, check_bounds, check_lengths, enum_fiel
 class ControllerSettings:
     """The reaction policy. Speeds in m/s and rad/s, angles in degrees, times in seconds.
 
-    track:  turn towards the most central confident detection of ``target_classes``; drive
-            forward at ``forward_speed`` only while it is within ``center_tolerance`` (a
-            fraction of the image width) of the image centre.
-    follow: lock onto the largest detection of ``target_classes[0]`` (by track id, so it does
-            not jump to another person) and keep it at ``follow_distance_m``, measured from the
+    Every camera of the config is used: a box's bearing is turned into the robot's frame by
+    its camera's ``mount_yaw_deg`` and ``hfov_deg``, and targets are chosen among all fresh
+    cameras' boxes; a stale camera is ignored, and none fresh is the dead-man stop.
+    track:  turn towards the most central confident detection of ``target_classes`` (the
+            smallest bearing from the robot's heading); drive forward at ``forward_speed``
+            only while it is centred: within ``center_tolerance`` (a fraction of the image
+            width of the camera that sees it, as an angle from the heading) of straight ahead.
+            A target beside or behind the robot is never centred: the robot turns in place.
+    follow: lock onto the largest detection of ``target_classes[0]`` (by camera and track id,
+            so it does not jump to another person) and keep it at ``follow_distance_m``,
+            measured from the
             box height (``distance_source = "box"``, for a target ``target_height_m`` tall) or
             by the laser in the target's bearing (``"laser"``). Forward only while centred and
             while the laser sector of ``sector_width_deg`` straight ahead, and the corridor
             ``robot_width_m`` wide that the body sweeps, are clear beyond ``safety_distance_m``
             plus the room needed to brake. A box cut by the image edge counts as arrived.
-            A target unseen for ``target_lost_timeout_s`` is dropped.
+            A target unseen for ``target_lost_timeout_s`` is dropped. When it leaves its
+            camera's view, the lock passes to a box of its class in another camera within
+            ``handover_gate_deg`` of its expected bearing, up to ``handover_window_s`` after it
+            was last seen; while it is expected between the cameras' fields of view the robot
+            keeps turning towards it (without driving) for that long.
     Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
     acceleration limits. Stale detections (captured or received longer than
     ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the
@@ -43,6 +53,8 @@ class ControllerSettings:
     detection_timeout_s: float = 1.0
     scan_timeout_s: float = 0.5
     target_lost_timeout_s: float = 1.5
+    handover_gate_deg: float = 20.0
+    handover_window_s: float = 3.0
     bearing_kp: float = 1.5
     bearing_ki: float = 0.0
     bearing_kd: float = 0.05
@@ -73,6 +85,8 @@ class ControllerSettings:
         "detection_timeout_s": (0.01, 10),
         "scan_timeout_s": (0.01, 10),
         "target_lost_timeout_s": (0.01, 60),
+        "handover_gate_deg": (1, 90),
+        "handover_window_s": (0.01, 60),
         "bearing_kp": (0, 100),
         "bearing_ki": (0, 100),
         "bearing_kd": (0, 100),

@@ -213,7 +213,9 @@ class ControllerStatus(Message):
 
     ``estop_saved`` is False while the controller's e-stop latch could not be written to disk
     (it holds in memory, and the controller stays stopped until it can save): the e-stop CLI
-    then says the stop is not durable."""
+    then says the stop is not durable. ``camera`` names the camera that sees the target ("" for
+    none); ``stale_cameras`` the cameras whose detections are stale or have not come (ignored
+    until they are fresh again)."""
 
     TAG: ClassVar[str] = "ControllerStatus"
     VERSION: ClassVar[int] = 1
@@ -224,6 +226,8 @@ class ControllerStatus(Message):
     reason: str = ""
     track_id: int = -1
     estop_saved: bool = True
+    camera: str = ""
+    stale_cameras: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -1,30 +1,51 @@
-"""The controller's decisions: pure functions and one stateful Controller. No bus, no clock.
+"""The controller's decisions: one stateful Controller over every camera. No bus, no clock.
 
-Conventions (REP 103): +x forward, +angular z turns left (counter-clockwise). Image x grows to
-the right, so a target right of the image centre has a negative bearing and gives a negative
-angular velocity. The camera looks along +x; its horizontal field of view turns a pixel column
-into a bearing with the pinhole model.
+Conventions (REP 103): +x forward, +angular z turns left (counter-clockwise). Every bearing
+here is in the robot's frame: a box's bearing in its image plus its camera's mounting yaw
+(services/controller/geometry.py), so a target right of a front camera's centre has a negative
+bearing and gives a negative angular velocity, and one seen by the rear camera has a bearing
+near +-180 deg.
+
+Several cameras: each camera's detections are judged on their own; a stale or silent camera is
+ignored, and only when no camera is fresh does the dead-man stop the robot. The target is
+chosen among the fresh cameras' boxes together (services/controller/targets.py). A target far
+off the robot's heading (behind it, beside it) is turned to in place: the robot drives forward
+only while the target is centred (``center_tolerance``). The follow lock is a camera's track
+id; when the locked target leaves that camera's view, the lock passes to a box of the same
+class in another camera within ``handover_gate_deg`` of where the target should be by now, for
+``handover_window_s`` after it was last seen, and the robot holds its turn towards it (without
+driving) while it is predicted between the cameras' fields of view.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass
 
-import numpy as np
-import numpy.typing as npt
-
 from common.contracts import ControllerMode, ControllerState, DistanceSource
-from common.messages import Detections, LaserScan
-from common.settings import ControllerSettings
+from common.messages import LaserScan
+from common.settings import CameraSettings, ControllerSettings
+from services.controller.geometry import (
+    box_clipped,
+    box_distance,
+    in_view,
+    laser_covers,
+    sector_clearance,
+    sector_range,
+    wrap,
+)
 from services.controller.limits import Limits, limit
 from services.controller.pid import PID, PIDGains
+from services.controller.targets import Sighting, View, sightings
 
 
 @dataclass(frozen=True, slots=True)
 class VelocityCommand:
-    """What to send: velocities plus the state and reason the status message reports."""
+    """What to send: velocities plus what the status message reports: the state and reason,
+    the target, the camera that sees it, and the cameras whose detections are stale."""
 
     linear_x: float
     angular_z: float
@@ -33,6 +54,8 @@ class VelocityCommand:
     target: str = ""
     track_id: int = -1
     input_stamp_ns: int = 0
+    camera: str = ""
+    stale: tuple[str, ...] = ()
 
     @property
     def is_zero(self) -> bool:
@@ -41,119 +64,43 @@ class VelocityCommand:
 
 @dataclass(frozen=True, slots=True)
 class Inputs:
-    """The newest inputs and their ages in seconds (inf when none has arrived).
+    """The newest inputs: each camera's :class:`View` by camera name, the scan and its age in
+    seconds (inf when none has arrived), and the e-stop."""
 
-    ``dets_age_s`` is how long ago the detections arrived (the dead-man timer);
-    ``capture_age_s`` how long ago their frame was captured (the latency to compensate).
-    """
-
-    dets: Detections | None
-    dets_age_s: float
+    views: Mapping[str, View]
     scan: LaserScan | None = None
-    scan_age_s: float = float("inf")
+    scan_age_s: float = math.inf
     estop: bool = False
-    capture_age_s: float = 0.0
 
 
 def stop(state: ControllerState, reason: str, input_stamp_ns: int = 0) -> VelocityCommand:
     return VelocityCommand(0.0, 0.0, state, reason, input_stamp_ns=input_stamp_ns)
 
 
-def candidates(
-    dets: Detections, classes: tuple[str, ...], min_score: float
-) -> npt.NDArray[np.intp]:
-    """Indices of detections of one of ``classes`` with at least ``min_score``."""
-    if len(dets) == 0:
-        return np.empty(0, dtype=np.intp)
-    mask = np.isin(np.asarray(dets.class_names, dtype=object), classes)
-    return np.flatnonzero(mask & (dets.boxes.scores >= min_score))
-
-
-def unknown_targets(targets: tuple[str, ...], model_classes: list[str]) -> list[str]:
-    """The target classes the detector's model cannot report: the robot would search forever."""
-    return [t for t in targets if t not in model_classes]
-
-
-def focal_px(image_width: int, hfov_deg: float) -> float:
-    """The pinhole focal length in pixels for this width and horizontal field of view."""
-    return (image_width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
-
-
-def bearing(dets: Detections, i: int, hfov_deg: float) -> float:
-    """Bearing of box ``i``'s centre in radians, counter-clockwise positive (left of centre)."""
-    dx = float(dets.centers[i, 0]) - dets.image_width / 2.0
-    return -math.atan2(dx, focal_px(dets.image_width, hfov_deg))
-
-
-def box_distance(dets: Detections, i: int, hfov_deg: float, target_height_m: float) -> float:
-    """Distance to a target of known height from its box height (pinhole, square pixels)."""
-    height_px = max(float(dets.sizes[i, 1]), 1.0)
-    return target_height_m * focal_px(dets.image_width, hfov_deg) / height_px
-
-
-def box_clipped(dets: Detections, i: int, margin_px: float = 2.0) -> bool:
-    """Whether box ``i`` touches the top or bottom image edge (its height is then cut)."""
-    y1, y2 = float(dets.boxes.xyxy[i, 1]), float(dets.boxes.xyxy[i, 3])
-    return y1 <= margin_px or y2 >= dets.image_height - margin_px
-
-
-def sector_range(scan: LaserScan, center_rad: float, width_deg: float) -> float:
-    """The nearest valid range within +-width/2 of ``center_rad``, in metres.
-
-    NaN rays and rays below ``range_min`` are invalid and ignored; +inf (nothing within range)
-    counts as clear. A sector with no valid ray returns 0.0: what cannot be seen is treated as
-    blocked.
-    """
-    half = math.radians(width_deg) / 2.0
-    offset = np.angle(np.exp(1j * (scan.angles - center_rad)))  # wrapped to -pi..pi
-    ranges = scan.ranges[np.abs(offset) <= half].astype(np.float64)
-    valid = ranges[~np.isnan(ranges) & (ranges >= scan.range_min)]
-    return float(valid.min()) if valid.size else 0.0
-
-
-def corridor_clearance(scan: LaserScan, half_width_m: float) -> float:
-    """How far the robot can drive straight on: the nearest valid hit in the corridor its body
-    sweeps (``|y| <= half_width_m`` ahead of the laser), in metres along x.
-
-    An angular sector alone misses things beside the nose that the body would still hit.
-    """
-    r = scan.ranges.astype(np.float64)
-    valid = np.isfinite(r) & (r >= scan.range_min)
-    r = np.where(valid, r, 0.0)  # inf * cos(90 deg) would be NaN (and a numpy warning)
-    x = r * np.cos(scan.angles)
-    y = r * np.sin(scan.angles)
-    hit = valid & (x > 0) & (np.abs(y) <= half_width_m)
-    return float(x[hit].min()) if hit.any() else math.inf
-
-
-def sector_clearance(scan: LaserScan, width_deg: float, half_width_m: float = 0.0) -> float:
-    """The room straight ahead: the nearest valid range within the sector (see
-    :func:`sector_range`) or, with ``half_width_m``, in the robot's corridor if that is nearer."""
-    sector = sector_range(scan, 0.0, width_deg)
-    return min(sector, corridor_clearance(scan, half_width_m)) if half_width_m > 0 else sector
-
-
 class Controller:
     """Turns the newest inputs into one command per control tick, with memory.
 
-    Memory: the PID's history, the locked target's track id and when it was last seen, the
-    previous command (for the acceleration limits), and the recent turn rates it commanded.
+    Memory: the PID's history, the locked target (its camera and track id) and when it was last
+    seen, the previous command (for the acceleration limits), and the recent turn rates it
+    commanded.
 
     Latency compensation: a detection describes the world when its frame was captured, which
     on a CPU detector is a few hundred milliseconds ago. The robot has turned since, by the
     turn rates this controller itself commanded. Subtracting that rotation from the measured
     bearing keeps the turn from overshooting; without it a slow detector makes the robot
-    swing past its target and lose it.
+    swing past its target and lose it. Each camera's frames have their own capture time.
     """
 
-    def __init__(self, s: ControllerSettings, hfov_deg: float) -> None:
+    def __init__(self, s: ControllerSettings, cameras: Mapping[str, CameraSettings]) -> None:
+        if not cameras:
+            raise ValueError("the controller needs at least one camera")
         self.s = s
-        self.hfov_deg = hfov_deg
+        self.cameras = dict(cameras)
         self.pid = PID(
             PIDGains(s.bearing_kp, s.bearing_ki, s.bearing_kd, s.max_angular, s.max_angular)
         )
         self.limits = Limits(s.max_linear, s.max_angular, s.max_linear_accel, s.max_angular_accel)
-        self.locked_id = -1
+        self.locked: tuple[str, int] | None = None  # (camera, track id) in follow mode
         self.last_seen = -math.inf
         self.last_aim: VelocityCommand | None = None
         self.previous = (0.0, 0.0)
@@ -164,26 +111,29 @@ class Controller:
 
     def step(self, inp: Inputs, now: float) -> VelocityCommand:
         """The command for this tick; ``now`` is a monotonic time in seconds."""
+        timeout = self.s.detection_timeout_s
+        views = {c: inp.views.get(c, View(None)) for c in self.cameras}
+        stale = tuple(c for c, v in views.items() if not v.fresh(timeout))
+        cmd = self._step(inp, views, now)
+        return dataclasses.replace(cmd, stale=stale) if stale else cmd
+
+    def _step(self, inp: Inputs, views: dict[str, View], now: float) -> VelocityCommand:
         # The first tick may accelerate for one nominal period, like every later one.
         dt = 1.0 / self.s.control_rate_hz if self.last_step is None else now - self.last_step
         self.last_step = now
         if inp.estop:
             return self._halt(stop(ControllerState.ESTOP, "emergency stop latched"))
-        if inp.dets is None:
-            return self._halt(stop(ControllerState.STALE, "no detections received yet"))
-        if inp.dets_age_s > self.s.detection_timeout_s:
-            return self._halt(
-                stop(ControllerState.STALE, f"detections are {inp.dets_age_s:.2f} s old")
-            )
+        timeout = self.s.detection_timeout_s
+        fresh = {c: v for c, v in views.items() if v.fresh(timeout)}
+        if not fresh:
+            return self._halt(stop(ControllerState.STALE, self._stale_reason(views)))
         scan = inp.scan if inp.scan_age_s <= self.s.scan_timeout_s else None
         # Room the robot needs to stop from its current speed: braking at the acceleration
         # limit, plus the distance covered while the scan ages and the next tick comes.
         v = self.previous[0]
         latency = (inp.scan_age_s if scan is not None else 0.0) + 1.0 / self.s.control_rate_hz
         self.stopping_m = v * v / (2 * self.s.max_linear_accel) + v * latency
-        # The compensation trusts the capture stamp no further than the dead-man does.
-        captured = now - min(inp.capture_age_s, self.s.detection_timeout_s)
-        aim = self._aim(inp.dets, scan, now, dt, captured)
+        aim = self._aim(fresh, scan, now, dt)
         if aim.state == ControllerState.SEARCHING:
             return self._halt(aim)  # the target is gone: stop now, not at the braking rate
         if not (math.isfinite(aim.linear_x) and math.isfinite(aim.angular_z)):
@@ -194,9 +144,17 @@ class Controller:
         v, w = limit(self.previous, (aim.linear_x, aim.angular_z), dt, self.limits)
         self.previous = (v, w)
         self.turns.append((now, w))
-        return VelocityCommand(
-            v, w, aim.state, aim.reason, aim.target, aim.track_id, aim.input_stamp_ns
-        )
+        return dataclasses.replace(aim, linear_x=v, angular_z=w)
+
+    def _stale_reason(self, views: dict[str, View]) -> str:
+        def age(v: View) -> str:
+            return "none received yet" if v.dets is None else f"{v.age_s:.2f} s old"
+
+        if len(views) == 1:
+            [v] = views.values()
+            return "no detections received yet" if v.dets is None else f"detections are {age(v)}"
+        ages = ", ".join(f"{c} {age(v)}" for c, v in views.items())
+        return f"no camera's detections are fresh ({ages})"
 
     def _clearance(self, scan: LaserScan) -> float:
         return sector_clearance(scan, self.s.sector_width_deg, self.s.robot_width_m / 2)
@@ -205,7 +163,7 @@ class Controller:
         """Zero at once (safety stops bypass the acceleration limit) and forget the target."""
         self.previous = (0.0, 0.0)
         self.pid.reset()
-        self.locked_id, self.last_aim, self.last_bearing = -1, None, None
+        self.locked, self.last_aim, self.last_bearing = None, None, None
         self.turns.clear()
         return cmd
 
@@ -223,104 +181,168 @@ class Controller:
                 total += w * (end - start)
         return total
 
-    def _pick(self, dets: Detections, idx: npt.NDArray[np.intp]) -> int | None:
-        """The target: the most central (track) or the locked / largest (follow) candidate."""
-        if idx.size == 0:
+    def _bearing_now(self, bearing: float, captured: float, now: float) -> float:
+        """A bearing measured at ``captured``, net of the robot's turning since."""
+        return wrap(bearing - self.rotation_since(captured, now))
+
+    def _predicted(self, now: float) -> float | None:
+        """Where the last seen target should be now, if it stood still."""
+        if self.last_bearing is None:
+            return None
+        return self._bearing_now(*self.last_bearing, now)
+
+    def _between_cameras(self, now: float, fresh: Mapping[str, View]) -> bool:
+        """Whether, with several cameras, the target is predicted in none of the fresh ones'
+        fields of view: not seeing it then is no sign it has gone."""
+        predicted = self._predicted(now)
+        if len(self.cameras) < 2 or predicted is None:
+            return False
+        return not any(in_view(predicted, self.cameras[c]) for c in fresh)
+
+    def _pick(self, found: list[Sighting], now: float) -> Sighting | None:
+        """The target: the most central (track) or the locked / largest (follow) sighting."""
+        if not found:
             return None
         if self.s.mode is ControllerMode.TRACK:
-            offsets = np.abs(dets.centers[idx, 0] - dets.image_width / 2.0)
-            return int(idx[int(np.argmin(offsets))])
-        if dets.boxes.track_ids is not None and self.locked_id >= 0:
-            locked = idx[dets.boxes.track_ids[idx] == self.locked_id]
-            if locked.size:
-                return int(locked[0])
-            return None  # the locked target is out of view: never jump to another one
-        return int(idx[int(np.argmax(np.prod(dets.sizes[idx], axis=1)))])
+            return min(found, key=lambda x: abs(x.bearing))
+        if self.locked is not None:
+            cam, track_id = self.locked
+            mine = [x for x in found if x.camera == cam]
+            if not (mine and mine[0].dets.boxes.track_ids is None):
+                for x in mine:
+                    if x.track_id == track_id:
+                        return x
+                # Out of its camera's view: never jump to another target, but follow this
+                # one into another camera's view.
+                return self._handover(found, now)
+        return max(found, key=lambda x: x.angular_area)
+
+    def _handover(self, found: list[Sighting], now: float) -> Sighting | None:
+        """The locked target as another camera sees it: the box of the same class nearest to
+        where it should be now, within ``handover_gate_deg``, for ``handover_window_s`` after
+        it was last seen. The lock passes to that camera's track."""
+        s, predicted = self.s, self._predicted(now)
+        if (
+            self.locked is None
+            or self.last_aim is None
+            or predicted is None
+            or now - self.last_seen > s.handover_window_s
+        ):
+            return None
+        gate = math.radians(s.handover_gate_deg)
+        best: Sighting | None = None
+        best_off = math.inf
+        for x in found:
+            if x.camera == self.locked[0] or x.name != self.last_aim.target:
+                continue
+            off = abs(wrap(self._bearing_now(x.bearing, x.captured, now) - predicted))
+            if off <= gate and off < best_off:
+                best, best_off = x, off
+        if best is not None:
+            self.locked = (best.camera, best.track_id) if best.track_id >= 0 else None
+        return best
 
     def _aim(
-        self, dets: Detections, scan: LaserScan | None, now: float, dt: float, captured: float
+        self, fresh: dict[str, View], scan: LaserScan | None, now: float, dt: float
     ) -> VelocityCommand:
         s = self.s
         classes = s.target_classes if s.mode is ControllerMode.TRACK else s.target_classes[:1]
-        stamp = dets.header.stamp_ns
-        best = self._pick(dets, candidates(dets, classes, s.min_score))
+        newest = {c: v.dets for c, v in fresh.items() if v.dets is not None}
+        stamp = max(d.header.stamp_ns for d in newest.values())
+        # The compensation trusts the capture stamp no further than the dead-man does.
+        captured = {c: now - min(v.capture_age_s, s.detection_timeout_s) for c, v in fresh.items()}
+        best = self._pick(sightings(newest, captured, self.cameras, classes, s.min_score), now)
         if best is None:
-            if self.last_aim is not None and now - self.last_seen <= s.target_lost_timeout_s:
-                # A brief dropout (a missed detection): keep turning towards where the target
-                # was, net of our own turning since; drive on only while the way is clear.
-                held = self.last_aim
-                clear = scan is not None and self._clearance(scan) > (
-                    s.safety_distance_m + self.stopping_m
-                )
-                linear = held.linear_x if clear else 0.0
-                angular = 0.0
-                if self.last_bearing is not None:
-                    seen, when = self.last_bearing
-                    angular = self.pid.update(seen - self.rotation_since(when, now), dt)
-                return VelocityCommand(
-                    linear,
-                    angular,
-                    ControllerState.HOLDING,
-                    f"target unseen for {now - self.last_seen:.1f} s",
-                    held.target,
-                    held.track_id,
-                    stamp,
-                )
-            self.locked_id, self.last_aim = -1, None
-            self.pid.reset()
-            return stop(ControllerState.SEARCHING, f"no {'/'.join(classes)} in view", stamp)
-        track_id = -1 if dets.boxes.track_ids is None else int(dets.boxes.track_ids[best])
-        if s.mode is ControllerMode.FOLLOW and self.locked_id < 0 and track_id >= 0:
-            self.locked_id = track_id
+            return self._hold(fresh, scan, now, dt, stamp, classes)
+        if s.mode is ControllerMode.FOLLOW and self.locked is None and best.track_id >= 0:
+            self.locked = (best.camera, best.track_id)
         self.last_seen = now
-        measured = bearing(dets, best, self.hfov_deg)
-        self.last_bearing = (measured, captured)
-        err = measured - self.rotation_since(captured, now)
+        self.last_bearing = (best.bearing, best.captured)
+        err = self._bearing_now(best.bearing, best.captured, now)
         angular = self.pid.update(err, dt)
-        centred = abs(math.tan(err)) * focal_px(dets.image_width, self.hfov_deg) <= (
-            s.center_tolerance * dets.image_width
-        )
-        name = dets.class_names[best]
+        # Centred: within center_tolerance of the image width of the camera that sees it, as
+        # an angle; a target beside or behind the robot never is, and is turned to in place.
+        width = best.dets.image_width
+        centred = abs(err) <= math.atan(s.center_tolerance * width / best.focal_px)
+        stamp = best.dets.header.stamp_ns
         if s.mode is ControllerMode.TRACK:
             aim = VelocityCommand(
                 s.forward_speed if centred else 0.0,
                 angular,
                 ControllerState.TRACKING if centred else ControllerState.TURNING,
                 f"bearing {math.degrees(err):+.1f} deg",
-                name,
-                track_id,
+                best.name,
+                best.track_id,
                 stamp,
+                best.camera,
             )
         else:
-            aim = self._follow(dets, best, scan, err, angular, centred, name, track_id)
+            aim = self._follow(best, scan, err, angular, centred)
         self.last_aim = aim
         return aim
 
-    def _follow(
+    def _hold(
         self,
-        dets: Detections,
-        i: int,
+        fresh: dict[str, View],
         scan: LaserScan | None,
-        err: float,
-        angular: float,
-        centred: bool,
-        name: str,
-        track_id: int,
+        now: float,
+        dt: float,
+        stamp: int,
+        classes: tuple[str, ...],
+    ) -> VelocityCommand:
+        """No target in view. A brief dropout (a missed detection): keep turning towards where
+        the target was, net of our own turning since; drive on only while the way is clear.
+        A target predicted between the cameras is held up to ``handover_window_s``, turning
+        in place. Then stop and unlock."""
+        s = self.s
+        between = self._between_cameras(now, fresh)
+        hold_s = max(s.target_lost_timeout_s, s.handover_window_s if between else 0.0)
+        if self.last_aim is not None and now - self.last_seen <= hold_s:
+            held = self.last_aim
+            clear = scan is not None and self._clearance(scan) > (
+                s.safety_distance_m + self.stopping_m
+            )
+            linear = held.linear_x if clear and not between else 0.0
+            predicted = self._predicted(now)
+            angular = 0.0 if predicted is None else self.pid.update(predicted, dt)
+            where = ", between the cameras" if between else ""
+            return VelocityCommand(
+                linear,
+                angular,
+                ControllerState.HOLDING,
+                f"target unseen for {now - self.last_seen:.1f} s{where}",
+                held.target,
+                held.track_id,
+                stamp,
+                held.camera,
+            )
+        self.locked, self.last_aim = None, None
+        self.pid.reset()
+        return stop(ControllerState.SEARCHING, f"no {'/'.join(classes)} in view", stamp)
+
+    def _follow(
+        self, x: Sighting, scan: LaserScan | None, err: float, angular: float, centred: bool
     ) -> VelocityCommand:
         s = self.s
+        dets, i = x.dets, x.i
         stamp = dets.header.stamp_ns
 
         def turn_only(state: ControllerState, reason: str) -> VelocityCommand:
-            return VelocityCommand(0.0, angular, state, reason, name, track_id, stamp)
+            return VelocityCommand(0.0, angular, state, reason, x.name, x.track_id, stamp, x.camera)
 
         distance = math.inf
         if s.distance_source is DistanceSource.LASER:
             if scan is None:
                 return turn_only(ControllerState.BLOCKED, "no recent laser scan for the distance")
+            if not centred and not laser_covers(scan, err):
+                # Behind the robot, outside the laser's field: turn to it first.
+                return turn_only(
+                    ControllerState.TURNING,
+                    f"bearing {math.degrees(err):+.1f} deg, outside the laser's view",
+                )
             # The laser rays across the middle 60% of the box's width, in the bearing ``err``
-            # (already net of our turning since the frame was captured).
-            f = focal_px(dets.image_width, self.hfov_deg)
-            half_width = math.atan(float(dets.sizes[i, 0]) / 2 / f)
+            # (in the robot's frame, net of our turning since the frame was captured).
+            half_width = math.atan(float(dets.sizes[i, 0]) / 2 / x.focal_px)
             distance = sector_range(scan, err, math.degrees(1.2 * half_width))
             if distance == 0.0:
                 return turn_only(
@@ -331,7 +353,7 @@ class Controller:
                 # A box cut by the image edge is shorter than the target: its distance would
                 # be overestimated. Close enough to fill the frame is close enough.
                 return turn_only(ControllerState.ARRIVED, "target fills the image height")
-            distance = box_distance(dets, i, self.hfov_deg, s.target_height_m)
+            distance = box_distance(dets, i, x.hfov_deg, s.target_height_m)
         if not centred:
             return turn_only(ControllerState.TURNING, f"bearing {math.degrees(err):+.1f} deg")
         if distance <= s.follow_distance_m:
@@ -347,7 +369,8 @@ class Controller:
             angular,
             ControllerState.FOLLOWING,
             f"target at {distance:.2f} m",
-            name,
-            track_id,
+            x.name,
+            x.track_id,
             stamp,
+            x.camera,
         )

@@ -1,10 +1,12 @@
-"""The controller service: latest detections and scan in, Twist and ControllerStatus out."""
+"""The controller service: every camera's latest detections and the scan in, Twist and
+ControllerStatus out."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
 import threading
+from functools import partial
 from typing import Generic, Protocol, TypeVar
 
 import zenoh
@@ -13,6 +15,7 @@ from common import reach
 from common.bus import Publisher, QoS, open_session
 from common.clock import BOOT_ID, Stamp, mono_s, now
 from common.contracts import ControllerMode, ControllerState, DetectorInfo
+from common.counters import per_camera
 from common.errors import DecodeError, StackError
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.keys import Keys
@@ -21,7 +24,8 @@ from common.node import Node, Tally
 from common.queries import ready_services
 from common.settings import Config
 from services.controller.estop import EStopLatch
-from services.controller.policy import Controller, Inputs, VelocityCommand, unknown_targets
+from services.controller.policy import Controller, Inputs, VelocityCommand
+from services.controller.targets import View, unknown_targets
 
 
 class _Stamped(Protocol):
@@ -53,11 +57,13 @@ class Latest(Generic[_S]):
     source's older view) never replaces it.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, arrived: threading.Event | None = None) -> None:
         self._lock = threading.Lock()
         self._msg: _S | None = None
         self._t = 0.0
-        self.arrived = threading.Event()  # set on every new message; the loop clears it
+        # Set on every new message (one event may be shared: every camera's wakes the loop);
+        # the loop clears it.
+        self.arrived = arrived or threading.Event()
 
     def set(self, msg: _S) -> bool:
         """Hold ``msg``; False (and nothing changes) when it is older than the one held."""
@@ -83,10 +89,25 @@ def _age(msg: Header | None, arrival_age_s: float, at: Stamp) -> float:
     return max(arrival_age_s, capture_age_s(msg, at, BOOT_ID))
 
 
+def _view(latest: Latest[Detections], at: Stamp, timeout_s: float) -> View:
+    """One camera's newest detections, aged at the control instant ``at``."""
+    d, arrival = latest.get()
+    if d is None:
+        return View(None)
+    capture = capture_age_s(d.header, at, BOOT_ID)
+    return View(d, _age(d.header, arrival, at), min(max(0.0, capture), timeout_s))
+
+
 class ControllerHandlers:
     """What the controller does with each input as it arrives: detections and scans are judged
     (common/freshness.py) and the newest fresh one is held for the control loop; an e-stop
-    message latches or releases the stop, kept on disk (controller/estop.py)."""
+    message latches or releases the stop, kept on disk (controller/estop.py).
+
+    Every camera of the config has its own gate and its own newest detections (``dets``, by
+    camera name, the first camera first): one camera's stamps never judge another's, and a
+    stale camera is ignored while the others are used. With several cameras, each camera's
+    counts are kept beside the totals (``detections_in.rear``, ...).
+    """
 
     def __init__(self, config: Config, tally: Tally) -> None:
         s = config.controller
@@ -94,32 +115,48 @@ class ControllerHandlers:
         self.tolerance_s = config.stack.clock_tolerance_s
         self.estop_release_max_age_s = s.estop_release_max_age_s
         self.latch = EStopLatch(config.estop_path, now().wall_ns + int(self.tolerance_s * 1e9))
-        self.dets: Latest[Detections] = Latest()
+        cameras = list(config.all_cameras)
+        self.arrived = threading.Event()  # new detections from any camera
+        self.dets: dict[str, Latest[Detections]] = {c: Latest(self.arrived) for c in cameras}
         self.scan: Latest[LaserScan] = Latest()
-        self._det_key = tally.keys.detections(config.stack.camera)
-        self._det_gate = FreshnessGate(s.detection_timeout_s, self.tolerance_s, BOOT_ID)
+        self._det_keys = {c: tally.keys.detections(c) for c in cameras}
+        self._det_gates = {
+            c: FreshnessGate(s.detection_timeout_s, self.tolerance_s, BOOT_ID) for c in cameras
+        }
+        self._per_camera = len(cameras) > 1
         self._scan_gate = FreshnessGate(s.scan_timeout_s, self.tolerance_s, BOOT_ID)
 
-    def on_detections(self, payload: bytes) -> None:
-        msg = self.tally.decode(self._det_key, Detections.decode, payload)
+    def on_detections(self, camera: str, payload: bytes) -> None:
+        """Detections from ``camera``'s key (a camera of the config)."""
+        msg = self.tally.decode(self._det_keys[camera], Detections.decode, payload)
         if msg is not None:
-            self._fresh_input(msg, self._det_gate, self.dets, "detections")
+            where = camera if self._per_camera else ""
+            self._fresh_input(msg, self._det_gates[camera], self.dets[camera], "detections", where)
 
     def on_scan(self, payload: bytes) -> None:
         msg = self.tally.decode(self.tally.keys.scan(), LaserScan.decode, payload)
         if msg is not None:
             self._fresh_input(msg, self._scan_gate, self.scan, "scans")
 
-    def _fresh_input(self, msg: _S, gate: FreshnessGate, latest: Latest[_S], name: str) -> None:
+    def _fresh_input(
+        self, msg: _S, gate: FreshnessGate, latest: Latest[_S], name: str, camera: str = ""
+    ) -> None:
         """A decoded message's fate: judge its freshness, keep it if fresh and newest, count
-        the rest (``<name>_in``, ``<name>_stale|future|replay|late``)."""
+        the rest (``<name>_in``, ``<name>_stale|future|replay|late``; with ``camera``, also
+        ``<counter>.<camera>``)."""
         verdict, age = gate.check(msg.header, now())
+        of = f" from {camera}" if camera else ""
         if verdict is not Verdict.FRESH:
-            self.tally.reject(f"{name}_{verdict}", f"{verdict} {name} ({age:.2f} s) ignored")
+            counter = f"{name}_{verdict}"
+            self.tally.reject(counter, f"{verdict} {name}{of} ({age:.2f} s) ignored")
         elif latest.set(msg):
-            self.tally.counters.add(f"{name}_in")
+            counter = f"{name}_in"
+            self.tally.counters.add(counter)
         else:
-            self.tally.reject(f"{name}_late", f"{name} older than the ones held ignored")
+            counter = f"{name}_late"
+            self.tally.reject(counter, f"{name}{of} older than the ones held ignored")
+        if camera:
+            self.tally.counters.add(per_camera(counter, camera))
 
     def on_estop(self, payload: bytes) -> None:
         """Latch on an engage or on garbage; release only on a fresh release newer than the
@@ -162,25 +199,33 @@ def run(config: Config, stop: threading.Event) -> int:
     A command goes out at least ``control_rate_hz`` times a second, and at once when new
     detections arrive: waiting for the next tick would add up to a whole period of latency.
     Inputs are judged on arrival (common/freshness.py): stale, future-stamped or replayed
-    detections and scans are counted and never acted on.
+    detections and scans are counted and never acted on. Every camera of the config is
+    subscribed to, and each one's detections are aged on their own at the control instant
+    (policy.py: a stale camera is ignored; none fresh is the dead-man stop).
     """
     s = config.controller
     with Node("controller", config, counters_period_s=s.counters_period_s) as node:
         handlers = ControllerHandlers(config, node)
-        latch, dets, scan = handlers.latch, handlers.dets, handlers.scan
+        latch, scan = handlers.latch, handlers.scan
         (node.log.warning if latch.engaged else node.log.info)("%s", latch.note)
         if not latch.saved:
             node.log.error("the e-stop state cannot be saved: %s", latch.describe())
-        det_key = node.keys.detections(config.stack.camera)
+        cameras = config.all_cameras
+        det_keys = [node.keys.detections(c) for c in cameras]
         subs = [
-            node.subscribe(det_key, handlers.on_detections),
+            *(
+                node.subscribe(k, partial(handlers.on_detections, c))
+                for c, k in zip(cameras, det_keys, strict=True)
+            ),
             node.subscribe(node.keys.scan(), handlers.on_scan),
             node.subscribe(node.keys.estop(), handlers.on_estop),
         ]
-        controller = Controller(s, config.camera.hfov_deg)
+        controller = Controller(s, cameras)
         cmd_pub = node.publisher(node.keys.cmd_vel(), QoS.CONTROL)
         status_pub = node.publisher(node.keys.controller_status(), QoS.TELEMETRY)
-        node.log.info("mode %s on %s, targets %s", s.mode, det_key, list(s.target_classes))
+        node.log.info(
+            "mode %s on %s, targets %s", s.mode, ", ".join(det_keys), list(s.target_classes)
+        )
         threading.Thread(
             target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
         ).start()
@@ -189,19 +234,15 @@ def run(config: Config, stop: threading.Event) -> int:
         last_state: ControllerState | None = None
         try:
             while not stop.is_set():
-                dets.arrived.clear()  # before reading, so a message arriving now wakes us
+                handlers.arrived.clear()  # before reading, so a message arriving now wakes us
                 # One instant per tick: the ages are judged at it and the command is stamped
                 # with it, so that a reader of cmd_vel can check the judgement exactly.
                 at = now()
                 tick = at.mono_ns / 1e9
-                d, d_arrival = dets.get()
                 sc, sc_arrival = scan.get()
-                d_age = _age(d.header if d is not None else None, d_arrival, at)
-                capture = capture_age_s(d.header, at, BOOT_ID) if d is not None else 0.0
-                inputs = Inputs(
-                    d, d_age, sc, _age(sc.header if sc is not None else None, sc_arrival, at),
-                    latch.engaged, min(max(0.0, capture), s.detection_timeout_s),
-                )  # fmt: skip
+                views = {c: _view(d, at, s.detection_timeout_s) for c, d in handlers.dets.items()}
+                sc_age = _age(sc.header if sc is not None else None, sc_arrival, at)
+                inputs = Inputs(views, sc, sc_age, latch.engaged)
                 cmd = controller.step(inputs, tick)
                 if cmd.state == ControllerState.ESTOP:
                     cmd = dataclasses.replace(cmd, reason=latch.describe())
@@ -210,7 +251,7 @@ def run(config: Config, stop: threading.Event) -> int:
                     node.log.info("state %s: %s", cmd.state, cmd.reason)
                     last_state = cmd.state
                 node.publish_counters()
-                wait_either(dets.arrived, stop, period - (mono_s() - tick))
+                wait_either(handlers.arrived, stop, period - (mono_s() - tick))
             # Leave the robot still: the last word on cmd_vel is always a stop.
             stopped = VelocityCommand(0.0, 0.0, ControllerState.STOPPED, "shutdown")
             _publish(node, cmd_pub, status_pub, stopped, s.mode, now(), estop_saved=latch.saved)
@@ -276,6 +317,8 @@ def _publish(
         reason=cmd.reason,
         track_id=cmd.track_id,
         estop_saved=estop_saved,
+        camera=cmd.camera,
+        stale_cameras=cmd.stale,
     )
     status_pub.put(status.encode())
 

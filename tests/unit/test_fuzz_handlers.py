@@ -42,7 +42,9 @@ def test_the_controllers_handlers(tmp_path: Path) -> None:
     tally = Tally("controller", config)
     handlers = ControllerHandlers(config, tally)
     keys = tally.keys
-    message_handler(tally, handlers.on_detections, keys.detections(config.stack.camera), Detections)
+    camera = config.stack.camera
+    on_detections = partial(handlers.on_detections, camera)
+    message_handler(tally, on_detections, keys.detections(camera), Detections)
     message_handler(tally, handlers.on_scan, keys.scan(), LaserScan)
     message_handler(tally, handlers.on_estop, keys.estop(), EStop)
     # Garbage on the e-stop key is a press: fail safe. The latch is on disk.

@@ -11,10 +11,8 @@ import pytest
 
 from common.boxes import Boxes
 from common.messages import Detections, Header, LaserScan
-from common.settings import ControllerSettings
-from services.controller.policy import (
-    Controller,
-    Inputs,
+from common.settings import CameraSettings, ControllerSettings
+from services.controller.geometry import (
     bearing,
     box_distance,
     corridor_clearance,
@@ -22,6 +20,8 @@ from services.controller.policy import (
     sector_clearance,
     sector_range,
 )
+from services.controller.policy import Controller, Inputs
+from services.controller.targets import View
 
 HEADER = Header(stamp_ns=123, frame_id="camera", seq=1, source="test")
 W, H, HFOV = 640, 480, 60.0
@@ -30,6 +30,21 @@ W, H, HFOV = 640, 480, 60.0
 FREE = dict(max_linear_accel=20.0, max_angular_accel=100.0, bearing_kd=0.0)
 TRACK = ControllerSettings(mode="track", target_classes=("person",), **FREE)  # type: ignore[arg-type]
 FOLLOW = dataclasses.replace(TRACK, mode="follow")
+# Today's stack: one camera, looking forward.
+FRONT = {"front": CameraSettings(hfov_deg=HFOV)}
+
+
+def one(
+    d: Detections | None,
+    age: float,
+    sc: LaserScan | None = None,
+    scan_age: float = math.inf,
+    *,
+    estop: bool = False,
+    capture_age_s: float = 0.0,
+) -> Inputs:
+    """The inputs of a one-camera stack: the front camera's detections and their age."""
+    return Inputs({"front": View(d, age, capture_age_s)}, sc, scan_age, estop)
 
 
 def dets(
@@ -85,8 +100,8 @@ def step(
     now: float = 1.0,
     ctl: Controller | None = None,
 ):  # type: ignore[no-untyped-def]
-    ctl = ctl or Controller(s, HFOV)
-    return ctl.step(Inputs(d, age, sc, 0.0 if sc is not None else math.inf), now)
+    ctl = ctl or Controller(s, FRONT)
+    return ctl.step(one(d, age, sc, 0.0 if sc is not None else math.inf), now)
 
 
 # A box tall enough for a 1.7 m person at 2.5 m: beyond the 1.0 m follow distance.
@@ -133,10 +148,10 @@ def test_angular_speed_is_limited() -> None:
 
 def test_acceleration_is_limited_between_ticks() -> None:
     s = dataclasses.replace(TRACK, max_linear_accel=1.0, max_angular_accel=2.0)
-    ctl = Controller(s, HFOV)
+    ctl = Controller(s, FRONT)
     d = dets(("person", 0.9, 330, 240, 50, 100))
-    first = ctl.step(Inputs(d, 0.0), now=0.0)  # first tick: one nominal period (1/20 s)
-    second = ctl.step(Inputs(d, 0.0), now=0.1)
+    first = ctl.step(one(d, 0.0), now=0.0)  # first tick: one nominal period (1/20 s)
+    second = ctl.step(one(d, 0.0), now=0.1)
     assert first.linear_x == pytest.approx(0.05) and second.linear_x == pytest.approx(0.15)
 
 
@@ -173,37 +188,37 @@ def test_follow_stops_for_an_obstacle_ahead() -> None:
 
 
 def test_follow_locks_onto_one_track() -> None:
-    ctl = Controller(FOLLOW, HFOV)
+    ctl = Controller(FOLLOW, FRONT)
     big_a = ("person", 0.9, 250.0, 240.0, 80.0, FAR)
     bigger_b = ("person", 0.9, 420.0, 240.0, 120.0, FAR * 1.1)
-    first = ctl.step(Inputs(dets(big_a, tracks=[7]), 0.0, scan(5.0), 0.0), now=0.0)
+    first = ctl.step(one(dets(big_a, tracks=[7]), 0.0, scan(5.0), 0.0), now=0.0)
     assert first.track_id == 7
     # another, larger person appears: the lock holds on track 7
-    second = ctl.step(Inputs(dets(big_a, bigger_b, tracks=[7, 8]), 0.0, scan(5.0), 0.0), 0.1)
+    second = ctl.step(one(dets(big_a, bigger_b, tracks=[7, 8]), 0.0, scan(5.0), 0.0), 0.1)
     assert second.track_id == 7 and second.angular_z > 0
 
 
 def test_lost_target_is_held_briefly_then_dropped() -> None:
-    ctl = Controller(FOLLOW, HFOV)
+    ctl = Controller(FOLLOW, FRONT)
     seen = dets(("person", 0.9, 320, 240, 60, FAR), tracks=[3])
     empty = dets()
-    ctl.step(Inputs(seen, 0.0, scan(5.0), 0.0), now=0.0)
-    held = ctl.step(Inputs(empty, 0.0, scan(5.0), 0.0), now=FOLLOW.target_lost_timeout_s / 2)
+    ctl.step(one(seen, 0.0, scan(5.0), 0.0), now=0.0)
+    held = ctl.step(one(empty, 0.0, scan(5.0), 0.0), now=FOLLOW.target_lost_timeout_s / 2)
     assert held.state == "holding" and held.linear_x > 0
-    lost = ctl.step(Inputs(empty, 0.0, scan(5.0), 0.0), now=FOLLOW.target_lost_timeout_s + 0.1)
+    lost = ctl.step(one(empty, 0.0, scan(5.0), 0.0), now=FOLLOW.target_lost_timeout_s + 0.1)
     assert lost.is_zero and lost.state == "searching"
     # unlocked: a new person is followed
     other = ctl.step(
-        Inputs(dets(("person", 0.9, 320, 240, 60, FAR), tracks=[9]), 0.0, scan(5.0), 0.0),
+        one(dets(("person", 0.9, 320, 240, 60, FAR), tracks=[9]), 0.0, scan(5.0), 0.0),
         now=FOLLOW.target_lost_timeout_s + 0.2,
     )
     assert other.track_id == 9
 
 
 def test_held_target_does_not_drive_into_an_obstacle() -> None:
-    ctl = Controller(FOLLOW, HFOV)
-    ctl.step(Inputs(dets(("person", 0.9, 320, 240, 60, FAR)), 0.0, scan(5.0), 0.0), now=0.0)
-    held = ctl.step(Inputs(dets(), 0.0, scan(0.2), 0.0), now=0.1)
+    ctl = Controller(FOLLOW, FRONT)
+    ctl.step(one(dets(("person", 0.9, 320, 240, 60, FAR)), 0.0, scan(5.0), 0.0), now=0.0)
+    held = ctl.step(one(dets(), 0.0, scan(0.2), 0.0), now=0.1)
     assert held.state == "holding" and held.linear_x == 0.0
 
 
@@ -223,28 +238,28 @@ def test_sector_ignores_invalid_rays_and_blind_is_blocked() -> None:
 
 
 def test_stale_or_missing_detections_and_estop_command_zero_at_once() -> None:
-    ctl = Controller(dataclasses.replace(TRACK, max_linear_accel=0.1), HFOV)
+    ctl = Controller(dataclasses.replace(TRACK, max_linear_accel=0.1), FRONT)
     d = dets(("person", 0.9, 320, 240, 50, 100))
     for t in range(20):
-        moving = ctl.step(Inputs(d, 0.0), now=t * 0.1)
+        moving = ctl.step(one(d, 0.0), now=t * 0.1)
     assert moving.linear_x > 0
-    stale = ctl.step(Inputs(d, TRACK.detection_timeout_s + 0.01), now=2.1)
+    stale = ctl.step(one(d, TRACK.detection_timeout_s + 0.01), now=2.1)
     assert stale.is_zero and stale.state == "stale"  # no deceleration ramp for a stop
-    assert ctl.step(Inputs(None, math.inf), now=2.2).state == "stale"
-    estop = ctl.step(Inputs(d, 0.0, estop=True), now=2.3)
+    assert ctl.step(one(None, math.inf), now=2.2).state == "stale"
+    estop = ctl.step(one(d, 0.0, estop=True), now=2.3)
     assert estop.is_zero and estop.state == "estop"
 
 
 def test_obstacle_stop_leaves_room_to_brake() -> None:
     s = dataclasses.replace(FOLLOW, max_linear_accel=0.5)
-    ctl = Controller(s, HFOV)
+    ctl = Controller(s, FRONT)
     d = dets(("person", 0.9, 320, 240, 60, FAR))
     for t in range(40):  # reach cruising speed with a clear way
-        ctl.step(Inputs(d, 0.0, scan(8.0), 0.0), now=t * 0.05)
+        ctl.step(one(d, 0.0, scan(8.0), 0.0), now=t * 0.05)
     v = ctl.previous[0]
     assert v > 0.4
     # 0.6 m ahead is beyond the 0.5 m safety distance but within it plus the braking distance
-    cmd = ctl.step(Inputs(d, 0.0, scan(0.5 + v * v / (2 * 0.5)), 0.0), now=2.0)
+    cmd = ctl.step(one(d, 0.0, scan(0.5 + v * v / (2 * 0.5)), 0.0), now=2.0)
     assert cmd.state == "blocked"
 
 
@@ -261,45 +276,43 @@ def test_corridor_catches_what_the_sector_misses() -> None:
 
 
 def test_rotation_since_integrates_the_commanded_turns() -> None:
-    ctl = Controller(TRACK, HFOV)
+    ctl = Controller(TRACK, FRONT)
     ctl.turns.extend([(0.0, 0.5), (1.0, -0.2), (2.0, 0.0)])
     assert ctl.rotation_since(0.0, 3.0) == pytest.approx(0.5 - 0.2)
     assert ctl.rotation_since(0.5, 1.5) == pytest.approx(0.25 - 0.1)
 
 
 def test_bearing_is_compensated_for_the_turn_since_capture() -> None:
-    ctl = Controller(TRACK, HFOV)
+    ctl = Controller(TRACK, FRONT)
     ctl.turns.append((0.0, 0.5))  # turning left at 0.5 rad/s for the last second
     d = dets(("person", 0.9, 200, 240, 50, 100))  # seen left of centre a second ago
     measured = bearing(d, 0, HFOV)
     assert measured > 0
-    cmd = ctl.step(Inputs(d, 0.0, capture_age_s=1.0), now=1.0)
+    cmd = ctl.step(one(d, 0.0, capture_age_s=1.0), now=1.0)
     # The robot already turned 0.5 rad left: the target is now to the right.
     assert cmd.angular_z == pytest.approx(TRACK.bearing_kp * (measured - 0.5), abs=1e-6)
 
 
 def test_losing_the_target_stops_at_once_after_the_hold() -> None:
     s = dataclasses.replace(FOLLOW, max_linear_accel=0.5)
-    ctl = Controller(s, HFOV)
+    ctl = Controller(s, FRONT)
     seen = dets(("person", 0.9, 320, 240, 60, FAR))
     for t in range(60):
-        ctl.step(Inputs(seen, 0.0, scan(8.0), 0.0), now=t * 0.05)
+        ctl.step(one(seen, 0.0, scan(8.0), 0.0), now=t * 0.05)
     assert ctl.previous[0] > 0.4
-    lost = ctl.step(Inputs(dets(), 0.0, scan(8.0), 0.0), now=3.0 + s.target_lost_timeout_s + 0.1)
+    lost = ctl.step(one(dets(), 0.0, scan(8.0), 0.0), now=3.0 + s.target_lost_timeout_s + 0.1)
     assert lost.is_zero and lost.state == "searching"  # no braking ramp
 
 
 def test_track_mode_does_not_hold_forward_speed_blind() -> None:
-    ctl = Controller(TRACK, HFOV)
-    ctl.step(Inputs(dets(("person", 0.9, 320, 240, 50, 100)), 0.0), now=0.0)
-    held = ctl.step(Inputs(dets(), 0.0), now=0.1)  # no scan in track mode
+    ctl = Controller(TRACK, FRONT)
+    ctl.step(one(dets(("person", 0.9, 320, 240, 50, 100)), 0.0), now=0.0)
+    held = ctl.step(one(dets(), 0.0), now=0.1)  # no scan in track mode
     assert held.state == "holding" and held.linear_x == 0.0
 
 
 def test_corridor_with_rays_at_infinity_raises_no_numpy_warning() -> None:
     import warnings
-
-    from services.controller.policy import corridor_clearance
 
     ranges = np.full(541, np.inf, np.float32)
     ranges[270] = 2.0  # straight ahead
