@@ -14,8 +14,11 @@ from services.camera.reopen import ReopenHooks, ReopeningSource
 from services.camera.sources import FrameSource, open_source, resize
 
 
-def run(config: Config, stop: threading.Event) -> int:
-    """Publish frames until ``stop`` is set or the source ends; returns the exit code.
+def run(config: Config, camera: str, settings: CameraSettings, stop: threading.Event) -> int:
+    """Publish ``camera``'s frames (read with ``settings``) on its key until ``stop`` is set or
+    the source ends; returns the exit code. The process is that camera's service
+    (``config.camera_services``): its health token, counters and principal are its own, so the
+    supervisor watches and restarts each camera apart from the others.
 
     A source from which no frame at all can be read raises ConfigError (one line, exit 2: the
     supervisor does not restart it). Unreadable frames among good ones are counted and skipped,
@@ -23,8 +26,7 @@ def run(config: Config, stop: threading.Event) -> int:
     that stops giving frames never ends: it is reopened every ``camera.reopen_period_s``
     (services/camera/reopen.py).
     """
-    settings = config.camera
-    with Node("camera", config) as node:
+    with Node(config.camera_services[camera], config) as node:
 
         def on_bad(exc: ImageError) -> None:
             node.reject("bad_images", str(exc))  # a looped folder repeats it: rate-limited
@@ -32,7 +34,7 @@ def run(config: Config, stop: threading.Event) -> int:
         source = _reopening(
             open_source(settings.source, loop=settings.loop, on_bad=on_bad), settings, node, stop
         )
-        key = node.keys.frame(config.stack.camera)
+        key = node.keys.frame(camera)
         publisher = node.publisher(key, QoS.SENSOR)
         node.log.info("publishing %s on %s at %.1f Hz", source.description, key, settings.rate_hz)
         node.ready()
