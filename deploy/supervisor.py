@@ -194,7 +194,7 @@ def supervise(
                     why = p.last_error or f"exit code {p.last_exit}"
                     log.error("%s failed for good (%s); it is optional: the stack runs on", p.name,
                               why)  # fmt: skip
-            if now >= next_status:
+            if failed is None and now >= next_status:  # none once a failure stops it
                 next_status = now + s.status_period_s
                 last_metrics = query_metrics(session, keys, METRICS_TIMEOUT_S) or last_metrics
                 # Status lines go to stderr: stdout carries only the --duration summary.
