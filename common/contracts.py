@@ -136,6 +136,7 @@ class ScenarioResult(TypedDict, total=False):
     distance_travelled_m: float
     final_bearing_deg: float | None
     frames_per_camera: dict[str, int]
+    detections_per_camera: dict[str, int]
     seen_per_camera: dict[str, int]
     moving_at_kill: bool
     checks: dict[str, bool]

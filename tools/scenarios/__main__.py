@@ -40,6 +40,7 @@ def _print_text(r: ScenarioResult) -> None:
         print(f"  {key:24} {fmt(r.get(key))}")
     for key, per_camera in (
         ("frames_per_camera", r.get("frames_per_camera", {})),
+        ("detections_per_camera", r.get("detections_per_camera", {})),
         ("seen_per_camera", r.get("seen_per_camera", {})),
     ):
         print(f"  {key:24} " + " ".join(f"{c}={n}" for c, n in per_camera.items()))

@@ -13,7 +13,8 @@ Figures:
                             the end (None without one); a ``must_face`` scenario needs it within
                             the first camera's half field of view: the robot turned to it
     frames_per_camera       frames heard on each camera's key
-    seen_per_camera         each camera's detections that name a target class
+    detections_per_camera   detections messages heard on each camera's key
+    seen_per_camera         each camera's detections messages that name a target class
     stale_commands          non-zero commands acting on detections whose frame was captured
                             longer than the detection timeout before the command was
                             stamped: the controller's own rule (must be 0)
@@ -109,6 +110,7 @@ def score(
         ),
         "final_bearing_deg": None,
         "frames_per_camera": dict(rec.frames),
+        "detections_per_camera": {camera: len(dets) for camera, dets in rec.detections.items()},
         "seen_per_camera": {
             camera: sum(any(n in s.target_classes for n in d.class_names) for d in dets)
             for camera, dets in rec.detections.items()
