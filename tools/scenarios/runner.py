@@ -1,9 +1,9 @@
 """``python -m tools.scenarios scenario NAME``: run the real stack against a scripted world.
 
 The runner writes a private stack config (a free port, a unique key prefix, the simulator in
-place of the camera, the controller in follow mode, the scenario's own further cameras), starts
-it under the supervisor, records the truth, the commands, and every camera's frames and
-detections, stops it, and scores the run (tools/scenarios/score.py).
+place of the camera, the controller in follow mode, the scenario's own further cameras and
+detector changes), starts it under the supervisor, records the truth, the commands, and every
+camera's frames and detections, stops it, and scores the run (tools/scenarios/score.py).
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Con
         base,
         zenoh=zenoh_s,
         cameras=cameras,
+        detector=dataclasses.replace(base.detector, **scenario.detector),
         stack=dataclasses.replace(base.stack, prefix=f"sim/{uuid.uuid4().hex[:8]}"),
         controller=controller,
         sim=dataclasses.replace(
