@@ -134,6 +134,10 @@ class ScenarioResult(TypedDict, total=False):
     nonzero_commands: int
     stop_after_kill_s: float | None
     distance_travelled_m: float
+    final_bearing_deg: float | None
+    frames_per_camera: dict[str, int]
+    detections_per_camera: dict[str, int]
+    seen_per_camera: dict[str, int]
     moving_at_kill: bool
     checks: dict[str, bool]
     log: str

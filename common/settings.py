@@ -70,6 +70,12 @@ def camera_service(first: str, camera: str) -> str:
     return "camera" if camera == first else f"camera_{camera}"
 
 
+def service_package(service: str) -> str:
+    """The package a service runs from, ``services.<package>``: ``camera`` for every camera's
+    service (``camera``, ``camera_<name>``), the service's own name otherwise."""
+    return "camera" if service.startswith("camera_") else service
+
+
 SERVICES = ("recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
 # zenoh.max_payload_bytes: a counters message must fit; Zenoh refuses to receive above 1 GiB.

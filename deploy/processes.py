@@ -13,13 +13,31 @@ from typing import IO
 
 from common.clock import mono_s
 from common.lifecycle import PERMANENT_FAILURES, SUPERVISOR_PID_ENV
-from common.settings import SupervisorSettings
+from common.settings import Config, SupervisorSettings
 from common.spawn import ask_to_stop, spawn, wait_or_kill
 
 
-def service_command(name: str, config_path: str) -> list[str]:
-    """Every service starts the same way (common/cli.py)."""
-    return [sys.executable, "-m", f"services.{name}", "serve", "--config", config_path]
+def service_command(name: str, config_path: str, camera: str = "") -> list[str]:
+    """Every service starts the same way (common/cli.py); a further camera's with
+    ``--camera <name>`` (the first camera's without, as a one-camera stack always started it)."""
+    command = [sys.executable, "-m", f"services.{name}", "serve", "--config", config_path]
+    return [*command, "--camera", camera] if camera else command
+
+
+def stack_processes(config: Config) -> list[tuple[str, list[str]]]:
+    """(process name, command) of every process the supervisor runs, in start order: one per
+    service of ``supervisor.services``, and for ``camera`` one per configured camera, each
+    named as its service (``camera``, ``camera_<name>``: common/settings.py::camera_service),
+    so that each has its own status, restarts, backoff and watchdog."""
+    out = []
+    for name in config.supervisor.services:
+        if name != "camera":
+            out.append((name, service_command(name, config.path)))
+            continue
+        for camera, service in config.camera_services.items():
+            further = camera if camera != config.stack.camera else ""
+            out.append((service, service_command("camera", config.path, further)))
+    return out
 
 
 @dataclass

@@ -36,10 +36,10 @@ from common.lifecycle import (
 )
 from common.messages import ControllerStatus, GroundTruth, ServiceCounters, Twist
 from common.queries import query_metrics
-from common.settings import CameraSettings, Config
+from common.settings import CameraSettings, Config, service_package
 from deploy.crosscheck import cross_check, model_classes
 from deploy.lock import acquire
-from deploy.processes import ServiceProcess, service_command
+from deploy.processes import ServiceProcess, stack_processes
 from deploy.watchdog import Observation, check_settings, judge
 
 METRICS_TIMEOUT_S = 0.5
@@ -160,15 +160,18 @@ def supervise(
     view = LiveView(session, keys)
     for warning in config_warnings(config):
         log.warning("%s", warning)
-    procs = [ServiceProcess(n, service_command(n, config.path), s) for n in s.services]
-    log.info("hub on %s; starting %s", config.zenoh.endpoint, ", ".join(s.services))
+    # One process per service, and per camera: camera, camera_<name> (deploy/processes.py).
+    procs = [ServiceProcess(name, command, s) for name, command in stack_processes(config)]
+    log.info("hub on %s; starting %s", config.zenoh.endpoint, ", ".join(p.name for p in procs))
     for p in procs:
         p.start()
     end = mono_s() + duration_s if duration_s else None
     next_status = mono_s()
     last_metrics: MetricsAnswer | None = None
     failed: ServiceProcess | None = None
-    optional, left_behind = set(s.optional), set[str]()
+    # An optional "camera" makes every camera's process optional.
+    optional = {p.name for p in procs if service_package(p.name) in s.optional}
+    left_behind = set[str]()
     try:
         while failed is None and not stop.wait(0.1):
             now = mono_s()
@@ -191,7 +194,7 @@ def supervise(
                     why = p.last_error or f"exit code {p.last_exit}"
                     log.error("%s failed for good (%s); it is optional: the stack runs on", p.name,
                               why)  # fmt: skip
-            if now >= next_status:
+            if failed is None and now >= next_status:  # none once a failure stops it
                 next_status = now + s.status_period_s
                 last_metrics = query_metrics(session, keys, METRICS_TIMEOUT_S) or last_metrics
                 # Status lines go to stderr: stdout carries only the --duration summary.
@@ -254,12 +257,44 @@ def config_warnings(config: Config) -> list[str]:
     out = []
     if config.zenoh.auth == "none":
         out.append(OPEN_BUS_WARNING)
-    camera_changed = config.camera.source != CameraSettings().source
-    if camera_changed and "camera" not in config.supervisor.services:
+    services = config.supervisor.services
+    first, default_source = config.stack.camera, CameraSettings().source
+    changed = {
+        ("camera" if name == first else f"cameras.{name}") + ".source": c.source
+        for name, c in config.all_cameras.items()
+        if c.source != default_source
+    }
+    if changed and "camera" not in services:
+        sources = ", ".join(f"{field} is {source!r}" for field, source in changed.items())
+        what = "the source is" if len(changed) == 1 else "the sources are"
         out.append(
-            f"camera.source is {config.camera.source!r} but the camera service is not in "
-            f"supervisor.services {list(config.supervisor.services)}: the source is unused; "
-            'list "camera" there (in place of "sim") to use it'
+            f"{sources} but the camera service is not in supervisor.services "
+            f'{list(services)}: {what} unused; list "camera" there (in place of "sim") '
+            "to use it"
+        )
+    out += _camera_warnings(config)
+    return out
+
+
+def _camera_warnings(config: Config) -> list[str]:
+    """Several cameras set up in a way that works but hides something."""
+    out = []
+    cameras = config.all_cameras
+    by_frame_id: dict[str, list[str]] = {}
+    for name, c in cameras.items():
+        by_frame_id.setdefault(c.frame_id, []).append(name)
+    for frame_id, names in by_frame_id.items():
+        if len(names) > 1:
+            out.append(
+                f"cameras {names} share frame_id {frame_id!r}: their frames differ only by key "
+                "(a ROS 2 graph, a recording's reader and the sequence-gap count tell streams "
+                "apart by frame_id); give each [cameras.<name>] a frame_id of its own"
+            )
+    s = config.supervisor
+    if len(cameras) > 1 and "sim" in s.services and config.sim.ros2_robot:
+        out.append(
+            f"sim.ros2_robot plays a robot with one image topic (ros2.image_topic): only the "
+            f"first camera, {config.stack.camera!r}, is rendered; {list(cameras)[1:]} are not"
         )
     return out
 

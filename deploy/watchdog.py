@@ -1,7 +1,8 @@
 """The supervisor's watchdog: is a running service hung? Pure: the supervisor brings the clock
 and what it saw on the bus (deploy/supervisor.py), and acts on the verdict (deploy/processes.py).
 
-Two signals, per service the supervisor started itself (never a service on another host):
+Two signals, per service the supervisor started itself (never a service on another host), and
+per camera process (``camera``, ``camera_<name>``: each has its own token and counters):
 
 - **Its liveliness token** ``<prefix>/health/<service>``. A service holds it from ``ready()``
   until it stops. It vanishes when the process dies, is frozen (SIGSTOP: Zenoh's lease, about
@@ -30,9 +31,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from common.errors import ConfigError
-from common.settings import Config
+from common.settings import Config, service_package
 
-# Services whose work loop publishes counters on every pass (their heartbeat, see above).
+# Services whose work loop publishes counters on every pass (their heartbeat, see above); by
+# package: every camera's process (camera, camera_<name>) beats as the camera does.
 HEARTBEAT_SERVICES = frozenset({"camera", "sim", "ros2", "detector", "controller"})
 # The heartbeat timeout must span this many counters periods, so that a late sample (TELEMETRY
 # is dropped under congestion) or a slow pass on a loaded machine is not taken for a hang.
@@ -67,7 +69,7 @@ def judge(
         gone = now - seen.token_lost_at
         if gone >= grace_s:
             return f"its liveliness token has been gone for {gone:.1f} s"
-    if progress_s > 0 and name in HEARTBEAT_SERVICES:
+    if progress_s > 0 and service_package(name) in HEARTBEAT_SERVICES:
         quiet = now - max(seen.ready_at, seen.last_progress or seen.ready_at)
         if quiet >= progress_s:
             return f"its work loop has published no counters for {quiet:.1f} s"

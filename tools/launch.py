@@ -31,7 +31,7 @@ from common.config_file import ENV_PREFIX, to_toml
 from common.errors import StackError
 from common.keys import Keys
 from common.queries import ready_services
-from common.settings import REPO_ROOT, Config
+from common.settings import REPO_ROOT, Config, service_package
 from common.spawn import spawn, stop_child
 
 
@@ -112,8 +112,15 @@ def stop_supervisor(
 
 
 def service_pids(service: str, config_path: str | Path) -> list[int]:
-    """PIDs of ``python -m services.<service> ... --config <config_path>`` (Linux /proc)."""
-    want = (f"services.{service}".encode(), str(config_path).encode())
+    """PIDs of ``python -m services.<service> ... --config <config_path>`` (Linux /proc).
+
+    A camera's process is found by its service name as the supervisor names it
+    (deploy/processes.py): ``camera`` is the first camera's (started without ``--camera``),
+    ``camera_<name>`` a further camera's (``--camera <name>``).
+    """
+    package = service_package(service)
+    camera = service.removeprefix("camera_").encode() if package != service else None
+    want = (f"services.{package}".encode(), str(config_path).encode())
     pids = []
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
@@ -122,6 +129,14 @@ def service_pids(service: str, config_path: str | Path) -> list[int]:
             argv = (entry / "cmdline").read_bytes().split(b"\0")
         except OSError:
             continue  # the process ended while we looked
-        if all(w in argv for w in want):
+        if all(w in argv for w in want) and _camera_arg(argv) == camera:
             pids.append(int(entry.name))
     return pids
+
+
+def _camera_arg(argv: list[bytes]) -> bytes | None:
+    """The value of ``--camera`` in ``argv``, None without one."""
+    for i, arg in enumerate(argv[:-1]):
+        if arg == b"--camera":
+            return argv[i + 1]
+    return None

@@ -14,12 +14,11 @@ from services.camera.reopen import ReopenHooks, ReopeningSource
 from services.camera.sources import FrameSource, open_source, resize
 
 
-def run(
-    config: Config, stop: threading.Event, camera: str = "", settings: CameraSettings | None = None
-) -> int:
-    """Publish camera ``camera``'s frames (default: the first, ``stack.camera``) with
-    ``settings`` (default: its configured ones) until ``stop`` is set or the source ends, as
-    that camera's service; returns the exit code.
+def run(config: Config, camera: str, settings: CameraSettings, stop: threading.Event) -> int:
+    """Publish ``camera``'s frames (read with ``settings``) on its key until ``stop`` is set or
+    the source ends; returns the exit code. The process is that camera's service
+    (``config.camera_services``): its health token, counters and principal are its own, so the
+    supervisor watches and restarts each camera apart from the others.
 
     A source from which no frame at all can be read raises ConfigError (one line, exit 2: the
     supervisor does not restart it). Unreadable frames among good ones are counted and skipped,
@@ -27,8 +26,6 @@ def run(
     that stops giving frames never ends: it is reopened every ``camera.reopen_period_s``
     (services/camera/reopen.py).
     """
-    camera = camera or config.stack.camera
-    settings = settings or config.camera_settings(camera)
     with Node(config.camera_services[camera], config) as node:
 
         def on_bad(exc: ImageError) -> None:

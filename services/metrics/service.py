@@ -72,9 +72,10 @@ class MetricsHandlers:
     def on_counters(self, key: str, payload: bytes) -> None:
         """``key``: the one the sample came on, which must name the service that counts."""
         limit = self.settings.max_counters_per_service
+        known = (*SERVICES, *self.tally.config.camera_services.values())  # camera_<name> too
         self._take(
             "counters", ServiceCounters.decode, key, payload, self._feed_counters,
-            lambda m, heard_on: refuse_counters(m, heard_on, SERVICES, limit),
+            lambda m, heard_on: refuse_counters(m, heard_on, known, limit),
         )  # fmt: skip
 
     def _feed_counters(self, msg: ServiceCounters) -> None:

@@ -2,8 +2,11 @@
 
 Each target is a billboard: a cut-out of a real photo (scikit-image samples), scaled by its
 distance and placed by its bearing, standing on the floor. Obstacles are drawn as low grey boxes.
-Nearer things are drawn over farther ones. The camera looks along the robot's +x at
-``height_m`` above the floor, with square pixels and the configured horizontal field of view.
+Nearer things are drawn over farther ones. The camera stands at the robot's centre,
+``height_m`` above the floor, and looks ``mount_yaw_deg`` counter-clockwise from the robot's +x
+(0 the front camera, 180 the rear one), with square pixels and the configured horizontal field
+of view. Anything behind a camera is not drawn: a person behind the robot is in the rear
+camera's image alone.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ class CameraSpec:
     height: int = 480
     hfov_deg: float = 60.0
     height_m: float = 0.6
+    mount_yaw_deg: float = 0.0
 
     @property
     def focal_px(self) -> float:
@@ -81,10 +85,11 @@ def _paste(canvas: Image, img: Image, left: float, top: float, width: float, hei
 
 
 def render(world: World, spec: CameraSpec) -> Image:
-    """The camera image of ``world`` from the robot's pose."""
+    """The image of ``world`` from a camera on the robot (its pose, plus the mounting yaw)."""
     canvas = background(spec).copy()
     r = world.robot
-    c, s = math.cos(r.theta), math.sin(r.theta)
+    heading = r.theta + math.radians(spec.mount_yaw_deg)  # where the camera looks, world frame
+    c, s = math.cos(heading), math.sin(heading)
     f, cx, cy = spec.focal_px, spec.width / 2, spec.height / 2
     items: list[tuple[float, float, Image | None, float, float]] = []  # z, lateral, img, h, w
     for tg, (tx, ty) in zip(world.targets, world.target_positions(), strict=True):
@@ -109,5 +114,6 @@ def render(world: World, spec: CameraSpec) -> Image:
 
 
 def _to_camera(dx: float, dy: float, c: float, s: float) -> tuple[float, float]:
-    """World offset -> (forward depth, lateral left) in the robot frame."""
+    """World offset -> (forward depth, lateral left) in the camera's frame (cos and sin of
+    the direction it looks in)."""
     return dx * c + dy * s, -dx * s + dy * c

@@ -1,4 +1,7 @@
-"""The simulator service: the robot's camera, laser and base, driven by cmd_vel over Zenoh.
+"""The simulator service: the robot's cameras, laser and base, driven by cmd_vel over Zenoh.
+
+Every configured camera is rendered from the same world, each on its own key
+(services/sim/cameras.py says at what size and rate).
 
 The robot talks either way a robot may: the stack's own messages (``StackRobot``), or ROS 2 over
 rmw_zenoh (``RosRobot``: sensor_msgs Image and LaserScan, geometry_msgs Twist or TwistStamped,
@@ -19,6 +22,7 @@ import numpy as np
 from common.bus import Publisher, QoS, source_of
 from common.clock import mono_s, wall_ns
 from common.command_sources import CommandSources
+from common.counters import per_camera
 from common.errors import ConfigError, DecodeError
 from common.frames import image_to_frame
 from common.lifecycle import Closing
@@ -37,8 +41,9 @@ from services.ros2 import (
     scan_to_ros,
     twist_from_ros,
 )
+from services.sim.cameras import SimCamera, sim_cameras
 from services.sim.laser import LaserSpec, cast
-from services.sim.render import CameraSpec, render
+from services.sim.render import render
 from services.sim.scenarios import SCENARIOS
 from services.sim.world import World
 
@@ -88,24 +93,27 @@ class SimHandlers:
 
 
 class SensorOutput(Protocol):
-    def frame(self, frame: Frame) -> None: ...
+    def frame(self, camera: str, frame: Frame) -> None: ...
     def scan(self, scan: LaserScan) -> None: ...
 
 
 class StackRobot:
-    """Sensors on the stack's keys; commands from the controller's cmd_vel key."""
+    """Sensors on the stack's keys (each camera's frames on its own); commands from the
+    controller's cmd_vel key."""
 
     def __init__(self, config: Config, node: Node, handlers: SimHandlers) -> None:
         keys = node.keys
-        self._frame = node.publisher(keys.frame(config.stack.camera), QoS.SENSOR)
+        self._frames = {
+            camera: node.publisher(keys.frame(camera), QoS.SENSOR) for camera in config.all_cameras
+        }
         self._scan = node.publisher(keys.scan(), QoS.SENSOR)
         self._sub = node.session.declare_subscriber(
             keys.cmd_vel(),
             lambda sample: handlers.on_cmd_vel(sample.payload.to_bytes(), source_of(sample)),
         )
 
-    def frame(self, frame: Frame) -> None:
-        self._frame.put(frame.encode())
+    def frame(self, camera: str, frame: Frame) -> None:
+        self._frames[camera].put(frame.encode())
 
     def scan(self, scan: LaserScan) -> None:
         self._scan.put(scan.encode())
@@ -116,7 +124,8 @@ class StackRobot:
 
 class RosRobot(Closing):
     """Sensors as ROS 2 messages on the rmw_zenoh keys of ``config.ros2``'s topics; commands
-    taken from its cmd_vel topic. Hosts the graph's router on ``ros2.router``."""
+    taken from its cmd_vel topic. Hosts the graph's router on ``ros2.router``. One image topic:
+    the first camera's frames alone (``run`` renders no other camera for it)."""
 
     def __init__(self, config: Config, handlers: SimHandlers) -> None:
         s = config.ros2
@@ -126,7 +135,7 @@ class RosRobot(Closing):
         self._scan = self._graph.publisher(s.scan_topic, LASER_SCAN, SENSOR_DATA_QOS)
         self._graph.subscribe(s.cmd_vel_topic, handlers.ros_type, handlers.on_ros_cmd_vel)
 
-    def frame(self, frame: Frame) -> None:
+    def frame(self, camera: str, frame: Frame) -> None:
         self._image.put(frame_to_image(self._distro, frame))
 
     def scan(self, scan: LaserScan) -> None:
@@ -148,7 +157,9 @@ def run(config: Config, stop: threading.Event) -> int:
     s = config.sim
     world = build_world(config)
     lock = threading.Lock()
-    camera = CameraSpec(s.width, s.height, config.camera.hfov_deg, s.camera_height_m)
+    cameras = sim_cameras(config)
+    if s.ros2_robot:
+        cameras = cameras[:1]  # one image topic (the supervisor warns of the others)
     laser = LaserSpec(s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m)
     rng = np.random.default_rng(s.seed)
     sources = CommandSources(s.command_sources_window_s)
@@ -188,13 +199,26 @@ def run(config: Config, stop: threading.Event) -> int:
 
         def new_clocks() -> dict[str, Clock]:
             return {
-                "frame": Clock(s.camera_rate_hz),
+                **{f"frame:{c.name}": Clock(c.rate_hz) for c in cameras},
                 "scan": Clock(s.scan_rate_hz),
                 "truth": Clock(s.truth_rate_hz),
             }
 
         clocks = new_clocks()
         node.log.info("scenario %r: %s", s.scenario, SCENARIOS[s.scenario].description)
+        for c in cameras:
+            node.log.info(
+                "camera %r: %dx%d at %.1f Hz, hfov %.0f deg, looking %+.0f deg",
+                c.name, c.spec.width, c.spec.height, c.rate_hz, c.spec.hfov_deg,
+                c.spec.mount_yaw_deg,
+            )  # fmt: skip
+        missing = [c for c in SCENARIOS[s.scenario].cameras if c not in config.all_cameras]
+        if missing:
+            node.log.warning(
+                "scenario %r is meant to be seen by cameras %s too, which the config lacks "
+                "(the scenario runner adds them: python -m tools.scenarios scenario %s)",
+                s.scenario, missing, s.scenario,
+            )  # fmt: skip
         node.ready()
         dt = 1.0 / s.physics_hz
         started = False
@@ -215,7 +239,7 @@ def run(config: Config, stop: threading.Event) -> int:
                     if started:
                         world.advance(dt)
                     t = world.t if started else now - boot
-                    _publish_due(node, world, t, clocks, out, truth_pub, camera, laser, rng, config)
+                    _publish_due(node, world, t, clocks, out, truth_pub, cameras, laser, rng)
                 node.publish_counters()
                 next_tick = max(next_tick + dt, mono_s() - dt)
                 stop.wait(max(0.0, next_tick - mono_s()))
@@ -239,20 +263,20 @@ def _publish_due(
     clocks: dict[str, Clock],
     out: SensorOutput,
     truth_pub: Publisher,
-    camera: CameraSpec,
+    cameras: list[SimCamera],
     laser: LaserSpec,
     rng: np.random.Generator,
-    config: Config,
 ) -> None:
     r = world.robot
     pose = (r.x, r.y, r.theta)
-    if clocks["frame"].due(t):
-        header = node.header(frame_id=config.camera.frame_id)
-        frame = image_to_frame(
-            render(world, camera), header, jpeg_quality=config.camera.jpeg_quality
-        )
-        out.frame(frame)
-        node.counters.add("frames_out")
+    for camera in cameras:
+        if clocks[f"frame:{camera.name}"].due(t):
+            header = node.header(frame_id=camera.frame_id)
+            image = render(world, camera.spec)
+            out.frame(camera.name, image_to_frame(image, header, jpeg_quality=camera.jpeg_quality))
+            node.counters.add("frames_out")
+            if len(cameras) > 1:  # the total above, and each camera's (common/counters.py)
+                node.counters.add(per_camera("frames_out", camera.name))
     if clocks["scan"].due(t):
         scan = LaserScan(
             header=node.header(frame_id="laser"),

@@ -96,6 +96,18 @@ def test_robot_stops_in_time_when_the_detector_dies(attempt: int) -> None:
     assert result["success"], result
 
 
+def test_behind_the_robot_turns_round_and_stops_at_the_follow_distance() -> None:
+    # The person starts behind the robot, in the rear camera's image alone (the scenario adds
+    # a rear camera, mount_yaw_deg 180): the detector serves both cameras, the controller turns
+    # the rear camera's bearing into the robot's frame, turns round and follows.
+    result = run("behind")
+    assert result["frames_per_camera"].keys() == {"front", "rear"}, result
+    assert result["seen_per_camera"]["rear"] > 0, result
+    assert result["checks"]["turned to face the target"], result
+    assert reached(result), result
+    assert result["success"], result
+
+
 def test_ahead_with_the_simulator_playing_a_ros2_robot() -> None:
     # The simulator speaks only ROS 2 (Image, LaserScan, Twist on rmw_zenoh keys, through a
     # router it hosts): every frame, scan and command passes through the ros2 bridge.

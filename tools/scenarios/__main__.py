@@ -31,12 +31,19 @@ def _print_text(r: ScenarioResult) -> None:
         "final_distance_m",
         "min_clearance_m",
         "mean_bearing_error_deg",
+        "final_bearing_deg",
         "stale_commands",
         "stop_after_kill_s",
         "distance_travelled_m",
         "duration_s",
     ):
         print(f"  {key:24} {fmt(r.get(key))}")
+    for key, per_camera in (
+        ("frames_per_camera", r.get("frames_per_camera", {})),
+        ("detections_per_camera", r.get("detections_per_camera", {})),
+        ("seen_per_camera", r.get("seen_per_camera", {})),
+    ):
+        print(f"  {key:24} " + " ".join(f"{c}={n}" for c, n in per_camera.items()))
     for check, ok in r.get("checks", {}).items():
         print(f"  [{'x' if ok else ' '}] {check}")
     print(f"  log: {r['log']}")

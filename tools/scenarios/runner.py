@@ -1,8 +1,9 @@
 """``python -m tools.scenarios scenario NAME``: run the real stack against a scripted world.
 
 The runner writes a private stack config (a free port, a unique key prefix, the simulator in
-place of the camera, the controller in follow mode), starts it under the supervisor, records
-the truth, the commands and the detections, stops it, and scores the run (tools/scenarios/score.py).
+place of the camera, the controller in follow mode, the scenario's own further cameras and
+detector changes), starts it under the supervisor, records the truth, the commands, and every
+camera's frames and detections, stops it, and scores the run (tools/scenarios/score.py).
 """
 
 from __future__ import annotations
@@ -37,7 +38,10 @@ STOP_TIMEOUT_S = 30.0  # then the whole stack is killed
 
 def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Config:
     """``base`` made private to one run of ``scenario``. With ``ros2`` the simulator plays a
-    ROS 2 robot on a private router, and the ``ros2`` bridge carries its sensors and commands."""
+    ROS 2 robot on a private router, and the ``ros2`` bridge carries its sensors and commands.
+    The cameras are ``base``'s first camera and the scenario's further ones (each laid over
+    [camera], as a ``[cameras.<name>]`` table is), whatever further cameras ``base`` has: a
+    scenario is seen by the same cameras on every machine."""
     zenoh_s = dataclasses.replace(
         base.zenoh,
         endpoint=f"tcp/127.0.0.1:{free_port()}",
@@ -51,9 +55,15 @@ def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Con
         **scenario.controller,
     )
     bridge = ("ros2",) if ros2 else ()
+    cameras = tuple(
+        (name, dataclasses.replace(base.camera, **changes))
+        for name, changes in scenario.cameras.items()
+    )
     return dataclasses.replace(
         base,
         zenoh=zenoh_s,
+        cameras=cameras,
+        detector=dataclasses.replace(base.detector, **scenario.detector),
         stack=dataclasses.replace(base.stack, prefix=f"sim/{uuid.uuid4().hex[:8]}"),
         controller=controller,
         sim=dataclasses.replace(
@@ -72,8 +82,12 @@ def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Con
     )
 
 
-def record_into(session: zenoh.Session, keys: Keys, camera: str, rec: ScenarioLog) -> list[Any]:
-    """Subscribe to the truth, commands and detections, appending each to ``rec``."""
+def record_into(
+    session: zenoh.Session, keys: Keys, cameras: list[str], rec: ScenarioLog, *, frames: bool
+) -> list[Any]:
+    """Subscribe to the truth, the commands and each camera's detections, appending each to
+    ``rec``; with ``frames``, count each camera's frames too (heard, not decoded; a copy of
+    every frame is sent to this subscriber, which a soak does not want)."""
     lock = threading.Lock()
 
     def recorder(decode: Any, into: list[Any]) -> Any:
@@ -87,13 +101,25 @@ def record_into(session: zenoh.Session, keys: Keys, camera: str, rec: ScenarioLo
 
         return on_sample
 
-    return [
+    def frame_counter(camera: str) -> Any:
+        def on_frame(_sample: zenoh.Sample) -> None:
+            with lock:
+                rec.frames[camera] = rec.frames.get(camera, 0) + 1
+
+        return on_frame
+
+    subs = [
         session.declare_subscriber(keys.sim_truth(), recorder(GroundTruth.decode, rec.truths)),
         session.declare_subscriber(keys.cmd_vel(), recorder(Twist.decode, rec.twists)),
-        session.declare_subscriber(
-            keys.detections(camera), recorder(Detections.decode, rec.detections)
-        ),
     ]
+    for camera in cameras:
+        into = rec.detections.setdefault(camera, [])
+        subs.append(
+            session.declare_subscriber(keys.detections(camera), recorder(Detections.decode, into))
+        )
+        if frames:
+            subs.append(session.declare_subscriber(keys.frame(camera), frame_counter(camera)))
+    return subs
 
 
 def run_scenario(base: Config, name: str, log: Any = None, ros2: bool = False) -> ScenarioResult:
@@ -113,7 +139,8 @@ def run_scenario(base: Config, name: str, log: Any = None, ros2: bool = False) -
         try:
             session = open_session(config.zenoh, "observer")
             try:
-                subs = record_into(session, Keys(config.stack.prefix), config.stack.camera, rec)
+                cameras = list(config.all_cameras)
+                subs = record_into(session, Keys(config.stack.prefix), cameras, rec, frames=True)
                 _drive(proc, scenario, rec, config_path, log)
                 for sub in subs:
                     sub.undeclare()

@@ -9,6 +9,12 @@ Figures:
     min_clearance_m         least distance from the robot centre to an obstacle's surface,
                             as the laser measures it (None without obstacles)
     mean_bearing_error_deg  mean |bearing of the followed target| while it was in view
+    final_bearing_deg       bearing of the followed target from the robot's forward axis at
+                            the end (None without one); a ``must_face`` scenario needs it within
+                            the first camera's half field of view: the robot turned to it
+    frames_per_camera       frames heard on each camera's key
+    detections_per_camera   detections messages heard on each camera's key
+    seen_per_camera         each camera's detections messages that name a target class
     stale_commands          non-zero commands acting on detections whose frame was captured
                             longer than the detection timeout before the command was
                             stamped: the controller's own rule (must be 0)
@@ -38,7 +44,8 @@ class ScenarioLog:
 
     truths: list[GroundTruth] = field(default_factory=list)
     twists: list[Twist] = field(default_factory=list)
-    detections: list[Detections] = field(default_factory=list)
+    detections: dict[str, list[Detections]] = field(default_factory=dict)  # by camera
+    frames: dict[str, int] = field(default_factory=dict)  # frames heard, by camera
     kill_ns: int | None = None
 
 
@@ -101,6 +108,13 @@ def score(
             math.hypot(b.robot[0] - a.robot[0], b.robot[1] - a.robot[1])
             for a, b in itertools.pairwise(truths)
         ),
+        "final_bearing_deg": None,
+        "frames_per_camera": dict(rec.frames),
+        "detections_per_camera": {camera: len(dets) for camera, dets in rec.detections.items()},
+        "seen_per_camera": {
+            camera: sum(any(n in s.target_classes for n in d.class_names) for d in dets)
+            for camera, dets in rec.detections.items()
+        },
     }
     if scenario.followed is not None:
         i = truths[-1].target_ids.index(scenario.followed)
@@ -110,6 +124,7 @@ def score(
             (t.sim_time_s for t in truths if _distance(t, i, radius) <= reach), None
         )
         out["final_distance_m"] = _distance(truths[-1], i, radius)
+        out["final_bearing_deg"] = _bearing_deg(truths[-1], i)
         in_view = [
             abs(_bearing_deg(t, i)) for t in truths if abs(_bearing_deg(t, i)) <= hfov_deg / 2
         ]
@@ -121,14 +136,15 @@ def score(
         after = [t for t in rec.twists if t.header.stamp_ns >= kill_ns and t.is_zero]
         if after:
             out["stop_after_kill_s"] = (min(t.header.stamp_ns for t in after) - kill_ns) / 1e9
-    out["success"], out["checks"] = verdict(scenario, out, s)
+    out["success"], out["checks"] = verdict(scenario, out, s, hfov_deg)
     return out
 
 
 def verdict(
-    scenario: Scenario, f: ScenarioResult, s: ControllerSettings
+    scenario: Scenario, f: ScenarioResult, s: ControllerSettings, hfov_deg: float
 ) -> tuple[bool, dict[str, bool]]:
-    """The pass conditions, each named so a failure says which one."""
+    """The pass conditions, each named so a failure says which one (``hfov_deg``: the first
+    camera's field of view)."""
     checks = {"no commands while stale": f["stale_commands"] == 0}
     if f["min_clearance_m"] is not None:
         checks["kept the safety distance"] = f["min_clearance_m"] >= s.safety_distance_m
@@ -137,6 +153,9 @@ def verdict(
         checks["reached the stop distance"] = (
             final is not None and abs(final - s.follow_distance_m) <= REACH_TOLERANCE_M
         )
+    if scenario.must_face:
+        bearing = f["final_bearing_deg"]
+        checks["turned to face the target"] = bearing is not None and abs(bearing) <= hfov_deg / 2
     if scenario.followed is None:
         checks["stayed still"] = f["nonzero_commands"] == 0 and f["distance_travelled_m"] < 0.05
     if scenario.kill_detector_at_s is not None:

@@ -195,7 +195,7 @@ def run_soak(
             # (after the warm-up), never from before the model was loaded.
             wait_ready(session, keys, set(config.supervisor.services), proc, READY_TIMEOUT_S,
                        log_path=log_path)  # fmt: skip
-            subs = record_into(session, keys, config.stack.camera, rec)
+            subs = record_into(session, keys, [config.stack.camera], rec, frames=False)
             flooder.start()
             start = mono_s()
             while (now := mono_s() - start) < duration_s:

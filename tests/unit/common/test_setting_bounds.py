@@ -18,7 +18,7 @@ from common.setting_checks import range_text
 from common.settings import DEFAULT_CONFIG, REPO_ROOT, Config
 from services.controller.service import STOP_POLL_S, wait_either
 
-# [cameras.<name>] tables are [camera] tables (checked there), not a table of their own.
+# [cameras.<name>] are [camera] tables (CameraSettings): the camera table covers them.
 TABLES = {f.name: f.type for f in dataclasses.fields(Config) if f.name not in ("path", "cameras")}
 HINTS = typing.get_type_hints(Config)
 # Checked by rules of their own: [w, h] within 1..MAX_IMAGE_SIDE or [0, 0] (keep the size);

@@ -221,7 +221,7 @@ def test_the_default_stack_file_names_every_setting() -> None:
     missing = [
         f"{table.name}.{f.name}"
         for table in dataclasses.fields(Config)
-        if table.name not in ("path", "cameras")  # [cameras.<name>]: [camera]'s fields
+        if table.name not in ("path", "cameras")  # [cameras.<name>]: [camera] tables
         for f in dataclasses.fields(getattr(Config(), table.name))
         if f.name not in data.get(table.name, {})
     ]

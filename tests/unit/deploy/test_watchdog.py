@@ -74,3 +74,10 @@ def test_a_progress_timeout_shorter_than_two_counters_periods_is_refused() -> No
         )
     with pytest.raises(ConfigError, match="watchdog_progress_s"):
         SupervisorSettings(watchdog_progress_s=-1.0)
+
+
+def test_every_camera_process_beats_as_the_camera_does() -> None:
+    # camera_rear (a further camera's process) is watched for its heartbeat like "camera".
+    quiet = Observation(ready_at=10.0, token_lost_at=None, last_progress=None)
+    assert verdict(quiet, 1000.0, "camera") is not None
+    assert verdict(quiet, 1000.0, "camera_rear") is not None

@@ -15,7 +15,7 @@ import pytest
 
 from common.errors import StackError
 from common.keys import Keys
-from tools.launch import free_port, stop_supervisor, wait_ready
+from tools.launch import free_port, service_pids, stop_supervisor, wait_ready
 
 KEYS = Keys("test")
 
@@ -101,3 +101,31 @@ def test_stop_supervisor_kills_what_ignores_sigint_after_the_deadline() -> None:
     )
     assert stop_supervisor(proc, timeout_s=0.3) is False
     assert proc.returncode == -9
+
+
+def test_service_pids_tells_each_camera_process_by_its_service_name(tmp_path: Path) -> None:
+    # Stand-ins with the argv the supervisor gives camera processes (deploy/processes.py).
+    config = str(tmp_path / "stack.toml")
+    code = "import signal; print('ready', flush=True); signal.pause()"
+    argv = {
+        "camera": ["services.camera", "serve", "--config", config],
+        "camera_rear": ["services.camera", "serve", "--config", config, "--camera", "rear"],
+        "camera_left": ["services.camera", "serve", "--config", config, "--camera", "left"],
+        "detector": ["services.detector", "serve", "--config", config],
+    }
+    procs = {}
+    for name, args in argv.items():
+        proc = subprocess.Popen(
+            [sys.executable, "-c", code, *args], stdout=subprocess.PIPE, text=True
+        )
+        assert proc.stdout is not None and proc.stdout.readline() == "ready\n"
+        procs[name] = proc
+    try:
+        for name, proc in procs.items():
+            assert service_pids(name, config) == [proc.pid], name
+        assert service_pids("camera_back", config) == []
+        assert service_pids("camera", str(tmp_path / "other.toml")) == []
+    finally:
+        for proc in procs.values():
+            proc.kill()
+            proc.wait()

@@ -1,0 +1,41 @@
+"""The cameras the simulator renders: every camera of the config, from the same world. Pure.
+
+The first camera (``stack.camera``, the [camera] table) is rendered as a one-camera simulator
+always rendered it: ``sim.width`` x ``sim.height`` at ``sim.camera_rate_hz``. Each further
+camera (``[cameras.<name>]``) is rendered at its own ``rate_hz``, and at its ``resize`` when it
+sets one, else at the simulator's size. Every camera has its own field of view
+(``hfov_deg``), mounting yaw (``mount_yaw_deg``), ``frame_id`` and ``jpeg_quality``; all stand
+at the robot's centre, ``sim.camera_height_m`` above the floor. Frames are rendered in
+scenario time, so no camera is rendered more often than ``sim.physics_hz``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from common.settings import Config
+from services.sim.render import CameraSpec
+
+
+@dataclass(frozen=True, slots=True)
+class SimCamera:
+    """One camera as the simulator renders it, and what its frames carry."""
+
+    name: str
+    spec: CameraSpec
+    rate_hz: float
+    frame_id: str
+    jpeg_quality: int
+
+
+def sim_cameras(config: Config) -> list[SimCamera]:
+    """Every configured camera, the first first (see the module's docstring for the rules)."""
+    s = config.sim
+    out = []
+    for name, c in config.all_cameras.items():
+        first = name == config.stack.camera
+        width, height = (s.width, s.height) if first or c.resize == (0, 0) else c.resize
+        spec = CameraSpec(width, height, c.hfov_deg, s.camera_height_m, c.mount_yaw_deg)
+        rate = s.camera_rate_hz if first else c.rate_hz
+        out.append(SimCamera(name, spec, rate, c.frame_id, c.jpeg_quality))
+    return out

@@ -1,0 +1,29 @@
+"""The config a scenario runs with: its own further cameras and detector changes (pure)."""
+
+from __future__ import annotations
+
+from common.settings import CameraSettings, Config, DetectorSettings
+from services.sim.scenarios import SCENARIOS
+from tools.scenarios.runner import scenario_config
+
+BASE = Config(
+    camera=CameraSettings(hfov_deg=70.0, rate_hz=8.0),
+    cameras=(("left", CameraSettings(mount_yaw_deg=90.0)),),
+    detector=DetectorSettings(conf=0.3),
+)
+
+
+def test_behind_adds_its_rear_camera_over_the_base_camera() -> None:
+    config = scenario_config(BASE, SCENARIOS["behind"])
+    assert list(config.all_cameras) == ["front", "rear"]  # the base's "left" is not the world's
+    rear = config.camera_settings("rear")
+    assert (rear.mount_yaw_deg, rear.frame_id, rear.rate_hz) == (180.0, "camera_rear", 5.0)
+    assert rear.hfov_deg == 70.0  # what the scenario leaves alone comes from [camera]
+    assert (config.detector.imgsz, config.detector.conf) == (320, 0.3)
+    assert config.supervisor.services[0] == "sim" and "camera" not in config.supervisor.services
+
+
+def test_other_scenarios_see_through_the_first_camera_alone() -> None:
+    config = scenario_config(BASE, SCENARIOS["ahead"])
+    assert list(config.all_cameras) == ["front"]
+    assert config.detector == BASE.detector
