@@ -169,7 +169,7 @@ class Rounds:
                     self.tally,
                     w.camera,
                     f"frames_{verdict}",
-                    f"{verdict} frame ({age:.2f} s old) dropped",
+                    f"{verdict} frame from {w.camera} ({age:.2f} s old) dropped",
                     out.frame_key,
                 )
                 continue
@@ -198,8 +198,8 @@ class Rounds:
                 self.tally,
                 out.camera,
                 "nonfinite_outputs",
-                f"the model's output for frame {frame.header.seq} is not finite (NaN, "
-                "infinity or a magnitude over 1e6): no detections published",
+                f"the model's output for frame {frame.header.seq} from {out.camera} is not "
+                "finite (NaN, infinity or a magnitude over 1e6): no detections published",
                 out.frame_key,
             )
             return

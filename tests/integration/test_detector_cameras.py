@@ -10,6 +10,7 @@ own Zenoh session, which plays the supervisor's hub. No camera process runs.
 
 from __future__ import annotations
 
+import json
 import signal
 import sys
 import threading
@@ -180,6 +181,11 @@ def test_three_cameras_each_get_their_own_frames_detections(serve: Any) -> None:
         found = det.detections(cam.name)
         assert all(d.header.frame_id == f"{cam.name}_optical" for d in found)
         assert {d.class_names for d in found} != {()}, f"{cam.name}: nothing ever detected"
+    # Each camera's info queryable answers, for the one model.
+    for cam in cameras:
+        replies = [r.ok for r in det.hub.get(det.keys.detector_info(cam.name), timeout=10.0)]
+        (info,) = [json.loads(r.payload.to_string()) for r in replies if r is not None]
+        assert info["model"] == "yolov5s-coco-320.onnx" and info["backend"] == "onnx"
     # Counted per camera too (published once a second: wait for the next snapshot).
     wait_for(
         lambda: all(det.counter(f"detections_out.{cam.name}") >= 3 for cam in cameras),
