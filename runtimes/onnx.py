@@ -2,6 +2,11 @@
 
 One intra-op thread per physical core: on SMT machines, two threads sharing a core slow the
 convolutions down rather than speeding them up.
+
+Batch: ONNX Runtime runs any batch a model with a dynamic batch takes. With ``max_batch`` 1
+(the default: single frames), a batch dimension denoted ``DATA_BATCH`` (the default model's)
+is pinned to 1, so that the session is the one a batch-1 export would give; a fixed batch is
+the model's own whatever ``max_batch`` says (the Detector cuts batches to it).
 """
 
 from __future__ import annotations
@@ -20,6 +25,8 @@ from common.errors import ConfigError, ModelError, one_line
 from runtimes.base import Backend, Dim
 
 _PRECISIONS = {"tensor(float)": "fp32", "tensor(float16)": "fp16"}
+#: ONNX's standard denotation of a batch dimension (modelprep/acquire marks the default model's).
+BATCH_DENOTATION = "DATA_BATCH"
 _ORT_ERRORS: tuple[type[Exception], ...] = (
     ort_state.Fail,
     ort_state.InvalidArgument,
@@ -64,9 +71,11 @@ class OnnxBackend:
     name = "onnx"
     device = "cpu"
 
-    def __init__(self, model_path: Path, *, threads: int | None = None) -> None:
+    def __init__(self, model_path: Path, *, threads: int | None = None, max_batch: int = 1) -> None:
         if threads is not None and threads < 1:
             raise ConfigError(f"threads must be a positive integer, got {threads}")
+        if max_batch < 1:
+            raise ConfigError(f"max_batch must be a positive integer, got {max_batch}")
         if not model_path.is_file():
             raise ModelError(f"{model_path}: no such model file")
         options = ort.SessionOptions()
@@ -76,6 +85,8 @@ class OnnxBackend:
         # Spinning threads keep a core busy ~50 ms after each run, stolen from the camera and
         # controller on a small robot CPU; not spinning costs about 1 % of inference time.
         options.add_session_config_entry("session.intra_op.allow_spinning", "0")
+        if max_batch == 1:
+            options.add_free_dimension_override_by_denotation(BATCH_DENOTATION, 1)
         try:
             session = ort.InferenceSession(
                 str(model_path), sess_options=options, providers=["CPUExecutionProvider"]
@@ -116,6 +127,7 @@ class OnnxBackend:
         self._session = None
 
 
-def load(model_path: Path, *, threads: int | None = None) -> Backend:
-    """Open ``model_path`` with ONNX Runtime on the CPU (``threads``: intra-op threads)."""
-    return OnnxBackend(model_path, threads=threads)
+def load(model_path: Path, *, threads: int | None = None, max_batch: int = 1) -> Backend:
+    """Open ``model_path`` with ONNX Runtime on the CPU (``threads``: intra-op threads;
+    ``max_batch``: the largest batch it will be given, see the module's doc)."""
+    return OnnxBackend(model_path, threads=threads, max_batch=max_batch)

@@ -7,6 +7,11 @@ frames) and ``threads`` inference threads, one per physical core by default as f
 Runtime. The inference precision is pinned to f32: on CPUs with AMX, OpenVINO would otherwise
 run in bf16, whose 8-bit mantissa rounds box coordinates near 640 px to 4 px steps.
 
+Batch: a model with a dynamic batch is reshaped before it is compiled: to a batch of 1 for
+``max_batch`` 1 (the default: single frames, compiled as a batch-1 export would be), else to
+a batch bounded by 1..``max_batch`` (one compiled model runs every batch size up to it). A fixed
+batch is the model's own whatever ``max_batch`` says (the Detector cuts batches to it).
+
 Precisions: ``fp32`` runs the model as it is; ``int8`` runs an NNCF-quantized IR (the head and
 decode kept in float). An IR's precision is its own: FakeQuantize ops in it mean INT8.
 """
@@ -57,6 +62,21 @@ def _is_int8(model: Any) -> bool:
     return any(op.get_type_name() == "FakeQuantize" for op in model.get_ordered_ops())
 
 
+def _bound_batch(model: Any, max_batch: int) -> None:
+    """Reshape a dynamic batch to 1 (``max_batch`` 1) or to 1..``max_batch``; a fixed one,
+    or an input that is not 4-D, is left as it is."""
+    shape = model.inputs[0].get_partial_shape()
+    if shape.rank.is_dynamic or len(shape) != 4 or shape[0].is_static:
+        return
+    batch = ov.Dimension(1) if max_batch == 1 else ov.Dimension(1, max_batch)
+    try:
+        model.reshape({model.inputs[0]: ov.PartialShape([batch, *(shape[i] for i in (1, 2, 3))])})
+    except RuntimeError as exc:
+        raise ModelError(
+            f"OpenVINO cannot set the model's batch to {batch} ({one_line(exc)})"
+        ) from exc
+
+
 class OpenVinoBackend:
     """A model compiled by OpenVINO for the CPU, with one reused infer request."""
 
@@ -64,10 +84,17 @@ class OpenVinoBackend:
     device = "cpu"
 
     def __init__(
-        self, model_path: Path, *, precision: str = "", threads: int | None = None
+        self,
+        model_path: Path,
+        *,
+        precision: str = "",
+        threads: int | None = None,
+        max_batch: int = 1,
     ) -> None:
         if threads is not None and threads < 1:
             raise ConfigError(f"threads must be a positive integer, got {threads}")
+        if max_batch < 1:
+            raise ConfigError(f"max_batch must be a positive integer, got {max_batch}")
         if not model_path.is_file():
             raise ModelError(f"{model_path}: no such model file")
         core = ov.Core()
@@ -81,6 +108,7 @@ class OpenVinoBackend:
             raise ModelError(
                 f"{model_path}: expected one image input, the model has {len(model.inputs)}"
             )
+        _bound_batch(model, max_batch)
         own = "int8" if _is_int8(model) else "fp32"
         if precision and precision != own:
             raise ConfigError(
@@ -124,11 +152,14 @@ class OpenVinoBackend:
         self._outputs = []
 
 
-def load(model_path: Path, *, precision: str = "", threads: int | None = None) -> Backend:
+def load(
+    model_path: Path, *, precision: str = "", threads: int | None = None, max_batch: int = 1
+) -> Backend:
     """Open ``model_path`` (ONNX or IR) with OpenVINO on the CPU.
 
     ``precision``: ``fp32`` or ``int8``; empty takes the model's own (fp32 for ONNX).
-    ``threads``: inference threads, one per physical core by default.
+    ``threads``: inference threads, one per physical core by default. ``max_batch``: the
+    largest batch it will be given (see the module's doc).
     """
     if precision and precision not in PRECISIONS:
         raise ConfigError(f"openvino takes precision {' or '.join(PRECISIONS)}, not {precision!r}")
@@ -139,4 +170,4 @@ def load(model_path: Path, *, precision: str = "", threads: int | None = None) -
             f"openvino int8 loads a quantized IR (.xml), not {model_path.name}: set "
             'detector.precision = "int8" (the detector quantizes and caches it), or pass the IR'
         )
-    return OpenVinoBackend(model_path, precision=precision, threads=threads)
+    return OpenVinoBackend(model_path, precision=precision, threads=threads, max_batch=max_batch)

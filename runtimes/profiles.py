@@ -81,6 +81,19 @@ def batch_profile(
     return BatchProfile(low, best, high, dynamic=True)
 
 
+def served_profile(batch_profile: Sequence[int], max_batch: int) -> tuple[int, int, int]:
+    """The ``(min, opt, max)`` batch profile to build for a detector serving batches of up to
+    ``max_batch``: ``batch_profile`` when it was set (not (1, 1, 1)), else 1..``max_batch``
+    with opt ``max_batch`` (the batch a busy detector runs; a batch of one still runs
+    correctly on kernels tuned for more). A TOML list is fine for ``batch_profile``."""
+    if max_batch < 1:
+        raise ConfigError(f"max_batch must be a positive integer, got {max_batch}")
+    lo, opt, hi = (int(b) for b in batch_profile)
+    if (lo, opt, hi) == (1, 1, 1):
+        return 1, max_batch, max_batch
+    return lo, opt, hi
+
+
 def profile_shapes(
     input_shape: Sequence[Dim],
     batch_sizes: Sequence[int],

@@ -213,15 +213,19 @@ def open_auto(
     raise BackendUnavailable("auto: no backend can run here: " + "; ".join(reasons.values()))
 
 
-def backend_options(settings: DetectorSettings) -> dict[str, Any]:
+def backend_options(settings: DetectorSettings, max_batch: int = 1) -> dict[str, Any]:
     """Backend options from the stack config: only those set away from their defaults.
 
-    ``precision`` ("" = the backend's own default) and ``batch_profile`` ((1, 1, 1) = single
-    frames) are passed on only when set, so the default config loads on every backend.
+    ``precision`` ("" = the backend's own default), ``batch_profile`` ((1, 1, 1) = single
+    frames) and ``max_batch`` (the largest batch the caller will send: the detector service's
+    ``min(detector.max_batch, cameras)``; 1 = single frames) are passed on only when set, so
+    the default config loads on every backend.
     """
     options: dict[str, Any] = {}
     if settings.precision:
         options["precision"] = settings.precision
     if settings.batch_profile != (1, 1, 1):
         options["batch_profile"] = settings.batch_profile
+    if max_batch != 1:
+        options["max_batch"] = max_batch
     return options

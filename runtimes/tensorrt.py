@@ -41,7 +41,7 @@ from runtimes import engine_cache
 from runtimes.base import Backend, Dim
 from runtimes.cudart import cuda_device_count, import_cudart
 from runtimes.engine_cache import BuildOptions
-from runtimes.profiles import ProfileShapes, calibration_shape, model_profile
+from runtimes.profiles import ProfileShapes, calibration_shape, model_profile, served_profile
 
 try:
     cudart = import_cudart()
@@ -374,15 +374,20 @@ def load(
     workspace_gb: float = 4.0,
     device: int = 0,
     progress: Progress | None = None,
+    max_batch: int = 1,
 ) -> Backend:
     """Open ``model_path`` (ONNX) on TensorRT, building and caching its engine if needed.
 
     Options are those of :class:`~.BuildOptions`; ``progress`` receives the
     cache decision and build progress lines (default: this module's logger at INFO).
+    ``max_batch`` is the largest batch it will be given: with ``batch_profile`` left at
+    (1, 1, 1), a dynamic-batch model's engine is built for 1..``max_batch`` (opt
+    ``max_batch``, the batch a busy detector runs); a profile set explicitly wins, and a
+    larger batch than its max is run in parts. A fixed batch is the model's own.
     """
     opts = BuildOptions(
         precision=precision,
-        batch_profile=tuple(batch_profile),  # type: ignore[arg-type]  # a TOML list is fine
+        batch_profile=served_profile(batch_profile, max_batch),
         calib_dir=Path(calib_dir) if calib_dir is not None else None,
         cache_dir=Path(cache_dir) if cache_dir is not None else None,
         workspace_gb=workspace_gb,

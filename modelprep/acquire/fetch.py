@@ -217,6 +217,7 @@ def _convert_tarball(
                 names=COCO80,
                 metadata=default_model_metadata(package, height, width),
                 box_scale=(width, height, width, height),
+                dynamic_batch=True,  # one detector batches the frames of several cameras
             )
             os.replace(partial, target)
         except ModelFetchError:

@@ -23,6 +23,9 @@ from modelprep.acquire.tfjs_graph import TfNode
 
 NHWC_TO_NCHW = (0, 3, 1, 2)  # ONNX axis j of an NCHW tensor is TF (NHWC) axis NHWC_TO_NCHW[j]
 NCHW_TO_NHWC = (0, 2, 3, 1)
+#: The name of a dynamic batch dimension in the graph's input and output.
+BATCH_DIM = "batch"
+BATCH_DENOTATION = "DATA_BATCH"
 
 
 class Layout(enum.Enum):
@@ -48,7 +51,12 @@ class Value:
 class GraphBuilder:
     """Collects ONNX nodes and initializers; maps TF node names to translated values."""
 
-    def __init__(self, constants: Mapping[str, npt.NDArray[Any]]) -> None:
+    def __init__(
+        self, constants: Mapping[str, npt.NDArray[Any]], *, dynamic_batch: bool = False
+    ) -> None:
+        #: Whether the graph's batch (axis 0 of the input, 1 in TF's shapes) is left dynamic:
+        #: shapes written into the graph then copy it from their input instead of baking it in.
+        self.dynamic_batch = dynamic_batch
         self.nodes: list[onnx.NodeProto] = []
         self.initializers: list[onnx.TensorProto] = []
         self._constants = dict(constants)
@@ -93,9 +101,33 @@ class GraphBuilder:
         self._used_names.add(onnx_name)
         value = Value(onnx_name, shape, layout)
         self._values[tf_name] = value
-        return helper.make_tensor_value_info(
-            onnx_name, onnx.TensorProto.FLOAT, list(value.onnx_shape)
-        )
+        return self.value_info(onnx_name, value.onnx_shape)
+
+    def value_info(self, name: str, shape: Sequence[int]) -> onnx.ValueInfoProto:
+        """A graph input or output of ``shape``. With a dynamic batch, axis 0 is named
+        ``batch`` and denoted ``DATA_BATCH`` (ONNX's standard denotation: a runtime may pin
+        it by that, as ONNX Runtime's free dimension overrides do)."""
+        dims: list[int | str] = list(shape)
+        if self.dynamic_batch and dims:
+            dims[0] = BATCH_DIM
+        info = helper.make_tensor_value_info(name, onnx.TensorProto.FLOAT, dims)
+        if self.dynamic_batch and dims:
+            info.type.tensor_type.shape.dim[0].denotation = BATCH_DENOTATION
+        return info
+
+    def reshape_target(self, source_shape: Sequence[int], target: Sequence[int]) -> str:
+        """An initializer with a Reshape's ``target`` shape for a ``source_shape`` input. With
+        a dynamic batch, a leading dimension equal to the source's is written 0 ("copy the
+        input's"): the same shape for a batch of 1, and the right one for any other; a
+        reshape that moves the batch axis is a ModelError then."""
+        dims = np.array(target, np.int64)
+        if self.dynamic_batch:
+            if not len(dims) or not source_shape or dims[0] != source_shape[0]:
+                raise ModelError(
+                    f"a reshape of {list(source_shape)} to {list(target)} moves the batch axis"
+                )
+            dims[0] = 0
+        return self.initializer(dims, "shape")
 
     def define(self, tf_name: str, onnx_name: str, shape: tuple[int, ...], layout: Layout) -> None:
         self._values[tf_name] = Value(onnx_name, shape, layout)

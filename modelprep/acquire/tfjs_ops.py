@@ -123,6 +123,12 @@ def _resize_nearest(builder: GraphBuilder, node: TfNode) -> None:
     if scale_h.is_integer() and scale_w.is_integer():
         scales = np.array([1, 1, scale_h, scale_w], np.float32)
         size_inputs = ["", builder.initializer(scales, "scales")]
+    elif builder.dynamic_batch:  # sizes: the input's own batch and channels, then out_h, out_w
+        nchw = builder.in_layout(x, Layout.NCHW)
+        batch_channels = builder.emit("Shape", [nchw], f"{node.name}/shape", start=0, end=2)
+        spatial = builder.initializer(np.array([out_h, out_w], np.int64), "sizes")
+        sizes_name = builder.emit("Concat", [batch_channels, spatial], f"{node.name}/sizes", axis=0)
+        size_inputs = ["", "", sizes_name]
     else:  # float scales could round the output size down (5 * 9/5 -> 8.999)
         sizes = np.array([x.shape[0], x.shape[3], out_h, out_w], np.int64)
         size_inputs = ["", "", builder.initializer(sizes, "sizes")]
@@ -146,7 +152,7 @@ def _reshape(builder: GraphBuilder, node: TfNode) -> None:
         target[target.index(-1)] = total // known
     if int(np.prod(target)) != total or min(target) < 0:
         raise ModelError(f"cannot reshape {x.shape} to {target} (node {node.name})")
-    shape = builder.initializer(np.array(target, np.int64), "shape")
+    shape = builder.reshape_target(x.shape, target)
     out = builder.emit("Reshape", [builder.in_layout(x, Layout.NATIVE), shape], node.name)
     builder.define(node.name, out, tuple(target), Layout.NATIVE)
 
@@ -154,6 +160,8 @@ def _reshape(builder: GraphBuilder, node: TfNode) -> None:
 def _transpose(builder: GraphBuilder, node: TfNode) -> None:
     x = builder.value(node.inputs[0])
     perm = [int(v) for v in builder.constant(node, 1)]
+    if builder.dynamic_batch and perm and perm[0] != 0:
+        raise ModelError(f"Transpose {node.name} moves the batch axis (perm {perm})")
     out = builder.emit("Transpose", [builder.in_layout(x, Layout.NATIVE)], node.name, perm=perm)
     builder.define(node.name, out, tuple(x.shape[p] for p in perm), Layout.NATIVE)
 
@@ -166,6 +174,11 @@ def _strided_slice(builder: GraphBuilder, node: TfNode) -> None:
         for key in ("begin_mask", "end_mask", "ellipsis_mask", "new_axis_mask", "shrink_axis_mask")
     }
     plan = strided_slice_plan(x.shape, begin, end, strides, **masks)
+    if builder.dynamic_batch and x.shape:
+        # Batch-independent only if a batch of 2 slices the same axes and keeps axis 0.
+        twice = strided_slice_plan((2, *x.shape[1:]), begin, end, strides, **masks)
+        if twice.axes != plan.axes or twice.out_shape != (2, *plan.out_shape[1:]):
+            raise ModelError(f"StridedSlice {node.name} slices the batch axis")
     out = builder.in_layout(x, Layout.NATIVE)
     if plan.axes:
         inputs = [np.array(v, np.int64) for v in (plan.starts, plan.ends, plan.axes, plan.steps)]
@@ -173,7 +186,7 @@ def _strided_slice(builder: GraphBuilder, node: TfNode) -> None:
             "Slice", [out, *(builder.initializer(v, "slice") for v in inputs)], node.name
         )
     if plan.needs_reshape:
-        shape = builder.initializer(np.array(plan.out_shape, np.int64), "shape")
+        shape = builder.reshape_target(plan.sliced_shape, plan.out_shape)
         out = builder.emit("Reshape", [out, shape], f"{node.name}/reshape")
     builder.define(node.name, out, plan.out_shape, Layout.NATIVE)
 

@@ -8,6 +8,12 @@ elementwise ops) remap their axes. Ops whose meaning depends on the memory order
 Transpose, StridedSlice) get a ``Layout.NATIVE`` input, converted by one cached Transpose. For
 YOLOv5 that adds just one Transpose per detection head, before its Reshape.
 
+Batch: the TF.js graph declares a batch of 1. With ``dynamic_batch`` the ONNX graph takes any
+batch instead: its input and output name axis 0 ``batch``, and every shape the graph writes
+down copies the batch from its input (a Reshape target's leading 1 becomes 0, "keep this
+dimension"; a Resize to sizes takes the batch from ``Shape``). An op that would mix the batch
+with another axis is a ModelError.
+
 Scope: single-input, single-output graphs with static shapes, float32 data; the op table
 (``TRANSLATORS`` in tfjs_ops.py) covers what the TF.js converter emits for YOLOv5. Anything else
 raises ModelError naming the op.
@@ -20,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import onnx
-from onnx import TensorProto, helper
+from onnx import helper
 
 from common.errors import ModelError
 from modelprep.acquire.tfjs_graph import TfGraph, TfNode, load_tfjs_graph
@@ -38,10 +44,16 @@ def convert_tfjs_to_onnx(
     names: Sequence[str],
     metadata: Mapping[str, str],
     box_scale: Sequence[float] | None = None,
+    dynamic_batch: bool = False,
 ) -> None:
     """Convert ``model_json`` (+ shards) into ``out_path``; see convert_tfjs_graph."""
     convert_tfjs_graph(
-        load_tfjs_graph(model_json), out_path, names=names, metadata=metadata, box_scale=box_scale
+        load_tfjs_graph(model_json),
+        out_path,
+        names=names,
+        metadata=metadata,
+        box_scale=box_scale,
+        dynamic_batch=dynamic_batch,
     )
 
 
@@ -54,12 +66,14 @@ def convert_tfjs_graph(
     box_scale: Sequence[float] | None = None,
     input_name: str = "images",
     output_name: str = "output0",
+    dynamic_batch: bool = False,
 ) -> None:
     """Write the ONNX translation of ``graph``.
 
     ``names`` becomes the Ultralytics-style ``names`` metadata ("{0: 'person', ...}").
     ``box_scale`` (4 factors) multiplies channels 0..3 of the output's last axis, turning the
     TF.js normalised cx, cy, w, h into input pixels like Ultralytics' own ONNX export.
+    ``dynamic_batch``: the model takes any batch, not the graph's 1 (see the module's doc).
     """
     model = build_onnx_model(
         graph,
@@ -68,6 +82,7 @@ def convert_tfjs_graph(
         box_scale=box_scale,
         input_name=input_name,
         output_name=output_name,
+        dynamic_batch=dynamic_batch,
     )
     try:
         onnx.save(model, str(out_path))
@@ -83,13 +98,14 @@ def build_onnx_model(
     box_scale: Sequence[float] | None = None,
     input_name: str = "images",
     output_name: str = "output0",
+    dynamic_batch: bool = False,
 ) -> onnx.ModelProto:
     """Translate ``graph`` into a checked in-memory ONNX model."""
     if len(graph.inputs) != 1 or len(graph.outputs) != 1:
         raise ModelError(
             f"expected one input and one output, got {list(graph.inputs)} and {list(graph.outputs)}"
         )
-    builder = GraphBuilder(graph.constants)
+    builder = GraphBuilder(graph.constants, dynamic_batch=dynamic_batch)
     ((tf_input, shape),) = graph.inputs.items()
     graph_input = builder.define_input(tf_input, input_name, shape)
     for node in _reachable_nodes(graph):
@@ -162,4 +178,4 @@ def _finish_output(
         factors[:4] = np.asarray(box_scale, dtype=np.float32)
         scale = builder.initializer(factors, "box_scale")
         builder.emit("Mul", [source, scale], output_name, output=output_name)
-    return helper.make_tensor_value_info(output_name, TensorProto.FLOAT, list(value.shape))
+    return builder.value_info(output_name, value.shape)

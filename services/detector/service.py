@@ -1,9 +1,14 @@
-"""The detector service: newest frame in, Detections out, with the frame's header."""
+"""The detector service: the newest frame of every camera in, each camera's Detections out,
+with its frame's header, on its own key; several cameras' frames batched (docs/detector.md,
+"Several cameras")."""
 
 from __future__ import annotations
 
 import json
+import logging
 import threading
+from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import numpy.typing as npt
@@ -12,15 +17,16 @@ import zenoh
 from common.bus import QoS
 from common.clock import BOOT_ID, now, wall_ns
 from common.contracts import DetectorInfo
+from common.counters import per_camera
 from common.errors import DecodeError, ImageError, ImageTooLarge
 from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, Header
-from common.node import Node, Tally
+from common.node import Node, Put, Tally
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
-from services.detector.mailbox import Mailbox
 from services.detector.pipeline import Detector
+from services.detector.schedule import CameraSlots, Waiting
 from services.detector.tracker import Tracker, tracker_clock
 from services.detector.types import DetectionResult
 from services.detector.variants import variant_of
@@ -28,18 +34,19 @@ from services.detector.variants import variant_of
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag
 
 
-def open_detector(s: DetectorSettings) -> tuple[Detector, str]:
+def open_detector(s: DetectorSettings, max_batch: int = 1) -> tuple[Detector, str]:
     """Load the configured model (the default one, fetched if needed, when none is named) at
-    its size and precision, or the fast profile's choice; with a note on what was chosen."""
+    its size and precision, or the fast profile's choice, for batches of up to ``max_batch``
+    frames; with a note on what was chosen."""
     from services.detector.variants import open_prepared
 
     if s.profile == "fast":
         from services.detector.fast_profile import choose_fast
 
         variant, why = choose_fast(s)  # measured ahead: zstack fast-profile
-        det, note = open_prepared(variant.settings(s))
+        det, note = open_prepared(variant.settings(s), max_batch=max_batch)
         return det, f"{why}; {note}" if note else why
-    return open_prepared(s)
+    return open_prepared(s, max_batch=max_batch)
 
 
 def to_message(
@@ -69,44 +76,148 @@ def to_message(
     )
 
 
+def served_batch(config: Config) -> int:
+    """The most frames one round takes: ``detector.max_batch``, never more than there are
+    cameras (one frame per camera per round), so one camera always runs batches of 1."""
+    return min(config.detector.max_batch, len(config.all_cameras))
+
+
 class DetectorHandlers:
-    """What the detector does with a frame as it arrives: decode it, count it, and leave it in
-    the mailbox that the detection loop takes the newest frame from."""
+    """What the detector does with a frame as it arrives: decode it, count it (in all and for
+    its camera), and leave it in its camera's slot, from which the loop takes rounds."""
 
     def __init__(self, config: Config, tally: Tally) -> None:
         self.settings = config.detector
         self.tally = tally
-        self.frame_key = tally.keys.frame(config.stack.camera)
-        self.mailbox: Mailbox[Frame] = Mailbox()
-        self.gaps = SeqGaps()
+        self.frame_keys = {cam: tally.keys.frame(cam) for cam in config.all_cameras}
+        self.slots: CameraSlots[Frame] = CameraSlots(self.frame_keys)
+        self.gaps = {cam: SeqGaps() for cam in self.frame_keys}  # one numbering per camera
 
-    def on_frame(self, payload: bytes) -> None:
+    def on_frame(self, camera: str, payload: bytes) -> None:
         # Decode here, not in the loop: garbage must be counted even when a newer frame would
-        # have replaced it in the mailbox before the loop looked at it; and an oversize frame
+        # have replaced it in the slot before the loop looked at it; and an oversize frame
         # must never displace a real one there.
-        counters = self.tally.counters
-        counters.add("frames_in")
+        count = partial(count_for, self.tally, camera)
+        count("frames_in")
+        key = self.frame_keys[camera]
         try:
             frame = Frame.decode(payload)
-            missed = self.gaps.observe(frame.header)
+            missed = self.gaps[camera].observe(frame.header)
             if missed:
-                counters.add("frames_missed", missed)
+                count("frames_missed", missed)
             check_pixel_budget(frame, self.settings.max_frame_pixels)
         except DecodeError as exc:
-            self.tally.bad_input(self.frame_key, exc)
+            self.tally.bad_input(key, exc)
+            self.tally.counters.add(per_camera("bad_input", camera))
             return
         except ImageTooLarge as exc:
-            self.tally.reject("frames_oversize", str(exc), key=self.frame_key)
+            reject_for(self.tally, camera, "frames_oversize", str(exc), key)
             return
-        if self.mailbox.put(frame):
-            counters.add("dropped")
+        if self.slots.put(camera, frame):
+            count("dropped")
+
+
+def count_for(tally: Tally, camera: str, name: str, n: int = 1) -> None:
+    """Count ``n`` under ``name`` (the detector's total) and under ``name.<camera>``."""
+    tally.counters.add(name, n)
+    tally.counters.add(per_camera(name, camera), n)
+
+
+def reject_for(tally: Tally, camera: str, counter: str, message: str, key: str) -> None:
+    """``Tally.reject`` (counted in all, logged rate-limited per key) and counted for
+    ``camera`` too."""
+    tally.reject(counter, message, key=key)
+    tally.counters.add(per_camera(counter, camera))
+
+
+@dataclass(slots=True)
+class CameraOutput:
+    """What the detector keeps per camera: its frames' freshness (replays are judged per
+    camera), its own tracker (track ids never cross cameras) and its detections' publisher."""
+
+    camera: str
+    frame_key: str
+    gate: FreshnessGate
+    tracker: Tracker | None
+    put: Put
+
+
+class Rounds:
+    """The detection loop's work: take a round of frames, one per waiting camera, run them
+    through the model as one batch, and publish each camera's detections with its frame's
+    header on its own key. Counted in all and per camera; a round's size is counted as
+    ``batches`` (rounds run) and ``batched_frames`` (frames in them): their ratio is the mean
+    batch size."""
+
+    def __init__(
+        self, config: Config, tally: Tally, detector: Detector, outputs: dict[str, CameraOutput]
+    ) -> None:
+        self.settings = config.detector
+        self.tally = tally
+        self.detector = detector
+        self.outputs = outputs
+
+    def run(self, waiting: list[Waiting[Frame]]) -> None:
+        ready: list[tuple[CameraOutput, Frame, int, npt.NDArray[np.uint8]]] = []
+        for w in waiting:
+            out, frame = self.outputs[w.camera], w.item
+            # Judged as it leaves the slot: a frame that waited out a pause (or was stamped
+            # wrong, or sent again) is not worth a detection nobody may act on.
+            verdict, age = out.gate.check(frame.header, now())
+            if verdict is not Verdict.FRESH:
+                reject_for(
+                    self.tally,
+                    w.camera,
+                    f"frames_{verdict}",
+                    f"{verdict} frame from {w.camera} ({age:.2f} s old) dropped",
+                    out.frame_key,
+                )
+                continue
+            try:
+                image = frame_to_bgr(frame, self.settings.max_frame_pixels)
+            except ImageError as exc:
+                self.tally.bad_input(out.frame_key, exc)
+                self.tally.counters.add(per_camera("bad_input", w.camera))
+                continue
+            ready.append((out, frame, w.received_ns, image))
+        if not ready:
+            return
+        results = self.detector.detect_batch([image for *_, image in ready])
+        self.tally.counters.add("batches")
+        self.tally.counters.add("batched_frames", len(ready))
+        for (out, frame, received_ns, _), result in zip(ready, results, strict=True):
+            self._publish(out, frame, received_ns, result)
+
+    def _publish(
+        self, out: CameraOutput, frame: Frame, received_ns: int, result: DetectionResult
+    ) -> None:
+        if not result.output_sane:
+            # Zero boxes from a broken model are no verdict: publish nothing, so that the
+            # controller's detection timeout stops the robot.
+            reject_for(
+                self.tally,
+                out.camera,
+                "nonfinite_outputs",
+                f"the model's output for frame {frame.header.seq} from {out.camera} is not "
+                "finite (NaN, infinity or a magnitude over 1e6): no detections published",
+                out.frame_key,
+            )
+            return
+        track_ids = (
+            None
+            if out.tracker is None
+            else _track(self.tally, out, result, frame.header, received_ns)
+        )
+        out.put(to_message(frame, result, self.detector, received_ns, track_ids).encode())
+        count_for(self.tally, out.camera, "detections_out")
 
 
 def run(config: Config, stop: threading.Event) -> int:
-    """Detect on the newest frame until ``stop`` is set."""
+    """Detect on the newest frame of every camera until ``stop`` is set."""
     s = config.detector
     with Node("detector", config, counters_period_s=s.counters_period_s) as node:
-        detector, note = open_detector(s)
+        served = served_batch(config)
+        detector, note = open_detector(s, served)
         b = detector.backend
         node.log.info(
             "model %s on %s (%s, %s, input %d)%s",
@@ -117,12 +228,23 @@ def run(config: Config, stop: threading.Event) -> int:
             detector.info.input_height,
             f": {note}" if note else "",
         )
+        per_round = round_size(detector, served, node.log)
         handlers = DetectorHandlers(config, node)
-        frame_key, mailbox = handlers.frame_key, handlers.mailbox
-        tracker = Tracker(config.tracker) if config.tracker.enabled else None
-        sub = node.subscribe(frame_key, handlers.on_frame)
-        pub = node.publisher(node.keys.detections(config.stack.camera), QoS.PERCEPTION)
-        gate = FreshnessGate(s.max_frame_age_s, config.stack.clock_tolerance_s, BOOT_ID)
+        outputs = {
+            cam: CameraOutput(
+                camera=cam,
+                frame_key=key,
+                gate=FreshnessGate(s.max_frame_age_s, config.stack.clock_tolerance_s, BOOT_ID),
+                tracker=Tracker(config.tracker) if config.tracker.enabled else None,
+                put=node.publisher(node.keys.detections(cam), QoS.PERCEPTION).put,
+            )
+            for cam, key in handlers.frame_keys.items()
+        }
+        rounds = Rounds(config, node, detector, outputs)
+        subs = [
+            node.subscribe(key, partial(handlers.on_frame, cam))
+            for cam, key in handlers.frame_keys.items()
+        ]
         info = json.dumps(
             DetectorInfo(
                 model=detector.model_path.name,
@@ -134,66 +256,81 @@ def run(config: Config, stop: threading.Event) -> int:
                 note=note,
             )
         )
-        info_key = node.keys.detector_info(config.stack.camera)
-        queryable = node.session.declare_queryable(
-            info_key, lambda q: q.reply(info_key, info, encoding=zenoh.Encoding.APPLICATION_JSON)
-        )
-        # Warm the backend up before announcing readiness: the first run allocates.
-        detector.detect(np.full((480, 640, 3), 114, np.uint8))
+        queryables = [_info_queryable(node, node.keys.detector_info(cam), info) for cam in outputs]
+        # Warm the backend up before announcing readiness: the first run allocates, and each
+        # batch size may (a CUDA graph, an OpenVINO shape) on its first run.
+        warm = np.full((480, 640, 3), 114, np.uint8)
+        for size in sorted({1, per_round}):
+            detector.detect_batch([warm] * size)
         node.ready()
         try:
             while not stop.is_set():
                 node.publish_counters()
-                item = mailbox.take(_WAIT_S)
-                if item is None:
-                    continue
-                frame, received_ns = item
-                # Judged as it leaves the mailbox: a frame that waited out a pause (or was
-                # stamped wrong, or sent again) is not worth a detection nobody may act on.
-                verdict, age = gate.check(frame.header, now())
-                if verdict is not Verdict.FRESH:
-                    node.reject(f"frames_{verdict}", f"{verdict} frame ({age:.2f} s old) dropped")
-                    continue
-                try:
-                    image = frame_to_bgr(frame, s.max_frame_pixels)
-                except ImageError as exc:
-                    node.bad_input(frame_key, exc)
-                    continue
-                result = detector.detect(image)
-                if not result.output_sane:
-                    # Zero boxes from a broken model are no verdict: publish nothing, so that
-                    # the controller's detection timeout stops the robot.
-                    node.reject(
-                        "nonfinite_outputs",
-                        f"the model's output for frame {frame.header.seq} is not finite (NaN, "
-                        "infinity or a magnitude over 1e6): no detections published",
-                    )
-                    continue
-                track_ids = (
-                    None
-                    if tracker is None
-                    else _track(node, tracker, result, frame.header, received_ns)
-                )
-                pub.put(to_message(frame, result, detector, received_ns, track_ids).encode())
-                node.counters.add("detections_out")
+                waiting = handlers.slots.take(per_round, _WAIT_S)
+                if waiting:
+                    rounds.run(waiting)
         finally:
-            sub.undeclare()
-            queryable.undeclare()
+            for sub in subs:
+                sub.undeclare()
+            for queryable in queryables:
+                queryable.undeclare()
             detector.close()
     return 0
 
 
+def round_size(detector: Detector, served: int, log: logging.Logger) -> int:
+    """Frames per round: ``served``, cut to a fixed-batch model's batch (which a smaller
+    round is padded to), said in one line when the model's batch is not ``served``."""
+    fixed = detector.info.batch_size
+    if fixed is None or fixed == served:
+        return served
+    log.info(
+        "the model takes a fixed batch of %d: rounds of up to %d frame(s) (detector.max_batch "
+        "and the cameras allow %d), each run as one batch of %d",
+        fixed,
+        min(served, fixed),
+        served,
+        fixed,
+    )
+    return min(served, fixed)
+
+
+def _info_queryable(node: Node, key: str, info: str) -> zenoh.Queryable[None]:
+    return node.session.declare_queryable(
+        key, lambda q: q.reply(key, info, encoding=zenoh.Encoding.APPLICATION_JSON)
+    )
+
+
 def _track(
-    node: Node, tracker: Tracker, result: DetectionResult, header: Header, received_ns: int
+    tally: Tally,
+    out: CameraOutput,
+    result: DetectionResult,
+    header: Header,
+    received_ns: int,
 ) -> npt.NDArray[np.int32]:
-    """Track ids for ``result``; a frame whose stamp jumped is counted, its ids left at -1."""
+    """Track ids for ``result`` from its camera's tracker; a frame whose stamp jumped is
+    counted, its ids left at -1."""
+    tracker = out.tracker
+    assert tracker is not None
     ignored, resets = tracker.ignored_frames, tracker.resets
     at, arrival = tracker_clock(
         header.stamp_ns, header.mono_ns, header.boot_id, received_ns, BOOT_ID
     )
     ids = tracker.update(result.boxes, at, arrival)
     if tracker.ignored_frames > ignored:
-        node.reject("tracker_stamp_jumps", "frame stamp jumped: the tracker ignored it")
+        reject_for(
+            tally,
+            out.camera,
+            "tracker_stamp_jumps",
+            "frame stamp jumped: the tracker ignored it",
+            out.frame_key,
+        )
     if tracker.resets > resets:
-        node.reject("tracker_resets", "frame stamps jumped for good: tracks restarted")
+        reject_for(
+            tally,
+            out.camera,
+            "tracker_resets",
+            "frame stamps jumped for good: tracks restarted",
+            out.frame_key,
+        )
     return ids

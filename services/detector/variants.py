@@ -131,17 +131,20 @@ def finds_objects(reference: Path, backend: str) -> Callable[[Path], str | None]
     return check
 
 
-def prepare(s: DetectorSettings, progress: Progress = print_progress) -> Prepared:
-    """The model, backend and options for settings ``s`` (profile already resolved)."""
+def prepare(
+    s: DetectorSettings, progress: Progress = print_progress, max_batch: int = 1
+) -> Prepared:
+    """The model, backend and options for settings ``s`` (profile already resolved), for
+    batches of up to ``max_batch`` frames."""
     model = sized_model(s, progress)
     runtime = QUANT_RUNTIMES.get(s.backend)
     if runtime is None:
-        return Prepared(model, s.backend, backend_options(s))
+        return Prepared(model, s.backend, backend_options(s, max_batch))
     if s.precision not in ("", "fp32", "int8"):
         raise ConfigError(
             f"detector.precision {s.precision!r} is not for backend {s.backend}: use fp32 or int8"
         )
-    options = backend_options(replace(s, precision=""))
+    options = backend_options(replace(s, precision=""), max_batch)
     if s.precision != "int8":
         return Prepared(model, s.backend, options)
     from modelprep.quantize import QuantizationFailed, quantized_model
@@ -161,9 +164,12 @@ def prepare(s: DetectorSettings, progress: Progress = print_progress) -> Prepare
     return Prepared(quantized, s.backend, options)
 
 
-def open_prepared(s: DetectorSettings, progress: Progress = print_progress) -> tuple[Detector, str]:
-    """The Detector for settings ``s`` (profile already resolved) and its note."""
-    prepared = prepare(s, progress)
+def open_prepared(
+    s: DetectorSettings, progress: Progress = print_progress, max_batch: int = 1
+) -> tuple[Detector, str]:
+    """The Detector for settings ``s`` (profile already resolved), for batches of up to
+    ``max_batch`` frames, and its note."""
+    prepared = prepare(s, progress, max_batch)
     det = Detector.open(prepared.model, backend=prepared.backend, settings=s, **prepared.options)
     return det, prepared.note
 

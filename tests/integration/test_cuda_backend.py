@@ -128,3 +128,24 @@ def test_gpu_raw_outputs_match_onnxruntime(default_model: Path, onnx_detector: D
     np.testing.assert_allclose(graph_out[0, confident, 4], objectness[confident], atol=0.03)
     for backend in (fp32, eager, graphed):
         backend.close()
+
+
+@gpu
+@pytest.mark.gpu
+def test_gpu_batches_replay_one_graph_per_size_and_match_single_images(
+    default_model: Path, onnx_detector: Detector
+) -> None:
+    """Several cameras' frames in one batch: a CUDA graph per batch size (1, 2, 4, 5 here),
+    one copy of the weights, and each image's outputs as a batch of one gives them."""
+    photos = [bgr(name) for name in ("chelsea", "coffee", "astronaut", "rocket")]
+    photos.append(np.ascontiguousarray(photos[0][::2, ::2]))  # the cat again, half the size
+    rows = np.concatenate([onnx_detector.preprocess([p])[0].copy() for p in photos])
+    backend = cuda_backend.CudaBackend(default_model, precision="fp16", max_batch=5)
+    assert backend.batch_sizes == (1, 2, 4, 5) and backend.cuda_graphs, backend.graph_error
+    singles = np.concatenate([backend.infer(rows[i : i + 1])[0] for i in range(5)])
+    for n in (5, 3, 2):  # 3 runs on the graph of 4, padded
+        # fp16, and cuDNN may pick other kernels per batch size: a pixel, 0.02 in score
+        got = backend.infer(rows[:n])[0]
+        np.testing.assert_allclose(got[..., :4], singles[:n, :, :4], rtol=1e-2, atol=1.0)
+        np.testing.assert_allclose(got[..., 4:], singles[:n, :, 4:], atol=0.02)
+    backend.close()

@@ -43,11 +43,12 @@ def _letterbox_nchw(rgb: npt.NDArray[np.uint8], size: int = 640) -> npt.NDArray[
 def test_io_names_shapes_and_metadata(model_path: Path) -> None:
     model = onnx.load(str(model_path), load_external_data=False)
 
-    def dims(value: Any) -> list[int]:
-        return [d.dim_value for d in value.type.tensor_type.shape.dim]
+    def dims(value: Any) -> list[int | str]:
+        return [d.dim_param or d.dim_value for d in value.type.tensor_type.shape.dim]
 
-    assert [(v.name, dims(v)) for v in model.graph.input] == [("images", [1, 3, 640, 640])]
-    assert [(v.name, dims(v)) for v in model.graph.output] == [("output0", [1, 25200, 85])]
+    # A dynamic batch: one detector batches the frames of several cameras.
+    assert [(v.name, dims(v)) for v in model.graph.input] == [("images", ["batch", 3, 640, 640])]
+    assert [(v.name, dims(v)) for v in model.graph.output] == [("output0", ["batch", 25200, 85])]
     props = {p.key: p.value for p in model.metadata_props}
     names = ast.literal_eval(props["names"])
     assert len(names) == 80 and names[9] == "traffic light" and names[CAT] == "cat"

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from common.counters import per_camera
 from common.messages import Detections, EStop, Frame, LaserScan, ServiceCounters, Twist
 from common.node import Tally
 from common.settings import Config, ControllerSettings, Ros2Settings, SimSettings
@@ -63,14 +64,17 @@ def test_the_metrics_services_handlers() -> None:
 
 
 def test_the_detectors_handler() -> None:
-    # The handler alone is fuzzed here: nothing takes frames from its mailbox (what the loop
+    # The handler alone is fuzzed here: nothing takes frames from its slots (what the loop
     # does with a frame's pixels: tests/unit/common/test_fuzz_decoders.py).
     config = Config()
     tally = Tally("detector", config)
     handlers = DetectorHandlers(config, tally)
+    camera = config.stack.camera
     before = tally.counters.get("frames_in")
-    fed = message_handler(tally, handlers.on_frame, handlers.frame_key, Frame)
+    on_frame = partial(handlers.on_frame, camera)
+    fed = message_handler(tally, on_frame, handlers.frame_keys[camera], Frame)
     assert tally.counters.get("frames_in") - before == fed
+    assert tally.counters.get(per_camera("frames_in", camera)) == fed
 
 
 def _ros_handler(

@@ -368,8 +368,11 @@ def test_cpu_device_runs_the_interpreter(tiny_model: Path) -> None:
     np.testing.assert_allclose(
         backend.infer(batch)[0], session.run(None, {"images": batch})[0], rtol=1e-5, atol=1e-5
     )
-    with pytest.raises(ModelError, match=r"batch shape \[2, 3, 32, 32\] is not"):
-        backend.infer(rand(2, 3, 32, 32))
+    two = rand(2, 3, 32, 32)  # more rows than the fixed batch: run in parts
+    want = np.concatenate([session.run(None, {"images": two[i : i + 1]})[0] for i in (0, 1)])
+    np.testing.assert_allclose(backend.infer(two)[0], want, rtol=1e-5, atol=1e-5)
+    with pytest.raises(ModelError, match=r"batch shape \[1, 3, 16, 16\] is not"):
+        backend.infer(rand(1, 3, 16, 16))
     backend.close()
     with pytest.raises(ModelError, match="closed"):
         backend.infer(batch)
@@ -381,8 +384,7 @@ def test_cpu_device_runs_the_interpreter(tiny_model: Path) -> None:
         ({"device": "cpu", "precision": "fp16"}, "fp32 only"),
         ({"device": "cpu", "precision": "int8"}, "precision must be one of"),
         ({"device": "tpu:0", "precision": "fp32"}, "device must be"),
-        ({"device": "cpu", "precision": "fp32", "batch": 0}, "batch must be a positive"),
-        ({"device": "cpu", "precision": "fp32", "batch": 4}, "fixed batch of 1"),
+        ({"device": "cpu", "precision": "fp32", "max_batch": 0}, "max_batch must be a positive"),
     ],
 )
 def test_bad_options_are_config_errors(
@@ -390,6 +392,59 @@ def test_bad_options_are_config_errors(
 ) -> None:
     with pytest.raises(ConfigError, match=message):
         cuda_backend.load(tiny_model, **options)
+
+
+@pytest.fixture()
+def tiny_dynamic_model(tiny_model: Path) -> Path:
+    """The tiny model with a dynamic batch, named and denoted as our converter writes it."""
+    model = onnx.load(str(tiny_model))
+    dim = model.graph.input[0].type.tensor_type.shape.dim[0]
+    dim.dim_param, dim.denotation = "batch", "DATA_BATCH"
+    path = tiny_model.with_name("tiny-dynamic.onnx")
+    onnx.save(model, str(path))
+    return path
+
+
+def test_batch_sizes_are_powers_of_two_then_the_largest() -> None:
+    assert cuda_backend.batch_sizes(1) == (1,)
+    assert cuda_backend.batch_sizes(4) == (1, 2, 4)
+    assert cuda_backend.batch_sizes(5) == (1, 2, 4, 5)
+    assert cuda_backend.batch_sizes(32) == (1, 2, 4, 8, 16, 32)
+
+
+def test_a_dynamic_batch_runs_every_size_as_single_images_do(tiny_dynamic_model: Path) -> None:
+    backend = cuda_backend.CudaBackend(
+        tiny_dynamic_model, device="cpu", precision="fp32", max_batch=5
+    )
+    assert backend.batch_sizes == (1, 2, 4, 5)
+    assert backend.input_shape == (None, 3, 32, 32)
+    assert backend.output_shapes == ((None, 6, 32, 32),)
+    images = rand(7, 3, 32, 32)
+    singles = np.concatenate([backend.infer(images[i : i + 1])[0] for i in range(7)])
+    for rows in (1, 2, 3, 5, 7):  # 3 runs padded to 4; 7 runs as 5 + 2
+        got = backend.infer(images[:rows])[0]
+        assert got.shape == (rows, 6, 32, 32)
+        np.testing.assert_allclose(got, singles[:rows], rtol=1e-5, atol=1e-5)
+    # One copy of the weights, whatever the number of sizes.
+    modules = [size.module for size in backend._sizes]
+    weight = {n: b.data_ptr() for n, b in modules[0].named_buffers() if b.dim() == 4}
+    assert weight and all(
+        dict(m.named_buffers())[n].data_ptr() == ptr for m in modules for n, ptr in weight.items()
+    )
+    with pytest.raises(ModelError, match=r"batch shape \[2, 3, 16, 16\] is not"):
+        backend.infer(rand(2, 3, 16, 16))
+    backend.close()
+
+
+def test_a_fixed_batch_is_the_models_own_whatever_max_batch_says(
+    tiny_model: Path, tiny_dynamic_model: Path
+) -> None:
+    backend = cuda_backend.load(tiny_model, device="cpu", precision="fp32", max_batch=4)
+    assert backend.input_shape == (1, 3, 32, 32)  # the Detector cuts batches to it
+    backend.close()
+    one = cuda_backend.load(tiny_dynamic_model, device="cpu", precision="fp32")
+    assert one.input_shape == (1, 3, 32, 32)  # max_batch 1: built as a batch-1 export
+    one.close()
 
 
 def test_not_a_model_is_a_model_error(tmp_path: Path) -> None:

@@ -16,6 +16,7 @@ from runtimes.profiles import (
     model_profile,
     profile_shapes,
     read_onnx_input,
+    served_profile,
 )
 
 
@@ -124,3 +125,11 @@ def test_read_onnx_input_refuses_missing_and_junk_files(tmp_path: Path) -> None:
     junk.write_bytes(b"\x00\x01 definitely not protobuf \xff" * 10)
     with pytest.raises(ModelError, match="not a valid ONNX model"):
         read_onnx_input(junk)
+
+
+def test_the_served_profile_is_1_to_max_batch_unless_one_was_set() -> None:
+    assert served_profile((1, 1, 1), 1) == (1, 1, 1)  # one camera: as before
+    assert served_profile([1, 1, 1], 4) == (1, 4, 4)  # a TOML list
+    assert served_profile((1, 2, 8), 4) == (1, 2, 8)  # set explicitly: it wins
+    with pytest.raises(ConfigError, match="max_batch"):
+        served_profile((1, 1, 1), 0)

@@ -165,7 +165,8 @@ def test_supported_options_reads_the_load_signature() -> None:
 
 def test_a_named_backend_refuses_an_option_it_does_not_take(tmp_path: Path) -> None:
     with pytest.raises(
-        ConfigError, match="backend 'onnx' takes no option\\(s\\) precision; it takes: threads"
+        ConfigError,
+        match="backend 'onnx' takes no option\\(s\\) precision; it takes: max_batch, threads",
     ):
         open_backend("onnx", tmp_path / "m.onnx", precision="fp16")
 
@@ -205,3 +206,6 @@ def test_backend_options_pass_only_what_was_set() -> None:
     assert sel.backend_options(DetectorSettings()) == {}
     settings = DetectorSettings(backend="tensorrt", precision="int8", batch_profile=(1, 2, 4))
     assert sel.backend_options(settings) == {"precision": "int8", "batch_profile": (1, 2, 4)}
+    # The served batch, not detector.max_batch: one camera loads exactly as before.
+    assert sel.backend_options(DetectorSettings(max_batch=8)) == {}
+    assert sel.backend_options(DetectorSettings(), max_batch=3) == {"max_batch": 3}

@@ -1,0 +1,90 @@
+"""Which frames the detector runs next: one latest-only slot per camera, taken in fair rounds.
+
+Each camera has one slot. A frame replaces the one waiting there (that one is dropped and
+counted by the caller): queueing would make every detection later than the last, and the
+newest frame is the one worth detecting on.
+
+A *round* takes the waiting frame of up to ``max_batch`` cameras, those that have waited
+longest first. A camera's wait starts when its slot fills after being emptied, and a newer
+frame replacing the waiting one does not restart it; so a camera sending 100 frames a second
+stays in its place in the queue like one sending 5, and a camera that was just served goes
+to the back. Hence the bound the unit tests prove: with ``n`` cameras, a camera with a frame
+waiting is served within ``ceil(n / max_batch)`` rounds, whatever the others' rates, since
+at most ``n - 1`` cameras can be ahead of it and every round serves the ``max_batch`` oldest.
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+from common.clock import wall_ns
+
+_T = TypeVar("_T")
+
+
+@dataclass(frozen=True, slots=True)
+class Waiting(Generic[_T]):
+    """A camera's newest frame as a round takes it: ``received_ns`` is when that frame
+    arrived (``common.clock.wall_ns()``)."""
+
+    camera: str
+    item: _T
+    received_ns: int
+
+
+@dataclass(slots=True)
+class _Slot(Generic[_T]):
+    item: _T
+    received_ns: int
+    since: int  # the arrival ticket of the frame that started this wait (smaller = older)
+
+
+class CameraSlots(Generic[_T]):
+    """One latest-only slot per camera (thread-safe: Zenoh's threads put, the loop takes)."""
+
+    def __init__(self, cameras: Iterable[str]) -> None:
+        self.cameras: tuple[str, ...] = tuple(cameras)
+        if not self.cameras or len(set(self.cameras)) != len(self.cameras):
+            raise ValueError(f"cameras must be distinct and at least one, got {self.cameras}")
+        self._cond = threading.Condition()
+        self._slots: dict[str, _Slot[_T]] = {}
+        self._tickets = itertools.count()
+
+    def put(self, camera: str, item: _T) -> bool:
+        """Leave ``item`` in ``camera``'s slot; True when it replaced one nobody took (a drop).
+
+        KeyError for a camera not given at construction.
+        """
+        if camera not in self.cameras:
+            raise KeyError(camera)
+        received = wall_ns()
+        with self._cond:
+            ticket = next(self._tickets)
+            slot = self._slots.get(camera)
+            if slot is not None:
+                slot.item, slot.received_ns = item, received  # keeps its place: slot.since
+                return True
+            self._slots[camera] = _Slot(item, received, ticket)
+            self._cond.notify()
+        return False
+
+    def take(self, max_batch: int, timeout: float) -> list[Waiting[_T]]:
+        """The next round: the waiting frames of at most ``max_batch`` cameras, those waiting
+        longest first; empty after ``timeout`` seconds with nothing waiting."""
+        if max_batch < 1:
+            raise ValueError(f"max_batch must be at least 1, got {max_batch}")
+        with self._cond:
+            if not self._slots and not self._cond.wait_for(lambda: bool(self._slots), timeout):
+                return []
+            oldest = sorted(self._slots, key=lambda cam: self._slots[cam].since)[:max_batch]
+            taken = [(cam, self._slots.pop(cam)) for cam in oldest]
+        return [Waiting(cam, slot.item, slot.received_ns) for cam, slot in taken]
+
+    def waiting(self) -> int:
+        """How many cameras have a frame waiting."""
+        with self._cond:
+            return len(self._slots)
