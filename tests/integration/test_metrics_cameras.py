@@ -29,8 +29,7 @@ BOXES = {"front": 2, "rear": 1}  # boxes in each
 REACTED = {"front": 5, "rear": 4}  # frames a Twist reacts to, the first of each camera's
 DETECTOR_COUNTS = {
     "frames_in": 33, "dropped": 3, "frames_in.front": 22, "dropped.front": 2,
-    "frames_in.rear": 11, "dropped.rear": 1, "detections_out.rear": 10, "batches": 15,
-    "batched_frames": 30,
+    "frames_in.rear": 11, "dropped.rear": 1, "detections_out.rear": 10,
 }  # fmt: skip
 
 
@@ -105,16 +104,23 @@ def test_the_query_shows_each_camera(make_stack: Any) -> None:
             )
         }
 
+        runs = [0]
+
         def counted() -> dict[str, Any] | None:
-            # Put again on every poll: telemetry may be dropped under congestion.
+            # Put again on every poll: telemetry may be dropped under congestion. The detector
+            # runs one more batch of two frames between reports (a mean over the window).
+            runs[0] += 1
+            batches = {"batches": runs[0], "batched_frames": 2 * runs[0]}
             for service, (pub, counts) in counters.items():
+                counts = {**counts, **batches} if service == "detector" else counts
                 msg = ServiceCounters(
                     header=_header(service, 1, now().wall_ns), service=service, counters=counts
                 )
                 pub.put(msg.encode())
             m = stack.metrics()
-            seen = m is not None and m["frames"] == sum(FRAMES.values())
-            return m if seen and "camera_rear.frames_out" in m["counters"] else None
+            if m is None or m["frames"] != sum(FRAMES.values()):
+                return None
+            return m if "camera_rear.frames_out" in m["counters"] else None
 
         wait_for(counted, 30, lambda: f"every message counted: {stack.metrics()}")
     finally:
