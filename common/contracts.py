@@ -9,7 +9,7 @@ recorded session): the writer builds them, every reader reads them through these
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import Any, TypedDict
+from typing import Any, NotRequired, TypedDict
 
 
 class ControllerMode(StrEnum):
@@ -62,8 +62,35 @@ class TimelineSeries(TypedDict):
     detections_per_frame: list[float]
 
 
+class CameraMetrics(TypedDict):
+    """One camera's figures in the metrics answer (services/metrics/cameras.py): its frames'
+    FPS, totals and latency, as the top level has them for every camera together; the drops
+    and frames offered from its worker's ``dropped.<cam>`` and ``frames_in.<cam>``; the worker
+    that serves it (``served_by``, the service counting ``frames_in.<cam>``) and that worker's
+    mean batch over the window; every ``<service>.<name>.<cam>`` counter as
+    ``<service>.<name>``."""
+
+    fps: float
+    frames: int
+    detections: int
+    detections_per_frame: float
+    latency_ms: LatencyStats
+    dropped_frames: int
+    frames_offered: int
+    drop_rate: float
+    drop_rate_total: float
+    served_by: str
+    batch_mean: float
+    counters: dict[str, int]
+
+
 class MetricsAnswer(TypedDict):
-    """The metrics service's answer to a query (``zstack query``), and a session's summary."""
+    """The metrics service's answer to a query (``zstack query``), and a session's summary.
+
+    The top-level figures are every camera's together (with one camera, that camera's);
+    ``cameras`` has each configured camera's, first camera first (absent from answers recorded
+    before several cameras existed).
+    """
 
     stamp_ns: int
     window_s: float
@@ -79,6 +106,7 @@ class MetricsAnswer(TypedDict):
     drop_rate_total: float
     frames_offered: int
     timeline: TimelineSeries
+    cameras: NotRequired[dict[str, CameraMetrics]]
 
 
 class _SessionCore(TypedDict):

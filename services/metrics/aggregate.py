@@ -1,42 +1,38 @@
-"""Turns the messages the metrics service hears into a MetricsSnapshot. Pure: no bus, no clock.
+"""Turns the messages the metrics service hears into a MetricsSnapshot and the query's answer.
+Pure: no bus, no clock.
 
-Latency stages, all in ms, measured from the camera's capture stamp (``header.stamp_ns``):
-
-    capture_to_detector    capture -> the detector took the frame (transport + queueing)
-    preprocess / inference / postprocess    the detector's own stages
-    capture_to_detections  capture -> detections published
-    detections_to_command  detections published -> the first Twist reacting to them
-    end_to_end             capture -> that first Twist (what the robot feels)
+The latency stages are in services/metrics/figures.py. The top-level figures are every camera's
+together; ``cameras`` in the answer has each camera's (services/metrics/cameras.py says which
+counters it reads). A command is attributed to the camera whose frame it reacts to by its
+capture stamp (services/metrics/reactions.py).
 
 Cross-process figures compare wall clocks, so across hosts they need synchronised clocks (PTP
 or chrony); on one host they are exact.
 
-Besides the snapshot (``common.messages.MetricsSnapshot``), :meth:`Aggregator.extras` adds what
+Besides the snapshot (``common.messages.MetricsSnapshot``), :meth:`Aggregator.answer` adds what
 the message does not carry: the drop rate (frames the detector skipped because a newer one had
-arrived, over the frames offered to it) and a per-second timeline (FPS over time) for plots.
+arrived, over the frames offered to it), a per-second timeline (FPS over time) for plots, and
+each camera's figures.
 """
 
 from __future__ import annotations
 
-from collections import Counter, OrderedDict
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import Iterable
 
-from common.contracts import MetricsAnswer, TimelineSeries
+from common.contracts import CameraMetrics, MetricsAnswer, TimelineSeries
 from common.messages import Detections, Header, MetricsSnapshot, ServiceCounters, Twist
-from services.metrics.window import Timeline, Window, percentiles
+from common.settings import MAX_CAMERAS
+from services.metrics.cameras import BatchSizes, CameraCounters, ratio
+from services.metrics.figures import DETECTOR_STAGES, STAGES, Figures, LatencyListener
+from services.metrics.reactions import Reaction, Reactions
+from services.metrics.window import Timeline
 
-NS_PER_MS = 1e6
-DETECTOR_STAGES = ("preprocess", "inference", "postprocess")
-STAGES = (
-    "capture_to_detector",
-    *DETECTOR_STAGES,
-    "capture_to_detections",
-    "detections_to_command",
-    "end_to_end",
-)
+__all__ = ["DETECTOR_STAGES", "STAGES", "Aggregator", "LatencyListener", "report_line"]
+
 MAX_CLASSES = 1000  # distinct class names counted by default (COCO has 80, LVIS 1203)
 MAX_COUNTERS = 2000  # distinct "<service>.<counter>" names kept
-_RECENT = 512  # capture stamps remembered to pair Twists with the detections they react to
+_RECENT = 512  # capture stamps remembered per camera, to pair Twists with their detections
 #: Per-second timeline columns: detections messages, boxes, frames offered to the detector
 #: (its frames_in counter) and frames it dropped.
 TIMELINE_COLUMNS = ("frames", "detections", "offered", "dropped")
@@ -45,12 +41,12 @@ TIMELINE_COLUMNS = ("frames", "detections", "offered", "dropped")
 TIMELINE_SETTLE_S = 2.0
 _DETECTOR_DELTAS = {"frames_in": "offered", "dropped": "dropped"}
 
-#: Called with (stage, milliseconds) for every latency sample, e.g. to feed a histogram.
-LatencyListener = Callable[[str, float], None]
-
 
 class Aggregator:
-    """Accumulates per-stage latencies, rates and counters over a sliding window."""
+    """Accumulates per-stage latencies, rates and counters over a sliding window, for every
+    camera together and for each (``cameras`` are shown from the start, even before their
+    first detections; another camera is added when its detections come, up to
+    ``max_cameras``)."""
 
     def __init__(
         self,
@@ -59,39 +55,56 @@ class Aggregator:
         on_latency: LatencyListener | None = None,
         max_counters_per_service: int = MAX_COUNTERS,
         max_classes: int = MAX_CLASSES,
+        cameras: Iterable[str] = (),
+        max_cameras: int = MAX_CAMERAS,
     ) -> None:
         self.window_s = window_s
         self.max_counters_per_service = max_counters_per_service
         self.max_classes = max_classes
-        self._names: Counter[str] = Counter()  # service -> its counter names kept
-        self._lat = {stage: Window(window_s) for stage in STAGES}
-        self._frames = Window(window_s)  # one sample per Detections message: value = n boxes
-        self._timeline = Timeline(history_s)
+        self.max_cameras = max_cameras
         self._on_latency = on_latency
+        self._names: Counter[str] = Counter()  # service -> its counter names kept
+        self._all = Figures(window_s, "", on_latency)
+        self._figures: dict[str, Figures] = {}  # camera -> its own
+        self._camera_counters: dict[str, CameraCounters] = {}
+        self._reactions = Reactions(_RECENT)  # per camera: grows with them
+        for camera in cameras:
+            self._camera(camera)
+        self._batches = BatchSizes(window_s)
+        self._timeline = Timeline(history_s)
         self._classes: Counter[str] = Counter()
-        self._published: OrderedDict[int, int] = OrderedDict()  # capture stamp -> published_ns
-        # The command can reach us before the detections it reacts to (they travel different
-        # paths): capture stamp -> the first such command's stamp, paired when they arrive.
-        self._early: OrderedDict[int, int] = OrderedDict()
         self._counters: dict[str, int] = {}
-        self.frames_total = 0
-        self.detections_total = 0
-        self._detector_counters_at: float | None = None  # when its counters last came
-        self._detector_counters_since: float | None = None  # ... and first came
+        self._reported_at: dict[str, float] = {}  # service -> when its counters last came
+        self._detector_counters_since: float | None = None  # ... and the detector's first came
         self.model = ""  # as the latest Detections named them
         self.backend = ""
 
-    def _record(self, stage: str, now: float, ms: float) -> None:
-        self._lat[stage].add(now, ms)
-        if self._on_latency is not None:
-            self._on_latency(stage, ms)
+    @property
+    def frames_total(self) -> int:
+        return self._all.frames_total
 
-    def on_detections(self, msg: Detections, now: float) -> None:
-        stamp = msg.header.stamp_ns
-        self.frames_total += 1
-        self.detections_total += len(msg)
+    @property
+    def detections_total(self) -> int:
+        return self._all.detections_total
+
+    def _camera(self, camera: str) -> Figures | None:
+        """``camera``'s figures, added if there is room."""
+        figures = self._figures.get(camera)
+        if figures is None and len(self._figures) < self.max_cameras:
+            figures = self._figures[camera] = Figures(self.window_s, camera, self._on_latency)
+            self._camera_counters[camera] = CameraCounters(self.window_s)
+            self._reactions.keep = _RECENT * len(self._figures)
+        return figures
+
+    def on_detections(self, msg: Detections, now: float, *, camera: str) -> None:
+        """``camera``'s detections (the camera its key names)."""
         self.model, self.backend = msg.model, msg.backend
-        self._frames.add(now, float(len(msg)))
+        self._all.on_detections(msg, now)
+        figures = self._camera(camera)
+        if figures is None:
+            self.count("cameras_refused")  # over max_cameras: in the totals only
+        else:
+            figures.on_detections(msg, now)
         self._timeline.add(now, frames=1.0, detections=float(len(msg)))
         # Bounded: garbage that decodes can still name thousands of made-up classes (each
         # name is bounded in length where it enters: common.messages.MAX_NAME_CHARS).
@@ -103,41 +116,28 @@ class Aggregator:
                 refused += 1
         if refused:
             self.count("class_names_refused", refused)
-        for stage in DETECTOR_STAGES:
-            if stage in msg.timing_ms:
-                self._record(stage, now, msg.timing_ms[stage])
-        if msg.received_ns:
-            self._record("capture_to_detector", now, (msg.received_ns - stamp) / NS_PER_MS)
-        if msg.published_ns:
-            self._record("capture_to_detections", now, (msg.published_ns - stamp) / NS_PER_MS)
-            early = self._early.pop(stamp, None)
-            if early is not None:
-                self._record_reaction(now, stamp, msg.published_ns, early)
-                return
-            self._published[stamp] = msg.published_ns
-            while len(self._published) > _RECENT:
-                self._published.popitem(last=False)
+        if msg.published_ns and figures is not None:
+            stamp = msg.header.stamp_ns
+            self._score(now, self._reactions.on_detections(camera, stamp, msg.published_ns))
 
     def on_twist(self, msg: Twist, now: float) -> None:
         """Score the first command that reacts to each frame; later repeats are ignored."""
         if msg.input_stamp_ns <= 0:
             return  # a stop that reacts to no frame
-        published = self._published.pop(msg.input_stamp_ns, None)
-        if published is None:
-            self._early.setdefault(msg.input_stamp_ns, msg.header.stamp_ns)
-            while len(self._early) > _RECENT:
-                self._early.popitem(last=False)
-            return
-        self._record_reaction(now, msg.input_stamp_ns, published, msg.header.stamp_ns)
+        self._score(now, self._reactions.on_command(msg.input_stamp_ns, msg.header.stamp_ns))
 
-    def _record_reaction(self, now: float, captured: int, published: int, commanded: int) -> None:
-        self._record("detections_to_command", now, (commanded - published) / NS_PER_MS)
-        self._record("end_to_end", now, (commanded - captured) / NS_PER_MS)
+    def _score(self, now: float, reactions: list[Reaction]) -> None:
+        for r in reactions:
+            self._figures[r.camera].on_reaction(now, r.captured, r.published, r.commanded)
+            if r.first:
+                self._all.on_reaction(now, r.captured, r.published, r.commanded)
 
     def on_counters(self, msg: ServiceCounters, now: float) -> None:
         """Keep each service's totals; put the detector's new offered/dropped frames on the
-        timeline. A counter that went down means the service restarted and counts from zero."""
+        timeline; give each camera its ``<name>.<camera>`` counters. A counter that went down
+        means the service restarted and counts from zero."""
         deltas: dict[str, float] = {}
+        touched: set[str] = set()
         for name, value in msg.counters.items():
             key = f"{msg.service}.{name}"
             previous = self._counters.get(key)
@@ -149,13 +149,26 @@ class Aggregator:
                     continue  # bounded, like the class counts
                 self._names[msg.service] += 1
             self._counters[key] = value
+            delta = None
+            if previous is not None:
+                delta = float(value - previous if value >= previous else value)
             column = _DETECTOR_DELTAS.get(name) if msg.service == "detector" else None
-            if column is not None and previous is not None:
-                deltas[column] = float(value - previous if value >= previous else value)
+            if column is not None and delta is not None:
+                deltas[column] = delta
+            base, _, camera = name.rpartition(".")
+            counters = self._camera_counters.get(camera) if base else None
+            if counters is not None:
+                counters.count(msg.service, base, value, delta)
+                touched.add(camera)
+        since = self._reported_at.get(msg.service)
+        if msg.service in self._names:  # a service with counters kept (bounded)
+            self._reported_at[msg.service] = now
+            self._batches.on_counters(msg.service, msg.counters, now)
+        for camera in touched:
+            self._camera_counters[camera].settle(since, now)
         if msg.service == "detector":
             if self._detector_counters_since is None:
                 self._detector_counters_since = now  # a baseline: the drops before are unknown
-            since, self._detector_counters_at = self._detector_counters_at, now
             if deltas and since is not None:
                 self._timeline.spread(since, now, **deltas)
 
@@ -165,22 +178,31 @@ class Aggregator:
         self._counters[key] = self._counters.get(key, 0) + n
 
     def snapshot(self, header: Header, now: float) -> MetricsSnapshot:
-        boxes = self._frames.values(now)
         return MetricsSnapshot(
             header=header,
             window_s=self.window_s,
-            fps=self._frames.rate(now),
-            frames=self.frames_total,
-            detections=self.detections_total,
-            detections_per_frame=float(boxes.mean()) if boxes.size else 0.0,
+            fps=self._all.fps(now),
+            frames=self._all.frames_total,
+            detections=self._all.detections_total,
+            detections_per_frame=self._all.detections_per_frame(now),
             dropped_frames=self._counters.get("detector.dropped", 0),
-            latency_ms={stage: percentiles(w.values(now)) for stage, w in self._lat.items()},
+            latency_ms=self._all.latency_ms(now),
             counters=dict(sorted(self._counters.items())),
             class_counts=dict(self._classes.most_common()),
         )
 
+    def cameras(self, now: float) -> dict[str, CameraMetrics]:
+        """Each camera's figures, in the order the cameras were named."""
+        out = {}
+        for camera, figures in self._figures.items():
+            counters = self._camera_counters[camera]
+            batch_mean = self._batches.mean(counters.served_by) if counters.served_by else 0.0
+            out[camera] = counters.figures(figures, now, batch_mean)
+        return out
+
     def answer(self, header: Header, now: float, clock_to_unix: float = 0.0) -> MetricsAnswer:
-        """The metrics query's JSON: the snapshot, drop rates and the per-second timeline.
+        """The metrics query's JSON: the snapshot, drop rates, the per-second timeline and
+        each camera's figures.
 
         ``drop_rate`` covers the window (dropped / offered frames, 0 when none were offered);
         ``drop_rate_total`` the detector's counters since it started. The timeline's ``t`` is
@@ -208,8 +230,8 @@ class Aggregator:
             latency_ms=snap.latency_ms,
             counters=snap.counters,
             class_counts=snap.class_counts,
-            drop_rate=_ratio(recent.get("dropped", 0.0), recent.get("offered", 0.0)),
-            drop_rate_total=_ratio(self._counters.get("detector.dropped", 0), offered_total),
+            drop_rate=ratio(recent.get("dropped", 0.0), recent.get("offered", 0.0)),
+            drop_rate_total=ratio(self._counters.get("detector.dropped", 0), offered_total),
             frames_offered=offered_total,
             timeline=TimelineSeries(
                 period_s=period,
@@ -217,17 +239,15 @@ class Aggregator:
                 fps=[f / period for f in frames],
                 offered_fps=[f / period for f in series["offered"]],
                 dropped=series["dropped"],
-                detections_per_frame=[_ratio(b, f) for b, f in zip(boxes, frames, strict=True)],
+                detections_per_frame=[ratio(b, f) for b, f in zip(boxes, frames, strict=True)],
             ),
+            cameras=self.cameras(now),
         )
 
     def latency_samples(self, now: float) -> dict[str, list[float]]:
-        """Every latency sample still in the window, per stage, in arrival order (ms)."""
-        return {stage: w.values(now).tolist() for stage, w in self._lat.items()}
-
-
-def _ratio(part: float, whole: float) -> float:
-    return float(part) / float(whole) if whole > 0 else 0.0
+        """Every latency sample still in the window, per stage, in arrival order (ms), of
+        every camera together."""
+        return self._all.latency_samples(now)
 
 
 def report_line(snap: MetricsSnapshot) -> str:

@@ -9,6 +9,10 @@ Two kinds of series, because they answer different questions:
   per frame, drop rate, the window's own percentiles (``stack_latency_window_ms``), frame and
   detection totals, per-class detections and every service counter.
 
+Each camera's figures (the answer's ``cameras``) are the same series under ``stack_camera_*``
+with a ``camera`` label (``stack_camera_latency_seconds{camera,stage}``, ``stack_camera_fps
+{camera}`` ...); the series above stay every camera's together, as they were with one camera.
+
 A private registry is used (not prometheus_client's global one) so that tests and several
 exporters in one process never collide. No zenoh here: the service hands us its answer.
 """
@@ -35,6 +39,22 @@ _GAUGES = {
     "drop_rate": "Frames the detector dropped / frames offered to it, over the window",
     "drop_rate_total": "Dropped / offered frames since the detector started",
     "window_s": "Span of the sliding window in seconds",
+}
+
+#: Camera figure -> help text; each becomes the gauge ``stack_camera_<key>{camera}``.
+_CAMERA_GAUGES = {
+    "fps": "Detections messages per second over the window, per camera",
+    "detections_per_frame": "Mean boxes per frame over the window, per camera",
+    "drop_rate": "Frames dropped / offered over the window, per camera",
+    "drop_rate_total": "Frames dropped / offered since the worker started, per camera",
+    "batch_mean": "Mean frames per inference run of the worker serving the camera (window)",
+}
+#: Camera total -> help text; each becomes the counter ``stack_camera_<key>{camera}``.
+_CAMERA_COUNTERS = {
+    "frames": "Detections messages seen, per camera",
+    "detections": "Boxes seen, per camera",
+    "dropped_frames": "Frames the worker dropped, per camera",
+    "frames_offered": "Frames offered to the worker, per camera",
 }
 
 #: Returns the metrics query's JSON answer, taken under the service's lock.
@@ -82,6 +102,49 @@ class _AnswerCollector:
             service, _, counter = key.partition(".")
             events.add_metric([service, counter], float(count))
         yield events
+        yield from _camera_metrics(a)
+
+
+def _camera_metrics(a: MetricsAnswer) -> Iterator[Metric]:
+    """Each camera's figures, labelled ``camera``."""
+    cameras = a.get("cameras", {})
+    for key, doc in _CAMERA_GAUGES.items():
+        gauge = GaugeMetricFamily(f"stack_camera_{key}", doc, labels=["camera"])
+        for camera, figures in cameras.items():
+            gauge.add_metric([camera], float(figures[key]))  # type: ignore[literal-required]
+        yield gauge
+    for key, doc in _CAMERA_COUNTERS.items():
+        counter = CounterMetricFamily(f"stack_camera_{key}", doc, labels=["camera"])
+        for camera, figures in cameras.items():
+            counter.add_metric([camera], float(figures[key]))  # type: ignore[literal-required]
+        yield counter
+    served = GaugeMetricFamily(
+        "stack_camera_served_by",
+        "1 for the worker serving each camera",
+        labels=["camera", "worker"],
+    )
+    window = GaugeMetricFamily(
+        "stack_camera_latency_window_ms",
+        "Latency percentiles over the sliding window, per camera and stage (ms)",
+        labels=["camera", "stage", "quantile"],
+    )
+    events = CounterMetricFamily(
+        "stack_camera_service_events",
+        "Each service's counters for one camera (<name>.<camera>) since it started",
+        labels=["camera", "service", "counter"],
+    )
+    for camera, figures in cameras.items():
+        if figures["served_by"]:
+            served.add_metric([camera, figures["served_by"]], 1.0)
+        for stage, pct in figures["latency_ms"].items():
+            for q in _QUANTILES:
+                window.add_metric([camera, stage, q], float(pct.get(q, 0.0)))
+        for key, count in figures["counters"].items():
+            service, _, counter_name = key.partition(".")
+            events.add_metric([camera, service, counter_name], float(count))
+    yield served
+    yield window
+    yield events
 
 
 class PrometheusExporter:
@@ -96,12 +159,23 @@ class PrometheusExporter:
             buckets=LATENCY_BUCKETS_S,
             registry=self.registry,
         )
+        self._camera_latency = Histogram(
+            "stack_camera_latency_seconds",
+            "Latency per camera and stage, every sample since start",
+            ["camera", "stage"],
+            buckets=LATENCY_BUCKETS_S,
+            registry=self.registry,
+        )
         self._server: WSGIServer | None = None
         self._thread: threading.Thread | None = None
 
-    def observe(self, stage: str, ms: float) -> None:
-        """Record one latency sample (ms, as the aggregator measures; exported in seconds)."""
-        self._latency.labels(stage).observe(ms / 1000.0)
+    def observe(self, stage: str, ms: float, camera: str = "") -> None:
+        """Record one latency sample (ms, as the aggregator measures; exported in seconds):
+        ``camera``'s, or every camera's together for ""."""
+        if camera:
+            self._camera_latency.labels(camera, stage).observe(ms / 1000.0)
+        else:
+            self._latency.labels(stage).observe(ms / 1000.0)
 
     def start(self, source: AnswerSource, host: str, port: int) -> int:
         """Serve ``http://host:port/metrics`` on a daemon thread; return the bound port.

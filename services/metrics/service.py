@@ -10,6 +10,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from functools import partial
 from typing import TypeVar
 
 import zenoh
@@ -53,15 +54,16 @@ class MetricsHandlers:
             on_latency=on_latency,
             max_counters_per_service=s.max_counters_per_service,
             max_classes=s.max_classes,
+            cameras=config.all_cameras,
         )
         self.lock = threading.Lock()
 
-    def on_detections(self, key: str, payload: bytes) -> None:
-        """``key``: the one the sample came on (a camera's)."""
+    def on_detections(self, camera: str, key: str, payload: bytes) -> None:
+        """``camera``'s detections; ``key``: the one the sample came on (that camera's)."""
         max_timing_ms = self.settings.max_timing_ms
         self._take(
             "detections", Detections.decode, key, payload,
-            lambda m: self.agg.on_detections(m, mono_s()),
+            lambda m: self.agg.on_detections(m, mono_s(), camera=camera),
             lambda m, _k: refuse_detections(m, max_timing_ms),
         )  # fmt: skip
 
@@ -130,8 +132,16 @@ def run(config: Config, stop: threading.Event) -> int:
                 return agg.answer(node.header(), mono_s(), mono_to_unix_s())
 
         keys = node.keys
+        # One subscriber per configured camera, so the camera is the one its key names;
+        # detections for a camera the config does not name (anyone may put them in peer
+        # mode) are not heard, so they cannot grow the answer.
         subs = [
-            node.subscribe_keyed(keys.all_detections(), handlers.on_detections),
+            *(
+                node.subscribe_keyed(
+                    keys.detections(camera), partial(handlers.on_detections, camera)
+                )
+                for camera in config.all_cameras
+            ),
             node.subscribe(keys.cmd_vel(), handlers.on_cmd_vel),
             node.subscribe_keyed(keys.all_counters(), handlers.on_counters),
         ]

@@ -57,8 +57,10 @@ def test_the_metrics_services_handlers() -> None:
     tally = Tally("metrics", config)
     handlers = MetricsHandlers(config, tally)
     keys = tally.keys
-    detections, counters = keys.all_detections(), keys.all_counters()
-    message_handler(tally, partial(handlers.on_detections, detections), detections, Detections)
+    camera, counters = config.stack.camera, keys.all_counters()
+    detections = keys.detections(camera)
+    on_detections = partial(handlers.on_detections, camera, detections)
+    message_handler(tally, on_detections, detections, Detections)
     message_handler(tally, handlers.on_cmd_vel, keys.cmd_vel(), Twist)
     message_handler(tally, partial(handlers.on_counters, counters), counters, ServiceCounters)
 

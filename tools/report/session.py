@@ -13,7 +13,7 @@ A session is plain JSON (``session.json``) that ``report --from`` reads back.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, cast
 
@@ -80,8 +80,15 @@ def _query_metrics(session: zenoh.Session, keys: Keys) -> dict[str, Any] | None:
     return {k: v for k, v in answer.items() if k != "timeline"}
 
 
-def _listen(session: zenoh.Session, keys: Keys, agg: Aggregator, lock: threading.Lock) -> list[Any]:
-    """Feed ``agg`` from the bus; garbage is skipped (the metrics service counts it)."""
+def _listen(
+    session: zenoh.Session,
+    keys: Keys,
+    cameras: Iterable[str],
+    agg: Aggregator,
+    lock: threading.Lock,
+) -> list[Any]:
+    """Feed ``agg`` from the bus, each camera's detections as that camera's; garbage is
+    skipped (the metrics service counts it)."""
 
     def handler(decode: Callable[[bytes], Any], feed: Callable[[Any, float], None]) -> Any:
         def on_sample(sample: zenoh.Sample) -> None:
@@ -94,9 +101,15 @@ def _listen(session: zenoh.Session, keys: Keys, agg: Aggregator, lock: threading
 
         return on_sample
 
+    def detections_of(camera: str) -> Callable[[Detections, float], None]:
+        return lambda msg, now: agg.on_detections(msg, now, camera=camera)
+
     return [
-        session.declare_subscriber(
-            keys.all_detections(), handler(Detections.decode, agg.on_detections)
+        *(
+            session.declare_subscriber(
+                keys.detections(camera), handler(Detections.decode, detections_of(camera))
+            )
+            for camera in cameras
         ),
         session.declare_subscriber(keys.cmd_vel(), handler(Twist.decode, agg.on_twist)),
         session.declare_subscriber(
@@ -136,8 +149,9 @@ def record(
             )
             progress(f"report: recording {duration_s:.0f} s")
             lock = threading.Lock()
-            agg = Aggregator(duration_s + _WINDOW_MARGIN_S, duration_s + _WINDOW_MARGIN_S)
-            subs = _listen(session, keys, agg, lock)
+            span = duration_s + _WINDOW_MARGIN_S
+            agg = Aggregator(span, span, cameras=config.all_cameras)
+            subs = _listen(session, keys, config.all_cameras, agg, lock)
             start = mono_s()
             stop.wait(duration_s)
             with lock:

@@ -55,7 +55,7 @@ def test_latency_chain_from_capture_to_command() -> None:
     agg = Aggregator(window_s=10.0)
     for i in range(10):
         stamp = 1_000 * MS + i * 100 * MS
-        agg.on_detections(_dets(stamp, n=i % 3), now=i * 0.1)
+        agg.on_detections(_dets(stamp, n=i % 3), now=i * 0.1, camera="front")
         agg.on_twist(_twist(stamp + 95 * MS, stamp), now=i * 0.1)
         agg.on_twist(_twist(stamp + 145 * MS, stamp), now=i * 0.1)  # repeat: not a reaction
     snap = agg.snapshot(Header(stamp_ns=0, frame_id="", seq=0, source="metrics"), now=0.95)
@@ -112,7 +112,7 @@ def test_drop_rate_over_the_window_and_since_start() -> None:
 def test_timeline_gives_fps_and_boxes_per_second() -> None:
     agg = Aggregator(window_s=10.0, history_s=60.0)
     for i in range(30):  # 10 frames per second for 3 s, 2 boxes each
-        agg.on_detections(_dets(1_000 * MS + i * 100 * MS, n=2), now=10.0 + i * 0.1)
+        agg.on_detections(_dets(1_000 * MS + i * 100 * MS, n=2), now=10.0 + i * 0.1, camera="front")
     agg.on_counters(_counters(0, 0), now=10.0)
     agg.on_counters(_counters(60, 30), now=13.0)  # 20 offered/s, 10 dropped/s, over 3 s
     tl = agg.answer(HDR, now=15.5, clock_to_unix=1000.0)["timeline"]
@@ -124,18 +124,22 @@ def test_timeline_gives_fps_and_boxes_per_second() -> None:
 
 
 def test_latency_listener_sees_every_sample() -> None:
-    seen: list[tuple[str, float]] = []
-    agg = Aggregator(window_s=10.0, on_latency=lambda stage, ms: seen.append((stage, ms)))
-    agg.on_detections(_dets(1_000 * MS, n=1), now=0.0)
+    seen: list[tuple[str, float, str]] = []
+    agg = Aggregator(
+        window_s=10.0, on_latency=lambda stage, ms, camera: seen.append((stage, ms, camera))
+    )
+    agg.on_detections(_dets(1_000 * MS, n=1), now=0.0, camera="front")
     agg.on_twist(_twist(1_000 * MS + 95 * MS, 1_000 * MS), now=0.1)
-    stages = dict(seen)
+    stages = {stage: ms for stage, ms, camera in seen if camera == ""}
     assert stages["inference"] == 80.0 and stages["end_to_end"] == pytest.approx(95.0)
-    assert len(seen) == 7  # three detector stages, two transport figures, two command figures
+    # Three detector stages, two transport figures, two command figures: once for the totals
+    # (camera "") and once for the camera.
+    assert sorted(camera for _, _, camera in seen) == [""] * 7 + ["front"] * 7
 
 
 def test_answer_is_the_snapshot_plus_extras() -> None:
     agg = Aggregator(window_s=10.0)
-    agg.on_detections(_dets(1_000 * MS, n=1), now=0.0)
+    agg.on_detections(_dets(1_000 * MS, n=1), now=0.0, camera="front")
     answer = agg.answer(Header(stamp_ns=5, frame_id="", seq=0, source="metrics"), now=0.5)
     assert answer["frames"] == 1 and answer["stamp_ns"] == 5
     assert {"drop_rate", "drop_rate_total", "timeline"} <= answer.keys()
@@ -147,7 +151,7 @@ def test_a_command_that_overtakes_its_detections_is_still_paired() -> None:
     stamp = 1_000 * MS
     agg.on_twist(_twist(stamp + 95 * MS, stamp), now=0.0)  # arrives first
     agg.on_twist(_twist(stamp + 145 * MS, stamp), now=0.0)  # a repeat: ignored
-    agg.on_detections(_dets(stamp, n=1), now=0.0)
+    agg.on_detections(_dets(stamp, n=1), now=0.0, camera="front")
     snap = agg.snapshot(Header(stamp_ns=0, frame_id="", seq=0, source="metrics"), now=0.1)
     assert snap.latency_ms["end_to_end"]["count"] == 1
     assert snap.latency_ms["end_to_end"]["p50"] == pytest.approx(95.0)

@@ -69,6 +69,7 @@ def test_scrape_shows_gauges_counters_and_latency_histogram(
                 published_ns=stamp + 90 * MS,
             ),
             now=i * 0.1,
+            camera="front",
         )
     agg.on_counters(
         ServiceCounters(header=HEADER, service="detector", counters={"dropped": 3}), now=0.5
@@ -86,6 +87,57 @@ def test_scrape_shows_gauges_counters_and_latency_histogram(
     assert _value(samples, "stack_latency_seconds_bucket", stage="inference", le="0.075") == 0
     assert _value(samples, "stack_latency_seconds_bucket", stage="inference", le="0.1") == 5
     assert "stack_drop_rate" in samples
+
+
+def _detections(stamp: int, seq: int) -> Detections:
+    return Detections(
+        header=Header(stamp_ns=stamp, frame_id="c", seq=seq, source="camera"),
+        image_width=64,
+        image_height=48,
+        boxes=Boxes(
+            xyxy=np.array([[0, 0, 10, 10]], np.float32),
+            scores=np.ones(1, np.float32),
+            class_ids=np.zeros(1, np.int32),
+        ),
+        class_names=("person",),
+        timing_ms={"preprocess": 2.0, "inference": 80.0, "postprocess": 1.0},
+        received_ns=stamp + 5 * MS,
+        published_ns=stamp + 90 * MS,
+    )
+
+
+def test_each_cameras_series_carry_a_camera_label() -> None:
+    exporter = PrometheusExporter()
+    agg = Aggregator(window_s=10.0, on_latency=exporter.observe, cameras=("front", "rear"))
+    port = exporter.start(lambda: agg.answer(HEADER, now=1.0), "127.0.0.1", 0)
+    try:
+        for i in range(5):
+            stamp = 1_000 * MS + i * 100 * MS
+            agg.on_detections(_detections(stamp, i), now=i * 0.1, camera="front")
+            if i < 2:
+                agg.on_detections(_detections(stamp + MS, i), now=i * 0.1, camera="rear")
+        counts = {"frames_in.rear": 4, "dropped.rear": 2, "batches": 3, "batched_frames": 6}
+        agg.on_counters(
+            ServiceCounters(header=HEADER, service="detector", counters=counts), now=0.5
+        )
+        samples = _scrape(port)
+    finally:
+        exporter.close()
+    # The series of old are every camera's together; each camera's are stack_camera_*.
+    assert _value(samples, "stack_frames_total") == 7
+    assert _value(samples, "stack_latency_seconds_count", stage="inference") == 7
+    assert _value(samples, "stack_camera_frames_total", camera="front") == 5
+    assert _value(samples, "stack_camera_frames_total", camera="rear") == 2
+    assert _value(samples, "stack_camera_fps", camera="front") == pytest.approx(10.0)
+    latency = "stack_camera_latency_seconds_count"
+    assert _value(samples, latency, camera="rear", stage="inference") == 2
+    window = "stack_camera_latency_window_ms"
+    assert _value(samples, window, camera="rear", stage="inference", quantile="p50") == 80.0
+    assert _value(samples, "stack_camera_dropped_frames_total", camera="rear") == 2
+    assert _value(samples, "stack_camera_served_by", camera="rear", worker="detector") == 1
+    assert _value(samples, "stack_camera_batch_mean", camera="rear") == 2.0
+    events = "stack_camera_service_events_total"
+    assert _value(samples, events, camera="rear", service="detector", counter="dropped") == 2
 
 
 def test_a_port_in_use_is_a_config_error(served: tuple[Aggregator, int]) -> None:

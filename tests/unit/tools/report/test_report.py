@@ -51,7 +51,7 @@ def _session(seconds: int = 12) -> dict[str, Any]:
             received_ns=stamp + 2 * MS,
             published_ns=stamp + int((40 + infer) * MS),
         )
-        agg.on_detections(det, now=t + (40 + infer) / 1000)
+        agg.on_detections(det, now=t + (40 + infer) / 1000, camera="front")
         cmd_stamp = det.published_ns + 3 * MS
         twist = Twist(header=Header(stamp_ns=cmd_stamp, frame_id="base_link", seq=i,
                                     source="controller"), input_stamp_ns=stamp)  # fmt: skip
