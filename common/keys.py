@@ -37,6 +37,18 @@ def _check_chunks(what: str, value: str) -> str:
     return value
 
 
+def camera_in_key(key: str) -> str | None:
+    """The camera whose frames or detections ``key`` carries, under any prefix (a recording
+    may come from another stack's); None for any other key."""
+    parts = key.split("/")
+    if len(parts) >= 4 and (parts[-3], parts[-1]) in (
+        ("camera", "frame"),
+        ("detector", "detections"),
+    ):
+        return parts[-2]
+    return None
+
+
 @dataclass(frozen=True, slots=True)
 class Keys:
     """The key space of one stack, rooted at ``prefix``."""

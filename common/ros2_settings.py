@@ -6,6 +6,7 @@ Re-exported by common/settings.py, where the whole Config is assembled. See docs
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import ClassVar
@@ -26,6 +27,8 @@ class ImageFormat(StrEnum):
     COMPRESSED = "compressed"  # sensor_msgs/msg/CompressedImage: jpeg
 
 
+#: In ``ros2.camera_namespace``: where the camera's name goes.
+CAMERA_FIELD = "{camera}"
 _TOPIC = re.compile(r"^/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$")
 
 
@@ -48,6 +51,11 @@ class Ros2Settings:
     ``debug_image_out`` publishes each frame with its detections drawn on it (boxes, class,
     score, track id) as a jpeg ``CompressedImage`` on ``debug_image_topic``, at most
     ``debug_image_rate_hz`` times a second, at ``debug_jpeg_quality``.
+    ``image_topic``, ``detections_topic`` and ``debug_image_topic`` are the first camera's
+    (``stack.camera``); each further camera has them under ``camera_namespace``, its
+    ``{camera}`` replaced by the camera's name (:func:`camera_topics`: the rear camera's
+    images on ``/rear/camera/rgb/image_raw``, its detections on ``/rear/detections``), as a
+    camera driver started in that namespace publishes them.
     ``router_timeout_s`` bounds the wait for the router at start-up. A command on cmd_vel
     faster than ``max_command_linear`` (m/s) or ``max_command_angular`` (rad/s), the most
     the controller's own settings allow, is no command a sane controller sends: the bridge
@@ -74,6 +82,7 @@ class Ros2Settings:
     debug_image_topic: str = "/detections/image"
     debug_image_rate_hz: float = 5.0
     debug_jpeg_quality: int = 80
+    camera_namespace: str = "/" + CAMERA_FIELD
     router_timeout_s: float = 5.0
     max_command_linear: float = 5.0
     max_command_angular: float = 10.0
@@ -104,3 +113,58 @@ class Ros2Settings:
         topics = ("image_topic", "scan_topic", "detections_topic", "cmd_vel_topic")
         for name in (*topics, "debug_image_topic"):
             _topic(name, getattr(self, name))
+        if CAMERA_FIELD not in self.camera_namespace or not _TOPIC.match(
+            self.camera_namespace.replace(CAMERA_FIELD, "camera")
+        ):
+            raise ConfigError(
+                f"ros2.camera_namespace {self.camera_namespace!r} must be a ROS 2 namespace "
+                f"holding {CAMERA_FIELD} (e.g. /{CAMERA_FIELD} or /robot/{CAMERA_FIELD})"
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class CameraTopics:
+    """One camera's ROS 2 topics: its images in, its detections and debug images out."""
+
+    image: str
+    detections: str
+    debug_image: str
+
+
+def camera_topics(settings: Ros2Settings, first: str, camera: str) -> CameraTopics:
+    """The topics of ``camera``: the ``ros2`` table's own for the first camera (``first``,
+    stack.camera), as a one-camera stack has always used them; each further camera's are those
+    under ``ros2.camera_namespace`` with its name filled in (a relative topic stays
+    relative)."""
+    s = settings
+    if camera == first:
+        return CameraTopics(s.image_topic, s.detections_topic, s.debug_image_topic)
+    namespace = s.camera_namespace.replace(CAMERA_FIELD, camera).strip("/")
+
+    def under(topic: str) -> str:
+        inside = f"{namespace}/{topic.lstrip('/')}"
+        return f"/{inside}" if topic.startswith("/") else inside
+
+    return CameraTopics(under(s.image_topic), under(s.detections_topic), under(s.debug_image_topic))
+
+
+def check_camera_topics(settings: Ros2Settings, cameras: Sequence[str]) -> None:
+    """ConfigError unless every camera's topics (``cameras``: the first camera first) are ROS 2
+    topic names and no two cameras, nor the scan and cmd_vel, share one."""
+    seen = {settings.scan_topic: "ros2.scan_topic", settings.cmd_vel_topic: "ros2.cmd_vel_topic"}
+    for camera in cameras:
+        topics = camera_topics(settings, cameras[0], camera)
+        for what, topic in (("image", topics.image), ("detections", topics.detections),
+                            ("debug image", topics.debug_image)):  # fmt: skip
+            if not _TOPIC.match(topic):
+                raise ConfigError(
+                    f"ros2.camera_namespace {settings.camera_namespace!r} gives camera "
+                    f"{camera!r} the {what} topic {topic!r}, not a ROS 2 topic name (a name "
+                    "must start with a letter): rename the camera or change the namespace"
+                )
+            if topic in seen:
+                raise ConfigError(
+                    f"camera {camera!r}'s {what} topic {topic!r} is also {seen[topic]}: each "
+                    "camera needs topics of its own (ros2.camera_namespace)"
+                )
+            seen[topic] = f"camera {camera!r}'s {what} topic"

@@ -22,7 +22,7 @@ from common.control_settings import ControllerSettings, SimSettings
 from common.errors import ConfigError
 from common.perception_settings import CameraSettings, DetectorSettings, TrackerSettings
 from common.recorder_settings import RecorderSettings
-from common.ros2_settings import Ros2Settings
+from common.ros2_settings import Ros2Settings, check_camera_topics
 from common.security import AUTH_MODES
 from common.setting_checks import Bounds, check_bounds, check_lengths
 from common.viewer_settings import ViewerSettings
@@ -294,6 +294,8 @@ class Config:
             )
         for name in names:
             check_camera_name(name)
+        if len(names) > 1:
+            check_camera_topics(self.ros2, names)  # each camera's own ROS 2 topics
         unknown = sorted(set(self.sim.wait_for) - set(SERVICES))
         if unknown:
             raise ConfigError(

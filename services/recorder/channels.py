@@ -11,6 +11,10 @@ dependencies), so that Foxglove, rosbags and ``ros2 bag`` read them:
     Twist              geometry_msgs/msg/TwistStamped     on ros2.cmd_vel_topic (stamped:
                        a recording needs the command's time)
 
+The image and detections topics are the first camera's (stack.camera); a further camera's
+frames and detections go on its own topics, as the bridge maps them (``ros2.camera_namespace``:
+``/rear/camera/rgb/image_raw``, ``/rear/detections``), the camera read from the stack key.
+
 Everything else, and what the ROS types cannot carry (the detector's timings, the frame's
 sequence, the command's ``input_stamp_ns``), is JSON on the stack's own key: Detections and
 Twist are written twice, once each way. A JSON channel has no schema record: rosbags (0.11)
@@ -35,8 +39,9 @@ import numpy as np
 
 from common.codec import Message
 from common.fields import inline_fields
+from common.keys import camera_in_key
 from common.messages import Detections, Frame, Header, LaserScan, Twist
-from common.ros2_settings import Ros2Settings
+from common.ros2_settings import CameraTopics, Ros2Settings, camera_topics
 from services.ros2 import (
     COMPRESSED_IMAGE,
     DETECTION_2D_ARRAY,
@@ -168,12 +173,18 @@ def json_channel(topic: str, cls: type[Message]) -> Channel:
 
 
 class Translator:
-    """Turns each stack message into the entries a recording holds for it."""
+    """Turns each stack message into the entries a recording holds for it; ``first_camera``
+    (stack.camera) has the ``ros2`` table's own image and detections topics."""
 
-    def __init__(self, ros2: Ros2Settings) -> None:
+    def __init__(self, ros2: Ros2Settings, first_camera: str) -> None:
         self._distro = RosDistro(ros2.distro)
         self._ros2 = ros2
+        self._first = first_camera
         self._channels: dict[tuple[str, str], Channel] = {}
+
+    def _topics(self, key: str) -> CameraTopics:
+        camera = camera_in_key(key) or self._first
+        return camera_topics(self._ros2, self._first, camera)
 
     def _ros_channel(self, topic: str, ros_type: str, stack_type: str) -> Channel:
         key = (topic, ros_type)
@@ -206,17 +217,18 @@ class Translator:
         header: Header = msg.header  # type: ignore[attr-defined]  # every message has one
         d, r = self._distro, self._ros2
         if isinstance(msg, Frame):
+            image_topic = self._topics(key).image
             if msg.encoding == "jpeg":
-                topic = f"{r.image_topic.rstrip('/')}/compressed"
+                topic = f"{image_topic.rstrip('/')}/compressed"
                 return [self._ros(topic, COMPRESSED_IMAGE, msg, header,
                                   frame_to_compressed_image(d, msg))]  # fmt: skip
-            return [self._ros(r.image_topic, IMAGE, msg, header, frame_to_image(d, msg))]
+            return [self._ros(image_topic, IMAGE, msg, header, frame_to_image(d, msg))]
         if isinstance(msg, LaserScan):
             return [self._ros(r.scan_topic, LASER_SCAN, msg, header, scan_to_ros(d, msg))]
         if isinstance(msg, Detections):
             ros = detections_to_ros(d, msg)
             return [
-                self._ros(r.detections_topic, DETECTION_2D_ARRAY, msg, header, ros),
+                self._ros(self._topics(key).detections, DETECTION_2D_ARRAY, msg, header, ros),
                 self._json(key, msg, header),
             ]
         if isinstance(msg, Twist):

@@ -8,6 +8,11 @@ its recorded sequence number (the MCAP message's ``sequence``, our recorder writ
 header's ``seq``; a ROS 2 bag's count otherwise), so that detections made on the replay can be
 matched with the recorded ones (compare.py); its source is ``replay``. Under the secure profile
 the player joins as the ``recorder`` principal, which may publish frames and scans.
+
+With several cameras each camera's frames go back on its own key: an image topic is the camera
+whose ROS 2 topic it is (``ros2.camera_namespace``, as the recorder wrote it and the bridge
+maps it, :func:`frame_keys`); an image topic of no configured camera (a bag from another
+robot) plays as the first camera's, as with one camera.
 """
 
 from __future__ import annotations
@@ -21,9 +26,11 @@ from pathlib import Path
 
 from common.clock import BOOT_ID, now
 from common.errors import DecodeError, RecordingError, one_line
+from common.keys import Keys
 from common.messages import Frame, Header, LaserScan
+from common.ros2_settings import camera_topics
 from common.settings import Config
-from services.recorder.reading import PLAYABLE, Input, Recording, check_playable, decode_input
+from services.recorder.reading import PLAYABLE, Recording, check_playable, decode_input
 from services.recorder.timing import Schedule
 
 log = logging.getLogger("recorder")
@@ -51,19 +58,32 @@ def playable_topics(path: Path, topics: Sequence[str] | None) -> list[str]:
     return [topic for topic, enc, schema in channels if enc == "cdr" and schema in PLAYABLE]
 
 
+def frame_keys(config: Config) -> dict[str, str]:
+    """The stack key each camera's image topics (raw and ``/compressed``) play onto."""
+    keys, first = Keys(config.stack.prefix), config.stack.camera
+    out: dict[str, str] = {}
+    for camera in config.all_cameras:
+        image = camera_topics(config.ros2, first, camera).image
+        out[image] = out[f"{image.rstrip('/')}/compressed"] = keys.frame(camera)
+    return out
+
+
 def one_pass(
     config: Config,
     path: Path,
     topics: list[str],
     rate: float,
-    put: Callable[[Input, bytes], object],
+    put: Callable[[str, bytes], object],
     stop: threading.Event,
     played: Played,
 ) -> None:
-    """Publish ``topics`` of ``path`` once, through ``put``, at their recorded timing over
-    ``rate``; counted in ``played``. RecordingError for a truncated file, after playing it."""
+    """Publish ``topics`` of ``path`` once, through ``put`` (the stack key, the payload), at
+    their recorded timing over ``rate``; counted in ``played``. RecordingError for a truncated
+    file, after playing it."""
     schedule: Schedule | None = None
     distro = config.ros2.distro
+    keys = Keys(config.stack.prefix)
+    cameras, first_camera = frame_keys(config), keys.frame(config.stack.camera)
     with Recording(path) as rec:
         for index, record in enumerate(rec.records(topics)):
             log_ns = record.message.log_time
@@ -87,11 +107,11 @@ def one_pass(
                 mono_ns=at.mono_ns, boot_id=BOOT_ID,
             )  # fmt: skip
             out: Frame | LaserScan = dataclasses.replace(msg, header=header)
-            kind = Input.FRAME if isinstance(out, Frame) else Input.SCAN
-            put(kind, out.encode())
-            if kind is Input.FRAME:
+            if isinstance(out, Frame):
+                put(cameras.get(record.channel.topic, first_camera), out.encode())
                 played.frames += 1
             else:
+                put(keys.scan(), out.encode())
                 played.scans += 1
         played.truncated = rec.truncated
     if played.truncated:

@@ -43,16 +43,16 @@ from common.security import running_sensors
 from common.settings import REPO_ROOT, Config
 from services.recorder.channels import Translator
 from services.recorder.play import Played, one_pass, playable_topics
-from services.recorder.reading import Input
 from services.recorder.writer import Decode, McapFile, QueuedRecorder
 
 SERVICE = "recorder"
 
 
-def subscriptions(keys: Keys, camera: str) -> dict[str, type[Message]]:
-    """Every key the recorder listens to, and its message type."""
+def subscriptions(keys: Keys, cameras: Sequence[str]) -> dict[str, type[Message]]:
+    """Every key the recorder listens to, and its message type: each of ``cameras``' frames,
+    every camera's detections."""
     return {
-        keys.frame(camera): Frame,
+        **{keys.frame(camera): Frame for camera in cameras},
         keys.all_detections(): Detections,
         keys.scan(): LaserScan,
         keys.cmd_vel(): Twist,
@@ -82,8 +82,8 @@ class Recorder(Closing):
         self.tally = tally
         self.path = path
         self._queued = QueuedRecorder(
-            McapFile(path, config.recorder), Translator(config.ros2), config.recorder,
-            tally.counters,
+            McapFile(path, config.recorder), Translator(config.ros2, config.stack.camera),
+            config.recorder, tally.counters,
         )  # fmt: skip
         self._subs: list[zenoh.Subscriber[None]] = []
         self._own = tally.keys.counters(SERVICE)
@@ -91,7 +91,7 @@ class Recorder(Closing):
 
     def listen(self, node: Node) -> Recorder:
         """Subscribe to every key of :func:`subscriptions` on ``node``'s session."""
-        for key, cls in subscriptions(node.keys, node.config.stack.camera).items():
+        for key, cls in subscriptions(node.keys, list(node.config.all_cameras)).items():
             self._subs.append(node.subscribe_keyed(key, partial(self.on_sample, decode=cls.decode)))
         return self
 
@@ -218,13 +218,12 @@ def play(
             )
         if "detector" not in ready:
             progress("no detector is ready on this stack: playing anyway")
-        pubs = {
-            Input.FRAME: Publisher(session, keys.frame(config.stack.camera), QoS.SENSOR),
-            Input.SCAN: Publisher(session, keys.scan(), QoS.SENSOR),
-        }
+        pubs = {keys.frame(camera): Publisher(session, keys.frame(camera), QoS.SENSOR)
+                for camera in config.all_cameras}  # fmt: skip
+        pubs[keys.scan()] = Publisher(session, keys.scan(), QoS.SENSOR)
         played = Played()
         while not stop.is_set():
-            one_pass(config, path, chosen, rate, lambda kind, b: pubs[kind].put(b), stop, played)
+            one_pass(config, path, chosen, rate, lambda key, b: pubs[key].put(b), stop, played)
             played.passes += 1
             progress(f"played {path}: {played.frames} frames, {played.scans} scans"
                      f" ({played.passes} pass{'es' if played.passes > 1 else ''})")  # fmt: skip

@@ -5,6 +5,10 @@ In:  sensor_msgs/Image or CompressedImage (``ros2.image_topic``) -> Frame on the
 Out: Detections -> vision_msgs/Detection2DArray (``ros2.detections_topic``);
      the controller's Twist -> geometry_msgs/Twist or TwistStamped (``ros2.cmd_vel_topic``).
 
+Those image and detections topics are the first camera's (stack.camera); each further camera
+has its own, under ``ros2.camera_namespace`` (common.ros2_settings.camera_topics), each mapped
+to and from that camera's own keys.
+
 Two sessions: the stack's bus (as principal ``ros2``) and the robot's ROS 2 graph. A payload on
 a ROS key that is not valid CDR for its type, an image whose size and step disagree or an
 unknown encoding is logged, counted as bad input and dropped. Losing the router while running
@@ -24,7 +28,7 @@ from common.clock import mono_s
 from common.errors import DecodeError, ImageError
 from common.messages import Detections, Frame, Twist
 from common.node import Node, Put, Tally
-from common.ros2_settings import ImageFormat
+from common.ros2_settings import ImageFormat, camera_topics
 from common.settings import Config
 from services.ros2.convert import (
     DETECTION_2D_ARRAY,
@@ -88,13 +92,14 @@ class RosInbound:
 
 
 class DetectionsToRos:
-    """The detector's Detections out as vision_msgs/Detection2DArray CDR, through ``put``."""
+    """The detector's Detections of ``camera`` out as vision_msgs/Detection2DArray CDR, through
+    ``put``."""
 
-    def __init__(self, config: Config, tally: Tally, put: Put) -> None:
+    def __init__(self, config: Config, tally: Tally, put: Put, camera: str) -> None:
         self.distro = config.ros2.distro
         self.tally = tally
         self.put = put
-        self.key = tally.keys.detections(config.stack.camera)
+        self.key = tally.keys.detections(camera)
 
     def on_detections(self, payload: bytes) -> None:
         dets = self.tally.decode(self.key, Detections.decode, payload)
@@ -133,16 +138,16 @@ class CommandsToRos:
 
 
 class DebugImages:
-    """Each frame with its detections drawn on it, as CompressedImage CDR through ``put``, at
-    most ``ros2.debug_image_rate_hz``."""
+    """Each frame of ``camera`` with its detections drawn on it, as CompressedImage CDR through
+    ``put``, at most ``ros2.debug_image_rate_hz``."""
 
-    def __init__(self, config: Config, tally: Tally, put: Put) -> None:
+    def __init__(self, config: Config, tally: Tally, put: Put, camera: str) -> None:
         self.settings = config.ros2
         self.max_frame_pixels = config.detector.max_frame_pixels
         self.tally = tally
         self.put = put
-        self.frame_key = tally.keys.frame(config.stack.camera)
-        self.detections_key = tally.keys.detections(config.stack.camera)
+        self.frame_key = tally.keys.frame(camera)
+        self.detections_key = tally.keys.detections(camera)
         self.frames = FrameCache()
         self._period_s = 1.0 / self.settings.debug_image_rate_hz
         self._due = 0.0
@@ -171,30 +176,43 @@ class DebugImages:
         self.tally.counters.add("debug_images_out")
 
 
+def _bridge_camera(
+    config: Config, node: Node, graph: RosGraph, camera: str
+) -> list[zenoh.Subscriber[None]]:
+    """Map ``camera``'s images in and its detections (and debug images) out, on its own ROS
+    topics; the subscriptions on the stack's keys made for it."""
+    s, keys = config.ros2, node.keys
+    topics = camera_topics(s, config.stack.camera, camera)
+    subs: list[zenoh.Subscriber[None]] = []
+    if s.image_in:
+        image_type = IMAGE if s.image_format is ImageFormat.RAW else COMPRESSED_IMAGE
+        frames = node.publisher(keys.frame(camera), QoS.SENSOR)
+        image_in = RosInbound(config, node, image_type, topics.image, frames.put)
+        graph.subscribe(topics.image, image_type, image_in.on_payload, SENSOR_DATA_QOS)
+    if s.debug_image_out:
+        debug = graph.publisher(topics.debug_image, COMPRESSED_IMAGE)
+        drawn = DebugImages(config, node, debug.put_cdr, camera)
+        subs.append(node.subscribe(keys.detections(camera), drawn.on_detections))
+        subs.append(node.subscribe(keys.frame(camera), drawn.on_frame))
+    if s.detections_out:
+        det_pub = graph.publisher(topics.detections, DETECTION_2D_ARRAY)
+        dets_out = DetectionsToRos(config, node, det_pub.put_cdr, camera)
+        subs.append(node.subscribe(keys.detections(camera), dets_out.on_detections))
+    return subs
+
+
 def run(config: Config, stop: threading.Event) -> int:
     """Bridge until ``stop`` is set."""
     s = config.ros2
     with Node("ros2", config) as node, RosGraph(s) as graph:
-        keys, camera = node.keys, config.stack.camera
+        keys = node.keys
         subs: list[zenoh.Subscriber[None]] = []
-        if s.image_in:
-            image_type = IMAGE if s.image_format is ImageFormat.RAW else COMPRESSED_IMAGE
-            frames = node.publisher(keys.frame(camera), QoS.SENSOR)
-            image_in = RosInbound(config, node, image_type, s.image_topic, frames.put)
-            graph.subscribe(s.image_topic, image_type, image_in.on_payload, SENSOR_DATA_QOS)
+        for camera in config.all_cameras:
+            subs += _bridge_camera(config, node, graph, camera)
         if s.scan_in:
             scans = node.publisher(keys.scan(), QoS.SENSOR)
             scan_in = RosInbound(config, node, LASER_SCAN, s.scan_topic, scans.put)
             graph.subscribe(s.scan_topic, LASER_SCAN, scan_in.on_payload, SENSOR_DATA_QOS)
-        if s.debug_image_out:
-            debug = graph.publisher(s.debug_image_topic, COMPRESSED_IMAGE)
-            drawn = DebugImages(config, node, debug.put_cdr)
-            subs.append(node.subscribe(keys.detections(camera), drawn.on_detections))
-            subs.append(node.subscribe(keys.frame(camera), drawn.on_frame))
-        if s.detections_out:
-            det_pub = graph.publisher(s.detections_topic, DETECTION_2D_ARRAY)
-            dets_out = DetectionsToRos(config, node, det_pub.put_cdr)
-            subs.append(node.subscribe(keys.detections(camera), dets_out.on_detections))
         if s.cmd_vel_out:
             twist_type = TWIST_STAMPED if s.twist_stamped else TWIST
             cmd_pub = graph.publisher(s.cmd_vel_topic, twist_type)

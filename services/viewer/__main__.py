@@ -1,9 +1,10 @@
 """python -m services.viewer [serve|layout] ...
 
 serve (the default) runs the live view: a Foxglove WebSocket server on viewer.host:viewer.port
-showing the camera with its detections, the laser scan, the simulator's world, the command, the
+showing each camera with its detections, the laser scan, the simulator's world, the command, the
 controller's state and the metrics (docs/viewer.md). layout writes the Foxglove layout that
-arranges them (deploy/foxglove/layout.json by default).
+arranges them (deploy/foxglove/layout.json by default), an image panel for each camera of the
+config.
 """
 
 from __future__ import annotations
@@ -28,12 +29,14 @@ def serve(args: argparse.Namespace) -> int:
 
 def _layout_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, help="where to write it (default the shipped file)")
+    add_config(p)
 
 
 def layout(args: argparse.Namespace) -> int:
     from services.viewer import layout
 
-    print(layout.write(args.out or layout.LAYOUT_FILE))
+    cameras = list(load_config(args.config).all_cameras)  # an image panel for each
+    print(layout.write(args.out or layout.LAYOUT_FILE, cameras))
     return 0
 
 

@@ -1,13 +1,14 @@
 """The live view's Foxglove channels: their topics, and the JSON schemas of the plottable ones.
 
-Typed channels (protobuf, Foxglove's own schemas) carry the image, its annotations, the scan,
-the transforms and the 3D scene; the command, the controller's state and the metrics are JSON
-with a JSON schema, so that Foxglove's Plot panel can plot any number in them. The layout
-(layout.py) names the same topics.
+Typed channels (protobuf, Foxglove's own schemas) carry each camera's image and its
+annotations, the scan, the transforms and the 3D scene; the command, the controller's state and
+the metrics are JSON with a JSON schema, so that Foxglove's Plot panel can plot any number in
+them. The layout (layout.py) names the same topics.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import foxglove
@@ -19,6 +20,7 @@ from foxglove.channels import (
     SceneUpdateChannel,
 )
 
+# The first camera's (stack.camera); each further camera's: camera_topics().
 IMAGE = "/camera/image"
 ANNOTATIONS = "/camera/annotations"
 SCAN = "/scan"
@@ -27,6 +29,16 @@ SCENE = "/world/scene"
 CMD_VEL = "/cmd_vel"
 CONTROLLER = "/controller/status"
 METRICS = "/metrics"
+
+
+def camera_topics(first: str, camera: str) -> tuple[str, str]:
+    """The image and annotations topics of ``camera``: IMAGE and ANNOTATIONS for the first
+    camera (``first``, stack.camera), as a one-camera view has always named them, and
+    ``/camera/<name>/image``, ``/camera/<name>/annotations`` for each further one."""
+    if camera == first:
+        return IMAGE, ANNOTATIONS
+    return f"/camera/{camera}/image", f"/camera/{camera}/annotations"
+
 
 _NUMBER = {"type": "number"}
 _PERCENTILES = {
@@ -74,20 +86,29 @@ METRICS_SCHEMA: dict[str, Any] = {
 }
 
 
-class Channels:
-    """Every channel of the view, in one Foxglove context (one server)."""
+class CameraChannels:
+    """One camera's image and the annotations drawn over it."""
 
-    def __init__(self, context: foxglove.Context) -> None:
-        self.image = CompressedImageChannel(IMAGE, context=context)
-        self.annotations = ImageAnnotationsChannel(ANNOTATIONS, context=context)
+    def __init__(self, context: foxglove.Context, image_topic: str, annotations_topic: str) -> None:
+        self.image = CompressedImageChannel(image_topic, context=context)
+        self.annotations = ImageAnnotationsChannel(annotations_topic, context=context)
+
+    def watched(self) -> bool:
+        """Whether a client subscribes to the image or its annotations (else nothing is
+        encoded)."""
+        return self.image.has_sinks() or self.annotations.has_sinks()
+
+
+class Channels:
+    """Every channel of the view, in one Foxglove context (one server): ``cameras`` by name,
+    the first camera (stack.camera) first."""
+
+    def __init__(self, context: foxglove.Context, cameras: Sequence[str]) -> None:
+        first = cameras[0]
+        self.cameras = {c: CameraChannels(context, *camera_topics(first, c)) for c in cameras}
         self.scan = LaserScanChannel(SCAN, context=context)
         self.tf = FrameTransformsChannel(TF, context=context)
         self.scene = SceneUpdateChannel(SCENE, context=context)
         self.cmd_vel = foxglove.Channel(CMD_VEL, schema=CMD_VEL_SCHEMA, context=context)
         self.controller = foxglove.Channel(CONTROLLER, schema=CONTROLLER_SCHEMA, context=context)
         self.metrics = foxglove.Channel(METRICS, schema=METRICS_SCHEMA, context=context)
-
-    def watched(self) -> bool:
-        """Whether a client subscribes to the image or its annotations (else nothing is
-        encoded)."""
-        return self.image.has_sinks() or self.annotations.has_sinks()

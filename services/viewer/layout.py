@@ -11,21 +11,26 @@ what this module builds.
     +--------------+-------------+------------+-----------+
     | Plot: speeds | Plot: latency per stage  | Plot: FPS | Raw: controller state
     +--------------+--------------------------+-----------+
+
+With several cameras the image panel becomes a column of them, one per camera (the first camera
+on top), each with its own image and annotations topics (channels.camera_topics).
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import foxglove.layouts as fl
 
 from common.files import atomic_write_bytes
-from common.settings import REPO_ROOT
+from common.settings import REPO_ROOT, StackSettings
 from services.viewer import channels as ch
 from services.viewer.scene import WORLD_FRAME
 
 LAYOUT_FILE = REPO_ROOT / "deploy" / "foxglove" / "layout.json"
+ONE_CAMERA = (StackSettings().camera,)  # the shipped layout's: one camera
 # The stages the metrics service times (services/metrics/aggregate.py), in pipeline order.
 LATENCY_STAGES = (
     "capture_to_detector",
@@ -50,18 +55,34 @@ def _plot(title: str, paths: list[tuple[str, str]], y_label: str) -> fl.PlotPane
     )
 
 
-def build() -> fl.Layout:
-    image = fl.ImagePanel(
-        title="camera and detections (the locked target in red)",
+IMAGE_TITLE = "camera and detections (the locked target in red)"
+
+
+def _image(image_topic: str, annotations_topic: str, title: str) -> fl.ImagePanel:
+    return fl.ImagePanel(
+        title=title,
         config=fl.ImageConfig(
             image_mode=fl.ImageModeConfig(
-                image_topic=ch.IMAGE,
-                annotations={ch.ANNOTATIONS: fl.ImageAnnotationSettings(visible=True)},
+                image_topic=image_topic,
+                annotations={annotations_topic: fl.ImageAnnotationSettings(visible=True)},
                 # Each image is sent with the detections made on it, under the same stamp.
                 synchronize=True,
             ),
         ),
     )
+
+
+def _images(cameras: Sequence[str]) -> fl.ImagePanel | fl.SplitContainer:
+    """One image panel per camera: the one-camera view's panel alone, or a column of them."""
+    if len(cameras) == 1:
+        return _image(ch.IMAGE, ch.ANNOTATIONS, IMAGE_TITLE)
+    panels = [_image(*ch.camera_topics(cameras[0], c), f"{c}: {IMAGE_TITLE}") for c in cameras]
+    return fl.SplitContainer(direction="column", items=[fl.SplitItem(content=p) for p in panels])
+
+
+def build(cameras: Sequence[str] = ONE_CAMERA) -> fl.Layout:
+    """The layout of a stack with ``cameras`` (the first camera, stack.camera, first)."""
+    image = _images(cameras)
     world = fl.ThreeDeePanel(
         title="world (simulator), laser scan, robot path",
         config=fl.ThreeDeeConfig(
@@ -110,12 +131,12 @@ def build() -> fl.Layout:
     )
 
 
-def layout_json() -> str:
+def layout_json(cameras: Sequence[str] = ONE_CAMERA) -> str:
     """The layout as the file holds it: indented JSON, one trailing newline."""
-    return json.dumps(json.loads(build().to_json()), indent=2) + "\n"
+    return json.dumps(json.loads(build(cameras).to_json()), indent=2) + "\n"
 
 
-def write(path: Path = LAYOUT_FILE) -> Path:
+def write(path: Path = LAYOUT_FILE, cameras: Sequence[str] = ONE_CAMERA) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(path, layout_json().encode("utf-8"))
+    atomic_write_bytes(path, layout_json(cameras).encode("utf-8"))
     return path

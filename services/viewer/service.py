@@ -1,9 +1,10 @@
 """The viewer service: the stack's keys in, a Foxglove WebSocket server out.
 
 Zenoh's callbacks convert the small messages (scan, command, controller status, truth) at
-once; frames and detections only go into the ``Pairing``, and the viewer's own encoder thread
-turns the newest pair into a JPEG and its annotations at ``image_rate_hz``, and only while a
-client watches them. Nothing here publishes on the stack's keys but the viewer's counters.
+once; each camera's frames and detections only go into that camera's ``Pairing``, and the
+viewer's own encoder thread turns each camera's newest pair into a JPEG and its annotations on
+the camera's own channels at ``image_rate_hz``, and only while a client watches them. Nothing
+here publishes on the stack's keys but the viewer's counters.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from common.queries import query_metrics
 from common.security import viewer_token_file
 from common.settings import Config
 from services.viewer import convert, scene
-from services.viewer.channels import Channels
+from services.viewer.channels import CameraChannels, Channels
 from services.viewer.front import Front, make_check
 from services.viewer.pairing import Pairing
 
@@ -66,37 +67,74 @@ def start_front(config: Config, inner_port: int) -> Front:
     return front
 
 
+class CameraView:
+    """One camera in the view: its frames paired with their detections (``pairing``), sent as
+    a JPEG and its annotations on the camera's own channels."""
+
+    def __init__(self, viewer: Viewer, camera: str, channels: CameraChannels) -> None:
+        self.viewer = viewer
+        self.camera = camera
+        self.channels = channels
+        self.pairing = Pairing()
+        self._frame_key = viewer.tally.keys.frame(camera)
+        self._detections_key = viewer.tally.keys.detections(camera)
+
+    def on_frame(self, payload: bytes) -> None:
+        frame = self.viewer.tally.decode(self._frame_key, Frame.decode, payload)
+        if frame is None:
+            return
+        self.viewer.tally.counters.add("frames_in")
+        self.pairing.add_frame(frame)
+
+    def on_detections(self, payload: bytes) -> None:
+        tally = self.viewer.tally
+        dets = tally.decode(self._detections_key, Detections.decode, payload)
+        if dets is not None and not self.pairing.add_detections(dets, mono_s()):
+            tally.counters.add("detections_unpaired")
+
+    def send(self, frame: Frame, dets: Detections | None) -> None:
+        """Send ``frame`` as a JPEG, and ``dets`` as its annotations; a frame whose pixels
+        cannot be read is bad input, one Foxglove cannot carry is counted as unshowable."""
+        viewer = self.viewer
+        v = viewer.settings
+        try:
+            image = convert.compressed_image(frame, v.jpeg_quality, v.max_image_width)
+            marks = None
+            if dets is not None:
+                w, h = convert.scaled_size(frame.width, frame.height, v.max_image_width)
+                marks = convert.image_annotations(dets, w, h, viewer.locked_track)
+        except ImageError as exc:
+            viewer.tally.bad_input("frame", exc)
+            return
+        except ValueError as exc:
+            viewer.unshowable("image", exc)
+            return
+        at = frame.header.stamp_ns
+        self.channels.image.log(image, log_time=at)
+        viewer.tally.counters.add("images_out")
+        if marks is not None:
+            self.channels.annotations.log(marks, log_time=at)
+
+
 class Viewer:
-    """The viewer's handlers and what they and the threads share: the channels, the pairing,
-    the latest status and the robot's path. Each ``on_*`` takes a payload as it came off the
-    bus; garbage is counted as bad input on its key."""
+    """The viewer's handlers and what they and the threads share: the channels, each camera's
+    view (``cameras``, the first camera first), the latest status and the robot's path. Each
+    ``on_*`` takes a payload as it came off the bus; garbage is counted as bad input on its
+    key."""
 
     def __init__(self, tally: Tally, channels: Channels, config: Config) -> None:
         self.tally = tally
         self.channels = channels
         self.settings = config.viewer
-        self.pairing = Pairing()
         self.locked_track = -1
         self.trail = scene.PathTrail(self.settings.path_points)
         self._scene_period_s = 1.0 / self.settings.scene_rate_hz
         self._next_scene = 0.0
-        keys, camera = tally.keys, config.stack.camera
-        self._frame_key = keys.frame(camera)
-        self._detections_key = keys.detections(camera)
+        self.cameras = {
+            name: CameraView(self, name, channels.cameras[name]) for name in config.all_cameras
+        }
 
-    def on_frame(self, payload: bytes) -> None:
-        frame = self.tally.decode(self._frame_key, Frame.decode, payload)
-        if frame is None:
-            return
-        self.tally.counters.add("frames_in")
-        self.pairing.add_frame(frame)
-
-    def on_detections(self, payload: bytes) -> None:
-        dets = self.tally.decode(self._detections_key, Detections.decode, payload)
-        if dets is not None and not self.pairing.add_detections(dets, mono_s()):
-            self.tally.counters.add("detections_unpaired")
-
-    def _unshowable(self, what: str, error: ValueError) -> None:
+    def unshowable(self, what: str, error: ValueError) -> None:
         """A message that decoded but that Foxglove cannot carry (a stamp past 2106)."""
         self.tally.reject("unshowable", f"{what} not shown: {error}")
 
@@ -107,7 +145,7 @@ class Viewer:
         try:
             shown = convert.laser_scan(scan)
         except ValueError as exc:
-            self._unshowable("scan", exc)
+            self.unshowable("scan", exc)
             return
         self.channels.scan.log(shown, log_time=scan.header.stamp_ns)
 
@@ -133,7 +171,7 @@ class Viewer:
         try:
             pose = scene.transforms(truth)
         except ValueError as exc:
-            self._unshowable("ground truth", exc)
+            self.unshowable("ground truth", exc)
             return
         self.trail.add(truth.robot[0], truth.robot[1])
         self.channels.tf.log(pose, log_time=at)
@@ -143,39 +181,18 @@ class Viewer:
             self.channels.scene.log(scene.scene(truth, self.trail.points()), log_time=at)
 
     def encode_loop(self, stop: threading.Event) -> None:
-        """Send the newest image and its annotations, at most ``image_rate_hz`` a second."""
+        """Send each camera's newest image and its annotations, at most ``image_rate_hz`` a
+        second per camera."""
         period = 1.0 / self.settings.image_rate_hz
-        dropped = 0
+        dropped = dict.fromkeys(self.cameras, 0)
         while not stop.wait(period):
-            item = self.pairing.take(mono_s())
-            if self.pairing.dropped > dropped:
-                self.tally.counters.add("images_dropped", self.pairing.dropped - dropped)
-                dropped = self.pairing.dropped
-            if item is None or not self.channels.watched():
-                continue
-            self.send(*item)
-
-    def send(self, frame: Frame, dets: Detections | None) -> None:
-        """Send ``frame`` as a JPEG, and ``dets`` as its annotations; a frame whose pixels
-        cannot be read is bad input, one Foxglove cannot carry is counted as unshowable."""
-        v = self.settings
-        try:
-            image = convert.compressed_image(frame, v.jpeg_quality, v.max_image_width)
-            marks = None
-            if dets is not None:
-                w, h = convert.scaled_size(frame.width, frame.height, v.max_image_width)
-                marks = convert.image_annotations(dets, w, h, self.locked_track)
-        except ImageError as exc:
-            self.tally.bad_input("frame", exc)
-            return
-        except ValueError as exc:
-            self._unshowable("image", exc)
-            return
-        at = frame.header.stamp_ns
-        self.channels.image.log(image, log_time=at)
-        self.tally.counters.add("images_out")
-        if marks is not None:
-            self.channels.annotations.log(marks, log_time=at)
+            for name, view in self.cameras.items():
+                item = view.pairing.take(mono_s())
+                if view.pairing.dropped > dropped[name]:
+                    self.tally.counters.add("images_dropped", view.pairing.dropped - dropped[name])
+                    dropped[name] = view.pairing.dropped
+                if item is not None and view.channels.watched():
+                    view.send(*item)
 
     def on_metrics(self, answer: MetricsAnswer) -> None:
         """The metrics service's answer to the metrics loop's question, shown."""
@@ -194,15 +211,21 @@ def metrics_loop(node: Node, viewer: Viewer, stop: threading.Event) -> None:
 def run(config: Config, stop: threading.Event) -> int:
     """Serve the live view until ``stop`` is set."""
     context = foxglove.Context()
-    channels = Channels(context)
+    channels = Channels(context, list(config.all_cameras))
     with Node("viewer", config) as node:
         server = start_server(context)
         front = start_front(config, server.port)
         viewer = Viewer(node, channels, config)
-        keys, camera = node.keys, config.stack.camera
+        keys = node.keys
         subs = [
-            node.subscribe(keys.frame(camera), viewer.on_frame),
-            node.subscribe(keys.detections(camera), viewer.on_detections),
+            sub
+            for camera, view in viewer.cameras.items()
+            for sub in (
+                node.subscribe(keys.frame(camera), view.on_frame),
+                node.subscribe(keys.detections(camera), view.on_detections),
+            )
+        ]
+        subs += [
             node.subscribe(keys.scan(), viewer.on_scan),
             node.subscribe(keys.cmd_vel(), viewer.on_twist),
             node.subscribe(keys.controller_status(), viewer.on_status),

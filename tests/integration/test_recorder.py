@@ -26,7 +26,7 @@ from services.recorder.reading import Recording
 from services.ros2 import RosDistro, cdr_encode, frame_to_image, scan_to_ros, typestore_for
 from tests.integration.conftest import REPO, Stack, wait_for
 from tools.compare.compare import match_frame
-from tools.compare.runs import load_run
+from tools.compare.runs import FrameId, load_run
 from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration
@@ -67,11 +67,11 @@ def _check_with_foreign_readers(path: Path) -> None:
         assert stamps[topic] == sorted(set(stamps[topic])), f"{topic}: stamps not increasing"
 
 
-def _matches(recorded: dict[int, Detections], replayed: list[Detections]) -> list[int]:
+def _matches(recorded: dict[FrameId, Detections], replayed: list[Detections]) -> list[int]:
     """Sequence numbers detected in both runs with the same classes and every box IoU >= 0.9."""
     same = []
     for d in replayed:
-        before = recorded.get(d.header.seq)
+        before = recorded.get(("front", d.header.seq))
         if before is None or not len(before.class_names):
             continue
         assert sorted(d.class_names) == sorted(before.class_names)

@@ -103,8 +103,8 @@ def test_the_ros2_bridges_handlers() -> None:
     tally = Tally("ros2", config)
     keys, camera = tally.keys, config.stack.camera
     sent: list[bytes] = []  # what would be published, on the stack or to the robot
-    debug = DebugImages(config, tally, sent.append)
-    dets_out = DetectionsToRos(config, tally, sent.append)
+    debug = DebugImages(config, tally, sent.append, camera)
+    dets_out = DetectionsToRos(config, tally, sent.append, camera)
     cmds_out = CommandsToRos(config, tally, sent.append)
     fresh = samples(stamp_ns=None)
     # The ROS and debug images' detections, then the commands, then the debug images' frames.

@@ -63,14 +63,15 @@ def past_foxglove(stamp_ns: int) -> bool:
 def test_the_viewers_handlers_and_encoder() -> None:
     config = Config(viewer=ViewerSettings(max_image_width=64))
     tally = Tally("viewer", config)
-    live = viewer.Viewer(tally, Channels(foxglove.Context()), config)
+    live = viewer.Viewer(tally, Channels(foxglove.Context(), [config.stack.camera]), config)
     keys, camera = tally.keys, config.stack.camera
+    view = live.cameras[camera]
     before = tally.counters.get("frames_in")
-    fed = _viewer_handler(tally, live.on_frame, keys.frame(camera), Frame)
+    fed = _viewer_handler(tally, view.on_frame, keys.frame(camera), Frame)
     rejected = tally.counters.get("bad_input.frame")
     assert tally.counters.get("frames_in") - before == fed - rejected
     for on_payload, key, cls in [
-        (live.on_detections, keys.detections(camera), Detections),
+        (view.on_detections, keys.detections(camera), Detections),
         (live.on_scan, keys.scan(), LaserScan),
         (live.on_twist, keys.cmd_vel(), Twist),
         (live.on_status, keys.controller_status(), ControllerStatus),
@@ -111,7 +112,7 @@ def _sent(live: viewer.Viewer, frame: Frame, dets: Detections | None) -> str:
     """``live.send``: which one of OUTCOMES it counted."""
     c = live.tally.counters
     before = {name: c.get(name) for name in OUTCOMES}
-    live.send(frame, dets)
+    live.cameras[live.tally.config.stack.camera].send(frame, dets)
     grew = [name for name in OUTCOMES if c.get(name) != before[name]]
     assert len(grew) == 1 and c.get(grew[0]) == before[grew[0]] + 1, grew
     return grew[0]
@@ -176,7 +177,9 @@ def _recorded(
     )
     assert rec.failed is None, f"the writer thread died on {payload[:64]!r}: {rec.failed!r}"
     try:  # what the writer should make of it
-        entries = Translator(tally.config.ros2).entries(key, cls.decode(payload))
+        entries = Translator(tally.config.ros2, tally.config.stack.camera).entries(
+            key, cls.decode(payload)
+        )
     except (DecodeError, ValueError):  # garbage, or a stamp no ROS Time holds (2038)
         assert c.get("bad_input") - before["bad_input"] == 1, key
         assert c.get("written") == before["written"], key
@@ -227,7 +230,7 @@ def test_the_recorders_handlers_and_writer(tmp_path: Path) -> None:
     config, ledger = Config(), _Ledger()
     tally = Tally(recorder.SERVICE, config)
     with recorder.Recorder(tally, path) as rec:
-        keys = recorder.subscriptions(tally.keys, config.stack.camera)
+        keys = recorder.subscriptions(tally.keys, list(config.all_cameras))
         for key, cls in keys.items():
             _fuzz_recorded(tally, rec, key, cls, ledger)
         c = tally.counters

@@ -1,9 +1,11 @@
 """How two runs differ: detections matched per frame by class and IoU, the commands given for
 the same frames, and latency per stage. Pure: runs in, figures and markdown out.
 
-Frames are matched by their sequence number, which a replay keeps (play.py): recording A of a
-live run and recording B of A played back name each frame alike. In each frame, detections are
-paired greedily, highest IoU first, only within one class and at ``iou_min`` or more.
+Frames are matched by camera and sequence number, which a replay keeps (play.py puts each
+camera's frames back on its own key): recording A of a live run and recording B of A played
+back name each frame alike. In each frame, detections are paired greedily, highest IoU first,
+only within one class and at ``iou_min`` or more. With several cameras the report gives the
+figures per camera as well.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Detections
-from tools.compare.runs import CommandRecord, Run
+from tools.compare.runs import CommandRecord, FrameId, Run
 
 #: The stages whose latency is compared: name -> what it covers.
 STAGES: dict[str, str] = {
@@ -83,13 +85,28 @@ def first_commands(run: Run) -> dict[int, CommandRecord]:
     return firsts
 
 
-def commands_by_seq(run: Run) -> dict[int, CommandRecord]:
+def commands_by_frame(run: Run) -> dict[FrameId, CommandRecord]:
     by_stamp = first_commands(run)
     return {
-        seq: by_stamp[d.header.stamp_ns]
-        for seq, d in run.detections.items()
+        frame: by_stamp[d.header.stamp_ns]
+        for frame, d in run.detections.items()
         if d.header.stamp_ns in by_stamp
     }
+
+
+@dataclass(slots=True)
+class CameraFigures:
+    """One camera's share of a comparison."""
+
+    frames: tuple[int, int] = (0, 0)  # detected frames in A, in B
+    frames_both: int = 0
+    detections: tuple[int, int] = (0, 0)  # detections in the frames both runs detected on
+    matched: int = 0
+
+    @property
+    def match_rate(self) -> float:
+        most = max(self.detections)
+        return self.matched / most if most else 1.0
 
 
 @dataclass(slots=True)
@@ -106,6 +123,7 @@ class Comparison:
     dw: list[float] = field(default_factory=list)  # |angular A - angular B|, rad/s
     latency_ms: dict[str, tuple[list[float], list[float]]] = field(default_factory=dict)
     detectors: tuple[list[str], list[str]] = field(default_factory=lambda: ([], []))
+    per_camera: dict[str, CameraFigures] = field(default_factory=dict)  # by camera name
 
     @property
     def match_rate(self) -> float:
@@ -120,28 +138,41 @@ def compare_runs(a: Run, b: Run, iou_min: float = 0.5) -> Comparison:
         frames=(len(a.detections), len(b.detections)),
         detectors=(a.detectors, b.detectors),
     )
+    cameras = sorted({camera for camera, _ in (*a.detections, *b.detections)})
+    out.per_camera = {
+        camera: CameraFigures(frames=(
+            sum(1 for c, _ in a.detections if c == camera),
+            sum(1 for c, _ in b.detections if c == camera),
+        ))
+        for camera in cameras
+    }  # fmt: skip
     both = sorted(set(a.detections) & set(b.detections))
     out.frames_both = len(both)
     count_a: Counter[str] = Counter()
     count_b: Counter[str] = Counter()
     count_m: Counter[str] = Counter()
-    for seq in both:
-        da, db = a.detections[seq], b.detections[seq]
+    for frame in both:
+        da, db = a.detections[frame], b.detections[frame]
         count_a.update(da.class_names)
         count_b.update(db.class_names)
-        for i, _j, iou in match_frame(da, db, iou_min):
+        pairs = match_frame(da, db, iou_min)
+        for i, _j, iou in pairs:
             count_m[da.class_names[i]] += 1
             out.ious.append(iou)
+        cam = out.per_camera[frame[0]]
+        cam.frames_both += 1
+        cam.detections = (cam.detections[0] + len(da), cam.detections[1] + len(db))
+        cam.matched += len(pairs)
     out.detections = (sum(count_a.values()), sum(count_b.values()))
     out.matched = sum(count_m.values())
     out.per_class = {
         name: (count_a[name], count_b[name], count_m[name])
         for name in sorted(set(count_a) | set(count_b))
     }
-    cmd_a, cmd_b = commands_by_seq(a), commands_by_seq(b)
-    for seq in sorted(set(cmd_a) & set(cmd_b)):
-        out.dv.append(abs(cmd_a[seq].linear - cmd_b[seq].linear))
-        out.dw.append(abs(cmd_a[seq].angular - cmd_b[seq].angular))
+    cmd_a, cmd_b = commands_by_frame(a), commands_by_frame(b)
+    for frame in sorted(set(cmd_a) & set(cmd_b)):
+        out.dv.append(abs(cmd_a[frame].linear - cmd_b[frame].linear))
+        out.dw.append(abs(cmd_a[frame].angular - cmd_b[frame].angular))
     out.command_pairs = len(out.dv)
     lat_a, lat_b = latencies_ms(a), latencies_ms(b)
     out.latency_ms = {stage: (lat_a[stage], lat_b[stage]) for stage in STAGES}
@@ -156,6 +187,25 @@ def _mean_max(values: list[float]) -> str:
     return f"{np.mean(values):.3f} / {np.max(values):.3f}" if values else "-"
 
 
+def _cameras_table(c: Comparison) -> list[str]:
+    """The figures per camera, when there is more than one (else nothing: one camera's are the
+    totals)."""
+    if len(c.per_camera) < 2:
+        return []
+    return [
+        "## Per camera",
+        "",
+        "| camera | frames A | frames B | both | detections A | detections B | matched | rate |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        *(
+            f"| {name} | {f.frames[0]} | {f.frames[1]} | {f.frames_both} | {f.detections[0]} | "
+            f"{f.detections[1]} | {f.matched} | {100 * f.match_rate:.1f} % |"
+            for name, f in c.per_camera.items()
+        ),
+        "",
+    ]
+
+
 def report_markdown(c: Comparison, name_a: str, name_b: str, plot: str = "") -> str:
     """The comparison as a short markdown report (``plot``: a PNG beside it to show)."""
     mean_iou = f"Mean IoU of the matched: {np.mean(c.ious):.3f}." if c.ious else ""
@@ -166,8 +216,9 @@ def report_markdown(c: Comparison, name_a: str, name_b: str, plot: str = "") -> 
         f"B {', '.join(c.detectors[1]) or 'unknown'}.",
         "",
         f"Frames detected on: A {c.frames[0]}, B {c.frames[1]}, both {c.frames_both} "
-        "(matched by sequence number).",
+        f"(matched by {'camera and ' if len(c.per_camera) > 1 else ''}sequence number).",
         "",
+        *_cameras_table(c),
         "## Detections",
         "",
         f"In the frames both detected on: A {c.detections[0]}, B {c.detections[1]}, "

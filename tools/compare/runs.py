@@ -2,8 +2,9 @@
 
 Read from the JSON channels our recorder writes (services/recorder/channels.py): ``Detections``
 (with the frame's sequence number and the detector's timings), read back into the message
-itself, and ``Twist`` (with ``input_stamp_ns``). The first detections of each sequence number
-are kept (a looped replay repeats them).
+itself, and ``Twist`` (with ``input_stamp_ns``). Detections are kept by frame: the camera (read
+from the stack key they were recorded on) and the frame's sequence number, which each camera
+numbers on its own. The first detections of each frame are kept (a looped replay repeats them).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 
 from common.boxes import Boxes
 from common.errors import DecodeError, RecordingError
+from common.keys import camera_in_key
 from common.messages import Detections, Header
 from services.recorder.reading import Input, Recording, input_kind
 
@@ -30,11 +32,15 @@ class CommandRecord:
     angular: float  # rad/s about z
 
 
+#: A frame of a run: its camera and its sequence number (each camera numbers its own frames).
+FrameId = tuple[str, int]
+
+
 @dataclass(slots=True)
 class Run:
     path: Path
     frames: int = 0
-    detections: dict[int, Detections] = field(default_factory=dict)  # by the frame's seq
+    detections: dict[FrameId, Detections] = field(default_factory=dict)  # by (camera, seq)
     commands: list[CommandRecord] = field(default_factory=list)
     truncated: bool = False
     # Which model produced the detections: "model (backend/device/precision)", in the order
@@ -107,7 +113,9 @@ def load_run(path: str | Path) -> Run:
                 if kind == "Detections" and record.channel.message_encoding == "json":
                     body = record.json()
                     dets = detections_from_json(body)
-                    run.detections.setdefault(dets.header.seq, dets)
+                    topic = record.channel.topic
+                    camera = camera_in_key(topic) or topic
+                    run.detections.setdefault((camera, dets.header.seq), dets)
                     detector = detector_name(body)
                     if detector not in run.detectors:
                         run.detectors.append(detector)

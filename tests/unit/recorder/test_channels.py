@@ -54,7 +54,7 @@ def test_the_ros2msg_schema_names_every_dependency_and_parses_back() -> None:
 
 def test_detections_are_cdr_on_the_bridge_topic_and_json_on_the_stack_key() -> None:
     ros2 = Ros2Settings()
-    cdr, js = Translator(ros2).entries("stack/detector/front/detections", _detections())
+    cdr, js = Translator(ros2, "front").entries("stack/detector/front/detections", _detections())
     assert (cdr.channel.topic, cdr.channel.message_encoding) == ("/detections", "cdr")
     assert cdr.channel.schema_name == "vision_msgs/msg/Detection2DArray"
     assert (cdr.sequence, cdr.publish_ns) == (7, HEADER.stamp_ns)
@@ -72,7 +72,7 @@ def test_detections_are_cdr_on_the_bridge_topic_and_json_on_the_stack_key() -> N
 
 
 def test_frames_scans_and_commands_take_their_ros_types() -> None:
-    t = Translator(Ros2Settings(image_topic="/cam/image"))
+    t = Translator(Ros2Settings(image_topic="/cam/image"), "front")
     raw = Frame(header=HEADER, encoding="bgr8", width=4, height=2, data=bytes(range(24)))
     (image,) = t.entries("k", raw)
     assert image.channel.topic == "/cam/image"
@@ -96,7 +96,7 @@ def test_frames_scans_and_commands_take_their_ros_types() -> None:
 
 def test_messages_without_a_ros_type_are_json_only() -> None:
     status = ControllerStatus(header=HEADER, mode="follow", target="person", state="following")
-    (entry,) = Translator(Ros2Settings()).entries("stack/controller/status", status)
+    (entry,) = Translator(Ros2Settings(), "front").entries("stack/controller/status", status)
     assert entry.channel.message_encoding == "json"
     assert json.loads(entry.data)["state"] == "following"
 
@@ -108,3 +108,26 @@ def test_json_has_no_nan_and_the_schema_types_fields() -> None:
     schema = json_schema(Detections)
     assert schema["properties"]["header"]["properties"]["seq"] == {"type": "integer"}
     assert schema["properties"]["track_ids"]["anyOf"][-1] == {"type": "null"}
+
+
+def test_each_cameras_frames_and_detections_go_on_its_own_ros_topics() -> None:
+    t = Translator(Ros2Settings(), "front")
+    raw = Frame(header=HEADER, encoding="bgr8", width=4, height=2, data=bytes(range(24)))
+    jpeg = Frame(header=HEADER, encoding="jpeg", width=4, height=2, data=b"\xff\xd8not-checked")
+    written = [
+        [e.channel.topic for e in t.entries(key, msg)]
+        for key, msg in (
+            ("test/x/camera/front/frame", raw),  # the first camera: as with one camera
+            ("test/x/camera/rear/frame", raw),
+            ("test/x/camera/rear/frame", jpeg),
+            ("test/x/detector/front/detections", _detections()),
+            ("test/x/detector/rear/detections", _detections()),
+        )
+    ]
+    assert written == [
+        ["/camera/rgb/image_raw"],
+        ["/rear/camera/rgb/image_raw"],
+        ["/rear/camera/rgb/image_raw/compressed"],
+        ["/detections", "test/x/detector/front/detections"],
+        ["/rear/detections", "test/x/detector/rear/detections"],
+    ]

@@ -35,7 +35,7 @@ def _frame(seq: int) -> Frame:
 
 def _write(path: Path, frames: int, *, finish: bool) -> McapFile:
     out = McapFile(path, SETTINGS)
-    translator = Translator(Ros2Settings())
+    translator = Translator(Ros2Settings(), "front")
     for seq in range(1, frames + 1):
         frame = _frame(seq)
         for entry in translator.entries("stack/camera/front/frame", frame):
@@ -150,8 +150,8 @@ def test_a_full_queue_drops_and_counts_and_never_blocks(tmp_path: Path) -> None:
 
     counters = Counters()
     settings = RecorderSettings(queue_size=2)
-    rec = QueuedRecorder(McapFile(tmp_path / "q.mcap", settings), Translator(Ros2Settings()),
-                         settings, counters)  # fmt: skip
+    rec = QueuedRecorder(McapFile(tmp_path / "q.mcap", settings),
+                         Translator(Ros2Settings(), "front"), settings, counters)  # fmt: skip
     twist = Twist(header=Header(stamp_ns=10**18, frame_id="base", seq=1, source="controller"))
     payload = twist.encode()
     assert rec.offer("stack/controller/cmd_vel", payload, 1, slow_decode)
@@ -172,9 +172,44 @@ def test_a_writer_that_fails_says_so_and_closing_does_not_hang(tmp_path: Path) -
 
     counters = Counters()
     settings = RecorderSettings(queue_size=1)
-    rec = QueuedRecorder(McapFile(tmp_path / "f.mcap", settings), Translator(Ros2Settings()),
-                         settings, counters)  # fmt: skip
+    rec = QueuedRecorder(McapFile(tmp_path / "f.mcap", settings),
+                         Translator(Ros2Settings(), "front"), settings, counters)  # fmt: skip
     for _ in range(3):
         rec.offer("stack/controller/cmd_vel", b"", 1, broken)
     rec.close()
     assert isinstance(rec.failed, RuntimeError)
+
+
+def test_each_cameras_frames_play_back_onto_its_own_key(tmp_path: Path) -> None:
+    from common.perception_settings import CameraSettings
+    from common.settings import Config
+    from services.recorder.play import Played, frame_keys, one_pass
+
+    config = Config(cameras=(("rear", CameraSettings()),))
+    out = McapFile(tmp_path / "two.mcap", SETTINGS)
+    translator = Translator(config.ros2, config.stack.camera)
+    for seq in range(1, 5):
+        frame = _frame(seq)
+        camera = "front" if seq % 2 else "rear"
+        for entry in translator.entries(f"stack/camera/{camera}/frame", frame):
+            out.add(entry, frame.header.stamp_ns + 1000)
+    out.close()
+    assert frame_keys(config) == {
+        "/camera/rgb/image_raw": "stack/camera/front/frame",
+        "/camera/rgb/image_raw/compressed": "stack/camera/front/frame",
+        "/rear/camera/rgb/image_raw": "stack/camera/rear/frame",
+        "/rear/camera/rgb/image_raw/compressed": "stack/camera/rear/frame",
+    }
+    put: list[tuple[str, int]] = []
+    topics = ["/camera/rgb/image_raw", "/rear/camera/rgb/image_raw"]
+    one_pass(config, tmp_path / "two.mcap", topics, 1000.0,
+             lambda key, b: put.append((key, Frame.decode(b).header.seq)),
+             threading.Event(), Played())  # fmt: skip
+    assert put == [("stack/camera/front/frame", 1), ("stack/camera/rear/frame", 2),
+                   ("stack/camera/front/frame", 3), ("stack/camera/rear/frame", 4)]  # fmt: skip
+    # A one-camera stack plays every image topic onto its camera, as before.
+    put.clear()
+    one_pass(Config(), tmp_path / "two.mcap", topics, 1000.0,
+             lambda key, b: put.append((key, Frame.decode(b).header.seq)),
+             threading.Event(), Played())  # fmt: skip
+    assert {key for key, _ in put} == {"stack/camera/front/frame"} and len(put) == 4

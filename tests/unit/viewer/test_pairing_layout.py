@@ -101,3 +101,30 @@ def test_a_port_in_use_is_one_config_error() -> None:
         config = Config(viewer=ViewerSettings(port=port))
         with pytest.raises(ConfigError, match=f"viewer.port: cannot listen on 127.0.0.1:{port}"):
             start_front(config, inner_port=1)
+
+
+def test_each_camera_has_its_own_topics_the_first_keeps_the_one_camera_ones() -> None:
+    assert channels.camera_topics("front", "front") == (channels.IMAGE, channels.ANNOTATIONS)
+    assert channels.camera_topics("front", "rear") == (
+        "/camera/rear/image",
+        "/camera/rear/annotations",
+    )
+
+
+def test_the_layout_shows_an_image_panel_per_camera() -> None:
+    assert layout.layout_json(["rear"]) == layout.layout_json()  # one camera: the shipped one
+    built = json.loads(layout.layout_json(["front", "rear"]))
+
+    def panels(node: object) -> list[dict[str, object]]:
+        if isinstance(node, dict):
+            here = [node] if node.get("panelType") == "Image" else []
+            return here + [p for v in node.values() for p in panels(v)]
+        if isinstance(node, list):
+            return [p for v in node for p in panels(v)]
+        return []
+
+    modes = [p["config"]["imageMode"] for p in panels(built)]  # type: ignore[index]
+    assert [(m["imageTopic"], list(m["annotations"])) for m in modes] == [
+        (channels.IMAGE, [channels.ANNOTATIONS]),
+        ("/camera/rear/image", ["/camera/rear/annotations"]),
+    ]

@@ -47,13 +47,13 @@ def test_match_frame_pairs_within_a_class_best_first_each_box_once() -> None:
 
 def test_compare_runs_counts_matches_commands_and_latency() -> None:
     a = Run(Path("a"), detections={
-        1: _frame(1, [("person", [0, 0, 10, 10])]),
-        2: _frame(2, [("person", [0, 0, 10, 10]), ("cup", [5, 5, 6, 6])]),
-        3: _frame(3, [("person", [0, 0, 10, 10])]),  # only A detected on frame 3
+        ("front", 1): _frame(1, [("person", [0, 0, 10, 10])]),
+        ("front", 2): _frame(2, [("person", [0, 0, 10, 10]), ("cup", [5, 5, 6, 6])]),
+        ("front", 3): _frame(3, [("person", [0, 0, 10, 10])]),  # only A detected on frame 3
     })  # fmt: skip
     b = Run(Path("b"), detections={
-        1: _frame(1, [("person", [0, 0, 10, 10])], stamp=50_000_000_000),
-        2: _frame(2, [("person", [30, 30, 40, 40])], stamp=51_000_000_000),
+        ("front", 1): _frame(1, [("person", [0, 0, 10, 10])], stamp=50_000_000_000),
+        ("front", 2): _frame(2, [("person", [30, 30, 40, 40])], stamp=51_000_000_000),
     })  # fmt: skip
     a.commands = [
         CommandRecord(1_100_000_000, 1_000_000_000, 0.3, 0.1),
@@ -83,8 +83,64 @@ def test_compare_runs_counts_matches_commands_and_latency() -> None:
 
 
 def test_the_report_of_runs_with_nothing_in_common_says_so() -> None:
-    a = Run(Path("a"), detections={1: _frame(1, [])})
-    c = compare_runs(a, Run(Path("b"), detections={2: _frame(2, [])}))
+    a = Run(Path("a"), detections={("front", 1): _frame(1, [])})
+    c = compare_runs(a, Run(Path("b"), detections={("front", 2): _frame(2, [])}))
     md = report_markdown(c, "a", "b")
     assert "Detector: A unknown; B unknown." in md
     assert "both 0" in md and "0 frames: |dv| mean / max - m/s" in md
+
+
+def test_two_cameras_are_matched_each_on_its_own_and_reported_per_camera() -> None:
+    # Both cameras number their frames from 1: frame 1 of the rear camera is not the front's.
+    person, dog = ("person", [0, 0, 10, 10]), ("dog", [20, 20, 40, 40])
+    a = Run(Path("a"), detections={
+        ("front", 1): _frame(1, [person]),
+        ("rear", 1): _frame(1, [dog]),
+        ("rear", 2): _frame(2, [dog, person]),
+    })  # fmt: skip
+    b = Run(Path("b"), detections={
+        ("front", 1): _frame(1, [person]),
+        ("rear", 1): _frame(1, [("dog", [20, 20, 39, 40])]),
+        ("rear", 2): _frame(2, [person]),  # the dog missed
+        ("rear", 3): _frame(3, [dog]),  # only B detected on it
+    })  # fmt: skip
+    c = compare_runs(a, b, iou_min=0.5)
+    assert (c.frames, c.frames_both) == ((3, 4), 3)
+    assert (c.detections, c.matched) == ((4, 3), 3)
+    front, rear = c.per_camera["front"], c.per_camera["rear"]
+    assert (front.frames, front.frames_both, front.detections, front.matched) == (
+        (1, 1), 1, (1, 1), 1,
+    )  # fmt: skip
+    assert (rear.frames, rear.frames_both, rear.detections, rear.matched) == (
+        (2, 3), 2, (3, 2), 2,
+    )  # fmt: skip
+    assert rear.match_rate == pytest.approx(2 / 3)
+    md = report_markdown(c, "a", "b")
+    assert "(matched by camera and sequence number)" in md
+    assert "| front | 1 | 1 | 1 | 1 | 1 | 1 | 100.0 % |" in md
+    assert "| rear | 2 | 3 | 2 | 3 | 2 | 2 | 66.7 % |" in md
+    # One camera: no per-camera table, the report as it always was.
+    solo = Run(Path("s"), detections={("front", 1): _frame(1, [person])})
+    plain = report_markdown(compare_runs(solo, solo), "s", "s")
+    assert "## Per camera" not in plain and "(matched by sequence number)" in plain
+
+
+def test_a_recording_of_two_cameras_reads_back_by_camera_and_frame(tmp_path: Path) -> None:
+    from common.recorder_settings import RecorderSettings
+    from common.ros2_settings import Ros2Settings
+    from services.recorder.channels import Translator
+    from services.recorder.writer import McapFile
+    from tools.compare.runs import load_run
+
+    out = McapFile(tmp_path / "two.mcap", RecorderSettings())
+    translator = Translator(Ros2Settings(), "front")
+    for camera, label in (("front", "person"), ("rear", "dog")):
+        dets = _frame(1, [(label, [0, 0, 10, 10])])
+        for entry in translator.entries(f"test/ab/detector/{camera}/detections", dets):
+            out.add(entry, dets.header.stamp_ns)
+    out.close()
+    run = load_run(tmp_path / "two.mcap")
+    assert {frame: d.class_names for frame, d in run.detections.items()} == {
+        ("front", 1): ("person",),
+        ("rear", 1): ("dog",),
+    }
