@@ -101,18 +101,13 @@ def _static_shape(
 
 
 class CudaBackend:
-    """An :class:`OnnxModule` on one device with static input and output buffers."""
+    """An :class:`OnnxModule` on one device with static input and output buffers, opened by
+    :func:`load` (whose options, with their defaults, these are)."""
 
     name = "cuda"
 
     def __init__(
-        self,
-        model_path: Path,
-        *,
-        device: str = "cuda:0",
-        precision: str = "fp16",
-        cuda_graphs: bool = True,
-        batch: int | None = None,
+        self, model_path: Path, *, device: str, precision: str, cuda_graphs: bool, batch: int | None
     ) -> None:
         dev = _device(device, precision)
         model = read_model(model_path)
