@@ -460,7 +460,7 @@ def tracker_section(args: argparse.Namespace) -> None:
     except ImportError:
         trackers_ok = False
         missing("trackers", "ByteTrack comparison")
-    from services.detector.model_files import default_model_path
+    from modelprep.files import default_model_path
     from services.detector.pipeline import Detector
 
     model = default_model_path(Path(args.models_dir) if args.models_dir else None)
