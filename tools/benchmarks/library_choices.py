@@ -54,13 +54,13 @@ REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
+from common.boxes import MAX_DETECTIONS, Boxes  # noqa: E402
 from common.codec import Message  # noqa: E402
 from common.config_file import load_config  # noqa: E402
 from common.errors import ConfigError, DecodeError  # noqa: E402
 from common.messages import (  # noqa: E402
     FRAME_ENCODINGS,
     MAX_COMMAND,
-    MAX_DETECTIONS,
     MAX_IMAGE_SIDE,
     MAX_NAME_CHARS,
     Detections,
@@ -414,7 +414,6 @@ def evaluate(
 
 
 def ours_tracker() -> Callable[..., npt.NDArray[Any]]:
-    from common.boxes import Boxes
     from services.detector.tracker import Tracker
 
     tr = Tracker(TrackerSettings())
@@ -613,10 +612,12 @@ def _constrained(
 ) -> Any:
     """``hint`` with our BOUNDS (each item of a tuple) and LENGTHS as library constraints;
     ``meta(ge=, le=)`` / ``meta(min_length=, max_length=)`` makes the library's annotation."""
+    # Annotated made with run-time values: through Any, as mypy cannot check such a type.
+    annotated: Any = Annotated
     if typing.get_origin(hint) is tuple:
         args = typing.get_args(hint)
         if bound is not None:
-            item = Annotated[args[0], meta(ge=bound[0], le=bound[1])]
+            item = annotated[args[0], meta(ge=bound[0], le=bound[1])]
             args = (item, ...) if args[-1] is Ellipsis else (item,) * len(args)
         hint = tuple[args]  # type: ignore[valid-type]
         if length is not None:
@@ -809,7 +810,7 @@ def settings_section(args: argparse.Namespace) -> None:
         print(f"  load + validate {path.relative_to(REPO)} (TOML parse included), per load:")
         ref = None
         for label, loader, module in loaders:
-            us = per_call_us(lambda loader=loader: loader(path))
+            us = per_call_us(functools.partial(loader, path))
             ref = us if ref is None else ref
             imp = cold_import_ms(module)
             print(
@@ -1038,11 +1039,13 @@ def sample_messages() -> dict[str, bytes]:
         header=header,
         image_width=640,
         image_height=480,
-        class_ids=rng.integers(0, 80, 20).astype(np.int32),
+        boxes=Boxes(
+            xyxy=np.hstack([xy, xy + wh]),
+            class_ids=rng.integers(0, 80, 20).astype(np.int32),
+            scores=rng.uniform(0.25, 1, 20).astype(np.float32),
+            track_ids=np.arange(20, dtype=np.int32),
+        ),
         class_names=("person",) * 20,
-        scores=rng.uniform(0.25, 1, 20).astype(np.float32),
-        xyxy=np.hstack([xy, xy + wh]),
-        track_ids=np.arange(20, dtype=np.int32),
         timing_ms={"preprocess": 1.5, "inference": 80.0, "postprocess": 2.0},
         model="yolov5s-coco.onnx",
         backend="onnx",
@@ -1157,11 +1160,11 @@ def codec_section(args: argparse.Namespace) -> None:
     print(f"  decode + validate, per message{f' (msgspec {version})' if theirs else ''}:")
     for label, payload in msgs.items():
         kind = label.split()[0]
-        our_us = per_call_us(lambda k=kind, p=payload: ours[k].decode(p))
+        our_us = per_call_us(functools.partial(ours[kind].decode, payload))
         line = f"    {label:<11} {len(payload):>7} B   ours {our_us:>7.1f} us"
         if theirs is not None:
             dec = theirs[kind]
-            their_us = per_call_us(lambda d=dec, p=payload: d.decode(p))
+            their_us = per_call_us(functools.partial(dec.decode, payload))
             line += f"   msgspec {their_us:>7.1f} us   ours/msgspec {ratio(our_us, their_us)}"
         print(line)
     enc_us = per_call_us(lambda: Detections.decode(msgs["Detections"]).encode())
@@ -1175,7 +1178,10 @@ def codec_section(args: argparse.Namespace) -> None:
             same.append(a.header.stamp_ns == b.header.stamp_ns and a.header.seq == b.header.seq)
             if kind == "Detections":
                 same.append(
-                    bool(np.array_equal(a.xyxy, b.xyxy))
+                    all(
+                        np.array_equal(getattr(a.boxes, k), getattr(b, k))
+                        for k in ("xyxy", "scores", "class_ids", "track_ids")
+                    )
                     and tuple(a.class_names) == tuple(b.class_names)
                 )
             if kind == "Frame":
