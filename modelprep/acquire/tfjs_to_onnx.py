@@ -29,65 +29,12 @@ import onnx
 from onnx import helper
 
 from common.errors import ModelError
-from modelprep.acquire.tfjs_graph import TfGraph, TfNode, load_tfjs_graph
+from modelprep.acquire.tfjs_graph import TfGraph, TfNode
 from modelprep.acquire.tfjs_onnx_builder import GraphBuilder, Layout
 from modelprep.acquire.tfjs_ops import TRANSLATORS
 
 OPSET = 17  # Resize-13 semantics, and parsed by TensorRT 8.6+/10
 IR_VERSION = 8  # the IR that opset 17 shipped with; older runtimes reject newer IRs
-
-
-def convert_tfjs_to_onnx(
-    model_json: Path,
-    out_path: Path,
-    *,
-    names: Sequence[str],
-    metadata: Mapping[str, str],
-    box_scale: Sequence[float] | None = None,
-    dynamic_batch: bool = False,
-) -> None:
-    """Convert ``model_json`` (+ shards) into ``out_path``; see convert_tfjs_graph."""
-    convert_tfjs_graph(
-        load_tfjs_graph(model_json),
-        out_path,
-        names=names,
-        metadata=metadata,
-        box_scale=box_scale,
-        dynamic_batch=dynamic_batch,
-    )
-
-
-def convert_tfjs_graph(
-    graph: TfGraph,
-    out_path: Path,
-    *,
-    names: Sequence[str],
-    metadata: Mapping[str, str],
-    box_scale: Sequence[float] | None = None,
-    input_name: str = "images",
-    output_name: str = "output0",
-    dynamic_batch: bool = False,
-) -> None:
-    """Write the ONNX translation of ``graph``.
-
-    ``names`` becomes the Ultralytics-style ``names`` metadata ("{0: 'person', ...}").
-    ``box_scale`` (4 factors) multiplies channels 0..3 of the output's last axis, turning the
-    TF.js normalised cx, cy, w, h into input pixels like Ultralytics' own ONNX export.
-    ``dynamic_batch``: the model takes any batch, not the graph's 1 (see the module's doc).
-    """
-    model = build_onnx_model(
-        graph,
-        names=names,
-        metadata=metadata,
-        box_scale=box_scale,
-        input_name=input_name,
-        output_name=output_name,
-        dynamic_batch=dynamic_batch,
-    )
-    try:
-        onnx.save(model, str(out_path))
-    except OSError as exc:
-        raise ModelError(f"cannot write {out_path}: {exc.strerror or exc}") from exc
 
 
 def build_onnx_model(
@@ -100,7 +47,12 @@ def build_onnx_model(
     output_name: str = "output0",
     dynamic_batch: bool = False,
 ) -> onnx.ModelProto:
-    """Translate ``graph`` into a checked in-memory ONNX model."""
+    """Translate ``graph`` into a checked in-memory ONNX model.
+
+    ``names`` becomes the Ultralytics-style ``names`` metadata ("{0: 'person', ...}").
+    ``box_scale`` (4 factors) multiplies channels 0..3 of the output's last axis, turning the
+    TF.js normalised cx, cy, w, h into input pixels like Ultralytics' own ONNX export.
+    """
     if len(graph.inputs) != 1 or len(graph.outputs) != 1:
         raise ModelError(
             f"expected one input and one output, got {list(graph.inputs)} and {list(graph.outputs)}"
@@ -131,6 +83,14 @@ def build_onnx_model(
         first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ModelError(f"translated graph failed the ONNX checker: {first_line}") from exc
     return model
+
+
+def save_onnx(model: onnx.ModelProto, out_path: Path) -> None:
+    """Write ``model`` to ``out_path``; a file that cannot be written is a ModelError."""
+    try:
+        onnx.save(model, str(out_path))
+    except OSError as exc:
+        raise ModelError(f"cannot write {out_path}: {exc.strerror or exc}") from exc
 
 
 def _reachable_nodes(graph: TfGraph) -> list[TfNode]:

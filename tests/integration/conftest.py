@@ -44,6 +44,20 @@ def wait_for(
     )
 
 
+def run_detector_cli(*args: str | Path, timeout: float = 240) -> subprocess.CompletedProcess[str]:
+    """The detector's command line as a user runs it: ``serve`` is the detector service's,
+    every other command the detector tool's."""
+    module = "services.detector" if args[0] == "serve" else "tools.detector"
+    return subprocess.run(
+        [sys.executable, "-m", module, *map(str, args)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
 def write_config(tmp: Path, **tables: dict[str, Any]) -> Path:
     """A stack config on a free port, with a unique key prefix, multicast off."""
     base: dict[str, dict[str, Any]] = {

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -17,7 +16,7 @@ import pytest
 from skimage import data
 
 from runtimes.select import probe_cuda, probe_tensorrt
-from tests.integration.conftest import REPO, write_config
+from tests.integration.conftest import run_detector_cli, write_config
 
 pytestmark = pytest.mark.integration
 
@@ -41,22 +40,6 @@ def photos(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
-def _module(command: str | Path) -> str:
-    """``serve`` is the detector service's; every other command is the detector tool's."""
-    return "services.detector" if command == "serve" else "tools.detector"
-
-
-def run_cli(*args: str | Path, timeout: float = 240) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", _module(args[0]), *map(str, args)],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        check=False,
-    )
-
-
 def assert_one_line(proc: subprocess.CompletedProcess[str], code: int, line: str) -> None:
     assert proc.returncode == code, proc.stderr
     assert proc.stderr.strip().splitlines() == [line], proc.stderr
@@ -67,7 +50,7 @@ def assert_one_line(proc: subprocess.CompletedProcess[str], code: int, line: str
 def test_detect_on_tensorrt_without_it_is_one_line_and_exit_4(
     default_model: Path, photos: Path
 ) -> None:
-    proc = run_cli("detect", photos, "--model", default_model, "--backend", "tensorrt")
+    proc = run_detector_cli("detect", photos, "--model", default_model, "--backend", "tensorrt")
     assert_one_line(proc, EXIT_BACKEND, NO_TRT_LINE)
 
 
@@ -79,7 +62,7 @@ def test_detect_on_tensorrt_without_it_is_one_line_and_exit_4(
 def test_export_without_tensorrt_is_one_line_and_exit_4(
     default_model: Path, extra: list[str]
 ) -> None:
-    proc = run_cli("export", "--backend", "tensorrt", "--model", default_model, *extra)
+    proc = run_detector_cli("export", "--backend", "tensorrt", "--model", default_model, *extra)
     assert_one_line(proc, EXIT_BACKEND, NO_TRT_LINE)
 
 
@@ -88,7 +71,7 @@ def test_serve_on_tensorrt_without_it_exits_4_with_one_error_line(
     default_model: Path, tmp_path: Path
 ) -> None:
     config = write_config(tmp_path, detector={"model": str(default_model)})
-    proc = run_cli("serve", "--config", config, "--backend", "tensorrt", timeout=120)
+    proc = run_detector_cli("serve", "--config", config, "--backend", "tensorrt", timeout=120)
     assert proc.returncode == EXIT_BACKEND, proc.stderr
     errors = [line for line in proc.stderr.splitlines() if "error" in line.lower()]
     assert errors == [NO_TRT_LINE], proc.stderr
@@ -96,7 +79,9 @@ def test_serve_on_tensorrt_without_it_exits_4_with_one_error_line(
 
 
 def test_serve_refuses_an_unknown_backend_with_one_line(tmp_path: Path) -> None:
-    proc = run_cli("serve", "--config", write_config(tmp_path), "--backend", "tpu", timeout=60)
+    proc = run_detector_cli(
+        "serve", "--config", write_config(tmp_path), "--backend", "tpu", timeout=60
+    )
     assert_one_line(
         proc,
         2,
@@ -110,7 +95,9 @@ def test_serve_refuses_an_unknown_backend_with_one_line(tmp_path: Path) -> None:
 def test_detect_auto_falls_back_to_a_cpu_backend_and_says_so(
     default_model: Path, photos: Path
 ) -> None:
-    proc = run_cli("detect", photos, "--model", default_model, "--backend", "auto", "--json")
+    proc = run_detector_cli(
+        "detect", photos, "--model", default_model, "--backend", "auto", "--json"
+    )
     assert proc.returncode == 0, proc.stderr
     # Without a GPU: OpenVINO on a CPU with VNNI or AMX (the dev extra installs it), else onnx.
     from runtimes import select
@@ -124,7 +111,7 @@ def test_detect_auto_falls_back_to_a_cpu_backend_and_says_so(
 
 
 def test_benchmark_compares_backends_side_by_side(default_model: Path, photos: Path) -> None:
-    proc = run_cli(
+    proc = run_detector_cli(
         "benchmark", "--model", default_model, "--backend", "onnx", "--backend", "auto",
         "--runs", "3", "--warmup", "1", "--images", photos, "--json",
     )  # fmt: skip
@@ -149,7 +136,7 @@ def test_benchmark_compares_backends_side_by_side(default_model: Path, photos: P
 def test_benchmark_on_a_missing_backend_is_one_line(default_model: Path) -> None:
     if probe_tensorrt() is None:
         pytest.skip("TensorRT is present here")
-    proc = run_cli(
+    proc = run_detector_cli(
         "benchmark", "--model", default_model, "--backend", "onnx", "--backend", "tensorrt"
     )
     assert_one_line(proc, EXIT_BACKEND, NO_TRT_LINE)

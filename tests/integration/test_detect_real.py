@@ -9,7 +9,6 @@ from __future__ import annotations
 import importlib.resources
 import json
 import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -23,10 +22,9 @@ from skimage import data
 
 from services.detector.decode import Family
 from services.detector.pipeline import Detector
+from tests.integration.conftest import run_detector_cli
 
 pytestmark = pytest.mark.integration
-
-REPO = Path(__file__).resolve().parents[2]
 
 # Hand-labelled boxes, x1, y1, x2, y2 in image pixels.
 CHELSEA_CAT = (0.0, 0.0, 395.0, 300.0)  # 451x300: the cat's head fills most of the frame
@@ -87,22 +85,6 @@ def test_yolov8_layout_on_nudenet_weights() -> None:
 # --- the command line ---------------------------------------------------------------------------
 
 
-def _module(command: str | Path) -> str:
-    """``serve`` is the detector service's; every other command is the detector tool's."""
-    return "services.detector" if command == "serve" else "tools.detector"
-
-
-def run_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", _module(args[0]), *map(str, args)],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=240,
-        check=False,
-    )
-
-
 def assert_one_line_error(proc: subprocess.CompletedProcess[str], code: int, text: str) -> None:
     assert proc.returncode == code, proc.stderr
     assert "Traceback" not in proc.stderr
@@ -124,7 +106,7 @@ def photo_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_cli_detect_folder_reports_bad_images_and_goes_on(
     default_model: Path, photo_dir: Path, tmp_path: Path
 ) -> None:
-    proc = run_cli(
+    proc = run_detector_cli(
         "detect", photo_dir, tmp_path / "nowhere.jpg", "--model", default_model, "--json",
         "--save-dir", tmp_path / "out",
     )  # fmt: skip
@@ -150,7 +132,7 @@ def test_cli_detect_folder_reports_bad_images_and_goes_on(
 
 
 def test_cli_detect_text_output(default_model: Path, photo_dir: Path) -> None:
-    proc = run_cli("detect", photo_dir / "a_chelsea.png", "--model", default_model)
+    proc = run_detector_cli("detect", photo_dir / "a_chelsea.png", "--model", default_model)
     assert proc.returncode == 0, proc.stderr
     assert "a_chelsea.png: 451x300, 1 detection(s): cat" in proc.stdout
 
@@ -158,7 +140,7 @@ def test_cli_detect_text_output(default_model: Path, photo_dir: Path) -> None:
 def test_cli_text_file_as_model(tmp_path: Path, photo_dir: Path) -> None:
     model = tmp_path / "model.onnx"
     model.write_text("this is a text file\n")
-    proc = run_cli("detect", photo_dir / "a_chelsea.png", "--model", model)
+    proc = run_detector_cli("detect", photo_dir / "a_chelsea.png", "--model", model)
     assert_one_line_error(proc, 3, "not a valid ONNX model")
 
 
@@ -177,7 +159,7 @@ def test_cli_model_with_unknown_output_shape(tmp_path: Path, photo_dir: Path) ->
     onnx.checker.check_model(model)
     path = tmp_path / "not_yolo.onnx"
     onnx.save(model, str(path))
-    proc = run_cli("detect", photo_dir / "a_chelsea.png", "--model", path)
+    proc = run_detector_cli("detect", photo_dir / "a_chelsea.png", "--model", path)
     assert_one_line_error(proc, 3, "output shape [1, 7] matches no YOLO family")
 
 
@@ -192,12 +174,14 @@ def test_cli_model_with_unknown_output_shape(tmp_path: Path, photo_dir: Path) ->
 def test_cli_bad_settings(
     default_model: Path, photo_dir: Path, extra: list[str], code: int, text: str
 ) -> None:
-    proc = run_cli("detect", photo_dir / "a_chelsea.png", "--model", default_model, *extra)
+    proc = run_detector_cli("detect", photo_dir / "a_chelsea.png", "--model", default_model, *extra)
     assert_one_line_error(proc, code, text)
 
 
 def test_cli_benchmark_json(default_model: Path) -> None:
-    proc = run_cli("benchmark", "--model", default_model, "--runs", "5", "--warmup", "1", "--json")
+    proc = run_detector_cli(
+        "benchmark", "--model", default_model, "--runs", "5", "--warmup", "1", "--json"
+    )
     assert proc.returncode == 0, proc.stderr
     report = json.loads(proc.stdout)
     for key in ("p50_ms", "p95_ms"):
@@ -211,6 +195,6 @@ def test_cli_benchmark_json(default_model: Path) -> None:
 
 
 def test_cli_fetch_model_prints_the_present_model(default_model: Path) -> None:
-    proc = run_cli("fetch-model", "--models-dir", default_model.parent)
+    proc = run_detector_cli("fetch-model", "--models-dir", default_model.parent)
     assert proc.returncode == 0, proc.stderr
     assert Path(proc.stdout.strip()) == default_model

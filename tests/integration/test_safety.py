@@ -39,6 +39,15 @@ def moving(raw: list[bytes], start: int = 0) -> list[Twist]:
     return [t for t in map(Twist.decode, list(raw)[start:]) if not t.is_zero]
 
 
+def started_moving(stack: Stack) -> list[bytes]:
+    """Wait for the whole stack, then for it to drive towards the cameraman: its commands (a
+    subscriber with a callback lives on, as the session's, once its handle is dropped)."""
+    stack.wait_ready(STACK)
+    _, cmds = stack.subscribe(stack.keys.cmd_vel())
+    wait_for(lambda: moving(cmds), 60, "motion towards the cameraman")
+    return cmds
+
+
 def pause(seconds: float) -> None:
     """Let the stack run for a while: the duration is the test condition, not a wait for one."""
     threading.Event().wait(seconds)
@@ -88,9 +97,7 @@ def counters(raw: list[bytes]) -> dict[str, int]:
 
 def test_estop_survives_a_killed_controller_and_a_restarted_stack(make_stack, tmp_path) -> None:  # type: ignore[no-untyped-def]
     stack: Stack = make_stack()
-    stack.wait_ready(STACK)
-    _, cmds = stack.subscribe(stack.keys.cmd_vel())
-    wait_for(lambda: moving(cmds), 60, "motion towards the cameraman")
+    cmds = started_moving(stack)
     stack.estop("engage")
     engaged = len(cmds)
 
@@ -192,9 +199,7 @@ def test_stale_future_and_replayed_detections_never_move_the_robot(make_stack) -
 
 def test_no_moving_command_on_frames_captured_before_a_detector_pause(make_stack) -> None:  # type: ignore[no-untyped-def]
     stack: Stack = make_stack()
-    stack.wait_ready(STACK)
-    _, cmds = stack.subscribe(stack.keys.cmd_vel())
-    wait_for(lambda: moving(cmds), 60, "motion towards the cameraman")
+    cmds = started_moving(stack)
     [pid] = service_pids("detector", stack.config_path)
     paused_ns = time.time_ns()
     os.kill(pid, signal.SIGSTOP)
@@ -216,9 +221,7 @@ def test_no_moving_command_on_frames_captured_before_a_detector_pause(make_stack
 
 def test_a_killed_supervisor_takes_every_service_with_it(make_stack) -> None:  # type: ignore[no-untyped-def]
     stack: Stack = make_stack()
-    stack.wait_ready(STACK)
-    _, cmds = stack.subscribe(stack.keys.cmd_vel())
-    wait_for(lambda: moving(cmds), 60, "motion towards the cameraman")
+    cmds = started_moving(stack)
 
     second = subprocess.run(
         [sys.executable, "-m", "deploy.supervisor", "--config", str(stack.config_path)],

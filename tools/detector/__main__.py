@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from common.cli import Command, service_main
+from common.cli import Command, options_from, service_main
 from common.errors import StackError
 from common.images import SAMPLES
 from common.lifecycle import EXIT_INTERRUPTED, exit_code, run_main
@@ -62,21 +62,8 @@ def _detect_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def detect(args: argparse.Namespace) -> int:
-    return cli.run_detect(
-        cli.DetectOptions(
-            paths=tuple(args.paths),
-            model=args.model,
-            backend=args.backend,
-            device=args.device,
-            imgsz=args.imgsz,
-            conf=args.conf,
-            iou=args.iou,
-            max_det=args.max_det,
-            classes=args.classes,
-            as_json=args.json,
-            save_dir=args.save_dir,
-        )
-    )
+    options = options_from(cli.DetectOptions, args, paths=tuple(args.paths), as_json=args.json)
+    return cli.run_detect(options)
 
 
 def _benchmark_arguments(p: argparse.ArgumentParser) -> None:
@@ -106,18 +93,9 @@ def _benchmark_arguments(p: argparse.ArgumentParser) -> None:
 def benchmark(args: argparse.Namespace) -> int:
     from tools.benchmarks.detector import BenchmarkOptions
 
+    backends = tuple(args.backend or ())
     return cli.run_benchmark(
-        BenchmarkOptions(
-            model=args.model,
-            backends=tuple(args.backend or ()),
-            runs=args.runs,
-            warmup=args.warmup,
-            image=args.image,
-            images=args.images,
-            conf=args.conf,
-            as_json=args.json,
-            variants=args.variants,
-        )
+        options_from(BenchmarkOptions, args, backends=backends, as_json=args.json)
     )
 
 
@@ -149,17 +127,7 @@ def _export_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def export(args: argparse.Namespace) -> int:
-    return cli.run_export(
-        cli.ExportOptions(
-            backend=args.backend,
-            model=args.model,
-            precision=args.precision,
-            calib=args.calib,
-            batch=args.batch,
-            workspace_gb=args.workspace_gb,
-            cache_dir=args.cache_dir,
-        )
-    )
+    return cli.run_export(options_from(cli.ExportOptions, args))
 
 
 #: In help order.

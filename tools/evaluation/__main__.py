@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from common.cli import Command, service_main
+from common.cli import Command, options_from, service_main
 from common.lifecycle import run_main
 
 
@@ -43,16 +43,7 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
 def evaluate(args: argparse.Namespace) -> int:
     from tools.evaluation.evaluate import EvaluateOptions, run
 
-    options = EvaluateOptions(
-        dataset=args.dataset,
-        images=args.images,
-        model=args.model,
-        backend=args.backend,
-        conf=args.conf,
-        iou=args.iou,
-        conf_threshold=args.conf_threshold,
-        as_json=args.json,
-    )
+    options = options_from(EvaluateOptions, args, as_json=args.json)
     return run(options)  # Ctrl-C: KeyboardInterrupt, exit 130
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from common.cli import Command, service_main
+from common.cli import Command, options_from, service_main
 from common.lifecycle import run_main, setup_logging, stop_event
 
 
@@ -40,11 +40,10 @@ def report(args: argparse.Namespace) -> int:
     from tools.report.report import ReportOptions, run
 
     setup_logging("report", "WARNING")
-    options = ReportOptions(
-        out=args.out,
-        config=args.config,
+    options = options_from(
+        ReportOptions,
+        args,
         duration_s=args.duration,
-        from_file=args.from_file,
         benchmarks=tuple(args.benchmark or ()),
         startup_timeout_s=args.startup_timeout,
     )

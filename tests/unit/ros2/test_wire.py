@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import Any, Literal
 
 import pytest
 import xxhash
@@ -35,6 +35,14 @@ TWIST = "geometry_msgs/msg/Twist"
 TWIST_HASH = "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
 DETS_HASH = "RIHS01_214274120007f4a683866481336b70310268cfa107aebe9d594a6acf75bda968"
 ZID = "a1b2c3d4e5f60718293a4b5c6d7e8f90"
+#: A plain node's fields, as node_token and endpoint_token take them: tests change a few.
+NODE: dict[str, Any] = {"domain_id": 0, "zid": ZID, "nid": 0, "namespace": "/", "node": "n"}
+
+
+def _endpoint(kind: Literal["MP", "MS"], **fields: Any) -> str:
+    """endpoint_token of a plain node's Twist endpoint on Jazzy, with ``fields`` changed."""
+    twist = {"eid": 1, "topic": "/t", "ros_type": TWIST, "distro": RosDistro.JAZZY}
+    return endpoint_token(kind, **(NODE | twist | fields))
 
 
 def test_dds_type_names() -> None:
@@ -196,15 +204,8 @@ def test_node_token() -> None:
         f"@ros2_lv/5/{ZID}/0/0/NN/%secure/%robot1/bridge"
     )
     for bad in ({"namespace": ""}, {"node": ""}, {"zid": ""}, {"zid": "a/b"}, {"node": "a*"}):
-        kwargs: dict[str, Any] = {
-            "domain_id": 0,
-            "zid": ZID,
-            "nid": 0,
-            "namespace": "/",
-            "node": "n",
-        } | bad
         with pytest.raises(ValueError):
-            node_token(**kwargs)
+            node_token(**(NODE | bad))
 
 
 @pytest.mark.parametrize(
@@ -212,27 +213,13 @@ def test_node_token() -> None:
     [(RosDistro.HUMBLE, "TypeHashNotSupported"), (RosDistro.JAZZY, TWIST_HASH)],
 )
 def test_endpoint_tokens(distro: RosDistro, hash_chunk: str) -> None:
-    common: dict[str, Any] = {
-        "domain_id": 0,
-        "zid": ZID,
-        "nid": 0,
-        "namespace": "/",
-        "node": "zstack_bridge",
-        "ros_type": TWIST,
-        "distro": distro,
-    }
-    publisher = endpoint_token("MP", eid=1, topic="/cmd_vel", **common)
+    bridge = {"node": "zstack_bridge", "distro": distro}
+    publisher = _endpoint("MP", eid=1, topic="/cmd_vel", **bridge)
     assert publisher == (
         f"@ros2_lv/0/{ZID}/0/1/MP/%/%/zstack_bridge/%cmd_vel/"
         f"geometry_msgs::msg::dds_::Twist_/{hash_chunk}/::,10:,:,:,,"
     )
-    subscriber = endpoint_token(
-        "MS",
-        eid=2,
-        topic="/robot1/cmd_vel",
-        qos=SENSOR_DATA_QOS,
-        **common,
-    )
+    subscriber = _endpoint("MS", eid=2, topic="/robot1/cmd_vel", qos=SENSOR_DATA_QOS, **bridge)
     assert subscriber == (
         f"@ros2_lv/0/{ZID}/0/2/MS/%/%/zstack_bridge/%robot1%cmd_vel/"
         f"geometry_msgs::msg::dds_::Twist_/{hash_chunk}/2::,5:,:,:,,"
@@ -245,10 +232,8 @@ def test_endpoint_tokens(distro: RosDistro, hash_chunk: str) -> None:
 
 
 def test_endpoint_token_joins_a_relative_topic_to_the_namespace() -> None:
-    token = endpoint_token(
+    token = _endpoint(
         "MP",
-        domain_id=0,
-        zid=ZID,
         nid=1,
         eid=4,
         namespace="/robot1",
@@ -268,15 +253,4 @@ def test_endpoint_token_joins_a_relative_topic_to_the_namespace() -> None:
 
 def test_endpoint_token_refuses_other_kinds() -> None:
     with pytest.raises(ValueError):
-        endpoint_token(
-            "SS",  # type: ignore[arg-type]
-            domain_id=0,
-            zid=ZID,
-            nid=0,
-            eid=1,
-            namespace="/",
-            node="n",
-            topic="/t",
-            ros_type=TWIST,
-            distro=RosDistro.JAZZY,
-        )
+        _endpoint("SS")  # type: ignore[arg-type]

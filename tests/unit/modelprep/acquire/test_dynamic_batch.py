@@ -13,7 +13,8 @@ import onnxruntime as ort
 import pytest
 
 from common.errors import ModelError
-from modelprep.acquire.tfjs_to_onnx import convert_tfjs_to_onnx
+from modelprep.acquire.tfjs_graph import load_tfjs_graph
+from modelprep.acquire.tfjs_to_onnx import build_onnx_model, save_onnx
 from tests.unit.modelprep.acquire.tfjs_models import TfjsModel, fused_conv
 
 RNG = np.random.default_rng(11)
@@ -41,6 +42,20 @@ def _head(out_size: tuple[int, int]) -> tuple[TfjsModel, str]:
     box = m.op("box", "StridedSlice", [tr, *consts], ellipsis_mask=1)
     out = m.op("flat", "Reshape", [box, m.const("shape2", [-1, 2 * cells, 4], np.int32)])
     return m, out
+
+
+def convert_tfjs_to_onnx(
+    model_json: Path,
+    path: Path,
+    *,
+    names: list[str],
+    metadata: dict[str, str],
+    dynamic_batch: bool = False,
+) -> None:
+    """The fetch's own steps: the TF.js graph, translated, then saved."""
+    graph = load_tfjs_graph(model_json)
+    save_onnx(build_onnx_model(graph, names=names, metadata=metadata, dynamic_batch=dynamic_batch),
+              path)  # fmt: skip
 
 
 def _convert(tmp_path: Path, model: TfjsModel, out: str, dynamic: bool) -> ort.InferenceSession:

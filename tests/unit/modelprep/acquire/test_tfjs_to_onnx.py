@@ -7,6 +7,7 @@ converter.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -17,11 +18,26 @@ import onnxruntime as ort
 import pytest
 
 from common.errors import ModelError
-from modelprep.acquire.tfjs_to_onnx import convert_tfjs_to_onnx
+from modelprep.acquire.tfjs_graph import load_tfjs_graph
+from modelprep.acquire.tfjs_to_onnx import build_onnx_model, save_onnx
 from tests.unit.modelprep.acquire.tfjs_models import TfjsModel, fused_conv
 
 Array = npt.NDArray[Any]
 RNG = np.random.default_rng(7)
+
+
+def _convert(
+    model_json: Path,
+    names: Sequence[str] = (),
+    metadata: Mapping[str, str] | None = None,
+    box_scale: tuple[float, ...] | None = None,
+) -> Path:
+    """Translate ``model_json`` (+ shards) as the fetch does, into model.onnx beside it."""
+    onnx_path = model_json.with_name("model.onnx")
+    graph = load_tfjs_graph(model_json)
+    model = build_onnx_model(graph, names=names, metadata=metadata or {}, box_scale=box_scale)
+    save_onnx(model, onnx_path)
+    return onnx_path
 
 
 def _run(
@@ -32,13 +48,8 @@ def _run(
     box_scale: tuple[float, ...] | None = None,
 ) -> Array:
     """Convert, run in ORT (feeding NCHW for 4-D inputs) and return the output."""
-    onnx_path = tmp_path / "model.onnx"
-    convert_tfjs_to_onnx(
-        model.write(tmp_path, output),
-        onnx_path,
-        names=["a", "b"],
-        metadata={"task": "detect"},
-        box_scale=box_scale,
+    onnx_path = _convert(
+        model.write(tmp_path, output), ["a", "b"], {"task": "detect"}, box_scale=box_scale
     )
     session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
     feed = x.transpose(0, 3, 1, 2) if x.ndim == 4 else x
@@ -263,13 +274,7 @@ def test_strided_slice_masks(tmp_path: Path, spec: tuple[Any, ...], index: Any) 
 def test_io_names_shapes_and_metadata(tmp_path: Path) -> None:
     model = TfjsModel((1, 8, 8, 3))
     out = model.op("sig", "Sigmoid", ["input_1"])
-    onnx_path = tmp_path / "m.onnx"
-    convert_tfjs_to_onnx(
-        model.write(tmp_path, out),
-        onnx_path,
-        names=["traffic light", "cat"],
-        metadata={"imgsz": "[8, 8]"},
-    )
+    onnx_path = _convert(model.write(tmp_path, out), ["traffic light", "cat"], {"imgsz": "[8, 8]"})
     loaded = onnx.load(str(onnx_path))
     dims = [d.dim_value for d in loaded.graph.input[0].type.tensor_type.shape.dim]
     assert (loaded.graph.input[0].name, dims) == ("images", [1, 3, 8, 8])
@@ -286,7 +291,7 @@ def test_unsupported_op_is_a_model_error_naming_it(tmp_path: Path) -> None:
     model = TfjsModel((1, 4, 4, 3))
     out = model.op("r6", "Relu6", ["input_1"])
     with pytest.raises(ModelError, match="Relu6"):
-        convert_tfjs_to_onnx(model.write(tmp_path, out), tmp_path / "m.onnx", names=[], metadata={})
+        _convert(model.write(tmp_path, out))
 
 
 def test_missing_shard_and_bad_json_are_model_errors(tmp_path: Path) -> None:
@@ -295,7 +300,7 @@ def test_missing_shard_and_bad_json_are_model_errors(tmp_path: Path) -> None:
     model_json = model.write(tmp_path, "input_1")
     (tmp_path / "group1-shard1of1.bin").unlink()
     with pytest.raises(ModelError, match="shard"):
-        convert_tfjs_to_onnx(model_json, tmp_path / "m.onnx", names=[], metadata={})
+        _convert(model_json)
     model_json.write_text("{not json")
     with pytest.raises(ModelError, match="JSON"):
-        convert_tfjs_to_onnx(model_json, tmp_path / "m.onnx", names=[], metadata={})
+        _convert(model_json)
