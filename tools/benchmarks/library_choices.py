@@ -40,7 +40,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 import typing
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -55,6 +54,7 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from common.boxes import MAX_DETECTIONS, Boxes  # noqa: E402
+from common.clock import mono_ns, perf_s, wall_ns  # noqa: E402
 from common.codec import Message  # noqa: E402
 from common.config_file import load_config  # noqa: E402
 from common.errors import ConfigError, DecodeError  # noqa: E402
@@ -102,11 +102,11 @@ def per_call_us(fn: Callable[[], Any], min_s: float = 0.1, repeats: int = 7) -> 
     fn()
     best = math.inf
     for _ in range(repeats):
-        n, t0 = 0, time.perf_counter()
+        n, t0 = 0, perf_s()
         while True:
             fn()
             n += 1
-            elapsed = time.perf_counter() - t0
+            elapsed = perf_s() - t0
             if elapsed >= min_s:
                 break
         best = min(best, elapsed / n * 1e6)
@@ -348,9 +348,9 @@ def time_frames(
         for k, t in enumerate(run.times):
             keep = run.det_scores[k] >= min_score
             args = (run.det_xyxy[k][keep], run.det_scores[k][keep], run.det_classes[k][keep], t)
-            t0 = time.perf_counter()
+            t0 = perf_s()
             tracker(*args)
-            best[k] = min(best[k], (time.perf_counter() - t0) * 1e6)
+            best[k] = min(best[k], (perf_s() - t0) * 1e6)
     return best
 
 
@@ -794,9 +794,9 @@ def settings_section(args: argparse.Namespace) -> None:
         ("msgspec", build_msgspec_settings, "msgspec", "msgspec"),
     ):
         try:
-            t0 = time.perf_counter()
+            t0 = perf_s()
             loader = build()
-            build_ms = (time.perf_counter() - t0) * 1e3
+            build_ms = (perf_s() - t0) * 1e3
             loaders.append((label, loader, module))
             print(
                 f"  {label}: models built from our dataclasses in {build_ms:.0f} ms "
@@ -1023,11 +1023,11 @@ def sample_messages() -> dict[str, bytes]:
     world.t = 10.0
     image = render(world, CameraSpec())
     header = Header(
-        stamp_ns=time.time_ns(),
+        stamp_ns=wall_ns(),
         frame_id="camera",
         seq=7,
         source="camera",
-        mono_ns=time.monotonic_ns(),
+        mono_ns=mono_ns(),
         boot_id="b" * 36,
     )
     ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 80])
