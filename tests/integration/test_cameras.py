@@ -58,7 +58,14 @@ def test_each_camera_is_a_process_and_a_killed_one_restarts_alone(make_stack) ->
         **FURTHER,
     )
     arrivals = Arrivals(stack)
-    _, dets = stack.subscribe(stack.keys.detections("front"))
+    dets = {c: stack.subscribe(stack.keys.detections(c))[1] for c in SOURCES}
+
+    def detected_since(camera: str, t: float) -> list[Detections]:
+        """``camera``'s detections of frames captured after monotonic time ``t``."""
+        sent = {f.header.stamp_ns for f in arrivals.since(camera, t)}
+        found = [Detections.decode(d) for d in list(dets[camera])]
+        return [d for d in found if d.header.stamp_ns in sent]
+
     stack.wait_ready({*SERVICES.values(), "detector", "metrics"})
 
     # Every camera's frames on its own key, from its own process, with its own frame id.
@@ -68,9 +75,11 @@ def test_each_camera_is_a_process_and_a_killed_one_restarts_alone(make_stack) ->
         assert frames[-1].header.frame_id == ("camera" if camera == "front" else camera)
     sizes = {c: arrivals.since(c, 0)[-1].width for c in SOURCES}
     assert len(set(sizes.values())) == 3, sizes  # three different photos, one per camera
-    # The detector of this branch serves the first camera (every camera: the batch detector).
-    wait_for(lambda: dets, 120, "detections of the first camera")
-    assert Detections.decode(dets[-1]).header.frame_id == "camera"
+    # One detector serves every camera: each camera's detections on its own key, carrying
+    # the stamp of a frame that camera sent and that camera's frame id.
+    for camera in SOURCES:
+        got = wait_for(lambda c=camera: detected_since(c, 0), 120, f"{camera}'s detections")
+        assert got[-1].header.frame_id == ("camera" if camera == "front" else camera)
     # The supervisor shows each camera process.
     wait_for(
         lambda: all(f"{s}:ready" in stack.log() for s in SERVICES.values()),
@@ -106,6 +115,11 @@ def test_each_camera_is_a_process_and_a_killed_one_restarts_alone(make_stack) ->
         assert len(during) >= 2, (camera, back_at - killed_at)
     for service in ("camera", "camera_rear"):
         assert service_pids(service, stack.config_path) == pids[service], service
+    # ... and the detector went on serving them: detections of frames captured meanwhile.
+    for camera in ("front", "rear"):
+        wait_for(
+            lambda c=camera: detected_since(c, killed_at), 60, f"{camera} served after the kill"
+        )
     wait_for(
         lambda: "camera_left:ready(r1)" in stack.log(),
         10,
