@@ -46,6 +46,11 @@ COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
         ("recorder",),
         "the stack with and without the recorder",
     ),
+    "scale-benchmark": (
+        "tools.benchmarks",
+        ("scale",),
+        "several cameras on one detector against one stack per camera",
+    ),
     "soak": ("tools.scenarios", ("soak",), "the whole stack for a long run under a garbage flood"),
     "credentials": ("deploy.credentials", (), "write the secure profile's credentials"),
 }

@@ -1,7 +1,8 @@
-"""python -m tools.benchmarks recorder|ros2 [options]
+"""python -m tools.benchmarks recorder|ros2|scale [options]
 
 recorder runs the default stack with and without the recorder, side by side; ros2 measures
-what the ROS 2 bridge adds against the direct path. (The detector's own benchmark is
+what the ROS 2 bridge adds against the direct path; scale runs 1, 2, 4, 8 cameras on one
+detector against as many one-camera stacks, batched and batch 1. (The detector's own benchmark is
 ``python -m tools.detector benchmark``.)
 """
 
@@ -10,7 +11,7 @@ from __future__ import annotations
 import argparse
 import logging
 
-from common.cli import Command, service_main
+from common.cli import Command, options_from, service_main
 from common.lifecycle import run_main, setup_logging, stop_event
 
 
@@ -41,11 +42,63 @@ def ros2(args: argparse.Namespace) -> int:
     return bench.main(args.runs, args.json)
 
 
+def _camera_counts(text: str) -> tuple[int, ...]:
+    try:
+        counts = tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"a list of camera counts like 1,2,4, got {text!r}"
+        ) from None
+    if not counts or any(not 1 <= n <= 32 for n in counts):
+        raise argparse.ArgumentTypeError(f"camera counts within 1..32, got {text!r}")
+    return counts
+
+
+def _scale_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", help="the stack to start from (default deploy/stack.toml)")
+    p.add_argument(
+        "--cameras",
+        type=_camera_counts,
+        default=(1, 2, 4, 8),
+        help="camera counts to compare (default 1,2,4,8)",
+    )
+    p.add_argument(
+        "--seconds", type=float, default=20.0, help="measured seconds per condition (default 20)"
+    )
+    p.add_argument(
+        "--warmup",
+        type=float,
+        default=20.0,
+        help="seconds after readiness left out of each condition (default 20)",
+    )
+    p.add_argument(
+        "--source", default="sample:chelsea", help="every camera's source (default sample:chelsea)"
+    )
+    p.add_argument(
+        "--rate",
+        dest="rate_hz",
+        type=float,
+        default=10.0,
+        help="every camera's rate in Hz (default 10: more than a CPU detector serves)",
+    )
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")  # fmt: skip
+
+
+def scale(args: argparse.Namespace) -> int:
+    stop = stop_event()
+    logging.getLogger().setLevel(logging.WARNING)
+    from tools.benchmarks import scale as bench
+
+    return bench.main(options_from(bench.ScaleOptions, args, as_json=args.json), stop)
+
+
 COMMANDS = [
     Command("recorder", "the stack's FPS and latency with and without the recorder",
             _recorder_arguments, recorder),
     Command("ros2", "the ROS 2 bridge's added latency against the direct path",
             _ros2_arguments, ros2),
+    Command("scale", "N cameras on one detector against N one-camera stacks, batched and not",
+            _scale_arguments, scale),
 ]  # fmt: skip
 
 

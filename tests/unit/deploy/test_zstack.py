@@ -29,6 +29,11 @@ REPO = Path(__file__).resolve().parents[3]
         (["scenarios"], "tools.scenarios", ["list"]),
         (["estop", "engage"], "services.controller", ["estop", "engage"]),
         (["credentials", "--force"], "deploy.credentials", ["--force"]),
+        (
+            ["scale-benchmark", "--cameras", "1,2"],
+            "tools.benchmarks",
+            ["scale", "--cameras", "1,2"],
+        ),
     ],
 )
 def test_each_command_runs_its_module(argv: list[str], module: str, args: list[str]) -> None:

@@ -1,0 +1,97 @@
+"""The scale benchmark's pure parts: fairness, percentiles, ratios, the table, the options."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import pytest
+
+from common.errors import StackError
+from tools.benchmarks.__main__ import _camera_counts
+from tools.benchmarks.scale import (
+    Result,
+    ScaleOptions,
+    fairness,
+    percentile,
+    ratio,
+    ratios,
+    render_table,
+)
+
+
+def _result(n: int, setup: str, fps: list[float], rss: float, det: float, p50: float = 100.0,
+            batch: float = 1.0) -> Result:  # fmt: skip
+    names = [f"c{i}" for i in range(len(fps))]
+    return Result(
+        n=n, setup=setup, seconds=10.0, fps=dict(zip(names, fps, strict=True)),
+        p50_ms={c: p50 for c in names}, p95_ms={c: 2 * p50 for c in names},
+        rss_mb=rss, detector_rss_mb=det, batch_mean=batch,
+    )  # fmt: skip
+
+
+def test_fairness_is_the_slowest_over_the_fastest() -> None:
+    assert fairness([2.0, 4.0, 3.0]) == 0.5
+    assert fairness([3.0]) == 1.0
+    assert math.isnan(fairness([]))
+    assert math.isnan(fairness([0.0, 0.0]))
+
+
+def test_percentiles() -> None:
+    values = [float(v) for v in range(1, 101)]
+    assert percentile(values, 50) == pytest.approx(50.5)
+    assert percentile(values, 95) == pytest.approx(95.05)
+    assert math.isnan(percentile([], 50))
+
+
+def test_ratio_guards_zero_and_nan() -> None:
+    assert ratio(3.0, 2.0) == 1.5
+    assert math.isnan(ratio(1.0, 0.0))
+    assert math.isnan(ratio(float("nan"), 1.0))
+
+
+def test_ratios_compare_shared_stacks_and_batching() -> None:
+    results = [
+        _result(1, "one", [5.0], rss=400, det=270),
+        _result(2, "shared", [3.0, 3.0], rss=600, det=300, p50=200, batch=2.0),
+        _result(2, "batch1", [2.0, 2.0], rss=580, det=290, p50=400),
+        _result(2, "stacks", [2.5, 3.5], rss=800, det=540, p50=300),
+    ]
+    (row,) = ratios(results)
+    assert row["n"] == 2
+    assert row["memory_vs_one_camera"] == 1.5
+    assert row["detector_memory_vs_one_camera"] == pytest.approx(300 / 270)
+    assert row["stacks_memory_vs_one_camera"] == 2.0
+    assert row["memory_shared_vs_stacks"] == 0.75
+    assert row["fps_shared_vs_stacks"] == 1.0
+    assert row["fps_batched_vs_batch1"] == 1.5
+    assert row["p50_batched_vs_batch1"] == 0.5
+    assert results[3].fairness == pytest.approx(2.5 / 3.5)
+
+
+def test_table_shows_every_condition_the_ratios_and_what_was_skipped() -> None:
+    results = [
+        _result(1, "one", [5.0], rss=400, det=270),
+        _result(4, "shared", [1.0, 1.0, 1.0, 1.0], rss=900, det=360, batch=4.0),
+    ]
+    text = render_table(results, ["8 one-camera stacks: too big"])
+    lines = text.splitlines()
+    assert lines[0].split()[:2] == ["N", "setup"]
+    assert any(line.startswith(" 4  1 detector, batched") and "4.00" in line for line in lines)
+    assert "N=4: memory, 1 detector / 1 camera 2.25x" in text
+    assert "fps_shared_vs_stacks" not in text  # no stacks run: no such ratio
+    assert lines[-1] == "skipped: 8 one-camera stacks: too big"
+
+
+def test_options_are_checked() -> None:
+    with pytest.raises(StackError):
+        ScaleOptions(cameras=())
+    with pytest.raises(StackError):
+        ScaleOptions(cameras=(0,))
+    with pytest.raises(StackError):
+        ScaleOptions(seconds=0)
+    assert _camera_counts("1,2,4") == (1, 2, 4)
+    with pytest.raises(argparse.ArgumentTypeError):
+        _camera_counts("1,x")
+    with pytest.raises(argparse.ArgumentTypeError):
+        _camera_counts("64")

@@ -1,0 +1,422 @@
+"""python -m tools.benchmarks scale: several cameras on one detector against one stack each.
+
+What it runs: stacks of camera processes (sample sources, one process per camera, as the
+supervisor starts them) and the detector, nothing else: the detector is what several cameras
+share, so its memory, throughput, latency and fairness are what this measures most directly
+(no controller or metrics process competes for the two cores; this process counts the
+detections itself). For each N of ``--cameras``:
+
+- ``shared``: one stack, N cameras, one detector with ``max_batch = N`` (batched);
+- ``batch1``: the same stack with ``max_batch = 1`` (one frame per inference, same load);
+- ``stacks``: N one-camera stacks, each with its own detector (what a user does today).
+
+N = 1 is one stack of one camera (the three are the same). Each condition starts its stacks
+(each on a private port), waits ``warmup_s`` (excluded), then measures ``seconds``: detections
+per camera (FPS), capture-to-detections latency per camera (the frame's capture stamp to the
+detections' arrival here, one host's wall clock), the detector's mean batch (its ``batches``
+and ``batched_frames`` counters) and the resident memory of the stack's processes (detector and
+cameras; the detector's apart: one model copy each). Fairness is the slowest camera's FPS over
+the fastest's. Progress goes to stderr, the table (or ``--json``) to stdout.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+import tempfile
+import threading
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from common.bus import open_session
+from common.clock import mono_s, wall_ns
+from common.config_file import load_config, to_toml
+from common.errors import StackError
+from common.keys import Keys
+from common.machine import machine_info
+from common.messages import Detections, ServiceCounters
+from common.settings import Config, ZenohSettings
+from tools.launch import free_port, service_pids, start_supervisor, stop_supervisor, wait_ready
+
+STARTUP_S = 240.0
+STOP_S = 30.0
+SERVICES = ("camera", "detector")
+#: A rate every camera asks for: above what one CPU detector serves, so the detector is the
+#: bottleneck (overload) and fairness is tested.
+DEFAULT_SOURCE = "sample:chelsea"
+DEFAULT_RATE_HZ = 10.0
+#: N one-camera stacks are skipped when their estimated memory passes this share of what the
+#: machine has available.
+MEMORY_SHARE = 0.7
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class ScaleOptions:
+    """What ``zstack scale-benchmark`` was asked for."""
+
+    config: str | None = None
+    cameras: tuple[int, ...] = (1, 2, 4, 8)
+    seconds: float = 20.0
+    warmup: float = 20.0
+    source: str = DEFAULT_SOURCE
+    rate_hz: float = DEFAULT_RATE_HZ
+    as_json: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.cameras or any(not 1 <= n <= 32 for n in self.cameras):
+            raise StackError(f"--cameras must be numbers within 1..32, got {self.cameras}")
+        if self.seconds <= 0 or self.warmup < 0:
+            raise StackError("--seconds must be > 0 and --warmup >= 0")
+        if not 0.1 <= self.rate_hz <= 100:
+            raise StackError(f"--rate must be within 0.1..100 Hz, got {self.rate_hz}")
+
+
+# ---------------------------------------------------------------- pure figures
+
+
+def percentile(values: Sequence[float], q: float) -> float:
+    """The ``q``-th percentile of ``values``; NaN when there are none."""
+    return float(np.percentile(values, q)) if len(values) else float("nan")
+
+
+def fairness(fps: Sequence[float]) -> float:
+    """The slowest camera's FPS over the fastest's (1 = fair); NaN without cameras or frames."""
+    if not fps or max(fps) <= 0:
+        return float("nan")
+    return min(fps) / max(fps)
+
+
+def ratio(a: float, b: float) -> float:
+    """``a / b``; NaN when ``b`` is zero or either is NaN."""
+    return a / b if b and not (np.isnan(a) or np.isnan(b)) else float("nan")
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class Result:
+    """One condition's figures."""
+
+    n: int
+    setup: str  # "shared" | "batch1" | "stacks" | "one"
+    seconds: float
+    fps: dict[str, float]  # per camera
+    p50_ms: dict[str, float]
+    p95_ms: dict[str, float]
+    rss_mb: float  # every process of the condition: detectors and cameras
+    detector_rss_mb: float  # the detectors' alone (all of them)
+    batch_mean: float
+
+    @property
+    def total_fps(self) -> float:
+        return float(sum(self.fps.values()))
+
+    @property
+    def fairness(self) -> float:
+        return fairness(list(self.fps.values()))
+
+    @property
+    def worst_p50_ms(self) -> float:
+        return max(self.p50_ms.values(), default=float("nan"))
+
+    @property
+    def worst_p95_ms(self) -> float:
+        return max(self.p95_ms.values(), default=float("nan"))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            **dataclasses.asdict(self),
+            "total_fps": self.total_fps,
+            "fairness": self.fairness,
+        }
+
+
+SETUP_TEXT = {
+    "one": "1 stack, 1 camera",
+    "shared": "1 detector, batched",
+    "batch1": "1 detector, batch 1",
+    "stacks": "{n} one-camera stacks",
+}
+
+
+def ratios(results: Sequence[Result]) -> list[dict[str, Any]]:
+    """For each N: shared against N stacks (memory, detections/s), batched against batch 1
+    (detections/s, latency), and memory against one camera."""
+    by = {(r.n, r.setup): r for r in results}
+    one = by.get((1, "one"))
+    out = []
+    for n in sorted({r.n for r in results if r.n > 1}):
+        shared, b1, stacks = by.get((n, "shared")), by.get((n, "batch1")), by.get((n, "stacks"))
+        row: dict[str, Any] = {"n": n}
+        if shared and one:
+            row["memory_vs_one_camera"] = ratio(shared.rss_mb, one.rss_mb)
+            row["detector_memory_vs_one_camera"] = ratio(
+                shared.detector_rss_mb, one.detector_rss_mb
+            )
+        if stacks and one:
+            row["stacks_memory_vs_one_camera"] = ratio(stacks.rss_mb, one.rss_mb)
+        if shared and stacks:
+            row["memory_shared_vs_stacks"] = ratio(shared.rss_mb, stacks.rss_mb)
+            row["fps_shared_vs_stacks"] = ratio(shared.total_fps, stacks.total_fps)
+            row["p50_shared_vs_stacks"] = ratio(shared.worst_p50_ms, stacks.worst_p50_ms)
+        if shared and b1:
+            row["fps_batched_vs_batch1"] = ratio(shared.total_fps, b1.total_fps)
+            row["p50_batched_vs_batch1"] = ratio(shared.worst_p50_ms, b1.worst_p50_ms)
+            row["p95_batched_vs_batch1"] = ratio(shared.worst_p95_ms, b1.worst_p95_ms)
+        out.append(row)
+    return out
+
+
+def render_table(results: Sequence[Result], skipped: Sequence[str]) -> str:
+    """The figures as a text table, then the ratios and what was skipped."""
+    head = (
+        f"{'N':>2}  {'setup':22}{'RSS MB':>8}{'det MB':>8}{'det/s':>7}{'min FPS':>8}"
+        f"{'max FPS':>8}{'fair':>6}{'p50 ms':>8}{'p95 ms':>8}{'batch':>6}"
+    )
+    lines = [head, "-" * len(head)]
+    for r in results:
+        fps = list(r.fps.values())
+        lines.append(
+            f"{r.n:>2}  {SETUP_TEXT[r.setup].format(n=r.n):22}{r.rss_mb:8.0f}"
+            f"{r.detector_rss_mb:8.0f}{r.total_fps:7.2f}{min(fps, default=0):8.2f}"
+            f"{max(fps, default=0):8.2f}{r.fairness:6.2f}{r.worst_p50_ms:8.0f}"
+            f"{r.worst_p95_ms:8.0f}{r.batch_mean:6.2f}"
+        )
+    lines.append("(p50/p95: the worst camera's capture-to-detections; batch: the mean frames "
+                 "per inference, one detector's or the stacks' mean)")  # fmt: skip
+    names = {
+        "memory_vs_one_camera": "memory, 1 detector / 1 camera",
+        "detector_memory_vs_one_camera": "detector memory, 1 detector / 1 camera",
+        "stacks_memory_vs_one_camera": "memory, N stacks / 1 camera",
+        "memory_shared_vs_stacks": "memory, 1 detector / N stacks",
+        "fps_shared_vs_stacks": "det/s, 1 detector / N stacks",
+        "p50_shared_vs_stacks": "p50, 1 detector / N stacks",
+        "fps_batched_vs_batch1": "det/s, batched / batch 1",
+        "p50_batched_vs_batch1": "p50, batched / batch 1",
+        "p95_batched_vs_batch1": "p95, batched / batch 1",
+    }
+    rows = ratios(results)
+    if rows:
+        lines += ["", "ratios:"]
+        for row in rows:
+            parts = [f"{text} {row[key]:.2f}x" for key, text in names.items() if key in row]
+            lines.append(f"  N={row['n']}: " + "; ".join(parts))
+    lines += [f"skipped: {s}" for s in skipped]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- processes
+
+
+def _rss_kb(pid: int) -> int:
+    """A process's resident memory (VmRSS, kB); 0 when it has gone."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    except OSError:
+        pass
+    return 0
+
+
+def _mem_available_mb() -> float:
+    for line in Path("/proc/meminfo").read_text().splitlines():
+        if line.startswith("MemAvailable:"):
+            return int(line.split()[1]) / 1024
+    return float("inf")
+
+
+@dataclasses.dataclass
+class _Stack:
+    config: Config
+    path: Path
+    proc: Any  # subprocess.Popen[bytes]
+
+
+def _stack_config(
+    base: Config, cameras: int, max_batch: int, options: ScaleOptions, path: Path
+) -> Config:
+    first = dataclasses.replace(
+        base.camera, source=options.source, rate_hz=options.rate_hz, loop=True
+    )
+    further = tuple(
+        (f"cam{i}", dataclasses.replace(first, frame_id=f"camera_cam{i}"))
+        for i in range(1, cameras)
+    )
+    return dataclasses.replace(
+        base,
+        path=str(path),
+        zenoh=ZenohSettings(endpoint=f"tcp/127.0.0.1:{free_port()}"),
+        stack=dataclasses.replace(base.stack, prefix=f"scale/{free_port()}"),
+        supervisor=dataclasses.replace(base.supervisor, services=SERVICES, optional=()),
+        camera=first,
+        cameras=further,
+        detector=dataclasses.replace(base.detector, max_batch=max_batch),
+    )
+
+
+class _Watch:
+    """Detections per camera and the detector's batch counters of one stack, reset per phase."""
+
+    def __init__(self, stack: _Stack) -> None:
+        self.stack = stack
+        self.keys = Keys(stack.config.stack.prefix)
+        self._lock = threading.Lock()
+        self.session = open_session(stack.config.zenoh, "observer")
+        self._subs = [
+            self.session.declare_subscriber(self.keys.detections(cam), self._handler(cam))
+            for cam in stack.config.all_cameras
+        ]
+        self._subs.append(
+            self.session.declare_subscriber(self.keys.counters("detector"), self._on_counters)
+        )
+        self._counters: dict[str, int] = {}
+        self.reset()
+
+    def _handler(self, camera: str) -> Callable[[Any], None]:
+        return lambda sample: self._on_detections(camera, sample)
+
+    def _on_detections(self, camera: str, sample: Any) -> None:
+        msg = Detections.decode(sample.payload.to_bytes())
+        latency = (wall_ns() - msg.header.stamp_ns) / 1e6
+        with self._lock:
+            self.latency_ms[camera].append(latency)
+
+    def _on_counters(self, sample: Any) -> None:
+        msg = ServiceCounters.decode(sample.payload.to_bytes())
+        with self._lock:
+            self._counters = dict(msg.counters)
+
+    def reset(self) -> None:
+        with self._lock:
+            self.latency_ms: dict[str, list[float]] = {c: [] for c in self.stack.config.all_cameras}
+            self.start = mono_s()
+            self.start_counters = dict(self._counters)
+
+    def take(self) -> tuple[float, dict[str, list[float]], int, int]:
+        """Seconds since reset, latencies per camera, batches and batched frames since reset."""
+        with self._lock:
+            d = {k: self._counters.get(k, 0) - self.start_counters.get(k, 0) for k in
+                 ("batches", "batched_frames")}  # fmt: skip
+            return mono_s() - self.start, {c: list(v) for c, v in self.latency_ms.items()}, \
+                d["batches"], d["batched_frames"]  # fmt: skip
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+        self.session.close()
+
+
+def _stop_all(stacks: Sequence[_Stack]) -> None:
+    """Stop every stack at once (a SIGINT each, in parallel), each killed if it lingers."""
+    threads = [
+        threading.Thread(target=stop_supervisor, args=(s.proc, STOP_S)) for s in stacks
+    ]  # fmt: skip
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+
+
+def _progress(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def _condition(
+    base: Config, workdir: Path, n: int, setup: str, options: ScaleOptions,
+    stop: threading.Event,
+) -> Result:  # fmt: skip
+    """Start the condition's stacks, warm up, measure, stop them all."""
+    shapes = [(1, 1)] * n if setup == "stacks" else [(n, n if setup == "shared" else 1)]
+    stacks: list[_Stack] = []
+    watches: list[_Watch] = []
+    try:
+        for k, (cams, batch) in enumerate(shapes):
+            path = workdir / f"n{n}-{setup}-{k}.toml"
+            config = _stack_config(base, cams, batch, options, path)
+            path.write_text(to_toml(config))
+            with path.with_suffix(".log").open("wb") as log:
+                stacks.append(_Stack(config, path, start_supervisor(path, log)))
+        for s in stacks:
+            watches.append(_Watch(s))
+            want = {"detector", *s.config.camera_services.values()}
+            wait_ready(watches[-1].session, watches[-1].keys, want, s.proc, STARTUP_S,
+                       stop=stop, log_path=s.path.with_suffix(".log"))  # fmt: skip
+        _progress(f"  ready; warming up {options.warmup:.0f} s")
+        if stop.wait(options.warmup):
+            raise KeyboardInterrupt
+        for w in watches:
+            w.reset()
+        if stop.wait(options.seconds / 2):
+            raise KeyboardInterrupt
+        rss = det_rss = 0
+        for s in stacks:  # memory mid-phase, every process running
+            det_pids = service_pids("detector", s.path)
+            cam_pids = [
+                p for svc in s.config.camera_services.values() for p in service_pids(svc, s.path)
+            ]
+            det_rss += sum(_rss_kb(p) for p in det_pids)
+            rss += sum(_rss_kb(p) for p in det_pids + cam_pids)
+        if stop.wait(options.seconds / 2):
+            raise KeyboardInterrupt
+        fps: dict[str, float] = {}
+        p50: dict[str, float] = {}
+        p95: dict[str, float] = {}
+        batches = frames = 0
+        for k, w in enumerate(watches):
+            elapsed, latency, b, f = w.take()
+            batches, frames = batches + b, frames + f
+            for cam, values in latency.items():
+                name = cam if len(watches) == 1 else f"{k}:{cam}"
+                fps[name] = len(values) / elapsed
+                p50[name] = percentile(values, 50)
+                p95[name] = percentile(values, 95)
+        return Result(n=n, setup=setup, seconds=options.seconds, fps=fps, p50_ms=p50,
+                      p95_ms=p95, rss_mb=rss / 1024, detector_rss_mb=det_rss / 1024,
+                      batch_mean=ratio(frames, batches))  # fmt: skip
+    finally:
+        for w in watches:
+            w.close()
+        _stop_all(stacks)
+
+
+def main(options: ScaleOptions, stop: threading.Event) -> int:
+    """Run every condition of ``options`` and print the table (or JSON)."""
+    base = load_config(options.config)
+    results: list[Result] = []
+    skipped: list[str] = []
+    plan = [(n, s) for n in options.cameras for s in
+            (("one",) if n == 1 else ("shared", "batch1", "stacks"))]  # fmt: skip
+    started = mono_s()
+    with tempfile.TemporaryDirectory(prefix="scale-bench-") as tmp:
+        for i, (n, setup) in enumerate(plan, 1):
+            if setup == "stacks":
+                per_stack = next((r.rss_mb for r in results if r.setup == "one"), 0.0)
+                available = _mem_available_mb()
+                if per_stack * n > MEMORY_SHARE * available:
+                    skipped.append(
+                        f"{n} one-camera stacks: about {per_stack * n:.0f} MB against "
+                        f"{available:.0f} MB available"
+                    )
+                    _progress(f"skipped: {skipped[-1]}")
+                    continue
+            _progress(f"[{i}/{len(plan)}] N={n}: {SETUP_TEXT[setup].format(n=n)} "
+                      f"({mono_s() - started:.0f} s so far)")  # fmt: skip
+            results.append(_condition(base, Path(tmp), n, setup, options, stop))
+            r = results[-1]
+            _progress(f"  {r.total_fps:.2f} det/s, fairness {r.fairness:.2f}, "
+                      f"{r.rss_mb:.0f} MB, batch {r.batch_mean:.2f}")  # fmt: skip
+    if options.as_json:
+        out = {
+            "results": [r.as_dict() for r in results],
+            "ratios": ratios(results),
+            "skipped": skipped,
+            "options": {**dataclasses.asdict(options)},
+            "machine": machine_info(),
+        }
+        print(json.dumps(out, indent=2, default=str))
+    else:
+        print(render_table(results, skipped))
+    return 0
