@@ -99,9 +99,11 @@ class DetectorSettings:
     at most ``fast_max_ap50_drop`` below FP32 at 640, overriding backend, precision and imgsz.
     ``max_batch`` is the most frames one detection round takes, the newest of each waiting
     camera (docs/detector.md, "Several cameras"): a round never holds more frames than there
-    are cameras, so one camera always runs batches of 1. ``batch_profile`` is the (min, opt,
-    max) batch a TensorRT engine is built for; left at (1, 1, 1), the engine is built for
-    1..the served batch instead.
+    are cameras, so one camera always runs batches of 1. It is 1 by default: on the CPU a batch
+    adds no parallelism to a runtime already using every core and costs latency (measured in
+    docs/benchmarks.md, "Several cameras on one detector"); raise it on a GPU.
+    ``batch_profile`` is the (min, opt, max) batch a TensorRT engine is built for; left at
+    (1, 1, 1), the engine is built for 1..the served batch instead.
     A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
     not detected on (counted, see common/freshness.py). A frame of more than
     ``max_frame_pixels`` (width x height, JPEG or raw) is counted as ``frames_oversize`` and
@@ -118,7 +120,7 @@ class DetectorSettings:
     backend: BackendName = BackendName.ONNX
     precision: str = ""
     batch_profile: tuple[int, int, int] = (1, 1, 1)
-    max_batch: int = 4
+    max_batch: int = 1
     conf: float = 0.25
     iou: float = 0.45
     max_det: int = 300

@@ -201,5 +201,5 @@ def test_settings_bound_max_batch(tmp_path: Path) -> None:
     for bad in (0, 33):
         with pytest.raises(ConfigError, match=r"detector\.max_batch must be within 1\.\.32"):
             DetectorSettings(max_batch=bad)
-    assert DetectorSettings().max_batch == 4
+    assert DetectorSettings().max_batch == 1  # the CPU's best (docs/benchmarks.md)
     assert CameraSettings().frame_id == "camera"  # the default camera is unchanged
