@@ -37,7 +37,7 @@ DEFAULT_MODEL_FILENAME = "yolov5s-coco.onnx"
 NATIVE_IMGSZ = 640
 
 MODELS_DIR_ENV = "STACK_MODELS_DIR"
-_REPO_ROOT = Path(__file__).resolve().parents[2]
+_REPO_ROOT = Path(__file__).resolve().parents[1]  # modelprep/files.py -> the repo
 
 
 def models_dir() -> Path:
