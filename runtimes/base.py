@@ -5,13 +5,14 @@ imports. The table of runtime modules is :mod:`.table`, which no runtime imports
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
 
 from common.contracts import BackendName
-from common.errors import ModelError
+from common.errors import ConfigError, ModelError
 from common.model_metadata import literal
 
 Dim = int | None  # None: a dynamic dimension (named or unknown in the model)
@@ -22,6 +23,17 @@ AUTO = BackendName.AUTO
 #: Every name ``--backend`` and ``detector.backend`` accept: the enum's members, in its order
 #: (the default first, then by speed, then auto).
 BACKEND_CHOICES: tuple[str, ...] = tuple(b.value for b in BackendName)
+
+
+def check_cpu_backend_args(model_path: Path, threads: int | None, max_batch: int) -> None:
+    """What a CPU backend checks before it loads ``model_path``: a thread count and a
+    batch size of at least one (ConfigError), and a model file that is there (ModelError)."""
+    if threads is not None and threads < 1:
+        raise ConfigError(f"threads must be a positive integer, got {threads}")
+    if max_batch < 1:
+        raise ConfigError(f"max_batch must be a positive integer, got {max_batch}")
+    if not model_path.is_file():
+        raise ModelError(f"{model_path}: no such model file")
 
 
 @runtime_checkable

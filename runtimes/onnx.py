@@ -21,8 +21,8 @@ import numpy.typing as npt
 import onnxruntime as ort
 from onnxruntime.capi import onnxruntime_pybind11_state as ort_state
 
-from common.errors import ConfigError, ModelError, one_line
-from runtimes.base import Backend, Dim
+from common.errors import ModelError, one_line
+from runtimes.base import Backend, Dim, check_cpu_backend_args
 
 _PRECISIONS = {"tensor(float)": "fp32", "tensor(float16)": "fp16"}
 #: ONNX's standard denotation of a batch dimension (modelprep/acquire marks the default model's).
@@ -72,12 +72,7 @@ class OnnxBackend:
     device = "cpu"
 
     def __init__(self, model_path: Path, *, threads: int | None = None, max_batch: int = 1) -> None:
-        if threads is not None and threads < 1:
-            raise ConfigError(f"threads must be a positive integer, got {threads}")
-        if max_batch < 1:
-            raise ConfigError(f"max_batch must be a positive integer, got {max_batch}")
-        if not model_path.is_file():
-            raise ModelError(f"{model_path}: no such model file")
+        check_cpu_backend_args(model_path, threads, max_batch)
         options = ort.SessionOptions()
         options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
         options.intra_op_num_threads = threads or physical_cores()

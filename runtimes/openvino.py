@@ -28,7 +28,7 @@ import numpy.typing as npt
 
 from common.errors import BackendUnavailable, ConfigError, ModelError, one_line
 from common.model_metadata import OPENVINO_METADATA_KEY
-from runtimes.base import Backend, Dim
+from runtimes.base import Backend, Dim, check_cpu_backend_args
 from runtimes.onnx import physical_cores
 from runtimes.profiles import read_onnx_input
 
@@ -91,12 +91,7 @@ class OpenVinoBackend:
         threads: int | None = None,
         max_batch: int = 1,
     ) -> None:
-        if threads is not None and threads < 1:
-            raise ConfigError(f"threads must be a positive integer, got {threads}")
-        if max_batch < 1:
-            raise ConfigError(f"max_batch must be a positive integer, got {max_batch}")
-        if not model_path.is_file():
-            raise ModelError(f"{model_path}: no such model file")
+        check_cpu_backend_args(model_path, threads, max_batch)
         core = ov.Core()
         try:
             model = core.read_model(str(model_path))

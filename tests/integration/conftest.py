@@ -10,17 +10,21 @@ import sys
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 import zenoh
 
+from common.boxes import Boxes
 from common.bus import open_session
 from common.config_file import load_config
 from common.errors import ConfigError, StackError
+from common.frames import image_to_frame
 from common.keys import Keys
+from common.messages import Detections, Header
 from common.queries import query_metrics, ready_services
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 
@@ -145,6 +149,34 @@ class Stack:
         self.session.close()
         self._log.close()
         return self.proc.returncode
+
+
+def publish_cameras(
+    stack: Stack,
+    stop: threading.Event,
+    cameras: Mapping[str, tuple[tuple[int, int], str]],
+    *,
+    fill: int,
+    box: Callable[[int, int], tuple[float, float, float, float]],
+    score: float,
+) -> None:
+    """Stand in for the cameras and the detector until ``stop``: each camera (name: picture
+    size, class) at 10 Hz, each frame filled with ``fill`` and followed by the detections made
+    on it, one box ``box(w, h)`` of that camera's class with ``score``."""
+    seq = 0
+    while not stop.wait(0.1):
+        seq += 1
+        for name, ((w, h), label) in cameras.items():
+            header = Header(stamp_ns=time.time_ns(), frame_id=name, seq=seq, source="test")
+            frame = image_to_frame(np.full((h, w, 3), fill, np.uint8), header)
+            dets = Detections(
+                header=header, image_width=w, image_height=h, class_names=(label,),
+                boxes=Boxes(xyxy=np.array([box(w, h)], np.float32),
+                            scores=np.array([score], np.float32),
+                            class_ids=np.zeros(1, np.int32)),
+            )  # fmt: skip
+            stack.session.put(stack.keys.frame(name), frame.encode())
+            stack.session.put(stack.keys.detections(name), dets.encode())
 
 
 @pytest.fixture

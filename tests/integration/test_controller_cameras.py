@@ -13,10 +13,10 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from common.boxes import Boxes
 from common.clock import BOOT_ID, now
-from common.messages import ControllerStatus, Detections, Header, LaserScan, ServiceCounters, Twist
+from common.messages import ControllerStatus, Header, LaserScan, ServiceCounters, Twist
 from tests.integration.conftest import Stack, wait_for
+from tests.integration.test_safety import person
 
 pytestmark = pytest.mark.integration
 
@@ -36,17 +36,7 @@ def header(age_s: float = 0.0) -> Header:
 
 def people(n: int, age_s: float = 0.0) -> bytes:
     """``n`` people (0: nobody) centred in a 640x480 image."""
-    return Detections(
-        header=header(age_s),
-        image_width=640,
-        image_height=480,
-        boxes=Boxes(
-            xyxy=np.tile(np.array([[280, 100, 360, 400]], np.float32), (n, 1)),
-            scores=np.full(n, 0.9, np.float32),
-            class_ids=np.zeros(n, np.int32),
-        ),
-        class_names=("person",) * n,
-    ).encode()
+    return person(header(age_s), n).encode()
 
 
 def all_clear() -> bytes:

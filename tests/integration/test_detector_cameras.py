@@ -24,7 +24,7 @@ import pytest
 import zenoh
 
 from common.bus import Publisher, QoS, open_hub
-from common.clock import BOOT_ID, mono_s, now
+from common.clock import mono_s
 from common.config_file import load_config
 from common.frames import image_to_frame
 from common.images import load_sample
@@ -34,6 +34,7 @@ from common.queries import ready_services
 from common.settings import Config
 from common.spawn import spawn, stop_child
 from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
+from tests.unit.detector.headers import camera_header
 
 pytestmark = pytest.mark.integration
 
@@ -127,18 +128,6 @@ def serve(tmp_path: Path) -> Iterator[Any]:
         assert stopped and det.proc.returncode == 0, det.log()
 
 
-def header(camera: str, seq: int) -> Header:
-    at = now()
-    return Header(
-        stamp_ns=at.wall_ns,
-        frame_id=f"{camera}_optical",
-        seq=seq,
-        source=f"camera_{camera}",
-        mono_ns=at.mono_ns,
-        boot_id=BOOT_ID,
-    )
-
-
 class Camera:
     """A camera as the test plays it: one photo, sent with a fresh header each time."""
 
@@ -149,7 +138,7 @@ class Camera:
         self.sent: dict[int, Header] = {}  # seq -> the header sent
 
     def send(self) -> Header:
-        h = header(self.name, len(self.sent) + 1)
+        h = camera_header(self.name, len(self.sent) + 1)
         self.sent[h.seq] = h
         self.pub.put(image_to_frame(self.photo, h).encode())
         return h

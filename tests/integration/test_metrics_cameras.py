@@ -12,14 +12,13 @@ import subprocess
 import sys
 from typing import Any
 
-import numpy as np
 import pytest
 import zenoh
 
-from common.boxes import Boxes
 from common.clock import BOOT_ID, now
 from common.messages import Detections, Header, ServiceCounters, Twist
 from tests.integration.conftest import REPO, Stack, wait_for
+from tests.unit.metrics.samples import detections
 
 pytestmark = pytest.mark.integration
 
@@ -38,21 +37,7 @@ def _header(source: str, seq: int, stamp_ns: int) -> Header:
 
 
 def _detections(camera: str, seq: int, stamp_ns: int) -> Detections:
-    n = BOXES[camera]
-    return Detections(
-        header=_header(camera, seq, stamp_ns),
-        image_width=640,
-        image_height=480,
-        boxes=Boxes(
-            xyxy=np.tile(np.array([0, 0, 10, 10], np.float32), (n, 1)),
-            scores=np.ones(n, np.float32),
-            class_ids=np.zeros(n, np.int32),
-        ),
-        class_names=("person",) * n,
-        timing_ms={"preprocess": 2.0, "inference": 80.0, "postprocess": 1.0},
-        received_ns=stamp_ns + 5 * MS,
-        published_ns=stamp_ns + 90 * MS,
-    )
+    return detections(_header(camera, seq, stamp_ns), BOXES[camera])
 
 
 def _matched(session: zenoh.Session, key: str) -> zenoh.Publisher:

@@ -9,18 +9,14 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from common.boxes import Boxes
-from common.frames import image_to_frame
-from common.messages import Detections, Frame, Header, ServiceCounters
-from tests.integration.conftest import REPO, Stack, wait_for
+from common.messages import Frame, ServiceCounters
+from tests.integration.conftest import REPO, Stack, publish_cameras, wait_for
 from tools.compare.runs import load_run
 
 pytestmark = pytest.mark.integration
@@ -35,19 +31,7 @@ TOPICS = {
 
 
 def _publish(stack: Stack, stop: threading.Event) -> None:
-    seq = 0
-    while not stop.wait(0.1):
-        seq += 1
-        for name, ((w, h), label) in CAMERAS.items():
-            header = Header(stamp_ns=time.time_ns(), frame_id=name, seq=seq, source="test")
-            frame = image_to_frame(np.full((h, w, 3), 90, np.uint8), header)
-            dets = Detections(
-                header=header, image_width=w, image_height=h, class_names=(label,),
-                boxes=Boxes(xyxy=np.array([[1, 1, 9, 9]], np.float32),
-                            scores=np.array([0.8], np.float32), class_ids=np.zeros(1, np.int32)),
-            )  # fmt: skip
-            stack.session.put(stack.keys.frame(name), frame.encode())
-            stack.session.put(stack.keys.detections(name), dets.encode())
+    publish_cameras(stack, stop, CAMERAS, fill=90, box=lambda w, h: (1, 1, 9, 9), score=0.8)
 
 
 def test_two_cameras_recorded_compared_and_played_per_camera(make_stack, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]

@@ -17,12 +17,9 @@ import numpy as np
 import pytest
 import websockets
 
-from common.boxes import Boxes
-from common.frames import image_to_frame
-from common.messages import Detections, Header
 from services.viewer import channels as ch
 from tests.foxglove_client import SUBPROTOCOL, decode_channel_message, split_message_frame
-from tests.integration.conftest import Stack
+from tests.integration.conftest import Stack, publish_cameras
 from tools.launch import free_port
 
 pytestmark = pytest.mark.integration
@@ -37,20 +34,9 @@ TOPICS = {
 
 def _publish(stack: Stack, stop: threading.Event) -> None:
     """Both cameras at 10 Hz, each frame followed by the detections made on it."""
-    seq = 0
-    while not stop.wait(0.1):
-        seq += 1
-        for name, ((w, h), label) in CAMERAS.items():
-            header = Header(stamp_ns=time.time_ns(), frame_id=name, seq=seq, source="test")
-            frame = image_to_frame(np.full((h, w, 3), 128, np.uint8), header)
-            dets = Detections(
-                header=header, image_width=w, image_height=h, class_names=(label,),
-                boxes=Boxes(xyxy=np.array([[2, 2, w / 2, h / 2]], np.float32),
-                            scores=np.array([0.9], np.float32),
-                            class_ids=np.zeros(1, np.int32)),
-            )  # fmt: skip
-            stack.session.put(stack.keys.frame(name), frame.encode())
-            stack.session.put(stack.keys.detections(name), dets.encode())
+    publish_cameras(
+        stack, stop, CAMERAS, fill=128, box=lambda w, h: (2, 2, w / 2, h / 2), score=0.9
+    )
 
 
 async def _watch(port: int, deadline: float) -> dict[str, list[dict[str, Any]]]:

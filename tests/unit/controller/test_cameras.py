@@ -20,6 +20,7 @@ from services.controller.geometry import focal_px, in_view, robot_bearing, wrap
 from services.controller.policy import Controller, Inputs, VelocityCommand
 from services.controller.service import ControllerHandlers
 from services.controller.targets import View
+from tests.unit.controller.scans import scan_of
 
 W, H, HFOV = 640, 480, 60.0
 F = focal_px(W, HFOV)
@@ -72,14 +73,7 @@ def laser(hits: dict[float, float] | None = None, fov_deg: float = 270.0) -> Las
     ranges = np.full(rays, 10.0, np.float32)
     for at, r in (hits or {}).items():
         ranges[np.abs(np.angle(np.exp(1j * (angles - at)))) < math.radians(5)] = r
-    return LaserScan(
-        header=HEADER,
-        angle_min=float(angles[0]),
-        angle_increment=float(angles[1] - angles[0]),
-        range_min=0.05,
-        range_max=20.0,
-        ranges=ranges,
-    )
+    return scan_of(angles, ranges, HEADER)
 
 
 def views(**by_camera: Detections | None) -> dict[str, View]:

@@ -6,7 +6,6 @@ import dataclasses
 import math
 
 import numpy as np
-import numpy.typing as npt
 import pytest
 
 from common.boxes import Boxes
@@ -22,6 +21,7 @@ from services.controller.geometry import (
 )
 from services.controller.policy import Controller, Inputs
 from services.controller.targets import View
+from tests.unit.controller.scans import scan_of
 
 HEADER = Header(stamp_ns=123, frame_id="camera", seq=1, source="test")
 W, H, HFOV = 640, 480, 60.0
@@ -72,23 +72,11 @@ def dets(
     )
 
 
-def scan_of(angles: npt.NDArray[np.float64], ranges: npt.NDArray[np.float32]) -> LaserScan:
-    """A scan whose rays point at ``angles`` (evenly spaced) and read ``ranges``."""
-    return LaserScan(
-        header=HEADER,
-        angle_min=float(angles[0]),
-        angle_increment=float(angles[1] - angles[0]),
-        range_min=0.05,
-        range_max=20.0,
-        ranges=ranges,
-    )
-
-
 def scan(front_range: float, *, rays: int = 181, fov_deg: float = 180.0) -> LaserScan:
     angles = np.linspace(-np.radians(fov_deg / 2), np.radians(fov_deg / 2), rays)
     ranges = np.full(rays, 10.0, np.float32)
     ranges[np.abs(angles) < np.radians(5)] = front_range
-    return scan_of(angles, ranges)
+    return scan_of(angles, ranges, HEADER)
 
 
 def step(
@@ -269,7 +257,7 @@ def test_corridor_catches_what_the_sector_misses() -> None:
     angles = np.linspace(-np.pi / 2, np.pi / 2, 361)
     ranges = np.full(angles.size, np.inf, np.float32)
     ranges[np.argmin(np.abs(angles - math.atan2(0.25, 0.6)))] = math.hypot(0.6, 0.25)
-    s = scan_of(angles, ranges)
+    s = scan_of(angles, ranges, HEADER)
     assert sector_clearance(s, 30.0) == math.inf
     assert sector_clearance(s, 30.0, half_width_m=0.3) == pytest.approx(0.6, abs=0.01)
     assert corridor_clearance(s, 0.2) == math.inf

@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.clock import BOOT_ID, now
+from common.clock import BOOT_ID
 from common.counters import per_camera
 from common.frames import image_to_frame
 from common.freshness import FreshnessGate
-from common.messages import Detections, Frame, Header
+from common.messages import Detections, Frame
 from common.node import Tally
 from common.settings import CameraSettings, Config, DetectorSettings, TrackerSettings
 from services.detector.pipeline import Detector
@@ -29,19 +29,11 @@ from services.detector.service import (
 )
 from services.detector.tracker import Tracker
 from tests.unit.detector.halves import halves_model, image
+from tests.unit.detector.headers import camera_header
 
 
 def frame(camera: str, seq: int, left: bool, right: bool) -> Frame:
-    at = now()
-    header = Header(
-        stamp_ns=at.wall_ns,
-        frame_id=f"{camera}_optical",
-        seq=seq,
-        source=f"camera_{camera}",
-        mono_ns=at.mono_ns,
-        boot_id=BOOT_ID,
-    )
-    return image_to_frame(image(left, right), header)
+    return image_to_frame(image(left, right), camera_header(camera, seq))
 
 
 CAMERAS = ("front", "rear", "left")

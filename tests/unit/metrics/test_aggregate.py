@@ -3,29 +3,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from common.boxes import Boxes
 from common.messages import Detections, Header, ServiceCounters, Twist
 from services.metrics.aggregate import Aggregator
 from services.metrics.window import Window, percentiles
+from tests.unit.metrics.samples import detections
 
 MS = 1_000_000
 
 
 def _dets(stamp: int, n: int) -> Detections:
-    return Detections(
-        header=Header(stamp_ns=stamp, frame_id="c", seq=stamp, source="camera"),
-        image_width=640,
-        image_height=480,
-        boxes=Boxes(
-            xyxy=np.tile(np.array([0, 0, 10, 10], np.float32), (n, 1)),
-            scores=np.ones(n, np.float32),
-            class_ids=np.zeros(n, np.int32),
-        ),
-        class_names=("person",) * n,
-        timing_ms={"preprocess": 2.0, "inference": 80.0, "postprocess": 1.0},
-        received_ns=stamp + 5 * MS,
-        published_ns=stamp + 90 * MS,
-    )
+    return detections(Header(stamp_ns=stamp, frame_id="c", seq=stamp, source="camera"), n)
 
 
 def _twist(stamp: int, input_stamp: int) -> Twist:

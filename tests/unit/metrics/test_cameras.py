@@ -2,34 +2,21 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
-from common.boxes import Boxes
 from common.messages import Detections, Header, ServiceCounters, Twist
 from services.metrics.aggregate import Aggregator
 from services.metrics.cameras import BatchSizes
 from services.metrics.reactions import Reactions
+from tests.unit.metrics.samples import detections
 
 MS = 1_000_000
 HDR = Header(stamp_ns=0, frame_id="", seq=0, source="metrics")
 
 
 def _dets(stamp: int, n: int, published_ms: float = 90.0) -> Detections:
-    return Detections(
-        header=Header(stamp_ns=stamp, frame_id="cam", seq=1, source="camera"),
-        image_width=640,
-        image_height=480,
-        boxes=Boxes(
-            xyxy=np.tile(np.array([0, 0, 10, 10], np.float32), (n, 1)),
-            scores=np.ones(n, np.float32),
-            class_ids=np.zeros(n, np.int32),
-        ),
-        class_names=("person",) * n,
-        timing_ms={"preprocess": 2.0, "inference": 80.0, "postprocess": 1.0},
-        received_ns=stamp + 5 * MS,
-        published_ns=stamp + int(published_ms * MS),
-    )
+    header = Header(stamp_ns=stamp, frame_id="cam", seq=1, source="camera")
+    return detections(header, n, published_ms=published_ms)
 
 
 def _twist(stamp: int, input_stamp: int) -> Twist:
@@ -95,22 +82,16 @@ def test_a_command_for_a_stamp_both_cameras_share_counts_for_each_and_once_in_to
 
 def test_counters_named_for_a_camera_show_under_it() -> None:
     agg = Aggregator(window_s=5.0, cameras=("front", "rear"))
-    agg.on_counters(
-        _counters(
-            "detector", frames_in=150, dropped=60, batches=50, batched_frames=100,
-            frames_in__front=100, dropped__front=50, frames_in__rear=50, dropped__rear=10,
-            detections_out__rear=40, frames_in__side=7,
-        ),
-        now=0.0,
+    names = (
+        "frames_in", "dropped", "batches", "batched_frames", "frames_in__front",
+        "dropped__front", "frames_in__rear", "dropped__rear", "detections_out__rear",
+        "frames_in__side",
     )  # fmt: skip
-    agg.on_counters(
-        _counters(
-            "detector", frames_in=190, dropped=70, batches=70, batched_frames=140,
-            frames_in__front=130, dropped__front=58, frames_in__rear=60, dropped__rear=12,
-            detections_out__rear=48, frames_in__side=9,
-        ),
-        now=2.0,
-    )  # fmt: skip
+    for now, counts in (
+        (0.0, (150, 60, 50, 100, 100, 50, 50, 10, 40, 7)),
+        (2.0, (190, 70, 70, 140, 130, 58, 60, 12, 48, 9)),
+    ):
+        agg.on_counters(_counters("detector", **dict(zip(names, counts, strict=True))), now=now)
     agg.on_counters(_counters("controller", detections_in__rear=47, estop_in=1), now=2.0)
     answer = agg.answer(HDR, now=2.5)
     front, rear = answer["cameras"]["front"], answer["cameras"]["rear"]

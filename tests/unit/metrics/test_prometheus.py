@@ -5,14 +5,13 @@ from __future__ import annotations
 import urllib.request
 from collections.abc import Iterator
 
-import numpy as np
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from common.boxes import Boxes
 from common.messages import Detections, Header, ServiceCounters
 from services.metrics.aggregate import Aggregator
 from services.metrics.prometheus import PrometheusExporter
+from tests.unit.metrics.samples import detections
 
 MS = 1_000_000
 HEADER = Header(stamp_ns=0, frame_id="", seq=0, source="metrics")
@@ -47,30 +46,18 @@ def _value(samples: Samples, name: str, **labels: str) -> float:
     return next(v for lab, v in samples[name] if labels.items() <= lab.items())
 
 
+def _detections(stamp: int, seq: int) -> Detections:
+    header = Header(stamp_ns=stamp, frame_id="c", seq=seq, source="camera")
+    return detections(header, 1, size=(64, 48))
+
+
 def test_scrape_shows_gauges_counters_and_latency_histogram(
     served: tuple[Aggregator, int],
 ) -> None:
     agg, port = served
     for i in range(5):
         stamp = 1_000 * MS + i * 100 * MS
-        agg.on_detections(
-            Detections(
-                header=Header(stamp_ns=stamp, frame_id="c", seq=i, source="camera"),
-                image_width=64,
-                image_height=48,
-                boxes=Boxes(
-                    xyxy=np.array([[0, 0, 10, 10]], np.float32),
-                    scores=np.ones(1, np.float32),
-                    class_ids=np.zeros(1, np.int32),
-                ),
-                class_names=("person",),
-                timing_ms={"preprocess": 2.0, "inference": 80.0, "postprocess": 1.0},
-                received_ns=stamp + 5 * MS,
-                published_ns=stamp + 90 * MS,
-            ),
-            now=i * 0.1,
-            camera="front",
-        )
+        agg.on_detections(_detections(stamp, i), now=i * 0.1, camera="front")
     agg.on_counters(
         ServiceCounters(header=HEADER, service="detector", counters={"dropped": 3}), now=0.5
     )
@@ -87,23 +74,6 @@ def test_scrape_shows_gauges_counters_and_latency_histogram(
     assert _value(samples, "stack_latency_seconds_bucket", stage="inference", le="0.075") == 0
     assert _value(samples, "stack_latency_seconds_bucket", stage="inference", le="0.1") == 5
     assert "stack_drop_rate" in samples
-
-
-def _detections(stamp: int, seq: int) -> Detections:
-    return Detections(
-        header=Header(stamp_ns=stamp, frame_id="c", seq=seq, source="camera"),
-        image_width=64,
-        image_height=48,
-        boxes=Boxes(
-            xyxy=np.array([[0, 0, 10, 10]], np.float32),
-            scores=np.ones(1, np.float32),
-            class_ids=np.zeros(1, np.int32),
-        ),
-        class_names=("person",),
-        timing_ms={"preprocess": 2.0, "inference": 80.0, "postprocess": 1.0},
-        received_ns=stamp + 5 * MS,
-        published_ns=stamp + 90 * MS,
-    )
 
 
 def test_each_cameras_series_carry_a_camera_label() -> None:
