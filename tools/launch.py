@@ -140,3 +140,15 @@ def _camera_arg(argv: list[bytes]) -> bytes | None:
         if arg == b"--camera":
             return argv[i + 1]
     return None
+
+
+def rss_kb(pid: int) -> int | None:
+    """Process ``pid``'s resident memory (``VmRSS``, kB); None once it has gone."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return None  # the process ended while we looked
+    for line in status.splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    return None

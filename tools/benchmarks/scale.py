@@ -40,7 +40,14 @@ from common.keys import Keys
 from common.machine import machine_info
 from common.messages import Detections, ServiceCounters
 from common.settings import Config, ZenohSettings
-from tools.launch import free_port, service_pids, start_supervisor, stop_supervisor, wait_ready
+from tools.launch import (
+    free_port,
+    rss_kb,
+    service_pids,
+    start_supervisor,
+    stop_supervisor,
+    wait_ready,
+)
 
 STARTUP_S = 240.0
 STOP_S = 30.0
@@ -210,17 +217,6 @@ def render_table(results: Sequence[Result], skipped: Sequence[str]) -> str:
 # ---------------------------------------------------------------- processes
 
 
-def _rss_kb(pid: int) -> int:
-    """A process's resident memory (VmRSS, kB); 0 when it has gone."""
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1])
-    except OSError:
-        pass
-    return 0
-
-
 def _mem_available_mb() -> float:
     for line in Path("/proc/meminfo").read_text().splitlines():
         if line.startswith("MemAvailable:"):
@@ -357,8 +353,8 @@ def _condition(
             cam_pids = [
                 p for svc in s.config.camera_services.values() for p in service_pids(svc, s.path)
             ]
-            det_rss += sum(_rss_kb(p) for p in det_pids)
-            rss += sum(_rss_kb(p) for p in det_pids + cam_pids)
+            det_rss += sum(rss_kb(p) or 0 for p in det_pids)
+            rss += sum(rss_kb(p) or 0 for p in det_pids + cam_pids)
         if stop.wait(options.seconds / 2):
             raise KeyboardInterrupt
         fps: dict[str, float] = {}

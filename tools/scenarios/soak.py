@@ -28,7 +28,7 @@ from common.keys import Keys
 from common.messages import GroundTruth
 from common.settings import SERVICES, Config
 from services.sim.scenarios import SCENARIOS
-from tools.launch import service_pids, start_supervisor, stop_supervisor, wait_ready
+from tools.launch import rss_kb, service_pids, start_supervisor, stop_supervisor, wait_ready
 from tools.scenarios.runner import STOP_TIMEOUT_S, record_into, scenario_config
 from tools.scenarios.score import ScenarioLog
 
@@ -85,13 +85,8 @@ def flooded_keys(keys: Keys, camera: str) -> list[str]:
 
 
 def _rss_mb(pid: int) -> float | None:
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    except OSError:
-        return None  # the process ended while we looked
-    return None
+    kb = rss_kb(pid)
+    return None if kb is None else kb / 1024.0
 
 
 def in_view_fraction(truths: list[GroundTruth], hfov_deg: float) -> tuple[float, float]:

@@ -129,3 +129,13 @@ def test_service_pids_tells_each_camera_process_by_its_service_name(tmp_path: Pa
         for proc in procs.values():
             proc.kill()
             proc.wait()
+
+
+def test_rss_kb_reads_a_live_process_and_none_once_gone() -> None:
+    import os
+
+    from tools.launch import rss_kb
+
+    own = rss_kb(os.getpid())
+    assert own is not None and own > 1000  # a Python process is megabytes
+    assert rss_kb(0) is None  # no /proc/0: as a process that has ended
