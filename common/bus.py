@@ -30,7 +30,6 @@ from typing import Any
 
 import zenoh
 
-from common.certificates import refuse_server_capable
 from common.errors import ConfigError, StackError
 from common.keys import Keys
 from common.security import (
@@ -149,6 +148,10 @@ def _security(settings: ZenohSettings, principal: str, hub: bool) -> dict[str, A
             usrpwd["dictionary_file"] = _readable(users_file(creds), "user dictionary")
         out["transport/auth/usrpwd"] = usrpwd
     if settings.uses_tls:
+        # Here, not at the top: cryptography costs every process about 15 MB, and only TLS
+        # profiles read certificates.
+        from common.certificates import refuse_server_capable
+
         refuse_server_capable(creds)  # any principal's certificate could pose as the router
         tls: dict[str, Any] = {
             "root_ca_certificate": _readable(ca_file(creds), "CA certificate"),

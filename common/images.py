@@ -6,9 +6,9 @@ command line, benchmark and INT8 calibration, and the metrics' dataset evaluatio
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+import importlib.util
+from collections.abc import Iterable
 from pathlib import Path
-from typing import cast
 
 import cv2
 import numpy as np
@@ -23,7 +23,15 @@ Image = npt.NDArray[np.uint8]
 IMAGE_EXTENSIONS = frozenset({".bmp", ".jpeg", ".jpg", ".png", ".tif", ".tiff", ".webp"})
 
 # scikit-image ships these public-domain photos, so the stack runs with no camera and no download.
-SAMPLES = ("astronaut", "cameraman", "chelsea", "coffee", "rocket", "motorcycle")
+_SAMPLE_FILES = {
+    "astronaut": "astronaut.png",
+    "cameraman": "camera.png",
+    "chelsea": "chelsea.png",
+    "coffee": "coffee.png",
+    "rocket": "rocket.jpg",
+    "motorcycle": "motorcycle_left.png",
+}
+SAMPLES = tuple(_SAMPLE_FILES)
 
 
 def load_image(path: str | Path) -> Image:
@@ -69,21 +77,19 @@ def load_sample(name: str) -> Image:
     """A scikit-image sample photo (one of :data:`SAMPLES`) as ``(H, W, 3)`` BGR uint8.
 
     ``cameraman`` is ``data.camera()`` (grey, expanded to BGR); ``motorcycle`` is
-    ``stereo_motorcycle``'s left view. ConfigError names the samples for any other name.
+    ``stereo_motorcycle``'s left view. Read straight from the files scikit-image ships, with
+    OpenCV: the same pixels as ``skimage.data`` (a unit test compares them), without importing
+    scikit-image and SciPy, which cost every camera process about 20 MB. ConfigError names the
+    samples for any other name; ImageError if the installed scikit-image lacks the file.
     """
-    from skimage import data  # heavy import, only when a sample is asked for
-
-    loaders: dict[str, Callable[[], object]] = {
-        "astronaut": data.astronaut,
-        "cameraman": data.camera,
-        "chelsea": data.chelsea,
-        "coffee": data.coffee,
-        "rocket": data.rocket,
-        "motorcycle": lambda: data.stereo_motorcycle()[0],
-    }
-    if name not in loaders:
+    if name not in _SAMPLE_FILES:
         raise ConfigError(f"unknown sample {name!r}; choose one of {', '.join(SAMPLES)}")
-    rgb = np.asarray(loaders[name](), dtype=np.uint8)
-    if rgb.ndim == 2:
-        return cast(Image, cv2.cvtColor(rgb, cv2.COLOR_GRAY2BGR))
-    return np.ascontiguousarray(rgb[:, :, ::-1])
+    return load_image(_sample_folder() / _SAMPLE_FILES[name])
+
+
+def _sample_folder() -> Path:
+    """scikit-image's ``data`` folder, found without importing the package."""
+    spec = importlib.util.find_spec("skimage")
+    if spec is None or spec.origin is None:
+        raise ImageError("scikit-image is not installed: its sample photos are unavailable")
+    return Path(spec.origin).parent / "data"

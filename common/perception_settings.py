@@ -20,6 +20,8 @@ MAX_CLASSES = 2000
 MAX_BATCH = 64
 #: The most frames one detector round may batch (``detector.max_batch``): one per camera.
 MAX_SERVED_BATCH = 32
+#: ``detector.batch_choice``: measure at start which batch pays, or always fill to max_batch.
+BATCH_CHOICES = ("measured", "max")
 
 #: The detector's default pixel budget per frame: 2**25, 32 Mpx. It admits every real camera
 #: up to 8K UHD (7680x4320, 33.2 Mpx) and 4096x4096 inspection cameras, and bounds one decoded
@@ -101,7 +103,11 @@ class DetectorSettings:
     camera (docs/detector.md, "Several cameras"): a round never holds more frames than there
     are cameras, so one camera always runs batches of 1. It is 1 by default: on the CPU a batch
     adds no parallelism to a runtime already using every core and costs latency (measured in
-    docs/benchmarks.md, "Several cameras on one detector"); raise it on a GPU.
+    docs/benchmarks.md, "Several cameras on one detector"); raise it on a GPU. Raising it is
+    safe: with ``batch_choice`` "measured" the detector times batch 1, 2, 4, ... at start
+    (``batch_probe_runs`` runs each) and uses a larger batch only where it saves at least
+    ``batch_min_gain`` of the time per image (services/detector/batching.py); "max" always
+    fills rounds up to ``max_batch``.
     ``batch_profile`` is the (min, opt, max) batch a TensorRT engine is built for; left at
     (1, 1, 1), the engine is built for 1..the served batch instead.
     A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
@@ -121,6 +127,9 @@ class DetectorSettings:
     precision: str = ""
     batch_profile: tuple[int, int, int] = (1, 1, 1)
     max_batch: int = 1
+    batch_choice: str = "measured"
+    batch_min_gain: float = 0.2
+    batch_probe_runs: int = 3
     conf: float = 0.25
     iou: float = 0.45
     max_det: int = 300
@@ -136,6 +145,8 @@ class DetectorSettings:
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
         "max_batch": (1, MAX_SERVED_BATCH),
+        "batch_min_gain": (0, 0.9),
+        "batch_probe_runs": (1, 20),
         "conf": (0, 1),
         "iou": (0, 1),
         "max_det": (1, MAX_DETECTIONS),
@@ -160,6 +171,11 @@ class DetectorSettings:
                 f"detector.profile must be one of {', '.join(PROFILES)}, got {self.profile!r}"
             )
         enum_field(self, "backend", BackendName, "detector.backend")
+        if self.batch_choice not in BATCH_CHOICES:
+            raise ConfigError(
+                f"detector.batch_choice must be one of {', '.join(BATCH_CHOICES)}, "
+                f"got {self.batch_choice!r}"
+            )
         if self.precision not in ("", "fp32", "fp16", "int8"):
             raise ConfigError(
                 f"detector.precision must be one of fp32, fp16, int8 (or empty for the "

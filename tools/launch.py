@@ -144,11 +144,23 @@ def _camera_arg(argv: list[bytes]) -> bytes | None:
 
 def rss_kb(pid: int) -> int | None:
     """Process ``pid``'s resident memory (``VmRSS``, kB); None once it has gone."""
+    return _proc_field(f"/proc/{pid}/status", "VmRSS:")
+
+
+def pss_kb(pid: int) -> int | None:
+    """Process ``pid``'s proportional set size (kB): its resident pages, each shared page
+    divided by the number of processes mapping it, so that the sum over processes is the
+    memory they take together (summed RSS counts a shared library once per process). None
+    once it has gone (or where the kernel has no ``smaps_rollup``, before Linux 4.14)."""
+    return _proc_field(f"/proc/{pid}/smaps_rollup", "Pss:")
+
+
+def _proc_field(path: str, name: str) -> int | None:
     try:
-        status = Path(f"/proc/{pid}/status").read_text()
+        text = Path(path).read_text()
     except OSError:
         return None  # the process ended while we looked
-    for line in status.splitlines():
-        if line.startswith("VmRSS:"):
+    for line in text.splitlines():
+        if line.startswith(name):
             return int(line.split()[1])
     return None

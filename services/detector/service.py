@@ -25,6 +25,7 @@ from common.messages import Detections, Frame, Header
 from common.node import Node, Put, Tally
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
+from services.detector.batching import measure
 from services.detector.pipeline import Detector
 from services.detector.schedule import CameraSlots, Waiting
 from services.detector.tracker import Tracker, tracker_clock
@@ -229,6 +230,7 @@ def run(config: Config, stop: threading.Event) -> int:
             f": {note}" if note else "",
         )
         per_round = round_size(detector, served, node.log)
+        detector, note, per_round = settle_batch(detector, note, per_round, s, node.log)
         handlers = DetectorHandlers(config, node)
         outputs = {
             cam: CameraOutput(
@@ -276,6 +278,23 @@ def run(config: Config, stop: threading.Event) -> int:
                 queryable.undeclare()
             detector.close()
     return 0
+
+
+def settle_batch(
+    detector: Detector, note: str, per_round: int, s: DetectorSettings, log: logging.Logger
+) -> tuple[Detector, str, int]:
+    """With ``batch_choice`` "measured" and rounds of several frames on a model of dynamic
+    batch: time the batch sizes and keep the one that serves frames fastest
+    (services/detector/batching.py). When that is 1, the model is opened again for batch 1:
+    the fastest batch-1 session, and the buffers the large batches took given back."""
+    if per_round == 1 or s.batch_choice != "measured" or detector.info.batch_size is not None:
+        return detector, note, per_round
+    choice = measure(detector.detect_batch, per_round, s.batch_probe_runs, s.batch_min_gain)
+    log.info("%s", choice.describe())
+    if choice.size == 1:
+        detector.close()
+        detector, note = open_detector(s, 1)
+    return detector, note, choice.size
 
 
 def round_size(detector: Detector, served: int, log: logging.Logger) -> int:

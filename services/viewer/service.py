@@ -102,7 +102,7 @@ class CameraView:
             marks = None
             if dets is not None:
                 w, h = convert.scaled_size(frame.width, frame.height, v.max_image_width)
-                marks = convert.image_annotations(dets, w, h, viewer.locked_track)
+                marks = convert.image_annotations(dets, w, h, viewer.locked_on(self.camera))
         except ImageError as exc:
             viewer.tally.bad_input("frame", exc)
             return
@@ -127,6 +127,7 @@ class Viewer:
         self.channels = channels
         self.settings = config.viewer
         self.locked_track = -1
+        self.locked_camera = ""  # the camera that sees the target: track ids are per camera
         self.trail = scene.PathTrail(self.settings.path_points)
         self._scene_period_s = 1.0 / self.settings.scene_rate_hz
         self._next_scene = 0.0
@@ -155,12 +156,21 @@ class Viewer:
             return
         self.channels.cmd_vel.log(convert.twist_json(twist), log_time=twist.header.stamp_ns)
 
+    def locked_on(self, camera: str) -> int:
+        """The controller's locked track id on ``camera``'s image, -1 for none: each camera's
+        tracker numbers its own tracks, so the same id on another camera is another object.
+        A status that names no camera (a controller from before several cameras) locks on
+        the first camera's image."""
+        locked_camera = self.locked_camera or next(iter(self.cameras))
+        return self.locked_track if camera == locked_camera else -1
+
     def on_status(self, payload: bytes) -> None:
         key = self.tally.keys.controller_status()
         status = self.tally.decode(key, ControllerStatus.decode, payload)
         if status is None:
             return
         self.locked_track = status.track_id
+        self.locked_camera = status.camera
         self.channels.controller.log(convert.status_json(status), log_time=status.header.stamp_ns)
 
     def on_truth(self, payload: bytes) -> None:

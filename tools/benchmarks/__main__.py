@@ -72,7 +72,9 @@ def _scale_arguments(p: argparse.ArgumentParser) -> None:
         help="seconds after readiness left out of each condition (default 20)",
     )
     p.add_argument(
-        "--source", default="sample:chelsea", help="every camera's source (default sample:chelsea)"
+        "--source",
+        default="sample:chelsea",
+        help="every camera process's source with --cameras-from processes (default sample:chelsea)",
     )
     p.add_argument(
         "--rate",
@@ -80,6 +82,13 @@ def _scale_arguments(p: argparse.ArgumentParser) -> None:
         type=float,
         default=10.0,
         help="every camera's rate in Hz (default 10: more than a CPU detector serves)",
+    )
+    p.add_argument(
+        "--cameras-from",
+        choices=("sim", "processes"),
+        default="sim",
+        help="sim: the simulator renders every camera in one process (default); processes: "
+        "one camera process per camera, each with --source",
     )
     p.add_argument("--json", action="store_true", help="print the figures as JSON")  # fmt: skip
 

@@ -1,12 +1,21 @@
 """python -m tools.benchmarks scale: several cameras on one detector against one stack each.
 
-What it runs: stacks of camera processes (sample sources, one process per camera, as the
-supervisor starts them) and the detector, nothing else: the detector is what several cameras
-share, so its memory, throughput, latency and fairness are what this measures most directly
-(no controller or metrics process competes for the two cores; this process counts the
-detections itself). For each N of ``--cameras``:
+What it runs: stacks of simulated cameras and the detector, nothing else: the detector is what
+several cameras share, so its memory, throughput, latency and fairness are what this measures
+most directly (no controller or metrics process competes for the two cores; this process
+counts the detections itself). The cameras come from one of two places (``--cameras-from``):
 
-- ``shared``: one stack, N cameras, one detector with ``max_batch = N`` (batched);
+- ``sim`` (the default): the simulator renders every camera of the stack from one world, in one
+  process, as a simulated robot's stack runs them (the cameras spread round the robot);
+- ``processes``: one camera process per camera with a still source (``--source``), as the
+  supervisor starts a real robot's cameras: what each camera process costs shows here.
+
+For each N of ``--cameras``:
+
+- ``measured``: one stack, N cameras, one detector with ``max_batch = N`` and
+  ``batch_choice = "measured"`` (what a user who raises max_batch gets: the detector times the
+  batch sizes at start and batches only where it pays, services/detector/batching.py);
+- ``shared``: the same with ``batch_choice = "max"``: every round batched up to N (forced);
 - ``batch1``: the same stack with ``max_batch = 1`` (one frame per inference, same load);
 - ``stacks``: N one-camera stacks, each with its own detector (what a user does today).
 
@@ -14,8 +23,11 @@ N = 1 is one stack of one camera (the three are the same). Each condition starts
 (each on a private port), waits ``warmup_s`` (excluded), then measures ``seconds``: detections
 per camera (FPS), capture-to-detections latency per camera (the frame's capture stamp to the
 detections' arrival here, one host's wall clock), the detector's mean batch (its ``batches``
-and ``batched_frames`` counters) and the resident memory of the stack's processes (detector and
-cameras; the detector's apart: one model copy each). Fairness is the slowest camera's FPS over
+and ``batched_frames`` counters) and the memory of the stack's processes (supervisor, detector
+and cameras; the detector's apart: one model copy each): the proportional set size (PSS, each
+shared page divided among the processes mapping it, so the sum is what they take together;
+the ratios use it) and the summed resident set (RSS, which counts every shared library once
+per process). Fairness is the slowest camera's FPS over
 the fastest's. Progress goes to stderr, the table (or ``--json``) to stdout.
 """
 
@@ -42,6 +54,7 @@ from common.messages import Detections, ServiceCounters
 from common.settings import Config, ZenohSettings
 from tools.launch import (
     free_port,
+    pss_kb,
     rss_kb,
     service_pids,
     start_supervisor,
@@ -51,7 +64,8 @@ from tools.launch import (
 
 STARTUP_S = 240.0
 STOP_S = 30.0
-SERVICES = ("camera", "detector")
+#: The services a condition runs, by where its cameras come from.
+SERVICES = {"sim": ("sim", "detector"), "processes": ("camera", "detector")}
 #: A rate every camera asks for: above what one CPU detector serves, so the detector is the
 #: bottleneck (overload) and fairness is tested.
 DEFAULT_SOURCE = "sample:chelsea"
@@ -71,6 +85,7 @@ class ScaleOptions:
     warmup: float = 20.0
     source: str = DEFAULT_SOURCE
     rate_hz: float = DEFAULT_RATE_HZ
+    cameras_from: str = "sim"
     as_json: bool = False
 
     def __post_init__(self) -> None:
@@ -80,6 +95,10 @@ class ScaleOptions:
             raise StackError("--seconds must be > 0 and --warmup >= 0")
         if not 0.1 <= self.rate_hz <= 100:
             raise StackError(f"--rate must be within 0.1..100 Hz, got {self.rate_hz}")
+        if self.cameras_from not in SERVICES:
+            raise StackError(
+                f"--cameras-from must be one of {', '.join(SERVICES)}, got {self.cameras_from!r}"
+            )
 
 
 # ---------------------------------------------------------------- pure figures
@@ -112,8 +131,10 @@ class Result:
     fps: dict[str, float]  # per camera
     p50_ms: dict[str, float]
     p95_ms: dict[str, float]
-    rss_mb: float  # every process of the condition: detectors and cameras
+    rss_mb: float  # summed VmRSS of every process of the condition: detectors and cameras
     detector_rss_mb: float  # the detectors' alone (all of them)
+    pss_mb: float  # summed PSS of every process: supervisors, detectors, cameras
+    detector_pss_mb: float
     batch_mean: float
 
     @property
@@ -142,36 +163,40 @@ class Result:
 
 SETUP_TEXT = {
     "one": "1 stack, 1 camera",
-    "shared": "1 detector, batched",
+    "measured": "1 detector, measured",
+    "shared": "1 detector, batch N",
     "batch1": "1 detector, batch 1",
     "stacks": "{n} one-camera stacks",
 }
 
 
 def ratios(results: Sequence[Result]) -> list[dict[str, Any]]:
-    """For each N: shared against N stacks (memory, detections/s), batched against batch 1
-    (detections/s, latency), and memory against one camera."""
+    """For each N: one detector (as shipped: measured batching) against N stacks and against
+    one camera (memory: PSS), and each batching choice against batch 1 (detections/s,
+    latency)."""
     by = {(r.n, r.setup): r for r in results}
     one = by.get((1, "one"))
     out = []
     for n in sorted({r.n for r in results if r.n > 1}):
-        shared, b1, stacks = by.get((n, "shared")), by.get((n, "batch1")), by.get((n, "stacks"))
+        measured, shared = by.get((n, "measured")), by.get((n, "shared"))
+        b1, stacks = by.get((n, "batch1")), by.get((n, "stacks"))
         row: dict[str, Any] = {"n": n}
-        if shared and one:
-            row["memory_vs_one_camera"] = ratio(shared.rss_mb, one.rss_mb)
+        if measured and one:
+            row["memory_vs_one_camera"] = ratio(measured.pss_mb, one.pss_mb)
             row["detector_memory_vs_one_camera"] = ratio(
-                shared.detector_rss_mb, one.detector_rss_mb
+                measured.detector_pss_mb, one.detector_pss_mb
             )
         if stacks and one:
-            row["stacks_memory_vs_one_camera"] = ratio(stacks.rss_mb, one.rss_mb)
-        if shared and stacks:
-            row["memory_shared_vs_stacks"] = ratio(shared.rss_mb, stacks.rss_mb)
-            row["fps_shared_vs_stacks"] = ratio(shared.total_fps, stacks.total_fps)
-            row["p50_shared_vs_stacks"] = ratio(shared.worst_p50_ms, stacks.worst_p50_ms)
-        if shared and b1:
-            row["fps_batched_vs_batch1"] = ratio(shared.total_fps, b1.total_fps)
-            row["p50_batched_vs_batch1"] = ratio(shared.worst_p50_ms, b1.worst_p50_ms)
-            row["p95_batched_vs_batch1"] = ratio(shared.worst_p95_ms, b1.worst_p95_ms)
+            row["stacks_memory_vs_one_camera"] = ratio(stacks.pss_mb, one.pss_mb)
+        if measured and stacks:
+            row["memory_shared_vs_stacks"] = ratio(measured.pss_mb, stacks.pss_mb)
+            row["fps_shared_vs_stacks"] = ratio(measured.total_fps, stacks.total_fps)
+            row["p50_shared_vs_stacks"] = ratio(measured.worst_p50_ms, stacks.worst_p50_ms)
+        for name, batched in (("measured", measured), ("batched", shared)):
+            if batched and b1:
+                row[f"fps_{name}_vs_batch1"] = ratio(batched.total_fps, b1.total_fps)
+                row[f"p50_{name}_vs_batch1"] = ratio(batched.worst_p50_ms, b1.worst_p50_ms)
+                row[f"p95_{name}_vs_batch1"] = ratio(batched.worst_p95_ms, b1.worst_p95_ms)
         out.append(row)
     return out
 
@@ -179,30 +204,36 @@ def ratios(results: Sequence[Result]) -> list[dict[str, Any]]:
 def render_table(results: Sequence[Result], skipped: Sequence[str]) -> str:
     """The figures as a text table, then the ratios and what was skipped."""
     head = (
-        f"{'N':>2}  {'setup':22}{'RSS MB':>8}{'det MB':>8}{'det/s':>7}{'min FPS':>8}"
+        f"{'N':>2}  {'setup':22}{'PSS MB':>8}{'det MB':>8}{'RSS MB':>8}{'det/s':>7}{'min FPS':>8}"
         f"{'max FPS':>8}{'fair':>6}{'p50 ms':>8}{'p95 ms':>8}{'batch':>6}"
     )
     lines = [head, "-" * len(head)]
     for r in results:
         fps = list(r.fps.values())
         lines.append(
-            f"{r.n:>2}  {SETUP_TEXT[r.setup].format(n=r.n):22}{r.rss_mb:8.0f}"
-            f"{r.detector_rss_mb:8.0f}{r.total_fps:7.2f}{min(fps, default=0):8.2f}"
+            f"{r.n:>2}  {SETUP_TEXT[r.setup].format(n=r.n):22}{r.pss_mb:8.0f}"
+            f"{r.detector_pss_mb:8.0f}{r.rss_mb:8.0f}{r.total_fps:7.2f}{min(fps, default=0):8.2f}"
             f"{max(fps, default=0):8.2f}{r.fairness:6.2f}{r.worst_p50_ms:8.0f}"
             f"{r.worst_p95_ms:8.0f}{r.batch_mean:6.2f}"
         )
-    lines.append("(p50/p95: the worst camera's capture-to-detections; batch: the mean frames "
-                 "per inference, one detector's or the stacks' mean)")  # fmt: skip
+    lines.append(
+        "(PSS: supervisors, detectors and cameras, shared pages divided among them; det MB: "
+        "the detectors' PSS; RSS: summed resident sets; p50/p95: the worst camera's "
+        "capture-to-detections; batch: the mean frames per inference)"
+    )
     names = {
-        "memory_vs_one_camera": "memory, 1 detector / 1 camera",
-        "detector_memory_vs_one_camera": "detector memory, 1 detector / 1 camera",
-        "stacks_memory_vs_one_camera": "memory, N stacks / 1 camera",
-        "memory_shared_vs_stacks": "memory, 1 detector / N stacks",
+        "memory_vs_one_camera": "PSS, 1 detector / 1 camera",
+        "detector_memory_vs_one_camera": "detector PSS, 1 detector / 1 camera",
+        "stacks_memory_vs_one_camera": "PSS, N stacks / 1 camera",
+        "memory_shared_vs_stacks": "PSS, 1 detector / N stacks",
         "fps_shared_vs_stacks": "det/s, 1 detector / N stacks",
         "p50_shared_vs_stacks": "p50, 1 detector / N stacks",
-        "fps_batched_vs_batch1": "det/s, batched / batch 1",
-        "p50_batched_vs_batch1": "p50, batched / batch 1",
-        "p95_batched_vs_batch1": "p95, batched / batch 1",
+        "fps_measured_vs_batch1": "det/s, measured / batch 1",
+        "p50_measured_vs_batch1": "p50, measured / batch 1",
+        "p95_measured_vs_batch1": "p95, measured / batch 1",
+        "fps_batched_vs_batch1": "det/s, batch N / batch 1",
+        "p50_batched_vs_batch1": "p50, batch N / batch 1",
+        "p95_batched_vs_batch1": "p95, batch N / batch 1",
     }
     rows = ratios(results)
     if rows:
@@ -232,25 +263,50 @@ class _Stack:
 
 
 def _stack_config(
-    base: Config, cameras: int, max_batch: int, options: ScaleOptions, path: Path
+    base: Config, cameras: int, max_batch: int, choice: str, options: ScaleOptions, path: Path
 ) -> Config:
     first = dataclasses.replace(
         base.camera, source=options.source, rate_hz=options.rate_hz, loop=True
     )
     further = tuple(
-        (f"cam{i}", dataclasses.replace(first, frame_id=f"camera_cam{i}"))
+        (
+            f"cam{i}",
+            dataclasses.replace(
+                first, frame_id=f"camera_cam{i}", mount_yaw_deg=_ring_yaw(i, cameras)
+            ),
+        )
         for i in range(1, cameras)
     )
+    # The simulator renders the first camera at sim.camera_rate_hz (each further one at its own
+    # rate_hz), and starts its world once the detector alone is ready: no controller here.
+    sim = dataclasses.replace(base.sim, camera_rate_hz=options.rate_hz, wait_for=("detector",))
     return dataclasses.replace(
         base,
         path=str(path),
         zenoh=ZenohSettings(endpoint=f"tcp/127.0.0.1:{free_port()}"),
         stack=dataclasses.replace(base.stack, prefix=f"scale/{free_port()}"),
-        supervisor=dataclasses.replace(base.supervisor, services=SERVICES, optional=()),
+        supervisor=dataclasses.replace(
+            base.supervisor, services=SERVICES[options.cameras_from], optional=()
+        ),
+        sim=sim,
         camera=first,
         cameras=further,
-        detector=dataclasses.replace(base.detector, max_batch=max_batch),
+        detector=dataclasses.replace(base.detector, max_batch=max_batch, batch_choice=choice),
     )
+
+
+def _source_services(config: Config, options: ScaleOptions) -> list[str]:
+    """The services that bring a stack its frames: the simulator, or each camera's process."""
+    if options.cameras_from == "sim":
+        return ["sim"]
+    return list(config.camera_services.values())
+
+
+def _ring_yaw(i: int, cameras: int) -> float:
+    """Camera ``i`` of ``cameras`` spread evenly round the robot, the first looking ahead;
+    within -180..180 degrees."""
+    yaw = 360.0 * i / cameras
+    return yaw - 360.0 if yaw > 180.0 else yaw
 
 
 class _Watch:
@@ -325,19 +381,21 @@ def _condition(
     stop: threading.Event,
 ) -> Result:  # fmt: skip
     """Start the condition's stacks, warm up, measure, stop them all."""
-    shapes = [(1, 1)] * n if setup == "stacks" else [(n, n if setup == "shared" else 1)]
+    batch = n if setup in ("shared", "measured") else 1
+    shapes = [(1, 1)] * n if setup == "stacks" else [(n, batch)]
+    choice = "max" if setup == "shared" else "measured"
     stacks: list[_Stack] = []
     watches: list[_Watch] = []
     try:
         for k, (cams, batch) in enumerate(shapes):
             path = workdir / f"n{n}-{setup}-{k}.toml"
-            config = _stack_config(base, cams, batch, options, path)
+            config = _stack_config(base, cams, batch, choice, options, path)
             path.write_text(to_toml(config))
             with path.with_suffix(".log").open("wb") as log:
                 stacks.append(_Stack(config, path, start_supervisor(path, log)))
         for s in stacks:
             watches.append(_Watch(s))
-            want = {"detector", *s.config.camera_services.values()}
+            want = set(_source_services(s.config, options)) | {"detector"}
             wait_ready(watches[-1].session, watches[-1].keys, want, s.proc, STARTUP_S,
                        stop=stop, log_path=s.path.with_suffix(".log"))  # fmt: skip
         _progress(f"  ready; warming up {options.warmup:.0f} s")
@@ -347,14 +405,16 @@ def _condition(
             w.reset()
         if stop.wait(options.seconds / 2):
             raise KeyboardInterrupt
-        rss = det_rss = 0
+        rss = det_rss = pss = det_pss = 0
         for s in stacks:  # memory mid-phase, every process running
             det_pids = service_pids("detector", s.path)
             cam_pids = [
-                p for svc in s.config.camera_services.values() for p in service_pids(svc, s.path)
+                p for svc in _source_services(s.config, options) for p in service_pids(svc, s.path)
             ]
             det_rss += sum(rss_kb(p) or 0 for p in det_pids)
             rss += sum(rss_kb(p) or 0 for p in det_pids + cam_pids)
+            det_pss += sum(pss_kb(p) or 0 for p in det_pids)
+            pss += sum(pss_kb(p) or 0 for p in [s.proc.pid, *det_pids, *cam_pids])
         if stop.wait(options.seconds / 2):
             raise KeyboardInterrupt
         fps: dict[str, float] = {}
@@ -371,6 +431,7 @@ def _condition(
                 p95[name] = percentile(values, 95)
         return Result(n=n, setup=setup, seconds=options.seconds, fps=fps, p50_ms=p50,
                       p95_ms=p95, rss_mb=rss / 1024, detector_rss_mb=det_rss / 1024,
+                      pss_mb=pss / 1024, detector_pss_mb=det_pss / 1024,
                       batch_mean=ratio(frames, batches))  # fmt: skip
     finally:
         for w in watches:
@@ -384,12 +445,12 @@ def main(options: ScaleOptions, stop: threading.Event) -> int:
     results: list[Result] = []
     skipped: list[str] = []
     plan = [(n, s) for n in options.cameras for s in
-            (("one",) if n == 1 else ("shared", "batch1", "stacks"))]  # fmt: skip
+            (("one",) if n == 1 else ("measured", "shared", "batch1", "stacks"))]  # fmt: skip
     started = mono_s()
     with tempfile.TemporaryDirectory(prefix="scale-bench-") as tmp:
         for i, (n, setup) in enumerate(plan, 1):
             if setup == "stacks":
-                per_stack = next((r.rss_mb for r in results if r.setup == "one"), 0.0)
+                per_stack = next((r.pss_mb for r in results if r.setup == "one"), 0.0)
                 available = _mem_available_mb()
                 if per_stack * n > MEMORY_SHARE * available:
                     skipped.append(
@@ -403,7 +464,7 @@ def main(options: ScaleOptions, stop: threading.Event) -> int:
             results.append(_condition(base, Path(tmp), n, setup, options, stop))
             r = results[-1]
             _progress(f"  {r.total_fps:.2f} det/s, fairness {r.fairness:.2f}, "
-                      f"{r.rss_mb:.0f} MB, batch {r.batch_mean:.2f}")  # fmt: skip
+                      f"{r.pss_mb:.0f} MB, batch {r.batch_mean:.2f}")  # fmt: skip
     if options.as_json:
         out = {
             "results": [r.as_dict() for r in results],

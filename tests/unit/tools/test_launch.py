@@ -139,3 +139,14 @@ def test_rss_kb_reads_a_live_process_and_none_once_gone() -> None:
     own = rss_kb(os.getpid())
     assert own is not None and own > 1000  # a Python process is megabytes
     assert rss_kb(0) is None  # no /proc/0: as a process that has ended
+
+
+def test_pss_kb_is_at_most_rss_and_none_once_gone() -> None:
+    import os
+
+    from tools.launch import pss_kb, rss_kb
+
+    pss, rss = pss_kb(os.getpid()), rss_kb(os.getpid())
+    assert pss is not None and rss is not None
+    assert 1000 < pss <= rss * 1.05  # shared pages count in part; allow pages mapped between reads
+    assert pss_kb(0) is None
