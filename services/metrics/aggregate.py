@@ -179,6 +179,15 @@ class Aggregator:
             if deltas and since is not None:
                 self._timeline.spread(since, now, **deltas)
 
+    def _detector_total(self, name: str) -> int:
+        """Counter ``name`` summed over every detector worker (one unless a pool)."""
+        total = 0
+        for key, value in self._counters.items():
+            service, _, counter = key.partition(".")
+            if counter == name and service_package(service) == "detector":
+                total += value
+        return total
+
     def count(self, name: str, n: int = 1) -> None:
         """Count something the metrics service itself saw (e.g. its own bad input)."""
         key = f"metrics.{name}"
@@ -192,7 +201,7 @@ class Aggregator:
             frames=self._all.frames_total,
             detections=self._all.detections_total,
             detections_per_frame=self._all.detections_per_frame(now),
-            dropped_frames=self._counters.get("detector.dropped", 0),
+            dropped_frames=self._detector_total("dropped"),
             latency_ms=self._all.latency_ms(now),
             counters=dict(sorted(self._counters.items())),
             class_counts=dict(self._classes.most_common()),
@@ -220,7 +229,7 @@ class Aggregator:
         per second, ``dropped`` a count per period.
         """
         recent = self._timeline.totals(now, self.window_s)
-        offered_total = self._counters.get("detector.frames_in", 0)
+        offered_total = self._detector_total("frames_in")
         series = self._timeline.series(
             now - TIMELINE_SETTLE_S, TIMELINE_COLUMNS, since=self._detector_counters_since
         )
@@ -239,7 +248,7 @@ class Aggregator:
             counters=snap.counters,
             class_counts=snap.class_counts,
             drop_rate=ratio(recent.get("dropped", 0.0), recent.get("offered", 0.0)),
-            drop_rate_total=ratio(self._counters.get("detector.dropped", 0), offered_total),
+            drop_rate_total=ratio(self._detector_total("dropped"), offered_total),
             frames_offered=offered_total,
             timeline=TimelineSeries(
                 period_s=period,
