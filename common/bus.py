@@ -264,7 +264,10 @@ def hub_access(config: Config) -> dict[str, Any]:
         return {}
     live = bool(running_sensors(config.supervisor.services))
     keys = Keys(config.stack.prefix)
-    return access_control(keys, config.camera_services, z.auth, live_sensors=live)
+    workers = tuple(config.detector_services.values())
+    return access_control(
+        keys, config.camera_services, z.auth, live_sensors=live, pool_workers=workers
+    )
 
 
 def check_credentials(config: Config) -> None:

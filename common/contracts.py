@@ -82,6 +82,21 @@ class CameraMetrics(TypedDict):
     served_by: str
     batch_mean: float
     counters: dict[str, int]
+    duplicate_detections: NotRequired[int]
+
+
+class WorkerMetrics(TypedDict):
+    """One detector worker of the pool in the metrics answer (services/metrics/pool.py), from
+    its counters: the cameras it says it serves, their share of every camera's pixel rate
+    (``load``, 0..1), the live workers it counts, its hand-overs since it started, and how long
+    ago its counters came (a dead worker's last word stays until it is restarted)."""
+
+    cameras: list[str]
+    load: float
+    members: int
+    cameras_gained: int
+    cameras_lost: int
+    reported_s_ago: float
 
 
 class MetricsAnswer(TypedDict):
@@ -89,7 +104,8 @@ class MetricsAnswer(TypedDict):
 
     The top-level figures are every camera's together (with one camera, that camera's);
     ``cameras`` has each configured camera's, first camera first (absent from answers recorded
-    before several cameras existed).
+    before several cameras existed). ``workers`` has each detector worker's (the pool), and
+    ``duplicate_detections`` counts frames detected twice (by two workers during a hand-over).
     """
 
     stamp_ns: int
@@ -107,6 +123,8 @@ class MetricsAnswer(TypedDict):
     frames_offered: int
     timeline: TimelineSeries
     cameras: NotRequired[dict[str, CameraMetrics]]
+    workers: NotRequired[dict[str, WorkerMetrics]]
+    duplicate_detections: NotRequired[int]
 
 
 class _SessionCore(TypedDict):

@@ -14,6 +14,7 @@ runs can share one network without hearing each other:
     <prefix>/counters/<service>               ServiceCounters each service -> metrics
     <prefix>/metrics                          queryable       metrics -> JSON snapshot
     <prefix>/health/<service>                 liveliness      present while a service is ready
+    <prefix>/detector/pool/<worker>           liveliness      a detector worker in the pool
 
 Who may put on which key under the secure profile is in common/security.py.
 """
@@ -75,6 +76,14 @@ class Keys:
 
     def all_detector_info(self) -> str:
         return f"{self.prefix}/detector/*/info"
+
+    def pool_member(self, worker: str) -> str:
+        """A detector worker's liveliness token: present while it takes cameras
+        (services/detector/pool.py)."""
+        return f"{self.prefix}/detector/pool/{_check_chunks('worker id', worker)}"
+
+    def all_pool_members(self) -> str:
+        return f"{self.prefix}/detector/pool/*"
 
     def scan(self) -> str:
         return f"{self.prefix}/scan"

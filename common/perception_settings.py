@@ -5,6 +5,7 @@ Re-exported by common/settings.py, where the whole Config is assembled.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -22,6 +23,10 @@ MAX_BATCH = 64
 MAX_SERVED_BATCH = 32
 #: ``detector.batch_choice``: measure at start which batch pays, or always fill to max_batch.
 BATCH_CHOICES = ("measured", "max")
+
+#: The most detector workers one supervisor starts (``detector.workers``).
+MAX_WORKERS = 8
+_WORKER_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
 
 #: The detector's default pixel budget per frame: 2**25, 32 Mpx. It admits every real camera
 #: up to 8K UHD (7680x4320, 33.2 Mpx) and 4096x4096 inspection cameras, and bounds one decoded
@@ -120,6 +125,15 @@ class DetectorSettings:
     ``iou`` the overlap above which a lower-scored box of the same class is suppressed;
     ``max_det`` caps detections per image (300 as in Ultralytics; the stack's config sets its
     own); ``classes`` keeps only those class names, and empty keeps every class.
+
+    The pool (docs/detector.md, "A pool of workers"): ``workers`` detector processes on this
+    host divide the cameras between them, with those on other hosts that share the key
+    prefix; 1 (the default) is one detector serving every camera. Each worker's id is
+    ``worker_id`` (empty: its service name, ``detector``, ``detector_2`` ...) with ``_<n>``
+    added for the n-th worker from the second on; ids must differ across hosts, so on several
+    hosts give each its own (``worker_id = "robot1"``). ``pool_balance`` is the slack over an
+    even share of the cameras' pixel rate that a worker may take before a camera goes to its
+    next choice (services/detector/pool.py).
     """
 
     model: str = ""
@@ -141,6 +155,9 @@ class DetectorSettings:
     calibration_dir: str = ""
     profile: str = "default"
     fast_max_ap50_drop: float = 0.01
+    workers: int = 1
+    worker_id: str = ""
+    pool_balance: float = 1.25
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
@@ -155,6 +172,8 @@ class DetectorSettings:
         "max_frame_pixels": (1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE),  # JPEG header or raw size
         "imgsz": (0, MAX_IMGSZ),  # 0 = the model's own; else a multiple of 32, checked below
         "fast_max_ap50_drop": (0, 1),
+        "workers": (1, MAX_WORKERS),
+        "pool_balance": (1, 4),
     }
     LENGTHS: ClassVar[Bounds] = {"classes": (0, MAX_CLASSES)}
 
@@ -186,6 +205,11 @@ class DetectorSettings:
             raise ConfigError(
                 f"detector.batch_profile must be [min, opt, max] with 1 <= min <= opt <= max, "
                 f"got {list(self.batch_profile)}"
+            )
+        if self.worker_id and not _WORKER_ID.fullmatch(self.worker_id):
+            raise ConfigError(
+                f"detector.worker_id {self.worker_id!r} must be 1..64 of letters, digits, "
+                "'_', '-', '.' (starting with a letter or digit): it names a liveliness key"
             )
         if not all(self.classes):
             raise ConfigError(

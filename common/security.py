@@ -131,12 +131,16 @@ def key_file(directory: Path, principal: str) -> Path:
 
 
 def _principal_keys(
-    keys: Keys, cameras: str | Mapping[str, str], live_sensors: bool = True
+    keys: Keys,
+    cameras: str | Mapping[str, str],
+    live_sensors: bool = True,
+    pool_workers: tuple[str, ...] = ("detector",),
 ) -> dict[str, dict[str, tuple[str, ...]]]:
     """What each principal may publish (``put``), announce (``token``), serve (``serve``) and
     subscribe to (``read``). ``cameras``: see :func:`camera_services`. ``live_sensors``: the
     stack runs a camera, the simulator or the ROS 2 bridge, so the recorder may not play frames
-    or scans onto it."""
+    or scans onto it. ``pool_workers``: the detector's pool ids (``Config.detector_services``'
+    values), whose liveliness tokens the detector may declare."""
 
     def service(name: str, *puts: str, read: tuple[str, ...] = ()) -> dict[str, tuple[str, ...]]:
         out = {"put": (*puts, keys.counters(name)), "token": (keys.health(name),)}
@@ -171,8 +175,10 @@ def _principal_keys(
         # on a stack with no live sensor only.
         "recorder": service("recorder", *replay, read=(f"{keys.prefix}/**",)),
         # One detector serves every camera: it reads frames and puts detections, never frames.
+        # Its pool membership token too (services/detector/pool.py), under its worker ids.
         "detector": {
             **service("detector", *(keys.detections(c) for c in services), read=(all_frames,)),
+            "token": (keys.health("detector"), *(keys.pool_member(w) for w in pool_workers)),
             "serve": (keys.all_detector_info(),),
         },
         "controller": service(
@@ -210,13 +216,15 @@ def access_control(
     principals: tuple[str, ...] | None = None,
     *,
     live_sensors: bool = True,
+    pool_workers: tuple[str, ...] = ("detector",),
 ) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for the router: deny by default, then allow each
     principal its own keys on ingress (puts, tokens, queryables, subscriptions), queries and
     liveliness for everyone, and everything on egress (the router delivers only what it
     accepted, and only to subscriptions it accepted). ``cameras``: see
     :func:`camera_services`; ``principals`` (default: :func:`stack_principals`) limits the
-    rules to those named."""
+    rules to those named; ``pool_workers``: the detector pool's worker ids
+    (``Config.detector_services``' values)."""
     if auth not in AUTH_MODES[1:]:
         raise ValueError(f"access control needs an authenticated mode, got {auth!r}")
     if principals is None:
@@ -246,7 +254,8 @@ def access_control(
         "serve": ["declare_queryable", "reply"],
         "read": ["declare_subscriber"],
     }
-    for principal, allowed in _principal_keys(keys, cameras, live_sensors).items():
+    allowed_keys = _principal_keys(keys, cameras, live_sensors, pool_workers)
+    for principal, allowed in allowed_keys.items():
         if principal not in principals:
             continue
         subjects.append({"id": principal, match: [principal]})

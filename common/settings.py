@@ -70,10 +70,21 @@ def camera_service(first: str, camera: str) -> str:
     return "camera" if camera == first else f"camera_{camera}"
 
 
+def detector_service(n: int) -> str:
+    """The service (process, health token, counters) of the ``n``-th detector worker (from 1):
+    ``detector`` for the first, as a one-detector stack has always named it, ``detector_<n>``
+    for each further one."""
+    return "detector" if n == 1 else f"detector_{n}"
+
+
 def service_package(service: str) -> str:
     """The package a service runs from, ``services.<package>``: ``camera`` for every camera's
-    service (``camera``, ``camera_<name>``), the service's own name otherwise."""
-    return "camera" if service.startswith("camera_") else service
+    service (``camera``, ``camera_<name>``), ``detector`` for every detector worker's
+    (``detector``, ``detector_<n>``), the service's own name otherwise."""
+    for package in ("camera", "detector"):
+        if service.startswith(f"{package}_"):
+            return package
+    return service
 
 
 SERVICES = ("recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
@@ -311,6 +322,19 @@ class Config:
     def camera_services(self) -> dict[str, str]:
         """Every camera's service name (see :func:`camera_service`) by camera name."""
         return {c: camera_service(self.stack.camera, c) for c in self.all_cameras}
+
+    @property
+    def detector_services(self) -> dict[str, str]:
+        """Every detector worker this host runs, ``{service: worker id}`` (``detector.workers``
+        of them; see :func:`detector_service` and ``DetectorSettings``)."""
+        d = self.detector
+        out = {}
+        for n in range(1, d.workers + 1):
+            service = detector_service(n)
+            out[service] = (
+                (d.worker_id if n == 1 else f"{d.worker_id}_{n}") if d.worker_id else service
+            )
+        return out
 
     def camera_settings(self, name: str) -> CameraSettings:
         """The settings of camera ``name``; ConfigError naming the known ones otherwise."""

@@ -17,20 +17,31 @@ from common.settings import Config, SupervisorSettings
 from common.spawn import ask_to_stop, spawn, wait_or_kill
 
 
-def service_command(name: str, config_path: str, camera: str = "") -> list[str]:
+def service_command(name: str, config_path: str, camera: str = "", worker: str = "") -> list[str]:
     """Every service starts the same way (common/cli.py); a further camera's with
-    ``--camera <name>`` (the first camera's without, as a one-camera stack always started it)."""
+    ``--camera <name>`` (the first camera's without, as a one-camera stack always started it),
+    a further detector worker's with ``--worker <service>`` (``detector_2`` ...)."""
     command = [sys.executable, "-m", f"services.{name}", "serve", "--config", config_path]
-    return [*command, "--camera", camera] if camera else command
+    if camera:
+        command += ["--camera", camera]
+    if worker:
+        command += ["--worker", worker]
+    return command
 
 
 def stack_processes(config: Config) -> list[tuple[str, list[str]]]:
     """(process name, command) of every process the supervisor runs, in start order: one per
     service of ``supervisor.services``, and for ``camera`` one per configured camera, each
     named as its service (``camera``, ``camera_<name>``: common/settings.py::camera_service),
-    so that each has its own status, restarts, backoff and watchdog."""
+    so that each has its own status, restarts, backoff and watchdog; likewise for
+    ``detector`` one per worker of ``detector.workers`` (``detector``, ``detector_<n>``)."""
     out = []
     for name in config.supervisor.services:
+        if name == "detector":
+            for service in config.detector_services:
+                further = service if service != "detector" else ""
+                out.append((service, service_command("detector", config.path, worker=further)))
+            continue
         if name != "camera":
             out.append((name, service_command(name, config.path)))
             continue

@@ -116,10 +116,13 @@ def service_pids(service: str, config_path: str | Path) -> list[int]:
 
     A camera's process is found by its service name as the supervisor names it
     (deploy/processes.py): ``camera`` is the first camera's (started without ``--camera``),
-    ``camera_<name>`` a further camera's (``--camera <name>``).
+    ``camera_<name>`` a further camera's (``--camera <name>``); likewise ``detector`` is the
+    first detector worker's, ``detector_<n>`` a further one's (``--worker detector_<n>``).
     """
     package = service_package(service)
-    camera = service.removeprefix("camera_").encode() if package != service else None
+    further = package != service
+    camera = service.removeprefix("camera_").encode() if further and package == "camera" else None
+    worker = service.encode() if further and package == "detector" else None
     want = (f"services.{package}".encode(), str(config_path).encode())
     pids = []
     for entry in Path("/proc").iterdir():
@@ -129,15 +132,19 @@ def service_pids(service: str, config_path: str | Path) -> list[int]:
             argv = (entry / "cmdline").read_bytes().split(b"\0")
         except OSError:
             continue  # the process ended while we looked
-        if all(w in argv for w in want) and _camera_arg(argv) == camera:
+        if (
+            all(w in argv for w in want)
+            and _arg(argv, b"--camera") == camera
+            and _arg(argv, b"--worker") == worker
+        ):
             pids.append(int(entry.name))
     return pids
 
 
-def _camera_arg(argv: list[bytes]) -> bytes | None:
-    """The value of ``--camera`` in ``argv``, None without one."""
+def _arg(argv: list[bytes], flag: bytes) -> bytes | None:
+    """The value of ``flag`` in ``argv``, None without one."""
     for i, arg in enumerate(argv[:-1]):
-        if arg == b"--camera":
+        if arg == flag:
             return argv[i + 1]
     return None
 

@@ -13,7 +13,7 @@ import sys
 
 from common.cli import Command, add_config, service_main
 from common.config_file import load_config
-from common.errors import StackError
+from common.errors import ConfigError, StackError
 from common.lifecycle import exit_code, run_main, setup_logging, stop_event
 
 
@@ -23,6 +23,12 @@ def _serve_arguments(p: argparse.ArgumentParser) -> None:
         "--backend", help="override detector.backend: onnx, tensorrt, cuda, openvino or auto"
     )
     p.add_argument("--model", help="override detector.model")
+    p.add_argument(
+        "--worker",
+        default="detector",
+        help="this worker's service name: detector (the default) or detector_<n>, one of "
+        "detector.workers (docs/detector.md, 'A pool of workers')",
+    )
 
 
 def serve(args: argparse.Namespace) -> int:
@@ -33,10 +39,13 @@ def serve(args: argparse.Namespace) -> int:
         config = dataclasses.replace(
             config, detector=dataclasses.replace(config.detector, **overrides)
         )
-    setup_logging("detector")
+    if args.worker not in config.detector_services:
+        known = list(config.detector_services)
+        raise ConfigError(f"no detector worker {args.worker!r} (detector.workers); known: {known}")
+    setup_logging(args.worker)
     from services.detector.service import run
 
-    return run(config, stop)
+    return run(config, stop, args.worker)
 
 
 COMMANDS = [Command("serve", "run the detector service on the Zenoh bus", _serve_arguments, serve)]

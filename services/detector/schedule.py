@@ -84,6 +84,12 @@ class CameraSlots(Generic[_T]):
             taken = [(cam, self._slots.pop(cam)) for cam in oldest]
         return [Waiting(cam, slot.item, slot.received_ns) for cam, slot in taken]
 
+    def clear(self, camera: str) -> bool:
+        """Drop ``camera``'s waiting frame, if any (its camera went to another worker); True
+        when there was one."""
+        with self._cond:
+            return self._slots.pop(camera, None) is not None
+
     def waiting(self) -> int:
         """How many cameras have a frame waiting."""
         with self._cond:

@@ -1,6 +1,7 @@
-"""The detector service: the newest frame of every camera in, each camera's Detections out,
-with its frame's header, on its own key; several cameras' frames batched (docs/detector.md,
-"Several cameras")."""
+"""The detector service: the newest frame of every camera it serves in, each camera's
+Detections out, with its frame's header, on its own key; several cameras' frames batched
+(docs/detector.md, "Several cameras"). Several workers divide the cameras between them as a
+pool (services/detector/pool.py; :class:`PoolMember` here is its bus side)."""
 
 from __future__ import annotations
 
@@ -27,12 +28,16 @@ from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
 from services.detector.batching import measure
 from services.detector.pipeline import Detector
+from services.detector.pool import Change, PoolView, camera_weights
 from services.detector.schedule import CameraSlots, Waiting
 from services.detector.tracker import Tracker, tracker_clock
 from services.detector.types import DetectionResult
 from services.detector.variants import variant_of
 
-_WAIT_S = 0.2  # how often the idle loop looks at the stop flag
+_WAIT_S = 0.2  # how often the idle loop looks at the stop flag (and the pool's membership)
+#: How long a joining worker asks who is already in the pool before it takes its cameras: the
+#: query ends as soon as every peer answered; this bounds it on a slow link.
+POOL_ASK_TIMEOUT_S = 1.0
 
 
 def open_detector(s: DetectorSettings, max_batch: int = 1) -> tuple[Detector, str]:
@@ -93,11 +98,28 @@ class DetectorHandlers:
         self.frame_keys = {cam: tally.keys.frame(cam) for cam in config.all_cameras}
         self.slots: CameraSlots[Frame] = CameraSlots(self.frame_keys)
         self.gaps = {cam: SeqGaps() for cam in self.frame_keys}  # one numbering per camera
+        #: The cameras this worker serves (all of them outside a pool); a frame of another,
+        #: late from a subscription just undeclared, is left to its new worker.
+        self.serving: frozenset[str] = frozenset(self.frame_keys)
+
+    def serve(
+        self, cameras: frozenset[str], gained: tuple[str, ...], lost: tuple[str, ...]
+    ) -> None:
+        """Serve ``cameras`` from now on: a camera ``lost`` has its waiting frame dropped (its
+        new worker detects on it), one ``gained`` starts its frame numbering afresh (the frames
+        sent while another worker served it are no loss)."""
+        self.serving = cameras
+        for cam in lost:
+            self.slots.clear(cam)
+        for cam in gained:
+            self.gaps[cam] = SeqGaps()
 
     def on_frame(self, camera: str, payload: bytes) -> None:
         # Decode here, not in the loop: garbage must be counted even when a newer frame would
         # have replaced it in the slot before the loop looked at it; and an oversize frame
         # must never displace a real one there.
+        if camera not in self.serving:
+            return
         count = partial(count_for, self.tally, camera)
         count("frames_in")
         key = self.frame_keys[camera]
@@ -213,10 +235,11 @@ class Rounds:
         count_for(self.tally, out.camera, "detections_out")
 
 
-def run(config: Config, stop: threading.Event) -> int:
-    """Detect on the newest frame of every camera until ``stop`` is set."""
+def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
+    """Detect on the newest frame of every camera this worker (``detector``, ``detector_<n>``:
+    ``Config.detector_services``) serves until ``stop`` is set."""
     s = config.detector
-    with Node("detector", config, counters_period_s=s.counters_period_s) as node:
+    with Node(worker, config, counters_period_s=s.counters_period_s) as node:
         served = served_batch(config)
         detector, note = open_detector(s, served)
         b = detector.backend
@@ -243,10 +266,7 @@ def run(config: Config, stop: threading.Event) -> int:
             for cam, key in handlers.frame_keys.items()
         }
         rounds = Rounds(config, node, detector, outputs)
-        subs = [
-            node.subscribe(key, partial(handlers.on_frame, cam))
-            for cam, key in handlers.frame_keys.items()
-        ]
+        pool = PoolMember(node, config.detector_services[worker], handlers)
         info = json.dumps(
             DetectorInfo(
                 model=detector.model_path.name,
@@ -264,16 +284,17 @@ def run(config: Config, stop: threading.Event) -> int:
         warm = np.full((480, 640, 3), 114, np.uint8)
         for size in sorted({1, per_round}):
             detector.detect_batch([warm] * size)
+        pool.join()
         node.ready()
         try:
             while not stop.is_set():
+                pool.settle()
                 node.publish_counters()
                 waiting = handlers.slots.take(per_round, _WAIT_S)
                 if waiting:
                     rounds.run(waiting)
         finally:
-            for sub in subs:
-                sub.undeclare()
+            pool.close()
             for queryable in queryables:
                 queryable.undeclare()
             detector.close()
@@ -295,6 +316,116 @@ def settle_batch(
         detector.close()
         detector, note = open_detector(s, 1)
     return detector, note, choice.size
+
+
+class PoolMember:
+    """This worker's place in the detector pool (services/detector/pool.py): its liveliness
+    token ``<prefix>/detector/pool/<worker id>``, the others' tokens as they come and go, and a
+    frame subscription for each camera it serves.
+
+    Zenoh's threads only note a join or a leave; the detection loop calls :meth:`settle`
+    between rounds, which recomputes the assignment and declares and undeclares subscriptions
+    there (never inside a Zenoh callback). Counted: ``serving`` and ``serving.<cam>`` (1 while
+    served), ``pool_members``, ``pool_load_permille`` (the served cameras' share of every
+    camera's pixel rate), ``cameras_gained`` and ``cameras_lost`` (and ``.<cam>``: hand-overs
+    after the first assignment)."""
+
+    def __init__(self, node: Node, worker_id: str, handlers: DetectorHandlers) -> None:
+        config = node.config
+        self.node = node
+        self.handlers = handlers
+        self.view = PoolView(
+            worker_id, camera_weights(config.all_cameras), config.detector.pool_balance
+        )
+        self._lock = threading.Lock()
+        self._dirty = True
+        self._subs: dict[str, zenoh.Subscriber[None]] = {}
+        self._token: zenoh.LivelinessToken | None = None
+        self._watch: zenoh.Subscriber[None] | None = None
+        self._gauges: dict[str, int] = {}
+        self._handed_over = False
+        for cam in handlers.frame_keys:
+            self._gauge(per_camera("serving", cam), 0)
+        for name in ("serving", "pool_members", "pool_load_permille"):
+            self._gauge(name, 0)
+        for name in ("cameras_gained", "cameras_lost"):
+            node.counters.add(name, 0)
+
+    def join(self) -> None:
+        """Declare this worker's token, learn who else is in the pool, and take its cameras."""
+        node, keys = self.node, self.node.keys
+        liveliness = node.session.liveliness()
+        self._token = liveliness.declare_token(keys.pool_member(self.view.me))
+        self._watch = liveliness.declare_subscriber(
+            keys.all_pool_members(), self._on_member, history=True
+        )
+        for reply in liveliness.get(keys.all_pool_members(), timeout=POOL_ASK_TIMEOUT_S):
+            if reply.ok is not None:
+                self._member(str(reply.ok.key_expr), joined=True)
+        self.settle()
+
+    def _on_member(self, sample: zenoh.Sample) -> None:
+        self._member(str(sample.key_expr), joined=sample.kind == zenoh.SampleKind.PUT)
+
+    def _member(self, key: str, *, joined: bool) -> None:
+        worker = key.rsplit("/", 1)[-1]
+        with self._lock:
+            if joined:
+                self.view.joined(worker)
+            else:
+                self.view.left(worker)
+            self._dirty = True
+
+    def settle(self) -> None:
+        """Apply a membership change, if any, to this worker's subscriptions and counters."""
+        with self._lock:
+            if not self._dirty:
+                return
+            self._dirty = False
+            change = self.view.settle()
+        self._apply(change)
+
+    def _apply(self, change: Change) -> None:
+        node, handlers = self.node, self.handlers
+        for cam in change.lost:
+            sub = self._subs.pop(cam, None)
+            if sub is not None:
+                sub.undeclare()
+        handlers.serve(change.serving, change.gained, change.lost)
+        for cam in change.gained:
+            key = handlers.frame_keys[cam]
+            self._subs[cam] = node.subscribe(key, partial(handlers.on_frame, cam))
+        for cam in (*change.gained, *change.lost):
+            self._gauge(per_camera("serving", cam), int(cam in change.serving))
+        if self._handed_over:  # the first assignment, at start, is no hand-over
+            for cam in change.gained:
+                count_for(node, cam, "cameras_gained")
+            for cam in change.lost:
+                count_for(node, cam, "cameras_lost")
+        self._handed_over = True
+        self._gauge("serving", len(change.serving))
+        self._gauge("pool_members", change.members)
+        self._gauge("pool_load_permille", round(change.load * 1000))
+        if change.gained or change.lost:
+            node.log.info(
+                "pool of %d: serving %s (gained %s, lost %s)",
+                change.members,
+                sorted(change.serving) or "no camera",
+                list(change.gained),
+                list(change.lost),
+            )
+
+    def _gauge(self, name: str, value: int) -> None:
+        # Counters only add: a gauge moves by its difference.
+        self.node.counters.add(name, value - self._gauges.get(name, 0))
+        self._gauges[name] = value
+
+    def close(self) -> None:
+        for sub in [*self._subs.values(), *((self._watch,) if self._watch else ())]:
+            sub.undeclare()
+        self._subs.clear()
+        if self._token is not None:
+            self._token.undeclare()
 
 
 def round_size(detector: Detector, served: int, log: logging.Logger) -> int:

@@ -22,9 +22,10 @@ from collections.abc import Iterable
 
 from common.contracts import CameraMetrics, MetricsAnswer, TimelineSeries
 from common.messages import Detections, Header, MetricsSnapshot, ServiceCounters, Twist
-from common.settings import MAX_CAMERAS
+from common.settings import MAX_CAMERAS, service_package
 from services.metrics.cameras import BatchSizes, CameraCounters, ratio
 from services.metrics.figures import DETECTOR_STAGES, STAGES, Figures, LatencyListener
+from services.metrics.pool import Duplicates, workers
 from services.metrics.reactions import Reaction, Reactions
 from services.metrics.window import Timeline
 
@@ -76,6 +77,7 @@ class Aggregator:
         self._counters: dict[str, int] = {}
         self._reported_at: dict[str, float] = {}  # service -> when its counters last came
         self._detector_counters_since: float | None = None  # ... and the detector's first came
+        self._duplicates = Duplicates()  # frames detected twice (a pool's hand-over)
         self.model = ""  # as the latest Detections named them
         self.backend = ""
 
@@ -97,7 +99,11 @@ class Aggregator:
         return figures
 
     def on_detections(self, msg: Detections, now: float, *, camera: str) -> None:
-        """``camera``'s detections (the camera its key names)."""
+        """``camera``'s detections (the camera its key names). A frame detected twice (two
+        workers during a hand-over) is counted as ``duplicate_detections`` and shown as
+        published: the controller heard both."""
+        if self._duplicates.seen(camera, msg.header):
+            self.count("duplicate_detections")
         self.model, self.backend = msg.model, msg.backend
         self._all.on_detections(msg, now)
         figures = self._camera(camera)
@@ -152,7 +158,8 @@ class Aggregator:
             delta = None
             if previous is not None:
                 delta = float(value - previous if value >= previous else value)
-            column = _DETECTOR_DELTAS.get(name) if msg.service == "detector" else None
+            detector = service_package(msg.service) == "detector"  # any worker of the pool
+            column = _DETECTOR_DELTAS.get(name) if detector else None
             if column is not None and delta is not None:
                 deltas[column] = delta
             base, _, camera = name.rpartition(".")
@@ -166,11 +173,20 @@ class Aggregator:
             self._batches.on_counters(msg.service, msg.counters, now)
         for camera in touched:
             self._camera_counters[camera].settle(since, now)
-        if msg.service == "detector":
+        if service_package(msg.service) == "detector":
             if self._detector_counters_since is None:
                 self._detector_counters_since = now  # a baseline: the drops before are unknown
             if deltas and since is not None:
                 self._timeline.spread(since, now, **deltas)
+
+    def _detector_total(self, name: str) -> int:
+        """Counter ``name`` summed over every detector worker (one unless a pool)."""
+        total = 0
+        for key, value in self._counters.items():
+            service, _, counter = key.partition(".")
+            if counter == name and service_package(service) == "detector":
+                total += value
+        return total
 
     def count(self, name: str, n: int = 1) -> None:
         """Count something the metrics service itself saw (e.g. its own bad input)."""
@@ -185,7 +201,7 @@ class Aggregator:
             frames=self._all.frames_total,
             detections=self._all.detections_total,
             detections_per_frame=self._all.detections_per_frame(now),
-            dropped_frames=self._counters.get("detector.dropped", 0),
+            dropped_frames=self._detector_total("dropped"),
             latency_ms=self._all.latency_ms(now),
             counters=dict(sorted(self._counters.items())),
             class_counts=dict(self._classes.most_common()),
@@ -198,6 +214,7 @@ class Aggregator:
             counters = self._camera_counters[camera]
             batch_mean = self._batches.mean(counters.served_by) if counters.served_by else 0.0
             out[camera] = counters.figures(figures, now, batch_mean)
+            out[camera]["duplicate_detections"] = self._duplicates.per_camera.get(camera, 0)
         return out
 
     def answer(self, header: Header, now: float, clock_to_unix: float = 0.0) -> MetricsAnswer:
@@ -212,7 +229,7 @@ class Aggregator:
         per second, ``dropped`` a count per period.
         """
         recent = self._timeline.totals(now, self.window_s)
-        offered_total = self._counters.get("detector.frames_in", 0)
+        offered_total = self._detector_total("frames_in")
         series = self._timeline.series(
             now - TIMELINE_SETTLE_S, TIMELINE_COLUMNS, since=self._detector_counters_since
         )
@@ -231,7 +248,7 @@ class Aggregator:
             counters=snap.counters,
             class_counts=snap.class_counts,
             drop_rate=ratio(recent.get("dropped", 0.0), recent.get("offered", 0.0)),
-            drop_rate_total=ratio(self._counters.get("detector.dropped", 0), offered_total),
+            drop_rate_total=ratio(self._detector_total("dropped"), offered_total),
             frames_offered=offered_total,
             timeline=TimelineSeries(
                 period_s=period,
@@ -242,6 +259,8 @@ class Aggregator:
                 detections_per_frame=[ratio(b, f) for b, f in zip(boxes, frames, strict=True)],
             ),
             cameras=self.cameras(now),
+            workers=workers(self._counters, self._figures, self._reported_at, now),
+            duplicate_detections=self._duplicates.total,
         )
 
     def latency_samples(self, now: float) -> dict[str, list[float]]:

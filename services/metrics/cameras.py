@@ -10,8 +10,10 @@ camera's under ``<name>.<camera>`` (common/counters.py::per_camera). The names r
 
 Every other ``<name>.<cam>`` of any service (``detections_out.rear``, the controller's
 ``detections_in.rear``, the simulator's ``frames_out.rear`` ...) is shown under that camera as
-``<service>.<name>``. The worker serving a camera (``served_by``) is the service that counts
-``frames_in.<cam>``: today the one detector ("detector").
+``<service>.<name>``. The worker serving a camera (``served_by``) is the detector worker
+whose latest ``serving.<cam>`` is 1 (a pool's workers hand cameras over: services/detector/
+pool.py); from a worker that does not count ``serving``, the service counting
+``frames_in.<cam>``.
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ from services.metrics.window import Timeline
 
 #: Counter name -> drop timeline column: frames offered to the worker, and dropped by it.
 DROP_COLUMNS = {"frames_in": "offered", "dropped": "dropped"}
-WORKER_COUNTER = "frames_in"  # the service counting this for a camera serves it
+WORKER_COUNTER = "frames_in"  # the service counting this for a camera serves it ...
+SERVING_COUNTER = "serving"  # ... unless a worker says so with this one (1: it serves it)
 BATCH_COUNTERS = ("batches", "batched_frames")
 
 
@@ -39,6 +42,7 @@ class CameraCounters:
         self.window_s = window_s
         self.counters: dict[str, int] = {}  # "<service>.<name>" -> count, for this camera
         self.served_by = ""
+        self._pool = False  # a worker counts SERVING_COUNTER: it, not WORKER_COUNTER, decides
         self._drops = Timeline(window_s + 2.0)  # the window and the period still filling
         self._pending: dict[str, float] = {}  # drop columns counted in the current message
 
@@ -46,7 +50,13 @@ class CameraCounters:
         """``service``'s counter ``name`` for this camera is ``value``, up ``delta`` since its
         last report (None on the first)."""
         self.counters[f"{service}.{name}"] = value
-        if name == WORKER_COUNTER:
+        if name == SERVING_COUNTER:
+            self._pool = True
+            if value > 0:
+                self.served_by = service
+            elif self.served_by == service:
+                self.served_by = ""  # it handed the camera on; the new worker says so next
+        elif name == WORKER_COUNTER and not self._pool:
             self.served_by = service
         column = DROP_COLUMNS.get(name)
         if column is not None and delta is not None and service == self.served_by:

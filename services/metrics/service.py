@@ -74,7 +74,9 @@ class MetricsHandlers:
     def on_counters(self, key: str, payload: bytes) -> None:
         """``key``: the one the sample came on, which must name the service that counts."""
         limit = self.settings.max_counters_per_service
-        known = (*SERVICES, *self.tally.config.camera_services.values())  # camera_<name> too
+        config = self.tally.config
+        # camera_<name> and detector_<n> too
+        known = (*SERVICES, *config.camera_services.values(), *config.detector_services)
         self._take(
             "counters", ServiceCounters.decode, key, payload, self._feed_counters,
             lambda m, heard_on: refuse_counters(m, heard_on, known, limit),

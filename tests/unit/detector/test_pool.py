@@ -1,0 +1,98 @@
+"""The pool's assignment rule (services/detector/pool.py)."""
+
+from __future__ import annotations
+
+import pytest
+
+from common.settings import CameraSettings
+from services.detector.pool import PoolView, assign, camera_weights, rank
+
+EVEN = {f"cam{i}": 1.0 for i in range(12)}
+
+
+def test_same_membership_same_assignment_in_any_order() -> None:
+    a = assign(["w1", "w2", "w3"], EVEN, 1.25)
+    b = assign(["w3", "w1", "w2", "w1"], dict(reversed(EVEN.items())), 1.25)
+    assert a == b
+
+
+def test_rank_is_stable_across_runs() -> None:
+    # blake2b, not Python's salted hash(): the same number on every host and run.
+    assert rank("front", "detector") == 0xFF6A8A796776AED8
+
+
+def test_every_camera_has_exactly_one_live_owner() -> None:
+    workers = ["a", "b", "c"]
+    owners = assign(workers, EVEN, 1.25)
+    assert set(owners) == set(EVEN)
+    assert set(owners.values()) <= set(workers)
+
+
+def test_no_worker_no_owner_and_one_worker_owns_all() -> None:
+    assert assign([], EVEN, 1.25) == {}
+    assert set(assign(["detector"], EVEN, 1.25).values()) == {"detector"}
+
+
+def test_loads_stay_within_the_bound() -> None:
+    workers = ["a", "b", "c", "d"]
+    owners = assign(workers, EVEN, 1.25)
+    counts = [list(owners.values()).count(w) for w in workers]
+    assert max(counts) <= 1.25 * len(EVEN) / len(workers)
+
+
+def test_a_joining_worker_takes_only_a_share() -> None:
+    before = assign(["a", "b", "c"], EVEN, 1.25)
+    after = assign(["a", "b", "c", "d"], EVEN, 1.25)
+    moved = {c for c in EVEN if before[c] != after[c]}
+    taken = {c for c, w in after.items() if w == "d"}
+    # The newcomer takes about a quarter; a full first choice may shift one or two more.
+    assert 1 <= len(taken) <= 1.25 * len(EVEN) / 4
+    assert len(moved) <= len(taken) + 2
+
+
+def test_a_leaving_worker_hands_on_only_its_cameras_when_loads_allow() -> None:
+    workers = ["a", "b", "c", "d"]
+    before = assign(workers, EVEN, 4.0)  # room to spare: pure rendezvous
+    after = assign(["a", "b", "c"], EVEN, 4.0)
+    moved = {c for c in EVEN if before[c] != after[c]}
+    assert moved == {c for c, w in before.items() if w == "d"}
+
+
+def test_heavy_cameras_spread() -> None:
+    weights = {"big1": 10.0, "big2": 10.0, "small1": 1.0, "small2": 1.0}
+    for pair in (["a", "b"], ["detector", "detector_2"], ["x", "y"]):
+        owners = assign(pair, weights, 1.25)
+        assert owners["big1"] != owners["big2"], pair
+
+
+def test_balance_below_one_is_refused() -> None:
+    with pytest.raises(ValueError, match="balance"):
+        assign(["a"], EVEN, 0.5)
+
+
+def test_weights_are_pixel_rates_normalised() -> None:
+    cams = {
+        "hd": CameraSettings(rate_hz=10.0, resize=(1280, 720)),
+        "vga": CameraSettings(rate_hz=10.0, resize=(640, 480)),
+        "source_size": CameraSettings(rate_hz=5.0),  # counted as VGA
+    }
+    w = camera_weights(cams)
+    assert sum(w.values()) == pytest.approx(1.0)
+    assert w["hd"] / w["vga"] == pytest.approx(3.0)
+    assert w["vga"] / w["source_size"] == pytest.approx(2.0)
+
+
+def test_view_reports_gains_and_losses() -> None:
+    weights = {"a": 1.0, "b": 1.0, "c": 1.0, "d": 1.0}
+    view = PoolView("w1", weights, 1.25)
+    first = view.settle()
+    assert set(first.gained) == set(weights) and first.lost == () and first.members == 1
+    view.joined("w2")
+    shared = view.settle()
+    assert shared.gained == () and 1 <= len(shared.lost) <= 3
+    assert shared.serving == set(weights) - set(shared.lost)
+    view.left("w2")
+    back = view.settle()
+    assert set(back.gained) == set(shared.lost) and back.serving == set(weights)
+    view.left("w1")  # its own token's loss: it keeps counting itself
+    assert view.settle().serving == set(weights)

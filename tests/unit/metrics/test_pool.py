@@ -1,0 +1,65 @@
+"""The pool in the metrics: which worker serves a camera as cameras are handed over, each
+worker's figures, and frames detected twice (services/metrics/pool.py)."""
+
+from __future__ import annotations
+
+from common.messages import Header, ServiceCounters
+from services.metrics.aggregate import Aggregator
+from tests.unit.metrics.samples import detections
+
+HDR = Header(stamp_ns=0, frame_id="", seq=0, source="metrics")
+
+
+def _counters(service: str, seq: int, **counts: int) -> ServiceCounters:
+    named = {k.replace("__", "."): v for k, v in counts.items()}
+    return ServiceCounters(
+        header=Header(stamp_ns=seq, frame_id="", seq=seq, source=service),
+        service=service,
+        counters=named,
+    )
+
+
+def test_served_by_follows_the_hand_over() -> None:
+    agg = Aggregator(10.0, cameras=["front", "rear"])
+    agg.on_counters(_counters("detector", 1, serving=2, serving__front=1, serving__rear=1,
+                              frames_in__front=5, frames_in__rear=5), 1.0)  # fmt: skip
+    agg.on_counters(_counters("detector_2", 1, serving=0, serving__front=0, serving__rear=0), 1.1)
+    assert {c: m["served_by"] for c, m in agg.cameras(1.2).items()} == {
+        "front": "detector",
+        "rear": "detector",
+    }
+    # detector_2 joins and takes rear; detector still reports its old frames_in.rear.
+    agg.on_counters(_counters("detector_2", 2, serving=1, serving__rear=1, frames_in__rear=1), 2.0)
+    agg.on_counters(_counters("detector", 2, serving=1, serving__front=1, serving__rear=0,
+                              frames_in__front=9, frames_in__rear=6), 2.1)  # fmt: skip
+    cams = agg.cameras(2.2)
+    assert cams["front"]["served_by"] == "detector"
+    assert cams["rear"]["served_by"] == "detector_2"
+    assert cams["rear"]["frames_offered"] == 1
+
+
+def test_workers_show_cameras_load_and_hand_overs() -> None:
+    agg = Aggregator(10.0, cameras=["front", "rear"])
+    counts = {"serving": 1, "serving__front": 1, "serving__rear": 0, "pool_load_permille": 500}
+    agg.on_counters(_counters("detector", 1, **counts, pool_members=2, cameras_lost=1), 1.0)
+    agg.on_counters(_counters("controller", 1, cmd_out=3), 1.0)
+    workers = agg.answer(HDR, 3.0)["workers"]
+    assert workers == {
+        "detector": {
+            "cameras": ["front"], "load": 0.5, "members": 2, "cameras_gained": 0,
+            "cameras_lost": 1, "reported_s_ago": 2.0,
+        }
+    }  # fmt: skip
+
+
+def test_a_frame_detected_twice_is_a_duplicate() -> None:
+    agg = Aggregator(10.0, cameras=["front", "rear"])
+    frame = Header(stamp_ns=1_000, frame_id="c", seq=7, source="camera")
+    agg.on_detections(detections(frame, 1), 1.0, camera="front")
+    agg.on_detections(detections(frame, 1), 1.0, camera="rear")  # another camera: no duplicate
+    agg.on_detections(detections(frame, 1), 1.1, camera="front")
+    answer = agg.answer(HDR, 1.2)
+    assert answer["duplicate_detections"] == 1
+    assert answer["cameras"]["front"]["duplicate_detections"] == 1
+    assert answer["cameras"]["rear"]["duplicate_detections"] == 0
+    assert answer["counters"]["metrics.duplicate_detections"] == 1
