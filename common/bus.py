@@ -264,16 +264,15 @@ def hub_access(config: Config) -> dict[str, Any]:
         return {}
     live = bool(running_sensors(config.supervisor.services))
     keys = Keys(config.stack.prefix)
-    workers = tuple(config.detector_services.values())
     return access_control(
-        keys, config.camera_services, z.auth, live_sensors=live, pool_workers=workers
+        keys, config.camera_services, z.auth, live_sensors=live, workers=config.detector_services
     )
 
 
 def check_credentials(config: Config) -> None:
     """With passwords, the router's dictionary must name every principal of this stack: one
-    made for fewer cameras would refuse a further camera's process. ConfigError, one line,
-    naming the command that makes them again."""
+    made for fewer cameras or detector workers would refuse a further one's process.
+    ConfigError, one line, naming the command that makes them again."""
     z = config.zenoh
     if z.auth != "password":
         return  # certificates: the router needs only the CA; each client checks its own files
@@ -282,12 +281,13 @@ def check_credentials(config: Config) -> None:
         known = {line.split(":", 1)[0] for line in path.read_text(encoding="utf-8").splitlines()}
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read {path}: {exc}") from exc
-    missing = [p for p in stack_principals(config.camera_services) if p not in known]
+    principals = stack_principals(config.camera_services, config.detector_services)
+    missing = [p for p in principals if p not in known]
     if missing:
         raise ConfigError(
             f"the credentials in {z.credentials_path} have no principal {', '.join(missing)} "
-            f"(made for fewer cameras?): make them again with `zstack credentials --config "
-            f"{config.path or 'FILE'} --force` (docs/security.md)"
+            "(made for fewer cameras or detector workers?): make them again with `zstack "
+            f"credentials --config {config.path or 'FILE'} --force` (docs/security.md)"
         )
 
 

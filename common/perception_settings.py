@@ -26,7 +26,11 @@ BATCH_CHOICES = ("measured", "max")
 
 #: The most detector workers one supervisor starts (``detector.workers``).
 MAX_WORKERS = 8
-_WORKER_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
+#: ``detector.worker_id``: one key chunk, process, principal and file name, starting with a
+#: letter (a digit would read as the n-th worker's number: ``detector_2``) and not ending in
+#: ``_<number>`` (the suffix of a host's further workers: ``detector_gpu_2``).
+_WORKER_ID = re.compile(r"[a-z](?:[a-z0-9_]{0,22}[a-z0-9])?")
+_NUMBERED = re.compile(r"_[0-9]+$")
 
 #: The detector's default pixel budget per frame: 2**25, 32 Mpx. It admits every real camera
 #: up to 8K UHD (7680x4320, 33.2 Mpx) and 4096x4096 inspection cameras, and bounds one decoded
@@ -128,10 +132,11 @@ class DetectorSettings:
 
     The pool (docs/detector.md, "A pool of workers"): ``workers`` detector processes on this
     host divide the cameras between them, with those on other hosts that share the key
-    prefix; 1 (the default) is one detector serving every camera. Each worker's id is
-    ``worker_id`` (empty: its service name, ``detector``, ``detector_2`` ...) with ``_<n>``
-    added for the n-th worker from the second on; ids must differ across hosts, so on several
-    hosts give each its own (``worker_id = "robot1"``). ``pool_balance`` is the slack over an
+    prefix; 1 (the default) is one detector serving every camera. Each worker has one name, its
+    service, process, health token, counters, pool id and principal: ``detector``,
+    ``detector_2`` ... or, with ``worker_id`` set, ``detector_<id>``, ``detector_<id>_2`` ...
+    (common/settings.py::detector_service). Names must differ across hosts, so on several hosts
+    give each its own ``worker_id`` (``"robot1"``). ``pool_balance`` is the slack over an
     even share of the cameras' pixel rate that a worker may take before a camera goes to its
     next choice (services/detector/pool.py).
     """
@@ -206,10 +211,13 @@ class DetectorSettings:
                 f"detector.batch_profile must be [min, opt, max] with 1 <= min <= opt <= max, "
                 f"got {list(self.batch_profile)}"
             )
-        if self.worker_id and not _WORKER_ID.fullmatch(self.worker_id):
+        if self.worker_id and (
+            not _WORKER_ID.fullmatch(self.worker_id) or _NUMBERED.search(self.worker_id)
+        ):
             raise ConfigError(
-                f"detector.worker_id {self.worker_id!r} must be 1..64 of letters, digits, "
-                "'_', '-', '.' (starting with a letter or digit): it names a liveliness key"
+                f"detector.worker_id {self.worker_id!r} must be 1..24 of a-z, 0-9 and _, start "
+                "with a letter and not end in _<number>: it names the workers (detector_<id>, "
+                "detector_<id>_2 ...), their keys, processes and principals"
             )
         if not all(self.classes):
             raise ConfigError(

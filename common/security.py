@@ -14,9 +14,12 @@ Each process has its own principal and may publish only its own keys: only the c
 ROS 2 bridge frames and scans, only stack services counters and health tokens. Each camera
 process is a principal of its own (``camera`` for the first camera, ``camera_<name>`` for each
 further one, common.settings.camera_service) and may put only its own camera's frames; the
-detector puts every camera's detections and no frame. The recorder (playing a recording back)
-may put frames and scans only on a stack that runs no live sensor (no camera, simulator or
-ROS 2 bridge): a replay must never reach a live robot's keys.
+detector puts every camera's detections and no frame. Each detector worker of a pool is a
+principal of its own too (its name, ``detector``, ``detector_2``, ``detector_<worker_id>`` ...:
+common.settings.detector_service): any worker may serve any camera, so each may put every
+camera's detections, but it announces only its own health and pool tokens. The recorder
+(playing a recording back) may put frames and scans only on a stack that runs no live sensor
+(no camera, simulator or ROS 2 bridge): a replay must never reach a live robot's keys.
 
 Each principal may also subscribe only to what it reads: the camera frames only to the
 detector, the live view, the recorder and the ROS 2 bridge. Zenoh allows a subscription only
@@ -47,10 +50,13 @@ SERVICE_PRINCIPALS = (
 )
 # The router's principal: the only one whose certificate may serve the TLS listener.
 ROUTER_PRINCIPAL = "supervisor"
-#: The principals of a one-camera stack; :func:`stack_principals` adds one per further camera.
+#: The principals of a one-camera, one-detector stack; :func:`stack_principals` adds one per
+#: further camera and names each detector worker.
 PRINCIPALS = (ROUTER_PRINCIPAL, *SERVICE_PRINCIPALS, "estop", "observer")
 #: The first camera's principal; a further camera's is ``camera_<name>``.
 FIRST_CAMERA_PRINCIPAL = "camera"
+#: The one detector's principal, and the first worker's of a pool with no ``worker_id``.
+DETECTOR_PRINCIPAL = "detector"
 
 AUTH_MODES = ("none", "password", "certificate")
 
@@ -94,12 +100,26 @@ def camera_services(cameras: str | Mapping[str, str]) -> dict[str, str]:
     return dict(cameras)
 
 
-def stack_principals(cameras: str | Mapping[str, str]) -> tuple[str, ...]:
-    """Every principal of a stack with ``cameras`` (see :func:`camera_services`): PRINCIPALS,
-    with each further camera's principal after ``camera``. What ``zstack credentials`` makes."""
+def stack_principals(
+    cameras: str | Mapping[str, str], workers: Iterable[str] = (DETECTOR_PRINCIPAL,)
+) -> tuple[str, ...]:
+    """Every principal of a stack with ``cameras`` (see :func:`camera_services`) and detector
+    ``workers`` (``Config.detector_services``; the one ``detector`` by default): PRINCIPALS,
+    with each further camera's principal after ``camera`` and the workers in place of
+    ``detector``. What ``zstack credentials`` makes."""
     further = [s for s in camera_services(cameras).values() if s != FIRST_CAMERA_PRINCIPAL]
-    at = PRINCIPALS.index(FIRST_CAMERA_PRINCIPAL) + 1
-    return (*PRINCIPALS[:at], *further, *PRINCIPALS[at:])
+    pool = list(dict.fromkeys(workers))
+    if not pool:
+        raise ValueError("a stack has at least one detector worker")
+    out: list[str] = []
+    for p in PRINCIPALS:
+        if p == DETECTOR_PRINCIPAL:
+            out += pool
+        else:
+            out.append(p)
+            if p == FIRST_CAMERA_PRINCIPAL:
+                out += further
+    return tuple(out)
 
 
 def users_file(directory: Path) -> Path:
@@ -134,13 +154,13 @@ def _principal_keys(
     keys: Keys,
     cameras: str | Mapping[str, str],
     live_sensors: bool = True,
-    pool_workers: tuple[str, ...] = ("detector",),
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
 ) -> dict[str, dict[str, tuple[str, ...]]]:
     """What each principal may publish (``put``), announce (``token``), serve (``serve``) and
     subscribe to (``read``). ``cameras``: see :func:`camera_services`. ``live_sensors``: the
     stack runs a camera, the simulator or the ROS 2 bridge, so the recorder may not play frames
-    or scans onto it. ``pool_workers``: the detector's pool ids (``Config.detector_services``'
-    values), whose liveliness tokens the detector may declare."""
+    or scans onto it. ``workers``: the detector workers' names (``Config.detector_services``),
+    each a principal."""
 
     def service(name: str, *puts: str, read: tuple[str, ...] = ()) -> dict[str, tuple[str, ...]]:
         out = {"put": (*puts, keys.counters(name)), "token": (keys.health(name),)}
@@ -162,8 +182,21 @@ def _principal_keys(
     replay = () if live_sensors else (*frames, keys.scan())
     # Each camera process puts its own camera's frames only, and reads nothing.
     camera_rules = {name: service(name, keys.frame(c)) for c, name in services.items()}
+    # Each detector worker reads frames and puts detections, never frames: every camera's, as
+    # any worker may come to serve any camera (services/detector/pool.py). Its tokens are its
+    # own only: its health, and its pool membership under its own name, so that no worker can
+    # pose as another, or as many, and skew the assignment.
+    worker_rules = {
+        w: {
+            **service(w, *(keys.detections(c) for c in services), read=(all_frames,)),
+            "token": (keys.health(w), keys.pool_member(w)),
+            "serve": (keys.all_detector_info(),),
+        }
+        for w in dict.fromkeys(workers)
+    }
     return {
         **camera_rules,
+        **worker_rules,
         # The simulator renders every camera from one world.
         "sim": service("sim", *frames, keys.scan(), keys.sim_truth(), read=(keys.cmd_vel(),)),
         # The ROS 2 bridge feeds the robot's cameras and laser into the stack, and the stack's
@@ -174,13 +207,6 @@ def _principal_keys(
         # The recorder listens to everything; playing a recording back puts frames and scans,
         # on a stack with no live sensor only.
         "recorder": service("recorder", *replay, read=(f"{keys.prefix}/**",)),
-        # One detector serves every camera: it reads frames and puts detections, never frames.
-        # Its pool membership token too (services/detector/pool.py), under its worker ids.
-        "detector": {
-            **service("detector", *(keys.detections(c) for c in services), read=(all_frames,)),
-            "token": (keys.health("detector"), *(keys.pool_member(w) for w in pool_workers)),
-            "serve": (keys.all_detector_info(),),
-        },
         "controller": service(
             "controller",
             keys.cmd_vel(),
@@ -216,19 +242,20 @@ def access_control(
     principals: tuple[str, ...] | None = None,
     *,
     live_sensors: bool = True,
-    pool_workers: tuple[str, ...] = ("detector",),
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
 ) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for the router: deny by default, then allow each
     principal its own keys on ingress (puts, tokens, queryables, subscriptions), queries and
     liveliness for everyone, and everything on egress (the router delivers only what it
     accepted, and only to subscriptions it accepted). ``cameras``: see
     :func:`camera_services`; ``principals`` (default: :func:`stack_principals`) limits the
-    rules to those named; ``pool_workers``: the detector pool's worker ids
-    (``Config.detector_services``' values)."""
+    rules to those named; ``workers``: the detector workers' names (``Config.detector_services``),
+    each a principal."""
     if auth not in AUTH_MODES[1:]:
         raise ValueError(f"access control needs an authenticated mode, got {auth!r}")
+    workers = tuple(workers)
     if principals is None:
-        principals = stack_principals(cameras)
+        principals = stack_principals(cameras, workers)
     match = "usernames" if auth == "password" else "cert_common_names"
     rules: list[dict[str, Any]] = [
         {
@@ -254,7 +281,7 @@ def access_control(
         "serve": ["declare_queryable", "reply"],
         "read": ["declare_subscriber"],
     }
-    allowed_keys = _principal_keys(keys, cameras, live_sensors, pool_workers)
+    allowed_keys = _principal_keys(keys, cameras, live_sensors, workers)
     for principal, allowed in allowed_keys.items():
         if principal not in principals:
             continue
@@ -286,10 +313,27 @@ def access_control(
 
 
 def may_put(
-    keys: Keys, cameras: str | Mapping[str, str], principal: str, *, live_sensors: bool = True
+    keys: Keys,
+    cameras: str | Mapping[str, str],
+    principal: str,
+    *,
+    live_sensors: bool = True,
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
 ) -> tuple[str, ...]:
     """The keys ``principal`` may put on (documentation and tests read the same table)."""
-    return _principal_keys(keys, cameras, live_sensors).get(principal, {}).get("put", ())
+    table = _principal_keys(keys, cameras, live_sensors, workers)
+    return table.get(principal, {}).get("put", ())
+
+
+def may_announce(
+    keys: Keys,
+    cameras: str | Mapping[str, str],
+    principal: str,
+    *,
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+) -> tuple[str, ...]:
+    """The liveliness tokens ``principal`` may declare (its health, a worker's pool token)."""
+    return _principal_keys(keys, cameras, workers=workers).get(principal, {}).get("token", ())
 
 
 def may_read(keys: Keys, cameras: str | Mapping[str, str], principal: str) -> tuple[str, ...]:

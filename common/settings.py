@@ -70,11 +70,24 @@ def camera_service(first: str, camera: str) -> str:
     return "camera" if camera == first else f"camera_{camera}"
 
 
-def detector_service(n: int) -> str:
-    """The service (process, health token, counters) of the ``n``-th detector worker (from 1):
-    ``detector`` for the first, as a one-detector stack has always named it, ``detector_<n>``
-    for each further one."""
-    return "detector" if n == 1 else f"detector_{n}"
+def detector_service(n: int, worker_id: str = "") -> str:
+    """The one name of this host's ``n``-th detector worker (from 1): its service, process,
+    health token, counters key, pool id and principal. ``detector``, ``detector_2`` ... with
+    no ``detector.worker_id`` (the first as a one-detector stack has always named it);
+    ``detector_<id>``, ``detector_<id>_2`` ... with one, so that workers on several hosts,
+    each host with its own id, never share a name."""
+    base = f"detector_{worker_id}" if worker_id else "detector"
+    return base if n == 1 else f"{base}_{n}"
+
+
+#: Any detector worker's name, on any host (``detector_service``'s names): what the metrics
+#: service believes counters from without knowing the other hosts' configs.
+_DETECTOR_SERVICE = re.compile(r"detector(_[a-z0-9_]{1,40})?")
+
+
+def is_detector_service(name: str) -> bool:
+    """Whether ``name`` can be a detector worker's name (``detector``, ``detector_<chunk>``)."""
+    return _DETECTOR_SERVICE.fullmatch(name) is not None
 
 
 def service_package(service: str) -> str:
@@ -188,6 +201,9 @@ class MetricsSettings:
     0..``max_timing_ms``. The rest is refused and counted as ``metrics.refused.<why>``. At most
     ``max_classes`` distinct class names are counted; a name beyond them is counted as
     ``metrics.class_names_refused`` (names longer than 128 characters never decode).
+    Counters of a detector worker the config does not name (another host's pool worker,
+    ``detector_<worker_id>``) are believed for the first ``max_workers`` such names heard; a
+    further one is refused (``metrics.refused.too_many_workers``).
     """
 
     window_s: float = 10.0
@@ -198,6 +214,7 @@ class MetricsSettings:
     max_counters_per_service: int = 256
     max_timing_ms: float = 1e6
     max_classes: int = 1000
+    max_workers: int = 32
 
     BOUNDS: ClassVar[Bounds] = {
         "window_s": (0.1, 3600),
@@ -207,6 +224,7 @@ class MetricsSettings:
         "max_counters_per_service": (1, 2000),
         "max_timing_ms": (0.001, 1e9),
         "max_classes": (1, 10000),
+        "max_workers": (0, 1000),
     }
 
     def __post_init__(self) -> None:
@@ -324,17 +342,11 @@ class Config:
         return {c: camera_service(self.stack.camera, c) for c in self.all_cameras}
 
     @property
-    def detector_services(self) -> dict[str, str]:
-        """Every detector worker this host runs, ``{service: worker id}`` (``detector.workers``
-        of them; see :func:`detector_service` and ``DetectorSettings``)."""
+    def detector_services(self) -> tuple[str, ...]:
+        """The names of every detector worker this host runs (``detector.workers`` of them;
+        see :func:`detector_service`): each is its service, pool id and principal."""
         d = self.detector
-        out = {}
-        for n in range(1, d.workers + 1):
-            service = detector_service(n)
-            out[service] = (
-                (d.worker_id if n == 1 else f"{d.worker_id}_{n}") if d.worker_id else service
-            )
-        return out
+        return tuple(detector_service(n, d.worker_id) for n in range(1, d.workers + 1))
 
     def camera_settings(self, name: str) -> CameraSettings:
         """The settings of camera ``name``; ConfigError naming the known ones otherwise."""

@@ -1,16 +1,20 @@
-"""python -m deploy.credentials [--config FILE] [--dir DIR] [--host ADDR ...] [--force] [--days N]
+"""python -m deploy.credentials [--config FILE] [--dir DIR] [--host ADDR ...] [--worker NAME ...]
+                               [--force] [--days N]
 
 Creates the credentials of the secure profile in DIR (default: the config's
 ``zenoh.credentials_dir``, ``secrets/``, git-ignored): a random password per principal plus the
 router's ``user:password`` dictionary, and a private CA with a key and certificate per principal
 (common name = principal). The principals are those of the config's stack: one per camera
-(``camera``, and ``camera_<name>`` for each further camera), one per other service, ``estop``,
-``observer`` and the supervisor. Only the supervisor's certificate can serve the TLS listener:
-it alone names ``localhost``, ``127.0.0.1`` and each --host and allows server authentication.
-Every other certificate names no host and allows client authentication only, so a client that
-checks the router's name refuses it. DIR is made 0700 and every secret 0600, whatever their
+(``camera``, and ``camera_<name>`` for each further camera), one per detector worker
+(``detector``, ``detector_2`` ..., or ``detector_<worker_id>`` ...), one per other service,
+``estop``, ``observer`` and the supervisor; and each --worker NAME, a detector worker another
+host runs (``detector_a``), so that one set of credentials (one CA) serves a pool across hosts.
+Only the supervisor's certificate can serve the TLS listener: it alone names ``localhost``,
+``127.0.0.1`` and each --host and allows server authentication. Every other certificate names
+no host and allows client authentication only, so a client that checks the router's name
+refuses it. DIR is made 0700 and every secret 0600, whatever their
 modes were. Existing credentials are kept unless --force is given (needed, too, to add the
-principal of a camera added to the config).
+principal of a camera or a worker added to the config).
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ from common.security import (
     users_file,
     viewer_token_file,
 )
+from common.settings import Config, is_detector_service
 
 DEFAULT_DAYS = 825  # the longest validity that browsers and most TLS stacks still accept
 DEFAULT_HOSTS = ("localhost", "127.0.0.1")
@@ -256,15 +261,34 @@ def _credentials_arguments(p: argparse.ArgumentParser) -> None:
         default=[],
         help="another name or IP address the supervisor is reached at (repeatable)",
     )
+    p.add_argument(
+        "--worker",
+        action="append",
+        default=[],
+        help="a detector worker another host runs, by its name (detector_<worker_id>, "
+        "detector_<worker_id>_2 ...): its principal too (repeatable)",
+    )
     p.add_argument("--force", action="store_true", help="replace existing credentials")
     p.add_argument("--days", type=int, default=DEFAULT_DAYS, help="certificate validity")
+
+
+def credential_workers(config: Config, others: list[str]) -> tuple[str, ...]:
+    """The detector workers to make principals for: the config's, then ``others`` (other
+    hosts' workers, by name); ConfigError, one line, for a name no worker can have."""
+    for name in others:
+        if not is_detector_service(name):
+            raise ConfigError(
+                f"--worker {name!r} is not a detector worker's name: detector, detector_<n>, "
+                "detector_<worker_id> or detector_<worker_id>_<n> (docs/detector.md)"
+            )
+    return tuple(dict.fromkeys((*config.detector_services, *others)))
 
 
 def _credentials(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     directory: Path = (args.dir or config.zenoh.credentials_path).resolve()
     hosts = tuple(args.host)
-    principals = stack_principals(config.camera_services)
+    principals = stack_principals(config.camera_services, credential_workers(config, args.worker))
     generate(directory, hosts, args.days, args.force, principals)
     say_written(directory, hosts, args.days, principals)
     return 0

@@ -20,7 +20,8 @@ from common.spawn import ask_to_stop, spawn, wait_or_kill
 def service_command(name: str, config_path: str, camera: str = "", worker: str = "") -> list[str]:
     """Every service starts the same way (common/cli.py); a further camera's with
     ``--camera <name>`` (the first camera's without, as a one-camera stack always started it),
-    a further detector worker's with ``--worker <service>`` (``detector_2`` ...)."""
+    a detector worker other than ``detector`` with ``--worker <its name>`` (``detector_2``,
+    ``detector_gpu`` ...)."""
     command = [sys.executable, "-m", f"services.{name}", "serve", "--config", config_path]
     if camera:
         command += ["--camera", camera]
@@ -34,7 +35,8 @@ def stack_processes(config: Config) -> list[tuple[str, list[str]]]:
     service of ``supervisor.services``, and for ``camera`` one per configured camera, each
     named as its service (``camera``, ``camera_<name>``: common/settings.py::camera_service),
     so that each has its own status, restarts, backoff and watchdog; likewise for
-    ``detector`` one per worker of ``detector.workers`` (``detector``, ``detector_<n>``)."""
+    ``detector`` one per worker of ``detector.workers`` (``detector``, ``detector_<n>``, or
+    ``detector_<worker_id>`` ...: common/settings.py::detector_service)."""
     out = []
     for name in config.supervisor.services:
         if name == "detector":

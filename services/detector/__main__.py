@@ -25,9 +25,9 @@ def _serve_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", help="override detector.model")
     p.add_argument(
         "--worker",
-        default="detector",
-        help="this worker's service name: detector (the default) or detector_<n>, one of "
-        "detector.workers (docs/detector.md, 'A pool of workers')",
+        help="this worker's name, one of detector.workers': detector, detector_2 ... or "
+        "detector_<worker_id>, detector_<worker_id>_2 ... (default: the first; docs/detector.md, "
+        "'A pool of workers')",
     )
 
 
@@ -39,13 +39,16 @@ def serve(args: argparse.Namespace) -> int:
         config = dataclasses.replace(
             config, detector=dataclasses.replace(config.detector, **overrides)
         )
-    if args.worker not in config.detector_services:
+    worker = args.worker or config.detector_services[0]
+    if worker not in config.detector_services:
         known = list(config.detector_services)
-        raise ConfigError(f"no detector worker {args.worker!r} (detector.workers); known: {known}")
-    setup_logging(args.worker)
+        raise ConfigError(
+            f"no detector worker {worker!r} (detector.workers, detector.worker_id); known: {known}"
+        )
+    setup_logging(worker)
     from services.detector.service import run
 
-    return run(config, stop, args.worker)
+    return run(config, stop, worker)
 
 
 COMMANDS = [Command("serve", "run the detector service on the Zenoh bus", _serve_arguments, serve)]

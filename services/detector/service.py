@@ -236,8 +236,9 @@ class Rounds:
 
 
 def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
-    """Detect on the newest frame of every camera this worker (``detector``, ``detector_<n>``:
-    ``Config.detector_services``) serves until ``stop`` is set."""
+    """Detect on the newest frame of every camera this worker serves until ``stop`` is set;
+    ``worker``: its one name (one of ``Config.detector_services``), its service, pool id and
+    principal."""
     s = config.detector
     with Node(worker, config, counters_period_s=s.counters_period_s) as node:
         served = served_batch(config)
@@ -266,7 +267,7 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
             for cam, key in handlers.frame_keys.items()
         }
         rounds = Rounds(config, node, detector, outputs)
-        pool = PoolMember(node, config.detector_services[worker], handlers)
+        pool = PoolMember(node, worker, handlers)
         info = json.dumps(
             DetectorInfo(
                 model=detector.model_path.name,

@@ -27,6 +27,7 @@ from common.queries import query_metrics, ready_services
 from common.settings import SERVICES, Config
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
 from services.metrics.trust import (
+    PoolWorkers,
     refuse_counters,
     refuse_detections,
     split_counters,
@@ -56,6 +57,12 @@ class MetricsHandlers:
             max_classes=s.max_classes,
             cameras=config.all_cameras,
         )
+        #: The services whose counters are believed: this stack's (camera_<name> and the
+        #: detector workers too) and, bounded, any other detector worker: another host's.
+        self.known = frozenset(
+            (*SERVICES, *config.camera_services.values(), *config.detector_services)
+        )
+        self.pool_workers = PoolWorkers(s.max_workers)
         self.lock = threading.Lock()
 
     def on_detections(self, camera: str, key: str, payload: bytes) -> None:
@@ -74,13 +81,12 @@ class MetricsHandlers:
     def on_counters(self, key: str, payload: bytes) -> None:
         """``key``: the one the sample came on, which must name the service that counts."""
         limit = self.settings.max_counters_per_service
-        config = self.tally.config
-        # camera_<name> and detector_<n> too
-        known = (*SERVICES, *config.camera_services.values(), *config.detector_services)
-        self._take(
-            "counters", ServiceCounters.decode, key, payload, self._feed_counters,
-            lambda m, heard_on: refuse_counters(m, heard_on, known, limit),
-        )  # fmt: skip
+
+        def refuse(msg: ServiceCounters, heard_on: str) -> str | None:
+            with self.lock:  # the other hosts' workers admitted so far
+                return refuse_counters(msg, heard_on, self.known, limit, self.pool_workers)
+
+        self._take("counters", ServiceCounters.decode, key, payload, self._feed_counters, refuse)
 
     def _feed_counters(self, msg: ServiceCounters) -> None:
         kept, refused = split_counters(msg)

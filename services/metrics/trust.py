@@ -1,12 +1,13 @@
 """What the metrics service believes, and how its answer stays JSON. Pure: no bus, no clock.
 
 Anyone on the bus can put on ``counters/<name>`` and on the detections keys (in the default
-peer mode nothing checks who). So the service believes counters only from a known service,
-on that service's own key, naming itself, in bounded numbers and with counts >= 0; and a
-detector's stage times only when finite and within a bound. The rest is refused and counted
-(``metrics.refused.<why>``). Under the secure profile the router lets only a service's own
-principal put on its counters key (common/security.py), so a key that names a service also
-names who sent it: see docs/security.md.
+peer mode nothing checks who). So the service believes counters only from a known service (its
+config's, or a detector worker of the pool on any host, a bounded number of those:
+:class:`PoolWorkers`), on that service's own key, naming itself, in bounded numbers and with
+counts >= 0; and a detector's stage times only when finite and within a bound. The rest is
+refused and counted (``metrics.refused.<why>``). Under the secure profile the router lets only
+a service's own principal put on its counters key (common/security.py), so a key that names a
+service also names who sent it: see docs/security.md.
 """
 
 from __future__ import annotations
@@ -19,24 +20,57 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from common.messages import Detections, ServiceCounters
+from common.settings import is_detector_service
 
 #: The longest counter name believed (the stack's own are under 40 characters).
 MAX_NAME_CHARS = 80
 
 
+class PoolWorkers:
+    """The detector workers not in this stack's config whose counters are believed: a pool's
+    workers on other hosts (``detector_<worker_id>`` ...), which no config lists. The first
+    ``max_workers`` names heard are admitted for good; a further one is refused
+    (``too_many_workers``), so that made-up names cannot grow the metrics without bound.
+    Not thread-safe: the caller holds its lock."""
+
+    def __init__(self, max_workers: int) -> None:
+        self.max_workers = max_workers
+        self.names: set[str] = set()
+
+    def admit(self, service: str) -> str | None:
+        """None if ``service``'s counters may be believed (admitting it if there is room), else
+        why not."""
+        if service in self.names:
+            return None
+        if len(self.names) >= self.max_workers:
+            return "too_many_workers"
+        self.names.add(service)
+        return None
+
+
 def refuse_counters(
-    msg: ServiceCounters, key: str, known: Iterable[str], max_names: int
+    msg: ServiceCounters,
+    key: str,
+    known: Iterable[str],
+    max_names: int,
+    workers: PoolWorkers | None = None,
 ) -> str | None:
     """Why ``msg``, heard on ``key`` (``.../counters/<service>``), is not believed at all; None
-    if it is. Reasons: ``unknown_service``, ``service_mismatch``, ``too_many_names``. A bad
-    name or count spoils only itself (:func:`split_counters`), never the service's others."""
+    if it is. Reasons: ``unknown_service``, ``service_mismatch``, ``too_many_names``,
+    ``too_many_workers``. A service not in ``known`` may still be a detector worker of another
+    host, admitted by ``workers`` once the message is otherwise sound. A bad name or count
+    spoils only itself (:func:`split_counters`), never the service's others."""
     service = key.rsplit("/", 1)[-1]
-    if service not in known:
+    other_worker = service not in known and workers is not None and is_detector_service(service)
+    if service not in known and not other_worker:
         return "unknown_service"
     if msg.service != service:
         return "service_mismatch"
     if len(msg.counters) > max_names:
         return "too_many_names"
+    if other_worker:
+        assert workers is not None
+        return workers.admit(service)
     return None
 
 

@@ -1,10 +1,11 @@
 """python -m tests.integration.probe --config FILE
 
 A test's eyes inside a network namespace (tests/integration/test_two_hosts.py): it joins the
-stack as "observer" and prints one JSON line per detections, cmd_vel and controller status
-sample and per health token that comes or goes, stamped with the system's monotonic clock
-(shared by every namespace of the host), so that a test in another namespace can read what
-the stack does there. It prints
+stack as "observer" and prints one JSON line per detections (of any camera), cmd_vel and
+controller status sample, per detector worker's counters (the cameras it serves, the members
+of the pool it counts) and per health token that comes or goes, stamped with the system's
+monotonic clock (shared by every namespace of the host), so that a test in another namespace
+can read what the stack does there. It prints
 ``{"kind": "open"}`` once its session is up, and runs until SIGINT or SIGTERM.
 """
 
@@ -25,8 +26,8 @@ from common.config_file import load_config
 from common.errors import ConfigError, DecodeError
 from common.keys import Keys
 from common.lifecycle import stop_event
-from common.messages import ControllerStatus, Detections, Twist
-from common.settings import Config
+from common.messages import ControllerStatus, Detections, ServiceCounters, Twist
+from common.settings import Config, is_detector_service
 
 _lock = threading.Lock()
 OPEN_TIMEOUT_S = 60.0  # a router (client mode) may start after the probe
@@ -53,9 +54,23 @@ def _on_health(sample: zenoh.Sample) -> None:
     emit("health", service=service, present=sample.kind == zenoh.SampleKind.PUT)
 
 
-def _detections(raw: bytes) -> dict[str, Any]:
-    d = Detections.decode(raw)
-    return {"classes": list(d.class_names), "age_ms": (time.time_ns() - d.header.stamp_ns) / 1e6}
+def _on_detections(sample: zenoh.Sample) -> None:
+    camera = str(sample.key_expr).split("/")[-2]  # <prefix>/detector/<camera>/detections
+    try:
+        d = Detections.decode(sample.payload.to_bytes())
+    except DecodeError as exc:
+        emit("garbage", key=str(sample.key_expr), error=str(exc))
+        return
+    age_ms = (time.time_ns() - d.header.stamp_ns) / 1e6
+    emit("detections", camera=camera, classes=list(d.class_names), age_ms=age_ms)
+
+
+def _worker(raw: bytes) -> dict[str, Any]:
+    c = ServiceCounters.decode(raw)
+    serving = sorted(
+        n.split(".", 1)[1] for n, v in c.counters.items() if n.startswith("serving.") and v > 0
+    )
+    return {"service": c.service, "serving": serving, "members": c.counters.get("pool_members", 0)}
 
 
 def _twist(raw: bytes) -> dict[str, Any]:
@@ -87,9 +102,15 @@ def main() -> None:
     config = load_config(args.config, environ={})
     keys = Keys(config.stack.prefix)
     session = _open(config, stop)
-    detections = keys.detections(config.stack.camera)
+    on_counters = _on("worker", _worker)
+
+    def on_worker(sample: zenoh.Sample) -> None:
+        if is_detector_service(str(sample.key_expr).rsplit("/", 1)[-1]):
+            on_counters(sample)
+
     subs = [
-        session.declare_subscriber(detections, _on("detections", _detections)),
+        session.declare_subscriber(keys.all_detections(), _on_detections),
+        session.declare_subscriber(keys.all_counters(), on_worker),
         session.declare_subscriber(keys.cmd_vel(), _on("cmd_vel", _twist)),
         session.declare_subscriber(keys.controller_status(), _on("status", _status)),
         session.liveliness().declare_subscriber(keys.all_health(), _on_health, history=True),

@@ -10,6 +10,11 @@ host's router, and the two routers link across the veth pair. Then the link is c
 than Zenoh's lease, so the session across it closes, and restored. Not peer mode: there every
 pair of processes must meet again after the cut, and one run in six left the controller without
 detections for good while the probe beside it had them (README, "Not peer mode across hosts").
+
+The second test runs a detector pool across the two hosts: a worker on each (``worker_id``
+"a" on A, "b" on B, so ``detector_a`` and ``detector_b``), both cameras on B. They split the
+cameras; with the link cut past the lease B's worker serves both (and A's, alone, takes both
+too, with no frame to detect); with the link back they split again, nothing restarted.
 """
 
 from __future__ import annotations
@@ -208,6 +213,138 @@ def test_detector_on_another_host_survives_a_cut_link(hosts: Hosts, tmp_path: Pa
     # Nothing was restarted, by hand or by either watchdog: A's detector kept its health token
     # and its heartbeat with A's own supervisor, and B's services never depended on host A.
     assert service_pids("detector", gpu_box) == [detector]
+    for name, path in (("A", log_a), ("B", log_b)):
+        text = path.read_text(errors="replace")
+        assert "hung (" not in text and "restarted" not in text, f"host {name}:\n{logs()}"
+    for proc in (sup_a, sup_b):
+        proc.send_signal(signal.SIGINT)
+    for name, proc in (("A", sup_a), ("B", sup_b)):
+        assert proc.wait(timeout=30) == 0, f"supervisor {name}:\n{logs()}"
+
+
+# --- A detector pool across the two hosts (issue 23) -------------------------------------------
+
+#: Both hosts' configs list the same cameras, as the pool needs (each worker weighs them from
+#: its own config): all on host B, the robot.
+POOL_CAMERAS = {"front": "cameraman", "rear": "astronaut"}
+POOL_WORKERS = {"a": "detector_a", "b": "detector_b"}  # detector.worker_id -> its worker
+
+
+def _pool_tables(stack: dict[str, str], worker_id: str) -> dict[str, Any]:
+    cams = {n: {"source": f"sample:{s}", "frame_id": n} for n, s in POOL_CAMERAS.items()}
+    return {
+        "stack": stack,
+        "camera": {**cams["front"], "rate_hz": 3.0, "resize": [320, 240]},
+        "cameras.rear": cams["rear"],
+        "detector": {"worker_id": worker_id, "imgsz": 320},
+    }
+
+
+def _serving(probe: Probe, after: float) -> dict[str, set[str]]:
+    """Each worker's cameras, from its latest counters heard on host B after ``after``."""
+    out: dict[str, set[str]] = {}
+    for e in probe.of("worker", after):
+        out[e["service"]] = set(e["serving"])
+    return out
+
+
+def _shared(probe: Probe, after: float) -> dict[str, set[str]] | None:
+    split = _serving(probe, after)
+    cams = [split.get(w, set()) for w in POOL_WORKERS.values()]
+    if all(len(c) == 1 for c in cams) and set.union(*cams) == set(POOL_CAMERAS):
+        return split
+    return None
+
+
+def _metrics_workers(ns: str, config: Path) -> dict[str, set[str]]:
+    """The workers (and their cameras) in the answer of the metrics service of namespace ``ns``,
+    asked as a user would (``zstack query``); {} while it has none to give."""
+    done = subprocess.run(
+        ["ip", "netns", "exec", ns, sys.executable, "-m", "services.metrics", "query",
+         "--config", str(config), "--timeout", "2"],
+        cwd=REPO, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    if done.returncode != 0:
+        return {}
+    answer = json.loads(done.stdout)
+    return {w: set(m["cameras"]) for w, m in (answer.get("workers") or {}).items()}
+
+
+def _detected(probe: Probe, after: float) -> bool:
+    """Every camera detected after ``after``."""
+    return {e["camera"] for e in probe.of("detections", after)} >= set(POOL_CAMERAS)
+
+
+def test_a_pool_across_two_hosts_shares_splits_and_settles_with_no_restart(
+    hosts: Hosts, tmp_path: Path
+) -> None:
+    prefix = f"test/{uuid.uuid4().hex[:8]}"
+    stack = {"prefix": prefix, "camera": "front"}
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    robot = write_config(
+        tmp_path / "b",
+        zenoh={"endpoint": f"tcp/{ADDR_B}:{PORT}", "mode": MODE},
+        supervisor={"services": ["camera", "detector", "metrics"]},
+        **_pool_tables(stack, "b"),
+    )
+    gpu_box = write_config(
+        tmp_path / "a",
+        zenoh={
+            "endpoint": f"tcp/127.0.0.1:{PORT}",
+            "connect": [f"tcp/{ADDR_B}:{PORT}"],
+            "mode": MODE,
+        },
+        supervisor={"services": ["detector"]},
+        **_pool_tables(stack, "a"),
+    )
+    log_a, log_b = tmp_path / "a.log", tmp_path / "b.log"
+    supervise = ["-m", "deploy.supervisor", "--config"]
+    sup_b = hosts.run(hosts.b, [*supervise, str(robot)], log_b.open("wb"))
+    sup_a = hosts.run(hosts.a, [*supervise, str(gpu_box)], log_a.open("wb"))
+    probe = Probe(hosts.run(hosts.b, ["-m", "tests.integration.probe", "--config", str(robot)],
+                            subprocess.PIPE))  # fmt: skip
+    worker_a, worker_b = POOL_WORKERS["a"], POOL_WORKERS["b"]
+
+    def logs() -> str:
+        return f"--- host A:\n{_log(log_a)}\n--- host B:\n{_log(log_b)}"
+
+    # Steady state: one camera each, both detected on the robot.
+    split = wait_for(lambda: _shared(probe, 0.0), STARTUP_S, lambda: f"a split:\n{logs()}")
+    settled = time.monotonic()
+    wait_for(lambda: _detected(probe, settled), 30, lambda: f"both cameras detected:\n{logs()}")
+    pids = {w: service_pids(w, cfg) for w, cfg in ((worker_a, gpu_box), (worker_b, robot))}
+    assert all(len(p) == 1 for p in pids.values()), pids
+    # The robot's metrics show both workers, host A's too, which its config does not name.
+    wait_for(lambda: _metrics_workers(hosts.b, robot) == split, 30, "both workers in B's metrics")
+
+    # The link cut for longer than the lease: B's worker serves every camera once A's token
+    # goes, and A's worker, alone in its pool, takes every camera too (it gets no frame).
+    cut = hosts.link(up=False)
+    alone = wait_for(
+        lambda: next((e["t"] for e in probe.of("worker", cut) if e["service"] == worker_b
+                      and set(e["serving"]) == set(POOL_CAMERAS)), None),
+        2 * LEASE_S + 10, lambda: f"{worker_b} to serve every camera:\n{logs()}",
+    )  # fmt: skip
+    wait_for(lambda: _detected(probe, alone), 30, lambda: f"B's worker detecting all:\n{logs()}")
+    wait_for(
+        lambda: "pool of 1: serving ['front', 'rear']" in log_a.read_text(errors="replace"),
+        10, lambda: f"{worker_a} to serve every camera alone:\n{logs()}",
+    )  # fmt: skip
+
+    # The link back: the routers meet again, each worker hears the other, and they split the
+    # cameras as before, with nothing restarted.
+    restored = hosts.link(up=True)
+    again = wait_for(lambda: _shared(probe, restored), 60, lambda: f"a split again:\n{logs()}")
+    shared_at = time.monotonic()
+    wait_for(lambda: _detected(probe, shared_at), 30, lambda: f"both detected again:\n{logs()}")
+    assert again == split, "the same membership gave another assignment"
+    print(
+        f"pool across hosts: split {split}; link cut: {worker_b} serves every camera after "
+        f"{alone - cut:.1f} s; link back: shared again after {shared_at - restored:.1f} s"
+    )
+    assert {w: service_pids(w, cfg) for w, cfg in
+            ((worker_a, gpu_box), (worker_b, robot))} == pids  # fmt: skip
     for name, path in (("A", log_a), ("B", log_b)):
         text = path.read_text(errors="replace")
         assert "hung (" not in text and "restarted" not in text, f"host {name}:\n{logs()}"

@@ -234,6 +234,38 @@ def test_cli_makes_a_principal_per_camera_of_the_config(
     assert server_capable(creds) == ["camera_rear"]
 
 
+def test_cli_makes_a_principal_per_worker_and_for_other_hosts_workers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    creds = tmp_path / "creds"
+    config = tmp_path / "robot.toml"
+    config.write_text(
+        f'[zenoh]\ncredentials_dir = "{creds}"\n[detector]\nworkers = 2\nworker_id = "b"\n'
+    )
+    argv = ["credentials", "--config", str(config), "--worker", "detector_a"]
+    monkeypatch.setattr(sys, "argv", argv)
+    with pytest.raises(SystemExit) as done:
+        run_main(credentials.main, "credentials")
+    assert done.value.code == 0
+    assert "wrote 13 passwords" in capsys.readouterr().err
+    users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
+    workers = ("detector_b", "detector_b_2", "detector_a")
+    assert users == list(stack_principals("front", workers))
+    assert "detector" not in users
+    ca = _cert(ca_file(creds))
+    for p in workers:
+        cert = _cert(cert_file(creds, p))
+        cert.verify_directly_issued_by(ca)
+        assert _purposes(cert) == [ExtendedKeyUsageOID.CLIENT_AUTH]
+    # A name no worker can have: one line, exit 2.
+    monkeypatch.setattr(sys, "argv", [*argv[:3], "--worker", "rogue", "--force"])
+    with pytest.raises(SystemExit) as bad:
+        run_main(credentials.main, "credentials")
+    assert bad.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--worker 'rogue'" in err
+
+
 @pytest.mark.integration
 def test_mtls_router_admits_only_clients_with_a_certificate(
     creds: tuple[Path, list[Path]],

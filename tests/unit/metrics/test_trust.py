@@ -13,6 +13,7 @@ from common.messages import Detections, Header, ServiceCounters
 from common.settings import SERVICES, MetricsSettings
 from services.metrics.aggregate import Aggregator
 from services.metrics.trust import (
+    PoolWorkers,
     refuse_counters,
     refuse_detections,
     split_counters,
@@ -47,6 +48,28 @@ def test_counters_are_believed_only_from_known_services(
     msg: ServiceCounters, key: str, why: str | None
 ) -> None:
     assert refuse_counters(msg, key, SERVICES, max_names=10) == why
+
+
+def test_another_hosts_workers_are_believed_up_to_a_bound() -> None:
+    workers = PoolWorkers(max_workers=2)
+
+    def refuse(service: str, key_service: str | None = None) -> str | None:
+        key = f"stack/counters/{key_service or service}"
+        return refuse_counters(counters(service), key, SERVICES, 10, workers)
+
+    assert refuse("detector_a") is None  # another host's worker: no config names it
+    assert refuse("detector_a") is None  # once admitted, for good
+    assert refuse("camera", "detector_b") == "service_mismatch"  # takes no place
+    assert refuse("detector_b_2") is None
+    assert refuse("detector_c") == "too_many_workers"
+    assert refuse("detector_a") is None and refuse("detector") is None  # known: no place
+    for garbage in ("detector_", "detector_C", "detector_../x", "rogue", "x" * 300):
+        assert refuse(garbage) == "unknown_service", garbage
+    assert workers.names == {"detector_a", "detector_b_2"}
+    # Without the pool's bookkeeping, only known services.
+    assert refuse_counters(counters("detector_a"), "stack/counters/detector_a", SERVICES, 10) == (
+        "unknown_service"
+    )
 
 
 def test_a_bad_name_or_count_costs_only_itself() -> None:
