@@ -51,6 +51,11 @@ COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
         ("scale",),
         "several cameras on one detector against one stack per camera",
     ),
+    "pool-benchmark": (
+        "tools.benchmarks",
+        ("pool",),
+        "cameras on 1 and 2 detector workers; the hand-over after a SIGKILL",
+    ),
     "soak": ("tools.scenarios", ("soak",), "the whole stack for a long run under a garbage flood"),
     "credentials": ("deploy.credentials", (), "write the secure profile's credentials"),
 }

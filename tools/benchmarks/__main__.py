@@ -1,8 +1,10 @@
-"""python -m tools.benchmarks recorder|ros2|scale [options]
+"""python -m tools.benchmarks recorder|ros2|scale|pool [options]
 
 recorder runs the default stack with and without the recorder, side by side; ros2 measures
 what the ROS 2 bridge adds against the direct path; scale runs 1, 2, 4, 8 cameras on one
-detector against as many one-camera stacks, batched and batch 1. (The detector's own benchmark is
+detector against as many one-camera stacks, batched and batch 1; pool runs 4 and 8 cameras on 1
+and 2 detector workers, times the hand-over after a worker's SIGKILL and the assignment under
+uneven load. (The detector's own benchmark is
 ``python -m tools.detector benchmark``.)
 """
 
@@ -10,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from collections.abc import Callable
 
 from common.cli import Command, options_from, service_main
 from common.lifecycle import run_main, setup_logging, stop_event
@@ -42,16 +45,21 @@ def ros2(args: argparse.Namespace) -> int:
     return bench.main(args.runs, args.json)
 
 
-def _camera_counts(text: str) -> tuple[int, ...]:
-    try:
-        counts = tuple(int(x) for x in text.split(",") if x.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"a list of camera counts like 1,2,4, got {text!r}"
-        ) from None
-    if not counts or any(not 1 <= n <= 32 for n in counts):
-        raise argparse.ArgumentTypeError(f"camera counts within 1..32, got {text!r}")
-    return counts
+def _counts(low: int, high: int) -> Callable[[str], tuple[int, ...]]:
+    def parse(text: str) -> tuple[int, ...]:
+        try:
+            counts = tuple(int(x) for x in text.split(",") if x.strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"a list of numbers like 1,2, got {text!r}") from None
+        if not counts or any(not low <= n <= high for n in counts):
+            raise argparse.ArgumentTypeError(f"numbers within {low}..{high}, got {text!r}")
+        return counts
+
+    return parse
+
+
+#: Camera counts as the scale benchmark takes them ("1,2,4,8").
+_camera_counts = _counts(1, 32)
 
 
 def _scale_arguments(p: argparse.ArgumentParser) -> None:
@@ -101,6 +109,57 @@ def scale(args: argparse.Namespace) -> int:
     return bench.main(options_from(bench.ScaleOptions, args, as_json=args.json), stop)
 
 
+def _pool_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", help="the stack to start from (default deploy/stack.toml)")
+    p.add_argument(
+        "--cameras", type=_camera_counts, default=(4, 8), help="camera counts (default 4,8)"
+    )
+    p.add_argument(
+        "--workers",
+        type=_counts(1, 8),
+        default=(1, 2),
+        help="worker counts to compare (default 1,2)",
+    )
+    p.add_argument(
+        "--seconds", type=float, default=20.0, help="measured seconds per condition (default 20)"
+    )
+    p.add_argument(
+        "--warmup",
+        type=float,
+        default=15.0,
+        help="seconds after the split left out of each condition (default 15)",
+    )
+    p.add_argument(
+        "--rate",
+        dest="rate_hz",
+        type=float,
+        default=10.0,
+        help="every camera's rate in Hz (default 10)",
+    )
+    p.add_argument(
+        "--kills",
+        type=int,
+        default=20,
+        help="SIGKILLs of a worker, 4 cameras on 2 (default 20; 0 skips)",
+    )
+    p.add_argument(
+        "--uneven",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="2 heavy and 2 light cameras on 2 workers (default on)",
+    )
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+
+
+def pool(args: argparse.Namespace) -> int:
+    stop = stop_event()
+    logging.getLogger().setLevel(logging.WARNING)
+    from tools.benchmarks.pool import PoolOptions
+    from tools.benchmarks.pool_runs import main as run
+
+    return run(options_from(PoolOptions, args, as_json=args.json), stop)
+
+
 COMMANDS = [
     Command("recorder", "the stack's FPS and latency with and without the recorder",
             _recorder_arguments, recorder),
@@ -108,6 +167,8 @@ COMMANDS = [
             _ros2_arguments, ros2),
     Command("scale", "N cameras on one detector against N one-camera stacks, batched and not",
             _scale_arguments, scale),
+    Command("pool", "4 and 8 cameras on 1 and 2 detector workers; hand-over after SIGKILL",
+            _pool_arguments, pool),
 ]  # fmt: skip
 
 

@@ -35,41 +35,35 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import sys
 import tempfile
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from common.bus import open_session
-from common.clock import mono_s, wall_ns
-from common.config_file import load_config, to_toml
+from common.clock import mono_s
+from common.config_file import load_config
 from common.errors import StackError
-from common.keys import Keys
 from common.machine import machine_info
-from common.messages import Detections, ServiceCounters
-from common.settings import Config, ZenohSettings
-from tools.launch import (
-    free_port,
-    pss_kb,
-    rss_kb,
-    service_pids,
-    start_supervisor,
-    stop_supervisor,
-    wait_ready,
+from common.settings import Config
+from tools.benchmarks.stacks import (
+    DEFAULT_RATE_HZ,
+    DEFAULT_SOURCE,
+    SOURCES,
+    CameraLoad,
+    PerCamera,
+    Stack,
+    Watch,
+    percentile,
+    progress,
+    ratio,
+    source_services,
+    stack_config,
+    start_stack,
+    stop_all,
 )
+from tools.launch import pss_kb, rss_kb, service_pids
 
-STARTUP_S = 240.0
-STOP_S = 30.0
-#: The services a condition runs, by where its cameras come from.
-SERVICES = {"sim": ("sim", "detector"), "processes": ("camera", "detector")}
-#: A rate every camera asks for: above what one CPU detector serves, so the detector is the
-#: bottleneck (overload) and fairness is tested.
-DEFAULT_SOURCE = "sample:chelsea"
-DEFAULT_RATE_HZ = 10.0
 #: N one-camera stacks are skipped when their estimated memory passes this share of what the
 #: machine has available.
 MEMORY_SHARE = 0.7
@@ -95,34 +89,14 @@ class ScaleOptions:
             raise StackError("--seconds must be > 0 and --warmup >= 0")
         if not 0.1 <= self.rate_hz <= 100:
             raise StackError(f"--rate must be within 0.1..100 Hz, got {self.rate_hz}")
-        if self.cameras_from not in SERVICES:
+        if self.cameras_from not in SOURCES:
             raise StackError(
-                f"--cameras-from must be one of {', '.join(SERVICES)}, got {self.cameras_from!r}"
+                f"--cameras-from must be one of {', '.join(SOURCES)}, got {self.cameras_from!r}"
             )
 
 
-# ---------------------------------------------------------------- pure figures
-
-
-def percentile(values: Sequence[float], q: float) -> float:
-    """The ``q``-th percentile of ``values``; NaN when there are none."""
-    return float(np.percentile(values, q)) if len(values) else float("nan")
-
-
-def fairness(fps: Sequence[float]) -> float:
-    """The slowest camera's FPS over the fastest's (1 = fair); NaN without cameras or frames."""
-    if not fps or max(fps) <= 0:
-        return float("nan")
-    return min(fps) / max(fps)
-
-
-def ratio(a: float, b: float) -> float:
-    """``a / b``; NaN when ``b`` is zero or either is NaN."""
-    return a / b if b and not (np.isnan(a) or np.isnan(b)) else float("nan")
-
-
 @dataclasses.dataclass(frozen=True, slots=True)
-class Result:
+class Result(PerCamera):
     """One condition's figures."""
 
     n: int
@@ -136,29 +110,6 @@ class Result:
     pss_mb: float  # summed PSS of every process: supervisors, detectors, cameras
     detector_pss_mb: float
     batch_mean: float
-
-    @property
-    def total_fps(self) -> float:
-        return float(sum(self.fps.values()))
-
-    @property
-    def fairness(self) -> float:
-        return fairness(list(self.fps.values()))
-
-    @property
-    def worst_p50_ms(self) -> float:
-        return max(self.p50_ms.values(), default=float("nan"))
-
-    @property
-    def worst_p95_ms(self) -> float:
-        return max(self.p95_ms.values(), default=float("nan"))
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            **dataclasses.asdict(self),
-            "total_fps": self.total_fps,
-            "fairness": self.fairness,
-        }
 
 
 SETUP_TEXT = {
@@ -255,125 +206,13 @@ def _mem_available_mb() -> float:
     return float("inf")
 
 
-@dataclasses.dataclass
-class _Stack:
-    config: Config
-    path: Path
-    proc: Any  # subprocess.Popen[bytes]
-
-
-def _stack_config(
-    base: Config, cameras: int, max_batch: int, choice: str, options: ScaleOptions, path: Path
-) -> Config:
-    first = dataclasses.replace(
-        base.camera, source=options.source, rate_hz=options.rate_hz, loop=True
-    )
-    further = tuple(
-        (
-            f"cam{i}",
-            dataclasses.replace(
-                first, frame_id=f"camera_cam{i}", mount_yaw_deg=_ring_yaw(i, cameras)
-            ),
-        )
-        for i in range(1, cameras)
-    )
-    # The simulator renders the first camera at sim.camera_rate_hz (each further one at its own
-    # rate_hz), and starts its world once the detector alone is ready: no controller here.
-    sim = dataclasses.replace(base.sim, camera_rate_hz=options.rate_hz, wait_for=("detector",))
-    return dataclasses.replace(
-        base,
-        path=str(path),
-        zenoh=ZenohSettings(endpoint=f"tcp/127.0.0.1:{free_port()}"),
-        stack=dataclasses.replace(base.stack, prefix=f"scale/{free_port()}"),
-        supervisor=dataclasses.replace(
-            base.supervisor, services=SERVICES[options.cameras_from], optional=()
-        ),
-        sim=sim,
-        camera=first,
-        cameras=further,
-        detector=dataclasses.replace(base.detector, max_batch=max_batch, batch_choice=choice),
-    )
-
-
-def _source_services(config: Config, options: ScaleOptions) -> list[str]:
-    """The services that bring a stack its frames: the simulator, or each camera's process."""
-    if options.cameras_from == "sim":
-        return ["sim"]
-    return list(config.camera_services.values())
-
-
-def _ring_yaw(i: int, cameras: int) -> float:
-    """Camera ``i`` of ``cameras`` spread evenly round the robot, the first looking ahead;
-    within -180..180 degrees."""
-    yaw = 360.0 * i / cameras
-    return yaw - 360.0 if yaw > 180.0 else yaw
-
-
-class _Watch:
-    """Detections per camera and the detector's batch counters of one stack, reset per phase."""
-
-    def __init__(self, stack: _Stack) -> None:
-        self.stack = stack
-        self.keys = Keys(stack.config.stack.prefix)
-        self._lock = threading.Lock()
-        self.session = open_session(stack.config.zenoh, "observer")
-        self._subs = [
-            self.session.declare_subscriber(self.keys.detections(cam), self._handler(cam))
-            for cam in stack.config.all_cameras
-        ]
-        self._subs.append(
-            self.session.declare_subscriber(self.keys.counters("detector"), self._on_counters)
-        )
-        self._counters: dict[str, int] = {}
-        self.reset()
-
-    def _handler(self, camera: str) -> Callable[[Any], None]:
-        return lambda sample: self._on_detections(camera, sample)
-
-    def _on_detections(self, camera: str, sample: Any) -> None:
-        msg = Detections.decode(sample.payload.to_bytes())
-        latency = (wall_ns() - msg.header.stamp_ns) / 1e6
-        with self._lock:
-            self.latency_ms[camera].append(latency)
-
-    def _on_counters(self, sample: Any) -> None:
-        msg = ServiceCounters.decode(sample.payload.to_bytes())
-        with self._lock:
-            self._counters = dict(msg.counters)
-
-    def reset(self) -> None:
-        with self._lock:
-            self.latency_ms: dict[str, list[float]] = {c: [] for c in self.stack.config.all_cameras}
-            self.start = mono_s()
-            self.start_counters = dict(self._counters)
-
-    def take(self) -> tuple[float, dict[str, list[float]], int, int]:
-        """Seconds since reset, latencies per camera, batches and batched frames since reset."""
-        with self._lock:
-            d = {k: self._counters.get(k, 0) - self.start_counters.get(k, 0) for k in
-                 ("batches", "batched_frames")}  # fmt: skip
-            return mono_s() - self.start, {c: list(v) for c, v in self.latency_ms.items()}, \
-                d["batches"], d["batched_frames"]  # fmt: skip
-
-    def close(self) -> None:
-        for sub in self._subs:
-            sub.undeclare()
-        self.session.close()
-
-
-def _stop_all(stacks: Sequence[_Stack]) -> None:
-    """Stop every stack at once (a SIGINT each, in parallel), each killed if it lingers."""
-    threads = [
-        threading.Thread(target=stop_supervisor, args=(s.proc, STOP_S)) for s in stacks
-    ]  # fmt: skip
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-
-
-def _progress(text: str) -> None:
-    print(text, file=sys.stderr, flush=True)
+def _config(base: Config, n: int, max_batch: int, choice: str, options: ScaleOptions,
+            path: Path) -> Config:  # fmt: skip
+    return stack_config(
+        base, path, [CameraLoad(options.rate_hz)] * n, tag="scale",
+        cameras_from=options.cameras_from, source=options.source, max_batch=max_batch,
+        batch_choice=choice,
+    )  # fmt: skip
 
 
 def _condition(
@@ -384,21 +223,16 @@ def _condition(
     batch = n if setup in ("shared", "measured") else 1
     shapes = [(1, 1)] * n if setup == "stacks" else [(n, batch)]
     choice = "max" if setup == "shared" else "measured"
-    stacks: list[_Stack] = []
-    watches: list[_Watch] = []
+    stacks: list[Stack] = []
+    watches: list[Watch] = []
     try:
         for k, (cams, batch) in enumerate(shapes):
             path = workdir / f"n{n}-{setup}-{k}.toml"
-            config = _stack_config(base, cams, batch, choice, options, path)
-            path.write_text(to_toml(config))
-            with path.with_suffix(".log").open("wb") as log:
-                stacks.append(_Stack(config, path, start_supervisor(path, log)))
+            stacks.append(start_stack(_config(base, cams, batch, choice, options, path), path))
         for s in stacks:
-            watches.append(_Watch(s))
-            want = set(_source_services(s.config, options)) | {"detector"}
-            wait_ready(watches[-1].session, watches[-1].keys, want, s.proc, STARTUP_S,
-                       stop=stop, log_path=s.path.with_suffix(".log"))  # fmt: skip
-        _progress(f"  ready; warming up {options.warmup:.0f} s")
+            watches.append(Watch(s))
+            watches[-1].wait_ready(options.cameras_from, stop)
+        progress(f"  ready; warming up {options.warmup:.0f} s")
         if stop.wait(options.warmup):
             raise KeyboardInterrupt
         for w in watches:
@@ -409,8 +243,9 @@ def _condition(
         for s in stacks:  # memory mid-phase, every process running
             det_pids = service_pids("detector", s.path)
             cam_pids = [
-                p for svc in _source_services(s.config, options) for p in service_pids(svc, s.path)
-            ]
+                p for svc in source_services(s.config, options.cameras_from)
+                for p in service_pids(svc, s.path)
+            ]  # fmt: skip
             det_rss += sum(rss_kb(p) or 0 for p in det_pids)
             rss += sum(rss_kb(p) or 0 for p in det_pids + cam_pids)
             det_pss += sum(pss_kb(p) or 0 for p in det_pids)
@@ -422,11 +257,12 @@ def _condition(
         p95: dict[str, float] = {}
         batches = frames = 0
         for k, w in enumerate(watches):
-            elapsed, latency, b, f = w.take()
-            batches, frames = batches + b, frames + f
-            for cam, values in latency.items():
+            taken = w.take()
+            batches += taken.counters.get("batches", 0)
+            frames += taken.counters.get("batched_frames", 0)
+            for cam, values in taken.latency_ms.items():
                 name = cam if len(watches) == 1 else f"{k}:{cam}"
-                fps[name] = len(values) / elapsed
+                fps[name] = len(values) / taken.elapsed_s
                 p50[name] = percentile(values, 50)
                 p95[name] = percentile(values, 95)
         return Result(n=n, setup=setup, seconds=options.seconds, fps=fps, p50_ms=p50,
@@ -436,7 +272,7 @@ def _condition(
     finally:
         for w in watches:
             w.close()
-        _stop_all(stacks)
+        stop_all(stacks)
 
 
 def main(options: ScaleOptions, stop: threading.Event) -> int:
@@ -457,13 +293,13 @@ def main(options: ScaleOptions, stop: threading.Event) -> int:
                         f"{n} one-camera stacks: about {per_stack * n:.0f} MB against "
                         f"{available:.0f} MB available"
                     )
-                    _progress(f"skipped: {skipped[-1]}")
+                    progress(f"skipped: {skipped[-1]}")
                     continue
-            _progress(f"[{i}/{len(plan)}] N={n}: {SETUP_TEXT[setup].format(n=n)} "
+            progress(f"[{i}/{len(plan)}] N={n}: {SETUP_TEXT[setup].format(n=n)} "
                       f"({mono_s() - started:.0f} s so far)")  # fmt: skip
             results.append(_condition(base, Path(tmp), n, setup, options, stop))
             r = results[-1]
-            _progress(f"  {r.total_fps:.2f} det/s, fairness {r.fairness:.2f}, "
+            progress(f"  {r.total_fps:.2f} det/s, fairness {r.fairness:.2f}, "
                       f"{r.pss_mb:.0f} MB, batch {r.batch_mean:.2f}")  # fmt: skip
     if options.as_json:
         out = {

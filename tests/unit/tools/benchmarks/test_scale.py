@@ -9,15 +9,8 @@ import pytest
 
 from common.errors import StackError
 from tools.benchmarks.__main__ import _camera_counts
-from tools.benchmarks.scale import (
-    Result,
-    ScaleOptions,
-    fairness,
-    percentile,
-    ratio,
-    ratios,
-    render_table,
-)
+from tools.benchmarks.scale import Result, ScaleOptions, ratios, render_table
+from tools.benchmarks.stacks import fairness, percentile, ratio, ring_yaw
 
 
 def _result(n: int, setup: str, fps: list[float], pss: float, det: float, p50: float = 100.0,
@@ -106,9 +99,7 @@ def test_options_are_checked() -> None:
 
 
 def test_cameras_spread_round_the_robot_and_the_source_is_checked() -> None:
-    from tools.benchmarks.scale import _ring_yaw
-
-    assert [_ring_yaw(i, 4) for i in range(4)] == [0.0, 90.0, 180.0, -90.0]
-    assert all(-180.0 <= _ring_yaw(i, 8) <= 180.0 for i in range(8))
+    assert [ring_yaw(i, 4) for i in range(4)] == [0.0, 90.0, 180.0, -90.0]
+    assert all(-180.0 <= ring_yaw(i, 8) <= 180.0 for i in range(8))
     with pytest.raises(StackError, match="--cameras-from must be one of sim, processes"):
         ScaleOptions(cameras_from="usb")
