@@ -162,7 +162,7 @@ class DetectorSettings:
     fast_max_ap50_drop: float = 0.01
     workers: int = 1
     worker_id: str = ""
-    pool_balance: float = 1.25
+    pool_balance: float = 1.0
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
