@@ -138,7 +138,8 @@ class DetectorSettings:
     (common/settings.py::detector_service). Names must differ across hosts, so on several hosts
     give each its own ``worker_id`` (``"robot1"``). ``pool_balance`` is the slack over an
     even share of the cameras' pixel rate that a worker may take before a camera goes to its
-    next choice (services/detector/pool.py).
+    next choice (services/detector/pool.py). A worker whose detection loop has not passed
+    for ``pool_stall_s`` leaves the pool (its cameras go to the others) until it runs again.
     """
 
     model: str = ""
@@ -163,6 +164,7 @@ class DetectorSettings:
     workers: int = 1
     worker_id: str = ""
     pool_balance: float = 1.0
+    pool_stall_s: float = 5.0
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
@@ -179,6 +181,7 @@ class DetectorSettings:
         "fast_max_ap50_drop": (0, 1),
         "workers": (1, MAX_WORKERS),
         "pool_balance": (1, 4),
+        "pool_stall_s": (1, 60),
     }
     LENGTHS: ClassVar[Bounds] = {"classes": (0, MAX_CLASSES)}
 

@@ -16,7 +16,7 @@ import numpy.typing as npt
 import zenoh
 
 from common.bus import QoS
-from common.clock import BOOT_ID, now, wall_ns
+from common.clock import BOOT_ID, mono_s, now, wall_ns
 from common.contracts import DetectorInfo
 from common.counters import per_camera
 from common.errors import DecodeError, ImageError, ImageTooLarge
@@ -289,6 +289,7 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
         node.ready()
         try:
             while not stop.is_set():
+                pool.beat()
                 pool.settle()
                 node.publish_counters()
                 waiting = handlers.slots.take(per_round, _WAIT_S)
@@ -329,7 +330,14 @@ class PoolMember:
     there (never inside a Zenoh callback). Counted: ``serving`` and ``serving.<cam>`` (1 while
     served), ``pool_members``, ``pool_load_permille`` (the served cameras' share of every
     camera's pixel rate), ``cameras_gained`` and ``cameras_lost`` (and ``.<cam>``: hand-overs
-    after the first assignment)."""
+    after the first assignment).
+
+    A worker whose loop stalls (an inference that never returns, a deadlock) while Zenoh's
+    threads still keep its token alive would hold its cameras until the watchdog restarts it.
+    So a thread here watches the loop's :meth:`beat`: none for ``detector.pool_stall_s`` and the
+    worker **resigns**, withdrawing its pool token (the others take its cameras at once) and
+    refusing frames; its next beat declares the token again and it takes its share back.
+    Counted as ``pool_resigned``."""
 
     def __init__(self, node: Node, worker_id: str, handlers: DetectorHandlers) -> None:
         config = node.config
@@ -338,6 +346,15 @@ class PoolMember:
         self.view = PoolView(
             worker_id, camera_weights(config.all_cameras), config.detector.pool_balance
         )
+        self._stall_s = config.detector.pool_stall_s
+        self._last_beat = mono_s()
+        self._resigned = False
+        self._closed = threading.Event()
+        self._stall_watch: threading.Thread | None = None
+        # Two locks, taken in this order: _token_lock around declaring and undeclaring the
+        # token (a Zenoh call, which may deliver our own liveliness change to _member at once,
+        # in this thread), _lock around the view and the flags (never held over a Zenoh call).
+        self._token_lock = threading.Lock()
         self._lock = threading.Lock()
         self._dirty = True
         self._subs: dict[str, zenoh.Subscriber[None]] = {}
@@ -349,14 +366,15 @@ class PoolMember:
             self._gauge(per_camera("serving", cam), 0)
         for name in ("serving", "pool_members", "pool_load_permille"):
             self._gauge(name, 0)
-        for name in ("cameras_gained", "cameras_lost"):
+        for name in ("cameras_gained", "cameras_lost", "pool_resigned"):
             node.counters.add(name, 0)
 
     def join(self) -> None:
         """Declare this worker's token, learn who else is in the pool, and take its cameras."""
         node, keys = self.node, self.node.keys
         liveliness = node.session.liveliness()
-        self._token = liveliness.declare_token(keys.pool_member(self.view.me))
+        with self._token_lock:
+            self._token = liveliness.declare_token(keys.pool_member(self.view.me))
         self._watch = liveliness.declare_subscriber(
             keys.all_pool_members(), self._on_member, history=True
         )
@@ -364,6 +382,53 @@ class PoolMember:
             if reply.ok is not None:
                 self._member(str(reply.ok.key_expr), joined=True)
         self.settle()
+        self._last_beat = mono_s()
+        self._stall_watch = threading.Thread(
+            target=self._watch_stalls, name="pool-stall-watch", daemon=True
+        )
+        self._stall_watch.start()
+
+    def beat(self) -> None:
+        """The detection loop passed (call it on every pass, before :meth:`settle`). After a
+        stall that made this worker resign, declare its token again: the pool gives its share
+        back, and the next settle() serves it again."""
+        with self._token_lock:
+            with self._lock:
+                self._last_beat = mono_s()
+                back = self._resigned and not self._closed.is_set()
+                self._resigned = False
+                if back:
+                    self._dirty = True
+            if back:
+                keys = self.node.keys
+                self._token = self.node.session.liveliness().declare_token(
+                    keys.pool_member(self.view.me)
+                )
+        if back:
+            self.node.log.warning("the detection loop runs again: back in the pool")
+
+    def _watch_stalls(self) -> None:
+        period = max(0.05, self._stall_s / 4)
+        while not self._closed.wait(period):
+            with self._token_lock:
+                with self._lock:
+                    stalled = not self._resigned and mono_s() - self._last_beat > self._stall_s
+                    if stalled:
+                        self._resigned = True
+                        # The frames that come meanwhile are not ours: restored by the
+                        # settle() after the next beat(), never before (beat clears the flag).
+                        self.handlers.serving = frozenset()
+                if stalled and self._token is not None:
+                    self._token.undeclare()
+                    self._token = None
+            if not stalled:
+                continue
+            self.node.counters.add("pool_resigned")
+            self.node.log.warning(
+                "the detection loop has not passed for %.1f s (detector.pool_stall_s): "
+                "leaving the pool so that the other workers take its cameras",
+                self._stall_s,
+            )
 
     def _on_member(self, sample: zenoh.Sample) -> None:
         self._member(str(sample.key_expr), joined=sample.kind == zenoh.SampleKind.PUT)
@@ -422,11 +487,16 @@ class PoolMember:
         self._gauges[name] = value
 
     def close(self) -> None:
+        self._closed.set()
+        if self._stall_watch is not None:
+            self._stall_watch.join()
         for sub in [*self._subs.values(), *((self._watch,) if self._watch else ())]:
             sub.undeclare()
         self._subs.clear()
-        if self._token is not None:
-            self._token.undeclare()
+        with self._token_lock:
+            if self._token is not None:
+                self._token.undeclare()
+                self._token = None
 
 
 def round_size(detector: Detector, served: int, log: logging.Logger) -> int:

@@ -1,0 +1,80 @@
+"""A pool worker whose detection loop stalls while Zenoh's threads keep its session alive (a
+stuck inference, a deadlock) leaves the pool after ``detector.pool_stall_s``: its pool token
+goes, so the other workers take its cameras at once instead of after the watchdog's restart;
+its next loop pass declares the token again and it serves its share again.
+
+The worker's bus side (``services/detector/service.py::PoolMember``) runs here in the test's
+process on a real Zenoh session, against the supervisor's router, so that the test decides
+when the "loop" passes: not passing is the stall. The hand-over that follows a token's loss
+is the pool's own and is tested with real workers in test_pool.py.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from collections.abc import Callable
+
+import pytest
+
+from common.node import Node
+from services.detector.service import DetectorHandlers, PoolMember
+from tests.integration.conftest import Stack, wait_for
+
+pytestmark = pytest.mark.integration
+
+STALL_S = 1.0  # detector.pool_stall_s here: the smallest allowed, so the test is short
+NOTICE_S = 10.0  # the resignation seen by another session, on a loaded machine
+LOOP_S = 0.2  # an idle detection loop's pass (services/detector/service.py::_WAIT_S)
+
+
+def _members(stack: Stack) -> set[str]:
+    """The pool ids whose tokens another session sees now."""
+    replies = stack.session.liveliness().get(stack.keys.all_pool_members(), timeout=2.0)
+    return {str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None}
+
+
+def test_a_stalled_worker_leaves_the_pool_and_comes_back(
+    make_stack: Callable[..., Stack],
+) -> None:
+    stack = make_stack(
+        supervisor={"services": ["metrics"]},  # the router, and nothing that takes frames
+        **{"cameras.rear": {"frame_id": "rear"}},
+    )
+    stack.wait_ready({"metrics"})
+    config = dataclasses.replace(
+        stack.config, detector=dataclasses.replace(stack.config.detector, pool_stall_s=STALL_S)
+    )
+    with Node("detector", config) as node:
+        handlers = DetectorHandlers(config, node)
+        pool = PoolMember(node, "detector", handlers)
+        try:
+            pool.join()
+            assert handlers.serving == {"front", "rear"}  # alone in the pool: every camera
+            wait_for(lambda: _members(stack) == {"detector"}, NOTICE_S, "the worker's token")
+            # The loop passes, every 0.2 s as an idle detector's does: the worker stays for
+            # well over pool_stall_s.
+            pace = threading.Event()  # never set: wait() paces the passes
+            for _ in range(round(3 * STALL_S / LOOP_S)):
+                pool.beat()
+                pool.settle()
+                pace.wait(LOOP_S)
+            assert node_counter(node, "pool_resigned") == 0
+            assert _members(stack) == {"detector"}
+            # The loop stops passing (stuck): the worker resigns and refuses frames.
+            wait_for(lambda: not _members(stack), NOTICE_S + STALL_S, "the token to go")
+            assert node_counter(node, "pool_resigned") == 1
+            assert handlers.serving == frozenset()
+            # The loop runs again: the token is back and the worker serves its share again.
+            pool.beat()
+            pool.settle()
+            assert handlers.serving == {"front", "rear"}
+            wait_for(lambda: _members(stack) == {"detector"}, NOTICE_S, "the token to return")
+            assert node_counter(node, "pool_resigned") == 1
+        finally:
+            pool.close()
+    assert stack.stop() == 0
+
+
+def node_counter(node: Node, name: str) -> int:
+    return int(node.counters.get(name))
