@@ -102,14 +102,16 @@ class Aggregator:
         """``camera``'s detections (the camera its key names). A frame detected twice (two
         workers during a hand-over) is counted as ``duplicate_detections`` and shown as
         published: the controller heard both."""
-        if self._duplicates.seen(camera, msg.header):
-            self.count("duplicate_detections")
         self.model, self.backend = msg.model, msg.backend
         self._all.on_detections(msg, now)
         figures = self._camera(camera)
         if figures is None:
             self.count("cameras_refused")  # over max_cameras: in the totals only
         else:
+            # Only for the cameras kept (at most max_cameras): made-up camera names on the
+            # detections keys must not grow the memory of frames seen.
+            if self._duplicates.seen(camera, msg.header):
+                self.count("duplicate_detections")
             figures.on_detections(msg, now)
         self._timeline.add(now, frames=1.0, detections=float(len(msg)))
         # Bounded: garbage that decodes can still name thousands of made-up classes (each

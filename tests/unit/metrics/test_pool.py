@@ -63,3 +63,17 @@ def test_a_frame_detected_twice_is_a_duplicate() -> None:
     assert answer["cameras"]["front"]["duplicate_detections"] == 1
     assert answer["cameras"]["rear"]["duplicate_detections"] == 0
     assert answer["counters"]["metrics.duplicate_detections"] == 1
+
+
+def test_made_up_camera_names_do_not_grow_the_frames_remembered() -> None:
+    # A flood of detections on keys naming cameras nobody configured: past max_cameras they
+    # are refused, and no frame of theirs is remembered for the duplicate count (whose memory
+    # would otherwise grow with every new name).
+    agg = Aggregator(10.0, cameras=["front"], max_cameras=2)
+    frame = Header(stamp_ns=1_000, frame_id="c", seq=7, source="camera")
+    for i in range(50):
+        agg.on_detections(detections(frame, 1), 1.0, camera=f"fake{i}")
+        agg.on_detections(detections(frame, 1), 1.0, camera=f"fake{i}")  # the same frame again
+    answer = agg.answer(HDR, 1.2)
+    assert answer["counters"]["metrics.cameras_refused"] == 2 * 49  # fake0 took the free place
+    assert answer["duplicate_detections"] == 1  # fake0's, the one camera kept
