@@ -112,17 +112,34 @@ def stop_event() -> StopEvent:
     event = StopEvent()
     supervisor = os.environ.get(SUPERVISOR_PID_ENV, "")
     supervisor_pid = int(supervisor) if supervisor.isdigit() else None
+    # The handler must not set the event itself: a handler runs in the main thread between
+    # two bytecodes, possibly while that thread holds the event's lock (inside its own
+    # ``stop.wait()``, which every loop calls ten times a second), and Event.set() would then
+    # wait for that lock forever: a stop lost. (A supervisor was seen hung so at the end of a
+    # scenario, its services left running until killed.) So the handler only writes a byte to
+    # a pipe, which takes no lock, and a thread of its own reads it and sets the event.
+    wake_read, wake_write = os.pipe()
+    threading.Thread(
+        target=_relay_stops, args=(wake_read, event), name="stop-relay", daemon=True
+    ).start()
 
     def _handler(signum: int, _frame: object) -> None:
         if supervisor_pid is not None and os.getppid() != supervisor_pid:
             _leave_soon(supervisor_pid)
-        event.set()
+        os.write(wake_write, b"\0")
 
     signal.signal(signal.SIGINT, _handler)
     signal.signal(signal.SIGTERM, _handler)
     if supervisor_pid is not None:
         _die_with(supervisor_pid, event)
     return event
+
+
+def _relay_stops(wake_read: int, event: threading.Event) -> None:
+    """Set ``event`` for each byte a stop signal's handler writes (see :func:`stop_event`);
+    draining every byte, so that no number of signals can fill the pipe."""
+    while os.read(wake_read, 1):
+        event.set()
 
 
 def _leave_soon(supervisor_pid: int) -> None:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import signal
+import subprocess
+import sys
 import threading
 import time
 
@@ -39,3 +41,28 @@ def test_waits_still_time_out_and_see_a_set() -> None:
     threading.Timer(0.1, stop.set).start()
     assert stop.wait(None) is True
     assert stop.wait(0) is True
+
+
+def test_a_signal_while_the_main_thread_holds_the_events_lock_is_not_lost() -> None:
+    # A handler runs in the main thread between two bytecodes, maybe while that thread holds
+    # the event's lock inside its own stop.wait(). Setting the event from the handler would
+    # then wait for that lock forever (it did: a supervisor hung at the end of a scenario).
+    # Here the lock is held on purpose (CPython's Event keeps it as _cond) when SIGINT comes.
+    code = (
+        "import os, signal\n"
+        "from common.lifecycle import stop_event\n"
+        "stop = stop_event()\n"
+        "with stop._cond:\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "    for _ in range(10000):\n"
+        "        pass\n"
+        "print(stop.wait(20.0))\n"
+    )
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, timeout=60
+        )
+    except subprocess.TimeoutExpired:
+        raise AssertionError("the stop signal deadlocked the process") from None
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"
