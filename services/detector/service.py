@@ -255,6 +255,7 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
         )
         per_round = round_size(detector, served, node.log)
         detector, note, per_round = settle_batch(detector, note, per_round, s, node.log)
+        b = detector.backend  # the one that runs (settle_batch may have opened it again)
         handlers = DetectorHandlers(config, node)
         outputs = {
             cam: CameraOutput(
