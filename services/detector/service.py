@@ -335,9 +335,10 @@ class PoolMember:
 
     A worker whose loop stalls (an inference that never returns, a deadlock) while Zenoh's
     threads still keep its token alive would hold its cameras until the watchdog restarts it.
-    So a thread here watches the loop's :meth:`beat`: none for ``detector.pool_stall_s`` and the
-    worker **resigns**, withdrawing its pool token (the others take its cameras at once) and
-    refusing frames; its next beat declares the token again and it takes its share back.
+    So a thread here watches the loop's :meth:`beat`: none for ``detector.pool_stall_s`` while
+    other workers are in the pool and the worker **resigns**, withdrawing its pool token (the
+    others take its cameras at once) and refusing frames; its next beat declares the token
+    again and it takes its share back. A worker alone in the pool stays: nobody could take over.
     Counted as ``pool_resigned``."""
 
     def __init__(self, node: Node, worker_id: str, handlers: DetectorHandlers) -> None:
@@ -413,7 +414,11 @@ class PoolMember:
         while not self._closed.wait(period):
             with self._token_lock:
                 with self._lock:
-                    stalled = not self._resigned and mono_s() - self._last_beat > self._stall_s
+                    stalled = (
+                        not self._resigned
+                        and len(self.view.members) > 1  # alone, there is nobody to hand to
+                        and mono_s() - self._last_beat > self._stall_s
+                    )
                     if stalled:
                         self._resigned = True
                         # The frames that come meanwhile are not ours: restored by the
