@@ -26,10 +26,8 @@ import numpy as np
 import numpy.typing as npt
 
 from common.fields import Dim, Shape
+from common.limits import MAX_DETECTIONS as MAX_DETECTIONS
 
-# The most detections one message carries; a Boxes in memory (the decoder's candidates) may
-# hold more.
-MAX_DETECTIONS = 10000
 N_DETECTIONS = Dim("n", 0, MAX_DETECTIONS)
 
 

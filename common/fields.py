@@ -41,14 +41,25 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import types
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Annotated, Any, TypeVar, Union, get_args, get_origin, get_type_hints
-
-import numpy as np
+from typing import (
+    TYPE_CHECKING,
+    Annotated,
+    Any,
+    TypeVar,
+    Union,
+    get_args,
+    get_origin,
+    get_type_hints,
+)
 
 from common.errors import DecodeError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 T = TypeVar("T")
 
@@ -274,7 +285,7 @@ def _converter(hint: Any, meta: tuple[Any, ...], where: str) -> tuple[Encoder | 
         if len(rest) != 1 or len(args) != 2:
             raise TypeError(f"{where}: only `X | None` unions are supported, got {hint}")
         return _optional(*_converter(rest[0], meta, where))
-    if origin is np.ndarray:
+    if _is_ndarray(origin):
         return _array(_dtype_of(hint, where), meta, where)
     if hint is int:
         rng = next((m for m in meta if isinstance(m, Range)), Range())
@@ -293,8 +304,18 @@ def _converter(hint: Any, meta: tuple[Any, ...], where: str) -> tuple[Encoder | 
     raise TypeError(f"{where}: no wire format for {hint}")
 
 
+def _is_ndarray(origin: Any) -> bool:
+    """Whether a hint's origin is numpy's array. numpy is imported by the messages that carry
+    arrays, never here: a hint cannot name ndarray unless numpy is loaded, and the messages
+    without arrays (common/control_messages.py: the e-stop command's) must not pay for it."""
+    numpy = sys.modules.get("numpy")
+    return numpy is not None and origin is numpy.ndarray
+
+
 def _dtype_of(hint: Any, where: str) -> np.dtype[Any]:
     """The element type of ``npt.NDArray[np.float32]``: ndarray[shape, dtype[float32]]."""
+    import numpy as np
+
     args = get_args(hint)
     scalar = get_args(args[1])[0] if len(args) == 2 and get_args(args[1]) else None
     if not (isinstance(scalar, type) and issubclass(scalar, np.generic)) or scalar in (
@@ -308,6 +329,8 @@ def _dtype_of(hint: Any, where: str) -> np.dtype[Any]:
 
 
 def _array(dtype: np.dtype[Any], meta: tuple[Any, ...], where: str) -> tuple[Encoder, Decoder]:
+    import numpy as np
+
     shape = next((m for m in meta if isinstance(m, Shape)), None)
     if shape is None or list(shape.dims).count(-1) > 1:
         raise TypeError(f"{where}: an array field needs Shape(...) with at most one -1")

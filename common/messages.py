@@ -5,6 +5,8 @@ plus our seq and source), ``sensor_msgs/Image``, ``vision_msgs/Detection2DArray`
 score, box centre and size), ``geometry_msgs/Twist`` and ``sensor_msgs/LaserScan``.
 
 Each field is declared once, here: its name and type are its wire format (common/fields.py),
+(the messages without arrays, which the e-stop command needs, are declared in
+common/control_messages.py, without numpy, and exported here with the rest),
 and each message type has its own schema version, ``VERSION`` (common/codec.py). To add a field,
 declare it with a default; bump the version only for a change older readers would misread.
 
@@ -24,10 +26,15 @@ import numpy.typing as npt
 
 from common.boxes import MAX_DETECTIONS, Boxes
 from common.codec import Message
+from common.control_messages import ControllerStatus as ControllerStatus
+from common.control_messages import EStop as EStop
+from common.control_messages import Header as Header
 from common.fields import Dim, Inline, NonNegativeInt, Shape
+from common.limits import MAX_IMAGE_SIDE as MAX_IMAGE_SIDE
 
-# Limits that no real camera reaches; anything above is garbage, not a frame.
-MAX_IMAGE_SIDE = 16384
+# ControllerStatus, EStop and Header are declared without numpy, for the e-stop command, and
+# exported here with every other message.
+
 # A class name (COCO's longest is 14 characters, LVIS's about 40) and a model or backend name:
 # longer ones are refused where they enter, so that no receiver keeps megabytes of names.
 MAX_NAME_CHARS = 128
@@ -41,24 +48,6 @@ FRAME_ENCODINGS: dict[str, int] = {"bgr8": 3, "rgb8": 3, "mono8": 1, "jpeg": 0}
 # against its bounds before any array is read (Detections' is common.boxes.N_DETECTIONS).
 N_RAYS = Dim("n", 1, MAX_SCAN_RAYS)
 N_TARGETS = Dim("n", 0, MAX_DETECTIONS)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Header:
-    """Who produced a message, when the data it describes was captured, and its sequence.
-
-    ``stamp_ns`` is wall-clock time. ``mono_ns`` is the same instant on the producer's
-    monotonic clock and ``boot_id`` names that clock (the host's boot); 0 and "" when unknown.
-    A receiver on the same boot judges age on both clocks (common/freshness.py).
-    """
-
-    stamp_ns: NonNegativeInt
-    frame_id: str
-    seq: NonNegativeInt
-    source: str
-    # Absent from headers written before these fields existed: they decode as unknown.
-    mono_ns: NonNegativeInt = 0
-    boot_id: str = ""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -208,29 +197,6 @@ class LaserScan(Message):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ControllerStatus(Message):
-    """What the controller is doing and why: mode, target and state (e.g. "following").
-
-    ``estop_saved`` is False while the controller's e-stop latch could not be written to disk
-    (it holds in memory, and the controller stays stopped until it can save): the e-stop CLI
-    then says the stop is not durable. ``camera`` names the camera that sees the target ("" for
-    none); ``stale_cameras`` the cameras whose detections are stale or have not come (ignored
-    until they are fresh again)."""
-
-    TAG: ClassVar[str] = "ControllerStatus"
-    VERSION: ClassVar[int] = 1
-    header: Header
-    mode: str
-    target: str
-    state: str
-    reason: str = ""
-    track_id: int = -1
-    estop_saved: bool = True
-    camera: str = ""
-    stale_cameras: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
 class GroundTruth(Message):
     """The simulator's truth: the robot's pose and every target's position, in the world frame.
 
@@ -266,17 +232,6 @@ class GroundTruth(Message):
             raise ValueError(f"obstacles must be (m, 3) x, y, radius, got {self.obstacles.shape}")
         if len(self.obstacles) > MAX_DETECTIONS:
             raise ValueError(f"{len(self.obstacles)} obstacles is over {MAX_DETECTIONS}")
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class EStop(Message):
-    """The emergency stop: ``engaged`` latches zero velocity until an EStop with False."""
-
-    TAG: ClassVar[str] = "EStop"
-    VERSION: ClassVar[int] = 1
-    header: Header
-    engaged: bool
-    reason: str = ""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

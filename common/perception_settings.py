@@ -9,10 +9,9 @@ import re
 from dataclasses import dataclass
 from typing import ClassVar
 
-from common.boxes import MAX_DETECTIONS
 from common.contracts import BackendName
 from common.errors import ConfigError
-from common.messages import MAX_IMAGE_SIDE
+from common.limits import MAX_DETECTIONS, MAX_IMAGE_SIDE
 from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
 
 #: The most class names a model may have (LVIS has 1203; COCO 80, Open Images 601).

@@ -46,9 +46,9 @@ def estop(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config)
         setup_logging("estop", "WARNING")
-        from services.controller import service
+        from services.controller.estop_command import send_estop
 
-        return service.send_estop(config, args.action == "engage", args.reason)
+        return send_estop(config, args.action == "engage", args.reason)
     except StackError as exc:
         print(f"estop: error: {exc}", file=sys.stderr)
         return exit_code(exc)

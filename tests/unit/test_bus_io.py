@@ -1,6 +1,7 @@
 """Who touches the bus inside services/ (docs/architecture.md, "Handlers and the bus"), read with
 ``ast``: in each service package only ``service.py`` does, and besides it only
-``services/ros2/graph.py``, the session a node holds in a robot's ROS 2 graph.
+``services/ros2/graph.py``, the session a node holds in a robot's ROS 2 graph, and
+``services/controller/estop_command.py``, the e-stop command's.
 
 A module touches the bus when it imports zenoh or the stack's session modules (at module level
 or inside a function), imports the ROS 2 graph, or reaches for a session: an attribute named
@@ -26,6 +27,8 @@ GRAPH_NAMES = frozenset({"RosGraph", "RosPublisher", "graph"})
 ALLOWED = {
     "services/ros2/graph.py": "the ROS 2 graph's own session, for the bridge and the simulator",
     "services/ros2/__init__.py": "re-exports RosGraph (imported on first use), touches nothing",
+    "services/controller/estop_command.py": "the e-stop command's own session, apart from the "
+    "controller's service so that its first put imports nothing else",
 }
 
 

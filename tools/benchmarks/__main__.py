@@ -1,10 +1,11 @@
-"""python -m tools.benchmarks recorder|ros2|scale|pool [options]
+"""python -m tools.benchmarks recorder|ros2|scale|pool|estop [options]
 
 recorder runs the default stack with and without the recorder, side by side; ros2 measures
 what the ROS 2 bridge adds against the direct path; scale runs 1, 2, 4, 8 cameras on one
 detector against as many one-camera stacks, batched and batch 1; pool runs 4 and 8 cameras on 1
 and 2 detector workers, times the hand-over after a worker's SIGKILL and the assignment under
-uneven load. (The detector's own benchmark is
+uneven load; estop times ``zstack estop engage``'s start to its first put against another
+revision. (The detector's own benchmark is
 ``python -m tools.detector benchmark``.)
 """
 
@@ -160,6 +161,22 @@ def pool(args: argparse.Namespace) -> int:
     return run(options_from(PoolOptions, args, as_json=args.json), stop)
 
 
+def _estop_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--runs", type=int, default=20, help="starts of each revision (default 20)")
+    p.add_argument(
+        "--against",
+        default="main",
+        help="the git revision to compare with (default main; name the one before a change)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def estop(args: argparse.Namespace) -> int:
+    from tools.benchmarks.estop import EstopOptions, main
+
+    return main(options_from(EstopOptions, args, as_json=args.json))
+
+
 COMMANDS = [
     Command("recorder", "the stack's FPS and latency with and without the recorder",
             _recorder_arguments, recorder),
@@ -169,6 +186,8 @@ COMMANDS = [
             _scale_arguments, scale),
     Command("pool", "4 and 8 cameras on 1 and 2 detector workers; hand-over after SIGKILL",
             _pool_arguments, pool),
+    Command("estop", "how soon zstack estop puts its first EStop, against another revision",
+            _estop_arguments, estop),
 ]  # fmt: skip
 
 

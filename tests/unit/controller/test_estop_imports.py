@@ -1,0 +1,50 @@
+"""What ``zstack estop`` imports on its way to the first put: the structure that makes it start
+fast (the time itself is measured by ``python -m tools.benchmarks estop``, never asserted).
+
+The command runs for real (``python -X importtime``, a config whose endpoint nothing listens
+on: it gives up after its link timeout), and the modules it imported are read from Python's
+own import log.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from tools.launch import free_port
+
+REPO = Path(__file__).resolve().parents[3]
+
+#: Libraries the e-stop never needs: numpy (and what needs it), the camera's and the
+#: detector's runtimes, and the controller's service (its policy, tracker and loop).
+HEAVY = ("numpy", "cv2", "onnxruntime", "msgspec", "services.controller.service")
+
+
+def imported_by(argv: list[str], tmp_path: Path) -> tuple[set[str], str]:
+    config = tmp_path / "stack.toml"
+    config.write_text(
+        f'[zenoh]\nendpoint = "tcp/127.0.0.1:{free_port()}"\nmulticast_scouting = false\n'
+        f'[controller]\nestop_file = "{tmp_path / "estop.json"}"\n'
+    )
+    done = subprocess.run(
+        [sys.executable, "-X", "importtime", "-m", "deploy.zstack", *argv, "--config", config],
+        cwd=REPO, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert done.returncode == 1, done.stderr[-2000:]
+    modules = {
+        line.rsplit("|", 1)[1].strip()
+        for line in done.stderr.splitlines()
+        if line.startswith("import time:") and line.count("|") == 2
+    }
+    errors = [line for line in done.stderr.splitlines() if not line.startswith("import time:")]
+    return modules, "\n".join(errors)
+
+
+def test_the_estop_imports_nothing_heavy(tmp_path: Path) -> None:
+    modules, errors = imported_by(["estop", "engage"], tmp_path)
+    assert "services.controller.estop_command" in modules, sorted(modules)  # the path ran
+    assert "zenoh" in modules  # and reached the bus: the put's own imports were made
+    heavy = sorted(m for m in modules if m.split(".")[0] in HEAVY or m in HEAVY)
+    assert heavy == [], f"the e-stop imported {heavy}"
+    assert "estop: error: cannot engage the e-stop: no link to the stack" in errors, errors

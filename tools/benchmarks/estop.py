@@ -1,0 +1,164 @@
+"""python -m tools.benchmarks estop: how soon ``zstack estop engage`` puts its first EStop,
+this checkout against another revision, side by side.
+
+This process plays the stack's hub (``common.bus.open_hub`` on a private endpoint) and
+subscribes to the e-stop key; each run starts the command as an operator would
+(``python -m deploy.zstack estop engage --config FILE``) and times from just before the
+process is started to the arrival of its first EStop, on this process's monotonic clock. The
+command is then killed (no controller acknowledges it). The other revision is a ``git
+archive`` of it in a temporary folder, run by the same interpreter; the two alternate run by
+run, so that both see the same machine load. Prints each one's p50, p90, min and max and the
+ratio of the p50s, with the machine it ran on.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
+import threading
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from common.bus import open_hub
+from common.clock import mono_s
+from common.config_file import to_toml
+from common.keys import Keys
+from common.machine import machine_info
+from common.settings import REPO_ROOT, Config, ControllerSettings, StackSettings, ZenohSettings
+from common.spawn import spawn
+from tools.launch import free_port
+
+#: The longest a run waits for the first put before counting it lost.
+FIRST_PUT_TIMEOUT_S = 30.0
+THIS = "this checkout"
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class EstopOptions:
+    runs: int = 20
+    against: str = "main"
+    as_json: bool = False
+
+
+def _export(revision: str, into: Path) -> str:
+    """``revision``'s tree in ``into``; its full commit id."""
+    commit = subprocess.run(
+        ["git", "rev-parse", "--verify", f"{revision}^{{commit}}"],
+        cwd=REPO_ROOT, capture_output=True, text=True, check=True,
+    ).stdout.strip()  # fmt: skip
+    tar = subprocess.run(
+        ["git", "archive", "--format=tar", commit], cwd=REPO_ROOT, capture_output=True, check=True
+    ).stdout
+    with tarfile.open(fileobj=io.BytesIO(tar)) as archive:
+        archive.extractall(into, filter="data")
+    return commit
+
+
+def _runs_from(folder: Path) -> bool:
+    """Whether ``python -m`` in ``folder`` imports that folder's code (not this checkout's, which
+    the editable install also offers)."""
+    where = subprocess.run(
+        [sys.executable, "-c", "import deploy.zstack as z; print(z.__file__)"],
+        cwd=folder, capture_output=True, text=True, check=True,
+    ).stdout.strip()  # fmt: skip
+    return Path(where).resolve().is_relative_to(folder.resolve())
+
+
+def _summary(values: list[float]) -> dict[str, float]:
+    ordered = sorted(values)
+    return {
+        "p50_ms": round(statistics.median(ordered) * 1000, 1),
+        "p90_ms": round(ordered[int(0.9 * (len(ordered) - 1))] * 1000, 1),
+        "min_ms": round(ordered[0] * 1000, 1),
+        "max_ms": round(ordered[-1] * 1000, 1),
+    }
+
+
+def run(options: EstopOptions) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory(prefix="estop-bench-") as tmp:
+        folder = Path(tmp)
+        old = folder / "old"
+        commit = _export(options.against, old)
+        if not _runs_from(old):
+            raise SystemExit(f"estop benchmark: {options.against} would not run from {old}")
+        config = Config(
+            zenoh=ZenohSettings(endpoint=f"tcp/127.0.0.1:{free_port()}"),
+            stack=StackSettings(prefix="estopbench"),
+            controller=ControllerSettings(estop_file=str(folder / "estop.json")),
+        )
+        config_path = folder / "stack.toml"
+        config_path.write_text(to_toml(config))
+        arrived = threading.Event()
+        stamp: list[float] = []
+
+        def on_estop(_: zenoh.Sample) -> None:
+            if not arrived.is_set():
+                stamp[:] = [mono_s()]
+                arrived.set()
+
+        times: dict[str, list[float]] = {THIS: [], options.against: []}
+        lost = dict.fromkeys(times, 0)
+        hub = open_hub(config)
+        sub = hub.declare_subscriber(Keys(config.stack.prefix).estop(), on_estop)
+        try:
+            for i in range(options.runs):
+                order = [(THIS, REPO_ROOT), (options.against, old)]
+                for name, cwd in order if i % 2 == 0 else order[::-1]:
+                    arrived.clear()
+                    start = mono_s()
+                    proc = spawn(
+                        [sys.executable, "-m", "deploy.zstack", "estop", "engage",
+                         "--config", str(config_path), "--reason", "benchmark"],
+                        cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                    )  # fmt: skip
+                    if arrived.wait(FIRST_PUT_TIMEOUT_S):
+                        times[name].append(stamp[0] - start)
+                    else:
+                        lost[name] += 1
+                    proc.kill()
+                    proc.wait()
+                print(f"estop benchmark: {i + 1}/{options.runs}", file=sys.stderr, flush=True)
+        finally:
+            sub.undeclare()
+            hub.close()
+    report = {name: {**_summary(v), "lost": lost[name]} for name, v in times.items() if v}
+    ratio = (
+        report[THIS]["p50_ms"] / report[options.against]["p50_ms"]
+        if len(report) == 2 and report[options.against]["p50_ms"] > 0
+        else None
+    )
+    return {
+        "runs": options.runs,
+        "against": {"revision": options.against, "commit": commit},
+        "first_put": report,
+        "p50_ratio": None if ratio is None else round(ratio, 2),
+        "machine": machine_info(),
+    }
+
+
+def main(options: EstopOptions) -> int:
+    result = run(options)
+    if options.as_json:
+        print(json.dumps(result, indent=2))
+        return 0
+    against = result["against"]
+    print(f"time from the command's start to its first EStop put, {options.runs} runs each")
+    print(f"{'':22} {'p50 ms':>8} {'p90 ms':>8} {'min ms':>8} {'max ms':>8} {'lost':>5}")
+    for name, row in result["first_put"].items():
+        label = name if name == THIS else f"{name} ({against['commit'][:9]})"
+        print(
+            f"{label:22} {row['p50_ms']:8.1f} {row['p90_ms']:8.1f} {row['min_ms']:8.1f} "
+            f"{row['max_ms']:8.1f} {row['lost']:5d}"
+        )
+    print(f"p50 ratio (this / {against['revision']}): {result['p50_ratio']}")
+    machine = result["machine"]
+    print(f"machine: {machine.get('cpu_model')}, {machine.get('cpu_count')} CPUs")
+    return 0
