@@ -36,7 +36,9 @@ class RecorderSettings:
     every ``flush_period_s``, so a recorder that is killed loses at most that much.
     A progress line (messages, MB, drops) every ``progress_period_s``. ``zstack record``
     warns when it has heard nothing of the stack after ``silence_warning_s``, and fails at the
-    end if it never did.
+    end if it never did. ``zstack play`` (and ``zstack compare``'s replay) waits up to
+    ``detector_wait_s`` for a detector to be ready before its first frame, else fails saying
+    so (``--no-wait`` plays at once).
 
     On a small robot computer the recorder shares the cores with the detector, and a recording
     must take only the time perception leaves over (common/priority.py). With ``sched_idle``
@@ -56,6 +58,7 @@ class RecorderSettings:
     flush_period_s: float = 1.0
     progress_period_s: float = 5.0
     silence_warning_s: float = 5.0
+    detector_wait_s: float = 120.0
     nice: int = 10
     sched_idle: bool = True
 
@@ -65,6 +68,7 @@ class RecorderSettings:
         "flush_period_s": (0.05, 60),
         "progress_period_s": (0.1, 3600),
         "silence_warning_s": (0.5, 3600),
+        "detector_wait_s": (1, 3600),
         "nice": (0, 19),
     }
 

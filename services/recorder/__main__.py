@@ -53,6 +53,9 @@ def _play_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--loop", action="store_true", help="play again from the start at the end")
     p.add_argument("--topics", nargs="+", help="only these MCAP topics (default: every frame "
                    "and scan topic)")  # fmt: skip
+    p.add_argument("--wait", action=argparse.BooleanOptionalAction, default=True,
+                   help="wait for a detector to be ready before the first frame, up to "
+                        "recorder.detector_wait_s (--no-wait plays at once)")  # fmt: skip
 
 
 def play(args: argparse.Namespace) -> int:
@@ -62,7 +65,7 @@ def play(args: argparse.Namespace) -> int:
     from services.recorder import service
 
     played = service.play(config, args.file, stop, print_progress, rate=args.rate, loop=args.loop,
-                         topics=args.topics)  # fmt: skip
+                         topics=args.topics, wait=args.wait)  # fmt: skip
     return 0 if played.frames + played.scans else 1
 
 

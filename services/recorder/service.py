@@ -40,7 +40,7 @@ from common.priority import lower_priority
 from common.queries import ready_services
 from common.recorder_settings import TIME_FIELD
 from common.security import running_sensors
-from common.settings import REPO_ROOT, Config
+from common.settings import REPO_ROOT, Config, is_detector_service
 from services.recorder.channels import Translator
 from services.recorder.play import Played, one_pass, playable_topics
 from services.recorder.writer import Decode, McapFile, QueuedRecorder
@@ -185,7 +185,69 @@ def record(
 
 # The player joins as the recorder's principal, which may publish frames and scans.
 PLAY_PRINCIPAL = SERVICE
-WAIT_FOR_DETECTOR_S = 5.0  # a replay with no detector up still plays, after saying so
+# How long the player waits for a first link to the stack before saying it reached nothing
+# (as the e-stop command does), and how often it asks which services are ready while it
+# waits for a detector (recorder.detector_wait_s).
+PLAY_LINK_TIMEOUT_S = 3.0
+READY_POLL_S = 0.5
+
+
+def _ready_to_play(
+    config: Config,
+    session: zenoh.Session,
+    path: Path,
+    stop: threading.Event,
+    progress: Progress,
+    wait: bool,
+) -> set[str]:
+    """The services ready on the stack once the replay may start: a link to the stack at once
+    (else one StackError line naming the endpoint), no live sensor, and with ``wait`` a ready
+    detector within recorder.detector_wait_s (frames played before it would be lost)."""
+    keys, prefix = Keys(config.stack.prefix), config.stack.prefix
+    if not reach.connected(session, PLAY_LINK_TIMEOUT_S):
+        raise StackError(
+            reach.unreached(
+                f"cannot play {path}: no link to the stack",
+                config.zenoh, prefix, PLAY_PRINCIPAL, linked=False,
+            )
+        )  # fmt: skip
+    deadline = mono_s() + (config.recorder.detector_wait_s if wait else 0.0)
+    said = False
+    while True:
+        ready = ready_services(session, keys, READY_POLL_S)
+        live = running_sensors(ready)
+        if live:
+            # A replay onto a live robot's keys would mix old frames and scans with its own:
+            # all-clear scans could blind its laser. Under the secure profile the router
+            # refuses these puts anyway (common/security.py); this says so before trying.
+            raise StackError(
+                f"refusing to play {path} onto stack {prefix!r}: it runs a live "
+                f"sensor ({', '.join(live)}) and a replay would mix with or blind it; play into "
+                "a stack without camera, sim or ros2 (e.g. supervisor.services = "
+                '["detector", "controller", "metrics"])'
+            )
+        if any(is_detector_service(name) for name in ready):
+            return ready
+        if not wait:
+            progress("no detector is ready on this stack: playing anyway (--no-wait)")
+            return ready
+        if mono_s() >= deadline:
+            raise StackError(
+                reach.unreached(
+                    f"no detector was ready within {config.recorder.detector_wait_s:g} s "
+                    "(recorder.detector_wait_s) to detect on the replay",
+                    config.zenoh, prefix, PLAY_PRINCIPAL, linked=True, ready=frozenset(ready),
+                )
+                + "; --no-wait plays without waiting"
+            )  # fmt: skip
+        if not said:
+            said = True
+            progress(
+                f"waiting up to {config.recorder.detector_wait_s:g} s for a detector to be "
+                "ready (--no-wait plays at once)"
+            )
+        if stop.wait(READY_POLL_S):
+            return ready
 
 
 def play(
@@ -197,27 +259,15 @@ def play(
     rate: float = 1.0,
     loop: bool = False,
     topics: Sequence[str] | None = None,
+    wait: bool = True,
 ) -> Played:
     """Publish the recording's frames and scans (play.py) until it ends (or ``stop``;
-    ``loop``: again)."""
+    ``loop``: again); with ``wait``, not before a detector is ready to see them."""
     chosen = playable_topics(path, topics)
     keys = Keys(config.stack.prefix)
     session = open_session(config.zenoh, PLAY_PRINCIPAL)
     try:
-        ready = ready_services(session, keys, WAIT_FOR_DETECTOR_S)
-        live = running_sensors(ready)
-        if live:
-            # A replay onto a live robot's keys would mix old frames and scans with its own:
-            # all-clear scans could blind its laser. Under the secure profile the router
-            # refuses these puts anyway (common/security.py); this says so before trying.
-            raise StackError(
-                f"refusing to play {path} onto stack {config.stack.prefix!r}: it runs a live "
-                f"sensor ({', '.join(live)}) and a replay would mix with or blind it; play into "
-                "a stack without camera, sim or ros2 (e.g. supervisor.services = "
-                '["detector", "controller", "metrics"])'
-            )
-        if "detector" not in ready:
-            progress("no detector is ready on this stack: playing anyway")
+        _ready_to_play(config, session, path, stop, progress, wait)
         pubs = {keys.frame(camera): Publisher(session, keys.frame(camera), QoS.SENSOR)
                 for camera in config.all_cameras}  # fmt: skip
         pubs[keys.scan()] = Publisher(session, keys.scan(), QoS.SENSOR)

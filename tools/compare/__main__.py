@@ -25,6 +25,9 @@ def _compare_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("compare"), help="folder for the report")
     p.add_argument("--iou", type=float, default=0.5, help="least IoU of a match (default 0.5)")
     p.add_argument("--rate", type=replay_rate, default=1.0, help="replay speed (without run B)")
+    p.add_argument("--wait", action=argparse.BooleanOptionalAction, default=True,
+                   help="without run B: wait for a detector to be ready before replaying, "
+                        "up to recorder.detector_wait_s (--no-wait: at once)")  # fmt: skip
 
 
 def compare(args: argparse.Namespace) -> int:
@@ -44,7 +47,7 @@ def compare(args: argparse.Namespace) -> int:
 
         config = load_config(args.config)
         other = replay_and_record(config, args.recording, out / "replay.mcap", stop,
-                                  print_progress, args.rate)  # fmt: skip
+                                  print_progress, args.rate, wait=args.wait)  # fmt: skip
     run_b = runs.load_run(other)
     result = cmp.compare_runs(run_a, run_b, args.iou)
     name_a, name_b = Path(args.recording).name, Path(other).name

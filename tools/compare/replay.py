@@ -19,13 +19,14 @@ TAIL_MAX_S = 15.0
 
 def replay_and_record(
     config: Config, source: Path, target: Path, stop: threading.Event, progress: Progress,
-    rate: float = 1.0,
+    rate: float = 1.0, *, wait: bool = True,
 ) -> Path:  # fmt: skip
-    """Play ``source`` onto the stack and record everything into ``target``."""
+    """Play ``source`` onto the stack and record everything into ``target`` (``wait``: for a
+    detector first; no link to the stack fails at once, play() says where it looked)."""
     with Node(SERVICE, config) as node:
         recorder = Recorder(node, target).listen(node)
         try:
-            play(config, source, stop, progress, rate=rate)
+            play(config, source, stop, progress, rate=rate, wait=wait)
             progress("waiting for the stack's last detections and commands")
             written, quiet_since = -1, mono_s()
             end = mono_s() + TAIL_MAX_S
