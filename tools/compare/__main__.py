@@ -12,7 +12,7 @@ from pathlib import Path
 
 from common.cli import Command, add_config, replay_rate, service_main
 from common.config_file import load_config
-from common.errors import ConfigError
+from common.errors import ConfigError, RecordingError, StackError
 from common.lifecycle import print_progress, run_main, setup_logging, stop_event
 
 
@@ -48,7 +48,18 @@ def compare(args: argparse.Namespace) -> int:
         config = load_config(args.config)
         other = replay_and_record(config, args.recording, out / "replay.mcap", stop,
                                   print_progress, args.rate, wait=args.wait)  # fmt: skip
-    run_b = runs.load_run(other)
+    try:
+        run_b = runs.load_run(other)
+    except RecordingError as exc:
+        if args.other is not None:
+            raise
+        from common.reach import describe
+
+        where = describe(config.zenoh, config.stack.prefix, "recorder")
+        raise StackError(
+            f"the stack at {where} made no detections of the replay of {args.recording} "
+            f"(kept in {other}): is a detector running there, on the same cameras?"
+        ) from exc
     result = cmp.compare_runs(run_a, run_b, args.iou)
     name_a, name_b = Path(args.recording).name, Path(other).name
     plot = plots.comparison_plot(result, name_a, name_b, out / "compare.png")

@@ -6,6 +6,12 @@ camera's frames back on its own key): recording A of a live run and recording B 
 back name each frame alike. In each frame, detections are paired greedily, highest IoU first,
 only within one class and at ``iou_min`` or more. With several cameras the report gives the
 figures per camera as well.
+
+Each run's detector skips the frames that come while it is busy, and not the same ones: when
+the runs share fewer than ``LOW_OVERLAP`` of the smaller run's frames the report says so, and
+suggests the replay ``--rate`` at which the detector (at its measured time per frame) sees
+every frame of A. A camera (or a comparison) with no frame in both is "nothing compared",
+never a rate.
 """
 
 from __future__ import annotations
@@ -18,6 +24,12 @@ import numpy.typing as npt
 
 from common.messages import Detections
 from tools.compare.runs import CommandRecord, FrameId, Run
+
+#: Below this share of the smaller run's detected frames in common, the report warns that the
+#: figures rest on few frames.
+LOW_OVERLAP = 0.5
+#: The detector's own stages, whose sum is its time per frame.
+DETECTOR_STAGES = ("preprocess", "inference", "postprocess")
 
 #: The stages whose latency is compared: name -> what it covers.
 STAGES: dict[str, str] = {
@@ -109,6 +121,38 @@ class CameraFigures:
         return self.matched / most if most else 1.0
 
 
+def rate_text(frames_both: int, match_rate: float) -> str:
+    """A match rate as the report prints it; none where no frame was in both runs."""
+    return f"{100 * match_rate:.1f} %" if frames_both else "- (nothing compared)"
+
+
+def overlap(frames: tuple[int, int], frames_both: int) -> float:
+    """The frames both runs detected on, as a share of the smaller run's (0 when one is
+    empty)."""
+    fewest = min(frames)
+    return frames_both / fewest if fewest else 0.0
+
+
+def detector_ms(run: Run) -> float | None:
+    """The median time the run's detector spent on a frame (its stages' sum), in ms."""
+    totals = [
+        sum(d.timing_ms[s] for s in DETECTOR_STAGES if s in d.timing_ms)
+        for d in run.detections.values()
+        if any(s in d.timing_ms for s in DETECTOR_STAGES)
+    ]
+    return float(np.median(totals)) if totals else None
+
+
+def every_frame_rate(frames: int, span_s: float, ms_per_frame: float | None) -> float | None:
+    """The replay rate (0.01..1, rounded down) at which a detector taking ``ms_per_frame`` sees
+    each of ``frames`` recorded over ``span_s``; None when it already does at 1, or when the
+    figures are missing."""
+    if ms_per_frame is None or ms_per_frame <= 0 or frames < 2 or span_s <= 0:
+        return None
+    rate = (1000.0 / ms_per_frame) / (frames / span_s)
+    return None if rate >= 1 else max(0.01, int(rate * 100) / 100)
+
+
 @dataclass(slots=True)
 class Comparison:
     iou_min: float
@@ -124,12 +168,19 @@ class Comparison:
     latency_ms: dict[str, tuple[list[float], list[float]]] = field(default_factory=dict)
     detectors: tuple[list[str], list[str]] = field(default_factory=lambda: ([], []))
     per_camera: dict[str, CameraFigures] = field(default_factory=dict)  # by camera name
+    # The replay rate at which the detector sees every frame of A (None: it does at 1, or
+    # unknown).
+    suggested_rate: float | None = None
 
     @property
     def match_rate(self) -> float:
         """Matched detections over the larger side's count (1.0 when both found nothing)."""
         most = max(self.detections)
         return self.matched / most if most else 1.0
+
+    @property
+    def overlap(self) -> float:
+        return overlap(self.frames, self.frames_both)
 
 
 def compare_runs(a: Run, b: Run, iou_min: float = 0.5) -> Comparison:
@@ -176,6 +227,8 @@ def compare_runs(a: Run, b: Run, iou_min: float = 0.5) -> Comparison:
     out.command_pairs = len(out.dv)
     lat_a, lat_b = latencies_ms(a), latencies_ms(b)
     out.latency_ms = {stage: (lat_a[stage], lat_b[stage]) for stage in STAGES}
+    slowest = max((ms for ms in (detector_ms(a), detector_ms(b)) if ms is not None), default=None)
+    out.suggested_rate = every_frame_rate(a.frames, a.frame_span_s, slowest)
     return out
 
 
@@ -199,16 +252,46 @@ def _cameras_table(c: Comparison) -> list[str]:
         "|---|---:|---:|---:|---:|---:|---:|---:|",
         *(
             f"| {name} | {f.frames[0]} | {f.frames[1]} | {f.frames_both} | {f.detections[0]} | "
-            f"{f.detections[1]} | {f.matched} | {100 * f.match_rate:.1f} % |"
+            f"{f.detections[1]} | {f.matched} | {rate_text(f.frames_both, f.match_rate)} |"
             for name, f in c.per_camera.items()
         ),
         "",
     ]
 
 
+def _overlap_note(c: Comparison, name_a: str) -> list[str]:
+    """A warning when the runs share few frames, with the rate that would fix it."""
+    if min(c.frames) == 0 or c.overlap >= LOW_OVERLAP:
+        return []
+    fix = (
+        f" Replay A at `--rate {c.suggested_rate:g}` (`zstack compare {name_a} --rate "
+        f"{c.suggested_rate:g}`), at which the detector, at its measured time per frame, "
+        "sees every frame."
+        if c.suggested_rate is not None
+        else ""
+    )
+    return [
+        f"**Few frames in common**: {c.frames_both} of A's {c.frames[0]} and B's {c.frames[1]}. "
+        "Each run's detector skipped the frames that came while it was busy, and not the same "
+        f"ones: the figures below rest on {c.frames_both} frame"
+        f"{'' if c.frames_both == 1 else 's'}.{fix}",
+        "",
+    ]
+
+
+def _totals_line(c: Comparison) -> str:
+    if not c.frames_both:
+        return "Nothing compared: no frame was detected on in both runs."
+    mean_iou = f"Mean IoU of the matched: {np.mean(c.ious):.3f}." if c.ious else ""
+    return (
+        f"In the frames both detected on: A {c.detections[0]}, B {c.detections[1]}, "
+        f"matched {c.matched} (same class, IoU >= {c.iou_min:g}): "
+        f"**{rate_text(c.frames_both, c.match_rate)}** of the larger side. {mean_iou}"
+    )
+
+
 def report_markdown(c: Comparison, name_a: str, name_b: str, plot: str = "") -> str:
     """The comparison as a short markdown report (``plot``: a PNG beside it to show)."""
-    mean_iou = f"Mean IoU of the matched: {np.mean(c.ious):.3f}." if c.ious else ""
     lines = [
         f"# {name_a} vs {name_b}",
         "",
@@ -218,12 +301,11 @@ def report_markdown(c: Comparison, name_a: str, name_b: str, plot: str = "") -> 
         f"Frames detected on: A {c.frames[0]}, B {c.frames[1]}, both {c.frames_both} "
         f"(matched by {'camera and ' if len(c.per_camera) > 1 else ''}sequence number).",
         "",
+        *_overlap_note(c, name_a),
         *_cameras_table(c),
         "## Detections",
         "",
-        f"In the frames both detected on: A {c.detections[0]}, B {c.detections[1]}, "
-        f"matched {c.matched} (same class, IoU >= {c.iou_min:g}): "
-        f"**{100 * c.match_rate:.1f} %** of the larger side. {mean_iou}",
+        _totals_line(c),
         "",
         "| class | A | B | matched |",
         "|---|---:|---:|---:|",

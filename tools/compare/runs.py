@@ -40,6 +40,7 @@ FrameId = tuple[str, int]
 class Run:
     path: Path
     frames: int = 0
+    frame_span_s: float = 0.0  # the first frame's to the last's log time (every camera's)
     detections: dict[FrameId, Detections] = field(default_factory=dict)  # by (camera, seq)
     commands: list[CommandRecord] = field(default_factory=list)
     truncated: bool = False
@@ -106,6 +107,7 @@ def load_run(path: str | Path) -> Run:
     """The run recorded in ``path``; RecordingError when it holds no detections to compare."""
     run = Run(Path(path))
     bad = 0
+    first_ns = last_ns = None
     with Recording(path) as rec:
         for record in rec.records():
             kind = record.stack_type
@@ -123,9 +125,14 @@ def load_run(path: str | Path) -> Run:
                     run.commands.append(command_from_json(record.json()))
                 elif input_kind(record) is Input.FRAME:
                     run.frames += 1
+                    at = record.message.log_time
+                    first_ns = at if first_ns is None else min(first_ns, at)
+                    last_ns = at if last_ns is None else max(last_ns, at)
             except DecodeError:
                 bad += 1
         run.truncated = rec.truncated
+    if first_ns is not None and last_ns is not None:
+        run.frame_span_s = (last_ns - first_ns) / 1e9
     if not run.detections:
         raise RecordingError(
             f"{path}: no detections to compare (this stack's recorder writes them as JSON on "

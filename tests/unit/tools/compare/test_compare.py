@@ -9,7 +9,13 @@ import pytest
 
 from common.boxes import Boxes
 from common.messages import Detections, Header
-from tools.compare.compare import compare_runs, iou_matrix, match_frame, report_markdown
+from tools.compare.compare import (
+    compare_runs,
+    every_frame_rate,
+    iou_matrix,
+    match_frame,
+    report_markdown,
+)
 from tools.compare.runs import CommandRecord, Run, detector_name
 
 
@@ -88,6 +94,55 @@ def test_the_report_of_runs_with_nothing_in_common_says_so() -> None:
     md = report_markdown(c, "a", "b")
     assert "Detector: A unknown; B unknown." in md
     assert "both 0" in md and "0 frames: |dv| mean / max - m/s" in md
+    assert "Nothing compared: no frame was detected on in both runs." in md
+    assert "100.0 %" not in md  # nothing compared is no agreement
+
+
+def test_a_camera_with_no_frame_in_both_shows_no_rate() -> None:
+    person = ("person", [0, 0, 10, 10])
+    a = Run(Path("a"), detections={("front", 1): _frame(1, [person]),
+                                   ("rear", 1): _frame(1, [person])})  # fmt: skip
+    b = Run(Path("b"), detections={("front", 1): _frame(1, [person]),
+                                   ("rear", 2): _frame(2, [person])})  # fmt: skip
+    md = report_markdown(compare_runs(a, b), "a", "b")
+    assert "| front | 1 | 1 | 1 | 1 | 1 | 1 | 100.0 % |" in md
+    assert "| rear | 1 | 1 | 0 | 0 | 0 | 0 | - (nothing compared) |" in md
+
+
+def test_runs_that_share_few_frames_say_so_and_suggest_a_rate() -> None:
+    # As seen: A 25 frames detected on, B 44, one in common. A recorded 100 frames over 10 s
+    # (10 per s); its detector took 400 ms a frame (2.5 per s): at rate 0.25 it sees them all.
+    person = [("person", [0.0, 0.0, 10.0, 10.0])]
+    a = Run(Path("a"), frames=100, frame_span_s=10.0,
+            detections={("front", s): _frame(s, person) for s in range(1, 101, 4)})  # fmt: skip
+    b = Run(Path("b"), detections={("front", s): _frame(s, person) for s in (1, *range(2, 88, 2))})
+    for run in (a, b):
+        for d in run.detections.values():
+            d.timing_ms.update(preprocess=0.0, inference=400.0, postprocess=0.0)
+    c = compare_runs(a, b)
+    assert (c.frames, c.frames_both) == ((25, 44), 1)
+    assert c.suggested_rate == pytest.approx(0.25)
+    md = report_markdown(c, "a.mcap", "b.mcap")
+    assert "**Few frames in common**: 1 of A's 25 and B's 44." in md, md
+    assert "rest on 1 frame." in md and "`zstack compare a.mcap --rate 0.25`" in md, md
+    # Most frames in common: no warning.
+    assert "Few frames" not in report_markdown(compare_runs(a, a), "a", "a")
+
+
+@pytest.mark.parametrize(
+    "frames, span_s, ms, rate",
+    [
+        (100, 10.0, 400.0, 0.25),  # 2.5 detections per s for 10 frames per s
+        (100, 10.0, 90.0, None),  # it keeps up at rate 1
+        (100, 10.0, None, None),  # no timings recorded
+        (1, 0.0, 400.0, None),  # one frame: no frame rate
+        (10_000, 1.0, 1000.0, 0.01),  # the slowest replay there is
+    ],
+)
+def test_the_rate_at_which_the_detector_sees_every_frame(
+    frames: int, span_s: float, ms: float | None, rate: float | None
+) -> None:
+    assert every_frame_rate(frames, span_s, ms) == (None if rate is None else pytest.approx(rate))
 
 
 def test_two_cameras_are_matched_each_on_its_own_and_reported_per_camera() -> None:
