@@ -49,7 +49,8 @@ class Scenario:
     """A world, how long to run it, and its pass conditions.
 
     ``cameras``: the further cameras the world is seen by, by name, each the settings it
-    changes from [camera]. ``detector``: the [detector] settings the scenario changes.
+    changes from [camera]. ``detector``: the [detector] settings the scenario changes, and
+    ``why`` why (the scenario runner prints both).
     ``must_face``: the robot must end facing the followed target (within the first camera's
     half field of view): it had to turn to it.
     """
@@ -65,6 +66,7 @@ class Scenario:
     controller: dict[str, Any] = field(default_factory=lambda: {"distance_source": "laser"})
     cameras: dict[str, dict[str, Any]] = field(default_factory=dict)
     detector: dict[str, Any] = field(default_factory=dict)
+    why: str = ""
 
 
 # The rear camera of the scenarios that look behind the robot: the front camera turned round,
@@ -107,10 +109,12 @@ SCENARIOS: dict[str, Scenario] = {
                  "a person behind the robot, seen by the rear camera alone: turn round, follow",
                  lambda: World(Robot(), targets=[person("alice", (0, -4.0, 0.5))]), 30.0,
                  must_face=True, cameras={"rear": REAR_CAMERA},
-                 # Two cameras double the detector's work: at input 640 a round of two frames
-                 # took 0.6-0.8 s on a busy 2-core CPU, so detections aged past the dead-man
-                 # timeout (1 s) between rounds and the robot stopped every other moment. At
-                 # 320 (a person 4 m away is still about 120 px tall) every round is fresh.
-                 detector={"imgsz": 320}),
+                 # At input 640 a round of two frames took 0.6-0.8 s on a busy 2-core CPU, so
+                 # detections aged past the dead-man timeout (1 s) between rounds and the robot
+                 # stopped every other moment. At 320 (a person 4 m away is still about 120 px
+                 # tall) every round is fresh.
+                 detector={"imgsz": 320},
+                 why="two cameras double the detector's work; at 320 each round of detections "
+                     "stays fresh on a 2-core CPU"),
     )
 }  # fmt: skip

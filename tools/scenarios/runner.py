@@ -82,6 +82,58 @@ def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Con
     )
 
 
+#: Why the runner changes these settings for every scenario (those of the scenario itself
+#: give the scenario's reason).
+RUNNER_REASONS = {
+    "controller.mode": "every scenario follows its target",
+    "controller.target_classes": "every scenario's target is a person",
+    "supervisor.services": "a scenario runs its own stack: the simulator, detector, controller "
+    "and metrics",
+}
+
+
+def _table_changes(name: str, before: Any, after: Any, own: dict[str, Any], why: str) -> list[str]:
+    lines = []
+    for f in dataclasses.fields(after):
+        old, new = getattr(before, f.name), getattr(after, f.name)
+        if old != new:
+            setting = f"{name}.{f.name}"
+            reason = why if f.name in own else RUNNER_REASONS.get(setting, "the scenario runner")
+            lines.append(f"{setting}: {_shown(old)} -> {_shown(new)} ({reason})")
+    return lines
+
+
+def _shown(value: Any) -> str:
+    if isinstance(value, tuple):
+        return "[" + ", ".join(map(str, value)) + "]"
+    return str(value)
+
+
+def config_changes(base: Config, config: Config, scenario: Scenario) -> list[str]:
+    """What of ``base`` (the user's config) the scenario's ``config`` changes, one line each
+    with why: the cameras, the detector, the controller and the services. What only makes the
+    run private (endpoint, prefix, the simulator's scenario) is left out."""
+    own = f"scenario {scenario.name!r}"
+    why = own + (f": {scenario.why}" if scenario.why else "")
+    kept = dict(config.cameras)
+    lines = [
+        f"cameras.{name}: left out (a scenario is seen by its own cameras on every machine)"
+        for name, _ in base.cameras
+        if name not in kept
+    ]
+    lines += [f"cameras.{name}: added ({why})" for name in kept if name not in dict(base.cameras)]
+    lines += _table_changes("detector", base.detector, config.detector, scenario.detector, why)
+    lines += _table_changes(
+        "controller", base.controller, config.controller, scenario.controller, own
+    )
+    if base.supervisor.services != config.supervisor.services:
+        lines.append(
+            f"supervisor.services: {_shown(base.supervisor.services)} -> "
+            f"{_shown(config.supervisor.services)} ({RUNNER_REASONS['supervisor.services']})"
+        )
+    return lines
+
+
 def record_into(
     session: zenoh.Session, keys: Keys, cameras: list[str], rec: ScenarioLog, *, frames: bool
 ) -> list[Any]:
@@ -130,6 +182,9 @@ def run_scenario(base: Config, name: str, log: Any = None, ros2: bool = False) -
         raise StackError(f"unknown scenario {name!r}; choose one of {known}")
     scenario = SCENARIOS[name]
     config = scenario_config(base, scenario, ros2)
+    if log is not None:
+        for line in config_changes(base, config, scenario):
+            log(f"{name}: changed from your config: {line}")
     workdir = Path(tempfile.mkdtemp(prefix=f"scenario-{name}-"))
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from common.settings import CameraSettings, Config, DetectorSettings
 from services.sim.scenarios import SCENARIOS
-from tools.scenarios.runner import scenario_config
+from tools.scenarios.runner import config_changes, scenario_config
 
 BASE = Config(
     camera=CameraSettings(hfov_deg=70.0, rate_hz=8.0),
@@ -27,3 +27,21 @@ def test_other_scenarios_see_through_the_first_camera_alone() -> None:
     config = scenario_config(BASE, SCENARIOS["ahead"])
     assert list(config.all_cameras) == ["front"]
     assert config.detector == BASE.detector
+
+
+def test_what_a_scenario_changes_of_the_users_config_is_said_with_why() -> None:
+    behind = SCENARIOS["behind"]
+    lines = config_changes(BASE, scenario_config(BASE, behind), behind)
+    assert "cameras.left: left out (a scenario is seen by its own cameras on every machine)" in (
+        lines
+    )
+    assert any(line.startswith("cameras.rear: added (scenario 'behind': ") for line in lines)
+    (imgsz,) = [line for line in lines if line.startswith("detector.")]
+    assert imgsz.startswith("detector.imgsz: 0 -> 320 (scenario 'behind': two cameras"), imgsz
+    assert "controller.mode: track -> follow (every scenario follows its target)" in lines
+    # A config the scenario leaves alone but for what every scenario needs: only that is said.
+    ahead = SCENARIOS["ahead"]
+    followed = scenario_config(Config(), ahead).controller
+    plain = Config(supervisor=BASE.supervisor, controller=followed)
+    lines = config_changes(plain, scenario_config(plain, ahead), ahead)
+    assert [line.split(":")[0] for line in lines] == ["supervisor.services"], lines
