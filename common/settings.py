@@ -246,11 +246,13 @@ class SupervisorSettings:
 
     A service that fails for good (bad config, model or backend: exit codes 2..4) stops the
     stack, unless it is ``optional``: then it is left stopped, said so once, and the rest runs
-    on (the live view whose port is taken must not stop a robot's perception).
+    on (the live view whose port is taken must not stop a robot's perception), and the run's
+    exit code ignores it. The viewer and the recorder are optional by default: they only
+    watch the bus, and no other service reads anything from them.
     """
 
     services: tuple[str, ...] = ("camera", "detector", "controller", "metrics")
-    optional: tuple[str, ...] = ("viewer",)
+    optional: tuple[str, ...] = ("viewer", "recorder")
     restart_backoff_s: float = 0.5
     restart_backoff_max_s: float = 10.0
     stop_timeout_s: float = 5.0

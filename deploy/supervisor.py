@@ -5,7 +5,8 @@ live figures, restarts a service that crashes (with backoff), and stops everythi
 Ctrl-C or SIGTERM. With --duration it runs headless for S seconds and ends with a JSON summary
 on stdout (status lines go to stderr, so the summary can be piped). A service that exits for a
 bad config, model or backend (exit codes 2, 3, 4) stops the whole stack: the supervisor exits
-with that code and the service's own error line.
+with that code and the service's own error line, unless the service is optional
+(``supervisor.optional``): the stack then runs on without it, and the run exits 0 all the same.
 """
 
 from __future__ import annotations
@@ -221,7 +222,9 @@ def supervise(
         log.info("stopped; all services exited cleanly")
         return 0
     log.warning("stopped; %s", "; ".join(_exit_words(p) for p in unclean))
-    return 1
+    # An optional service (the viewer, the recorder: nothing else reads from them) that failed
+    # was said so when it did; the run itself did its work.
+    return 1 if any(p.name not in optional for p in unclean) else 0
 
 
 def _exit_words(p: ServiceProcess) -> str:

@@ -41,6 +41,11 @@ COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
     "record": ("services.recorder", ("record",), "record the stack's keys to an MCAP file"),
     "play": ("services.recorder", ("play",), "publish a recording's frames and scans, as live"),
     "compare": ("tools.compare", ("compare",), "how two runs differ (or a replay)"),
+    "viewer-layout": (
+        "services.viewer",
+        ("layout",),
+        "write the Foxglove layout for a config's cameras",
+    ),
     "recorder-benchmark": (
         "tools.benchmarks",
         ("recorder",),

@@ -9,6 +9,7 @@ here publishes on the stack's keys but the viewer's counters.
 
 from __future__ import annotations
 
+import errno
 import threading
 
 import foxglove
@@ -19,6 +20,7 @@ from common.contracts import MetricsAnswer
 from common.errors import ConfigError, ImageError
 from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
 from common.node import Node, Tally
+from common.ports import holder_words
 from common.queries import query_metrics
 from common.security import viewer_token_file
 from common.settings import Config
@@ -63,7 +65,13 @@ def start_front(config: Config, inner_port: int) -> Front:
     try:
         front.start()
     except OSError as exc:
-        raise ConfigError(f"viewer.port: cannot listen on {v.host}:{v.port} ({exc})") from exc
+        where = f"viewer.port: cannot listen on {v.host}:{v.port}"
+        if exc.errno == errno.EADDRINUSE:
+            raise ConfigError(
+                f"{where}: port {v.port} is taken ({holder_words(v.port)}): set viewer.port to "
+                "a free port"
+            ) from exc
+        raise ConfigError(f"{where} ({exc})") from exc
     return front
 
 
