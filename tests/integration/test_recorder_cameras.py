@@ -81,7 +81,7 @@ def test_two_cameras_recorded_compared_and_played_per_camera(make_stack, tmp_pat
     frames = {name: fresh.subscribe(fresh.keys.frame(name))[1] for name in CAMERAS}
     player = subprocess.Popen(
         [sys.executable, "-m", "services.recorder", "play", str(recording), "--loop",
-         "--config", str(fresh.config_path)],
+         "--no-wait", "--config", str(fresh.config_path)],  # no detector there: on purpose
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
     )  # fmt: skip
     try:
