@@ -29,6 +29,7 @@ REPO = Path(__file__).resolve().parents[3]
         (["scenarios"], "tools.scenarios", ["list"]),
         (["estop", "engage"], "services.controller", ["estop", "engage"]),
         (["credentials", "--force"], "deploy.credentials", ["--force"]),
+        (["viewer-layout", "--out", "l.json"], "services.viewer", ["layout", "--out", "l.json"]),
         (
             ["scale-benchmark", "--cameras", "1,2"],
             "tools.benchmarks",
