@@ -140,6 +140,8 @@ def status_line(procs: list[ServiceProcess], view: LiveView, metrics: MetricsAns
         line += f" | {s.mode} {s.state}{target if s.target else ''}{cmd}"
         if s.state == "estop" or not s.estop_saved:
             line += f" ({s.reason})"  # who stopped it, and whether the stop could be saved
+        if s.no_laser:
+            line += " NO LASER: forward motion unchecked for obstacles"
     if view.truth is not None:
         x, y, theta = view.truth.robot
         line += f" | pose x={x:+.2f} y={y:+.2f} th={math.degrees(theta):+.0f}deg"

@@ -35,6 +35,11 @@ class _Stamped(Protocol):
 
 _S = TypeVar("_S", bound=_Stamped)
 
+NO_LASER_WARNING = (
+    "NO LASER (controller.no_laser = true): forward motion is not checked for obstacles; "
+    "the robot drives into whatever is in its way"
+)
+
 # The longest the control loop goes without looking at the stop flag, whatever its rate.
 STOP_POLL_S = 0.1
 
@@ -226,6 +231,8 @@ def run(config: Config, stop: threading.Event) -> int:
         node.log.info(
             "mode %s on %s, targets %s", s.mode, ", ".join(det_keys), list(s.target_classes)
         )
+        if s.no_laser:
+            node.log.warning(NO_LASER_WARNING)
         threading.Thread(
             target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
         ).start()
@@ -246,7 +253,10 @@ def run(config: Config, stop: threading.Event) -> int:
                 cmd = controller.step(inputs, tick)
                 if cmd.state == ControllerState.ESTOP:
                     cmd = dataclasses.replace(cmd, reason=latch.describe())
-                _publish(node, cmd_pub, status_pub, cmd, s.mode, at, estop_saved=latch.saved)
+                _publish(
+                    node, cmd_pub, status_pub, cmd, s.mode, at,
+                    estop_saved=latch.saved, no_laser=s.no_laser,
+                )  # fmt: skip
                 if cmd.state != last_state:
                     node.log.info("state %s: %s", cmd.state, cmd.reason)
                     last_state = cmd.state
@@ -254,7 +264,10 @@ def run(config: Config, stop: threading.Event) -> int:
                 wait_either(handlers.arrived, stop, period - (mono_s() - tick))
             # Leave the robot still: the last word on cmd_vel is always a stop.
             stopped = VelocityCommand(0.0, 0.0, ControllerState.STOPPED, "shutdown")
-            _publish(node, cmd_pub, status_pub, stopped, s.mode, now(), estop_saved=latch.saved)
+            _publish(
+                node, cmd_pub, status_pub, stopped, s.mode, now(),
+                estop_saved=latch.saved, no_laser=s.no_laser,
+            )  # fmt: skip
         finally:
             for sub in subs:
                 sub.undeclare()
@@ -298,6 +311,7 @@ def _publish(
     at: Stamp,
     *,
     estop_saved: bool,
+    no_laser: bool,
 ) -> None:
     twist = Twist(
         header=node.header(at, frame_id="base_link"),
@@ -319,6 +333,7 @@ def _publish(
         estop_saved=estop_saved,
         camera=cmd.camera,
         stale_cameras=cmd.stale,
+        no_laser=no_laser,
     )
     status_pub.put(status.encode())
 

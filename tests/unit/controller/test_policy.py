@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from common.boxes import Boxes
+from common.errors import ConfigError
 from common.messages import Detections, Header, LaserScan
 from common.settings import CameraSettings, ControllerSettings
 from services.controller.geometry import (
@@ -118,10 +119,45 @@ def test_track_turns_towards_most_central_confident_target() -> None:
 
 
 def test_track_drives_forward_only_when_centred() -> None:
-    cmd = step(TRACK, dets(("person", 0.9, W / 2 + 10, 240, 50, 100)))
+    cmd = step(TRACK, dets(("person", 0.9, W / 2 + 10, 240, 50, 100)), scan(5.0))
     assert cmd.linear_x == TRACK.forward_speed and cmd.state == "tracking"
-    left = step(TRACK, dets(("person", 0.9, 100, 240, 50, 100)))
+    left = step(TRACK, dets(("person", 0.9, 100, 240, 50, 100)), scan(5.0))
     assert left.angular_z > 0 and left.linear_x == 0.0
+
+
+@pytest.mark.parametrize("ahead_m", [0.1, 0.2, 0.3, TRACK.safety_distance_m])
+def test_track_never_drives_towards_an_obstacle(ahead_m: float) -> None:
+    # A centred person beyond the obstacle, and a person off to the left: no forward motion,
+    # but turning towards the target is still allowed.
+    cmd = step(TRACK, dets(("person", 0.9, W / 2 + 10, 240, 50, 100)), scan(ahead_m))
+    assert cmd.linear_x == 0.0 and cmd.state == "blocked" and "obstacle" in cmd.reason
+    left = step(TRACK, dets(("person", 0.9, 200, 240, 50, 100)), scan(ahead_m))
+    assert left.linear_x == 0.0 and left.angular_z > 0
+
+
+def test_track_never_drives_without_a_recent_scan() -> None:
+    d = dets(("person", 0.9, W / 2 + 10, 240, 50, 100))
+    blind = step(TRACK, d)
+    assert blind.linear_x == 0.0 and blind.state == "blocked", blind
+    assert blind.angular_z != 0.0  # turning in place is still allowed
+    ctl = Controller(TRACK, FRONT)
+    old = ctl.step(one(d, 0.0, scan(5.0), TRACK.scan_timeout_s + 0.01), now=1.0)
+    assert old.linear_x == 0.0 and old.reason == "no recent laser scan", old
+
+
+def test_no_laser_is_the_only_way_to_drive_without_a_scan() -> None:
+    d = dets(("person", 0.9, W / 2 + 10, 240, 50, 100))
+    for mode in ("track", "follow"):
+        s = dataclasses.replace(TRACK, mode=mode, no_laser=True)
+        far = dets(("person", 0.9, 320, 240, 60, FAR)) if mode == "follow" else d
+        assert step(s, far).linear_x > 0, mode
+        # A scan that does come is still obeyed.
+        assert step(s, far, scan(0.2)).state == "blocked", mode
+
+
+def test_no_laser_with_the_laser_for_distance_is_refused() -> None:
+    with pytest.raises(ConfigError, match="no_laser"):
+        ControllerSettings(mode="follow", distance_source="laser", no_laser=True)  # type: ignore[arg-type]
 
 
 def test_uses_the_image_width_from_the_message() -> None:
@@ -138,8 +174,8 @@ def test_acceleration_is_limited_between_ticks() -> None:
     s = dataclasses.replace(TRACK, max_linear_accel=1.0, max_angular_accel=2.0)
     ctl = Controller(s, FRONT)
     d = dets(("person", 0.9, 330, 240, 50, 100))
-    first = ctl.step(one(d, 0.0), now=0.0)  # first tick: one nominal period (1/20 s)
-    second = ctl.step(one(d, 0.0), now=0.1)
+    first = ctl.step(one(d, 0.0, scan(5.0), 0.0), now=0.0)  # first tick: one period (1/20 s)
+    second = ctl.step(one(d, 0.0, scan(5.0), 0.0), now=0.1)
     assert first.linear_x == pytest.approx(0.05) and second.linear_x == pytest.approx(0.15)
 
 
@@ -229,7 +265,7 @@ def test_stale_or_missing_detections_and_estop_command_zero_at_once() -> None:
     ctl = Controller(dataclasses.replace(TRACK, max_linear_accel=0.1), FRONT)
     d = dets(("person", 0.9, 320, 240, 50, 100))
     for t in range(20):
-        moving = ctl.step(one(d, 0.0), now=t * 0.1)
+        moving = ctl.step(one(d, 0.0, scan(5.0), 0.0), now=t * 0.1)
     assert moving.linear_x > 0
     stale = ctl.step(one(d, TRACK.detection_timeout_s + 0.01), now=2.1)
     assert stale.is_zero and stale.state == "stale"  # no deceleration ramp for a stop
