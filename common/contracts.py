@@ -106,6 +106,8 @@ class MetricsAnswer(TypedDict):
     ``cameras`` has each configured camera's, first camera first (absent from answers recorded
     before several cameras existed). ``workers`` has each detector worker's (the pool), and
     ``duplicate_detections`` counts frames detected twice (by two workers during a hand-over).
+    ``warnings`` names settings that work against each other on this machine, each with its
+    figures and fixes (services/metrics/advice.py; absent from older answers).
     """
 
     stamp_ns: int
@@ -125,6 +127,7 @@ class MetricsAnswer(TypedDict):
     cameras: NotRequired[dict[str, CameraMetrics]]
     workers: NotRequired[dict[str, WorkerMetrics]]
     duplicate_detections: NotRequired[int]
+    warnings: NotRequired[dict[str, str]]
 
 
 class _SessionCore(TypedDict):

@@ -133,6 +133,8 @@ def status_line(procs: list[ServiceProcess], view: LiveView, metrics: MetricsAns
             f" | fps {metrics['fps']:.1f} det/frame {metrics['detections_per_frame']:.1f}"
             f" e2e p50 {lat['end_to_end']['p50']:.0f} ms"
         )
+        if metrics.get("warnings"):
+            line += f" | WARNING {', '.join(metrics['warnings'])} (said above)"
     if view.status is not None:
         s, t = view.status, view.twist
         cmd = f" v={t.linear[0]:+.2f} w={t.angular[2]:+.2f}" if t else ""
@@ -170,6 +172,7 @@ def supervise(
     end = mono_s() + duration_s if duration_s else None
     next_status = mono_s()
     last_metrics: MetricsAnswer | None = None
+    warned: set[str] = set()  # the metrics answer's warnings already said
     failed: ServiceProcess | None = None
     # An optional "camera" makes every camera's process optional.
     optional = {p.name for p in procs if service_package(p.name) in s.optional}
@@ -199,6 +202,11 @@ def supervise(
             if failed is None and now >= next_status:  # none once a failure stops it
                 next_status = now + s.status_period_s
                 last_metrics = query_metrics(session, keys, METRICS_TIMEOUT_S) or last_metrics
+                warnings = last_metrics.get("warnings", {}) if last_metrics else {}
+                for name, text in warnings.items():
+                    if name not in warned:  # said once, in full; the status line names it
+                        warned.add(name)
+                        log.warning("%s", text)
                 # Status lines go to stderr: stdout carries only the --duration summary.
                 print(status_line(procs, view, last_metrics), file=sys.stderr, flush=True)
     finally:

@@ -23,6 +23,7 @@ from common.keys import Keys
 from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
 from common.node import Node, Tally
 from common.queries import ready_services
+from common.ratelimit import LogLimiter
 from common.settings import Config
 from services.controller.estop import EStopLatch
 from services.controller.policy import Controller, Inputs, VelocityCommand
@@ -311,6 +312,10 @@ def run(config: Config, stop: threading.Event) -> int:
         node.ready()
         period = 1.0 / s.control_rate_hz
         last_state: ControllerState | None = None
+        # Detections that go stale between one and the next flip the state several times a
+        # second: the first changes are logged, then a summary each period (the metrics
+        # service's detections_late warning says why and what to change).
+        state_log = LogLimiter()
         try:
             while not stop.is_set():
                 handlers.arrived.clear()  # before reading, so a message arriving now wakes us
@@ -330,8 +335,10 @@ def run(config: Config, stop: threading.Event) -> int:
                         cmd = dataclasses.replace(cmd, reason=latch.describe())
                     out.send(cmd, at, estop_saved=latch.saved)
                 if cmd.state != last_state:
-                    node.log.info("state %s: %s", cmd.state, cmd.reason)
+                    _log_state(node, state_log, cmd)
                     last_state = cmd.state
+                for line in state_log.due():
+                    node.log.info("%s", line)
                 node.publish_counters()
                 wait_either(handlers.arrived, stop, period - (mono_s() - tick))
             # Leave the robot still: the last word on cmd_vel is always a stop.
@@ -341,6 +348,22 @@ def run(config: Config, stop: threading.Event) -> int:
             for sub in subs:
                 sub.undeclare()
     return 0
+
+
+#: The limiter's key for state changes: its summaries read "state changes: N more not logged".
+STATE_CHANGES = "state changes"
+
+
+def _log_state(node: Node, limiter: LogLimiter, cmd: VelocityCommand) -> None:
+    """Log a change of state: an e-stop or a fault always, the others rate-limited."""
+    if cmd.state in (ControllerState.ESTOP, ControllerState.FAULT):
+        node.log.info("state %s: %s", cmd.state, cmd.reason)
+        return
+    admit = limiter.admit(STATE_CHANGES, f"to {cmd.state}")
+    if admit.summary:
+        node.log.info("%s", admit.summary)
+    if admit.log:
+        node.log.info("state %s: %s", cmd.state, cmd.reason)
 
 
 def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:

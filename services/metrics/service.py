@@ -25,6 +25,7 @@ from common.messages import Detections, ServiceCounters, Twist
 from common.node import Node, Tally
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES, Config
+from services.metrics.advice import advise
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
 from services.metrics.trust import (
     PoolWorkers,
@@ -137,7 +138,9 @@ def run(config: Config, stop: threading.Event) -> int:
 
         def answer() -> MetricsAnswer:
             with lock:
-                return agg.answer(node.header(), mono_s(), mono_to_unix_s())
+                out = agg.answer(node.header(), mono_s(), mono_to_unix_s())
+            out["warnings"] = advise(config, out)
+            return out
 
         keys = node.keys
         # One subscriber per configured camera, so the camera is the one its key names;
