@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from common.boxes import Boxes
+from common.config_file import load_config
 from common.errors import ConfigError
 from common.messages import Detections, Header, LaserScan
 from common.settings import CameraSettings, ControllerSettings
@@ -348,3 +350,8 @@ def test_corridor_with_rays_at_infinity_raises_no_numpy_warning() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # "invalid value encountered in multiply" fails here
         assert corridor_clearance(scan, 0.3) == pytest.approx(2.0)
+
+
+def test_the_code_and_the_default_stack_file_drive_in_one_mode() -> None:
+    stack_file = Path(__file__).resolve().parents[3] / "deploy" / "stack.toml"
+    assert load_config(stack_file, environ={}).controller.mode == ControllerSettings().mode
