@@ -43,8 +43,9 @@ class ControllerSettings:
     straight ahead and the corridor ``robot_width_m`` wide are clear beyond
     ``safety_distance_m`` plus the room needed to brake. A missing scan, or one older than
     ``scan_timeout_s``, means no forward motion (turning in place stays allowed), unless
-    ``no_laser`` is set: the robot has no laser, forward motion is not checked for obstacles,
-    and every ControllerStatus says so (``no_laser``); a scan that does come is still obeyed.
+    ``no_laser`` is set: the robot has no laser, forward motion towards a target in view is
+    not checked for obstacles, and every ControllerStatus says so (``no_laser``); a scan that
+    does come is still obeyed, and a target out of view is never driven on to without one.
     Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
     acceleration limits. Stale detections (captured or received longer than
     ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the

@@ -310,7 +310,8 @@ class Controller:
         classes: tuple[str, ...],
     ) -> VelocityCommand:
         """No target in view. A brief dropout (a missed detection): keep turning towards where
-        the target was, net of our own turning since; drive on only while the way is clear.
+        the target was, net of our own turning since; drive on only while a scan shows the way
+        clear (with ``no_laser`` too).
         A target predicted between the cameras is held up to ``handover_window_s``, turning
         in place. Then stop and unlock."""
         s = self.s
@@ -318,7 +319,9 @@ class Controller:
         hold_s = max(s.target_lost_timeout_s, s.handover_window_s if between else 0.0)
         if self.last_aim is not None and now - self.last_seen <= hold_s:
             held = self.last_aim
-            clear = self._blocked(scan) is None
+            # Driving on towards a target not seen needs a scan that shows the way clear,
+            # even with no_laser (which lets the robot drive only towards a target in view).
+            clear = scan is not None and self._blocked(scan) is None
             linear = held.linear_x if clear and not between else 0.0
             predicted = self._predicted(now)
             angular = 0.0 if predicted is None else self.pid.update(predicted, dt)

@@ -155,6 +155,11 @@ def test_no_laser_is_the_only_way_to_drive_without_a_scan() -> None:
         assert step(s, far).linear_x > 0, mode
         # A scan that does come is still obeyed.
         assert step(s, far, scan(0.2)).state == "blocked", mode
+        # A target out of view (held briefly) is not driven on to without a scan.
+        ctl = Controller(s, FRONT)
+        ctl.step(one(far, 0.0), now=0.0)
+        held = ctl.step(one(dets(), 0.0), now=0.1)
+        assert held.state == "holding" and held.linear_x == 0.0, mode
 
 
 def test_no_laser_with_the_laser_for_distance_is_refused() -> None:
