@@ -128,12 +128,15 @@ class Controller:
         fresh = {c: v for c, v in views.items() if v.fresh(timeout)}
         if not fresh:
             return self._halt(stop(ControllerState.STALE, self._stale_reason(views)))
-        scan = inp.scan if inp.scan_age_s <= self.s.scan_timeout_s else None
-        # Room the robot needs to stop from its current speed: braking at the acceleration
-        # limit, plus the distance covered while the scan ages and the next tick comes.
-        v = self.previous[0]
-        latency = (inp.scan_age_s if scan is not None else 0.0) + 1.0 / self.s.control_rate_hz
-        self.stopping_m = v * v / (2 * self.s.max_linear_accel) + v * latency
+        s = self.s
+        scan = inp.scan if inp.scan_age_s <= s.scan_timeout_s else None
+        # Room the robot needs to stop from the fastest this tick may command (its speed now
+        # plus what the acceleration limit allows since the last tick: after a stalled tick
+        # that is much more than now), braking at the acceleration limit, plus the distance
+        # covered while the scan ages and the next tick comes.
+        v = min(s.max_linear, max(0.0, self.previous[0]) + s.max_linear_accel * dt)
+        latency = (inp.scan_age_s if scan is not None else 0.0) + 1.0 / s.control_rate_hz
+        self.stopping_m = v * v / (2 * s.max_linear_accel) + v * latency
         aim = self._aim(fresh, scan, now, dt)
         if aim.state == ControllerState.SEARCHING:
             return self._halt(aim)  # the target is gone: stop now, not at the braking rate

@@ -360,3 +360,16 @@ def test_corridor_with_rays_at_infinity_raises_no_numpy_warning() -> None:
 def test_the_code_and_the_default_stack_file_drive_in_one_mode() -> None:
     stack_file = Path(__file__).resolve().parents[3] / "deploy" / "stack.toml"
     assert load_config(stack_file, environ={}).controller.mode == ControllerSettings().mode
+
+
+def test_after_a_stalled_tick_the_room_to_brake_is_for_the_speed_it_may_now_command() -> None:
+    # At rest, 0.55 m from an obstacle (beyond the 0.5 m safety distance). The next tick comes
+    # 0.6 s late (a loaded machine): the acceleration limit would allow 0.3 m/s at once, and
+    # 0.3 m/s needs more room than 0.05 m. Judged by the speed before the stall (0), it drove.
+    s = dataclasses.replace(TRACK, max_linear_accel=1.0)
+    ctl = Controller(s, FRONT)
+    d = dets(("person", 0.9, W / 2 + 10, 240, 50, 100))
+    assert ctl.step(one(d, 0.0, scan(0.55), 0.0), now=0.0).state == "tracking"  # 0.05 m/s
+    ctl.previous = (0.0, 0.0)  # at rest
+    late = ctl.step(one(d, 0.0, scan(0.55), 0.0), now=0.6)
+    assert late.linear_x == 0.0 and late.state == "blocked", late
