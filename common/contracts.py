@@ -173,6 +173,7 @@ class ScenarioResult(TypedDict, total=False):
     success: bool
     reason: str
     scenario: str
+    mode: str  # the controller's
     duration_s: float
     time_to_reach_s: float | None
     final_distance_m: float | None

@@ -25,7 +25,8 @@ def _print_text(r: ScenarioResult) -> None:
     def fmt(v: Any) -> str:
         return "-" if v is None else f"{v:.2f}" if isinstance(v, float) else str(v)
 
-    print(f"scenario {r['scenario']}: {'PASS' if r['success'] else 'FAIL'}")
+    mode = f" ({r['mode']} mode)" if r.get("mode") else ""
+    print(f"scenario {r['scenario']}{mode}: {'PASS' if r['success'] else 'FAIL'}")
     for key in (
         "time_to_reach_s",
         "final_distance_m",

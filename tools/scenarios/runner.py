@@ -163,6 +163,7 @@ def run_scenario(
         finally:
             stop_supervisor(proc, STOP_TIMEOUT_S)  # whatever happened, never leave it running
     result = score(scenario, rec, scenario.build(), config.controller, config.camera.hfov_deg)
+    result["mode"] = str(config.controller.mode)
     result["log"] = str(workdir / "stack.log")
     result["supervisor_exit_code"] = proc.returncode
     return result
