@@ -20,15 +20,15 @@ from common.counters import per_camera
 from common.errors import DecodeError, StackError
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.keys import Keys
-from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan
+from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
 from common.node import Node, Tally
 from common.queries import ready_services
 from common.ratelimit import LogLimiter
 from common.settings import Config
 from services.controller.estop import EStopLatch
-from services.controller.outputs import Outputs, log_state
 from services.controller.policy import Controller, Inputs, VelocityCommand
 from services.controller.policy import stop as stop_command
+from services.controller.statelog import log_state
 from services.controller.targets import View, unknown_targets
 
 
@@ -215,6 +215,58 @@ class ControllerHandlers:
             tally.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
 
 
+class Outputs:
+    """The controller's cmd_vel and status, sent from the control loop and, on an e-stop
+    engage, from the e-stop handler's thread. ``lock`` is held by the loop from reading its
+    inputs to publishing its command: a command computed before an engage latched goes out
+    before the engage's zero, never after it."""
+
+    def __init__(self, node: Node, config: Config) -> None:
+        self.node = node
+        self.mode = config.controller.mode
+        self.no_laser = config.controller.no_laser
+        self.lock = threading.RLock()
+        self.cmd_pub = node.publisher(node.keys.cmd_vel(), QoS.CONTROL)
+        self.status_pub = node.publisher(node.keys.controller_status(), QoS.TELEMETRY)
+
+    def send(self, cmd: VelocityCommand, at: Stamp, *, estop_saved: bool) -> None:
+        """``cmd`` on cmd_vel and the status, sharing one header stamped ``at``."""
+        with self.lock:
+            twist = self._twist(cmd, at)
+            status = ControllerStatus(
+                header=twist.header,
+                mode=self.mode,
+                target=cmd.target,
+                state=cmd.state,
+                reason=cmd.reason,
+                track_id=cmd.track_id,
+                estop_saved=estop_saved,
+                camera=cmd.camera,
+                stale_cameras=cmd.stale,
+                no_laser=self.no_laser,
+            )
+            self.status_pub.put(status.encode())
+
+    def halt(self) -> None:
+        """Zero on cmd_vel now (the status follows once the stop is saved)."""
+        with self.lock:
+            self._twist(VelocityCommand(0.0, 0.0, ControllerState.ESTOP, ""), now())
+            self.node.counters.add("estop_zero_at_once")
+
+    def _twist(self, cmd: VelocityCommand, at: Stamp) -> Twist:
+        twist = Twist(
+            header=self.node.header(at, frame_id="base_link"),
+            linear=(cmd.linear_x, 0.0, 0.0),
+            angular=(0.0, 0.0, cmd.angular_z),
+            input_stamp_ns=cmd.input_stamp_ns,
+        )
+        self.cmd_pub.put(twist.encode())
+        self.node.counters.add("commands_out")
+        if not cmd.is_zero:
+            self.node.counters.add("commands_nonzero")
+        return twist
+
+
 def run(config: Config, stop: threading.Event) -> int:
     """Run the control loop until ``stop`` is set.
 
@@ -284,7 +336,7 @@ def run(config: Config, stop: threading.Event) -> int:
                         cmd = dataclasses.replace(cmd, reason=latch.describe())
                     out.send(cmd, at, estop_saved=latch.saved)
                 if cmd.state != last_state:
-                    log_state(node, state_log, cmd)
+                    log_state(node.log, state_log, cmd)
                     last_state = cmd.state
                 for line in state_log.due():
                     node.log.info("%s", line)
