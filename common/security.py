@@ -200,9 +200,12 @@ def _principal_keys(
         # The simulator renders every camera from one world.
         "sim": service("sim", *frames, keys.scan(), keys.sim_truth(), read=(keys.cmd_vel(),)),
         # The ROS 2 bridge feeds the robot's cameras and laser into the stack, and the stack's
-        # detections and commands out to the robot.
+        # detections and commands out to the robot (held at zero by the controller's status).
         "ros2": service(
-            "ros2", *frames, keys.scan(), read=(all_frames, detections, keys.cmd_vel())
+            "ros2",
+            *frames,
+            keys.scan(),
+            read=(all_frames, detections, keys.cmd_vel(), keys.controller_status()),
         ),
         # The recorder listens to everything; playing a recording back puts frames and scans,
         # on a stack with no live sensor only.
