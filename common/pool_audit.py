@@ -28,6 +28,9 @@ from common.pool_rule import assign
 #: A serving token's parts: (worker, zenoh id of its session, camera).
 Serving = tuple[str, str, str]
 KINDS = ("idle_member", "unserved", "served_twice", "name_twice")
+#: The most findings said one by one (in a log at once, or in an answer): a raw session can
+#: declare thousands of tokens, and the rest is one line that counts them.
+MAX_LINES = 20
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,6 +58,14 @@ class Report:
 
     def count(self, kind: str) -> int:
         return sum(1 for f in self.current if f.kind == kind)
+
+
+def lines(findings: list[Finding], now: float, limit: int = MAX_LINES) -> list[str]:
+    """Each finding's text, at most ``limit`` of them, then one line for the rest."""
+    out = [f.text(now) for f in findings[:limit]]
+    if len(findings) > limit:
+        out.append(f"and {len(findings) - limit} more findings about the pool")
+    return out
 
 
 class PoolAudit:
@@ -121,7 +132,7 @@ def _findings(
                 + (f" (the pool gives it to {owner})" if owner else " (no worker in the pool)")
             )))  # fmt: skip
     for camera, servers in sorted(by_camera.items()):
-        if len(servers) > 1:
+        if len(servers) > 1 and camera in weights:  # another table's camera is not ours
             names = ", ".join(f"{w} ({z})" for w, z in sorted(servers))
             out.append(_Found("served_twice", camera, (
                 f"camera {camera} is served by {len(servers)} workers at once: {names}; "

@@ -24,7 +24,7 @@ from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, Header
 from common.node import Node, Put, Tally
-from common.pool_audit import PoolAudit, Report, Serving
+from common.pool_audit import MAX_LINES, PoolAudit, Report, Serving, lines
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
 from services.detector.batching import measure
@@ -491,9 +491,9 @@ class PoolMember:
             members = set(self.view.members)
             servers = self._servers | mine
         report = self._audit.check(now, members, servers)
-        for finding in report.raised:
-            self.node.log.warning("pool: %s", finding.text(now))
-        for finding in report.cleared:
+        for line in lines(report.raised, now):
+            self.node.log.warning("pool: %s", line)
+        for finding in report.cleared[:MAX_LINES]:
             self.node.log.info("pool: no longer so: %s", finding.detail)
         self._gauge("pool_warnings", len(report.current))
         return report

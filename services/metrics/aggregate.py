@@ -22,6 +22,7 @@ from collections.abc import Iterable
 
 from common.contracts import CameraMetrics, MetricsAnswer, TimelineSeries
 from common.messages import Detections, Header, MetricsSnapshot, ServiceCounters, Twist
+from common.pool_audit import lines
 from common.settings import MAX_CAMERAS, service_package
 from services.metrics.cameras import BatchSizes, CameraCounters, ratio
 from services.metrics.figures import DETECTOR_STAGES, STAGES, Figures, LatencyListener
@@ -268,9 +269,7 @@ class Aggregator:
             cameras=self.cameras(now),
             workers=workers(self._counters, self._figures, self._reported_at, now, self.pool),
             duplicate_detections=self._duplicates.total,
-            pool_warnings=(
-                [] if self.pool is None else [f.text(now) for f in self.pool.report.current]
-            ),
+            pool_warnings=[] if self.pool is None else lines(self.pool.report.current, now),
         )
 
     def latency_samples(self, now: float) -> dict[str, list[float]]:

@@ -23,7 +23,7 @@ from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, ServiceCounters, Twist
 from common.node import Node, Tally
-from common.pool_audit import PoolAudit
+from common.pool_audit import MAX_LINES, PoolAudit, lines
 from common.pool_rule import camera_weights
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES, Config
@@ -105,9 +105,9 @@ class MetricsHandlers:
             if not self.pool.heard:
                 return
             report = self.pool.check(now)
-        for finding in report.raised:
-            self.tally.log.warning("pool: %s", finding.text(now))
-        for finding in report.cleared:
+        for line in lines(report.raised, now):
+            self.tally.log.warning("pool: %s", line)
+        for finding in report.cleared[:MAX_LINES]:
             self.tally.log.info("pool: no longer so: %s", finding.detail)
 
     def on_cmd_vel(self, payload: bytes) -> None:

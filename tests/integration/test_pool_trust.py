@@ -8,11 +8,14 @@ of this module, which only add tokens from a raw session or start a process besi
    when the token goes;
 2. a serving token for a camera the worker serves, from another session under the worker's
    own name: the camera served twice and the name held twice, in the log and the answer;
-3. a second worker started with the live worker's name refuses to start, in one line.
+3. a second worker started with the live worker's name refuses to start, in one line;
+4. a second real worker whose config names fewer cameras (another camera table) leaves a
+   camera unserved: a WARNING in the first worker's log and in the metrics answer.
 """
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -148,3 +151,50 @@ def test_a_second_worker_with_a_live_name_refuses_to_start(stack: Stack) -> None
     assert why.startswith("error:") and f"{WORKER!r} is already in the pool" in why, why
     # The live worker was not disturbed: it still serves both cameras.
     assert served_by(stack) == {"front": WORKER, "rear": WORKER}
+
+
+def test_a_worker_with_another_camera_table_is_a_warning(
+    stack: Stack, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    # A second real worker on the same bus whose config names only front: the two compute
+    # the assignment over different tables, so a camera is served twice or by nobody.
+    config = stack.config
+    other = write_config(
+        tmp_path_factory.mktemp("other_table"),
+        zenoh={"endpoint": config.zenoh.endpoint, "multicast_scouting": False},
+        stack={"prefix": config.stack.prefix, "camera": "front"},
+        camera={"source": "sample:cameraman", "rate_hz": 2.0, "resize": [320, 240]},
+        detector={"imgsz": 320, "pool_alarm_s": ALARM_S, "workers": 2},
+    )
+    members = [WORKER, "detector_2"]
+    mine = assign(members, camera_weights(config.all_cameras), 1.0)
+    theirs = assign(members, {"front": 1.0}, 1.0)
+    servers = {c: {w for w in members if (mine if w == WORKER else theirs).get(c) == w}
+               for c in config.all_cameras}  # fmt: skip
+    twice = sorted(c for c, s in servers.items() if len(s) == 2)
+    nobody = sorted(c for c, s in servers.items() if not s)
+    assert twice or nobody  # the two tables disagree on something for these names
+    worker = subprocess.Popen(
+        [sys.executable, "-m", "services.detector", "serve",
+         "--config", str(other), "--worker", "detector_2"],
+        cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )  # fmt: skip
+    try:
+        expected = [f"camera {c} is served by 2 workers" for c in twice] + [
+            f"camera {c} is served by no detector worker" for c in nobody
+        ]
+        wait_for(
+            lambda: all(warnings(stack, e) for e in expected),
+            STARTUP_S,
+            lambda: f"the worker's warnings {expected}:\n{stack.log()}",
+        )
+        wait_for(
+            lambda: (w := answer_warnings(stack)) and all(any(e in x for x in w) for e in expected),
+            NOTICE_S,
+            lambda: f"{expected} in the metrics answer: {answer_warnings(stack)}",
+        )
+    finally:
+        worker.send_signal(signal.SIGINT)
+        assert worker.wait(timeout=30) == 0
+    wait_for(lambda: settled(stack), NOTICE_S, lambda: f"cleared: {answer_warnings(stack)}")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from common.pool_audit import PoolAudit, Report
+from common.pool_audit import MAX_LINES, PoolAudit, Report, lines
 from common.pool_rule import assign
 
 EVEN = {"front": 0.5, "rear": 0.5}
@@ -72,3 +72,16 @@ def test_a_condition_that_stops_and_returns_starts_its_time_again() -> None:
     audit.check(ALARM_S / 2, {"a"}, {("a", "z", "front"), ("a", "z", "rear")})
     assert audit.check(ALARM_S, {"a"}, set()).current == []  # unserved again since ALARM_S
     assert len(audit.check(2 * ALARM_S, {"a"}, set()).current) == 3  # idle a, both unserved
+
+
+def test_a_flood_of_stray_tokens_is_said_in_a_bounded_number_of_lines() -> None:
+    audit = PoolAudit(EVEN, 1.0, ALARM_S)
+    # Made-up serving tokens: 100 names each held by two sessions.
+    members = {"a"}
+    serving = {("a", "z", "front"), ("a", "z", "rear")}
+    serving |= {(f"w{i}", z, "rear") for i in range(100) for z in ("z1", "z2")}
+    audit.check(0.0, members, serving)
+    report = audit.check(ALARM_S, members, serving)
+    said = lines(report.raised, ALARM_S)
+    assert len(said) == MAX_LINES + 1
+    assert said[-1] == f"and {len(report.raised) - MAX_LINES} more findings about the pool"
