@@ -24,6 +24,7 @@ from common.cli import Command, add_config, service_main
 from common.clock import mono_s
 from common.config_file import load_config
 from common.contracts import MetricsAnswer
+from common.credential_modes import check_credentials_folder
 from common.errors import BackendUnavailable, ConfigError, DecodeError, ModelError, StackError
 from common.keys import Keys
 from common.lifecycle import (
@@ -157,6 +158,9 @@ def supervise(
     s = config.supervisor
     keys = Keys(config.stack.prefix)
     check_settings(config)
+    if config.zenoh.auth != "none" or config.zenoh.uses_tls:
+        # Before any process reads them: a folder others may write, a secret others may read.
+        check_credentials_folder(config.zenoh.credentials_path)
     cross_check(config, model_classes)
     grace, progress = s.watchdog_grace_s, s.watchdog_progress_s
     lock = acquire(s.lock_dir, config.zenoh.endpoint, config.stack.prefix)
