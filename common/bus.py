@@ -30,6 +30,7 @@ from typing import Any
 
 import zenoh
 
+from common.credential_modes import check_folder, check_public, check_secret
 from common.errors import ConfigError, StackError
 from common.keys import Keys
 from common.security import (
@@ -115,7 +116,9 @@ def source_of(sample: zenoh.Sample) -> str:
     return f"{info.source_id.zid}/{info.source_id.eid}"
 
 
-def _readable(path: Path, what: str) -> str:
+def _readable(path: Path, what: str, *, secret: bool = True) -> str:
+    """``path`` as Zenoh reads it, once it is there and no one else may change it (nor, for a
+    ``secret``, read it): ConfigError, one line, otherwise (common/credential_modes.py)."""
     if not path.is_file():
         fix = "run `zstack credentials`"
         if ca_file(path.parent).is_file():  # a folder made for fewer cameras, or not all copied
@@ -124,6 +127,8 @@ def _readable(path: Path, what: str) -> str:
                 "FILE --force`, or copy the file from where they were made"
             )
         raise ConfigError(f"{what} {path} is missing: {fix} (docs/security.md)")
+    check_folder(path.parent)
+    (check_secret if secret else check_public)(path)
     return str(path)
 
 
@@ -154,17 +159,21 @@ def _security(settings: ZenohSettings, principal: str, hub: bool) -> dict[str, A
 
         refuse_server_capable(creds)  # any principal's certificate could pose as the router
         tls: dict[str, Any] = {
-            "root_ca_certificate": _readable(ca_file(creds), "CA certificate"),
+            "root_ca_certificate": _readable(ca_file(creds), "CA certificate", secret=False),
             # Zenoh's default, stated: a client accepts only a certificate that names the host
             # it dialled, which only the supervisor's does (deploy/credentials.py).
             "verify_name_on_connect": True,
         }
         if hub:
-            tls["listen_certificate"] = _readable(cert_file(creds, principal), "certificate")
+            tls["listen_certificate"] = _readable(
+                cert_file(creds, principal), "certificate", secret=False
+            )
             tls["listen_private_key"] = _readable(key_file(creds, principal), "private key")
             tls["enable_mtls"] = settings.auth == "certificate"
         elif settings.auth == "certificate":
-            tls["connect_certificate"] = _readable(cert_file(creds, principal), "certificate")
+            tls["connect_certificate"] = _readable(
+                cert_file(creds, principal), "certificate", secret=False
+            )
             tls["connect_private_key"] = _readable(key_file(creds, principal), "private key")
             # A client sends its certificate only with this set too (checked on zenoh 1.10).
             tls["enable_mtls"] = True

@@ -3,10 +3,14 @@
 One file (``deploy/stack.toml`` by default) configures the whole stack, one table per service
 (the dataclasses of common/settings.py). Environment variables override single fields:
 ``STACK__<TABLE>__<FIELD>=<TOML value>``, e.g. ``STACK__DETECTOR__BACKEND=cuda`` or
-``STACK__CONTROLLER__TARGET_CLASSES='["cup"]'``. Unknown tables or fields, wrong types and
-out-of-range values raise ConfigError at start-up, so a typo stops the service with one line
-instead of being silently ignored. A profile can start with ``extends = "stack.toml"`` and
-state only the fields it changes (``deploy/secure.toml`` does).
+``STACK__CONTROLLER__TARGET_CLASSES='["cup"]'``, and a further camera's as
+``STACK__CAMERAS__<NAME>__<FIELD>`` (the camera itself is added in the file). Unknown tables or
+fields, wrong types and out-of-range values raise ConfigError at start-up, so a typo stops the
+service with one line instead of being silently ignored. A profile can start with
+``extends = "stack.toml"`` and state only the fields it changes (``deploy/secure.toml`` does):
+tables merge field by field at every depth (``[cameras.rear] rate_hz = 5.0`` changes the rear
+camera's rate and keeps the rest of it); any other value, a list included, replaces the base's
+whole.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ import re
 import tomllib
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -71,23 +75,27 @@ def _build(cls: type[_T], table: str, values: Mapping[str, Any]) -> _T:
     return cls(**kwargs)
 
 
-def _env_overrides(environ: Mapping[str, str]) -> dict[str, dict[str, Any]]:
-    """Collect ``STACK__TABLE__FIELD=value`` overrides; values are TOML, else plain strings.
+def _env_overrides(
+    environ: Mapping[str, str], further_cameras: Iterable[str]
+) -> dict[str, dict[str, Any]]:
+    """Collect ``STACK__TABLE__FIELD=value`` overrides, and ``STACK__CAMERAS__NAME__FIELD``
+    ones of the further cameras (``further_cameras``, those the file names); values are TOML,
+    else plain strings.
 
-    A misspelt table or field is blamed on the variable, not on the config file (and so is a
-    bad value: see :func:`_blame`)."""
+    A misspelt table, camera or field is blamed on the variable, not on the config file (and so
+    is a bad value: see :func:`_blame`)."""
     out: dict[str, dict[str, Any]] = {}
     hints = typing.get_type_hints(Config)
     for name, raw in environ.items():
         if not name.startswith(ENV_PREFIX):
             continue
         parts = name[len(ENV_PREFIX) :].lower().split("__")
+        if parts[0] == CAMERAS:
+            camera, field = _camera_override(name, parts, further_cameras)
+            out.setdefault(CAMERAS, {}).setdefault(camera, {})[field] = _env_value(raw)
+            continue
         if len(parts) != 2:
             raise ConfigError(f"{name}: overrides look like {ENV_PREFIX}<TABLE>__<FIELD>")
-        if parts[0] == CAMERAS:
-            raise ConfigError(
-                f"{name}: the [{CAMERAS}.<name>] tables are set in the config file only"
-            )
         if parts[0] == "path" or parts[0] not in hints:
             known = sorted(set(hints) - {"path"})
             raise ConfigError(f"{name}: there is no table [{parts[0]}]; known: {known}")
@@ -96,21 +104,48 @@ def _env_overrides(environ: Mapping[str, str]) -> dict[str, dict[str, Any]]:
             raise ConfigError(
                 f"{name}: [{parts[0]}] has no setting {parts[1]!r}; known: {sorted(fields)}"
             )
-        try:
-            value = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = raw
-        out.setdefault(parts[0], {})[parts[1]] = value
+        out.setdefault(parts[0], {})[parts[1]] = _env_value(raw)
     return out
+
+
+def _env_value(raw: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        return raw
+
+
+def _camera_override(
+    name: str, parts: list[str], further_cameras: Iterable[str]
+) -> tuple[str, str]:
+    """The camera and field of ``STACK__CAMERAS__<NAME>__<FIELD>`` (a name may itself hold
+    ``__``). Only a camera the file has: a misspelt name must not add a camera."""
+    if len(parts) < 3:
+        raise ConfigError(
+            f"{name}: a further camera's overrides look like {ENV_PREFIX}CAMERAS__<NAME>__<FIELD>"
+        )
+    camera, field = "__".join(parts[1:-1]), parts[-1]
+    known = list(further_cameras)
+    if camera not in known:
+        raise ConfigError(
+            f"{name}: no further camera {camera!r} in the config file; known: {known} (a "
+            f"further camera is added in the file, as a [{CAMERAS}.<name>] table; the first "
+            f"camera's settings are {ENV_PREFIX}CAMERA__<FIELD>)"
+        )
+    fields = sorted(f.name for f in dataclasses.fields(CameraSettings))
+    if field not in fields:
+        raise ConfigError(f"{name}: [{CAMERAS}.{camera}] has no setting {field!r}; known: {fields}")
+    return camera, field
 
 
 def _blame(error: ConfigError, table: str, fields: Mapping[str, Any]) -> ConfigError:
     """``error`` about a setting of ``table`` prefixed with the variable that set it, when an
     environment override did (``STACK__SIM__LASER_RAYS: sim.laser_rays must be ...``)."""
     text = str(error)
+    variable = ENV_PREFIX + "__".join(table.split(".")).upper()  # cameras.rear: CAMERAS__REAR
     for name in fields:
         if re.search(rf"(?<![\w.]){re.escape(table)}\.{re.escape(name)}(?!\w)", text):
-            return ConfigError(f"{ENV_PREFIX}{table.upper()}__{name.upper()}: {text}")
+            return ConfigError(f"{variable}__{name.upper()}: {text}")
     return error
 
 
@@ -134,38 +169,52 @@ def _read(cfg_path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
     if base_path in seen or len(seen) > 8:
         raise ConfigError(f"{cfg_path}: {EXTENDS} loops back to {base_path}")
     merged = _read(base_path, (*seen, base_path))
-    for table, values in data.items():
-        current = merged.setdefault(table, {})
-        if not (isinstance(values, dict) and isinstance(current, dict)):
-            raise ConfigError(f"{cfg_path}: [{table}] must be a table")
-        current.update(values)
+    _check_tables(cfg_path, data)
+    _merge(merged, data, cfg_path)
     return merged
+
+
+def _check_tables(cfg_path: Path, data: Mapping[str, Any]) -> None:
+    for table, values in data.items():
+        if not isinstance(values, dict):
+            raise ConfigError(f"{cfg_path}: [{table}] must be a table")
+
+
+def _merge(base: dict[str, Any], changes: Mapping[str, Any], where: Path, path: str = "") -> None:
+    """Lay ``changes`` (from the file ``where``) over ``base``, in place: a table field by
+    field, at every depth; any other value, a list included, replaces the base's whole."""
+    for key, value in changes.items():
+        dotted = f"{path}.{key}" if path else key
+        current = base.get(key)
+        if isinstance(current, dict) and isinstance(value, dict):
+            _merge(current, value, where, dotted)
+        elif isinstance(current, dict):
+            raise ConfigError(
+                f"{where}: {dotted} must be a table, [{dotted}], as in the file it extends"
+            )
+        else:
+            base[key] = value
 
 
 def load_config(path: str | Path | None = None, environ: Mapping[str, str] | None = None) -> Config:
     """Read the stack config (default ``deploy/stack.toml``), apply env overrides, validate."""
     cfg_path = Path(path) if path else DEFAULT_CONFIG
     data = _read(cfg_path, (cfg_path.resolve(),))
-    overrides = _env_overrides(os.environ if environ is None else environ)
-    for table, values in overrides.items():
-        current = data.setdefault(table, {})
-        if not isinstance(current, dict):
-            raise ConfigError(f"{cfg_path}: [{table}] must be a table")
-        current.update(values)
+    _check_tables(cfg_path, data)
+    overrides = _env_overrides(os.environ if environ is None else environ, data.get(CAMERAS, {}))
+    _merge(data, overrides, cfg_path)
     hints = typing.get_type_hints(Config)
     tables = {f.name for f in dataclasses.fields(Config)} - {"path"}
     unknown = sorted(set(data) - tables)
     if unknown:
         raise ConfigError(f"{cfg_path}: unknown table(s) {unknown}; known: {sorted(tables)}")
-    built: dict[str, Any] = {"cameras": _cameras(cfg_path, data)}
-    for table in tables - {CAMERAS}:
-        values = data.get(table, {})
-        if not isinstance(values, dict):
-            raise ConfigError(f"{cfg_path}: [{table}] must be a table")
+    built: dict[str, Any] = {}
+    for table in sorted(tables - {CAMERAS}):  # [camera] before the cameras laid over it
         try:
-            built[table] = _build(hints[table], table, values)
+            built[table] = _build(hints[table], table, data.get(table, {}))
         except ConfigError as exc:
             raise _blame(exc, table, overrides.get(table, {})) from exc
+    built[CAMERAS] = _cameras(cfg_path, data, overrides.get(CAMERAS, {}))
     try:
         return Config(path=str(cfg_path), **built)
     except ConfigError as exc:
@@ -175,17 +224,23 @@ def load_config(path: str | Path | None = None, environ: Mapping[str, str] | Non
 CAMERAS = "cameras"  # [cameras.<name>]: the further cameras, each [camera] with its changes
 
 
-def _cameras(cfg_path: Path, data: Mapping[str, Any]) -> tuple[tuple[str, CameraSettings], ...]:
+def _cameras(
+    cfg_path: Path, data: Mapping[str, Any], overrides: Mapping[str, Mapping[str, Any]]
+) -> tuple[tuple[str, CameraSettings], ...]:
     """The ``[cameras.<name>]`` tables, each laid over the [camera] table, in file order."""
-    tables = data.get(CAMERAS, {})
-    if not isinstance(tables, dict):
-        raise ConfigError(f"{cfg_path}: [{CAMERAS}] must hold tables, [{CAMERAS}.<name>]")
     first = data.get("camera", {})
     out = []
-    for name, values in tables.items():
+    for name, values in data.get(CAMERAS, {}).items():
+        table = f"{CAMERAS}.{name}"
         if not isinstance(values, dict):
-            raise ConfigError(f"{cfg_path}: {CAMERAS}.{name} must be a table, [{CAMERAS}.{name}]")
-        out.append((name, _build(CameraSettings, f"{CAMERAS}.{name}", {**first, **values})))
+            raise ConfigError(f"{cfg_path}: {table} must be a table, [{table}]")
+        try:
+            camera = _build(CameraSettings, table, {**first, **values})
+        except ConfigError as exc:
+            # CameraSettings checks itself as [camera]: name the further camera's own table.
+            named = ConfigError(re.sub(r"^camera\.", f"{table}.", str(exc)))
+            raise _blame(named, table, overrides.get(name, {})) from exc
+        out.append((name, camera))
     return tuple(out)
 
 

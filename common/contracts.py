@@ -86,11 +86,13 @@ class CameraMetrics(TypedDict):
 
 
 class WorkerMetrics(TypedDict):
-    """One detector worker of the pool in the metrics answer (services/metrics/pool.py), from
-    its counters: the cameras it says it serves, their share of every camera's pixel rate
-    (``load``, 0..1), the live workers it counts, its hand-overs since it started, and how long
-    ago its counters came (a dead worker's last word stays until it is restarted)."""
+    """One detector worker of the pool in the metrics answer (services/metrics/pool.py): whether
+    its pool token is live (``false`` once it has gone: exited, killed, or hung past Zenoh's
+    lease) and the cameras its serving tokens name; from its counters, their share of every
+    camera's pixel rate (``load``, 0..1), the live workers it counts, its hand-overs since it
+    started, and how long ago its counters came (a gone worker's last word stays)."""
 
+    live: bool
     cameras: list[str]
     load: float
     members: int
@@ -105,7 +107,11 @@ class MetricsAnswer(TypedDict):
     The top-level figures are every camera's together (with one camera, that camera's);
     ``cameras`` has each configured camera's, first camera first (absent from answers recorded
     before several cameras existed). ``workers`` has each detector worker's (the pool), and
-    ``duplicate_detections`` counts frames detected twice (by two workers during a hand-over).
+    ``duplicate_detections`` counts frames detected twice (by two workers during a hand-over);
+    ``pool_warnings`` says what has been wrong with the pool for ``detector.pool_alarm_s``
+    (common/pool_audit.py). ``warnings`` names settings that work against each other on this
+    machine, each with its figures and fixes (services/metrics/advice.py; absent from older
+    answers).
     """
 
     stamp_ns: int
@@ -125,6 +131,8 @@ class MetricsAnswer(TypedDict):
     cameras: NotRequired[dict[str, CameraMetrics]]
     workers: NotRequired[dict[str, WorkerMetrics]]
     duplicate_detections: NotRequired[int]
+    pool_warnings: NotRequired[list[str]]
+    warnings: NotRequired[dict[str, str]]
 
 
 class _SessionCore(TypedDict):
@@ -170,6 +178,7 @@ class ScenarioResult(TypedDict, total=False):
     success: bool
     reason: str
     scenario: str
+    mode: str  # the controller's
     duration_s: float
     time_to_reach_s: float | None
     final_distance_m: float | None

@@ -52,7 +52,8 @@ class ControllerStatus(Message):
     (it holds in memory, and the controller stays stopped until it can save): the e-stop CLI
     then says the stop is not durable. ``camera`` names the camera that sees the target ("" for
     none); ``stale_cameras`` the cameras whose detections are stale or have not come (ignored
-    until they are fresh again)."""
+    until they are fresh again). ``no_laser`` is True when the controller is set to drive without
+    a laser (``controller.no_laser``): forward motion is then not checked for obstacles."""
 
     TAG: ClassVar[str] = "ControllerStatus"
     VERSION: ClassVar[int] = 1
@@ -65,3 +66,4 @@ class ControllerStatus(Message):
     estop_saved: bool = True
     camera: str = ""
     stale_cameras: tuple[str, ...] = ()
+    no_laser: bool = False

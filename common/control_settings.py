@@ -23,7 +23,8 @@ class ControllerSettings:
     track:  turn towards the most central confident detection of ``target_classes`` (the
             smallest bearing from the robot's heading); drive forward at ``forward_speed``
             only while it is centred: within ``center_tolerance`` (a fraction of the image
-            width of the camera that sees it, as an angle from the heading) of straight ahead.
+            width of the camera that sees it, as an angle from the heading) of straight ahead,
+            and while the way ahead is known clear, as in follow mode (below).
             A target beside or behind the robot is never centred: the robot turns in place.
     follow: lock onto the largest detection of ``target_classes[0]`` (by camera and track id,
             so it does not jump to another person) and keep it at ``follow_distance_m``,
@@ -38,6 +39,13 @@ class ControllerSettings:
             ``handover_gate_deg`` of its expected bearing, up to ``handover_window_s`` after it
             was last seen; while it is expected between the cameras' fields of view the robot
             keeps turning towards it (without driving) for that long.
+    Forward safety, in both modes: forward only while the laser sector of ``sector_width_deg``
+    straight ahead and the corridor ``robot_width_m`` wide are clear beyond
+    ``safety_distance_m`` plus the room needed to brake. A missing scan, or one older than
+    ``scan_timeout_s``, means no forward motion (turning in place stays allowed), unless
+    ``no_laser`` is set: the robot has no laser, forward motion towards a target in view is
+    not checked for obstacles, and every ControllerStatus says so (``no_laser``); a scan that
+    does come is still obeyed, and a target out of view is never driven on to without one.
     Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
     acceleration limits. Stale detections (captured or received longer than
     ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the
@@ -46,7 +54,7 @@ class ControllerSettings:
     captured more than ``estop_release_max_age_s`` ago is refused.
     """
 
-    mode: ControllerMode = ControllerMode.TRACK
+    mode: ControllerMode = ControllerMode.FOLLOW
     target_classes: tuple[str, ...] = ("person",)
     min_score: float = 0.3
     control_rate_hz: float = 20.0
@@ -71,6 +79,7 @@ class ControllerSettings:
     safety_distance_m: float = 0.5
     sector_width_deg: float = 30.0
     robot_width_m: float = 0.6
+    no_laser: bool = False
     estop_file: str = ""
     estop_release_max_age_s: float = 2.0
     counters_period_s: float = 1.0
@@ -116,6 +125,15 @@ class ControllerSettings:
                 f"controller.target_classes must be class names, got {list(self.target_classes)}"
             )
         check_bounds(self, "controller", self.BOUNDS)
+        if (
+            self.no_laser
+            and self.mode is ControllerMode.FOLLOW
+            and self.distance_source is DistanceSource.LASER
+        ):
+            raise ConfigError(
+                'controller.no_laser = true needs distance_source = "box" in follow mode: '
+                "without a laser there is no distance to the target"
+            )
         if self.forward_speed > self.max_linear:
             raise ConfigError(
                 f"controller.forward_speed must be within 0..max_linear ({self.max_linear}), "

@@ -15,6 +15,8 @@ runs can share one network without hearing each other:
     <prefix>/metrics                          queryable       metrics -> JSON snapshot
     <prefix>/health/<service>                 liveliness      present while a service is ready
     <prefix>/detector/pool/<worker>           liveliness      a detector worker in the pool
+    <prefix>/detector/serving/<worker>/<zid>/<camera>
+                                              liveliness      a worker (session <zid>) serves it
 
 Who may put on which key under the secure profile is in common/security.py.
 """
@@ -84,6 +86,33 @@ class Keys:
 
     def all_pool_members(self) -> str:
         return f"{self.prefix}/detector/pool/*"
+
+    def pool_serving(self, worker: str, zid: str, camera: str) -> str:
+        """A detector worker's liveliness token while it serves ``camera``, from the session
+        ``zid`` (so that two processes holding one worker name show as two)."""
+        return "/".join(
+            (
+                f"{self.prefix}/detector/serving",
+                _check_chunks("worker id", worker),
+                _check_chunks("zenoh id", zid),
+                _check_chunks("camera name", camera),
+            )
+        )
+
+    def pool_serving_of(self, worker: str) -> str:
+        """Every serving token of ``worker`` (its access rule)."""
+        return f"{self.prefix}/detector/serving/{_check_chunks('worker id', worker)}/**"
+
+    def all_pool_serving(self) -> str:
+        return f"{self.prefix}/detector/serving/**"
+
+    def pool_serving_parts(self, key: str) -> tuple[str, str, str] | None:
+        """``(worker, zid, camera)`` of a serving token's key; None for another key."""
+        head = f"{self.prefix}/detector/serving/"
+        if not key.startswith(head):
+            return None
+        parts = key[len(head) :].split("/", 2)
+        return (parts[0], parts[1], parts[2]) if len(parts) == 3 and all(parts) else None
 
     def scan(self) -> str:
         return f"{self.prefix}/scan"

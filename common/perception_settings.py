@@ -139,6 +139,8 @@ class DetectorSettings:
     even share of the cameras' pixel rate that a worker may take before a camera goes to its
     next choice (services/detector/pool.py). A worker whose detection loop has not passed
     for ``pool_stall_s`` leaves the pool (its cameras go to the others) until it runs again.
+    What is wrong with the pool (a member that serves nothing, a camera nobody or two serve, a
+    name held twice) is a warning once it has lasted ``pool_alarm_s`` (common/pool_audit.py).
     """
 
     model: str = ""
@@ -164,6 +166,7 @@ class DetectorSettings:
     worker_id: str = ""
     pool_balance: float = 1.0
     pool_stall_s: float = 5.0
+    pool_alarm_s: float = 10.0
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
@@ -181,6 +184,7 @@ class DetectorSettings:
         "workers": (1, MAX_WORKERS),
         "pool_balance": (1, 4),
         "pool_stall_s": (1, 60),
+        "pool_alarm_s": (1, 600),
     }
     LENGTHS: ClassVar[Bounds] = {"classes": (0, MAX_CLASSES)}
 

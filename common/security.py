@@ -184,12 +184,12 @@ def _principal_keys(
     camera_rules = {name: service(name, keys.frame(c)) for c, name in services.items()}
     # Each detector worker reads frames and puts detections, never frames: every camera's, as
     # any worker may come to serve any camera (services/detector/pool.py). Its tokens are its
-    # own only: its health, and its pool membership under its own name, so that no worker can
-    # pose as another, or as many, and skew the assignment.
+    # own only: its health, its pool membership and its serving tokens under its own name, so
+    # that no worker can pose as another, or as many, and skew the assignment or its audit.
     worker_rules = {
         w: {
             **service(w, *(keys.detections(c) for c in services), read=(all_frames,)),
-            "token": (keys.health(w), keys.pool_member(w)),
+            "token": (keys.health(w), keys.pool_member(w), keys.pool_serving_of(w)),
             "serve": (keys.all_detector_info(),),
         }
         for w in dict.fromkeys(workers)
@@ -200,9 +200,12 @@ def _principal_keys(
         # The simulator renders every camera from one world.
         "sim": service("sim", *frames, keys.scan(), keys.sim_truth(), read=(keys.cmd_vel(),)),
         # The ROS 2 bridge feeds the robot's cameras and laser into the stack, and the stack's
-        # detections and commands out to the robot.
+        # detections and commands out to the robot (held at zero by the controller's status).
         "ros2": service(
-            "ros2", *frames, keys.scan(), read=(all_frames, detections, keys.cmd_vel())
+            "ros2",
+            *frames,
+            keys.scan(),
+            read=(all_frames, detections, keys.cmd_vel(), keys.controller_status()),
         ),
         # The recorder listens to everything; playing a recording back puts frames and scans,
         # on a stack with no live sensor only.
@@ -332,7 +335,8 @@ def may_announce(
     *,
     workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
 ) -> tuple[str, ...]:
-    """The liveliness tokens ``principal`` may declare (its health, a worker's pool token)."""
+    """The liveliness tokens ``principal`` may declare (its health, a worker's pool and serving
+    tokens)."""
     return _principal_keys(keys, cameras, workers=workers).get(principal, {}).get("token", ())
 
 

@@ -25,6 +25,7 @@ from common.cli import Command, add_config, service_main
 from common.clock import mono_s
 from common.config_file import load_config
 from common.contracts import MetricsAnswer
+from common.credential_modes import check_credentials_folder
 from common.errors import BackendUnavailable, ConfigError, DecodeError, ModelError, StackError
 from common.keys import Keys
 from common.lifecycle import (
@@ -134,6 +135,8 @@ def status_line(procs: list[ServiceProcess], view: LiveView, metrics: MetricsAns
             f" | fps {metrics['fps']:.1f} det/frame {metrics['detections_per_frame']:.1f}"
             f" e2e p50 {lat['end_to_end']['p50']:.0f} ms"
         )
+        if metrics.get("warnings"):
+            line += f" | WARNING {', '.join(metrics['warnings'])} (said above)"
     if view.status is not None:
         s, t = view.status, view.twist
         cmd = f" v={t.linear[0]:+.2f} w={t.angular[2]:+.2f}" if t else ""
@@ -141,6 +144,8 @@ def status_line(procs: list[ServiceProcess], view: LiveView, metrics: MetricsAns
         line += f" | {s.mode} {s.state}{target if s.target else ''}{cmd}"
         if s.state == "estop" or not s.estop_saved:
             line += f" ({s.reason})"  # who stopped it, and whether the stop could be saved
+        if s.no_laser:
+            line += " NO LASER: forward motion unchecked for obstacles"
     if view.truth is not None:
         x, y, theta = view.truth.robot
         line += f" | pose x={x:+.2f} y={y:+.2f} th={math.degrees(theta):+.0f}deg"
@@ -154,6 +159,9 @@ def supervise(
     s = config.supervisor
     keys = Keys(config.stack.prefix)
     check_settings(config)
+    if config.zenoh.auth != "none" or config.zenoh.uses_tls:
+        # Before any process reads them: a folder others may write, a secret others may read.
+        check_credentials_folder(config.zenoh.credentials_path)
     cross_check(config, model_classes)
     grace, progress = s.watchdog_grace_s, s.watchdog_progress_s
     lock = acquire(s.lock_dir, config.zenoh.endpoint, config.stack.prefix)
@@ -169,6 +177,7 @@ def supervise(
     end = mono_s() + duration_s if duration_s else None
     next_status = mono_s()
     last_metrics: MetricsAnswer | None = None
+    warned: set[str] = set()  # the metrics answer's warnings already said
     failed: ServiceProcess | None = None
     # An optional "camera" makes every camera's process optional.
     optional = {p.name for p in procs if service_package(p.name) in s.optional}
@@ -198,6 +207,11 @@ def supervise(
             if failed is None and now >= next_status:  # none once a failure stops it
                 next_status = now + s.status_period_s
                 last_metrics = query_metrics(session, keys, METRICS_TIMEOUT_S) or last_metrics
+                warnings = last_metrics.get("warnings", {}) if last_metrics else {}
+                for name, text in warnings.items():
+                    if name not in warned:  # said once, in full; the status line names it
+                        warned.add(name)
+                        log.warning("%s", text)
                 # Status lines go to stderr: stdout carries only the --duration summary.
                 print(status_line(procs, view, last_metrics), file=sys.stderr, flush=True)
     finally:

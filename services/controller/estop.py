@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import threading
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -119,12 +120,22 @@ class EStopLatch:
             return f"{exc.strerror or exc}: {self.path}"
         return ""
 
-    def engage(self, stamp_ns: int, by: str, reason: str, latest_ns: int) -> bool:
-        """Latch (in memory first, so that a disk error cannot delay the stop), then persist;
-        False when the latch could not be saved (it holds in memory all the same)."""
+    def engage(
+        self,
+        stamp_ns: int,
+        by: str,
+        reason: str,
+        latest_ns: int,
+        latched: Callable[[], None] | None = None,
+    ) -> bool:
+        """Latch (in memory first, so that neither a slow disk nor a disk error can delay the
+        stop), call ``latched`` (the controller sends its zero there), then persist; False
+        when the latch could not be saved (it holds in memory all the same)."""
         with self._lock:  # the state read and the state written under one lock
             since = min(max(stamp_ns, self.state.since_ns), latest_ns)
             self.state = EStopState(True, since, by[:MAX_REASON_CHARS], reason[:MAX_REASON_CHARS])
+            if latched is not None:
+                latched()
             self.save_error = self._write(self.state)
             self.saved = not self.save_error
             return self.saved

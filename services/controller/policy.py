@@ -10,7 +10,8 @@ Several cameras: each camera's detections are judged on their own; a stale or si
 ignored, and only when no camera is fresh does the dead-man stop the robot. The target is
 chosen among the fresh cameras' boxes together (services/controller/targets.py). A target far
 off the robot's heading (behind it, beside it) is turned to in place: the robot drives forward
-only while the target is centred (``center_tolerance``). The follow lock is a camera's track
+only while the target is centred (``center_tolerance``) and, in either mode, while a fresh scan
+shows the way ahead clear (``Controller._blocked``). The follow lock is a camera's track
 id; when the locked target leaves that camera's view, the lock passes to a box of the same
 class in another camera within ``handover_gate_deg`` of where the target should be by now, for
 ``handover_window_s`` after it was last seen, and the robot holds its turn towards it (without
@@ -127,12 +128,15 @@ class Controller:
         fresh = {c: v for c, v in views.items() if v.fresh(timeout)}
         if not fresh:
             return self._halt(stop(ControllerState.STALE, self._stale_reason(views)))
-        scan = inp.scan if inp.scan_age_s <= self.s.scan_timeout_s else None
-        # Room the robot needs to stop from its current speed: braking at the acceleration
-        # limit, plus the distance covered while the scan ages and the next tick comes.
-        v = self.previous[0]
-        latency = (inp.scan_age_s if scan is not None else 0.0) + 1.0 / self.s.control_rate_hz
-        self.stopping_m = v * v / (2 * self.s.max_linear_accel) + v * latency
+        s = self.s
+        scan = inp.scan if inp.scan_age_s <= s.scan_timeout_s else None
+        # Room the robot needs to stop from the fastest this tick may command (its speed now
+        # plus what the acceleration limit allows since the last tick: after a stalled tick
+        # that is much more than now), braking at the acceleration limit, plus the distance
+        # covered while the scan ages and the next tick comes.
+        v = min(s.max_linear, max(0.0, self.previous[0]) + s.max_linear_accel * dt)
+        latency = (inp.scan_age_s if scan is not None else 0.0) + 1.0 / s.control_rate_hz
+        self.stopping_m = v * v / (2 * s.max_linear_accel) + v * latency
         aim = self._aim(fresh, scan, now, dt)
         if aim.state == ControllerState.SEARCHING:
             return self._halt(aim)  # the target is gone: stop now, not at the braking rate
@@ -158,6 +162,20 @@ class Controller:
 
     def _clearance(self, scan: LaserScan) -> float:
         return sector_clearance(scan, self.s.sector_width_deg, self.s.robot_width_m / 2)
+
+    def _blocked(self, scan: LaserScan | None) -> str | None:
+        """Why the robot may not drive forward now, or None when the way ahead is known clear.
+
+        The rule of every mode: nothing within the safety distance plus the room to brake in
+        the sector and corridor ahead; no recent scan, no forward motion, unless the settings
+        say the robot has no laser (``no_laser``), when only a scan that does come is obeyed.
+        """
+        if scan is None:
+            return None if self.s.no_laser else "no recent laser scan"
+        clearance = self._clearance(scan)
+        if clearance <= self.s.safety_distance_m + self.stopping_m:
+            return f"obstacle at {clearance:.2f} m"
+        return None
 
     def _halt(self, cmd: VelocityCommand) -> VelocityCommand:
         """Zero at once (safety stops bypass the acceleration limit) and forget the target."""
@@ -266,11 +284,15 @@ class Controller:
         centred = abs(err) <= math.atan(s.center_tolerance * width / best.focal_px)
         stamp = best.dets.header.stamp_ns
         if s.mode is ControllerMode.TRACK:
+            blocked = self._blocked(scan) if centred else None
+            state = ControllerState.TURNING
+            if centred:
+                state = ControllerState.TRACKING if blocked is None else ControllerState.BLOCKED
             aim = VelocityCommand(
-                s.forward_speed if centred else 0.0,
+                s.forward_speed if state is ControllerState.TRACKING else 0.0,
                 angular,
-                ControllerState.TRACKING if centred else ControllerState.TURNING,
-                f"bearing {math.degrees(err):+.1f} deg",
+                state,
+                blocked or f"bearing {math.degrees(err):+.1f} deg",
                 best.name,
                 best.track_id,
                 stamp,
@@ -291,7 +313,8 @@ class Controller:
         classes: tuple[str, ...],
     ) -> VelocityCommand:
         """No target in view. A brief dropout (a missed detection): keep turning towards where
-        the target was, net of our own turning since; drive on only while the way is clear.
+        the target was, net of our own turning since; drive on only while a scan shows the way
+        clear (with ``no_laser`` too).
         A target predicted between the cameras is held up to ``handover_window_s``, turning
         in place. Then stop and unlock."""
         s = self.s
@@ -299,9 +322,9 @@ class Controller:
         hold_s = max(s.target_lost_timeout_s, s.handover_window_s if between else 0.0)
         if self.last_aim is not None and now - self.last_seen <= hold_s:
             held = self.last_aim
-            clear = scan is not None and self._clearance(scan) > (
-                s.safety_distance_m + self.stopping_m
-            )
+            # Driving on towards a target not seen needs a scan that shows the way clear,
+            # even with no_laser (which lets the robot drive only towards a target in view).
+            clear = scan is not None and self._blocked(scan) is None
             linear = held.linear_x if clear and not between else 0.0
             predicted = self._predicted(now)
             angular = 0.0 if predicted is None else self.pid.update(predicted, dt)
@@ -358,11 +381,9 @@ class Controller:
             return turn_only(ControllerState.TURNING, f"bearing {math.degrees(err):+.1f} deg")
         if distance <= s.follow_distance_m:
             return turn_only(ControllerState.ARRIVED, f"target at {distance:.2f} m")
-        if scan is None:
-            return turn_only(ControllerState.BLOCKED, "no recent laser scan")
-        clearance = self._clearance(scan)
-        if clearance <= s.safety_distance_m + self.stopping_m:
-            return turn_only(ControllerState.BLOCKED, f"obstacle at {clearance:.2f} m")
+        blocked = self._blocked(scan)
+        if blocked is not None:
+            return turn_only(ControllerState.BLOCKED, blocked)
         speed = min(s.max_linear, s.distance_gain * (distance - s.follow_distance_m))
         return VelocityCommand(
             speed,

@@ -6,20 +6,24 @@ from __future__ import annotations
 import dataclasses
 import json
 import threading
+from collections.abc import Callable
 from functools import partial
 from typing import Generic, Protocol, TypeVar
 
-from common.bus import Publisher, QoS
+from common.bus import QoS
 from common.clock import BOOT_ID, Stamp, mono_s, now
-from common.contracts import ControllerMode, ControllerState, DetectorInfo
+from common.contracts import ControllerState, DetectorInfo
 from common.counters import per_camera
 from common.errors import DecodeError
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
 from common.node import Node, Tally
+from common.ratelimit import LogLimiter
 from common.settings import Config
 from services.controller.estop import EStopLatch
 from services.controller.policy import Controller, Inputs, VelocityCommand
+from services.controller.policy import stop as stop_command
+from services.controller.statelog import log_state
 from services.controller.targets import View, unknown_targets
 
 
@@ -29,6 +33,11 @@ class _Stamped(Protocol):
 
 
 _S = TypeVar("_S", bound=_Stamped)
+
+NO_LASER_WARNING = (
+    "NO LASER (controller.no_laser = true): forward motion is not checked for obstacles; "
+    "the robot drives into whatever is in its way"
+)
 
 # The longest the control loop goes without looking at the stop flag, whatever its rate.
 STOP_POLL_S = 0.1
@@ -104,9 +113,19 @@ class ControllerHandlers:
     counts are kept beside the totals (``detections_in.rear``, ...).
     """
 
-    def __init__(self, config: Config, tally: Tally) -> None:
+    def __init__(
+        self,
+        config: Config,
+        tally: Tally,
+        halt: Callable[[], None] | None = None,
+        halted: Callable[[], None] | None = None,
+    ) -> None:
         s = config.controller
         self.tally = tally
+        # An engage is acted on here, on the handler's thread, not at the loop's next tick:
+        # ``halt`` (the zero command) once the latch holds in memory, before it is saved;
+        # ``halted`` (the status, saying whether the stop could be saved) after.
+        self.halt, self.halted = halt, halted
         self.tolerance_s = config.stack.clock_tolerance_s
         self.estop_release_max_age_s = s.estop_release_max_age_s
         self.latch = EStopLatch(config.estop_path, now().wall_ns + int(self.tolerance_s * 1e9))
@@ -170,7 +189,10 @@ class ControllerHandlers:
             by = msg.header.source if msg else "garbage"
             reason = msg.reason if msg else "undecodable message on the e-stop key"
             was, was_saved = latch.engaged, latch.saved
-            saved = latch.engage(msg.header.stamp_ns if msg else at.wall_ns, by, reason, latest_ns)
+            stamp = msg.header.stamp_ns if msg else at.wall_ns
+            saved = latch.engage(stamp, by, reason, latest_ns, self.halt)
+            if self.halted is not None:
+                self.halted()
             if not was:
                 tally.log.warning("e-stop ENGAGED by %s: %s", by, reason or "-")
             if not saved and was_saved:
@@ -188,6 +210,58 @@ class ControllerHandlers:
             tally.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
 
 
+class Outputs:
+    """The controller's cmd_vel and status, sent from the control loop and, on an e-stop
+    engage, from the e-stop handler's thread. ``lock`` is held by the loop from reading its
+    inputs to publishing its command: a command computed before an engage latched goes out
+    before the engage's zero, never after it."""
+
+    def __init__(self, node: Node, config: Config) -> None:
+        self.node = node
+        self.mode = config.controller.mode
+        self.no_laser = config.controller.no_laser
+        self.lock = threading.RLock()
+        self.cmd_pub = node.publisher(node.keys.cmd_vel(), QoS.CONTROL)
+        self.status_pub = node.publisher(node.keys.controller_status(), QoS.TELEMETRY)
+
+    def send(self, cmd: VelocityCommand, at: Stamp, *, estop_saved: bool) -> None:
+        """``cmd`` on cmd_vel and the status, sharing one header stamped ``at``."""
+        with self.lock:
+            twist = self._twist(cmd, at)
+            status = ControllerStatus(
+                header=twist.header,
+                mode=self.mode,
+                target=cmd.target,
+                state=cmd.state,
+                reason=cmd.reason,
+                track_id=cmd.track_id,
+                estop_saved=estop_saved,
+                camera=cmd.camera,
+                stale_cameras=cmd.stale,
+                no_laser=self.no_laser,
+            )
+            self.status_pub.put(status.encode())
+
+    def halt(self) -> None:
+        """Zero on cmd_vel now (the status follows once the stop is saved)."""
+        with self.lock:
+            self._twist(VelocityCommand(0.0, 0.0, ControllerState.ESTOP, ""), now())
+            self.node.counters.add("estop_zero_at_once")
+
+    def _twist(self, cmd: VelocityCommand, at: Stamp) -> Twist:
+        twist = Twist(
+            header=self.node.header(at, frame_id="base_link"),
+            linear=(cmd.linear_x, 0.0, 0.0),
+            angular=(0.0, 0.0, cmd.angular_z),
+            input_stamp_ns=cmd.input_stamp_ns,
+        )
+        self.cmd_pub.put(twist.encode())
+        self.node.counters.add("commands_out")
+        if not cmd.is_zero:
+            self.node.counters.add("commands_nonzero")
+        return twist
+
+
 def run(config: Config, stop: threading.Event) -> int:
     """Run the control loop until ``stop`` is set.
 
@@ -200,7 +274,14 @@ def run(config: Config, stop: threading.Event) -> int:
     """
     s = config.controller
     with Node("controller", config, counters_period_s=s.counters_period_s) as node:
-        handlers = ControllerHandlers(config, node)
+        out = Outputs(node, config)
+
+        def halted() -> None:
+            """The e-stop's status, once the engage is saved (or could not be)."""
+            estop = stop_command(ControllerState.ESTOP, latch.describe())
+            out.send(estop, now(), estop_saved=latch.saved)
+
+        handlers = ControllerHandlers(config, node, out.halt, halted)
         latch, scan = handlers.latch, handlers.scan
         (node.log.warning if latch.engaged else node.log.info)("%s", latch.note)
         if not latch.saved:
@@ -216,40 +297,49 @@ def run(config: Config, stop: threading.Event) -> int:
             node.subscribe(node.keys.estop(), handlers.on_estop),
         ]
         controller = Controller(s, cameras)
-        cmd_pub = node.publisher(node.keys.cmd_vel(), QoS.CONTROL)
-        status_pub = node.publisher(node.keys.controller_status(), QoS.TELEMETRY)
         node.log.info(
             "mode %s on %s, targets %s", s.mode, ", ".join(det_keys), list(s.target_classes)
         )
+        if s.no_laser:
+            node.log.warning(NO_LASER_WARNING)
         threading.Thread(
             target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
         ).start()
         node.ready()
         period = 1.0 / s.control_rate_hz
         last_state: ControllerState | None = None
+        # Detections that go stale between one and the next flip the state several times a
+        # second: the first changes are logged, then a summary each period (the metrics
+        # service's detections_late warning says why and what to change).
+        state_log = LogLimiter()
         try:
             while not stop.is_set():
                 handlers.arrived.clear()  # before reading, so a message arriving now wakes us
-                # One instant per tick: the ages are judged at it and the command is stamped
-                # with it, so that a reader of cmd_vel can check the judgement exactly.
-                at = now()
-                tick = at.mono_ns / 1e9
-                sc, sc_arrival = scan.get()
-                views = {c: _view(d, at, s.detection_timeout_s) for c, d in handlers.dets.items()}
-                sc_age = _age(sc.header if sc is not None else None, sc_arrival, at)
-                inputs = Inputs(views, sc, sc_age, latch.engaged)
-                cmd = controller.step(inputs, tick)
-                if cmd.state == ControllerState.ESTOP:
-                    cmd = dataclasses.replace(cmd, reason=latch.describe())
-                _publish(node, cmd_pub, status_pub, cmd, s.mode, at, estop_saved=latch.saved)
+                with out.lock:  # an engage's zero waits for this command, never the reverse
+                    # One instant per tick: the ages are judged at it and the command is
+                    # stamped with it, so that a reader of cmd_vel can check the judgement.
+                    at = now()
+                    tick = at.mono_ns / 1e9
+                    sc, sc_arrival = scan.get()
+                    views = {
+                        c: _view(d, at, s.detection_timeout_s) for c, d in handlers.dets.items()
+                    }
+                    sc_age = _age(sc.header if sc is not None else None, sc_arrival, at)
+                    inputs = Inputs(views, sc, sc_age, latch.engaged)
+                    cmd = controller.step(inputs, tick)
+                    if cmd.state == ControllerState.ESTOP:
+                        cmd = dataclasses.replace(cmd, reason=latch.describe())
+                    out.send(cmd, at, estop_saved=latch.saved)
                 if cmd.state != last_state:
-                    node.log.info("state %s: %s", cmd.state, cmd.reason)
+                    log_state(node.log, state_log, cmd)
                     last_state = cmd.state
+                for line in state_log.due():
+                    node.log.info("%s", line)
                 node.publish_counters()
                 wait_either(handlers.arrived, stop, period - (mono_s() - tick))
             # Leave the robot still: the last word on cmd_vel is always a stop.
             stopped = VelocityCommand(0.0, 0.0, ControllerState.STOPPED, "shutdown")
-            _publish(node, cmd_pub, status_pub, stopped, s.mode, now(), estop_saved=latch.saved)
+            out.send(stopped, now(), estop_saved=latch.saved)
         finally:
             for sub in subs:
                 sub.undeclare()
@@ -282,37 +372,3 @@ def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:
                 )  # fmt: skip
             return
         stop.wait(2.0)
-
-
-def _publish(
-    node: Node,
-    cmd_pub: Publisher,
-    status_pub: Publisher,
-    cmd: VelocityCommand,
-    mode: ControllerMode,
-    at: Stamp,
-    *,
-    estop_saved: bool,
-) -> None:
-    twist = Twist(
-        header=node.header(at, frame_id="base_link"),
-        linear=(cmd.linear_x, 0.0, 0.0),
-        angular=(0.0, 0.0, cmd.angular_z),
-        input_stamp_ns=cmd.input_stamp_ns,
-    )
-    cmd_pub.put(twist.encode())
-    node.counters.add("commands_out")
-    if not cmd.is_zero:
-        node.counters.add("commands_nonzero")
-    status = ControllerStatus(
-        header=twist.header,
-        mode=mode,
-        target=cmd.target,
-        state=cmd.state,
-        reason=cmd.reason,
-        track_id=cmd.track_id,
-        estop_saved=estop_saved,
-        camera=cmd.camera,
-        stale_cameras=cmd.stale,
-    )
-    status_pub.put(status.encode())

@@ -4,13 +4,8 @@ A pool has no coordinator. Every worker hears the same membership (Zenoh livelin
 ``<prefix>/detector/pool/<worker>``, declared in service.py) and computes the same assignment
 from it with :func:`assign`, so the workers agree on who serves which camera without talking.
 
-The rule: rendezvous (highest-random-weight) hashing with bounded loads. Each camera ranks
-the live workers by a stable hash of (camera, worker) (blake2b: the same on every host and
-run, unlike Python's salted ``hash``). Cameras are placed heaviest first (ties by name); each
-goes to the highest-ranked worker whose load plus the camera's weight stays within
-``balance`` x (total weight / live workers), or, when none has room, to the least-loaded
-worker. A camera's weight is its pixel rate (``rate_hz`` x width x height, normalised to sum
-to 1), so that one worker does not get all the heavy cameras.
+The rule (common/pool_rule.py, shared with whoever audits the pool): rendezvous hashing with
+bounded loads, each camera weighted by its pixel rate.
 
 What follows (tests/unit/detector/test_pool.py): every camera has exactly one owner; a
 worker that joins takes about its share and no more; a worker that leaves hands on only its
@@ -20,55 +15,12 @@ next, so a tight ``balance`` can move a few more).
 
 from __future__ import annotations
 
-import hashlib
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 
-from common.settings import CameraSettings
+from common.pool_rule import DEFAULT_PIXELS, assign, camera_weights, rank
 
-#: The pixel count assumed for a camera that keeps its source's size (``resize = [0, 0]``):
-#: the stack's config cannot know it before the first frame, and VGA is the common case.
-DEFAULT_PIXELS = 640 * 480
-_EPS = 1e-9  # float slack on the load bound: weights are sums of normalised fractions
-
-
-def camera_weights(cameras: Mapping[str, CameraSettings]) -> dict[str, float]:
-    """Each camera's share of the pixels per second all ``cameras`` send (summing to 1)."""
-    raw = {}
-    for name, cam in cameras.items():
-        width, height = cam.resize
-        raw[name] = cam.rate_hz * (width * height if width and height else DEFAULT_PIXELS)
-    total = sum(raw.values())
-    return {name: w / total for name, w in raw.items()}
-
-
-def rank(camera: str, worker: str) -> int:
-    """``worker``'s stable rendezvous score for ``camera`` (higher is preferred)."""
-    digest = hashlib.blake2b(f"{camera}\0{worker}".encode(), digest_size=8).digest()
-    return int.from_bytes(digest, "big")
-
-
-def assign(workers: Iterable[str], weights: Mapping[str, float], balance: float) -> dict[str, str]:
-    """``{camera: worker}`` for every camera of ``weights`` over the live ``workers`` (see the
-    module's docstring). Empty when there is no worker. ``balance`` >= 1 is the slack over a
-    perfectly even load that a worker may take before a camera goes to its next choice."""
-    live = sorted(set(workers))
-    if not live:
-        return {}
-    if balance < 1:
-        raise ValueError(f"balance must be at least 1, got {balance}")
-    bound = balance * sum(weights.values()) / len(live) + _EPS
-    load = dict.fromkeys(live, 0.0)
-    out: dict[str, str] = {}
-    for camera in sorted(weights, key=lambda c: (-weights[c], c)):
-        weight = weights[camera]
-        ranked = sorted(live, key=lambda w: (-rank(camera, w), w))
-        chosen = next((w for w in ranked if load[w] + weight <= bound), None)
-        if chosen is None:
-            chosen = min(ranked, key=lambda w: load[w])  # ties: the better-ranked
-        load[chosen] += weight
-        out[camera] = chosen
-    return out
+__all__ = ["DEFAULT_PIXELS", "Change", "PoolView", "assign", "camera_weights", "rank"]
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,11 +19,12 @@ from common.bus import QoS
 from common.clock import BOOT_ID, mono_s, now, wall_ns
 from common.contracts import DetectorInfo
 from common.counters import per_camera
-from common.errors import DecodeError, ImageError, ImageTooLarge
+from common.errors import DecodeError, ImageError, ImageTooLarge, StackError
 from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, Header
 from common.node import Node, Put, Tally
+from common.pool_audit import MAX_LINES, PoolAudit, Report, Serving, lines
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
 from services.detector.batching import measure
@@ -38,6 +39,7 @@ _WAIT_S = 0.2  # how often the idle loop looks at the stop flag (and the pool's 
 #: How long a joining worker asks who is already in the pool before it takes its cameras: the
 #: query ends as soon as every peer answered; this bounds it on a slow link.
 POOL_ASK_TIMEOUT_S = 1.0
+AUDIT_PERIOD_S = 0.5  # how often the loop audits the pool's tokens (common/pool_audit.py)
 
 
 def open_detector(s: DetectorSettings, max_batch: int = 1) -> tuple[Detector, str]:
@@ -292,6 +294,7 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
             while not stop.is_set():
                 pool.beat()
                 pool.settle()
+                pool.audit()
                 node.publish_counters()
                 waiting = handlers.slots.take(per_round, _WAIT_S)
                 if waiting:
@@ -339,7 +342,14 @@ class PoolMember:
     other workers are in the pool and the worker **resigns**, withdrawing its pool token (the
     others take its cameras at once) and refusing frames; its next beat declares the token
     again and it takes its share back. A worker alone in the pool stays: nobody could take over.
-    Counted as ``pool_resigned``."""
+    Counted as ``pool_resigned``.
+
+    For each camera it serves, the worker declares a serving token ``<prefix>/detector/serving/
+    <worker>/<zenoh id>/<camera>`` (withdrawn with its pool token on a stall), and it hears
+    everyone's: :meth:`audit` checks them against the membership (common/pool_audit.py) and
+    logs a WARNING for what has been wrong for ``detector.pool_alarm_s`` (a member that serves
+    nothing, a camera nobody or two serve, a name held twice), and a line when it clears.
+    Counted: ``pool_warnings`` (how many hold now)."""
 
     def __init__(self, node: Node, worker_id: str, handlers: DetectorHandlers) -> None:
         config = node.config
@@ -364,25 +374,45 @@ class PoolMember:
         self._watch: zenoh.Subscriber[None] | None = None
         self._gauges: dict[str, int] = {}
         self._handed_over = False
+        self.zid = str(node.session.info.zid())
+        self._serving_tokens: dict[str, zenoh.LivelinessToken] = {}  # under _token_lock
+        self._servers: set[Serving] = set()  # everyone's serving tokens, as heard
+        self._serving_watch: zenoh.Subscriber[None] | None = None
+        self._audit = PoolAudit(self.view.weights, self.view.balance, config.detector.pool_alarm_s)
+        self._audit_next = 0.0
         for cam in handlers.frame_keys:
             self._gauge(per_camera("serving", cam), 0)
-        for name in ("serving", "pool_members", "pool_load_permille"):
+        for name in ("serving", "pool_members", "pool_load_permille", "pool_warnings"):
             self._gauge(name, 0)
         for name in ("cameras_gained", "cameras_lost", "pool_resigned"):
             node.counters.add(name, 0)
 
     def join(self) -> None:
-        """Declare this worker's token, learn who else is in the pool, and take its cameras."""
+        """Learn who is in the pool, declare this worker's token and take its cameras. A worker
+        of this name already there is a StackError (one line, exit 1): two processes of one
+        name would each serve every camera the rule gives the name. (One the query misses, two
+        started at once, is the audit's ``name_twice`` warning.) The supervisor tries again
+        after its backoff: a process just killed takes its token with its links."""
         node, keys = self.node, self.node.keys
         liveliness = node.session.liveliness()
+        replies = liveliness.get(keys.all_pool_members(), timeout=POOL_ASK_TIMEOUT_S)
+        members = [str(reply.ok.key_expr) for reply in replies if reply.ok is not None]
+        mine = keys.pool_member(self.view.me)
+        if mine in members:
+            raise StackError(
+                f"a detector worker named {self.view.me!r} is already in the pool ({mine}): "
+                "not starting a second; give each host its own detector.worker_id"
+            )
         with self._token_lock:
-            self._token = liveliness.declare_token(keys.pool_member(self.view.me))
+            self._token = liveliness.declare_token(mine)
         self._watch = liveliness.declare_subscriber(
             keys.all_pool_members(), self._on_member, history=True
         )
-        for reply in liveliness.get(keys.all_pool_members(), timeout=POOL_ASK_TIMEOUT_S):
-            if reply.ok is not None:
-                self._member(str(reply.ok.key_expr), joined=True)
+        for key in members:
+            self._member(key, joined=True)
+        self._serving_watch = liveliness.declare_subscriber(
+            keys.all_pool_serving(), self._on_serving, history=True
+        )
         self.settle()
         self._last_beat = mono_s()
         self._stall_watch = threading.Thread(
@@ -427,6 +457,8 @@ class PoolMember:
                 if stalled and self._token is not None:
                     self._token.undeclare()
                     self._token = None
+                if stalled:
+                    self._withdraw_serving()
             if not stalled:
                 continue
             self.node.counters.add("pool_resigned")
@@ -435,6 +467,54 @@ class PoolMember:
                 "leaving the pool so that the other workers take its cameras",
                 self._stall_s,
             )
+
+    def _on_serving(self, sample: zenoh.Sample) -> None:
+        parts = self.node.keys.pool_serving_parts(str(sample.key_expr))
+        if parts is None:
+            return
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._servers.add(parts)
+            else:
+                self._servers.discard(parts)
+
+    def audit(self) -> Report | None:
+        """Check the pool's tokens (at most every :data:`AUDIT_PERIOD_S`): log what became
+        wrong, and what stopped being so; None when it is not yet time."""
+        now = mono_s()
+        if now < self._audit_next:
+            return None
+        self._audit_next = now + AUDIT_PERIOD_S
+        with self._token_lock:
+            mine = {(self.view.me, self.zid, cam) for cam in self._serving_tokens}
+        with self._lock:
+            members = set(self.view.members)
+            servers = self._servers | mine
+        report = self._audit.check(now, members, servers)
+        for line in lines(report.raised, now):
+            self.node.log.warning("pool: %s", line)
+        for finding in report.cleared[:MAX_LINES]:
+            self.node.log.info("pool: no longer so: %s", finding.detail)
+        self._gauge("pool_warnings", len(report.current))
+        return report
+
+    def _withdraw_serving(self) -> None:
+        """Undeclare every serving token (the caller holds _token_lock)."""
+        for token in self._serving_tokens.values():
+            token.undeclare()
+        self._serving_tokens.clear()
+
+    def _sync_serving(self, serving: frozenset[str]) -> None:
+        """One serving token for each camera of ``serving``, and none for another."""
+        keys, liveliness = self.node.keys, self.node.session.liveliness()
+        with self._token_lock:
+            if self._token is None:
+                return  # resigned or closed: it serves nothing until it is back
+            for cam in [c for c in self._serving_tokens if c not in serving]:
+                self._serving_tokens.pop(cam).undeclare()
+            for cam in sorted(serving - self._serving_tokens.keys()):
+                key = keys.pool_serving(self.view.me, self.zid, cam)
+                self._serving_tokens[cam] = liveliness.declare_token(key)
 
     def _on_member(self, sample: zenoh.Sample) -> None:
         self._member(str(sample.key_expr), joined=sample.kind == zenoh.SampleKind.PUT)
@@ -469,6 +549,7 @@ class PoolMember:
             self._subs[cam] = node.subscribe(key, partial(handlers.on_frame, cam))
         for cam in (*change.gained, *change.lost):
             self._gauge(per_camera("serving", cam), int(cam in change.serving))
+        self._sync_serving(change.serving)
         if self._handed_over:  # the first assignment, at start, is no hand-over
             for cam in change.gained:
                 count_for(node, cam, "cameras_gained")
@@ -496,10 +577,12 @@ class PoolMember:
         self._closed.set()
         if self._stall_watch is not None:
             self._stall_watch.join()
-        for sub in [*self._subs.values(), *((self._watch,) if self._watch else ())]:
+        watches = (w for w in (self._watch, self._serving_watch) if w is not None)
+        for sub in [*self._subs.values(), *watches]:
             sub.undeclare()
         self._subs.clear()
         with self._token_lock:
+            self._withdraw_serving()
             if self._token is not None:
                 self._token.undeclare()
                 self._token = None

@@ -22,10 +22,11 @@ from collections.abc import Iterable
 
 from common.contracts import CameraMetrics, MetricsAnswer, TimelineSeries
 from common.messages import Detections, Header, MetricsSnapshot, ServiceCounters, Twist
+from common.pool_audit import lines
 from common.settings import MAX_CAMERAS, service_package
 from services.metrics.cameras import BatchSizes, CameraCounters, ratio
 from services.metrics.figures import DETECTOR_STAGES, STAGES, Figures, LatencyListener
-from services.metrics.pool import Duplicates, workers
+from services.metrics.pool import Duplicates, LivePool, workers
 from services.metrics.reactions import Reaction, Reactions
 from services.metrics.window import Timeline
 
@@ -58,6 +59,7 @@ class Aggregator:
         max_classes: int = MAX_CLASSES,
         cameras: Iterable[str] = (),
         max_cameras: int = MAX_CAMERAS,
+        pool: LivePool | None = None,
     ) -> None:
         self.window_s = window_s
         self.max_counters_per_service = max_counters_per_service
@@ -78,6 +80,8 @@ class Aggregator:
         self._reported_at: dict[str, float] = {}  # service -> when its counters last came
         self._detector_counters_since: float | None = None  # ... and the detector's first came
         self._duplicates = Duplicates()  # frames detected twice (a pool's hand-over)
+        #: The pool's tokens (who serves which camera, what is wrong), when they are heard.
+        self.pool = pool
         self.model = ""  # as the latest Detections named them
         self.backend = ""
 
@@ -216,6 +220,8 @@ class Aggregator:
             counters = self._camera_counters[camera]
             batch_mean = self._batches.mean(counters.served_by) if counters.served_by else 0.0
             out[camera] = counters.figures(figures, now, batch_mean)
+            if self.pool is not None and self.pool.heard:
+                out[camera]["served_by"] = self.pool.served_by(camera)  # the live pool's word
             out[camera]["duplicate_detections"] = self._duplicates.per_camera.get(camera, 0)
         return out
 
@@ -261,8 +267,9 @@ class Aggregator:
                 detections_per_frame=[ratio(b, f) for b, f in zip(boxes, frames, strict=True)],
             ),
             cameras=self.cameras(now),
-            workers=workers(self._counters, self._figures, self._reported_at, now),
+            workers=workers(self._counters, self._figures, self._reported_at, now, self.pool),
             duplicate_detections=self._duplicates.total,
+            pool_warnings=[] if self.pool is None else lines(self.pool.report.current, now),
         )
 
     def latency_samples(self, now: float) -> dict[str, list[float]]:

@@ -1,9 +1,14 @@
-"""The detector pool as the metrics service sees it: each worker's cameras, load and hand-overs
-from its counters, and frames detected twice. Pure: no bus, no clock.
+"""The detector pool as the metrics service sees it: who is live and serves which camera, from
+the pool's liveliness tokens (:class:`LivePool`), and what is wrong with it (common/pool_audit.py);
+each worker's load and hand-overs from its counters; frames detected twice. Pure: no bus, no
+clock.
 
-A worker (``detector``, ``detector_<n>``) counts ``serving.<cam>`` (1 while it serves the
-camera), ``pool_load_permille``, ``pool_members``, ``cameras_gained`` and ``cameras_lost``
-(services/detector/service.py::PoolMember).
+A worker (``detector``, ``detector_<n>``) holds a pool token while in the pool and a serving
+token per camera it serves; it counts ``serving.<cam>`` (1 while it serves the camera),
+``pool_load_permille``, ``pool_members``, ``cameras_gained`` and ``cameras_lost``
+(services/detector/service.py::PoolMember). The tokens go when the worker does (at once when
+it exits or is killed, after Zenoh's lease when it hangs), so they, not the counters (a dead
+worker's last word), say who serves a camera.
 
 One worker never detects a frame twice (a frame leaves its camera's slot once), so a second
 Detections for the same camera and the same frame (its header's boot id, sequence number and
@@ -18,6 +23,7 @@ from collections.abc import Iterable, Mapping
 
 from common.contracts import WorkerMetrics
 from common.messages import Header
+from common.pool_audit import PoolAudit, Report, Serving
 from common.settings import service_package
 
 RECENT_FRAMES = 256  # frames remembered per camera: a hand-over's overlap is well under this
@@ -48,21 +54,69 @@ class Duplicates:
         return False
 
 
+class LivePool:
+    """The pool's tokens as heard now: its members and their serving tokens, and the audit of
+    them (:meth:`check`; ``report`` is the latest). Not thread-safe: the caller holds its lock."""
+
+    def __init__(self, audit: PoolAudit) -> None:
+        self.audit = audit
+        self.members: set[str] = set()
+        self.servers: set[Serving] = set()
+        self.heard = False  # a pool token was ever heard: the tokens, not counters, decide
+        self.report = Report()
+
+    def member(self, worker: str, *, live: bool) -> None:
+        self.heard = True
+        if live:
+            self.members.add(worker)
+        else:
+            self.members.discard(worker)
+
+    def serving(self, token: Serving, *, live: bool) -> None:
+        self.heard = True
+        if live:
+            self.servers.add(token)
+        else:
+            self.servers.discard(token)
+
+    def check(self, now: float) -> Report:
+        self.report = self.audit.check(now, self.members, self.servers)
+        return self.report
+
+    def served_by(self, camera: str) -> str:
+        """The live workers serving ``camera`` (", "-joined when two do: a warning)."""
+        return ", ".join(sorted({w for w, _, c in self.servers if c == camera}))
+
+    def cameras_of(self, worker: str) -> set[str]:
+        return {c for w, _, c in self.servers if w == worker}
+
+
 def workers(
     counters: Mapping[str, int],
     cameras: Iterable[str],
     reported_at: Mapping[str, float],
     now: float,
+    pool: LivePool | None = None,
 ) -> dict[str, WorkerMetrics]:
     """Each detector worker that counts ``serving``, from ``counters`` (``<service>.<name>``
-    -> value) and when its counters last came (``reported_at``)."""
+    -> value) and when its counters last came (``reported_at``); with ``pool`` (its tokens
+    heard), whether it is live and the cameras it serves come from its tokens: a worker that
+    has gone (exited, killed, hung past Zenoh's lease) is ``live: false`` and serves nothing."""
     cams = list(cameras)
     out: dict[str, WorkerMetrics] = {}
     for service in sorted(reported_at):
         if service_package(service) != "detector" or f"{service}.serving" not in counters:
             continue
+        if pool is not None and pool.heard:
+            live = service in pool.members
+            served = pool.cameras_of(service)
+            mine = [c for c in cams if c in served] + sorted(served - set(cams))
+        else:
+            live = True
+            mine = [c for c in cams if counters.get(f"{service}.serving.{c}", 0) > 0]
         out[service] = WorkerMetrics(
-            cameras=[c for c in cams if counters.get(f"{service}.serving.{c}", 0) > 0],
+            live=live,
+            cameras=mine,
             load=counters.get(f"{service}.pool_load_permille", 0) / 1000.0,
             members=counters.get(f"{service}.pool_members", 0),
             cameras_gained=counters.get(f"{service}.cameras_gained", 0),

@@ -23,9 +23,13 @@ from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, ServiceCounters, Twist
 from common.node import Node, Tally
+from common.pool_audit import MAX_LINES, PoolAudit, lines
+from common.pool_rule import camera_weights
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES, Config
+from services.metrics.advice import advise
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
+from services.metrics.pool import LivePool
 from services.metrics.trust import (
     PoolWorkers,
     refuse_counters,
@@ -49,6 +53,10 @@ class MetricsHandlers:
     ) -> None:
         s = self.settings = config.metrics
         self.tally = tally
+        d = config.detector
+        self.pool = LivePool(
+            PoolAudit(camera_weights(config.all_cameras), d.pool_balance, d.pool_alarm_s)
+        )
         self.agg = Aggregator(
             s.window_s,
             s.history_s,
@@ -56,6 +64,7 @@ class MetricsHandlers:
             max_counters_per_service=s.max_counters_per_service,
             max_classes=s.max_classes,
             cameras=config.all_cameras,
+            pool=self.pool,
         )
         #: The services whose counters are believed: this stack's (camera_<name> and the
         #: detector workers too) and, bounded, any other detector worker: another host's.
@@ -73,6 +82,34 @@ class MetricsHandlers:
             lambda m: self.agg.on_detections(m, mono_s(), camera=camera),
             lambda m, _k: refuse_detections(m, max_timing_ms),
         )  # fmt: skip
+
+    def on_pool_member(self, key: str, live: bool) -> None:
+        """A detector worker's pool token came (``live``) or went."""
+        with self.lock:
+            self.pool.member(key.rsplit("/", 1)[-1], live=live)
+        self.audit_pool()
+
+    def on_pool_serving(self, key: str, live: bool) -> None:
+        """A worker's serving token (common/keys.py::pool_serving) came or went."""
+        token = self.tally.keys.pool_serving_parts(key)
+        if token is None:
+            return
+        with self.lock:
+            self.pool.serving(token, live=live)
+        self.audit_pool()
+
+    def audit_pool(self) -> None:
+        """Check the pool's tokens (common/pool_audit.py): a WARNING for what has been wrong
+        for ``detector.pool_alarm_s``, a line when it clears; the answer shows what holds."""
+        now = mono_s()
+        with self.lock:
+            if not self.pool.heard:
+                return
+            report = self.pool.check(now)
+        for line in lines(report.raised, now):
+            self.tally.log.warning("pool: %s", line)
+        for finding in report.cleared[:MAX_LINES]:
+            self.tally.log.info("pool: no longer so: %s", finding.detail)
 
     def on_cmd_vel(self, payload: bytes) -> None:
         key = self.tally.keys.cmd_vel()
@@ -136,8 +173,11 @@ def run(config: Config, stop: threading.Event) -> int:
         agg, lock = handlers.agg, handlers.lock
 
         def answer() -> MetricsAnswer:
+            handlers.audit_pool()
             with lock:
-                return agg.answer(node.header(), mono_s(), mono_to_unix_s())
+                out = agg.answer(node.header(), mono_s(), mono_to_unix_s())
+            out["warnings"] = advise(config, out)
+            return out
 
         keys = node.keys
         # One subscriber per configured camera, so the camera is the one its key names;
@@ -159,13 +199,31 @@ def run(config: Config, stop: threading.Event) -> int:
                 keys.metrics(), strict_json(answer()), encoding=zenoh.Encoding.APPLICATION_JSON
             )
 
+        liveliness = node.session.liveliness()
+
+        def on_token(handle: Callable[[str, bool], None], sample: zenoh.Sample) -> None:
+            handle(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+
+        watches = [
+            liveliness.declare_subscriber(
+                keys.all_pool_members(), partial(on_token, handlers.on_pool_member), history=True
+            ),
+            liveliness.declare_subscriber(
+                keys.all_pool_serving(), partial(on_token, handlers.on_pool_serving), history=True
+            ),
+        ]
         queryable = node.session.declare_queryable(keys.metrics(), on_query)
         if exporter is not None:
             port = exporter.start(answer, s.prometheus_host, s.prometheus_port)
             node.log.info("prometheus metrics on http://%s:%d/metrics", s.prometheus_host, port)
         node.ready()
+        next_report = mono_s() + s.report_period_s
         try:
-            while not stop.wait(s.report_period_s):
+            while not stop.wait(min(s.report_period_s, config.detector.pool_alarm_s / 2)):
+                handlers.audit_pool()
+                if mono_s() < next_report:
+                    continue
+                next_report = mono_s() + s.report_period_s
                 with lock:
                     snap = agg.snapshot(node.header(), mono_s())
                 node.log.info("%s", report_line(snap))
@@ -173,7 +231,7 @@ def run(config: Config, stop: threading.Event) -> int:
             if exporter is not None:
                 exporter.close()
             queryable.undeclare()
-            for sub in subs:
+            for sub in [*subs, *watches]:
                 sub.undeclare()
     return 0
 

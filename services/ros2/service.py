@@ -3,7 +3,9 @@
 In:  sensor_msgs/Image or CompressedImage (``ros2.image_topic``) -> Frame on the camera key;
      sensor_msgs/LaserScan (``ros2.scan_topic``) -> the stack's LaserScan.
 Out: Detections -> vision_msgs/Detection2DArray (``ros2.detections_topic``);
-     the controller's Twist -> geometry_msgs/Twist or TwistStamped (``ros2.cmd_vel_topic``).
+     the controller's Twist -> geometry_msgs/Twist or TwistStamped (``ros2.cmd_vel_topic``),
+     only fresh, in order and from the controller; zero while its status says the e-stop is
+     engaged or it is silent (common/command_gate.py).
 
 Those image and detections topics are the first camera's (stack.camera); each further camera
 has its own, under ``ros2.camera_namespace`` (common.ros2_settings.camera_topics), each mapped
@@ -18,15 +20,15 @@ commands zero.
 
 from __future__ import annotations
 
-import dataclasses
 import threading
 
 import zenoh
 
 from common.bus import QoS
-from common.clock import mono_s
+from common.clock import BOOT_ID, mono_s, now
+from common.command_gate import CommandGate, Outcome
 from common.errors import DecodeError, ImageError
-from common.messages import Detections, Frame, Twist
+from common.messages import ControllerStatus, Detections, Frame, Twist
 from common.node import Node, Put, Tally
 from common.ros2_settings import ImageFormat, camera_topics
 from common.settings import Config
@@ -51,15 +53,6 @@ from services.ros2.images import (
     frame_to_compressed_image,
 )
 from services.ros2.wire import SENSOR_DATA_QOS
-
-_IDLE_S = 1.0  # how often the loop publishes counters and looks at the stop flag
-
-
-def command_in_range(twist: Twist, max_linear: float, max_angular: float) -> bool:
-    """Whether every component of ``twist`` is within the bounds (m/s, rad/s)."""
-    return all(abs(v) <= max_linear for v in twist.linear) and all(
-        abs(w) <= max_angular for w in twist.angular
-    )
 
 
 class RosInbound:
@@ -110,31 +103,59 @@ class DetectionsToRos:
 
 
 class CommandsToRos:
-    """The controller's Twist out as geometry_msgs Twist or TwistStamped CDR, through ``put``;
-    a command beyond ``ros2.max_command_*`` goes out as zero."""
+    """The controller's Twist out as geometry_msgs Twist or TwistStamped CDR, through ``put``,
+    only as common/command_gate.py allows: fresh, in order, from the controller; zero while
+    its status says the e-stop is engaged or is not fresh, or when the command is beyond
+    ``ros2.max_command_*``; and one zero of its own when the controller goes silent. The
+    window is the controller's dead-man (``controller.detection_timeout_s``).
+
+    Called from Zenoh's threads (commands, statuses) and the service loop (``on_tick``): one
+    lock keeps the gate and the order of what goes out."""
 
     def __init__(self, config: Config, tally: Tally, put: Put) -> None:
         self.settings = config.ros2
         self.tally = tally
         self.put = put
         self.ros_type = TWIST_STAMPED if self.settings.twist_stamped else TWIST
+        self.gate = CommandGate(
+            window_s=config.controller.detection_timeout_s,
+            tolerance_s=config.stack.clock_tolerance_s,
+            boot_id=BOOT_ID,
+            max_linear=self.settings.max_command_linear,
+            max_angular=self.settings.max_command_angular,
+            source=tally.service,
+        )
+        self._lock = threading.Lock()
 
     def on_cmd_vel(self, payload: bytes) -> None:
-        s = self.settings
         twist = self.tally.decode(self.tally.keys.cmd_vel(), Twist.decode, payload)
-        if twist is None:
-            return
-        if not command_in_range(twist, s.max_command_linear, s.max_command_angular):
-            # When in doubt, zero: the robot gets a stop, never the absurd command.
-            self.tally.reject(
-                "commands_out_of_range",
-                f"cmd_vel {twist.linear} {twist.angular} from {twist.header.source!r} "
-                "is beyond ros2.max_command_*: the robot is sent zero",
-            )
-            twist = dataclasses.replace(twist, linear=(0.0,) * 3, angular=(0.0,) * 3)
-        msg = twist_to_ros(s.distro, twist, stamped=s.twist_stamped)
-        self.put(cdr_encode(s.distro, self.ros_type, msg))
-        self.tally.counters.add("commands_out")
+        if twist is not None:
+            with self._lock:
+                self._act(self.gate.on_command(twist, now()))
+
+    def on_status(self, payload: bytes) -> None:
+        key = self.tally.keys.controller_status()
+        status = self.tally.decode(key, ControllerStatus.decode, payload)
+        if status is not None:
+            with self._lock:
+                self._act(self.gate.on_status(status, now()))
+
+    def on_tick(self) -> None:
+        with self._lock:
+            self._act(self.gate.on_tick(now()))
+
+    def on_close(self) -> None:
+        with self._lock:
+            self._act(self.gate.on_close(now()))
+
+    def _act(self, outcome: Outcome) -> None:
+        if outcome.counter:
+            self.tally.reject(outcome.counter, outcome.why)
+        if outcome.send is not None:
+            s = self.settings
+            msg = twist_to_ros(s.distro, outcome.send, stamped=s.twist_stamped)
+            self.put(cdr_encode(s.distro, self.ros_type, msg))
+            self.tally.counters.add("commands_out")
 
 
 class DebugImages:
@@ -213,19 +234,27 @@ def run(config: Config, stop: threading.Event) -> int:
             scans = node.publisher(keys.scan(), QoS.SENSOR)
             scan_in = RosInbound(config, node, LASER_SCAN, s.scan_topic, scans.put)
             graph.subscribe(s.scan_topic, LASER_SCAN, scan_in.on_payload, SENSOR_DATA_QOS)
+        cmds_out: CommandsToRos | None = None
         if s.cmd_vel_out:
             twist_type = TWIST_STAMPED if s.twist_stamped else TWIST
             cmd_pub = graph.publisher(s.cmd_vel_topic, twist_type)
             cmds_out = CommandsToRos(config, node, cmd_pub.put_cdr)
             subs.append(node.subscribe(keys.cmd_vel(), cmds_out.on_cmd_vel))
+            subs.append(node.subscribe(keys.controller_status(), cmds_out.on_status))
         node.log.info(
             "in the ROS 2 graph (%s, domain %d) via %s as %s%s",
             s.distro, s.domain_id, ", ".join(s.router), s.namespace.rstrip("/"), s.node,
         )  # fmt: skip
         node.ready()
         try:
-            while not stop.wait(_IDLE_S):
+            # At the controller's rate: a silent controller's last command is stopped within
+            # one period of outliving the window.
+            while not stop.wait(1.0 / config.controller.control_rate_hz):
+                if cmds_out is not None:
+                    cmds_out.on_tick()
                 node.publish_counters()
+            if cmds_out is not None:
+                cmds_out.on_close()
         finally:
             for sub in subs:
                 sub.undeclare()

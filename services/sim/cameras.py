@@ -1,9 +1,12 @@
 """The cameras the simulator renders: every camera of the config, from the same world. Pure.
 
 The first camera (``stack.camera``, the [camera] table) is rendered as a one-camera simulator
-always rendered it: ``sim.width`` x ``sim.height`` at ``sim.camera_rate_hz``. Each further
-camera (``[cameras.<name>]``) is rendered at its own ``rate_hz``, and at its ``resize`` when it
-sets one, else at the simulator's size. Every camera has its own field of view
+always rendered it: ``sim.width`` x ``sim.height`` at ``sim.camera_rate_hz``. A further camera
+(``[cameras.<name>]``) with a ``rate_hz`` of its own (one that differs from [camera]'s) is
+rendered at that rate; one with [camera]'s rate, which it has unless it states another, is
+rendered at the first camera's, ``sim.camera_rate_hz``: each at the rate the first runs at,
+not some at [camera]'s and the first at the simulator's. It is rendered at its ``resize`` when
+it sets one, else at the simulator's size. Every camera has its own field of view
 (``hfov_deg``), mounting yaw (``mount_yaw_deg``), ``frame_id`` and ``jpeg_quality``; all stand
 at the robot's centre, ``sim.camera_height_m`` above the floor. Frames are rendered in
 scenario time, so no camera is rendered more often than ``sim.physics_hz``.
@@ -36,6 +39,7 @@ def sim_cameras(config: Config) -> list[SimCamera]:
         first = name == config.stack.camera
         width, height = (s.width, s.height) if first or c.resize == (0, 0) else c.resize
         spec = CameraSpec(width, height, c.hfov_deg, s.camera_height_m, c.mount_yaw_deg)
-        rate = s.camera_rate_hz if first else c.rate_hz
+        own_rate = not first and c.rate_hz != config.camera.rate_hz
+        rate = c.rate_hz if own_rate else s.camera_rate_hz
         out.append(SimCamera(name, spec, rate, c.frame_id, c.jpeg_quality))
     return out

@@ -70,9 +70,9 @@ class Scenario:
 
 
 # The rear camera of the scenarios that look behind the robot: the front camera turned round,
-# at the simulator's camera rate (a further camera is rendered at its own rate_hz), with a
-# frame id of its own.
-REAR_CAMERA: dict[str, Any] = {"mount_yaw_deg": 180.0, "rate_hz": 5.0, "frame_id": "camera_rear"}
+# with a frame id of its own. It states no rate, so it is rendered at the first camera's
+# (services/sim/cameras.py).
+REAR_CAMERA: dict[str, Any] = {"mount_yaw_deg": 180.0, "frame_id": "camera_rear"}
 
 
 SCENARIOS: dict[str, Scenario] = {

@@ -17,6 +17,7 @@ from foxglove.websocket import WebSocketServer
 
 from common.clock import mono_s
 from common.contracts import MetricsAnswer
+from common.credential_modes import check_folder, check_secret
 from common.errors import ConfigError, ImageError
 from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
 from common.node import Node, Tally
@@ -45,6 +46,8 @@ def viewer_token(config: Config) -> str | None:
     if config.zenoh.auth == "none":
         return None
     path = viewer_token_file(config.zenoh.credentials_path)
+    check_folder(path.parent)
+    check_secret(path)
     try:
         token = path.read_text().strip()
     except OSError as exc:

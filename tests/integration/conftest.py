@@ -70,7 +70,10 @@ def write_config(tmp: Path, **tables: dict[str, Any]) -> Path:
         "camera": {"source": "sample:cameraman", "rate_hz": 5.0},
         "supervisor": {"status_period_s": 1.0, "restart_backoff_s": 0.2},
         # Each test's e-stop state of its own: a latched stop must not leak into the next test.
-        "controller": {"estop_file": str(tmp / "estop.json")},
+        # These stacks drive towards the sample photo's cameraman in track mode, and a camera
+        # stack has no laser: said on purpose, as on a robot without one (a test of the laser
+        # rules sets no_laser = false; a scan that does come, as the simulator's, is obeyed).
+        "controller": {"estop_file": str(tmp / "estop.json"), "mode": "track", "no_laser": True},
     }
     for name, values in tables.items():
         base.setdefault(name, {}).update(values)

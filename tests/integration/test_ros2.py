@@ -167,13 +167,17 @@ def test_a_ros2_robot_feeds_the_stack_and_obeys_it(make_stack, tmp_path: Path) -
         )
 
         # An absurd command on the stack's cmd_vel (anyone may put there without the secure
-        # profile) reaches the robot as zero, never as it is.
+        # profile, and say they are the controller) reaches the robot as zero, never as it is.
         rogue = stack.session.declare_publisher(stack.keys.cmd_vel())
-        absurd = Twist(header=Header(stamp_ns=time.time_ns(), frame_id="base_link", seq=1,
-                                     source="rogue"), linear=(50.0, 0.0, 0.0))  # fmt: skip
+
+        def absurd() -> Twist:  # fresh each time: a stale or repeated one is not even sent
+            header = Header(stamp_ns=time.time_ns(), frame_id="base_link", seq=1,
+                            source="controller")  # fmt: skip
+            return Twist(header=header, linear=(50.0, 0.0, 0.0))
+
         wait_for(
             lambda: (
-                rogue.put(absurd.encode())
+                rogue.put(absurd().encode())
                 or (
                     counts
                     and ServiceCounters.decode(counts[-1]).counters.get("commands_out_of_range", 0)

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from common.clock import now
-from common.messages import ControllerStatus, EStop
+from common.messages import ControllerStatus, EStop, Twist
 from tests.integration.conftest import REPO, Stack, wait_for
 from tests.integration.test_safety import STACK, header, moving, pause, restart_controller
 
@@ -135,4 +135,37 @@ def test_an_engage_stamped_a_century_ahead_can_be_released(make_stack) -> None: 
     restart_controller(stack)
     after = len(cmds)
     wait_for(lambda: moving(cmds, after), 30, "motion after the controller's restart")
+    assert stack.stop() == 0, stack.log()
+
+
+def test_an_engage_stops_at_once_not_at_the_next_control_tick(make_stack) -> None:  # type: ignore[no-untyped-def]
+    # One control tick a second (the slowest rate allowed) and no detections to wake the loop
+    # between ticks: a stop sent just after a tick must not wait for the next one.
+    stack: Stack = make_stack(
+        supervisor={"services": ["controller"]}, controller={"control_rate_hz": 1.0}
+    )
+    period_ns = 10**9
+    stack.wait_ready({"controller"})
+    _, cmds = stack.subscribe(stack.keys.cmd_vel())
+    _, statuses = stack.subscribe(stack.keys.controller_status())
+    wait_for(lambda: len(statuses) >= 2, 30, "two control ticks")
+    ticked = len(statuses)
+    wait_for(lambda: len(statuses) > ticked, 30, "a control tick")
+    at = now()  # just after a tick: the next is about a second away
+    engage = EStop(header=header(at.wall_ns, "test", at.mono_ns), engaged=True, reason="test")
+    stack.session.put(stack.keys.estop(), engage.encode())
+    [stopped, *_] = wait_for(
+        lambda: [s for s in statuses_of(statuses) if s.state == "estop"], 30, "the e-stop status"
+    )
+    last_tick = max(
+        s.header.stamp_ns for s in statuses_of(statuses) if s.header.stamp_ns <= at.wall_ns
+    )
+    # The next tick could not come before last_tick + period: well before it, the stop is out.
+    soon = last_tick + period_ns // 2
+    zeros = [t for t in map(Twist.decode, list(cmds)) if at.wall_ns <= t.header.stamp_ns < soon]
+    assert zeros and all(t.is_zero for t in zeros), (
+        f"no command within {(soon - at.wall_ns) / 1e9:.2f} s of the engage; the e-stop's "
+        f"status came {(stopped.header.stamp_ns - last_tick) / 1e9:.2f} s after the last tick"
+    )
+    assert stopped.header.stamp_ns < soon, "the e-stop's status waited for the next tick"
     assert stack.stop() == 0, stack.log()

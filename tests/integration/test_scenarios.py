@@ -74,8 +74,11 @@ def test_two_people_lock_holds_on_alice() -> None:
     assert result["success"], result
 
 
-def test_obstacle_is_never_closer_than_the_safety_distance() -> None:
-    result = run("obstacle")
+@pytest.mark.parametrize("mode", ["follow", "track"])
+def test_obstacle_is_never_closer_than_the_safety_distance(mode: str) -> None:
+    # Track mode obeys the same obstacle stop as follow (it drove into the box before).
+    result = run("obstacle", "--mode", mode)
+    assert result["mode"] == mode, result
     assert result["min_clearance_m"] >= DEFAULTS.safety_distance_m, result
     assert result["success"], result
 

@@ -17,7 +17,15 @@ from typing import Any
 import numpy as np
 
 from common.counters import per_camera
-from common.messages import Detections, EStop, Frame, LaserScan, ServiceCounters, Twist
+from common.messages import (
+    ControllerStatus,
+    Detections,
+    EStop,
+    Frame,
+    LaserScan,
+    ServiceCounters,
+    Twist,
+)
 from common.node import Tally
 from common.settings import Config, ControllerSettings, Ros2Settings, SimSettings
 from services.controller.service import ControllerHandlers
@@ -111,6 +119,7 @@ def test_the_ros2_bridges_handlers() -> None:
     message_handler(tally, debug.on_detections, keys.detections(camera), Detections)
     message_handler(tally, dets_out.on_detections, keys.detections(camera), Detections)
     message_handler(tally, cmds_out.on_cmd_vel, keys.cmd_vel(), Twist)
+    message_handler(tally, cmds_out.on_status, keys.controller_status(), ControllerStatus)
     message_handler(tally, debug.on_frame, keys.frame(camera), Frame)
     images = [frame_to_image(s.distro, f) for f in fresh[Frame] if f.encoding != "jpeg"]
     image_in = RosInbound(config, tally, IMAGE, s.image_topic, sent.append)

@@ -1,11 +1,12 @@
-"""python -m tools.benchmarks recorder|ros2|scale|pool|estop [options]
+"""python -m tools.benchmarks recorder|ros2|scale|pool|batch|estop [options]
 
 recorder runs the default stack with and without the recorder, side by side; ros2 measures
 what the ROS 2 bridge adds against the direct path; scale runs 1, 2, 4, 8 cameras on one
 detector against as many one-camera stacks, batched and batch 1; pool runs 4 and 8 cameras on 1
 and 2 detector workers, times the hand-over after a worker's SIGKILL and the assignment under
-uneven load; estop times ``zstack estop engage``'s start to its first put against another
-revision. (The detector's own benchmark is
+uneven load; batch times one backend per image at batch 1, 2, 4 ... (the whole detection and
+the model alone) with the choice the detector would make; estop times ``zstack estop
+engage``'s start to its first put against another revision. (The detector's own benchmark is
 ``python -m tools.detector benchmark``.)
 """
 
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 from collections.abc import Callable
 
 from common.cli import Command, options_from, service_main
@@ -161,6 +163,41 @@ def pool(args: argparse.Namespace) -> int:
     return run(options_from(PoolOptions, args, as_json=args.json), stop)
 
 
+def _batch_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--model", help="ONNX model (default: the YOLOv5s COCO model, fetched)")
+    p.add_argument(
+        "--backend", default="onnx", help="onnx, cuda, tensorrt or openvino (default onnx)"
+    )
+    p.add_argument("--largest", type=int, default=8, help="the largest batch timed (default 8)")
+    p.add_argument("--runs", type=int, default=20, help="timed runs of each size (default 20)")
+    p.add_argument(
+        "--min-gain",
+        type=float,
+        default=0.2,
+        help="what a batch must save per image to be chosen (default 0.2: detector.batch_min_gain)",
+    )
+    p.add_argument(
+        "--precision", help="the backend's precision where it has a choice (cuda: fp16 or fp32)"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def batch(args: argparse.Namespace) -> int:
+    stop = stop_event()
+    setup_logging("batch-bench", "WARNING")
+    from pathlib import Path
+
+    from modelprep.files import ensure_default_model
+    from tools.benchmarks import batch_sizes as bench
+
+    model = Path(args.model) if args.model else ensure_default_model()
+    extra = {"precision": args.precision} if args.precision else {}
+    options = bench.BatchOptions(
+        model, args.backend, args.largest, args.runs, args.min_gain, extra, args.json
+    )
+    return bench.run(options, stop, lambda line: print(line, file=sys.stderr, flush=True))
+
+
 def _estop_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=20, help="starts of each revision (default 20)")
     p.add_argument(
@@ -186,6 +223,8 @@ COMMANDS = [
             _scale_arguments, scale),
     Command("pool", "4 and 8 cameras on 1 and 2 detector workers; hand-over after SIGKILL",
             _pool_arguments, pool),
+    Command("batch", "time per image by batch size on one backend, and the detector's choice",
+            _batch_arguments, batch),
     Command("estop", "how soon zstack estop puts its first EStop, against another revision",
             _estop_arguments, estop),
 ]  # fmt: skip

@@ -1,4 +1,4 @@
-"""python -m tools.scenarios scenario NAME [--json] [--ros2] [--config FILE]
+"""python -m tools.scenarios scenario NAME [--json] [--ros2] [--mode follow|track] [--config FILE]
 python -m tools.scenarios list
 python -m tools.scenarios soak [--duration S] [--flood-hz HZ] [--json] [--config FILE]
 
@@ -17,7 +17,7 @@ from typing import Any
 
 from common.cli import Command, add_config, service_main
 from common.config_file import load_config
-from common.contracts import ScenarioResult
+from common.contracts import ControllerMode, ScenarioResult
 from common.lifecycle import run_main, setup_logging
 
 
@@ -25,7 +25,8 @@ def _print_text(r: ScenarioResult) -> None:
     def fmt(v: Any) -> str:
         return "-" if v is None else f"{v:.2f}" if isinstance(v, float) else str(v)
 
-    print(f"scenario {r['scenario']}: {'PASS' if r['success'] else 'FAIL'}")
+    mode = f" ({r['mode']} mode)" if r.get("mode") else ""
+    print(f"scenario {r['scenario']}{mode}: {'PASS' if r['success'] else 'FAIL'}")
     for key in (
         "time_to_reach_s",
         "final_distance_m",
@@ -62,6 +63,12 @@ def _scenario_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="play a ROS 2 robot: every frame, scan and command through the ros2 bridge",
     )
+    p.add_argument(
+        "--mode",
+        choices=[m.value for m in ControllerMode],
+        default=ControllerMode.FOLLOW.value,
+        help="the controller's mode (default follow)",
+    )
 
 
 def scenario(args: argparse.Namespace) -> int:
@@ -72,7 +79,11 @@ def scenario(args: argparse.Namespace) -> int:
     from tools.scenarios.runner import run_scenario
 
     result = run_scenario(
-        config, args.name, log=lambda m: print(m, file=sys.stderr), ros2=args.ros2
+        config,
+        args.name,
+        log=lambda m: print(m, file=sys.stderr),
+        ros2=args.ros2,
+        mode=ControllerMode(args.mode),
     )
     if args.json:
         print(json.dumps(result))

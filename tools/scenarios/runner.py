@@ -1,7 +1,8 @@
 """``python -m tools.scenarios scenario NAME``: run the real stack against a scripted world.
 
 The runner writes a private stack config (a free port, a unique key prefix, the simulator in
-place of the camera, the controller in follow mode, the scenario's own further cameras and
+place of the camera, the controller in follow mode (or the mode asked for), the scenario's own
+further cameras and
 detector changes), starts it under the supervisor, records the truth, the commands, and every
 camera's frames and detections, stops it, and scores the run (tools/scenarios/score.py).
 """
@@ -36,9 +37,15 @@ STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
 STOP_TIMEOUT_S = 30.0  # then the whole stack is killed
 
 
-def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Config:
-    """``base`` made private to one run of ``scenario``. With ``ros2`` the simulator plays a
-    ROS 2 robot on a private router, and the ``ros2`` bridge carries its sensors and commands.
+def scenario_config(
+    base: Config,
+    scenario: Scenario,
+    ros2: bool = False,
+    mode: ControllerMode = ControllerMode.FOLLOW,
+) -> Config:
+    """``base`` made private to one run of ``scenario``, the controller in ``mode``. With
+    ``ros2`` the simulator plays a ROS 2 robot on a private router, and the ``ros2`` bridge
+    carries its sensors and commands.
     The cameras are ``base``'s first camera and the scenario's further ones (each laid over
     [camera], as a ``[cameras.<name>]`` table is), whatever further cameras ``base`` has: a
     scenario is seen by the same cameras on every machine."""
@@ -50,7 +57,7 @@ def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Con
     )
     controller = dataclasses.replace(
         base.controller,
-        mode=ControllerMode.FOLLOW,
+        mode=mode,
         target_classes=("person",),
         **scenario.controller,
     )
@@ -85,7 +92,7 @@ def scenario_config(base: Config, scenario: Scenario, ros2: bool = False) -> Con
 #: Why the runner changes these settings for every scenario (those of the scenario itself
 #: give the scenario's reason).
 RUNNER_REASONS = {
-    "controller.mode": "every scenario follows its target",
+    "controller.mode": "a scenario runs in the mode asked: --mode, default follow",
     "controller.target_classes": "every scenario's target is a person",
     "supervisor.services": "a scenario runs its own stack: the simulator, detector, controller "
     "and metrics",
@@ -174,14 +181,21 @@ def record_into(
     return subs
 
 
-def run_scenario(base: Config, name: str, log: Any = None, ros2: bool = False) -> ScenarioResult:
-    """Run scenario ``name`` on the real stack (``ros2``: through the ROS 2 bridge, the
-    simulator playing a ROS 2 robot); returns its figures (see score.py)."""
+def run_scenario(
+    base: Config,
+    name: str,
+    log: Any = None,
+    ros2: bool = False,
+    mode: ControllerMode = ControllerMode.FOLLOW,
+) -> ScenarioResult:
+    """Run scenario ``name`` on the real stack with the controller in ``mode`` (``ros2``:
+    through the ROS 2 bridge, the simulator playing a ROS 2 robot); returns its figures (see
+    score.py)."""
     if name not in SCENARIOS or name == "demo":
         known = ", ".join(n for n in SCENARIOS if n != "demo")
         raise StackError(f"unknown scenario {name!r}; choose one of {known}")
     scenario = SCENARIOS[name]
-    config = scenario_config(base, scenario, ros2)
+    config = scenario_config(base, scenario, ros2, mode)
     if log is not None:
         for line in config_changes(base, config, scenario):
             log(f"{name}: changed from your config: {line}")
@@ -204,6 +218,7 @@ def run_scenario(base: Config, name: str, log: Any = None, ros2: bool = False) -
         finally:
             stop_supervisor(proc, STOP_TIMEOUT_S)  # whatever happened, never leave it running
     result = score(scenario, rec, scenario.build(), config.controller, config.camera.hfov_deg)
+    result["mode"] = str(config.controller.mode)
     result["log"] = str(workdir / "stack.log")
     result["supervisor_exit_code"] = proc.returncode
     return result

@@ -243,7 +243,7 @@ WIRE_KEYS = {
         "header", "angle_min", "angle_increment", "range_min", "range_max", "n", "ranges"
     },
     "ControllerStatus": {"header", "mode", "target", "state", "reason", "track_id",
-                         "estop_saved", "camera", "stale_cameras"},
+                         "estop_saved", "camera", "stale_cameras", "no_laser"},
     "ServiceCounters": {"header", "service", "counters"},
     "EStop": {"header", "engaged", "reason"},
     "GroundTruth": {

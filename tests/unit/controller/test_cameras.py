@@ -13,7 +13,7 @@ import pytest
 
 from common.boxes import Boxes
 from common.clock import BOOT_ID, now
-from common.messages import Detections, Header, LaserScan
+from common.messages import Detections, EStop, Header, LaserScan
 from common.node import Tally
 from common.settings import CameraSettings, Config, ControllerSettings
 from services.controller.geometry import focal_px, in_view, robot_bearing, wrap
@@ -278,3 +278,20 @@ def test_handlers_keep_each_cameras_detections_apart(tmp_path: Path) -> None:
     assert c["detections_in"] == 2 and c["detections_in.rear"] == c["detections_in.front"] == 1
     assert c["detections_replay"] == c["detections_replay.rear"] == 1
     assert handlers.arrived.is_set()
+
+
+def test_an_engage_halts_from_the_handler_then_reports(tmp_path: Path) -> None:
+    config = Config(controller=ControllerSettings(estop_file=str(tmp_path / "estop.json")))
+    calls: list[str] = []
+    handlers = ControllerHandlers(
+        config,
+        Tally("controller", config),
+        halt=lambda: calls.append(f"halt engaged={handlers.latch.engaged}"),
+        halted=lambda: calls.append(f"halted saved={handlers.latch.saved}"),
+    )
+    at = now()
+    h = Header(stamp_ns=at.wall_ns, frame_id="", seq=1, source="estop-cli")
+    handlers.on_estop(EStop(header=h, engaged=True, reason="test").encode())
+    assert calls == ["halt engaged=True", "halted saved=True"]
+    handlers.on_estop(b"garbage")  # fails safe: a press, acted on at once all the same
+    assert calls[2:] == ["halt engaged=True", "halted saved=True"]

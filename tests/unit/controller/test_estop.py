@@ -104,3 +104,15 @@ def test_a_latch_that_cannot_be_saved_starts_and_stays_engaged(tmp_path: Path) -
     blocker.unlink()
     assert latch.release(LATEST, "estop-cli") and not latch.engaged and latch.saved
     assert not EStopLatch(path, LATEST).engaged
+
+
+def test_the_stop_goes_out_once_latched_in_memory_before_it_is_saved(tmp_path: Path) -> None:
+    latch = EStopLatch(tmp_path / "estop.json", LATEST)
+    seen: list[tuple[bool, bool]] = []  # (engaged in memory, engaged on disk) when called
+
+    def latched() -> None:
+        seen.append((latch.engaged, EStopLatch(latch.path, LATEST).engaged))
+
+    assert latch.engage(100, "estop-cli", "", LATEST, latched)
+    assert seen == [(True, False)]  # the zero is sent before the disk is touched
+    assert EStopLatch(latch.path, LATEST).engaged

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from common.boxes import Boxes
+from common.config_file import load_config
+from common.errors import ConfigError
 from common.messages import Detections, Header, LaserScan
 from common.settings import CameraSettings, ControllerSettings
 from services.controller.geometry import (
@@ -118,10 +121,50 @@ def test_track_turns_towards_most_central_confident_target() -> None:
 
 
 def test_track_drives_forward_only_when_centred() -> None:
-    cmd = step(TRACK, dets(("person", 0.9, W / 2 + 10, 240, 50, 100)))
+    cmd = step(TRACK, dets(("person", 0.9, W / 2 + 10, 240, 50, 100)), scan(5.0))
     assert cmd.linear_x == TRACK.forward_speed and cmd.state == "tracking"
-    left = step(TRACK, dets(("person", 0.9, 100, 240, 50, 100)))
+    left = step(TRACK, dets(("person", 0.9, 100, 240, 50, 100)), scan(5.0))
     assert left.angular_z > 0 and left.linear_x == 0.0
+
+
+@pytest.mark.parametrize("ahead_m", [0.1, 0.2, 0.3, TRACK.safety_distance_m])
+def test_track_never_drives_towards_an_obstacle(ahead_m: float) -> None:
+    # A centred person beyond the obstacle, and a person off to the left: no forward motion,
+    # but turning towards the target is still allowed.
+    cmd = step(TRACK, dets(("person", 0.9, W / 2 + 10, 240, 50, 100)), scan(ahead_m))
+    assert cmd.linear_x == 0.0 and cmd.state == "blocked" and "obstacle" in cmd.reason
+    left = step(TRACK, dets(("person", 0.9, 200, 240, 50, 100)), scan(ahead_m))
+    assert left.linear_x == 0.0 and left.angular_z > 0
+
+
+def test_track_never_drives_without_a_recent_scan() -> None:
+    d = dets(("person", 0.9, W / 2 + 10, 240, 50, 100))
+    blind = step(TRACK, d)
+    assert blind.linear_x == 0.0 and blind.state == "blocked", blind
+    assert blind.angular_z != 0.0  # turning in place is still allowed
+    ctl = Controller(TRACK, FRONT)
+    old = ctl.step(one(d, 0.0, scan(5.0), TRACK.scan_timeout_s + 0.01), now=1.0)
+    assert old.linear_x == 0.0 and old.reason == "no recent laser scan", old
+
+
+def test_no_laser_is_the_only_way_to_drive_without_a_scan() -> None:
+    d = dets(("person", 0.9, W / 2 + 10, 240, 50, 100))
+    for mode in ("track", "follow"):
+        s = dataclasses.replace(TRACK, mode=mode, no_laser=True)
+        far = dets(("person", 0.9, 320, 240, 60, FAR)) if mode == "follow" else d
+        assert step(s, far).linear_x > 0, mode
+        # A scan that does come is still obeyed.
+        assert step(s, far, scan(0.2)).state == "blocked", mode
+        # A target out of view (held briefly) is not driven on to without a scan.
+        ctl = Controller(s, FRONT)
+        ctl.step(one(far, 0.0), now=0.0)
+        held = ctl.step(one(dets(), 0.0), now=0.1)
+        assert held.state == "holding" and held.linear_x == 0.0, mode
+
+
+def test_no_laser_with_the_laser_for_distance_is_refused() -> None:
+    with pytest.raises(ConfigError, match="no_laser"):
+        ControllerSettings(mode="follow", distance_source="laser", no_laser=True)  # type: ignore[arg-type]
 
 
 def test_uses_the_image_width_from_the_message() -> None:
@@ -138,8 +181,8 @@ def test_acceleration_is_limited_between_ticks() -> None:
     s = dataclasses.replace(TRACK, max_linear_accel=1.0, max_angular_accel=2.0)
     ctl = Controller(s, FRONT)
     d = dets(("person", 0.9, 330, 240, 50, 100))
-    first = ctl.step(one(d, 0.0), now=0.0)  # first tick: one nominal period (1/20 s)
-    second = ctl.step(one(d, 0.0), now=0.1)
+    first = ctl.step(one(d, 0.0, scan(5.0), 0.0), now=0.0)  # first tick: one period (1/20 s)
+    second = ctl.step(one(d, 0.0, scan(5.0), 0.0), now=0.1)
     assert first.linear_x == pytest.approx(0.05) and second.linear_x == pytest.approx(0.15)
 
 
@@ -229,7 +272,7 @@ def test_stale_or_missing_detections_and_estop_command_zero_at_once() -> None:
     ctl = Controller(dataclasses.replace(TRACK, max_linear_accel=0.1), FRONT)
     d = dets(("person", 0.9, 320, 240, 50, 100))
     for t in range(20):
-        moving = ctl.step(one(d, 0.0), now=t * 0.1)
+        moving = ctl.step(one(d, 0.0, scan(5.0), 0.0), now=t * 0.1)
     assert moving.linear_x > 0
     stale = ctl.step(one(d, TRACK.detection_timeout_s + 0.01), now=2.1)
     assert stale.is_zero and stale.state == "stale"  # no deceleration ramp for a stop
@@ -312,3 +355,21 @@ def test_corridor_with_rays_at_infinity_raises_no_numpy_warning() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # "invalid value encountered in multiply" fails here
         assert corridor_clearance(scan, 0.3) == pytest.approx(2.0)
+
+
+def test_the_code_and_the_default_stack_file_drive_in_one_mode() -> None:
+    stack_file = Path(__file__).resolve().parents[3] / "deploy" / "stack.toml"
+    assert load_config(stack_file, environ={}).controller.mode == ControllerSettings().mode
+
+
+def test_after_a_stalled_tick_the_room_to_brake_is_for_the_speed_it_may_now_command() -> None:
+    # At rest, 0.55 m from an obstacle (beyond the 0.5 m safety distance). The next tick comes
+    # 0.6 s late (a loaded machine): the acceleration limit would allow 0.3 m/s at once, and
+    # 0.3 m/s needs more room than 0.05 m. Judged by the speed before the stall (0), it drove.
+    s = dataclasses.replace(TRACK, max_linear_accel=1.0)
+    ctl = Controller(s, FRONT)
+    d = dets(("person", 0.9, W / 2 + 10, 240, 50, 100))
+    assert ctl.step(one(d, 0.0, scan(0.55), 0.0), now=0.0).state == "tracking"  # 0.05 m/s
+    ctl.previous = (0.0, 0.0)  # at rest
+    late = ctl.step(one(d, 0.0, scan(0.55), 0.0), now=0.6)
+    assert late.linear_x == 0.0 and late.state == "blocked", late

@@ -147,6 +147,23 @@ def test_an_existing_open_folder_and_files_become_private(tmp_path: Path) -> Non
     assert _mode(users_file(directory)) == 0o600
 
 
+def test_modes_do_not_depend_on_the_umask_and_pass_the_start_up_check(tmp_path: Path) -> None:
+    import os
+
+    from common.credential_modes import check_credentials_folder
+
+    directory = tmp_path / "secrets"
+    old = os.umask(0)  # the loosest: mkdir and open would give 0777 and 0666
+    try:
+        written = generate(directory)
+    finally:
+        os.umask(old)
+    assert _mode(directory) == 0o700
+    assert {_mode(p) for p in written if p.suffix != ".pem"} == {0o600}
+    assert {_mode(p) for p in written if p.suffix == ".pem"} == {0o644}
+    check_credentials_folder(directory)  # what the supervisor checks before it starts
+
+
 def test_a_link_in_the_folder_is_not_followed(tmp_path: Path) -> None:
     directory, elsewhere = tmp_path / "secrets", tmp_path / "elsewhere"
     directory.mkdir()

@@ -105,7 +105,9 @@ def test_each_worker_is_a_principal_that_announces_only_itself() -> None:
     assert set(workers) <= set(everyone["usernames"])
     for w in workers:
         rule = next(r for r in acl["rules"] if r["id"] == f"{w}_token")
-        assert set(rule["key_exprs"]) == {keys.health(w), keys.pool_member(w)}
+        assert set(rule["key_exprs"]) == {
+            keys.health(w), keys.pool_member(w), keys.pool_serving_of(w),
+        }  # fmt: skip
         assert set(may_announce(keys, cameras, w, workers=workers)) == set(rule["key_exprs"])
         # Every camera's detections (any worker may serve any camera), its counters, no frame.
         assert set(may_put(keys, cameras, w, workers=workers)) == {
@@ -114,4 +116,6 @@ def test_each_worker_is_a_principal_that_announces_only_itself() -> None:
     # The one detector of a one-worker stack is as it was.
     acl = access_control(keys, "front", "password")
     rule = next(r for r in acl["rules"] if r["id"] == "detector_token")
-    assert set(rule["key_exprs"]) == {keys.health("detector"), keys.pool_member("detector")}
+    assert set(rule["key_exprs"]) == {
+        keys.health("detector"), keys.pool_member("detector"), keys.pool_serving_of("detector"),
+    }  # fmt: skip

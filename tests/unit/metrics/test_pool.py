@@ -4,7 +4,9 @@ worker's figures, and frames detected twice (services/metrics/pool.py)."""
 from __future__ import annotations
 
 from common.messages import Header, ServiceCounters
+from common.pool_audit import PoolAudit
 from services.metrics.aggregate import Aggregator
+from services.metrics.pool import LivePool
 from tests.unit.metrics.samples import detections
 
 HDR = Header(stamp_ns=0, frame_id="", seq=0, source="metrics")
@@ -46,7 +48,7 @@ def test_workers_show_cameras_load_and_hand_overs() -> None:
     workers = agg.answer(HDR, 3.0)["workers"]
     assert workers == {
         "detector": {
-            "cameras": ["front"], "load": 0.5, "members": 2, "cameras_gained": 0,
+            "live": True, "cameras": ["front"], "load": 0.5, "members": 2, "cameras_gained": 0,
             "cameras_lost": 1, "reported_s_ago": 2.0,
         }
     }  # fmt: skip
@@ -77,3 +79,27 @@ def test_made_up_camera_names_do_not_grow_the_frames_remembered() -> None:
     answer = agg.answer(HDR, 1.2)
     assert answer["counters"]["metrics.cameras_refused"] == 2 * 49  # fake0 took the free place
     assert answer["duplicate_detections"] == 1  # fake0's, the one camera kept
+
+
+def test_the_live_pool_names_who_serves_and_marks_a_gone_worker() -> None:
+    # The killed worker's counters still say it serves rear; its tokens have gone.
+    pool = LivePool(PoolAudit({"front": 0.5, "rear": 0.5}, 1.0, 10.0))
+    agg = Aggregator(10.0, cameras=["front", "rear"], pool=pool)
+    agg.on_counters(_counters("detector", 1, serving=1, serving__front=1, serving__rear=0), 1.0)
+    agg.on_counters(_counters("detector_2", 1, serving=1, serving__front=0, serving__rear=1), 1.0)
+    pool.member("detector", live=True)
+    pool.serving(("detector", "z1", "front"), live=True)
+    pool.serving(("detector", "z1", "rear"), live=True)  # it took rear over at once
+    pool.check(2.0)
+    answer = agg.answer(HDR, 2.0)
+    assert {c: m["served_by"] for c, m in answer["cameras"].items()} == {
+        "front": "detector",
+        "rear": "detector",
+    }
+    workers = answer["workers"]
+    assert (workers["detector"]["live"], workers["detector"]["cameras"]) == (
+        True,
+        ["front", "rear"],
+    )
+    assert (workers["detector_2"]["live"], workers["detector_2"]["cameras"]) == (False, [])
+    assert answer["pool_warnings"] == []

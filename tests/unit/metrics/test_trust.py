@@ -4,14 +4,17 @@ from __future__ import annotations
 
 import json
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
 from common.boxes import Boxes
 from common.errors import ConfigError
 from common.messages import Detections, Header, ServiceCounters
-from common.settings import SERVICES, MetricsSettings
+from common.node import Tally
+from common.settings import SERVICES, Config, MetricsSettings
 from services.metrics.aggregate import Aggregator
+from services.metrics.service import MetricsHandlers
 from services.metrics.trust import (
     PoolWorkers,
     refuse_counters,
@@ -120,3 +123,19 @@ def test_metrics_bounds_are_settings() -> None:
         MetricsSettings(max_counters_per_service=0)
     with pytest.raises(ConfigError, match="max_timing_ms"):
         MetricsSettings(max_timing_ms=math.inf)
+
+
+def test_every_refusal_heard_is_counted_from_any_number_of_threads() -> None:
+    # Issue 29, item 9: "3 refusals (counted 2)" was a message that never arrived, not a lost
+    # count: every refusal the handler hears is counted, from Zenoh's threads at once too.
+    config = Config()
+    handlers = MetricsHandlers(config, Tally("metrics", config))
+    key = handlers.tally.keys.detections("front")
+    bad = Detections(
+        header=HEADER, image_width=4, image_height=4, boxes=Boxes(), class_names=(),
+        timing_ms={"inference": 1e308},
+    ).encode()  # fmt: skip
+    with ThreadPoolExecutor(8) as pool:
+        list(pool.map(lambda _: handlers.on_detections("front", key, bad), range(2000)))
+    counted = handlers.agg.answer(HEADER, 1.0)["counters"]["metrics.refused.bad_timing"]
+    assert counted == 2000

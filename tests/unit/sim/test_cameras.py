@@ -80,6 +80,15 @@ def test_further_cameras_have_their_own_rate_size_view_and_yaw() -> None:
     assert (lf.rate_hz, lf.spec.width, lf.spec.height, lf.spec.mount_yaw_deg) == (3.0, 640, 480, 90)
 
 
+def test_a_further_camera_that_sets_no_rate_renders_at_the_first_camera_s_rate() -> None:
+    # [camera] rate_hz 10, sim.camera_rate_hz 5: the first camera is rendered at 5 Hz, and so
+    # is a further camera that does not state a rate of its own (it has [camera]'s).
+    rear = CameraSettings(rate_hz=10.0, mount_yaw_deg=180.0, frame_id="cam_rear")
+    left = CameraSettings(rate_hz=2.0, mount_yaw_deg=90.0, frame_id="cam_left")
+    front, r, lf = sim_cameras(_config(("rear", rear), ("left", left)))
+    assert (front.rate_hz, r.rate_hz, lf.rate_hz) == (5.0, 5.0, 2.0)
+
+
 HDR = Header(stamp_ns=1, frame_id="world", seq=1, source="sim")
 
 

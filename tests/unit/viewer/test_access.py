@@ -90,8 +90,13 @@ def test_the_token_is_read_only_under_the_secure_profile(tmp_path: Path) -> None
     assert viewer_token(config("none")) is None
     with pytest.raises(ConfigError, match=r"cannot read the viewer token .*viewer-token"):
         viewer_token(config("password"))
-    (tmp_path / "viewer-token").write_text("\n")
+    token = tmp_path / "viewer-token"
+    token.write_text("\n")
+    token.chmod(0o600)
     with pytest.raises(ConfigError, match=r"viewer-token is empty"):
         viewer_token(config("password"))
-    (tmp_path / "viewer-token").write_text("s3cret\n")
+    token.write_text("s3cret\n")
     assert viewer_token(config("password")) == "s3cret"
+    token.chmod(0o644)  # others may read it: refused, with the fix
+    with pytest.raises(ConfigError, match=rf"may be read by others: .*`chmod 600 {token}`"):
+        viewer_token(config("password"))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from common.settings import CameraSettings, Config, DetectorSettings
+from services.sim.cameras import sim_cameras
 from services.sim.scenarios import SCENARIOS
 from tools.scenarios.runner import config_changes, scenario_config
 
@@ -17,8 +18,12 @@ def test_behind_adds_its_rear_camera_over_the_base_camera() -> None:
     config = scenario_config(BASE, SCENARIOS["behind"])
     assert list(config.all_cameras) == ["front", "rear"]  # the base's "left" is not the world's
     rear = config.camera_settings("rear")
-    assert (rear.mount_yaw_deg, rear.frame_id, rear.rate_hz) == (180.0, "camera_rear", 5.0)
-    assert rear.hfov_deg == 70.0  # what the scenario leaves alone comes from [camera]
+    assert (rear.mount_yaw_deg, rear.frame_id) == (180.0, "camera_rear")
+    # What the scenario leaves alone comes from [camera]; the rate too, so the simulator
+    # renders the rear camera at the first camera's rate.
+    assert (rear.hfov_deg, rear.rate_hz) == (70.0, config.camera.rate_hz)
+    rates = {c.name: c.rate_hz for c in sim_cameras(config)}
+    assert rates == {"front": config.sim.camera_rate_hz, "rear": config.sim.camera_rate_hz}
     assert (config.detector.imgsz, config.detector.conf) == (320, 0.3)
     assert config.supervisor.services[0] == "sim" and "camera" not in config.supervisor.services
 
@@ -38,7 +43,7 @@ def test_what_a_scenario_changes_of_the_users_config_is_said_with_why() -> None:
     assert any(line.startswith("cameras.rear: added (scenario 'behind': ") for line in lines)
     (imgsz,) = [line for line in lines if line.startswith("detector.")]
     assert imgsz.startswith("detector.imgsz: 0 -> 320 (scenario 'behind': two cameras"), imgsz
-    assert "controller.mode: track -> follow (every scenario follows its target)" in lines
+    assert "controller.distance_source: box -> laser (scenario 'behind')" in lines
     # A config the scenario leaves alone but for what every scenario needs: only that is said.
     ahead = SCENARIOS["ahead"]
     followed = scenario_config(Config(), ahead).controller

@@ -1,0 +1,147 @@
+"""What is wrong with the detector pool, as anyone who hears its liveliness tokens can tell. Pure:
+no bus, no clock.
+
+The pool trusts its membership: a token on ``<prefix>/detector/pool/<name>`` is a worker, and
+each worker serves what the rule (common/pool_rule.py) gives it by its own copy of the camera
+table. Each worker also declares, for every camera it serves, a token
+``<prefix>/detector/serving/<worker>/<zenoh id>/<camera>`` (common/keys.py). From both, each
+worker and the metrics service audit the pool (:class:`PoolAudit`) and warn when, for longer
+than ``detector.pool_alarm_s``:
+
+- ``idle_member``: a member serves none of the cameras the rule gives it (a stray token from
+  a raw session, a worker with another camera table, a hung one);
+- ``unserved``: a camera of this table has no worker serving it;
+- ``served_twice``: a camera is served by two workers (or two processes of one name);
+- ``name_twice``: one worker name is held by two processes (two hosts with one ``worker_id``).
+
+A hand-over makes some of these true for a moment (the old and the new owner settle apart):
+only what lasts past the alarm time is reported.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+from common.pool_rule import assign
+
+#: A serving token's parts: (worker, zenoh id of its session, camera).
+Serving = tuple[str, str, str]
+KINDS = ("idle_member", "unserved", "served_twice", "name_twice")
+#: The most findings said one by one (in a log at once, or in an answer): a raw session can
+#: declare thousands of tokens, and the rest is one line that counts them.
+MAX_LINES = 20
+
+
+@dataclass(frozen=True, slots=True)
+class Finding:
+    """One thing wrong: its ``kind`` (one of :data:`KINDS`), what it is about (a worker or a
+    camera) and since when it has held."""
+
+    kind: str
+    subject: str
+    detail: str
+    since: float
+
+    def text(self, now: float) -> str:
+        return f"{self.detail} for {now - self.since:.0f} s"
+
+
+@dataclass(slots=True)
+class Report:
+    """The findings held past the alarm time (``current``), and those that became so
+    (``raised``) or stopped (``cleared``) since the previous check."""
+
+    current: list[Finding] = field(default_factory=list)
+    raised: list[Finding] = field(default_factory=list)
+    cleared: list[Finding] = field(default_factory=list)
+
+    def count(self, kind: str) -> int:
+        return sum(1 for f in self.current if f.kind == kind)
+
+
+def lines(findings: list[Finding], now: float, limit: int = MAX_LINES) -> list[str]:
+    """Each finding's text, at most ``limit`` of them, then one line for the rest."""
+    out = [f.text(now) for f in findings[:limit]]
+    if len(findings) > limit:
+        out.append(f"and {len(findings) - limit} more findings about the pool")
+    return out
+
+
+class PoolAudit:
+    """Checks the pool's tokens against the rule over this table's cameras (``weights``, as
+    common/pool_rule.py's ``camera_weights``) and remembers since when each finding holds. Not
+    thread-safe: the caller holds its lock."""
+
+    def __init__(self, weights: Mapping[str, float], balance: float, alarm_s: float) -> None:
+        self.weights = dict(weights)
+        self.balance = balance
+        self.alarm_s = alarm_s
+        self._since: dict[tuple[str, str], float] = {}
+        self._raised: dict[tuple[str, str], Finding] = {}
+
+    def check(self, now: float, members: Iterable[str], serving: Iterable[Serving]) -> Report:
+        """The findings at ``now`` for the live ``members`` and ``serving`` tokens."""
+        findings = _findings(members, serving, self.weights, self.balance)
+        found = {(f.kind, f.subject): f.detail for f in findings}
+        self._since = {k: self._since.get(k, now) for k in found}
+        report = Report()
+        for key, detail in sorted(found.items()):
+            if now - self._since[key] < self.alarm_s:
+                continue
+            finding = Finding(kind=key[0], subject=key[1], detail=detail, since=self._since[key])
+            report.current.append(finding)
+            if key not in self._raised:
+                report.raised.append(finding)
+            self._raised[key] = finding
+        for key in [k for k in self._raised if k not in found]:
+            report.cleared.append(self._raised.pop(key))
+        return report
+
+
+@dataclass(frozen=True, slots=True)
+class _Found:
+    kind: str
+    subject: str
+    detail: str
+
+
+def _findings(
+    members: Iterable[str], serving: Iterable[Serving], weights: Mapping[str, float], balance: float
+) -> list[_Found]:
+    live = sorted(set(members))
+    by_camera: dict[str, set[tuple[str, str]]] = {}
+    by_worker: dict[str, set[str]] = {}
+    for worker, zid, camera in set(serving):
+        by_camera.setdefault(camera, set()).add((worker, zid))
+        by_worker.setdefault(worker, set()).add(zid)
+    owners = assign(live, weights, balance)
+    out: list[_Found] = []
+    for worker in live:
+        given = sorted(c for c, w in owners.items() if w == worker)
+        if given and worker not in by_worker:
+            out.append(_Found("idle_member", worker, (
+                f"pool member {worker} serves none of the cameras the pool gives it "
+                f"({', '.join(given)}): a stray token, or a worker with another camera table"
+            )))  # fmt: skip
+    for camera in weights if live else ():  # no pool at all is no pool's fault
+        if camera not in by_camera:
+            owner = owners.get(camera)
+            out.append(_Found("unserved", camera, (
+                f"camera {camera} is served by no detector worker"
+                + (f" (the pool gives it to {owner})" if owner else " (no worker in the pool)")
+            )))  # fmt: skip
+    for camera, servers in sorted(by_camera.items()):
+        if len(servers) > 1 and camera in weights:  # another table's camera is not ours
+            names = ", ".join(f"{w} ({z})" for w, z in sorted(servers))
+            out.append(_Found("served_twice", camera, (
+                f"camera {camera} is served by {len(servers)} workers at once: {names}; "
+                "do their hosts have different camera tables?"
+            )))  # fmt: skip
+    for worker, zids in sorted(by_worker.items()):
+        if len(zids) > 1:
+            out.append(_Found("name_twice", worker, (
+                f"worker name {worker} is held by {len(zids)} processes (zenoh ids "
+                f"{', '.join(sorted(zids))}): give each host its own detector.worker_id"
+            )))  # fmt: skip
+    return out

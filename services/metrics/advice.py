@@ -1,0 +1,74 @@
+"""Warnings the metrics answer carries (``warnings``: name -> one line with the figures and the
+fixes): settings that work, but against each other on this machine. Pure: figures in, text out.
+
+``detections_late``: a camera's detections are so old when they are published, and come so
+seldom, that they age past ``controller.detection_timeout_s`` before the next one comes. The
+controller's dead-man then stops the robot between detections and the next one starts it again:
+on a slow CPU it flipped between ``stale`` and ``following`` about 3 times a second. Judged per
+camera as capture->detections p95 plus the time between detections (1 / its detections rate).
+"""
+
+from __future__ import annotations
+
+import math
+
+from common.contracts import CameraMetrics, MetricsAnswer
+from common.settings import Config
+
+#: Detections of a camera in the window before it is judged at all.
+MIN_SAMPLES = 5
+DETECTIONS_LATE = "detections_late"
+
+
+def advise(config: Config, answer: MetricsAnswer) -> dict[str, str]:
+    """The warnings that hold for ``answer`` under ``config`` (empty when none)."""
+    out = {}
+    late = late_detections(config, answer.get("cameras", {}))
+    if late:
+        out[DETECTIONS_LATE] = late
+    return out
+
+
+def _oldest_ms(m: CameraMetrics) -> float | None:
+    """How old a camera's detections get before the next one comes (ms), or None when there
+    are too few to judge."""
+    lat = m["latency_ms"].get("capture_to_detections", {})
+    if lat.get("count", 0.0) < MIN_SAMPLES or m["fps"] <= 0:
+        return None
+    return lat["p95"] + 1000.0 / m["fps"]
+
+
+def late_detections(config: Config, cameras: dict[str, CameraMetrics]) -> str:
+    """The ``detections_late`` line, or "" when every camera's detections come in time."""
+    timeout_ms = config.controller.detection_timeout_s * 1000.0
+    late = {
+        name: oldest
+        for name, m in cameras.items()
+        if (oldest := _oldest_ms(m)) is not None and oldest > timeout_ms
+    }
+    if not late:
+        return ""
+    parts = []
+    for name in late:
+        lat, fps = cameras[name]["latency_ms"]["capture_to_detections"], cameras[name]["fps"]
+        parts.append(
+            f"{name}: capture->detections p50 {lat['p50']:.0f} ms, p95 {lat['p95']:.0f} ms, "
+            f"one every {1000.0 / fps:.0f} ms"
+        )
+    figures = "; ".join(parts)
+    fixes = []
+    d = config.detector
+    if d.profile != "fast":
+        fixes.append('detector.profile = "fast"')
+    if d.imgsz == 0 or d.imgsz > 320:
+        fixes.append(f"a smaller detector.imgsz (now {d.imgsz or 'the model size'}; 480 or 320)")
+    if len(config.all_cameras) > 1:
+        fixes.append(f"fewer cameras (now {len(config.all_cameras)})")
+    need_s = math.ceil(max(late.values()) * 1.2 / 100.0) / 10.0  # 20 % spare, to 0.1 s
+    fixes.append(f"controller.detection_timeout_s of {need_s:.1f} s or more")
+    return (
+        f"detections come too late for the controller's dead-man "
+        f"(controller.detection_timeout_s {timeout_ms:.0f} ms): {figures}. They age past the "
+        "timeout before the next one comes, so the controller stops the robot (stale) and "
+        f"starts it again on each one. Fix: {', or '.join(fixes)}"
+    )

@@ -1,0 +1,85 @@
+"""Credentials that others may read or change are refused at start-up, as ssh refuses a private
+key that others can read (issue 29): a credentials folder that group or others may write, a
+password or key that others may read, stops the secure stack with one line naming the file and
+the chmod that fixes it. The real supervisor and a real service's command line."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from common.security import key_file, password_file, users_file
+from deploy.credentials import generate
+from tests.integration.conftest import REPO, free_port, write_config
+
+pytestmark = pytest.mark.integration
+
+
+def _run(*args: str | Path) -> subprocess.CompletedProcess[str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("STACK__")}
+    return subprocess.run(
+        [sys.executable, "-m", *map(str, args)],
+        cwd=REPO, env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+
+
+def _one_line(done: subprocess.CompletedProcess[str]) -> str:
+    assert done.returncode == 2, (done.returncode, done.stderr)
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    return lines[0]
+
+
+def test_the_secure_stack_refuses_credentials_others_may_read_or_change(tmp_path: Path) -> None:
+    creds = tmp_path / "credentials"
+    generate(creds)
+    # What a careless copy leaves: a folder anyone may write, secrets anyone may read.
+    creds.chmod(0o777)
+    for path in creds.iterdir():
+        path.chmod(0o666)
+    config = write_config(
+        tmp_path,
+        zenoh={"mode": "client", "auth": "password", "credentials_dir": str(creds)},
+        supervisor={"services": ["controller"]},
+    )
+    # --duration: a supervisor that did start would stop by itself (exit 0), not hang the test.
+    supervisor = ("deploy.supervisor", "--config", config, "--duration", "5")
+
+    line = _one_line(_run(*supervisor))
+    assert line.startswith("supervisor: error: "), line
+    assert str(creds) in line and f"chmod 700 {creds}" in line, line
+
+    creds.chmod(0o700)  # the folder fixed, its files still 0666
+    line = _one_line(_run(*supervisor))
+    named = [p for p in creds.iterdir() if f"chmod 600 {p}" in line]
+    assert len(named) == 1, line
+    assert str(named[0]) in line.split("chmod")[0], line
+
+    # A service that reads its own secret refuses it too, started on its own: the operator's
+    # e-stop with a password file others may read.
+    for path in creds.iterdir():
+        path.chmod(0o600)
+    password_file(creds, "estop").chmod(0o644)
+    estop = ("services.controller", "estop", "engage", "--config", config, "--reason", "test")
+    line = _one_line(_run(*estop))
+    assert f"chmod 600 {password_file(creds, 'estop')}" in line, line
+
+    # A key or the router's dictionary that group or others may change is refused as well.
+    password_file(creds, "estop").chmod(0o600)
+    users_file(creds).chmod(0o620)
+    line = _one_line(_run(*supervisor))
+    assert f"chmod 600 {users_file(creds)}" in line, line
+    users_file(creds).chmod(0o600)
+    key_file(creds, "supervisor").chmod(0o604)
+    tls = write_config(
+        tmp_path,
+        zenoh={"mode": "client", "auth": "certificate", "credentials_dir": str(creds),
+               "endpoint": f"tls/127.0.0.1:{free_port()}"},
+        supervisor={"services": ["controller"]},
+    )  # fmt: skip
+    line = _one_line(_run("deploy.supervisor", "--config", tls, "--duration", "5"))
+    assert f"chmod 600 {key_file(creds, 'supervisor')}" in line, line

@@ -1,0 +1,52 @@
+"""The metrics answer's warnings: detections too late for the controller's dead-man."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from common.messages import Header
+from common.settings import Config, ControllerSettings, DetectorSettings
+from services.metrics.advice import DETECTIONS_LATE, advise
+from services.metrics.aggregate import Aggregator
+from tests.unit.metrics.samples import detections
+
+
+def answer_for(published_ms: float, every_s: float, n: int = 20):  # type: ignore[no-untyped-def]
+    """The answer after ``n`` detections of camera front, one every ``every_s``, each published
+    ``published_ms`` after its capture."""
+    agg = Aggregator(10.0, cameras=["front"])
+    for i in range(n):
+        t = i * every_s
+        h = Header(stamp_ns=int(t * 1e9), frame_id="camera", seq=i, source="camera")
+        agg.on_detections(detections(h, 1, published_ms=published_ms), t, camera="front")
+    return agg.answer(Header(stamp_ns=1, frame_id="", seq=1, source="metrics"), n * every_s)
+
+
+def test_detections_in_time_bring_no_warning() -> None:
+    assert advise(Config(), answer_for(300.0, 0.2)) == {}
+
+
+def test_detections_that_go_stale_before_the_next_are_said_with_figures_and_fixes() -> None:
+    # 900 ms old when published, one every 200 ms: 1.1 s old before the next, over 1.0 s.
+    text = advise(Config(), answer_for(900.0, 0.2))[DETECTIONS_LATE]
+    assert "p50 900 ms" in text and "one every 200 ms" in text and "1000 ms" in text, text
+    assert 'detector.profile = "fast"' in text and "detector.imgsz" in text, text
+    assert "controller.detection_timeout_s of 1.4 s or more" in text, text
+    assert "fewer cameras" not in text  # one camera
+
+
+def test_only_the_fixes_not_yet_made_are_offered() -> None:
+    config = Config(
+        detector=DetectorSettings(profile="fast", imgsz=320),
+        controller=ControllerSettings(detection_timeout_s=0.5),
+    )
+    text = advise(config, answer_for(450.0, 0.2))[DETECTIONS_LATE]
+    assert "profile" not in text and "imgsz" not in text, text
+    assert "controller.detection_timeout_s of 0.8 s or more" in text, text
+    # A longer timeout is the fix: no warning then.
+    longer = dataclasses.replace(config.controller, detection_timeout_s=1.0)
+    assert advise(dataclasses.replace(config, controller=longer), answer_for(450.0, 0.2)) == {}
+
+
+def test_too_few_detections_are_not_judged() -> None:
+    assert advise(Config(), answer_for(900.0, 0.2, n=3)) == {}
