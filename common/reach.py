@@ -1,9 +1,10 @@
 """Saying where a command-line client looked when it reached nothing.
 
-``zstack query``, ``zstack record`` and the e-stop command join a running stack; when nothing
-answers, the user must learn what was tried (endpoint, mode, prefix, principal and auth) and
-the likely fix, not only that nothing answered. Pure text apart from :func:`connected`, which
-asks the session whether any router or peer is linked to it.
+``zstack query``, ``zstack record``, ``zstack play`` (and compare's replay) and the e-stop
+command join a running stack; when nothing answers, the user must learn what was tried
+(endpoint, mode, prefix, principal and auth) and the likely fix, not only that nothing answered.
+Pure text apart from :func:`connected`, which asks the session whether any router or peer is
+linked to it.
 """
 
 from __future__ import annotations
