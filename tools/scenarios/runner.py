@@ -128,7 +128,11 @@ def config_changes(base: Config, config: Config, scenario: Scenario) -> list[str
         for name, _ in base.cameras
         if name not in kept
     ]
-    lines += [f"cameras.{name}: added ({why})" for name in kept if name not in dict(base.cameras)]
+    lines += [
+        f"cameras.{name}: added ({own}: {scenario.description})"
+        for name in kept
+        if name not in dict(base.cameras)
+    ]
     lines += _table_changes("detector", base.detector, config.detector, scenario.detector, why)
     lines += _table_changes(
         "controller", base.controller, config.controller, scenario.controller, own
