@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 
 import zenoh
@@ -59,3 +60,34 @@ def test_a_payload_over_the_limit_is_refused_and_reported() -> None:
         sub.undeclare()
     assert refused == [("t/frame", 1001)]
     assert received == [1000]
+
+
+def test_a_latest_subscription_keeps_only_the_newest_sample() -> None:
+    from common.node import Latest
+
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", "[]")
+    taken: list[bytes] = []
+    busy, release, done = threading.Event(), threading.Event(), threading.Event()
+
+    def handle(payload: bytes) -> None:
+        taken.append(payload)
+        if payload == b"0":
+            busy.set()
+            release.wait(10)  # a slow handler: everything sent meanwhile waits, or not
+        if payload == b"99":
+            done.set()
+
+    with zenoh.open(conf) as session:
+        latest = Latest(session, "t/frame", handle, logging.getLogger("t"))
+        session.put("t/frame", b"0")
+        assert busy.wait(10), "the first sample never arrived"
+        for n in range(1, 100):
+            session.put("t/frame", str(n).encode())
+        release.set()
+        assert done.wait(10), f"the newest sample never arrived: {taken}"
+        latest.undeclare()
+        assert not latest._thread.is_alive()
+    # Zenoh's ring held one sample while the handler was busy: the newest replaced the rest.
+    assert taken == [b"0", b"99"]
