@@ -1,7 +1,9 @@
 """No listener, however slow or hostile, may delay control or safety messages: a subscriber
 frozen with SIGSTOP beside a secure stack (every message through the supervisor's router)
-must not stall the e-stop or cmd_vel. And what each principal may read is its own business:
-a principal that needs no camera frames cannot subscribe to them.
+must not stall the e-stop or cmd_vel, even while a principal puts its frames to that
+subscriber with congestion control BLOCK (the router overwrites it to DROP). And what each
+principal may read is its own business: a principal that needs no camera frames cannot
+subscribe to them.
 """
 
 from __future__ import annotations
@@ -31,6 +33,9 @@ pytestmark = pytest.mark.integration
 ROUND_TRIP_LIMIT_S = 0.2  # the e-stop's round trip, engage or release, however slow a listener
 FROZEN_FOR_S = 25.0  # long past the point where the frozen link's queues are full (about 8 s)
 CMD_GAP_LIMIT_S = 0.5  # the longest cmd_vel may go quiet
+#: The camera's own frames, put with BLOCK beside the frozen listener: 320x240 at 30 Hz (7 MB/s)
+#: fills its link within a second or two.
+BLOCKING_FRAMES = ("640x480", "10")
 
 
 def secure_stack(make_stack, tmp_path: Path) -> Stack:  # type: ignore[no-untyped-def]
@@ -104,6 +109,17 @@ def test_a_frozen_listener_delays_no_stop(make_stack, tmp_path: Path) -> None:  
     # The viewer may read all it shows: frames, detections, commands, status. Frozen, its link
     # fills up with what the router still sends it.
     listener = start_listener(stack, "viewer", *may_read(stack.keys, "front", "viewer"))
+    # A principal that asks for congestion control BLOCK on a key it may put on (the camera,
+    # its own frames): the router must not wait on the frozen link for it.
+    size, rate_hz = BLOCKING_FRAMES
+    blocking = subprocess.Popen(
+        [sys.executable, "-m", "tools.benchmarks.frame_flood", "--config", str(stack.config_path),
+         "--principal", "camera", "--camera", "front", "--congestion", "block", "--size", size,
+         "--rate-hz", rate_hz, "--seconds", str(FROZEN_FOR_S + 2)],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert blocking.stdout is not None
+    assert blocking.stdout.readline().strip() == "flooding", blocking.stderr
     listener.send_signal(signal.SIGSTOP)
     try:
         trips: list[float] = []
@@ -117,8 +133,10 @@ def test_a_frozen_listener_delays_no_stop(make_stack, tmp_path: Path) -> None:  
         listener.send_signal(signal.SIGTERM)
         listener.wait(20)
         probe.close()
+        blocked, err = blocking.communicate(timeout=60)
     print(f"e-stop round trips: {len(trips)}, max {max(trips):.3f} s; longest cmd_vel gap "
-          f"{max(gaps, default=0):.3f} s")  # fmt: skip
+          f"{max(gaps, default=0):.3f} s; BLOCK publisher: {blocked.strip()}")  # fmt: skip
+    assert blocking.returncode == 0 and int(blocked.split()[1]) > 0, err
     assert "NO ACCESS CONTROL" not in stack.log()  # the secure profile has it
     slow = [round(t, 3) for t in trips if t > ROUND_TRIP_LIMIT_S]
     assert not slow, f"{len(slow)} of {len(trips)} e-stop round trips over 0.2 s: {slow[:10]}"
