@@ -15,7 +15,9 @@ stop. Every role drops under congestion, control too: Zenoh honours the flag on 
 with "block" a router forwarding a command into one full link (a frozen listener) waits up to
 5 s, holding up every other receiver's control traffic behind it. A dropped copy is lost only
 for the receiver whose queue is full; the controller repeats cmd_vel every tick and the e-stop
-command repeats until acknowledged (docs/security.md, "QoS by role").
+command repeats until acknowledged (docs/security.md, "QoS by role"). And a client's choice is
+not trusted: the router overwrites congestion control to DROP on every key but the e-stop
+(:func:`drop_overwrite`).
 """
 
 from __future__ import annotations
