@@ -23,7 +23,7 @@ from common.errors import DecodeError, ImageError, ImageTooLarge
 from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, Header
-from common.node import Latest, Node, Put, Tally
+from common.node import Bounded, Node, Put, Tally
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
 from services.detector.batching import measure
@@ -359,7 +359,7 @@ class PoolMember:
         self._token_lock = threading.Lock()
         self._lock = threading.Lock()
         self._dirty = True
-        self._subs: dict[str, Latest] = {}  # the newest frame only: nothing queues behind
+        self._subs: dict[str, Bounded] = {}
         self._token: zenoh.LivelinessToken | None = None
         self._watch: zenoh.Subscriber[None] | None = None
         self._gauges: dict[str, int] = {}
@@ -466,7 +466,8 @@ class PoolMember:
         handlers.serve(change.serving, change.gained, change.lost)
         for cam in change.gained:
             key = handlers.frame_keys[cam]
-            self._subs[cam] = node.subscribe_latest(key, partial(handlers.on_frame, cam))
+            # Bounded: no queue of stale frames ahead of the slot, which keeps the newest only.
+            self._subs[cam] = node.subscribe_bounded(key, partial(handlers.on_frame, cam))
         for cam in (*change.gained, *change.lost):
             self._gauge(per_camera("serving", cam), int(cam in change.serving))
         if self._handed_over:  # the first assignment, at start, is no hand-over
