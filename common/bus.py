@@ -15,7 +15,9 @@ stop. Every role drops under congestion, control too: Zenoh honours the flag on 
 with "block" a router forwarding a command into one full link (a frozen listener) waits up to
 5 s, holding up every other receiver's control traffic behind it. A dropped copy is lost only
 for the receiver whose queue is full; the controller repeats cmd_vel every tick and the e-stop
-command repeats until acknowledged (docs/security.md, "QoS by role").
+command repeats until acknowledged (docs/security.md, "QoS by role"). And a client's choice is
+not trusted: the router overwrites congestion control to DROP on every key but the e-stop
+(:func:`drop_overwrite`).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from common.security import (
     access_control,
     ca_file,
     cert_file,
+    congestion_overwritten,
     key_file,
     password_file,
     running_sensors,
@@ -182,12 +185,18 @@ def _security(settings: ZenohSettings, principal: str, hub: bool) -> dict[str, A
 
 
 def zenoh_config(
-    settings: ZenohSettings, principal: str, *, access: dict[str, Any] | None = None
+    settings: ZenohSettings,
+    principal: str,
+    *,
+    access: dict[str, Any] | None = None,
+    drop_keys: tuple[str, ...] = (),
 ) -> zenoh.Config:
     """Build the Zenoh config of one process.
 
     ``access`` is given for the supervisor only: its access-control rules. The supervisor
     listens on ``settings.endpoint`` (as a router in client mode); everyone else connects there.
+    ``drop_keys``: as a router, the supervisor sets congestion control DROP on every put and
+    delete it takes in on these keys (:func:`drop_overwrite`).
     """
     hub = access is not None
     if hub:
@@ -208,10 +217,25 @@ def zenoh_config(
     }
     if hub and settings.auth != "none":
         options["access_control"] = access
+    if hub and mode == "router" and drop_keys:
+        options["qos/network"] = [drop_overwrite(drop_keys)]
     conf = zenoh.Config()
     for path, value in options.items():
         conf.insert_json5(path, json.dumps(value))
     return conf
+
+
+def drop_overwrite(key_exprs: tuple[str, ...]) -> dict[str, Any]:
+    """Zenoh's ``qos/network`` item that makes the router drop, never wait, when a link a put
+    on ``key_exprs`` goes to is full, whatever congestion control its publisher chose: it
+    rewrites the sample as it comes in, and the router forwards it so (zenoh 1.10)."""
+    return {
+        "id": "drop_under_congestion",
+        "messages": ["put", "delete"],
+        "flows": ["ingress"],
+        "key_exprs": list(key_exprs),
+        "overwrite": {"congestion_control": "drop"},
+    }
 
 
 def _open(conf: zenoh.Config, settings: ZenohSettings, where: str, principal: str) -> zenoh.Session:
@@ -278,6 +302,13 @@ def hub_access(config: Config) -> dict[str, Any]:
     )
 
 
+def hub_drop_keys(config: Config) -> tuple[str, ...]:
+    """The keys on which the supervisor's router overwrites congestion control to DROP: every
+    key of the stack but the e-stop (common.security.congestion_overwritten)."""
+    keys = Keys(config.stack.prefix)
+    return congestion_overwritten(keys, config.camera_services, workers=config.detector_services)
+
+
 def check_credentials(config: Config) -> None:
     """With passwords, the router's dictionary must name every principal of this stack: one
     made for fewer cameras or detector workers would refuse a further one's process.
@@ -303,5 +334,7 @@ def check_credentials(config: Config) -> None:
 def open_hub(config: Config) -> zenoh.Session:
     """The supervisor's session: the endpoint every service joins, enforcing access control."""
     check_credentials(config)
-    conf = zenoh_config(config.zenoh, HUB_PRINCIPAL, access=hub_access(config))
+    conf = zenoh_config(
+        config.zenoh, HUB_PRINCIPAL, access=hub_access(config), drop_keys=hub_drop_keys(config)
+    )
     return _open(conf, config.zenoh, config.zenoh.endpoint, HUB_PRINCIPAL)

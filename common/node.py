@@ -8,6 +8,7 @@ and calls a handler directly; ``Node`` is a Tally with a session.
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -24,6 +25,10 @@ from common.ratelimit import LogLimiter
 from common.settings import Config
 
 _M = TypeVar("_M")
+
+#: Samples that may wait for a bounded subscription's handler (``Node.subscribe_bounded``):
+#: one waits while one is handled, so that the handler never waits on the bus for the next.
+BOUNDED_DEPTH = 1
 
 
 # What a bad-input counter may add to "bad_input.": 80 characters in all, the longest name the
@@ -132,6 +137,14 @@ class Node(Tally, Closing):
         through ``Tally.decode``)."""
         return self.session.declare_subscriber(key, lambda sample: handle(_payload(sample)))
 
+    def subscribe_bounded(
+        self, key: str, handle: Callable[[bytes], None], depth: int = BOUNDED_DEPTH
+    ) -> Bounded:
+        """Subscribe to ``key`` with at most ``depth`` samples waiting for ``handle``, which
+        runs on a thread of the subscription's own (see :class:`Bounded`). For large samples
+        that may come faster than they are handled: camera frames."""
+        return Bounded(self.session, key, handle, self.log, depth)
+
     def subscribe_keyed(
         self, key: str, handle: Callable[[str, bytes], None]
     ) -> zenoh.Subscriber[None]:
@@ -175,6 +188,59 @@ class Node(Tally, Closing):
         if self._token is not None:
             self._token.undeclare()
         self.session.close()
+
+
+class Bounded:
+    """A subscription with at most ``depth`` samples waiting between Zenoh and its handler.
+
+    A callback subscription (``Node.subscribe``) hands each sample from Zenoh's thread to a
+    Python thread through a queue of 256 samples (zenoh-python's ``Callback(indirect=True)``):
+    a publisher faster than the callback fills it, and with 6.2 MB frames that is 1.6 GB of
+    stale frames held in the receiving process, each delivered late. Here Zenoh puts each
+    sample in a FIFO of ``depth`` (``FifoChannel``) and this subscription's thread takes it
+    from there. When it is full Zenoh stops reading that link: the sender's queue fills and
+    its congestion control (DROP for every sample of the stack, common/bus.py) drops the
+    excess there, which the receiver sees as a gap in the sender's numbering. Nothing that
+    arrives is lost on the way to the handler, so bad input is still counted in full, and
+    Python's lock is never taken on Zenoh's thread. ``undeclare()`` ends the subscription and
+    its thread.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        handle: Callable[[bytes], None],
+        log: logging.Logger,
+        depth: int,
+    ) -> None:
+        self.key = key
+        self._handle = handle
+        self._log = log
+        self._sub = session.declare_subscriber(key, zenoh.handlers.FifoChannel(depth))
+        # Received through the handler, not the subscriber: a recv() blocked on the
+        # subscriber would hold it borrowed, and undeclare() would fail ("Already borrowed").
+        self._queue = self._sub.handler
+        self._thread = threading.Thread(target=self._run, name=f"bounded {key}", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            try:
+                sample = self._queue.recv()
+            except zenoh.ZError:
+                return  # undeclared: the queue is closed
+            try:
+                self._handle(_payload(sample))
+            except Exception:
+                # As Zenoh does for a callback: a handler's bug is logged, and the
+                # subscription goes on.
+                self._log.exception("the handler of %s failed", self.key)
+
+    def undeclare(self) -> None:
+        self._sub.undeclare()
+        if threading.current_thread() is not self._thread:  # from its own handler: no wait
+            self._thread.join()
 
 
 def _payload(sample: zenoh.Sample) -> bytes:

@@ -328,6 +328,23 @@ def may_put(
     return table.get(principal, {}).get("put", ())
 
 
+def congestion_overwritten(
+    keys: Keys,
+    cameras: str | Mapping[str, str],
+    *,
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+) -> tuple[str, ...]:
+    """The keys on which the router puts congestion control DROP on every sample it takes in,
+    whatever its publisher asked for: every key any principal may put on (a replay's too),
+    but the e-stop. A client's BLOCK there would make the router wait on a full link (a frozen
+    listener's) and hold up everyone's traffic behind it (docs/security.md, "QoS by role")."""
+    puts: dict[str, None] = {}
+    for live in (True, False):
+        for allowed in _principal_keys(keys, cameras, live, workers).values():
+            puts.update(dict.fromkeys(allowed.get("put", ())))
+    return tuple(k for k in puts if k != keys.estop())
+
+
 def may_announce(
     keys: Keys,
     cameras: str | Mapping[str, str],

@@ -23,7 +23,7 @@ from common.errors import DecodeError, ImageError, ImageTooLarge, StackError
 from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, Header
-from common.node import Node, Put, Tally
+from common.node import Bounded, Node, Put, Tally
 from common.pool_audit import MAX_LINES, PoolAudit, Report, Serving, lines
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
@@ -369,7 +369,7 @@ class PoolMember:
         self._token_lock = threading.Lock()
         self._lock = threading.Lock()
         self._dirty = True
-        self._subs: dict[str, zenoh.Subscriber[None]] = {}
+        self._subs: dict[str, Bounded] = {}
         self._token: zenoh.LivelinessToken | None = None
         self._watch: zenoh.Subscriber[None] | None = None
         self._gauges: dict[str, int] = {}
@@ -546,7 +546,8 @@ class PoolMember:
         handlers.serve(change.serving, change.gained, change.lost)
         for cam in change.gained:
             key = handlers.frame_keys[cam]
-            self._subs[cam] = node.subscribe(key, partial(handlers.on_frame, cam))
+            # Bounded: no queue of stale frames ahead of the slot, which keeps the newest only.
+            self._subs[cam] = node.subscribe_bounded(key, partial(handlers.on_frame, cam))
         for cam in (*change.gained, *change.lost):
             self._gauge(per_camera("serving", cam), int(cam in change.serving))
         self._sync_serving(change.serving)
@@ -577,9 +578,11 @@ class PoolMember:
         self._closed.set()
         if self._stall_watch is not None:
             self._stall_watch.join()
-        watches = (w for w in (self._watch, self._serving_watch) if w is not None)
-        for sub in [*self._subs.values(), *watches]:
+        for sub in self._subs.values():
             sub.undeclare()
+        for watch in (self._watch, self._serving_watch):
+            if watch is not None:
+                watch.undeclare()
         self._subs.clear()
         with self._token_lock:
             self._withdraw_serving()

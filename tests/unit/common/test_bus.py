@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 
 import zenoh
@@ -59,3 +60,41 @@ def test_a_payload_over_the_limit_is_refused_and_reported() -> None:
         sub.undeclare()
     assert refused == [("t/frame", 1001)]
     assert received == [1000]
+
+
+def test_a_bounded_subscription_holds_up_its_sender_not_its_memory() -> None:
+    from common.node import Bounded
+
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", "[]")
+    taken: list[bytes] = []
+    busy, release, done = threading.Event(), threading.Event(), threading.Event()
+
+    def handle(payload: bytes) -> None:
+        taken.append(payload)
+        if payload == b"0":
+            busy.set()
+            release.wait(10)  # a slow handler: what comes meanwhile waits, two at most
+        if payload == b"9":
+            done.set()
+
+    with zenoh.open(conf) as session:
+        bounded = Bounded(session, "t/frame", handle, logging.getLogger("t"), depth=2)
+        session.put("t/frame", b"0")
+        assert busy.wait(10), "the first sample never arrived"
+
+        def send() -> None:
+            for n in range(1, 10):
+                session.put("t/frame", str(n).encode())
+
+        sender = threading.Thread(target=send)
+        sender.start()
+        sender.join(0.5)  # a local put delivers in the putting thread: it waits for room
+        assert sender.is_alive(), "nine puts went through to a handler that took none"
+        release.set()
+        sender.join(10)
+        assert done.wait(10), f"the last sample never arrived: {taken}"
+        bounded.undeclare()
+        assert not bounded._thread.is_alive()
+    assert taken == [str(n).encode() for n in range(10)]  # none lost, in order

@@ -259,3 +259,27 @@ def test_the_hub_refuses_credentials_made_for_fewer_cameras(tmp_path: Path) -> N
     tls = dataclasses.replace(config.zenoh, auth="certificate", endpoint="tls/127.0.0.1:7448")
     generate(creds, force=True)
     check_credentials(dataclasses.replace(config, zenoh=tls))
+
+
+def test_the_router_drops_under_congestion_on_every_key_but_the_estop() -> None:
+    from common.bus import hub_drop_keys
+
+    cfg = load_config(REPO_ROOT / "deploy" / "secure.toml", environ={})
+    keys = Keys(cfg.stack.prefix)
+    drop = hub_drop_keys(cfg)
+    assert keys.estop() not in drop
+    for key in (
+        keys.cmd_vel(),
+        keys.frame(cfg.stack.camera),
+        keys.scan(),
+        keys.controller_status(),
+    ):
+        assert key in drop, key
+    s = ZenohSettings(mode="client", endpoint="tcp/127.0.0.1:7447")
+    hub = json.loads(str(zenoh_config(s, "supervisor", access={}, drop_keys=drop)))
+    (item,) = hub["qos"]["network"]
+    assert item["overwrite"]["congestion_control"] == "drop" and item["flows"] == ["ingress"]
+    assert item["key_exprs"] == list(drop)
+    # A peer-mode hub routes nothing: no overwrite there.
+    peer = json.loads(str(zenoh_config(ZenohSettings(), "supervisor", access={}, drop_keys=drop)))
+    assert peer["qos"]["network"] == []
