@@ -543,7 +543,13 @@ class PoolMember:
             sub = self._subs.pop(cam, None)
             if sub is not None:
                 sub.undeclare()
-        handlers.serve(change.serving, change.gained, change.lost)
+        with self._lock:
+            # Under the lock the stall watch resigns under: a change computed before a
+            # resignation (this pass stalled inside it) never switches serving back on; the
+            # settle() after the next beat() serves the share again.
+            handlers.serve(
+                frozenset() if self._resigned else change.serving, change.gained, change.lost
+            )
         for cam in change.gained:
             key = handlers.frame_keys[cam]
             # Bounded: no queue of stale frames ahead of the slot, which keeps the newest only.

@@ -79,6 +79,12 @@ def test_a_stalled_worker_leaves_the_pool_and_comes_back(
             )
             assert node_counter(node, "pool_resigned") == 1
             assert handlers.serving == frozenset()
+            # A settle() under way when the worker resigned (the pass stalled inside it)
+            # applies a change computed before: it must not switch serving back on.
+            with pool._lock:
+                pool._dirty = True
+            pool.settle()
+            assert handlers.serving == frozenset(), "a resigned worker serves again"
             # The loop runs again: the token is back and the worker serves its share again.
             pool.beat()
             pool.settle()
