@@ -31,3 +31,19 @@ def lower_priority(nice: int, idle: bool) -> str:
         except (AttributeError, OSError) as exc:  # not Linux, or refused: nice alone
             done.append(f"not SCHED_IDLE ({exc})")
     return ", ".join(done) or "unchanged"
+
+
+def leave_idle(*threads: int) -> str:
+    """Put ``threads`` (native thread ids; 0 is the calling thread) back in the normal class,
+    keeping their nice value; returns what was done, for the log.
+
+    For a stop: an idle-class thread gets no CPU at all while every core is busy, so a
+    recorder told to stop on a saturated machine could not finish its file before the
+    supervisor's stop timeout killed it (a file of its header alone, seen with both cores
+    busy). Finishing the file is a moment's work at nice 10."""
+    for tid in threads:
+        try:
+            os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+        except (AttributeError, OSError) as exc:  # not Linux, refused, or the thread is gone
+            return f"still SCHED_IDLE ({exc})"
+    return "back in the normal class to finish"

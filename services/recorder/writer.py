@@ -25,6 +25,7 @@ from common.codec import Message
 from common.counters import Counters
 from common.errors import ConfigError, DecodeError, one_line
 from common.lifecycle import Closing
+from common.priority import leave_idle
 from common.recorder_settings import Compression, RecorderSettings
 from services.recorder.channels import PROFILE, Channel, Entry, Translator
 
@@ -200,7 +201,11 @@ class QueuedRecorder(Closing):
         self._counters.add("written")
 
     def close(self) -> None:
-        """Write what is queued, then finish the file."""
+        """Write what is queued, then finish the file, out of the idle class (a stop is a
+        moment's work that must end before the supervisor's stop timeout, however busy the
+        cores)."""
+        writer = self._thread.native_id
+        log.debug("closing: %s", leave_idle(0, *([writer] if writer is not None else [])))
         self._closing.set()
         self._thread.join()
         if self._error is None:
