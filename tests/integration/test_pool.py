@@ -49,6 +49,7 @@ KILL_BOUND_S = 2.0
 CAMERAS = {"front": "cameraman", "left": "astronaut", "right": "coffee", "rear": "chelsea"}
 WORKERS = ("detector", "detector_2")
 WINDOW_FRAMES = 6  # detections per camera in the steady-state window (2 s at 3 Hz)
+RESTART_BACKOFF_S = 8.0  # the supervisor's wait before it restarts a dead worker
 RESTART_S = 90.0  # a worker's restart: backoff, interpreter, model load, warm-up, loaded box
 
 
@@ -98,6 +99,13 @@ class Watch:
             got = list(self.detections.get(camera, []))
         return [(t, d) for t, d in got if d.header.stamp_ns > wall_ns]
 
+    def served_all(self, worker: str, after: float) -> bool:
+        """Whether any of ``worker``'s counters heard after ``after`` says it serves every
+        camera (whatever it said since)."""
+        with self.lock:
+            reports = [c for t, c in self.counters.get(worker, []) if t > after]
+        return any(all(c.get(f"serving.{cam}", 0) > 0 for cam in CAMERAS) for c in reports)
+
     def serving(self, worker: str, after: float = 0.0) -> set[str] | None:
         """The cameras ``worker``'s latest counters (heard after ``after``) say it serves."""
         with self.lock:
@@ -118,7 +126,13 @@ def pool(make_stack: Any) -> Iterator[tuple[Stack, Watch]]:
         camera={**cams[first], "rate_hz": 3.0, "resize": [320, 240]},
         **{f"cameras.{n}": cams[n] for n in others},
         detector={"workers": 2, "imgsz": 320},
-        supervisor={"services": ["camera", "detector", "controller", "metrics"]},
+        # A killed worker comes back after this, not at once: with a 0.2 s backoff it rejoined
+        # 0.7 s after the SIGKILL on a quiet machine, before the survivor's counters and the
+        # metrics could show it serving every camera (a race of the test, not of the pool).
+        supervisor={
+            "services": ["camera", "detector", "controller", "metrics"],
+            "restart_backoff_s": RESTART_BACKOFF_S,
+        },
     )
     keys = stack.keys
     watch = Watch(keys=keys)
@@ -206,8 +220,8 @@ def test_two_workers_share_the_cameras_and_take_over_a_dead_or_hung_one(
         lambda: f"detections of {sorted(moved)} after the kill:\n{stack.log()}",
     )
     wait_for(
-        lambda: watch.serving(survivor, killed_at) == set(CAMERAS),
-        5,
+        lambda: watch.served_all(survivor, killed_at),
+        RESTART_BACKOFF_S,
         lambda: f"{survivor} to count every camera as served:\n{stack.log()}",
     )
     # The metrics know it from the live pool at once, not from the dead worker's last word.
