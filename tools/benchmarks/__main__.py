@@ -183,7 +183,8 @@ def _batch_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def batch(args: argparse.Namespace) -> int:
-    stop = stop_event()
+    # No stop event: Ctrl-C interrupts a measurement at once (run_main: exit 130); it writes
+    # no file.
     setup_logging("batch-bench", "WARNING")
     from pathlib import Path
 
@@ -195,7 +196,7 @@ def batch(args: argparse.Namespace) -> int:
     options = bench.BatchOptions(
         model, args.backend, args.largest, args.runs, args.min_gain, extra, args.json
     )
-    return bench.run(options, stop, lambda line: print(line, file=sys.stderr, flush=True))
+    return bench.run(options, lambda line: print(line, file=sys.stderr, flush=True))
 
 
 def _estop_arguments(p: argparse.ArgumentParser) -> None:

@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import statistics
 import sys
-import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -55,7 +54,8 @@ def _model_alone_ms(detector: Detector, sizes: list[int], runs: int) -> dict[int
     return {size: statistics.median(t) * 1000 for size, t in times.items()}
 
 
-def run(options: BatchOptions, stop: threading.Event, say: Callable[[str], None]) -> int:
+def run(options: BatchOptions, say: Callable[[str], None]) -> int:
+    """Measure and print; Ctrl-C (KeyboardInterrupt) stops it at once, the model closed."""
     say(f"opening {options.model.name} on {options.backend} for batches up to {options.largest}")
     options_for_backend = {"max_batch": options.largest, **options.backend_options}
     det = Detector.open(options.model, backend=options.backend, **options_for_backend)
@@ -63,8 +63,6 @@ def run(options: BatchOptions, stop: threading.Event, say: Callable[[str], None]
         sizes = probe_sizes(options.largest)
         say(f"timing the whole detection at batch {sizes} ({options.runs} runs each)")
         choice = measure(det.detect_batch, options.largest, options.runs, options.min_gain)
-        if stop.is_set():
-            return 130
         say("timing the model alone")
         alone = _model_alone_ms(det, sizes, options.runs)
         figures = {

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import threading
 from pathlib import Path
 
 import pytest
@@ -16,7 +15,7 @@ def test_it_times_each_size_and_names_the_detector_s_choice(
 ) -> None:
     said: list[str] = []
     options = BatchOptions(default_model, "onnx", 2, 1, 0.2, {}, as_json=True)
-    assert run(options, threading.Event(), said.append) == 0
+    assert run(options, said.append) == 0
     figures = json.loads(capsys.readouterr().out)
     assert set(figures["whole_ms_per_image"]) == {"1", "2"}  # JSON keys are strings
     assert all(ms > 0 for ms in figures["model_ms_per_image"].values())
