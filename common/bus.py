@@ -1,340 +1,127 @@
-"""The one place where a Zenoh configuration is built, a session opened and a publisher declared.
+"""What a service does on the bus, as a protocol: publish, subscribe, liveliness tokens and
+their watch, queryables and queries. Pure: no Zenoh here.
 
-Only service I/O modules (``services/*/service.py``, and ``services/ros2/graph.py`` for a ROS 2
-graph's session), the supervisor and the command-line clients import this module; the logic
-modules never touch the bus (tests/unit/test_bus_io.py).
+Two implementations: :class:`common.zenoh_bus.ZenohBus` over a Zenoh session (what the
+processes run), and :class:`common.memory_bus.MemoryBus`, every participant in one process
+with delivery in the caller's thread (what the in-process tests run, with a fake clock:
+deterministic and instant). A service's wiring takes a ``Bus``; nothing above it knows which.
 
-Topology. In ``peer`` mode (the default) the supervisor listens on ``zenoh.endpoint``, services
-connect there and then mesh directly. In ``client`` mode the supervisor is a Zenoh router and
-every message passes through it; that is where authentication and access control run
-(common/security.py).
-
-QoS by role (:class:`QoS`): control and safety messages (cmd_vel, e-stop) go first, express,
-on the real-time queue; sensor data goes last, so that a flood of frames can never hold back a
-stop. Every role drops under congestion, control too: Zenoh honours the flag on every hop, and
-with "block" a router forwarding a command into one full link (a frozen listener) waits up to
-5 s, holding up every other receiver's control traffic behind it. A dropped copy is lost only
-for the receiver whose queue is full; the controller repeats cmd_vel every tick and the e-stop
-command repeats until acknowledged (docs/security.md, "QoS by role"). And a client's choice is
-not trusted: the router overwrites congestion control to DROP on every key but the e-stop
-(:func:`drop_overwrite`).
+Key expressions are Zenoh's: chunks split by ``/``, ``*`` matching one chunk and ``**`` any
+number of them (common/keys.py builds every one).
 """
 
 from __future__ import annotations
 
-import itertools
-import json
-import logging
 from collections.abc import Callable
+from dataclasses import dataclass
 from enum import Enum
-from pathlib import Path
-from typing import Any
-
-import zenoh
-
-from common.credential_modes import check_folder, check_public, check_secret
-from common.errors import ConfigError, StackError
-from common.keys import Keys
-from common.security import (
-    ROUTER_PRINCIPAL,
-    access_control,
-    ca_file,
-    cert_file,
-    congestion_overwritten,
-    key_file,
-    password_file,
-    running_sensors,
-    stack_principals,
-    users_file,
-)
-from common.settings import Config, Ros2Settings, ZenohSettings
-from common.zenoh_errors import explain
-
-log = logging.getLogger(__name__)
-
-HUB_PRINCIPAL = ROUTER_PRINCIPAL
+from typing import Protocol
 
 
 class QoS(Enum):
-    """Publisher profiles by role: (priority, congestion control, express)."""
+    """Publisher profiles by role: (priority, drop under congestion, express). The priority
+    is Zenoh's name for it; common/zenoh_bus.py maps it.
 
-    CONTROL = (zenoh.Priority.REAL_TIME, zenoh.CongestionControl.DROP, True)
-    PERCEPTION = (zenoh.Priority.DATA_HIGH, zenoh.CongestionControl.DROP, True)
-    SENSOR = (zenoh.Priority.DATA, zenoh.CongestionControl.DROP, False)
-    TELEMETRY = (zenoh.Priority.DATA_LOW, zenoh.CongestionControl.DROP, False)
+    Control and safety messages (cmd_vel, e-stop) go first, express, on the real-time queue;
+    sensor data goes last, so that a flood of frames can never hold back a stop. Every role
+    drops under congestion, control too (docs/security.md, "QoS by role")."""
+
+    CONTROL = ("REAL_TIME", True, True)
+    PERCEPTION = ("DATA_HIGH", True, True)
+    SENSOR = ("DATA", True, False)
+    TELEMETRY = ("DATA_LOW", True, False)
 
 
-class Publisher:
-    """A declared publisher that stamps each sample with Zenoh's source info (its global id and
-    a sequence number), so that a receiver can tell one publisher from another.
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One message as a subscriber gets it: the key it came on, its bytes, and who put it
+    (its publisher's global id, or "unidentified")."""
 
-    A payload over ``max_payload_bytes`` is not sent: ``on_refused(key, size)`` is told, and
-    ``put`` returns False. Zenoh does not refuse it, it loses it: on loopback a 64 MiB put
-    with congestion control DROP never arrived while 48 MiB did (zenoh 1.10, measured), and
-    nothing tells either end; the limit turns that into a count (zenoh.max_payload_bytes).
-    """
+    key: str
+    payload: bytes
+    source: str = "unidentified"
 
-    def __init__(
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """One answer to a query: the key it answers on and its bytes."""
+
+    key: str
+    payload: bytes
+
+
+class Declared(Protocol):
+    """Something declared on the bus (a subscription, a token, a queryable, a publisher)."""
+
+    def undeclare(self) -> None: ...
+
+
+class Publisher(Declared, Protocol):
+    key: str
+
+    def put(self, payload: bytes) -> bool:
+        """Send ``payload``; False when it was refused (over the payload limit)."""
+        ...
+
+
+#: A subscriber's callback, and a liveliness watch's: (token key, alive).
+OnSample = Callable[[Sample], None]
+OnToken = Callable[[str, bool], None]
+#: A queryable's answer for a query on ``key`` with ``payload``: the bytes to reply, or None.
+Answer = Callable[[str, bytes], bytes | None]
+
+
+class Bus(Protocol):
+    """One participant's view of the bus (a Zenoh session, or a member of a MemoryHub)."""
+
+    @property
+    def zid(self) -> str:
+        """This participant's id on the bus (the Zenoh session id)."""
+        ...
+
+    def publisher(
         self,
-        session: zenoh.Session,
         key: str,
         qos: QoS,
         *,
         max_payload_bytes: int | None = None,
         on_refused: Callable[[str, int], None] | None = None,
-    ) -> None:
-        priority, congestion, express = qos.value
-        self.key = key
-        self.qos = qos
-        self.max_payload_bytes = max_payload_bytes
-        self._on_refused = on_refused
-        self._pub = session.declare_publisher(
-            key, priority=priority, congestion_control=congestion, express=express
-        )
-        self._id = self._pub.id
-        self._sn = itertools.count(1)
+    ) -> Publisher:
+        """Declare a publisher on ``key`` with the QoS of its role. A payload over
+        ``max_payload_bytes`` is not sent: ``on_refused(key, size)`` is told."""
+        ...
 
-    def put(self, payload: bytes) -> bool:
-        """Send ``payload``; False (and ``on_refused`` told) when it is over the limit."""
-        if self.max_payload_bytes is not None and len(payload) > self.max_payload_bytes:
-            if self._on_refused is not None:
-                self._on_refused(self.key, len(payload))
-            return False
-        self._pub.put(
-            payload,
-            encoding=zenoh.Encoding("application/msgpack"),  # every payload is a common.codec one
-            source_info=zenoh.SourceInfo(self._id, next(self._sn)),
-        )
-        return True
+    def subscribe(self, key: str, handle: OnSample) -> Declared:
+        """Every sample on ``key`` (a key expression) to ``handle``."""
+        ...
 
-    def undeclare(self) -> None:
-        self._pub.undeclare()
+    def subscribe_bounded(self, key: str, handle: OnSample, depth: int) -> Declared:
+        """As :meth:`subscribe`, with at most ``depth`` samples waiting for ``handle`` (which
+        runs on a thread of the subscription's own on Zenoh): for large samples that may come
+        faster than they are handled."""
+        ...
 
+    def declare_token(self, key: str) -> Declared:
+        """A liveliness token on ``key``: alive until undeclared or this participant is gone."""
+        ...
 
-def source_of(sample: zenoh.Sample) -> str:
-    """Who published ``sample``: its publisher's global id, or "unidentified"."""
-    info = sample.source_info
-    if info is None:
-        return "unidentified"
-    return f"{info.source_id.zid}/{info.source_id.eid}"
+    def watch_tokens(self, key: str, handle: OnToken) -> Declared:
+        """``handle(token key, alive)`` for every token on ``key`` that appears or goes; the
+        ones alive now first."""
+        ...
 
+    def live_tokens(self, key: str, timeout_s: float) -> list[str]:
+        """The keys of the tokens alive on ``key`` now (waiting at most ``timeout_s``)."""
+        ...
 
-def _readable(path: Path, what: str, *, secret: bool = True) -> str:
-    """``path`` as Zenoh reads it, once it is there and no one else may change it (nor, for a
-    ``secret``, read it): ConfigError, one line, otherwise (common/credential_modes.py)."""
-    if not path.is_file():
-        fix = "run `zstack credentials`"
-        if ca_file(path.parent).is_file():  # a folder made for fewer cameras, or not all copied
-            fix = (
-                "make them again for the config's cameras with `zstack credentials --config "
-                "FILE --force`, or copy the file from where they were made"
-            )
-        raise ConfigError(f"{what} {path} is missing: {fix} (docs/security.md)")
-    check_folder(path.parent)
-    (check_secret if secret else check_public)(path)
-    return str(path)
+    def serve(self, key: str, answer: Answer) -> Declared:
+        """A queryable on ``key``: a query's reply is ``answer(query key, payload)``."""
+        ...
 
+    def query(self, key: str, timeout_s: float, payload: bytes = b"") -> list[Reply]:
+        """Ask ``key``; every reply that came within ``timeout_s``."""
+        ...
 
-def _password(settings: ZenohSettings, principal: str) -> str:
-    path = Path(_readable(password_file(settings.credentials_path, principal), "password file"))
-    try:
-        password = path.read_text(encoding="utf-8").strip()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read {path}: {exc}") from exc
-    if not password:
-        raise ConfigError(f"{path} is empty")
-    return password
-
-
-def _security(settings: ZenohSettings, principal: str, hub: bool) -> dict[str, Any]:
-    """The ``transport`` options for authentication and TLS, by dotted path."""
-    out: dict[str, Any] = {}
-    creds = settings.credentials_path
-    if settings.auth == "password":
-        usrpwd: dict[str, Any] = {"user": principal, "password": _password(settings, principal)}
-        if hub:
-            usrpwd["dictionary_file"] = _readable(users_file(creds), "user dictionary")
-        out["transport/auth/usrpwd"] = usrpwd
-    if settings.uses_tls:
-        # Here, not at the top: cryptography costs every process about 15 MB, and only TLS
-        # profiles read certificates.
-        from common.certificates import refuse_server_capable
-
-        refuse_server_capable(creds)  # any principal's certificate could pose as the router
-        tls: dict[str, Any] = {
-            "root_ca_certificate": _readable(ca_file(creds), "CA certificate", secret=False),
-            # Zenoh's default, stated: a client accepts only a certificate that names the host
-            # it dialled, which only the supervisor's does (deploy/credentials.py).
-            "verify_name_on_connect": True,
-        }
-        if hub:
-            tls["listen_certificate"] = _readable(
-                cert_file(creds, principal), "certificate", secret=False
-            )
-            tls["listen_private_key"] = _readable(key_file(creds, principal), "private key")
-            tls["enable_mtls"] = settings.auth == "certificate"
-        elif settings.auth == "certificate":
-            tls["connect_certificate"] = _readable(
-                cert_file(creds, principal), "certificate", secret=False
-            )
-            tls["connect_private_key"] = _readable(key_file(creds, principal), "private key")
-            # A client sends its certificate only with this set too (checked on zenoh 1.10).
-            tls["enable_mtls"] = True
-        out["transport/link/tls"] = tls
-    return out
-
-
-def zenoh_config(
-    settings: ZenohSettings,
-    principal: str,
-    *,
-    access: dict[str, Any] | None = None,
-    drop_keys: tuple[str, ...] = (),
-) -> zenoh.Config:
-    """Build the Zenoh config of one process.
-
-    ``access`` is given for the supervisor only: its access-control rules. The supervisor
-    listens on ``settings.endpoint`` (as a router in client mode); everyone else connects there.
-    ``drop_keys``: as a router, the supervisor sets congestion control DROP on every put and
-    delete it takes in on these keys (:func:`drop_overwrite`).
-    """
-    hub = access is not None
-    if hub:
-        listen = [settings.endpoint, *settings.listen]
-        listen = [ep for ep in listen if not ep.endswith(":0")] or [settings.endpoint]
-        connect = list(settings.connect)
-        mode = "router" if settings.mode == "client" else "peer"
-    else:
-        listen = [] if settings.mode == "client" else list(settings.listen)
-        connect = [settings.endpoint, *settings.connect]
-        mode = settings.mode
-    options: dict[str, Any] = {
-        "mode": mode,
-        "listen/endpoints": listen,
-        "connect/endpoints": connect,
-        "scouting/multicast/enabled": settings.multicast_scouting,
-        **_security(settings, principal, hub),
-    }
-    if hub and settings.auth != "none":
-        options["access_control"] = access
-    if hub and mode == "router" and drop_keys:
-        options["qos/network"] = [drop_overwrite(drop_keys)]
-    conf = zenoh.Config()
-    for path, value in options.items():
-        conf.insert_json5(path, json.dumps(value))
-    return conf
-
-
-def drop_overwrite(key_exprs: tuple[str, ...]) -> dict[str, Any]:
-    """Zenoh's ``qos/network`` item that makes the router drop, never wait, when a link a put
-    on ``key_exprs`` goes to is full, whatever congestion control its publisher chose: it
-    rewrites the sample as it comes in, and the router forwards it so (zenoh 1.10)."""
-    return {
-        "id": "drop_under_congestion",
-        "messages": ["put", "delete"],
-        "flows": ["ingress"],
-        "key_exprs": list(key_exprs),
-        "overwrite": {"congestion_control": "drop"},
-    }
-
-
-def _open(conf: zenoh.Config, settings: ZenohSettings, where: str, principal: str) -> zenoh.Session:
-    try:
-        return zenoh.open(conf)
-    except zenoh.ZError as exc:
-        auth = f" as {principal!r} ({settings.auth} auth)" if settings.auth != "none" else ""
-        # A refused router certificate reads as "unable to connect": say what is accepted.
-        tls = (
-            f" (over TLS only a router with the {ROUTER_PRINCIPAL}'s certificate signed by "
-            f"{ca_file(settings.credentials_path)} is accepted)"
-            if settings.uses_tls and principal != ROUTER_PRINCIPAL
-            else ""
-        )
-        raise ConfigError(
-            f"cannot open a Zenoh session on {where}{auth}{tls}: {explain(str(exc))}"
-        ) from exc
-
-
-def open_session(settings: ZenohSettings, principal: str) -> zenoh.Session:
-    """Join the stack as ``principal`` (a service's name, "estop" or "observer")."""
-    conf = zenoh_config(settings, principal)
-    where = settings.endpoint if settings.mode == "client" else ", ".join(settings.listen)
-    return _open(conf, settings, where, principal)
-
-
-def open_ros_session(s: Ros2Settings, *, host: bool = False) -> zenoh.Session:
-    """A session in a ROS 2 graph, as an rmw_zenoh node joins it: a peer that connects to the
-    router and listens for the other nodes. ``host`` opens the router itself instead (the
-    simulator playing a robot). No router within ``router_timeout_s`` is a StackError."""
-    options: dict[str, Any] = {
-        "mode": "router" if host else "peer",
-        "listen/endpoints": list(s.router if host else s.listen),
-        "connect/endpoints": [] if host else list(s.router),
-        "scouting/multicast/enabled": False,
-        "connect/exit_on_failure": True,
-        "connect/timeout_ms": int(s.router_timeout_s * 1000),
-    }
-    conf = zenoh.Config()
-    for path, value in options.items():
-        conf.insert_json5(path, json.dumps(value))
-    try:
-        return zenoh.open(conf)
-    except zenoh.ZError as exc:
-        where = ", ".join(s.router)
-        if host:
-            why = explain(str(exc))
-            raise ConfigError(f"cannot host the ROS 2 router on {where}: {why}") from exc
-        raise StackError(
-            f"no rmw_zenoh router answered on {where} within {s.router_timeout_s:.0f} s: "
-            "start rmw_zenohd on the robot, or set ros2.router"
-        ) from exc
-
-
-def hub_access(config: Config) -> dict[str, Any]:
-    """The supervisor's access-control rules for this stack's keys ({} without auth)."""
-    z = config.zenoh
-    if z.auth == "none":
-        return {}
-    live = bool(running_sensors(config.supervisor.services))
-    keys = Keys(config.stack.prefix)
-    return access_control(
-        keys, config.camera_services, z.auth, live_sensors=live, workers=config.detector_services
-    )
-
-
-def hub_drop_keys(config: Config) -> tuple[str, ...]:
-    """The keys on which the supervisor's router overwrites congestion control to DROP: every
-    key of the stack but the e-stop (common.security.congestion_overwritten)."""
-    keys = Keys(config.stack.prefix)
-    return congestion_overwritten(keys, config.camera_services, workers=config.detector_services)
-
-
-def check_credentials(config: Config) -> None:
-    """With passwords, the router's dictionary must name every principal of this stack: one
-    made for fewer cameras or detector workers would refuse a further one's process.
-    ConfigError, one line, naming the command that makes them again."""
-    z = config.zenoh
-    if z.auth != "password":
-        return  # certificates: the router needs only the CA; each client checks its own files
-    path = Path(_readable(users_file(z.credentials_path), "user dictionary"))
-    try:
-        known = {line.split(":", 1)[0] for line in path.read_text(encoding="utf-8").splitlines()}
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read {path}: {exc}") from exc
-    principals = stack_principals(config.camera_services, config.detector_services)
-    missing = [p for p in principals if p not in known]
-    if missing:
-        raise ConfigError(
-            f"the credentials in {z.credentials_path} have no principal {', '.join(missing)} "
-            "(made for fewer cameras or detector workers?): make them again with `zstack "
-            f"credentials --config {config.path or 'FILE'} --force` (docs/security.md)"
-        )
-
-
-def open_hub(config: Config) -> zenoh.Session:
-    """The supervisor's session: the endpoint every service joins, enforcing access control."""
-    check_credentials(config)
-    conf = zenoh_config(
-        config.zenoh, HUB_PRINCIPAL, access=hub_access(config), drop_keys=hub_drop_keys(config)
-    )
-    return _open(conf, config.zenoh, config.zenoh.endpoint, HUB_PRINCIPAL)
+    def close(self) -> None:
+        """Leave the bus: every declaration of this participant is gone."""
+        ...

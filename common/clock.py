@@ -16,6 +16,7 @@ import datetime
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 
 def _read_boot_id() -> str:
@@ -85,3 +86,56 @@ def local_now() -> datetime.datetime:
 def utc_now() -> datetime.datetime:
     """The date and time in UTC (aware), for what is written down: certificates, reports."""
     return datetime.datetime.now(datetime.UTC)
+
+
+class Clock(Protocol):
+    """What a loop, a pool member or a window reads the time from: the system's clocks in a
+    process, a :class:`FakeClock` in an in-process test."""
+
+    def now(self) -> Stamp: ...
+
+    def mono_s(self) -> float: ...
+
+    def wall_ns(self) -> int: ...
+
+
+class SystemClock:
+    """The host's clocks (:func:`now`, :func:`mono_s`, :func:`wall_ns`)."""
+
+    def now(self) -> Stamp:
+        return now()
+
+    def mono_s(self) -> float:
+        return mono_s()
+
+    def wall_ns(self) -> int:
+        return wall_ns()
+
+
+SYSTEM_CLOCK = SystemClock()
+
+
+class FakeClock:
+    """A clock that moves only when told (:meth:`advance`): both readings move together, so
+    that a stamp's age on either is the same. Starts at a plausible wall time, and at a
+    monotonic reading far from zero (so that "0" never reads as a fresh instant)."""
+
+    def __init__(self, wall_ns: int = 1_790_000_000 * 10**9, mono_ns: int = 10_000 * 10**9):
+        self._wall_ns = wall_ns
+        self._mono_ns = mono_ns
+
+    def advance(self, seconds: float) -> None:
+        if seconds < 0:
+            raise ValueError("a monotonic clock never goes back")
+        step = round(seconds * 1e9)
+        self._wall_ns += step
+        self._mono_ns += step
+
+    def now(self) -> Stamp:
+        return Stamp(self._wall_ns, self._mono_ns)
+
+    def mono_s(self) -> float:
+        return self._mono_ns / 1e9
+
+    def wall_ns(self) -> int:
+        return self._wall_ns

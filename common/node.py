@@ -1,21 +1,18 @@
-"""What every service process has: a Zenoh session, its keys, counters and a health token.
+"""What every service process has: a bus (common/bus.py), its keys, counters and a health token.
 
 ``Tally`` is the part without the bus: the counters and the rate-limited log that a handler
 reports bad and refused input to. A service's handlers take a Tally, so that a test builds one
-and calls a handler directly; ``Node`` is a Tally with a session.
+and calls a handler directly; ``Node`` is a Tally with a bus and a clock.
 """
 
 from __future__ import annotations
 
 import logging
-import threading
 from collections.abc import Callable
 from typing import TypeVar
 
-import zenoh
-
-from common.bus import Publisher, QoS, open_session
-from common.clock import BOOT_ID, Stamp, mono_s, now
+from common.bus import Bus, Declared, Publisher, QoS
+from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock, Stamp
 from common.counters import Counters
 from common.errors import DecodeError
 from common.keys import Keys
@@ -91,17 +88,32 @@ class Tally:
 
 
 class Node(Tally, Closing):
-    """A service's presence on the bus.
+    """A service's presence on the bus (common/bus.py): a Zenoh session's, unless a ``bus`` is
+    given (an in-process test's, common/memory_bus.py), and its clock (the system's unless a
+    ``clock`` is given). Closing the node closes the bus.
 
     ``ready()`` declares the liveliness token ``<prefix>/health/<service>``; the supervisor and
     tests wait on it instead of sleeping. ``publish_counters()`` is rate-limited, so the service
     loop may call it every iteration.
     """
 
-    def __init__(self, service: str, config: Config, *, counters_period_s: float = 1.0) -> None:
+    def __init__(
+        self,
+        service: str,
+        config: Config,
+        *,
+        counters_period_s: float = 1.0,
+        bus: Bus | None = None,
+        clock: Clock = SYSTEM_CLOCK,
+    ) -> None:
         super().__init__(service, config)
-        self.session = open_session(config.zenoh, service)
-        self._token: zenoh.LivelinessToken | None = None
+        if bus is None:
+            from common.zenoh_bus import ZenohBus, open_session
+
+            bus = ZenohBus(open_session(config.zenoh, service), self.log)
+        self.bus = bus
+        self.clock = clock
+        self._token: Declared | None = None
         self._counters_pub = self.publisher(self.keys.counters(service), QoS.TELEMETRY)
         self._counters_period_s = counters_period_s
         self._counters_next = 0.0
@@ -109,14 +121,13 @@ class Node(Tally, Closing):
 
     def ready(self) -> None:
         """Announce that the service is up and serving."""
-        self._token = self.session.liveliness().declare_token(self.keys.health(self.service))
-        self.log.info("ready (zenoh id %s)", self.session.info.zid())
+        self._token = self.bus.declare_token(self.keys.health(self.service))
+        self.log.info("ready (zenoh id %s)", self.bus.zid)
 
     def publisher(self, key: str, qos: QoS) -> Publisher:
         """Declare a publisher with the QoS profile of its role (common/bus.py). A payload
         over ``zenoh.max_payload_bytes`` is not sent but counted (``payload_too_large``)."""
-        return Publisher(
-            self.session,
+        return self.bus.publisher(
             key,
             qos,
             max_payload_bytes=self.config.zenoh.max_payload_bytes,
@@ -132,34 +143,30 @@ class Node(Tally, Closing):
             key=key,
         )
 
-    def subscribe(self, key: str, handle: Callable[[bytes], None]) -> zenoh.Subscriber[None]:
+    def subscribe(self, key: str, handle: Callable[[bytes], None]) -> Declared:
         """Subscribe to ``key``: ``handle`` gets each sample's payload (and decodes it itself,
         through ``Tally.decode``)."""
-        return self.session.declare_subscriber(key, lambda sample: handle(_payload(sample)))
+        return self.bus.subscribe(key, lambda sample: handle(sample.payload))
 
     def subscribe_bounded(
         self, key: str, handle: Callable[[bytes], None], depth: int = BOUNDED_DEPTH
-    ) -> Bounded:
+    ) -> Declared:
         """Subscribe to ``key`` with at most ``depth`` samples waiting for ``handle``, which
-        runs on a thread of the subscription's own (see :class:`Bounded`). For large samples
-        that may come faster than they are handled: camera frames."""
-        return Bounded(self.session, key, handle, self.log, depth)
+        runs on a thread of the subscription's own (common/zenoh_bus.py, ``Bounded``). For
+        large samples that may come faster than they are handled: camera frames."""
+        return self.bus.subscribe_bounded(key, lambda sample: handle(sample.payload), depth)
 
-    def subscribe_keyed(
-        self, key: str, handle: Callable[[str, bytes], None]
-    ) -> zenoh.Subscriber[None]:
+    def subscribe_keyed(self, key: str, handle: Callable[[str, bytes], None]) -> Declared:
         """Subscribe to ``key`` (a wildcard, say): ``handle(key, payload)`` gets the key each
         sample came on with its payload."""
-        return self.session.declare_subscriber(
-            key, lambda sample: handle(str(sample.key_expr), _payload(sample))
-        )
+        return self.bus.subscribe(key, lambda sample: handle(sample.key, sample.payload))
 
     def header(self, stamp: Stamp | None = None, frame_id: str = "") -> Header:
         """A header for a message this service originates, stamped on both clocks (now, unless
         ``stamp`` is given), with its own sequence number: one numbering per ``frame_id``, so
         that a receiver of one stream (the simulator's frames, not its scans) sees no gaps."""
         seq = self._seq[frame_id] = self._seq.get(frame_id, 0) + 1
-        at = now() if stamp is None else stamp
+        at = self.clock.now() if stamp is None else stamp
         return Header(
             stamp_ns=at.wall_ns,
             frame_id=frame_id,
@@ -170,7 +177,7 @@ class Node(Tally, Closing):
         )
 
     def publish_counters(self, *, force: bool = False) -> None:
-        now = mono_s()
+        now = self.clock.mono_s()
         if not force and now < self._counters_next:
             return
         self._counters_next = now + self._counters_period_s
@@ -187,61 +194,4 @@ class Node(Tally, Closing):
         self.publish_counters(force=True)
         if self._token is not None:
             self._token.undeclare()
-        self.session.close()
-
-
-class Bounded:
-    """A subscription with at most ``depth`` samples waiting between Zenoh and its handler.
-
-    A callback subscription (``Node.subscribe``) hands each sample from Zenoh's thread to a
-    Python thread through a queue of 256 samples (zenoh-python's ``Callback(indirect=True)``):
-    a publisher faster than the callback fills it, and with 6.2 MB frames that is 1.6 GB of
-    stale frames held in the receiving process, each delivered late. Here Zenoh puts each
-    sample in a FIFO of ``depth`` (``FifoChannel``) and this subscription's thread takes it
-    from there. When it is full Zenoh stops reading that link: the sender's queue fills and
-    its congestion control (DROP for every sample of the stack, common/bus.py) drops the
-    excess there, which the receiver sees as a gap in the sender's numbering. Nothing that
-    arrives is lost on the way to the handler, so bad input is still counted in full, and
-    Python's lock is never taken on Zenoh's thread. ``undeclare()`` ends the subscription and
-    its thread.
-    """
-
-    def __init__(
-        self,
-        session: zenoh.Session,
-        key: str,
-        handle: Callable[[bytes], None],
-        log: logging.Logger,
-        depth: int,
-    ) -> None:
-        self.key = key
-        self._handle = handle
-        self._log = log
-        self._sub = session.declare_subscriber(key, zenoh.handlers.FifoChannel(depth))
-        # Received through the handler, not the subscriber: a recv() blocked on the
-        # subscriber would hold it borrowed, and undeclare() would fail ("Already borrowed").
-        self._queue = self._sub.handler
-        self._thread = threading.Thread(target=self._run, name=f"bounded {key}", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while True:
-            try:
-                sample = self._queue.recv()
-            except zenoh.ZError:
-                return  # undeclared: the queue is closed
-            try:
-                self._handle(_payload(sample))
-            except Exception:
-                # As Zenoh does for a callback: a handler's bug is logged, and the
-                # subscription goes on.
-                self._log.exception("the handler of %s failed", self.key)
-
-    def undeclare(self) -> None:
-        self._sub.undeclare()
-        if threading.current_thread() is not self._thread:  # from its own handler: no wait
-            self._thread.join()
-
-
-def _payload(sample: zenoh.Sample) -> bytes:
-    return sample.payload.to_bytes()
+        self.bus.close()

@@ -12,19 +12,26 @@ from typing import cast
 
 import zenoh
 
+from common.bus import Bus
 from common.contracts import MetricsAnswer
 from common.keys import Keys
 
 
-def ready_services(session: zenoh.Session, keys: Keys, timeout_s: float = 1.0) -> set[str]:
+def _bus(on: Bus | zenoh.Session) -> Bus:
+    if isinstance(on, zenoh.Session):
+        from common.zenoh_bus import ZenohBus
+
+        return ZenohBus(on)  # a view of the caller's session, which stays the caller's to close
+    return on
+
+
+def ready_services(on: Bus | zenoh.Session, keys: Keys, timeout_s: float = 1.0) -> set[str]:
     """The services whose health token is present now (each holds one while it is ready)."""
-    replies = session.liveliness().get(keys.all_health(), timeout=timeout_s)
-    return {str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None}
+    return {key.rsplit("/", 1)[-1] for key in _bus(on).live_tokens(keys.all_health(), timeout_s)}
 
 
-def query_metrics(session: zenoh.Session, keys: Keys, timeout_s: float) -> MetricsAnswer | None:
+def query_metrics(on: Bus | zenoh.Session, keys: Keys, timeout_s: float) -> MetricsAnswer | None:
     """The metrics service's JSON answer, or None when nobody answered within ``timeout_s``."""
-    for reply in session.get(keys.metrics(), timeout=timeout_s):
-        if reply.ok is not None:
-            return cast(MetricsAnswer, json.loads(reply.ok.payload.to_string()))
+    for reply in _bus(on).query(keys.metrics(), timeout_s):
+        return cast(MetricsAnswer, json.loads(reply.payload))
     return None

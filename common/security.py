@@ -1,6 +1,6 @@
 """Who may say what on the bus: principals, their credential files and the access-control rules.
 
-Pure: nothing here opens a session. ``common/bus.py`` turns these into Zenoh configuration.
+Pure: nothing here opens a session. ``common/zenoh_bus.py`` turns these into Zenoh configuration.
 
 The secure profile runs the stack as a star: the supervisor is a Zenoh *router* that every
 service joins as a *client*, authenticated by user name and password (``auth = "password"``)

@@ -20,7 +20,6 @@ from typing import cast
 
 import zenoh
 
-from common.bus import open_hub
 from common.cli import Command, add_config, service_main
 from common.clock import mono_s
 from common.config_file import load_config
@@ -39,6 +38,7 @@ from common.lifecycle import (
 from common.messages import ControllerStatus, GroundTruth, ServiceCounters, Twist
 from common.queries import query_metrics
 from common.settings import CameraSettings, Config, service_package
+from common.zenoh_bus import open_hub
 from deploy.crosscheck import cross_check, model_classes
 from deploy.lock import acquire
 from deploy.processes import ServiceProcess, stack_processes

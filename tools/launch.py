@@ -26,6 +26,7 @@ from typing import IO
 
 import zenoh
 
+from common.bus import Bus
 from common.clock import mono_s
 from common.config_file import ENV_PREFIX, to_toml
 from common.errors import StackError
@@ -73,7 +74,7 @@ def write_config(config: Config, path: Path) -> Path:
 
 
 def wait_ready(
-    session: zenoh.Session,
+    session: Bus | zenoh.Session,
     keys: Keys,
     services: set[str],
     proc: subprocess.Popen[bytes],

@@ -351,11 +351,9 @@ def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:
     target classes it cannot report."""
     key = node.keys.detector_info(config.stack.camera)
     while not stop.is_set():
-        for reply in node.session.get(key, timeout=2.0):
-            if reply.ok is None:
-                continue
+        for reply in node.bus.query(key, timeout_s=2.0):
             try:
-                info: DetectorInfo = json.loads(reply.ok.payload.to_string())
+                info: DetectorInfo = json.loads(reply.payload)
                 classes = info["classes"]
                 if not (isinstance(classes, list) and all(isinstance(c, str) for c in classes)):
                     raise TypeError(f"classes must be a list of names, got {classes!r:.80}")

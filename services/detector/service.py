@@ -13,9 +13,8 @@ from functools import partial
 
 import numpy as np
 import numpy.typing as npt
-import zenoh
 
-from common.bus import QoS
+from common.bus import Declared, QoS
 from common.clock import BOOT_ID, mono_s, now, wall_ns
 from common.contracts import DetectorInfo
 from common.counters import per_camera
@@ -23,7 +22,7 @@ from common.errors import DecodeError, ImageError, ImageTooLarge, StackError
 from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, Header
-from common.node import Bounded, Node, Put, Tally
+from common.node import Node, Put, Tally
 from common.pool_audit import MAX_LINES, PoolAudit, Report, Serving, lines
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
@@ -369,15 +368,15 @@ class PoolMember:
         self._token_lock = threading.Lock()
         self._lock = threading.Lock()
         self._dirty = True
-        self._subs: dict[str, Bounded] = {}
-        self._token: zenoh.LivelinessToken | None = None
-        self._watch: zenoh.Subscriber[None] | None = None
+        self._subs: dict[str, Declared] = {}
+        self._token: Declared | None = None
+        self._watch: Declared | None = None
         self._gauges: dict[str, int] = {}
         self._handed_over = False
-        self.zid = str(node.session.info.zid())
-        self._serving_tokens: dict[str, zenoh.LivelinessToken] = {}  # under _token_lock
+        self.zid = node.bus.zid
+        self._serving_tokens: dict[str, Declared] = {}  # under _token_lock
         self._servers: set[Serving] = set()  # everyone's serving tokens, as heard
-        self._serving_watch: zenoh.Subscriber[None] | None = None
+        self._serving_watch: Declared | None = None
         self._audit = PoolAudit(self.view.weights, self.view.balance, config.detector.pool_alarm_s)
         self._audit_next = 0.0
         for cam in handlers.frame_keys:
@@ -394,9 +393,8 @@ class PoolMember:
         started at once, is the audit's ``name_twice`` warning.) The supervisor tries again
         after its backoff: a process just killed takes its token with its links."""
         node, keys = self.node, self.node.keys
-        liveliness = node.session.liveliness()
-        replies = liveliness.get(keys.all_pool_members(), timeout=POOL_ASK_TIMEOUT_S)
-        members = [str(reply.ok.key_expr) for reply in replies if reply.ok is not None]
+        bus = node.bus
+        members = bus.live_tokens(keys.all_pool_members(), POOL_ASK_TIMEOUT_S)
         mine = keys.pool_member(self.view.me)
         if mine in members:
             raise StackError(
@@ -404,15 +402,11 @@ class PoolMember:
                 "not starting a second; give each host its own detector.worker_id"
             )
         with self._token_lock:
-            self._token = liveliness.declare_token(mine)
-        self._watch = liveliness.declare_subscriber(
-            keys.all_pool_members(), self._on_member, history=True
-        )
+            self._token = bus.declare_token(mine)
+        self._watch = bus.watch_tokens(keys.all_pool_members(), self._on_member)
         for key in members:
             self._member(key, joined=True)
-        self._serving_watch = liveliness.declare_subscriber(
-            keys.all_pool_serving(), self._on_serving, history=True
-        )
+        self._serving_watch = bus.watch_tokens(keys.all_pool_serving(), self._on_serving)
         self.settle()
         self._last_beat = mono_s()
         self._stall_watch = threading.Thread(
@@ -433,9 +427,7 @@ class PoolMember:
                     self._dirty = True
             if back:
                 keys = self.node.keys
-                self._token = self.node.session.liveliness().declare_token(
-                    keys.pool_member(self.view.me)
-                )
+                self._token = self.node.bus.declare_token(keys.pool_member(self.view.me))
         if back:
             self.node.log.warning("the detection loop runs again: back in the pool")
 
@@ -468,12 +460,12 @@ class PoolMember:
                 self._stall_s,
             )
 
-    def _on_serving(self, sample: zenoh.Sample) -> None:
-        parts = self.node.keys.pool_serving_parts(str(sample.key_expr))
+    def _on_serving(self, key: str, alive: bool) -> None:
+        parts = self.node.keys.pool_serving_parts(key)
         if parts is None:
             return
         with self._lock:
-            if sample.kind == zenoh.SampleKind.PUT:
+            if alive:
                 self._servers.add(parts)
             else:
                 self._servers.discard(parts)
@@ -506,7 +498,7 @@ class PoolMember:
 
     def _sync_serving(self, serving: frozenset[str]) -> None:
         """One serving token for each camera of ``serving``, and none for another."""
-        keys, liveliness = self.node.keys, self.node.session.liveliness()
+        keys, bus = self.node.keys, self.node.bus
         with self._token_lock:
             if self._token is None:
                 return  # resigned or closed: it serves nothing until it is back
@@ -514,10 +506,10 @@ class PoolMember:
                 self._serving_tokens.pop(cam).undeclare()
             for cam in sorted(serving - self._serving_tokens.keys()):
                 key = keys.pool_serving(self.view.me, self.zid, cam)
-                self._serving_tokens[cam] = liveliness.declare_token(key)
+                self._serving_tokens[cam] = bus.declare_token(key)
 
-    def _on_member(self, sample: zenoh.Sample) -> None:
-        self._member(str(sample.key_expr), joined=sample.kind == zenoh.SampleKind.PUT)
+    def _on_member(self, key: str, alive: bool) -> None:
+        self._member(key, joined=alive)
 
     def _member(self, key: str, *, joined: bool) -> None:
         worker = key.rsplit("/", 1)[-1]
@@ -614,10 +606,8 @@ def round_size(detector: Detector, served: int, log: logging.Logger) -> int:
     return min(served, fixed)
 
 
-def _info_queryable(node: Node, key: str, info: str) -> zenoh.Queryable[None]:
-    return node.session.declare_queryable(
-        key, lambda q: q.reply(key, info, encoding=zenoh.Encoding.APPLICATION_JSON)
-    )
+def _info_queryable(node: Node, key: str, info: str) -> Declared:
+    return node.bus.serve(key, lambda _key, _query: info.encode())
 
 
 def _track(

@@ -13,10 +13,7 @@ from collections.abc import Callable
 from functools import partial
 from typing import TypeVar
 
-import zenoh
-
 from common import reach
-from common.bus import open_session
 from common.clock import mono_s, mono_to_unix_s
 from common.contracts import MetricsAnswer
 from common.errors import DecodeError, StackError
@@ -27,6 +24,7 @@ from common.pool_audit import MAX_LINES, PoolAudit, lines
 from common.pool_rule import camera_weights
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES, Config
+from common.zenoh_bus import open_session
 from services.metrics.advice import advise
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
 from services.metrics.pool import LivePool
@@ -194,25 +192,11 @@ def run(config: Config, stop: threading.Event) -> int:
             node.subscribe_keyed(keys.all_counters(), handlers.on_counters),
         ]
 
-        def on_query(query: zenoh.Query) -> None:
-            query.reply(
-                keys.metrics(), strict_json(answer()), encoding=zenoh.Encoding.APPLICATION_JSON
-            )
-
-        liveliness = node.session.liveliness()
-
-        def on_token(handle: Callable[[str, bool], None], sample: zenoh.Sample) -> None:
-            handle(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
-
         watches = [
-            liveliness.declare_subscriber(
-                keys.all_pool_members(), partial(on_token, handlers.on_pool_member), history=True
-            ),
-            liveliness.declare_subscriber(
-                keys.all_pool_serving(), partial(on_token, handlers.on_pool_serving), history=True
-            ),
+            node.bus.watch_tokens(keys.all_pool_members(), handlers.on_pool_member),
+            node.bus.watch_tokens(keys.all_pool_serving(), handlers.on_pool_serving),
         ]
-        queryable = node.session.declare_queryable(keys.metrics(), on_query)
+        queryable = node.bus.serve(keys.metrics(), lambda _key, _q: strict_json(answer()).encode())
         if exporter is not None:
             port = exporter.start(answer, s.prometheus_host, s.prometheus_port)
             node.log.info("prometheus metrics on http://%s:%d/metrics", s.prometheus_host, port)

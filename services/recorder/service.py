@@ -19,7 +19,7 @@ from pathlib import Path
 import zenoh
 
 from common import reach
-from common.bus import Publisher, QoS, open_session
+from common.bus import Declared, QoS
 from common.clock import local_now, mono_s, wall_ns
 from common.codec import Message
 from common.errors import StackError
@@ -41,6 +41,7 @@ from common.queries import ready_services
 from common.recorder_settings import TIME_FIELD
 from common.security import running_sensors
 from common.settings import REPO_ROOT, Config, is_detector_service
+from common.zenoh_bus import Publisher, ZenohBus, open_session
 from services.recorder.channels import Translator
 from services.recorder.play import Played, one_pass, playable_topics
 from services.recorder.writer import Decode, McapFile, QueuedRecorder
@@ -85,7 +86,7 @@ class Recorder(Closing):
             McapFile(path, config.recorder), Translator(config.ros2, config.stack.camera),
             config.recorder, tally.counters,
         )  # fmt: skip
-        self._subs: list[zenoh.Subscriber[None]] = []
+        self._subs: list[Declared] = []
         self._own = tally.keys.counters(SERVICE)
         self.heard = 0  # samples from the stack: every key but the recorder's own counters
 
@@ -169,7 +170,7 @@ def record(
             recorder.close()
         progress(recorder.progress() + (" (stopped by an error)" if code else ", done"))
         if code == EXIT_OK and require_stack and recorder.heard == 0:
-            linked = reach.connected(node.session)
+            linked = not isinstance(node.bus, ZenohBus) or reach.connected(node.bus.session)
             raise StackError(
                 reach.unreached(
                     f"recorded nothing from the stack ({path} holds only the recorder's own "

@@ -13,10 +13,10 @@ from typing import Literal
 
 import zenoh
 
-from common.bus import open_ros_session
 from common.clock import wall_ns
 from common.lifecycle import Closing
 from common.ros2_settings import Ros2Settings
+from common.zenoh_bus import open_ros_session
 from services.ros2.convert import RosMessage, cdr_encode
 from services.ros2.wire import (
     DEFAULT_QOS,

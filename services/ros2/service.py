@@ -22,9 +22,7 @@ from __future__ import annotations
 
 import threading
 
-import zenoh
-
-from common.bus import QoS
+from common.bus import Declared, QoS
 from common.clock import BOOT_ID, mono_s, now
 from common.command_gate import CommandGate, Outcome
 from common.errors import DecodeError, ImageError
@@ -197,14 +195,12 @@ class DebugImages:
         self.tally.counters.add("debug_images_out")
 
 
-def _bridge_camera(
-    config: Config, node: Node, graph: RosGraph, camera: str
-) -> list[zenoh.Subscriber[None]]:
+def _bridge_camera(config: Config, node: Node, graph: RosGraph, camera: str) -> list[Declared]:
     """Map ``camera``'s images in and its detections (and debug images) out, on its own ROS
     topics; the subscriptions on the stack's keys made for it."""
     s, keys = config.ros2, node.keys
     topics = camera_topics(s, config.stack.camera, camera)
-    subs: list[zenoh.Subscriber[None]] = []
+    subs: list[Declared] = []
     if s.image_in:
         image_type = IMAGE if s.image_format is ImageFormat.RAW else COMPRESSED_IMAGE
         frames = node.publisher(keys.frame(camera), QoS.SENSOR)
@@ -227,7 +223,7 @@ def run(config: Config, stop: threading.Event) -> int:
     s = config.ros2
     with Node("ros2", config) as node, RosGraph(s) as graph:
         keys = node.keys
-        subs: list[zenoh.Subscriber[None]] = []
+        subs: list[Declared] = []
         for camera in config.all_cameras:
             subs += _bridge_camera(config, node, graph, camera)
         if s.scan_in:

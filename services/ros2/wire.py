@@ -155,7 +155,7 @@ _ZENOH_DEFAULT_DEPTH = 42
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class RosQoS:
-    """A ROS 2 QoS profile as a liveliness token carries it (not common.bus.QoS, our roles).
+    """A ROS 2 QoS profile as a liveliness token carries it (not common.zenoh_bus.QoS, our roles).
     Durations in ns; None is infinite.
 
     The defaults are ROS's default profile (reliable, volatile, keep last 10).

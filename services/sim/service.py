@@ -19,7 +19,7 @@ from typing import Protocol
 
 import numpy as np
 
-from common.bus import Publisher, QoS, source_of
+from common.bus import Publisher, QoS
 from common.clock import mono_s, wall_ns
 from common.command_sources import CommandSources
 from common.counters import per_camera
@@ -107,9 +107,8 @@ class StackRobot:
             camera: node.publisher(keys.frame(camera), QoS.SENSOR) for camera in config.all_cameras
         }
         self._scan = node.publisher(keys.scan(), QoS.SENSOR)
-        self._sub = node.session.declare_subscriber(
-            keys.cmd_vel(),
-            lambda sample: handlers.on_cmd_vel(sample.payload.to_bytes(), source_of(sample)),
+        self._sub = node.bus.subscribe(
+            keys.cmd_vel(), lambda sample: handlers.on_cmd_vel(sample.payload, sample.source)
         )
 
     def frame(self, camera: str, frame: Frame) -> None:
@@ -250,8 +249,7 @@ def run(config: Config, stop: threading.Event) -> int:
 
 def _ready(node: Node, services: tuple[str, ...]) -> bool:
     for service in services:
-        replies = list(node.session.liveliness().get(node.keys.health(service), timeout=0.2))
-        if not any(r.ok is not None for r in replies):
+        if not node.bus.live_tokens(node.keys.health(service), timeout_s=0.2):
             return False
     return True
 

@@ -224,7 +224,7 @@ def metrics_loop(node: Node, viewer: Viewer, stop: threading.Event) -> None:
     """Ask the metrics service ``metrics_rate_hz`` times a second; show its figures."""
     period = 1.0 / viewer.settings.metrics_rate_hz
     while not stop.wait(period):
-        answer = query_metrics(node.session, node.keys, min(period, 1.0))
+        answer = query_metrics(node.bus, node.keys, min(period, 1.0))
         if answer is not None:
             viewer.on_metrics(answer)
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import argparse
 
-from common.bus import open_session
 from common.config_file import load_config
 from common.lifecycle import stop_event
+from common.zenoh_bus import open_session
 
 
 def main() -> None:

@@ -23,7 +23,6 @@ import cv2
 import pytest
 import zenoh
 
-from common.bus import Publisher, QoS, open_hub
 from common.clock import mono_s
 from common.config_file import load_config
 from common.frames import image_to_frame
@@ -33,6 +32,7 @@ from common.messages import Detections, Header, ServiceCounters
 from common.queries import ready_services
 from common.settings import Config
 from common.spawn import spawn, stop_child
+from common.zenoh_bus import Publisher, QoS, open_hub
 from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
 from tests.unit.detector.headers import camera_header
 

@@ -16,11 +16,11 @@ import pytest
 import zenoh
 
 from common.boxes import Boxes
-from common.bus import Publisher, QoS
 from common.clock import BOOT_ID, now
 from common.frames import image_to_frame
 from common.images import load_sample
 from common.messages import Detections, Frame, Header, ServiceCounters
+from common.zenoh_bus import Publisher, QoS
 from tests.integration.conftest import Stack, wait_for, write_config
 from tests.unit.common.test_pixel_budget import bomb
 from tests.unit.detector.test_nonfinite import constant_model

@@ -316,8 +316,8 @@ def test_secure_profile_keeps_strangers_out_and_services_to_their_own_keys(
 ) -> None:  # type: ignore[no-untyped-def]
     import dataclasses
 
-    from common.bus import open_session
     from common.errors import ConfigError
+    from common.zenoh_bus import open_session
     from deploy.credentials import generate
     from tests.integration.conftest import free_port
 

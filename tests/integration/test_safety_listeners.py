@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 import zenoh
 
-from common.bus import Publisher, QoS
 from common.clock import BOOT_ID, now
 from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan
 from common.security import may_read
+from common.zenoh_bus import Publisher, QoS
 from deploy.credentials import generate
 from tests.integration.conftest import REPO, Stack, wait_for
 from tests.integration.test_safety import STACK, header, moving

@@ -15,12 +15,12 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from common.bus import HUB_PRINCIPAL, hub_access, zenoh_config
 from common.clock import now
 from common.config_file import load_config
 from common.contracts import ControllerState
 from common.keys import Keys
 from common.messages import ControllerStatus, Header
+from common.zenoh_bus import HUB_PRINCIPAL, hub_access, zenoh_config
 from deploy.credentials import generate
 from tests.integration.conftest import REPO, write_config
 from tools.launch import free_port

@@ -19,11 +19,11 @@ import threading
 import numpy as np
 import zenoh
 
-from common.bus import open_session
 from common.clock import BOOT_ID, mono_s, now
 from common.config_file import load_config
 from common.keys import Keys
 from common.messages import Frame, Header
+from common.zenoh_bus import open_session
 
 FULL_HD = (1920, 1080)
 CONGESTION = {"drop": zenoh.CongestionControl.DROP, "block": zenoh.CongestionControl.BLOCK}

@@ -27,13 +27,13 @@ from typing import Any
 import numpy as np
 
 from common.boxes import Boxes
-from common.bus import open_session
 from common.clock import perf_ns, wall_ns
 from common.config_file import to_toml
 from common.keys import Keys
 from common.machine import machine_info
 from common.messages import Detections, Frame, Header
 from common.settings import Config, ZenohSettings
+from common.zenoh_bus import open_session
 from services.ros2.convert import DETECTION_2D_ARRAY, cdr_decode
 from services.ros2.graph import RosGraph
 from services.ros2.images import IMAGE, frame_to_image

@@ -19,12 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from common.bus import open_session
 from common.clock import mono_s, wall_ns
 from common.config_file import to_toml
 from common.keys import Keys
 from common.messages import Detections, ServiceCounters
 from common.settings import Config, ZenohSettings
+from common.zenoh_bus import open_session
 from services.metrics.pool import Duplicates
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 

@@ -19,7 +19,6 @@ from typing import Any, cast
 
 import zenoh
 
-from common.bus import open_session
 from common.clock import mono_s, utc_now, wall_ns
 from common.config_file import load_config
 from common.contracts import Session
@@ -30,6 +29,7 @@ from common.machine import machine_info
 from common.messages import Detections, Header, ServiceCounters, Twist
 from common.queries import query_metrics
 from common.settings import REPO_ROOT, Config
+from common.zenoh_bus import open_session
 from services.metrics.aggregate import Aggregator
 from tools.launch import start_supervisor, stop_supervisor, wait_ready, write_config
 

@@ -21,7 +21,6 @@ from typing import Any
 
 import zenoh
 
-from common.bus import open_session
 from common.clock import mono_s, wall_ns
 from common.config_file import to_toml
 from common.contracts import ControllerMode, ScenarioResult
@@ -29,6 +28,7 @@ from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, GroundTruth, Twist
 from common.settings import Config
+from common.zenoh_bus import open_session
 from services.sim.scenarios import SCENARIOS, Scenario
 from tools.launch import free_port, service_pids, start_supervisor, stop_supervisor
 from tools.scenarios.score import ScenarioLog, score

@@ -7,8 +7,8 @@ import threading
 
 import zenoh
 
-from common.bus import Publisher, QoS
 from common.messages import EStop, Header
+from common.zenoh_bus import Publisher, QoS
 
 
 def test_every_put_is_marked_msgpack() -> None:
@@ -63,7 +63,8 @@ def test_a_payload_over_the_limit_is_refused_and_reported() -> None:
 
 
 def test_a_bounded_subscription_holds_up_its_sender_not_its_memory() -> None:
-    from common.node import Bounded
+    from common.bus import Sample
+    from common.zenoh_bus import Bounded
 
     conf = zenoh.Config()
     conf.insert_json5("scouting/multicast/enabled", "false")
@@ -71,7 +72,8 @@ def test_a_bounded_subscription_holds_up_its_sender_not_its_memory() -> None:
     taken: list[bytes] = []
     busy, release, done = threading.Event(), threading.Event(), threading.Event()
 
-    def handle(payload: bytes) -> None:
+    def handle(sample: Sample) -> None:
+        payload = sample.payload
         taken.append(payload)
         if payload == b"0":
             busy.set()

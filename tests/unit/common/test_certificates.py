@@ -7,11 +7,11 @@ import pytest
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
 
-from common.bus import zenoh_config
 from common.certificates import server_capable
 from common.errors import ConfigError
 from common.security import ROUTER_PRINCIPAL, ca_key_file, cert_file, key_file
 from common.settings import ZenohSettings
+from common.zenoh_bus import zenoh_config
 from deploy.credentials import generate
 
 

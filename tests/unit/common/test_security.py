@@ -9,7 +9,6 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from common.bus import QoS, hub_access, open_session, zenoh_config
 from common.config_file import load_config
 from common.errors import ConfigError
 from common.keys import Keys
@@ -22,6 +21,7 @@ from common.security import (
     stack_principals,
 )
 from common.settings import REPO_ROOT, ZenohSettings, camera_service
+from common.zenoh_bus import QoS, hub_access, open_session, zenoh_config
 
 KEYS = Keys("robot1")
 
@@ -143,7 +143,7 @@ def test_control_publishers_are_express_high_priority_and_never_block() -> None:
     conf = zenoh.Config()
     conf.insert_json5("scouting/multicast/enabled", "false")
     with zenoh.open(conf) as session:
-        from common.bus import Publisher
+        from common.zenoh_bus import Publisher
 
         control = Publisher(session, "t/cmd_vel", QoS.CONTROL)
         sensor = Publisher(session, "t/frame", QoS.SENSOR)
@@ -232,7 +232,7 @@ def test_one_camera_is_the_stack_it_always_was() -> None:
 
 
 def test_the_hub_refuses_credentials_made_for_fewer_cameras(tmp_path: Path) -> None:
-    from common.bus import check_credentials
+    from common.zenoh_bus import check_credentials
     from deploy.credentials import generate
 
     creds = tmp_path / "creds"
@@ -262,7 +262,7 @@ def test_the_hub_refuses_credentials_made_for_fewer_cameras(tmp_path: Path) -> N
 
 
 def test_the_router_drops_under_congestion_on_every_key_but_the_estop() -> None:
-    from common.bus import hub_drop_keys
+    from common.zenoh_bus import hub_drop_keys
 
     cfg = load_config(REPO_ROOT / "deploy" / "secure.toml", environ={})
     keys = Keys(cfg.stack.prefix)

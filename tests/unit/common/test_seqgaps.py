@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from common.clock import BOOT_ID
+from common.memory_bus import MemoryHub
 from common.messages import Header
 from common.node import Node
 from common.seqgaps import SeqGaps
+from common.settings import Config
 
 
 def header(seq: int, source: str = "camera", boot: str = "b1", frame_id: str = "") -> Header:
@@ -36,8 +38,7 @@ def test_sources_are_bounded() -> None:
 def test_one_source_numbers_each_frame_id_apart_and_its_streams_show_no_false_gaps() -> None:
     # The simulator stamps frames, scans and truths: each is its own numbered stream, so the
     # detector, which hears only the frames, must count nothing missed.
-    node = Node.__new__(Node)  # only the numbering: no session is needed for header()
-    node.service, node._seq = "sim", {}
+    node = Node("sim", Config(), bus=MemoryHub().join("sim"))
     stamped = [node.header(frame_id=f) for f in ("camera", "laser", "world") * 3]
     gaps = SeqGaps()
     assert [gaps.observe(h) for h in stamped if h.frame_id == "camera"] == [0, 0, 0]

@@ -8,29 +8,24 @@ import sys
 import threading
 from collections.abc import Iterator
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import pytest
 
 from common.errors import StackError
 from common.keys import Keys
+from common.memory_bus import MemoryBus, MemoryHub
 from tools.launch import free_port, service_pids, stop_supervisor, wait_ready
 
 KEYS = Keys("test")
 
 
-class FakeSession:
-    """Answers liveliness queries with the health tokens of ``ready`` services."""
-
-    def __init__(self, *ready: str) -> None:
-        self.ready = ready
-
-    def liveliness(self) -> Any:
-        replies = [
-            SimpleNamespace(ok=SimpleNamespace(key_expr=KEYS.health(name))) for name in self.ready
-        ]
-        return SimpleNamespace(get=lambda key, timeout: replies)
+def ready_bus(*ready: str) -> MemoryBus:
+    """An in-memory bus on which ``ready`` services hold their health tokens."""
+    hub = MemoryHub()
+    for name in ready:
+        hub.join(name).declare_token(KEYS.health(name))
+    return hub.join("launcher")
 
 
 def _child(code: str) -> subprocess.Popen[str]:
@@ -57,13 +52,13 @@ def test_free_port_can_be_bound() -> None:
 
 
 def test_wait_ready_returns_once_every_service_is_ready(sleeper: Any) -> None:
-    wait_ready(FakeSession("detector", "camera"), KEYS, {"camera"}, sleeper, timeout_s=5)
+    wait_ready(ready_bus("detector", "camera"), KEYS, {"camera"}, sleeper, timeout_s=5)
 
 
 def test_wait_ready_gives_up_at_the_deadline_naming_the_log(sleeper: Any) -> None:
     with pytest.raises(StackError, match=r"not ready within 0 s; see /tmp/stack\.log"):
         wait_ready(
-            FakeSession("camera"), KEYS, {"detector"}, sleeper, 0.0, log_path=Path("/tmp/stack.log")
+            ready_bus("camera"), KEYS, {"detector"}, sleeper, 0.0, log_path=Path("/tmp/stack.log")
         )
 
 
@@ -71,14 +66,14 @@ def test_wait_ready_stops_when_the_stack_exits() -> None:
     proc = subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])
     proc.wait()
     with pytest.raises(StackError, match=r"exited \(3\) before it was ready"):
-        wait_ready(FakeSession(), KEYS, {"detector"}, proc, timeout_s=5)
+        wait_ready(ready_bus(), KEYS, {"detector"}, proc, timeout_s=5)
 
 
 def test_wait_ready_is_interrupted_by_the_stop_event(sleeper: Any) -> None:
     stop = threading.Event()
     stop.set()
     with pytest.raises(KeyboardInterrupt):
-        wait_ready(FakeSession(), KEYS, {"detector"}, sleeper, 5, stop=stop)
+        wait_ready(ready_bus(), KEYS, {"detector"}, sleeper, 5, stop=stop)
 
 
 def test_stop_supervisor_sends_sigint_and_returns_the_exit_code() -> None:

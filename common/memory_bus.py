@@ -1,0 +1,211 @@
+"""The bus protocol (common/bus.py) in one process: the in-process tests' bus.
+
+A :class:`MemoryHub` is the bus; each :meth:`MemoryHub.join` is one participant (a service, a
+test's probe), a :class:`MemoryBus`. Delivery happens in the putting thread, before ``put``
+returns, in the order subscribers were declared: a test puts a message and reads what came of
+it on the next line, with no wait. A participant's ``close()`` is its process ending: its
+tokens go, and every watcher hears it.
+
+What it leaves out of Zenoh on purpose: no network (nothing is lost, delayed or reordered),
+no access control, and a bounded subscription's depth (a sample is handled as it is put).
+Those are the real-process tests' to check. A handler's exception is not swallowed as
+Zenoh's thread would (it logs it): it reaches the test that put the sample.
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from common.bus import Answer, OnSample, OnToken, QoS, Reply, Sample
+
+
+def intersects(a: str, b: str) -> bool:
+    """Whether key expressions ``a`` and ``b`` have a key in common (``*``: one chunk, ``**``:
+    any number of chunks, none included)."""
+    return _meet(tuple(a.split("/")), tuple(b.split("/")))
+
+
+def _meet(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
+    if not a and not b:
+        return True
+    if a and a[0] == "**":
+        return _meet(a[1:], b) or (bool(b) and _meet(a, b[1:]))
+    if b and b[0] == "**":
+        return _meet(a, b[1:]) or (bool(a) and _meet(a[1:], b))
+    if not a or not b:
+        return False
+    if a[0] == b[0] or a[0] == "*" or b[0] == "*":
+        return _meet(a[1:], b[1:])
+    return False
+
+
+@dataclass(eq=False)
+class _Entry:
+    """One declaration: whose, on which key, and what it calls."""
+
+    owner: MemoryBus
+    key: str
+    call: Callable[..., object] | None = None
+    alive: bool = field(default=True)
+
+    def undeclare(self) -> None:
+        self.owner.hub._undeclare(self)
+
+
+class MemoryPublisher:
+    def __init__(
+        self,
+        bus: MemoryBus,
+        key: str,
+        qos: QoS,
+        max_payload_bytes: int | None,
+        on_refused: Callable[[str, int], None] | None,
+    ) -> None:
+        self.key = key
+        self.qos = qos
+        self._bus = bus
+        self._max = max_payload_bytes
+        self._on_refused = on_refused
+        self._source = f"{bus.zid}/{next(bus.hub._ids)}"
+        self.sent = 0
+
+    def put(self, payload: bytes) -> bool:
+        if self._max is not None and len(payload) > self._max:
+            if self._on_refused is not None:
+                self._on_refused(self.key, len(payload))
+            return False
+        self.sent += 1
+        self._bus.hub._deliver(Sample(self.key, bytes(payload), self._source))
+        return True
+
+    def undeclare(self) -> None:
+        return None
+
+
+class MemoryHub:
+    """The in-process bus: every participant's subscriptions, tokens and queryables."""
+
+    def __init__(self) -> None:
+        self._lock = threading.RLock()
+        self._subs: list[_Entry] = []
+        self._tokens: list[_Entry] = []
+        self._watches: list[_Entry] = []
+        self._queryables: list[_Entry] = []
+        self._ids = itertools.count(1)
+        self._buses = itertools.count(1)
+
+    def join(self, name: str = "") -> MemoryBus:
+        """A new participant (``name`` only for reading its id in a failure)."""
+        return MemoryBus(self, f"mem{next(self._buses)}{'-' + name if name else ''}")
+
+    def tokens(self, key: str = "**") -> list[str]:
+        """The keys of the live tokens that ``key`` matches, sorted."""
+        with self._lock:
+            return sorted(t.key for t in self._tokens if intersects(key, t.key))
+
+    def _add(self, where: list[_Entry], entry: _Entry) -> _Entry:
+        with self._lock:
+            where.append(entry)
+        return entry
+
+    def _deliver(self, sample: Sample) -> None:
+        with self._lock:
+            subs = [s for s in self._subs if intersects(s.key, sample.key)]
+        for sub in subs:
+            if sub.alive and sub.call is not None:
+                sub.call(sample)
+
+    def _token_event(self, key: str, alive: bool) -> None:
+        with self._lock:
+            watches = [w for w in self._watches if intersects(w.key, key)]
+        for watch in watches:
+            if watch.alive and watch.call is not None:
+                watch.call(key, alive)
+
+    def _undeclare(self, entry: _Entry) -> None:
+        with self._lock:
+            if not entry.alive:
+                return
+            entry.alive = False
+            for where in (self._subs, self._tokens, self._watches, self._queryables):
+                if entry in where:
+                    where.remove(entry)
+                    break
+            token = entry.call is None
+        if token:
+            self._token_event(entry.key, False)
+
+    def _close(self, bus: MemoryBus) -> None:
+        with self._lock:
+            mine = [
+                e
+                for where in (self._subs, self._watches, self._queryables, self._tokens)
+                for e in where
+                if e.owner is bus
+            ]
+        for entry in mine:
+            self._undeclare(entry)
+
+
+class MemoryBus:
+    """One participant of a :class:`MemoryHub`: the bus protocol (common/bus.py)."""
+
+    def __init__(self, hub: MemoryHub, zid: str) -> None:
+        self.hub = hub
+        self._zid = zid
+        self.closed = False
+
+    @property
+    def zid(self) -> str:
+        return self._zid
+
+    def publisher(
+        self,
+        key: str,
+        qos: QoS,
+        *,
+        max_payload_bytes: int | None = None,
+        on_refused: Callable[[str, int], None] | None = None,
+    ) -> MemoryPublisher:
+        return MemoryPublisher(self, key, qos, max_payload_bytes, on_refused)
+
+    def subscribe(self, key: str, handle: OnSample) -> _Entry:
+        return self.hub._add(self.hub._subs, _Entry(self, key, handle))
+
+    def subscribe_bounded(self, key: str, handle: OnSample, depth: int) -> _Entry:
+        return self.subscribe(key, handle)
+
+    def declare_token(self, key: str) -> _Entry:
+        entry = self.hub._add(self.hub._tokens, _Entry(self, key))
+        self.hub._token_event(key, True)
+        return entry
+
+    def watch_tokens(self, key: str, handle: OnToken) -> _Entry:
+        entry = self.hub._add(self.hub._watches, _Entry(self, key, handle))
+        for token in self.hub.tokens(key):  # history: the ones alive now first
+            handle(token, True)
+        return entry
+
+    def live_tokens(self, key: str, timeout_s: float) -> list[str]:
+        return self.hub.tokens(key)
+
+    def serve(self, key: str, answer: Answer) -> _Entry:
+        return self.hub._add(self.hub._queryables, _Entry(self, key, answer))
+
+    def query(self, key: str, timeout_s: float, payload: bytes = b"") -> list[Reply]:
+        with self.hub._lock:
+            queryables = [q for q in self.hub._queryables if intersects(q.key, key)]
+        out = []
+        for q in queryables:
+            assert q.call is not None
+            answer = q.call(key, payload)
+            if isinstance(answer, bytes):
+                out.append(Reply(q.key, answer))
+        return out
+
+    def close(self) -> None:
+        self.closed = True
+        self.hub._close(self)

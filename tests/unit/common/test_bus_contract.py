@@ -1,0 +1,157 @@
+"""The bus protocol's contract (common/bus.py), checked on both implementations: two Zenoh
+sessions linked over loopback, and two participants of a MemoryHub. What the in-process tests
+rely on the in-memory bus for is what Zenoh does; where Zenoh takes time, the check waits for
+it (the memory bus has it done before the call returns)."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import pytest
+import zenoh
+
+from common.bus import Bus, QoS, Sample
+from common.memory_bus import MemoryHub, intersects
+from common.zenoh_bus import ZenohBus
+
+
+@dataclass
+class Pair:
+    a: Bus
+    b: Bus
+    eventually: Callable[[Callable[[], bool]], bool]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _session(listen: list[str], connect: list[str]) -> zenoh.Session:
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", json.dumps(listen))
+    conf.insert_json5("connect/endpoints", json.dumps(connect))
+    return zenoh.open(conf)
+
+
+def _poll(check: Callable[[], bool], timeout_s: float = 10.0) -> bool:
+    done = threading.Event()
+    for _ in range(int(timeout_s / 0.02)):
+        if check():
+            return True
+        done.wait(0.02)
+    return check()
+
+
+@pytest.fixture(params=["memory", "zenoh"])
+def pair(request: pytest.FixtureRequest) -> Iterator[Pair]:
+    if request.param == "memory":
+        hub = MemoryHub()
+        a, b = hub.join("a"), hub.join("b")
+        yield Pair(a, b, lambda check: check())
+        b.close()
+        a.close()
+        return
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    za = ZenohBus(_session([endpoint], []))
+    zb = ZenohBus(_session([], [endpoint]))
+    try:
+        # Linked once b sees a's token.
+        probe = za.declare_token("contract/link")
+        assert _poll(lambda: bool(zb.live_tokens("contract/link", 1.0))), "sessions not linked"
+        probe.undeclare()
+        yield Pair(za, zb, _poll)
+    finally:
+        zb.close()
+        za.close()
+
+
+def _until_heard(pair: Pair, put: Callable[[], bool], *heard: list[Sample]) -> None:
+    """Put until every list heard something: on Zenoh a subscription just declared reaches the
+    other session a moment later, and a put before that goes to nobody."""
+    assert pair.eventually(lambda: put() and all(heard)), "never heard"
+
+
+def test_a_put_reaches_every_matching_subscriber_with_its_source(pair: Pair) -> None:
+    got: list[Sample] = []
+    wild: list[Sample] = []
+    pair.b.subscribe("r/camera/front/frame", got.append)
+    pair.b.subscribe("r/camera/*/frame", wild.append)
+    pub = pair.a.publisher("r/camera/front/frame", QoS.SENSOR)
+    _until_heard(pair, lambda: pub.put(b"one"), got, wild)
+    assert got[0].key == "r/camera/front/frame" and got[0].payload == b"one"
+    assert got[0].source != "unidentified" and got[0].source == wild[0].source
+
+
+def test_a_payload_over_the_limit_is_refused(pair: Pair) -> None:
+    refused: list[tuple[str, int]] = []
+    got: list[Sample] = []
+    pair.b.subscribe("r/frame", got.append)
+    pub = pair.a.publisher(
+        "r/frame", QoS.SENSOR, max_payload_bytes=4, on_refused=lambda k, n: refused.append((k, n))
+    )
+    assert not pub.put(b"12345")
+    _until_heard(pair, lambda: pub.put(b"1234"), got)
+    assert refused == [("r/frame", 5)] and {s.payload for s in got} == {b"1234"}
+
+
+def test_an_undeclared_subscription_hears_nothing_more(pair: Pair) -> None:
+    got: list[Sample] = []
+    sub = pair.b.subscribe("r/x", got.append)
+    pub = pair.a.publisher("r/x", QoS.CONTROL)
+    _until_heard(pair, lambda: pub.put(b"1"), got)
+    sub.undeclare()
+    pub.put(b"2")
+    later: list[Sample] = []
+    pair.b.subscribe("r/x", later.append)
+    _until_heard(pair, lambda: pub.put(b"3"), later)
+    assert {s.payload for s in got} == {b"1"}
+    assert {s.payload for s in later} == {b"3"}
+
+
+def test_tokens_are_watched_with_their_history_and_go_with_their_owner(pair: Pair) -> None:
+    events: list[tuple[str, bool]] = []
+    early = pair.a.declare_token("r/pool/w1")
+    pair.b.watch_tokens("r/pool/*", lambda key, alive: events.append((key, alive)))
+    assert pair.eventually(lambda: ("r/pool/w1", True) in events)
+    late = pair.a.declare_token("r/pool/w2")
+    assert pair.eventually(lambda: ("r/pool/w2", True) in events)
+    assert sorted(pair.b.live_tokens("r/pool/*", 2.0)) == ["r/pool/w1", "r/pool/w2"]
+    late.undeclare()
+    assert pair.eventually(lambda: ("r/pool/w2", False) in events)
+    assert pair.b.live_tokens("r/pool/*", 2.0) == ["r/pool/w1"]
+    pair.a.close()  # a's process ends: its token goes with it
+    assert pair.eventually(lambda: ("r/pool/w1", False) in events)
+    del early
+
+
+def test_a_query_gets_the_queryables_answer(pair: Pair) -> None:
+    asked: list[str] = []
+
+    def answer(key: str, payload: bytes) -> bytes:
+        asked.append(key)
+        return b'{"ok": true}'
+
+    pair.a.serve("r/metrics", answer)
+    replies: list[bytes] = []
+    assert pair.eventually(
+        lambda: bool(replies.extend(r.payload for r in pair.b.query("r/metrics", 2.0)) or replies)
+    )
+    assert replies[0] == b'{"ok": true}' and asked[0] == "r/metrics"
+    assert pair.b.query("r/nobody", 0.5) == []
+
+
+def test_key_expressions_meet_as_zenohs_do() -> None:
+    assert intersects("a/*/c", "a/b/c")
+    assert not intersects("a/*/c", "a/b/d/c")
+    assert intersects("a/**", "a")
+    assert intersects("a/**/c", "a/b/d/c")
+    assert intersects("**", "x/y")
+    assert not intersects("a/*", "a")
+    assert not intersects("a/b", "a/c")
