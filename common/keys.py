@@ -18,7 +18,8 @@ runs can share one network without hearing each other:
     <prefix>/detector/serving/<worker>/<zid>/<camera>
                                               liveliness      a worker (session <zid>) serves it
 
-Who may put on which key under the secure profile is in common/security.py.
+Who may put on which key under the secure profile: each service's contract declares it
+(``services/<name>/contract.py``), stack/access.py builds the rules.
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from typing import TypeVar
 
 from common.bus import Bus, Declared, Publisher, QoS
 from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock, Stamp
-from common.counters import Counters
+from common.counters import BAD_INPUT, PAYLOAD_TOO_LARGE, Counters
 from common.errors import DecodeError
 from common.keys import Keys
 from common.lifecycle import Closing
@@ -30,7 +30,7 @@ BOUNDED_DEPTH = 1
 
 # What a bad-input counter may add to "bad_input.": 80 characters in all, the longest name the
 # metrics service believes (services/metrics/trust.py).
-MAX_WHERE_CHARS = 80 - len("bad_input.")
+MAX_WHERE_CHARS = 80 - len(f"{BAD_INPUT}.")
 
 
 #: What a handler publishes through: a declared publisher's ``put``, or a list's ``append``.
@@ -65,10 +65,10 @@ class Tally:
         last chunk; cut to ``MAX_WHERE_CHARS`` so that the name always fits the metrics
         service's limit.
         """
-        self.counters.add("bad_input")
+        self.counters.add(BAD_INPUT)
         where = topic.strip("/").replace("/", ".") if topic else key.rsplit("/", 1)[-1]
-        self.counters.add(f"bad_input.{where[:MAX_WHERE_CHARS]}")
-        self._log_limited(key, "bad_input", "dropped bad input on %s: %s", key, error)
+        self.counters.add(f"{BAD_INPUT}.{where[:MAX_WHERE_CHARS]}")
+        self._log_limited(key, BAD_INPUT, "dropped bad input on %s: %s", key, error)
 
     def reject(self, counter: str, message: str, *, key: str = "") -> None:
         """Count one message that was fine as bytes but unfit to act on (stale, replayed,
@@ -137,7 +137,7 @@ class Node(Tally, Closing):
     def _payload_refused(self, key: str, size: int) -> None:
         limit = self.config.zenoh.max_payload_bytes
         self.reject(
-            "payload_too_large",
+            PAYLOAD_TOO_LARGE,
             f"{size}-byte payload on {key} not sent: over zenoh.max_payload_bytes ({limit}), "
             "which Zenoh would lose",
             key=key,

@@ -8,7 +8,7 @@ modules never touch the bus (tests/unit/test_bus_io.py).
 Topology. In ``peer`` mode (the default) the supervisor listens on ``zenoh.endpoint``, services
 connect there and then mesh directly. In ``client`` mode the supervisor is a Zenoh router and
 every message passes through it; that is where authentication and access control run
-(common/security.py).
+(common/security.py; the rules: stack/access.py, the hub: stack/hub.py).
 
 QoS by role (:class:`QoS`): control and safety messages (cmd_vel, e-stop) go first, express,
 on the real-time queue; sensor data goes last, so that a flood of frames can never hold back a
@@ -37,20 +37,15 @@ from common.bus import Answer, Declared, OnSample, OnToken, Reply, Sample
 from common.bus import QoS as QoS
 from common.credential_modes import check_folder, check_public, check_secret
 from common.errors import ConfigError, StackError
-from common.keys import Keys
 from common.security import (
     ROUTER_PRINCIPAL,
-    access_control,
     ca_file,
     cert_file,
-    congestion_overwritten,
     key_file,
     password_file,
-    running_sensors,
-    stack_principals,
     users_file,
 )
-from common.settings import Config, Ros2Settings, ZenohSettings
+from common.settings import Ros2Settings, ZenohSettings
 from common.zenoh_errors import explain
 
 log = logging.getLogger(__name__)
@@ -240,7 +235,7 @@ def _sample(sample: zenoh.Sample) -> Sample:
     return Sample(str(sample.key_expr), sample.payload.to_bytes(), source_of(sample))
 
 
-def _readable(path: Path, what: str, *, secret: bool = True) -> str:
+def readable(path: Path, what: str, *, secret: bool = True) -> str:
     """``path`` as Zenoh reads it, once it is there and no one else may change it (nor, for a
     ``secret``, read it): ConfigError, one line, otherwise (common/credential_modes.py)."""
     if not path.is_file():
@@ -257,7 +252,7 @@ def _readable(path: Path, what: str, *, secret: bool = True) -> str:
 
 
 def _password(settings: ZenohSettings, principal: str) -> str:
-    path = Path(_readable(password_file(settings.credentials_path, principal), "password file"))
+    path = Path(readable(password_file(settings.credentials_path, principal), "password file"))
     try:
         password = path.read_text(encoding="utf-8").strip()
     except (OSError, UnicodeDecodeError) as exc:
@@ -274,7 +269,7 @@ def _security(settings: ZenohSettings, principal: str, hub: bool) -> dict[str, A
     if settings.auth == "password":
         usrpwd: dict[str, Any] = {"user": principal, "password": _password(settings, principal)}
         if hub:
-            usrpwd["dictionary_file"] = _readable(users_file(creds), "user dictionary")
+            usrpwd["dictionary_file"] = readable(users_file(creds), "user dictionary")
         out["transport/auth/usrpwd"] = usrpwd
     if settings.uses_tls:
         # Here, not at the top: cryptography costs every process about 15 MB, and only TLS
@@ -283,22 +278,22 @@ def _security(settings: ZenohSettings, principal: str, hub: bool) -> dict[str, A
 
         refuse_server_capable(creds)  # any principal's certificate could pose as the router
         tls: dict[str, Any] = {
-            "root_ca_certificate": _readable(ca_file(creds), "CA certificate", secret=False),
+            "root_ca_certificate": readable(ca_file(creds), "CA certificate", secret=False),
             # Zenoh's default, stated: a client accepts only a certificate that names the host
             # it dialled, which only the supervisor's does (deploy/credentials.py).
             "verify_name_on_connect": True,
         }
         if hub:
-            tls["listen_certificate"] = _readable(
+            tls["listen_certificate"] = readable(
                 cert_file(creds, principal), "certificate", secret=False
             )
-            tls["listen_private_key"] = _readable(key_file(creds, principal), "private key")
+            tls["listen_private_key"] = readable(key_file(creds, principal), "private key")
             tls["enable_mtls"] = settings.auth == "certificate"
         elif settings.auth == "certificate":
-            tls["connect_certificate"] = _readable(
+            tls["connect_certificate"] = readable(
                 cert_file(creds, principal), "certificate", secret=False
             )
-            tls["connect_private_key"] = _readable(key_file(creds, principal), "private key")
+            tls["connect_private_key"] = readable(key_file(creds, principal), "private key")
             # A client sends its certificate only with this set too (checked on zenoh 1.10).
             tls["enable_mtls"] = True
         out["transport/link/tls"] = tls
@@ -359,7 +354,9 @@ def drop_overwrite(key_exprs: tuple[str, ...]) -> dict[str, Any]:
     }
 
 
-def _open(conf: zenoh.Config, settings: ZenohSettings, where: str, principal: str) -> zenoh.Session:
+def open_configured(
+    conf: zenoh.Config, settings: ZenohSettings, where: str, principal: str
+) -> zenoh.Session:
     try:
         return zenoh.open(conf)
     except zenoh.ZError as exc:
@@ -380,7 +377,7 @@ def open_session(settings: ZenohSettings, principal: str) -> zenoh.Session:
     """Join the stack as ``principal`` (a service's name, "estop" or "observer")."""
     conf = zenoh_config(settings, principal)
     where = settings.endpoint if settings.mode == "client" else ", ".join(settings.listen)
-    return _open(conf, settings, where, principal)
+    return open_configured(conf, settings, where, principal)
 
 
 def open_ros_session(s: Ros2Settings, *, host: bool = False) -> zenoh.Session:
@@ -409,53 +406,3 @@ def open_ros_session(s: Ros2Settings, *, host: bool = False) -> zenoh.Session:
             f"no rmw_zenoh router answered on {where} within {s.router_timeout_s:.0f} s: "
             "start rmw_zenohd on the robot, or set ros2.router"
         ) from exc
-
-
-def hub_access(config: Config) -> dict[str, Any]:
-    """The supervisor's access-control rules for this stack's keys ({} without auth)."""
-    z = config.zenoh
-    if z.auth == "none":
-        return {}
-    live = bool(running_sensors(config.supervisor.services))
-    keys = Keys(config.stack.prefix)
-    return access_control(
-        keys, config.camera_services, z.auth, live_sensors=live, workers=config.detector_services
-    )
-
-
-def hub_drop_keys(config: Config) -> tuple[str, ...]:
-    """The keys on which the supervisor's router overwrites congestion control to DROP: every
-    key of the stack but the e-stop (common.security.congestion_overwritten)."""
-    keys = Keys(config.stack.prefix)
-    return congestion_overwritten(keys, config.camera_services, workers=config.detector_services)
-
-
-def check_credentials(config: Config) -> None:
-    """With passwords, the router's dictionary must name every principal of this stack: one
-    made for fewer cameras or detector workers would refuse a further one's process.
-    ConfigError, one line, naming the command that makes them again."""
-    z = config.zenoh
-    if z.auth != "password":
-        return  # certificates: the router needs only the CA; each client checks its own files
-    path = Path(_readable(users_file(z.credentials_path), "user dictionary"))
-    try:
-        known = {line.split(":", 1)[0] for line in path.read_text(encoding="utf-8").splitlines()}
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read {path}: {exc}") from exc
-    principals = stack_principals(config.camera_services, config.detector_services)
-    missing = [p for p in principals if p not in known]
-    if missing:
-        raise ConfigError(
-            f"the credentials in {z.credentials_path} have no principal {', '.join(missing)} "
-            "(made for fewer cameras or detector workers?): make them again with `zstack "
-            f"credentials --config {config.path or 'FILE'} --force` (docs/security.md)"
-        )
-
-
-def open_hub(config: Config) -> zenoh.Session:
-    """The supervisor's session: the endpoint every service joins, enforcing access control."""
-    check_credentials(config)
-    conf = zenoh_config(
-        config.zenoh, HUB_PRINCIPAL, access=hub_access(config), drop_keys=hub_drop_keys(config)
-    )
-    return _open(conf, config.zenoh, config.zenoh.endpoint, HUB_PRINCIPAL)

@@ -38,11 +38,11 @@ from common.lifecycle import (
 from common.messages import ControllerStatus, GroundTruth, ServiceCounters, Twist
 from common.queries import query_metrics
 from common.settings import CameraSettings, Config, service_package
-from common.zenoh_bus import open_hub
 from deploy.crosscheck import cross_check, model_classes
 from deploy.lock import acquire
 from deploy.processes import ServiceProcess, stack_processes
 from deploy.watchdog import Observation, check_settings, judge
+from stack.hub import open_hub
 
 METRICS_TIMEOUT_S = 0.5
 # the status line must not wait long for a missing metrics service

@@ -10,6 +10,7 @@ from common.errors import ImageError
 from common.frames import image_to_frame
 from common.node import Node
 from common.settings import CameraSettings, Config
+from services.camera import contract
 from services.camera.reopen import ReopenHooks, ReopeningSource
 from services.camera.sources import FrameSource, open_source, resize
 
@@ -29,7 +30,7 @@ def run(config: Config, camera: str, settings: CameraSettings, stop: threading.E
     with Node(config.camera_services[camera], config) as node:
 
         def on_bad(exc: ImageError) -> None:
-            node.reject("bad_images", str(exc))  # a looped folder repeats it: rate-limited
+            node.reject(contract.BAD_IMAGES, str(exc))  # a looped folder repeats it: rate-limited
 
         source = _reopening(
             open_source(settings.source, loop=settings.loop, on_bad=on_bad), settings, node, stop
@@ -57,7 +58,7 @@ def run(config: Config, camera: str, settings: CameraSettings, stop: threading.E
                         jpeg_quality=settings.jpeg_quality,
                     )
                     publisher.put(frame.encode())
-                    node.counters.add("frames_out")
+                    node.counters.add(contract.FRAMES_OUT)
                 except (ImageError, ValueError) as exc:
                     # An unreadable file, or an image larger than a Frame may carry: skip it.
                     on_bad(ImageError(f"{source.description}: {exc}"))
@@ -80,15 +81,15 @@ def _reopening(
         return source
 
     def lost(line: str) -> None:
-        node.counters.add("source_lost")
+        node.counters.add(contract.SOURCE_LOST)
         node.log.warning("%s", line)
 
     def reopened(line: str) -> None:
-        node.counters.add("source_reopened")
+        node.counters.add(contract.SOURCE_REOPENED)
         node.log.warning("%s", line)
 
     def failed(line: str) -> None:
-        node.reject("source_reopen_failed", line)  # one per period: rate-limited
+        node.reject(contract.SOURCE_REOPEN_FAILED, line)  # one per period: rate-limited
 
     return ReopeningSource(
         source,

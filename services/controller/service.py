@@ -20,6 +20,7 @@ from common.messages import ControllerStatus, Detections, EStop, Header, LaserSc
 from common.node import Node, Tally
 from common.ratelimit import LogLimiter
 from common.settings import Config
+from services.controller import contract
 from services.controller.estop import EStopLatch
 from services.controller.policy import Controller, Inputs, VelocityCommand
 from services.controller.policy import stop as stop_command
@@ -145,12 +146,14 @@ class ControllerHandlers:
         msg = self.tally.decode(self._det_keys[camera], Detections.decode, payload)
         if msg is not None:
             where = camera if self._per_camera else ""
-            self._fresh_input(msg, self._det_gates[camera], self.dets[camera], "detections", where)
+            self._fresh_input(
+                msg, self._det_gates[camera], self.dets[camera], contract.DETECTIONS, where
+            )
 
     def on_scan(self, payload: bytes) -> None:
         msg = self.tally.decode(self.tally.keys.scan(), LaserScan.decode, payload)
         if msg is not None:
-            self._fresh_input(msg, self._scan_gate, self.scan, "scans")
+            self._fresh_input(msg, self._scan_gate, self.scan, contract.SCANS)
 
     def _fresh_input(
         self, msg: _S, gate: FreshnessGate, latest: Latest[_S], name: str, camera: str = ""
@@ -161,13 +164,13 @@ class ControllerHandlers:
         verdict, age = gate.check(msg.header, now())
         of = f" from {camera}" if camera else ""
         if verdict is not Verdict.FRESH:
-            counter = f"{name}_{verdict}"
+            counter = contract.input_counter(name, verdict)
             self.tally.reject(counter, f"{verdict} {name}{of} ({age:.2f} s) ignored")
         elif latest.set(msg):
-            counter = f"{name}_in"
+            counter = contract.input_counter(name, contract.IN)
             self.tally.counters.add(counter)
         else:
-            counter = f"{name}_late"
+            counter = contract.input_counter(name, contract.LATE)
             self.tally.reject(counter, f"{name}{of} older than the ones held ignored")
         if camera:
             self.tally.counters.add(per_camera(counter, camera))
@@ -203,9 +206,13 @@ class ControllerHandlers:
         )
         if verdict is not Verdict.FRESH:
             latch.refuse(f"{verdict} ({age:.2f} s)")
-            tally.reject("estop_release_refused", f"{verdict} e-stop release ({age:.2f} s) refused")
+            tally.reject(
+                contract.ESTOP_RELEASE_REFUSED, f"{verdict} e-stop release ({age:.2f} s) refused"
+            )
         elif not latch.release(msg.header.stamp_ns, msg.header.source):
-            tally.reject("estop_release_refused", f"e-stop release refused: {latch.last_refusal}")
+            tally.reject(
+                contract.ESTOP_RELEASE_REFUSED, f"e-stop release refused: {latch.last_refusal}"
+            )
         else:
             tally.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
 
@@ -246,7 +253,7 @@ class Outputs:
         """Zero on cmd_vel now (the status follows once the stop is saved)."""
         with self.lock:
             self._twist(VelocityCommand(0.0, 0.0, ControllerState.ESTOP, ""), now())
-            self.node.counters.add("estop_zero_at_once")
+            self.node.counters.add(contract.ESTOP_ZERO_AT_ONCE)
 
     def _twist(self, cmd: VelocityCommand, at: Stamp) -> Twist:
         twist = Twist(
@@ -256,9 +263,9 @@ class Outputs:
             input_stamp_ns=cmd.input_stamp_ns,
         )
         self.cmd_pub.put(twist.encode())
-        self.node.counters.add("commands_out")
+        self.node.counters.add(contract.COMMANDS_OUT)
         if not cmd.is_zero:
-            self.node.counters.add("commands_nonzero")
+            self.node.counters.add(contract.COMMANDS_NONZERO)
         return twist
 
 

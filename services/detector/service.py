@@ -17,7 +17,7 @@ import numpy.typing as npt
 from common.bus import Declared, QoS
 from common.clock import BOOT_ID, mono_s, now, wall_ns
 from common.contracts import DetectorInfo
-from common.counters import per_camera
+from common.counters import BAD_INPUT, per_camera
 from common.errors import DecodeError, ImageError, ImageTooLarge, StackError
 from common.frames import check_pixel_budget, frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
@@ -26,6 +26,7 @@ from common.node import Node, Put, Tally
 from common.pool_audit import MAX_LINES, PoolAudit, Report, Serving, lines
 from common.seqgaps import SeqGaps
 from common.settings import Config, DetectorSettings
+from services.detector import contract
 from services.detector.batching import measure
 from services.detector.pipeline import Detector
 from services.detector.pool import Change, PoolView, camera_weights
@@ -122,23 +123,23 @@ class DetectorHandlers:
         if camera not in self.serving:
             return
         count = partial(count_for, self.tally, camera)
-        count("frames_in")
+        count(contract.FRAMES_IN)
         key = self.frame_keys[camera]
         try:
             frame = Frame.decode(payload)
             missed = self.gaps[camera].observe(frame.header)
             if missed:
-                count("frames_missed", missed)
+                count(contract.FRAMES_MISSED, missed)
             check_pixel_budget(frame, self.settings.max_frame_pixels)
         except DecodeError as exc:
             self.tally.bad_input(key, exc)
-            self.tally.counters.add(per_camera("bad_input", camera))
+            self.tally.counters.add(per_camera(BAD_INPUT, camera))
             return
         except ImageTooLarge as exc:
-            reject_for(self.tally, camera, "frames_oversize", str(exc), key)
+            reject_for(self.tally, camera, contract.FRAMES_OVERSIZE, str(exc), key)
             return
         if self.slots.put(camera, frame):
-            count("dropped")
+            count(contract.DROPPED)
 
 
 def count_for(tally: Tally, camera: str, name: str, n: int = 1) -> None:
@@ -192,7 +193,7 @@ class Rounds:
                 reject_for(
                     self.tally,
                     w.camera,
-                    f"frames_{verdict}",
+                    contract.frames_judged(verdict),
                     f"{verdict} frame from {w.camera} ({age:.2f} s old) dropped",
                     out.frame_key,
                 )
@@ -201,14 +202,14 @@ class Rounds:
                 image = frame_to_bgr(frame, self.settings.max_frame_pixels)
             except ImageError as exc:
                 self.tally.bad_input(out.frame_key, exc)
-                self.tally.counters.add(per_camera("bad_input", w.camera))
+                self.tally.counters.add(per_camera(BAD_INPUT, w.camera))
                 continue
             ready.append((out, frame, w.received_ns, image))
         if not ready:
             return
         results = self.detector.detect_batch([image for *_, image in ready])
-        self.tally.counters.add("batches")
-        self.tally.counters.add("batched_frames", len(ready))
+        self.tally.counters.add(contract.BATCHES)
+        self.tally.counters.add(contract.BATCHED_FRAMES, len(ready))
         for (out, frame, received_ns, _), result in zip(ready, results, strict=True):
             self._publish(out, frame, received_ns, result)
 
@@ -221,7 +222,7 @@ class Rounds:
             reject_for(
                 self.tally,
                 out.camera,
-                "nonfinite_outputs",
+                contract.NONFINITE_OUTPUTS,
                 f"the model's output for frame {frame.header.seq} from {out.camera} is not "
                 "finite (NaN, infinity or a magnitude over 1e6): no detections published",
                 out.frame_key,
@@ -233,7 +234,7 @@ class Rounds:
             else _track(self.tally, out, result, frame.header, received_ns)
         )
         out.put(to_message(frame, result, self.detector, received_ns, track_ids).encode())
-        count_for(self.tally, out.camera, "detections_out")
+        count_for(self.tally, out.camera, contract.DETECTIONS_OUT)
 
 
 def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
@@ -380,10 +381,10 @@ class PoolMember:
         self._audit = PoolAudit(self.view.weights, self.view.balance, config.detector.pool_alarm_s)
         self._audit_next = 0.0
         for cam in handlers.frame_keys:
-            self._gauge(per_camera("serving", cam), 0)
-        for name in ("serving", "pool_members", "pool_load_permille", "pool_warnings"):
+            self._gauge(per_camera(contract.SERVING, cam), 0)
+        for name in contract.POOL_GAUGES:
             self._gauge(name, 0)
-        for name in ("cameras_gained", "cameras_lost", "pool_resigned"):
+        for name in (contract.CAMERAS_GAINED, contract.CAMERAS_LOST, contract.POOL_RESIGNED):
             node.counters.add(name, 0)
 
     def join(self) -> None:
@@ -453,7 +454,7 @@ class PoolMember:
                     self._withdraw_serving()
             if not stalled:
                 continue
-            self.node.counters.add("pool_resigned")
+            self.node.counters.add(contract.POOL_RESIGNED)
             self.node.log.warning(
                 "the detection loop has not passed for %.1f s (detector.pool_stall_s): "
                 "leaving the pool so that the other workers take its cameras",
@@ -487,7 +488,7 @@ class PoolMember:
             self.node.log.warning("pool: %s", line)
         for finding in report.cleared[:MAX_LINES]:
             self.node.log.info("pool: no longer so: %s", finding.detail)
-        self._gauge("pool_warnings", len(report.current))
+        self._gauge(contract.POOL_WARNINGS, len(report.current))
         return report
 
     def _withdraw_serving(self) -> None:
@@ -547,17 +548,17 @@ class PoolMember:
             # Bounded: no queue of stale frames ahead of the slot, which keeps the newest only.
             self._subs[cam] = node.subscribe_bounded(key, partial(handlers.on_frame, cam))
         for cam in (*change.gained, *change.lost):
-            self._gauge(per_camera("serving", cam), int(cam in change.serving))
+            self._gauge(per_camera(contract.SERVING, cam), int(cam in change.serving))
         self._sync_serving(change.serving)
         if self._handed_over:  # the first assignment, at start, is no hand-over
             for cam in change.gained:
-                count_for(node, cam, "cameras_gained")
+                count_for(node, cam, contract.CAMERAS_GAINED)
             for cam in change.lost:
-                count_for(node, cam, "cameras_lost")
+                count_for(node, cam, contract.CAMERAS_LOST)
         self._handed_over = True
-        self._gauge("serving", len(change.serving))
-        self._gauge("pool_members", change.members)
-        self._gauge("pool_load_permille", round(change.load * 1000))
+        self._gauge(contract.SERVING, len(change.serving))
+        self._gauge(contract.POOL_MEMBERS, change.members)
+        self._gauge(contract.POOL_LOAD_PERMILLE, round(change.load * 1000))
         if change.gained or change.lost:
             node.log.info(
                 "pool of %d: serving %s (gained %s, lost %s)",
@@ -630,7 +631,7 @@ def _track(
         reject_for(
             tally,
             out.camera,
-            "tracker_stamp_jumps",
+            contract.TRACKER_STAMP_JUMPS,
             "frame stamp jumped: the tracker ignored it",
             out.frame_key,
         )
@@ -638,7 +639,7 @@ def _track(
         reject_for(
             tally,
             out.camera,
-            "tracker_resets",
+            contract.TRACKER_RESETS,
             "frame stamps jumped for good: tracks restarted",
             out.frame_key,
         )

@@ -24,6 +24,8 @@ from common.contracts import CameraMetrics, MetricsAnswer, TimelineSeries
 from common.messages import Detections, Header, MetricsSnapshot, ServiceCounters, Twist
 from common.pool_audit import lines
 from common.settings import MAX_CAMERAS, service_package
+from services.detector import contract as detector
+from services.metrics import contract
 from services.metrics.cameras import BatchSizes, CameraCounters, ratio
 from services.metrics.figures import DETECTOR_STAGES, STAGES, Figures, LatencyListener
 from services.metrics.pool import Duplicates, LivePool, workers
@@ -41,7 +43,7 @@ TIMELINE_COLUMNS = ("frames", "detections", "offered", "dropped")
 #: The timeline stops this far behind now: counters arrive about once a second (slower while
 #: inference is slow), so the latest seconds may still be missing their share of them.
 TIMELINE_SETTLE_S = 2.0
-_DETECTOR_DELTAS = {"frames_in": "offered", "dropped": "dropped"}
+_DETECTOR_DELTAS = {detector.FRAMES_IN: "offered", detector.DROPPED: "dropped"}
 
 
 class Aggregator:
@@ -110,12 +112,12 @@ class Aggregator:
         self._all.on_detections(msg, now)
         figures = self._camera(camera)
         if figures is None:
-            self.count("cameras_refused")  # over max_cameras: in the totals only
+            self.count(contract.CAMERAS_REFUSED)  # over max_cameras: in the totals only
         else:
             # Only for the cameras kept (at most max_cameras): made-up camera names on the
             # detections keys must not grow the memory of frames seen.
             if self._duplicates.seen(camera, msg.header):
-                self.count("duplicate_detections")
+                self.count(contract.DUPLICATE_DETECTIONS)
             figures.on_detections(msg, now)
         self._timeline.add(now, frames=1.0, detections=float(len(msg)))
         # Bounded: garbage that decodes can still name thousands of made-up classes (each
@@ -127,7 +129,7 @@ class Aggregator:
             else:
                 refused += 1
         if refused:
-            self.count("class_names_refused", refused)
+            self.count(contract.CLASS_NAMES_REFUSED, refused)
         if msg.published_ns and figures is not None:
             stamp = msg.header.stamp_ns
             self._score(now, self._reactions.on_detections(camera, stamp, msg.published_ns))
@@ -164,8 +166,8 @@ class Aggregator:
             delta = None
             if previous is not None:
                 delta = float(value - previous if value >= previous else value)
-            detector = service_package(msg.service) == "detector"  # any worker of the pool
-            column = _DETECTOR_DELTAS.get(name) if detector else None
+            is_detector = service_package(msg.service) == "detector"  # any worker of the pool
+            column = _DETECTOR_DELTAS.get(name) if is_detector else None
             if column is not None and delta is not None:
                 deltas[column] = delta
             base, _, camera = name.rpartition(".")
@@ -207,7 +209,7 @@ class Aggregator:
             frames=self._all.frames_total,
             detections=self._all.detections_total,
             detections_per_frame=self._all.detections_per_frame(now),
-            dropped_frames=self._detector_total("dropped"),
+            dropped_frames=self._detector_total(detector.DROPPED),
             latency_ms=self._all.latency_ms(now),
             counters=dict(sorted(self._counters.items())),
             class_counts=dict(self._classes.most_common()),
@@ -237,7 +239,7 @@ class Aggregator:
         per second, ``dropped`` a count per period.
         """
         recent = self._timeline.totals(now, self.window_s)
-        offered_total = self._detector_total("frames_in")
+        offered_total = self._detector_total(detector.FRAMES_IN)
         series = self._timeline.series(
             now - TIMELINE_SETTLE_S, TIMELINE_COLUMNS, since=self._detector_counters_since
         )
@@ -256,7 +258,7 @@ class Aggregator:
             counters=snap.counters,
             class_counts=snap.class_counts,
             drop_rate=ratio(recent.get("dropped", 0.0), recent.get("offered", 0.0)),
-            drop_rate_total=ratio(self._detector_total("dropped"), offered_total),
+            drop_rate_total=ratio(self._detector_total(detector.DROPPED), offered_total),
             frames_offered=offered_total,
             timeline=TimelineSeries(
                 period_s=period,

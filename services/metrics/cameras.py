@@ -21,14 +21,15 @@ from __future__ import annotations
 from collections import deque
 
 from common.contracts import CameraMetrics
+from services.detector import contract as detector
 from services.metrics.figures import Figures
 from services.metrics.window import Timeline
 
 #: Counter name -> drop timeline column: frames offered to the worker, and dropped by it.
-DROP_COLUMNS = {"frames_in": "offered", "dropped": "dropped"}
-WORKER_COUNTER = "frames_in"  # the service counting this for a camera serves it ...
-SERVING_COUNTER = "serving"  # ... unless a worker says so with this one (1: it serves it)
-BATCH_COUNTERS = ("batches", "batched_frames")
+DROP_COLUMNS = {detector.FRAMES_IN: "offered", detector.DROPPED: "dropped"}
+WORKER_COUNTER = detector.FRAMES_IN  # the service counting this for a camera serves it ...
+SERVING_COUNTER = detector.SERVING  # ... unless a worker says so with this one (1: it serves it)
+BATCH_COUNTERS = (detector.BATCHES, detector.BATCHED_FRAMES)
 
 
 def ratio(part: float, whole: float) -> float:

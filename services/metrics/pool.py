@@ -22,9 +22,11 @@ from collections import deque
 from collections.abc import Iterable, Mapping
 
 from common.contracts import WorkerMetrics
+from common.counters import per_camera
 from common.messages import Header
 from common.pool_audit import PoolAudit, Report, Serving
 from common.settings import service_package
+from services.detector import contract as detector
 
 RECENT_FRAMES = 256  # frames remembered per camera: a hand-over's overlap is well under this
 
@@ -105,7 +107,10 @@ def workers(
     cams = list(cameras)
     out: dict[str, WorkerMetrics] = {}
     for service in sorted(reported_at):
-        if service_package(service) != "detector" or f"{service}.serving" not in counters:
+        if (
+            service_package(service) != "detector"
+            or f"{service}.{detector.SERVING}" not in counters
+        ):
             continue
         if pool is not None and pool.heard:
             live = service in pool.members
@@ -113,14 +118,18 @@ def workers(
             mine = [c for c in cams if c in served] + sorted(served - set(cams))
         else:
             live = True
-            mine = [c for c in cams if counters.get(f"{service}.serving.{c}", 0) > 0]
+            mine = [
+                c
+                for c in cams
+                if counters.get(f"{service}.{per_camera(detector.SERVING, c)}", 0) > 0
+            ]
         out[service] = WorkerMetrics(
             live=live,
             cameras=mine,
-            load=counters.get(f"{service}.pool_load_permille", 0) / 1000.0,
-            members=counters.get(f"{service}.pool_members", 0),
-            cameras_gained=counters.get(f"{service}.cameras_gained", 0),
-            cameras_lost=counters.get(f"{service}.cameras_lost", 0),
+            load=counters.get(f"{service}.{detector.POOL_LOAD_PERMILLE}", 0) / 1000.0,
+            members=counters.get(f"{service}.{detector.POOL_MEMBERS}", 0),
+            cameras_gained=counters.get(f"{service}.{detector.CAMERAS_GAINED}", 0),
+            cameras_lost=counters.get(f"{service}.{detector.CAMERAS_LOST}", 0),
             reported_s_ago=max(0.0, now - reported_at[service]),
         )
     return out

@@ -16,6 +16,7 @@ from typing import TypeVar
 from common import reach
 from common.clock import mono_s, mono_to_unix_s
 from common.contracts import MetricsAnswer
+from common.counters import BAD_INPUT
 from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, ServiceCounters, Twist
@@ -25,6 +26,7 @@ from common.pool_rule import camera_weights
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES, Config
 from common.zenoh_bus import open_session
+from services.metrics import contract
 from services.metrics.advice import advise
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
 from services.metrics.pool import LivePool
@@ -126,8 +128,10 @@ class MetricsHandlers:
     def _feed_counters(self, msg: ServiceCounters) -> None:
         kept, refused = split_counters(msg)
         for why, n in refused.items():
-            self.agg.count(f"refused.{why}", n)
-            self.tally.reject(f"refused.{why}", f"{n} of {msg.service}'s counters refused: {why}")
+            self.agg.count(contract.refused(why), n)
+            self.tally.reject(
+                contract.refused(why), f"{n} of {msg.service}'s counters refused: {why}"
+            )
         self.agg.on_counters(kept, mono_s())
 
     def _take(
@@ -144,13 +148,15 @@ class MetricsHandlers:
         except DecodeError as exc:
             self.tally.bad_input(name, exc)
             with self.lock:
-                self.agg.count("bad_input")
+                self.agg.count(BAD_INPUT)
             return
         why = refuse(msg, heard_on)
         if why is not None:
-            self.tally.reject(f"refused.{why}", f"{name} on {heard_on} refused: {why}", key=name)
+            self.tally.reject(
+                contract.refused(why), f"{name} on {heard_on} refused: {why}", key=name
+            )
             with self.lock:
-                self.agg.count(f"refused.{why}")
+                self.agg.count(contract.refused(why))
             return
         with self.lock:
             feed(msg)

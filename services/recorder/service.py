@@ -39,12 +39,13 @@ from common.node import Node, Tally
 from common.priority import lower_priority
 from common.queries import ready_services
 from common.recorder_settings import TIME_FIELD
-from common.security import running_sensors
 from common.settings import REPO_ROOT, Config, is_detector_service
 from common.zenoh_bus import Publisher, ZenohBus, open_session
+from services.recorder import contract
 from services.recorder.channels import Translator
 from services.recorder.play import Played, one_pass, playable_topics
 from services.recorder.writer import Decode, McapFile, QueuedRecorder
+from stack.access import running_sensors
 
 SERVICE = "recorder"
 
@@ -114,7 +115,7 @@ class Recorder(Closing):
             f"recording {self.path}: {c.get('written')} messages, {mb:.1f} MB written, "
             f"{c.get('dropped')} dropped"
         )
-        if c.get("dropped"):
+        if c.get(contract.DROPPED):
             line += " (the writer could not keep up)"
         if c.get("bad_input"):
             line += f", {c.get('bad_input')} bad input"
@@ -220,7 +221,7 @@ def _ready_to_play(
         if live:
             # A replay onto a live robot's keys would mix old frames and scans with its own:
             # all-clear scans could blind its laser. Under the secure profile the router
-            # refuses these puts anyway (common/security.py); this says so before trying.
+            # refuses these puts anyway (stack/access.py); this says so before trying.
             raise StackError(
                 f"refusing to play {path} onto stack {prefix!r}: it runs a live "
                 f"sensor ({', '.join(live)}) and a replay would mix with or blind it; play into "

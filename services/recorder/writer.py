@@ -22,11 +22,12 @@ from mcap.writer import CompressionType, Writer
 
 from common.clock import mono_s
 from common.codec import Message
-from common.counters import Counters
+from common.counters import BAD_INPUT, Counters
 from common.errors import ConfigError, DecodeError, one_line
 from common.lifecycle import Closing
 from common.priority import leave_idle
 from common.recorder_settings import Compression, RecorderSettings
+from services.recorder import contract
 from services.recorder.channels import PROFILE, Channel, Entry, Translator
 
 log = logging.getLogger("recorder")
@@ -163,9 +164,9 @@ class QueuedRecorder(Closing):
     def offer(self, key: str, payload: bytes, log_ns: int, decode: Decode) -> bool:
         """Queue one message (received on ``key`` at ``log_ns``) for writing; never blocks.
         False, and counted, when ``queue_size`` messages are already waiting."""
-        self._counters.add("received")
+        self._counters.add(contract.RECEIVED)
         if len(self._queue) >= self._limit:
-            self._counters.add("dropped")
+            self._counters.add(contract.DROPPED)
             return False
         self._queue.append(_Item(key, payload, log_ns, decode))
         return True
@@ -193,12 +194,12 @@ class QueuedRecorder(Closing):
             msg = item.decode(item.payload)
             entries = self._translator.entries(item.key, msg)
         except (DecodeError, ValueError) as exc:  # ValueError: a stamp no ROS Time can hold
-            self._counters.add("bad_input")
+            self._counters.add(BAD_INPUT)
             log.warning("not recorded: bad input on %s: %s", item.key, one_line(exc))
             return
         for entry in entries:
             self.file.add(entry, item.log_ns)
-        self._counters.add("written")
+        self._counters.add(contract.WRITTEN)
 
     def close(self) -> None:
         """Write what is queued, then finish the file, out of the idle class (a stop is a

@@ -30,6 +30,7 @@ from common.messages import ControllerStatus, Detections, Frame, Twist
 from common.node import Node, Put, Tally
 from common.ros2_settings import ImageFormat, camera_topics
 from common.settings import Config
+from services.ros2 import contract
 from services.ros2.convert import (
     DETECTION_2D_ARRAY,
     LASER_SCAN,
@@ -63,7 +64,7 @@ class RosInbound:
         self.ros_type = ros_type
         self.topic = topic
         self.put = put
-        self._counter = f"{ros_type.rsplit('/', 1)[-1].lower()}_in"
+        self._counter = contract.topic_in(ros_type)
 
     def on_payload(self, key: str, cdr: memoryview) -> None:
         """``key``: the rmw_zenoh data key the sample came on."""
@@ -97,7 +98,7 @@ class DetectionsToRos:
         if dets is None:
             return
         self.put(cdr_encode(self.distro, DETECTION_2D_ARRAY, detections_to_ros(self.distro, dets)))
-        self.tally.counters.add("detections_out")
+        self.tally.counters.add(contract.DETECTIONS_OUT)
 
 
 class CommandsToRos:
@@ -153,7 +154,7 @@ class CommandsToRos:
             s = self.settings
             msg = twist_to_ros(s.distro, outcome.send, stamped=s.twist_stamped)
             self.put(cdr_encode(s.distro, self.ros_type, msg))
-            self.tally.counters.add("commands_out")
+            self.tally.counters.add(contract.COMMANDS_OUT)
 
 
 class DebugImages:
@@ -192,7 +193,7 @@ class DebugImages:
             return
         image = frame_to_compressed_image(s.distro, drawn)
         self.put(cdr_encode(s.distro, COMPRESSED_IMAGE, image))
-        self.tally.counters.add("debug_images_out")
+        self.tally.counters.add(contract.DEBUG_IMAGES_OUT)
 
 
 def _bridge_camera(config: Config, node: Node, graph: RosGraph, camera: str) -> list[Declared]:

@@ -41,6 +41,7 @@ from services.ros2 import (
     scan_to_ros,
     twist_from_ros,
 )
+from services.sim import contract
 from services.sim.cameras import SimCamera, sim_cameras
 from services.sim.laser import LaserSpec, cast
 from services.sim.render import render
@@ -172,13 +173,13 @@ def run(config: Config, stop: threading.Event) -> int:
                 sane = world.command(twist.linear[0], twist.angular[2])
             if not sane:
                 node.reject(
-                    "commands_out_of_range",
+                    contract.COMMANDS_OUT_OF_RANGE,
                     f"cmd_vel v={twist.linear[0]:g} w={twist.angular[2]:g} is beyond what the "
                     f"base takes (from {twist.header.source!r}): refused, the base stops",
                 )
             if active > 1:
                 node.reject(
-                    "commands_from_several_sources",
+                    contract.COMMANDS_FROM_SEVERAL_SOURCES,
                     f"cmd_vel from {active} publishers at once "
                     f"(this one from {twist.header.source!r}, {source})",
                 )
@@ -272,9 +273,9 @@ def _publish_due(
             header = node.header(frame_id=camera.frame_id)
             image = render(world, camera.spec)
             out.frame(camera.name, image_to_frame(image, header, jpeg_quality=camera.jpeg_quality))
-            node.counters.add("frames_out")
+            node.counters.add(contract.FRAMES_OUT)
             if len(cameras) > 1:  # the total above, and each camera's (common/counters.py)
-                node.counters.add(per_camera("frames_out", camera.name))
+                node.counters.add(per_camera(contract.FRAMES_OUT, camera.name))
     if clocks["scan"].due(t):
         scan = LaserScan(
             header=node.header(frame_id="laser"),

@@ -25,7 +25,7 @@ from common.ports import holder_words
 from common.queries import query_metrics
 from common.security import viewer_token_file
 from common.settings import Config
-from services.viewer import convert, scene
+from services.viewer import contract, convert, scene
 from services.viewer.channels import CameraChannels, Channels
 from services.viewer.front import Front, make_check
 from services.viewer.pairing import Pairing
@@ -94,14 +94,14 @@ class CameraView:
         frame = self.viewer.tally.decode(self._frame_key, Frame.decode, payload)
         if frame is None:
             return
-        self.viewer.tally.counters.add("frames_in")
+        self.viewer.tally.counters.add(contract.FRAMES_IN)
         self.pairing.add_frame(frame)
 
     def on_detections(self, payload: bytes) -> None:
         tally = self.viewer.tally
         dets = tally.decode(self._detections_key, Detections.decode, payload)
         if dets is not None and not self.pairing.add_detections(dets, mono_s()):
-            tally.counters.add("detections_unpaired")
+            tally.counters.add(contract.DETECTIONS_UNPAIRED)
 
     def send(self, frame: Frame, dets: Detections | None) -> None:
         """Send ``frame`` as a JPEG, and ``dets`` as its annotations; a frame whose pixels
@@ -122,7 +122,7 @@ class CameraView:
             return
         at = frame.header.stamp_ns
         self.channels.image.log(image, log_time=at)
-        viewer.tally.counters.add("images_out")
+        viewer.tally.counters.add(contract.IMAGES_OUT)
         if marks is not None:
             self.channels.annotations.log(marks, log_time=at)
 
@@ -148,7 +148,7 @@ class Viewer:
 
     def unshowable(self, what: str, error: ValueError) -> None:
         """A message that decoded but that Foxglove cannot carry (a stamp past 2106)."""
-        self.tally.reject("unshowable", f"{what} not shown: {error}")
+        self.tally.reject(contract.UNSHOWABLE, f"{what} not shown: {error}")
 
     def on_scan(self, payload: bytes) -> None:
         scan = self.tally.decode(self.tally.keys.scan(), LaserScan.decode, payload)
@@ -210,7 +210,9 @@ class Viewer:
             for name, view in self.cameras.items():
                 item = view.pairing.take(mono_s())
                 if view.pairing.dropped > dropped[name]:
-                    self.tally.counters.add("images_dropped", view.pairing.dropped - dropped[name])
+                    self.tally.counters.add(
+                        contract.IMAGES_DROPPED, view.pairing.dropped - dropped[name]
+                    )
                     dropped[name] = view.pairing.dropped
                 if item is not None and view.channels.watched():
                     view.send(*item)

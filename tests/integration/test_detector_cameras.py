@@ -32,7 +32,8 @@ from common.messages import Detections, Header, ServiceCounters
 from common.queries import ready_services
 from common.settings import Config
 from common.spawn import spawn, stop_child
-from common.zenoh_bus import Publisher, QoS, open_hub
+from common.zenoh_bus import Publisher, QoS
+from stack.hub import open_hub
 from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
 from tests.unit.detector.headers import camera_header
 

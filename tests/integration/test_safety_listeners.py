@@ -22,9 +22,9 @@ import zenoh
 
 from common.clock import BOOT_ID, now
 from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan
-from common.security import may_read
 from common.zenoh_bus import Publisher, QoS
 from deploy.credentials import generate
+from stack.access import may_read
 from tests.integration.conftest import REPO, Stack, wait_for
 from tests.integration.test_safety import STACK, header, moving
 

@@ -20,8 +20,9 @@ from common.config_file import load_config
 from common.contracts import ControllerState
 from common.keys import Keys
 from common.messages import ControllerStatus, Header
-from common.zenoh_bus import HUB_PRINCIPAL, hub_access, zenoh_config
+from common.zenoh_bus import HUB_PRINCIPAL, zenoh_config
 from deploy.credentials import generate
+from stack.hub import hub_access
 from tests.integration.conftest import REPO, write_config
 from tools.launch import free_port
 

@@ -10,10 +10,12 @@ name a project module, absolutely or as a submodule of the table's own module (m
 /quantize's ``RUNTIMES``, imported as ``f"{__name__}.{module}"``). Running a module as a program
 (``python -m``, ``runpy`` in deploy/zstack.py) is not an import.
 
-Units. For package cycles and layers each module belongs to one unit: ``common``, ``runtimes``
-and ``deploy`` are one unit each; below ``services``, ``tools`` and ``modelprep`` each second
-level is one (``services.detector``, ``tools.evaluation``, ``modelprep.quantize``, and a module
-directly in the folder is its own: ``tools.launch``, ``modelprep.files``).
+Units. For package cycles and layers each module belongs to one unit: ``common``, ``stack``,
+``runtimes`` and ``deploy`` are one unit each; below ``services``, ``tools`` and ``modelprep``
+each second level is one (``services.detector``, ``tools.evaluation``, ``modelprep.quantize``,
+and a module directly in the folder is its own: ``tools.launch``, ``modelprep.files``); a
+service's contract is a unit of its own (``services.detector.contract``), so that what reads
+it (the stack, other services) does not depend on the service.
 
 Layers: who may import whom (``_allowed`` is exactly this table).
 
@@ -21,12 +23,16 @@ Layers: who may import whom (``_allowed`` is exactly this table).
 importer       may import
 =============  ==========================================================================
 common         common
+a contract     common, another service's contract (what it reads of it); a contract is
+               ``services.X.contract``
+stack          common, stack, the services' contracts (it assembles them)
 runtimes       common, runtimes, modelprep
 modelprep.X    common, modelprep
-services.X     common, runtimes, modelprep, its own package, another service's package root
-               (``services.Y``, its public API, never its internals); never tools or deploy
+services.X     common, stack, runtimes, modelprep, its own package, another service's package
+               root (``services.Y``, its public API) or contract, never its internals; never
+               tools or deploy
 tools.X        anything but deploy (a tool starts the supervisor as a process)
-deploy         common, deploy
+deploy         common, stack, the services' contracts, deploy
 =============  ==========================================================================
 
 No production module reads anything under tests/: no import of ``tests``, and no string that
@@ -43,9 +49,9 @@ from collections.abc import Container, Iterable, Iterator, Mapping
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGES = ("common", "runtimes", "modelprep", "services", "tools", "deploy")
+PACKAGES = ("common", "stack", "runtimes", "modelprep", "services", "tools", "deploy")
 #: Units that are a whole top-level package (the others are split at the second level).
-WHOLE = ("common", "runtimes", "deploy")
+WHOLE = ("common", "stack", "runtimes", "deploy")
 
 #: Module -> the project modules it imports, each with the line of its first import there.
 Graph = dict[str, dict[str, int]]
@@ -174,7 +180,17 @@ def find_cycles(graph: Mapping[str, Iterable[str]]) -> list[list[str]]:
 def unit(module: str) -> str:
     """The package unit a module belongs to (see the module docstring)."""
     parts = module.split(".")
-    return parts[0] if parts[0] in WHOLE else ".".join(parts[:2])
+    if parts[0] in WHOLE:
+        return parts[0]
+    if is_contract(module):
+        return module
+    return ".".join(parts[:2])
+
+
+def is_contract(module: str) -> bool:
+    """A service's contract: ``services.<name>.contract``."""
+    parts = module.split(".")
+    return len(parts) == 3 and parts[0] == "services" and parts[2] == "contract"
 
 
 #: Unit -> unit -> one module edge behind it: ``(module, target, line)``.
@@ -240,12 +256,16 @@ def _allowed(module: str, target: str) -> bool:
     top, target_top = module.split(".")[0], target.split(".")[0]
     if top == "common":
         return target_top == "common"
+    if is_contract(module):
+        return target_top == "common" or is_contract(target)
+    if top == "stack":
+        return target_top in ("common", "stack") or is_contract(target)
     if top == "runtimes":
         return target_top in ("common", "runtimes", "modelprep")
     if top == "modelprep":
         return target_top in ("common", "modelprep")
     if top == "services":
-        if target_top in ("common", "runtimes", "modelprep"):
+        if target_top in ("common", "stack", "runtimes", "modelprep") or is_contract(target):
             return True
         if target_top != "services":
             return False  # tools, deploy
@@ -254,7 +274,7 @@ def _allowed(module: str, target: str) -> bool:
     if top == "tools":
         return target_top != "deploy"
     if top == "deploy":
-        return target_top in ("common", "deploy")
+        return target_top in ("common", "stack", "deploy") or is_contract(target)
     raise AssertionError(f"{module} is in no layer")
 
 
@@ -322,6 +342,8 @@ def test_units_are_the_whole_package_or_its_second_level() -> None:
     assert unit("tools.evaluation.datasets") == "tools.evaluation"
     assert unit("tools.launch") == "tools.launch"
     assert unit("modelprep.quantize.nncf_int8") == "modelprep.quantize"
+    assert unit("services.detector.contract") == "services.detector.contract"
+    assert unit("stack.access") == "stack"
 
 
 def test_a_package_cycle_through_a_function_level_import_is_caught() -> None:
@@ -393,6 +415,15 @@ def test_the_layering_rule_refuses_what_the_table_refuses() -> None:
     assert not _allowed("modelprep.quantize", "runtimes.base")
     assert not _allowed("deploy.supervisor", "services.metrics")
     assert not _allowed("deploy.supervisor", "tools.launch")
+    # a contract reads only common and other contracts; the stack assembles contracts only
+    assert _allowed("services.metrics.contract", "services.detector.contract")
+    assert not _allowed("services.detector.contract", "services.detector.pipeline")
+    assert not _allowed("services.detector.contract", "stack.access")
+    assert _allowed("stack.access", "services.camera.contract")
+    assert not _allowed("stack.access", "services.camera.service")
+    assert _allowed("services.metrics.aggregate", "services.detector.contract")
+    assert _allowed("services.recorder.service", "stack.access")
+    assert not _allowed("common.node", "stack.access")
 
 
 def test_a_service_importing_tools_or_deploy_inside_a_function_is_reported() -> None:

@@ -1,7 +1,7 @@
 """python -m tools.benchmarks estop: how soon ``zstack estop engage`` puts its first EStop,
 this checkout against another revision, side by side.
 
-This process plays the stack's hub (``common.zenoh_bus.open_hub`` on a private endpoint) and
+This process plays the stack's hub (``stack.hub.open_hub`` on a private endpoint) and
 subscribes to the e-stop key; each run starts the command as an operator would
 (``python -m deploy.zstack estop engage --config FILE``) and times from just before the
 process is started to the arrival of its first EStop, on this process's monotonic clock. The
@@ -33,7 +33,7 @@ from common.keys import Keys
 from common.machine import machine_info
 from common.settings import REPO_ROOT, Config, StackSettings, ZenohSettings
 from common.spawn import spawn
-from common.zenoh_bus import open_hub
+from stack.hub import open_hub
 from tools.launch import free_port
 
 #: The longest a run waits for the first put before counting it lost.

@@ -12,16 +12,11 @@ import zenoh
 from common.config_file import load_config
 from common.errors import ConfigError
 from common.keys import Keys
-from common.security import (
-    PRINCIPALS,
-    access_control,
-    may_put,
-    may_read,
-    running_sensors,
-    stack_principals,
-)
+from common.security import PRINCIPALS, stack_principals
 from common.settings import REPO_ROOT, ZenohSettings, camera_service
-from common.zenoh_bus import QoS, hub_access, open_session, zenoh_config
+from common.zenoh_bus import QoS, open_session, zenoh_config
+from stack.access import access_control, may_put, may_read, running_sensors
+from stack.hub import hub_access
 
 KEYS = Keys("robot1")
 
@@ -232,8 +227,8 @@ def test_one_camera_is_the_stack_it_always_was() -> None:
 
 
 def test_the_hub_refuses_credentials_made_for_fewer_cameras(tmp_path: Path) -> None:
-    from common.zenoh_bus import check_credentials
     from deploy.credentials import generate
+    from stack.hub import check_credentials
 
     creds = tmp_path / "creds"
     generate(creds)  # one camera's principals only
@@ -262,7 +257,7 @@ def test_the_hub_refuses_credentials_made_for_fewer_cameras(tmp_path: Path) -> N
 
 
 def test_the_router_drops_under_congestion_on_every_key_but_the_estop() -> None:
-    from common.zenoh_bus import hub_drop_keys
+    from stack.hub import hub_drop_keys
 
     cfg = load_config(REPO_ROOT / "deploy" / "secure.toml", environ={})
     keys = Keys(cfg.stack.prefix)

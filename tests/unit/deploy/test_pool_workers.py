@@ -12,7 +12,7 @@ import pytest
 from common.config_file import load_config
 from common.errors import ConfigError
 from common.keys import Keys
-from common.security import access_control, may_announce, may_put, stack_principals
+from common.security import stack_principals
 from common.settings import (
     Config,
     DetectorSettings,
@@ -22,6 +22,7 @@ from common.settings import (
 )
 from deploy.processes import service_command, stack_processes
 from deploy.watchdog import Observation, judge
+from stack.access import access_control, may_announce, may_put
 
 
 def _config(tmp_path: Path, text: str) -> Config:

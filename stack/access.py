@@ -1,0 +1,245 @@
+"""Who may say what on the bus: the router's access-control rules, built from what each
+service's contract (``services/<name>/contract.py``) declares it puts, announces, serves and
+reads. Pure: nothing here opens a session; stack/hub.py hands the rules to the router.
+
+Each process has its own principal (common/security.py) and may publish only its own keys:
+only the controller puts ``cmd_vel``, only the ``estop`` principal the e-stop, only the
+cameras, the simulator and the ROS 2 bridge frames and scans, only stack services counters and
+health tokens. Each camera process may put only its own camera's frames; the detector puts
+every camera's detections and no frame. Each detector worker of a pool may put every camera's
+detections (any worker may serve any camera), but announces only its own health and pool
+tokens. The recorder (playing a recording back) may put frames and scans only on a stack that
+runs no live sensor (no camera, simulator or ROS 2 bridge): a replay must never reach a live
+robot's keys.
+
+Each principal may also subscribe only to what it reads: the camera frames only to the
+detector, the live view, the recorder and the ROS 2 bridge. Zenoh allows a subscription only
+when its key expression lies within an allowed one, so a wider one (``<prefix>/**``) is denied
+whole, not trimmed. Queries and liveliness subscriptions stay open to every principal.
+Anything not allowed is denied.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from common.access import Access, Shape
+from common.keys import Keys
+from common.security import (
+    AUTH_MODES,
+    DETECTOR_PRINCIPAL,
+    ROUTER_PRINCIPAL,
+    camera_services,
+    stack_principals,
+)
+from common.settings import service_package
+from services.camera import contract as camera
+from services.controller import contract as controller
+from services.detector import contract as detector
+from services.metrics import contract as metrics
+from services.recorder import contract as recorder
+from services.ros2 import contract as ros2
+from services.sim import contract as sim
+from services.viewer import contract as viewer
+
+#: The packages whose services feed a live robot's sensors into the stack (their contracts'
+#: ``LIVE_SENSOR``): while one of them runs, no recording may be played onto its keys.
+LIVE_SENSORS = frozenset(
+    package
+    for package, live in (
+        ("camera", camera.LIVE_SENSOR),
+        ("sim", sim.LIVE_SENSOR),
+        ("ros2", ros2.LIVE_SENSOR),
+    )
+    if live
+)
+#: A principal that may watch (subscribe, query) but publishes nothing: status lines, tests.
+OBSERVER_PRINCIPAL = "observer"
+
+# Zenoh message kinds that only ask (or announce interest); every principal may send them.
+_ASK_MESSAGES = (
+    "query",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+)
+_ALL_MESSAGES = (
+    "put",
+    "delete",
+    "reply",
+    "declare_queryable",
+    "liveliness_token",
+    "declare_subscriber",
+    *_ASK_MESSAGES,
+)
+#: The Zenoh message kinds each kind of an Access allows.
+KIND_MESSAGES = {
+    "put": ["put"],
+    "token": ["liveliness_token"],
+    "serve": ["declare_queryable", "reply"],
+    "read": ["declare_subscriber"],
+}
+
+
+def running_sensors(services: Iterable[str]) -> list[str]:
+    """Those of ``services`` that feed a live robot's sensors (any camera, the simulator, the
+    ROS 2 bridge), sorted."""
+    return sorted(s for s in set(services) if service_package(s) in LIVE_SENSORS)
+
+
+def _observer(shape: Shape) -> dict[str, Access]:
+    """Everything but the cameras' pictures: what status lines, tests and tools watch."""
+    keys = shape.keys
+    watching = (
+        keys.all_detections(), keys.scan(), keys.cmd_vel(), keys.controller_status(),
+        keys.estop(), keys.sim_truth(), keys.all_counters(),
+    )  # fmt: skip
+    return {OBSERVER_PRINCIPAL: Access(read=watching)}
+
+
+def access_table(shape: Shape) -> dict[str, Access]:
+    """What each principal of the stack may do, from its service's contract. Puts name each
+    configured camera's key: nobody may put on a camera the stack does not have. Reads and the
+    detector's info take the wildcard, so that one subscription (or queryable) for every
+    camera is accepted as well as one per camera; nobody can put on an unconfigured camera's
+    key, so the wildcard reads nothing more."""
+    return {
+        **camera.access(shape),
+        **detector.access(shape),
+        **sim.access(shape),
+        **ros2.access(shape),
+        **recorder.access(shape),
+        **controller.access(shape),
+        **metrics.access(shape),
+        **viewer.access(shape),
+        **controller.estop_access(shape),
+        ROUTER_PRINCIPAL: Access(),  # its session lives inside the router: no rule applies to it
+        **_observer(shape),
+    }
+
+
+def _table(
+    keys: Keys,
+    cameras: str | Mapping[str, str],
+    live_sensors: bool = True,
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+) -> dict[str, Access]:
+    shape = Shape(keys, camera_services(cameras), tuple(workers), live_sensors)
+    return access_table(shape)
+
+
+def access_control(
+    keys: Keys,
+    cameras: str | Mapping[str, str],
+    auth: str,
+    principals: tuple[str, ...] | None = None,
+    *,
+    live_sensors: bool = True,
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+) -> dict[str, Any]:
+    """Zenoh's ``access_control`` section for the router: deny by default, then allow each
+    principal its own keys on ingress (puts, tokens, queryables, subscriptions), queries and
+    liveliness for everyone, and everything on egress (the router delivers only what it
+    accepted, and only to subscriptions it accepted). ``cameras``: see
+    common.security.camera_services; ``principals`` (default: stack_principals) limits the
+    rules to those named; ``workers``: the detector workers' names (``Config.detector_services``),
+    each a principal."""
+    if auth not in AUTH_MODES[1:]:
+        raise ValueError(f"access control needs an authenticated mode, got {auth!r}")
+    workers = tuple(workers)
+    if principals is None:
+        principals = stack_principals(cameras, workers)
+    match = "usernames" if auth == "password" else "cert_common_names"
+    rules: list[dict[str, Any]] = [
+        {
+            "id": "egress",
+            "messages": list(_ALL_MESSAGES),
+            "flows": ["egress"],
+            "permission": "allow",
+            "key_exprs": ["**"],
+        },
+        {
+            "id": "ask",
+            "messages": list(_ASK_MESSAGES),
+            "flows": ["ingress"],
+            "permission": "allow",
+            "key_exprs": ["**"],
+        },
+    ]
+    subjects: list[dict[str, Any]] = [{"id": "everyone", match: list(principals)}]
+    policies: list[dict[str, Any]] = [{"rules": ["egress", "ask"], "subjects": ["everyone"]}]
+    for principal, allowed in _table(keys, cameras, live_sensors, workers).items():
+        if principal not in principals:
+            continue
+        subjects.append({"id": principal, match: [principal]})
+        ids = []
+        for kind, key_exprs in allowed.kinds().items():
+            rule_id = f"{principal}_{kind}"
+            rules.append(
+                {
+                    "id": rule_id,
+                    "messages": KIND_MESSAGES[kind],
+                    "flows": ["ingress"],
+                    "permission": "allow",
+                    "key_exprs": list(key_exprs),
+                }
+            )
+            ids.append(rule_id)
+        if ids:
+            policies.append({"rules": ids, "subjects": [principal]})
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+def may_put(
+    keys: Keys,
+    cameras: str | Mapping[str, str],
+    principal: str,
+    *,
+    live_sensors: bool = True,
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+) -> tuple[str, ...]:
+    """The keys ``principal`` may put on (documentation and tests read the same table)."""
+    allowed = _table(keys, cameras, live_sensors, workers).get(principal)
+    return allowed.put if allowed else ()
+
+
+def congestion_overwritten(
+    keys: Keys,
+    cameras: str | Mapping[str, str],
+    *,
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+) -> tuple[str, ...]:
+    """The keys on which the router puts congestion control DROP on every sample it takes in,
+    whatever its publisher asked for: every key any principal may put on (a replay's too),
+    but the e-stop. A client's BLOCK there would make the router wait on a full link (a frozen
+    listener's) and hold up everyone's traffic behind it (docs/security.md, "QoS by role")."""
+    puts: dict[str, None] = {}
+    for live in (True, False):
+        for allowed in _table(keys, cameras, live, workers).values():
+            puts.update(dict.fromkeys(allowed.put))
+    return tuple(k for k in puts if k != keys.estop())
+
+
+def may_announce(
+    keys: Keys,
+    cameras: str | Mapping[str, str],
+    principal: str,
+    *,
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+) -> tuple[str, ...]:
+    """The liveliness tokens ``principal`` may declare (its health, a worker's pool and serving
+    tokens)."""
+    allowed = _table(keys, cameras, workers=workers).get(principal)
+    return allowed.token if allowed else ()
+
+
+def may_read(keys: Keys, cameras: str | Mapping[str, str], principal: str) -> tuple[str, ...]:
+    """The key expressions ``principal`` may subscribe to (within which any subscription)."""
+    allowed = _table(keys, cameras).get(principal)
+    return allowed.read if allowed else ()

@@ -1,0 +1,67 @@
+"""The supervisor's hub: the Zenoh router every service joins in client mode, with the access
+rules of this stack (stack/access.py) and congestion control overwritten to DROP on every key but
+the e-stop (common/zenoh_bus.py, "QoS by role")."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from common.errors import ConfigError
+from common.keys import Keys
+from common.security import stack_principals, users_file
+from common.settings import Config
+from common.zenoh_bus import HUB_PRINCIPAL, open_configured, readable, zenoh_config
+from stack.access import access_control, congestion_overwritten, running_sensors
+
+
+def hub_access(config: Config) -> dict[str, Any]:
+    """The supervisor's access-control rules for this stack's keys ({} without auth)."""
+    z = config.zenoh
+    if z.auth == "none":
+        return {}
+    live = bool(running_sensors(config.supervisor.services))
+    keys = Keys(config.stack.prefix)
+    return access_control(
+        keys, config.camera_services, z.auth, live_sensors=live, workers=config.detector_services
+    )
+
+
+def hub_drop_keys(config: Config) -> tuple[str, ...]:
+    """The keys on which the supervisor's router overwrites congestion control to DROP: every
+    key of the stack but the e-stop (stack.access.congestion_overwritten)."""
+    keys = Keys(config.stack.prefix)
+    return congestion_overwritten(keys, config.camera_services, workers=config.detector_services)
+
+
+def check_credentials(config: Config) -> None:
+    """With passwords, the router's dictionary must name every principal of this stack: one
+    made for fewer cameras or detector workers would refuse a further one's process.
+    ConfigError, one line, naming the command that makes them again."""
+    z = config.zenoh
+    if z.auth != "password":
+        return  # certificates: the router needs only the CA; each client checks its own files
+    path = Path(readable(users_file(z.credentials_path), "user dictionary"))
+    try:
+        known = {line.split(":", 1)[0] for line in path.read_text(encoding="utf-8").splitlines()}
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read {path}: {exc}") from exc
+    principals = stack_principals(config.camera_services, config.detector_services)
+    missing = [p for p in principals if p not in known]
+    if missing:
+        raise ConfigError(
+            f"the credentials in {z.credentials_path} have no principal {', '.join(missing)} "
+            "(made for fewer cameras or detector workers?): make them again with `zstack "
+            f"credentials --config {config.path or 'FILE'} --force` (docs/security.md)"
+        )
+
+
+def open_hub(config: Config) -> zenoh.Session:
+    """The supervisor's session: the endpoint every service joins, enforcing access control."""
+    check_credentials(config)
+    conf = zenoh_config(
+        config.zenoh, HUB_PRINCIPAL, access=hub_access(config), drop_keys=hub_drop_keys(config)
+    )
+    return open_configured(conf, config.zenoh, config.zenoh.endpoint, HUB_PRINCIPAL)
