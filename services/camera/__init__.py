@@ -9,6 +9,13 @@ devices through it, so both accept the same forms):
     VIDEO_EXTENSIONS the extensions taken for videos
 """
 
-from services.camera.sources import VIDEO_EXTENSIONS, CaptureSource, is_stream, open_stream
+from typing import TYPE_CHECKING
+
+from common.lazy import exports
+
+if TYPE_CHECKING:
+    from services.camera.sources import VIDEO_EXTENSIONS, CaptureSource, is_stream, open_stream
 
 __all__ = ["VIDEO_EXTENSIONS", "CaptureSource", "is_stream", "open_stream"]
+# Imported on first use: the camera's contract (services/camera/contract.py) loads no OpenCV.
+__getattr__ = exports(__name__, dict.fromkeys(__all__, "services.camera.sources"))

@@ -13,8 +13,23 @@ The detection path: ``service.py`` (the Zenoh I/O) -> ``pipeline.py`` (``preproc
 the CPU path.
 """
 
-from modelprep.files import ensure_default_model
-from services.detector.pipeline import Detector
-from services.detector.types import DetectionResult
+from typing import TYPE_CHECKING
+
+from common.lazy import exports
+
+if TYPE_CHECKING:
+    from modelprep.files import ensure_default_model
+    from services.detector.pipeline import Detector
+    from services.detector.types import DetectionResult
 
 __all__ = ["DetectionResult", "Detector", "ensure_default_model"]
+# Imported on first use: the detector's contract (services/detector/contract.py) loads no model
+# code.
+__getattr__ = exports(
+    __name__,
+    {
+        "DetectionResult": "services.detector.types",
+        "Detector": "services.detector.pipeline",
+        "ensure_default_model": "modelprep.files",
+    },
+)

@@ -13,44 +13,48 @@ import no zenoh.
 The wire-format facts and their sources: docs/ros2.md and services/ros2/wire.py.
 """
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from common.ros2_settings import RosDistro
-from services.ros2.convert import (
-    DETECTION_2D_ARRAY,
-    LASER_SCAN,
-    TWIST,
-    TWIST_STAMPED,
-    RosMessage,
-    cdr_decode,
-    cdr_encode,
-    detections_to_ros,
-    scan_from_ros,
-    scan_to_ros,
-    twist_from_ros,
-    twist_to_ros,
-)
-from services.ros2.images import (
-    COMPRESSED_IMAGE,
-    IMAGE,
-    frame_from_compressed_image,
-    frame_from_image,
-    frame_to_compressed_image,
-    frame_to_image,
-)
-from services.ros2.typestore import typestore_for
-from services.ros2.wire import (
-    DEFAULT_QOS,
-    SENSOR_DATA_QOS,
-    Attachment,
-    RosQoS,
-    data_key,
-    endpoint_token,
-    gid_for,
-    node_token,
-    qos_string,
-    type_hash,
-)
+from common.lazy import exports
+
+if TYPE_CHECKING:
+    from common.ros2_settings import RosDistro
+    from services.ros2.convert import (
+        DETECTION_2D_ARRAY,
+        LASER_SCAN,
+        TWIST,
+        TWIST_STAMPED,
+        RosMessage,
+        cdr_decode,
+        cdr_encode,
+        detections_to_ros,
+        scan_from_ros,
+        scan_to_ros,
+        twist_from_ros,
+        twist_to_ros,
+    )
+    from services.ros2.graph import RosGraph, RosPublisher
+    from services.ros2.images import (
+        COMPRESSED_IMAGE,
+        IMAGE,
+        frame_from_compressed_image,
+        frame_from_image,
+        frame_to_compressed_image,
+        frame_to_image,
+    )
+    from services.ros2.typestore import typestore_for
+    from services.ros2.wire import (
+        DEFAULT_QOS,
+        SENSOR_DATA_QOS,
+        Attachment,
+        RosQoS,
+        data_key,
+        endpoint_token,
+        gid_for,
+        node_token,
+        qos_string,
+        type_hash,
+    )
 
 __all__ = [
     "COMPRESSED_IMAGE",
@@ -87,14 +91,42 @@ __all__ = [
     "typestore_for",
 ]
 
-if TYPE_CHECKING:
-    from services.ros2.graph import RosGraph, RosPublisher
-
-
-def __getattr__(name: str) -> Any:
-    # The I/O piece is imported on first use, so that the translations alone load no zenoh.
-    if name in ("RosGraph", "RosPublisher"):
-        from services.ros2 import graph
-
-        return getattr(graph, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# Imported on first use: the bridge's contract (services/ros2/contract.py) loads none of it, and
+# the translations alone load no zenoh (the I/O piece, graph.py, comes only with RosGraph).
+__getattr__ = exports(
+    __name__,
+    {
+        "RosDistro": "common.ros2_settings",
+        "DETECTION_2D_ARRAY": "services.ros2.convert",
+        "LASER_SCAN": "services.ros2.convert",
+        "TWIST": "services.ros2.convert",
+        "TWIST_STAMPED": "services.ros2.convert",
+        "RosMessage": "services.ros2.convert",
+        "cdr_decode": "services.ros2.convert",
+        "cdr_encode": "services.ros2.convert",
+        "detections_to_ros": "services.ros2.convert",
+        "scan_from_ros": "services.ros2.convert",
+        "scan_to_ros": "services.ros2.convert",
+        "twist_from_ros": "services.ros2.convert",
+        "twist_to_ros": "services.ros2.convert",
+        "COMPRESSED_IMAGE": "services.ros2.images",
+        "IMAGE": "services.ros2.images",
+        "frame_from_compressed_image": "services.ros2.images",
+        "frame_from_image": "services.ros2.images",
+        "frame_to_compressed_image": "services.ros2.images",
+        "frame_to_image": "services.ros2.images",
+        "typestore_for": "services.ros2.typestore",
+        "DEFAULT_QOS": "services.ros2.wire",
+        "SENSOR_DATA_QOS": "services.ros2.wire",
+        "Attachment": "services.ros2.wire",
+        "RosQoS": "services.ros2.wire",
+        "data_key": "services.ros2.wire",
+        "endpoint_token": "services.ros2.wire",
+        "gid_for": "services.ros2.wire",
+        "node_token": "services.ros2.wire",
+        "qos_string": "services.ros2.wire",
+        "type_hash": "services.ros2.wire",
+        "RosGraph": "services.ros2.graph",
+        "RosPublisher": "services.ros2.graph",
+    },
+)
