@@ -6,19 +6,29 @@ returns, in the order subscribers were declared: a test puts a message and reads
 it on the next line, with no wait. A participant's ``close()`` is its process ending: its
 tokens go, and every watcher hears it.
 
+Access control as the supervisor's router enforces it: a hub made with the router's
+``access_control`` section (stack/access.py) takes each participant's principal
+(``hub.join(name, principal=...)``) and denies by default what the section does not allow on
+ingress (common/acl.py): a denied put reaches nobody, a denied subscription hears nothing, a
+denied token is not seen, a denied queryable answers nothing, a denied query or token watch
+hears nothing. Each denial is noted in ``hub.denied`` as ``(principal, kind, key)``; as on the
+router, the participant is not told.
+
 What it leaves out of Zenoh on purpose: no network (nothing is lost, delayed or reordered),
-no access control, and a bounded subscription's depth (a sample is handled as it is put).
-Those are the real-process tests' to check. A handler's exception is not swallowed as
-Zenoh's thread would (it logs it): it reaches the test that put the sample.
+and a bounded subscription's depth (a sample is handled as it is put). Those are the
+real-process tests' to check. A handler's exception is not swallowed as Zenoh's thread would
+(it logs it): it reaches the test that put the sample.
 """
 
 from __future__ import annotations
 
 import itertools
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
+from common.acl import AccessRules
 from common.bus import Answer, OnSample, OnToken, QoS, Reply, Sample
 
 
@@ -78,7 +88,8 @@ class MemoryPublisher:
                 self._on_refused(self.key, len(payload))
             return False
         self.sent += 1
-        self._bus.hub._deliver(Sample(self.key, bytes(payload), self._source))
+        if self._bus.admitted("put", self.key):  # else the router drops it, unsaid
+            self._bus.hub._deliver(Sample(self.key, bytes(payload), self._source))
         return True
 
     def undeclare(self) -> None:
@@ -86,9 +97,13 @@ class MemoryPublisher:
 
 
 class MemoryHub:
-    """The in-process bus: every participant's subscriptions, tokens and queryables."""
+    """The in-process bus: every participant's subscriptions, tokens and queryables; with
+    ``access`` (the router's ``access_control`` section), its access rules too."""
 
-    def __init__(self) -> None:
+    def __init__(self, access: Mapping[str, Any] | None = None) -> None:
+        self.rules = AccessRules(access) if access else None
+        #: What the rules denied: ``(principal, kind, key expression)``, in order.
+        self.denied: list[tuple[str, str, str]] = []
         self._lock = threading.RLock()
         self._subs: list[_Entry] = []
         self._tokens: list[_Entry] = []
@@ -97,9 +112,24 @@ class MemoryHub:
         self._ids = itertools.count(1)
         self._buses = itertools.count(1)
 
-    def join(self, name: str = "") -> MemoryBus:
-        """A new participant (``name`` only for reading its id in a failure)."""
-        return MemoryBus(self, f"mem{next(self._buses)}{'-' + name if name else ''}")
+    def join(self, name: str = "", *, principal: str | None = None) -> MemoryBus:
+        """A new participant (``name`` only for reading its id in a failure), authenticated
+        as ``principal``: a hub with access rules needs one, as the router admits no
+        anonymous link."""
+        if self.rules is not None and principal is None:
+            raise ValueError("a hub with access rules needs each participant's principal")
+        zid = f"mem{next(self._buses)}{'-' + name if name else ''}"
+        return MemoryBus(self, zid, principal)
+
+    def _admit(self, principal: str | None, kind: str, key: str) -> bool:
+        if self.rules is None:
+            return True
+        assert principal is not None  # join() asks for one
+        if self.rules.allows(principal, kind, key):
+            return True
+        with self._lock:
+            self.denied.append((principal, kind, key))
+        return False
 
     def tokens(self, key: str = "**") -> list[str]:
         """The keys of the live tokens that ``key`` matches, sorted."""
@@ -153,10 +183,19 @@ class MemoryHub:
 class MemoryBus:
     """One participant of a :class:`MemoryHub`: the bus protocol (common/bus.py)."""
 
-    def __init__(self, hub: MemoryHub, zid: str) -> None:
+    def __init__(self, hub: MemoryHub, zid: str, principal: str | None = None) -> None:
         self.hub = hub
+        self.principal = principal
         self._zid = zid
         self.closed = False
+
+    def admitted(self, kind: str, key: str) -> bool:
+        """Whether the hub's access rules let this participant send ``kind`` on ``key``."""
+        return self.hub._admit(self.principal, kind, key)
+
+    def _denied(self, key: str) -> _Entry:
+        """A declaration the router refused: registered nowhere, so it never hears a thing."""
+        return _Entry(self, key, alive=False)
 
     @property
     def zid(self) -> str:
@@ -173,36 +212,48 @@ class MemoryBus:
         return MemoryPublisher(self, key, qos, max_payload_bytes, on_refused)
 
     def subscribe(self, key: str, handle: OnSample) -> _Entry:
+        if not self.admitted("declare_subscriber", key):
+            return self._denied(key)
         return self.hub._add(self.hub._subs, _Entry(self, key, handle))
 
     def subscribe_bounded(self, key: str, handle: OnSample, depth: int) -> _Entry:
         return self.subscribe(key, handle)
 
     def declare_token(self, key: str) -> _Entry:
+        if not self.admitted("liveliness_token", key):
+            return self._denied(key)
         entry = self.hub._add(self.hub._tokens, _Entry(self, key))
         self.hub._token_event(key, True)
         return entry
 
     def watch_tokens(self, key: str, handle: OnToken) -> _Entry:
+        if not self.admitted("declare_liveliness_subscriber", key):
+            return self._denied(key)
         entry = self.hub._add(self.hub._watches, _Entry(self, key, handle))
         for token in self.hub.tokens(key):  # history: the ones alive now first
             handle(token, True)
         return entry
 
     def live_tokens(self, key: str, timeout_s: float) -> list[str]:
+        if not self.admitted("liveliness_query", key):
+            return []
         return self.hub.tokens(key)
 
     def serve(self, key: str, answer: Answer) -> _Entry:
+        if not self.admitted("declare_queryable", key):
+            return self._denied(key)
         return self.hub._add(self.hub._queryables, _Entry(self, key, answer))
 
     def query(self, key: str, timeout_s: float, payload: bytes = b"") -> list[Reply]:
+        if not self.admitted("query", key):
+            return []
         with self.hub._lock:
             queryables = [q for q in self.hub._queryables if intersects(q.key, key)]
         out = []
         for q in queryables:
             assert q.call is not None
             answer = q.call(key, payload)
-            if isinstance(answer, bytes):
+            if isinstance(answer, bytes) and q.owner.admitted("reply", q.key):
                 out.append(Reply(q.key, answer))
         return out
 
