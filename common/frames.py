@@ -9,8 +9,8 @@ import numpy as np
 
 from common.errors import ImageError, ImageTooLarge
 from common.images import Image
+from common.limits import DEFAULT_MAX_FRAME_PIXELS
 from common.messages import Frame, Header
-from common.perception_settings import DEFAULT_MAX_FRAME_PIXELS
 
 
 def image_to_frame(image: Image, header: Header, *, jpeg_quality: int = 0) -> Frame:

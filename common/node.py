@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Protocol, TypeVar
 
 from common.bus import Bus, Declared, Publisher, QoS
 from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock, Stamp
@@ -19,9 +19,21 @@ from common.keys import Keys
 from common.lifecycle import Closing
 from common.messages import Header, ServiceCounters
 from common.ratelimit import LogLimiter
-from common.settings import Config
+from common.settings import StackSettings, ZenohSettings
 
 _M = TypeVar("_M")
+
+
+class NodeConfig(Protocol):
+    """What a node reads of the stack's config (stack/config.py's ``Config`` has it): the key
+    prefix and how to join the bus."""
+
+    @property
+    def stack(self) -> StackSettings: ...
+
+    @property
+    def zenoh(self) -> ZenohSettings: ...
+
 
 #: Samples that may wait for a bounded subscription's handler (``Node.subscribe_bounded``):
 #: one waits while one is handled, so that the handler never waits on the bus for the next.
@@ -40,7 +52,7 @@ Put = Callable[[bytes], object]
 class Tally:
     """A service's counters and its log of dropped input: what its handlers report to. No bus."""
 
-    def __init__(self, service: str, config: Config) -> None:
+    def __init__(self, service: str, config: NodeConfig) -> None:
         self.service = service
         self.config = config
         self.keys = Keys(config.stack.prefix)
@@ -100,7 +112,7 @@ class Node(Tally, Closing):
     def __init__(
         self,
         service: str,
-        config: Config,
+        config: NodeConfig,
         *,
         counters_period_s: float = 1.0,
         bus: Bus | None = None,

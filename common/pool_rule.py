@@ -15,8 +15,18 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Iterable, Mapping
+from typing import Protocol
 
-from common.settings import CameraSettings
+
+class CameraRate(Protocol):
+    """What the rule reads of a camera's settings (services/camera/contract.py)."""
+
+    @property
+    def resize(self) -> tuple[int, int]: ...
+
+    @property
+    def rate_hz(self) -> float: ...
+
 
 #: The pixel count assumed for a camera that keeps its source's size (``resize = [0, 0]``):
 #: the stack's config cannot know it before the first frame, and VGA is the common case.
@@ -24,7 +34,7 @@ DEFAULT_PIXELS = 640 * 480
 _EPS = 1e-9  # float slack on the load bound: weights are sums of normalised fractions
 
 
-def camera_weights(cameras: Mapping[str, CameraSettings]) -> dict[str, float]:
+def camera_weights(cameras: Mapping[str, CameraRate]) -> dict[str, float]:
     """Each camera's share of the pixels per second all ``cameras`` send (summing to 1)."""
     raw = {}
     for name, cam in cameras.items():

@@ -29,7 +29,7 @@ import logging
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import zenoh
 
@@ -45,7 +45,7 @@ from common.security import (
     password_file,
     users_file,
 )
-from common.settings import Ros2Settings, ZenohSettings
+from common.settings import ZenohSettings
 from common.zenoh_errors import explain
 
 log = logging.getLogger(__name__)
@@ -380,7 +380,21 @@ def open_session(settings: ZenohSettings, principal: str) -> zenoh.Session:
     return open_configured(conf, settings, where, principal)
 
 
-def open_ros_session(s: Ros2Settings, *, host: bool = False) -> zenoh.Session:
+class RosRouter(Protocol):
+    """Where a ROS 2 graph's router is (the ROS 2 bridge's settings,
+    services/ros2/contract.py)."""
+
+    @property
+    def router(self) -> tuple[str, ...]: ...
+
+    @property
+    def listen(self) -> tuple[str, ...]: ...
+
+    @property
+    def router_timeout_s(self) -> float: ...
+
+
+def open_ros_session(s: RosRouter, *, host: bool = False) -> zenoh.Session:
     """A session in a ROS 2 graph, as an rmw_zenoh node joins it: a peer that connects to the
     router and listens for the other nodes. ``host`` opens the router itself instead (the
     simulator playing a robot). No router within ``router_timeout_s`` is a StackError."""

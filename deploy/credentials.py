@@ -36,7 +36,6 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 from common.certificates import refuse_server_capable
 from common.cli import Command, add_config, service_main
 from common.clock import utc_now
-from common.config_file import load_config
 from common.errors import ConfigError
 from common.lifecycle import run_main
 from common.security import (
@@ -51,7 +50,9 @@ from common.security import (
     users_file,
     viewer_token_file,
 )
-from common.settings import Config, is_detector_service
+from common.settings import is_detector_service
+from stack.config import Config
+from stack.config_file import load_config
 
 DEFAULT_DAYS = 825  # the longest validity that browsers and most TLS stacks still accept
 DEFAULT_HOSTS = ("localhost", "127.0.0.1")

@@ -15,7 +15,7 @@ from pathlib import Path
 from common.coco import COCO80
 from common.errors import ConfigError
 from common.model_metadata import parse_names
-from common.settings import Config
+from stack.config import Config
 
 #: Reads the class names of the model the detector will load (None: unknown before it loads).
 ClassReader = Callable[[Config], tuple[str, ...] | None]

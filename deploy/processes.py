@@ -13,8 +13,8 @@ from typing import IO
 
 from common.clock import mono_s
 from common.lifecycle import PERMANENT_FAILURES, SUPERVISOR_PID_ENV
-from common.settings import Config, SupervisorSettings
 from common.spawn import ask_to_stop, spawn, wait_or_kill
+from stack.config import Config, SupervisorSettings
 
 
 def service_command(name: str, config_path: str, camera: str = "", worker: str = "") -> list[str]:

@@ -22,7 +22,6 @@ import zenoh
 
 from common.cli import Command, add_config, service_main
 from common.clock import mono_s
-from common.config_file import load_config
 from common.contracts import MetricsAnswer
 from common.credential_modes import check_credentials_folder
 from common.errors import BackendUnavailable, ConfigError, DecodeError, ModelError, StackError
@@ -37,11 +36,14 @@ from common.lifecycle import (
 )
 from common.messages import ControllerStatus, GroundTruth, ServiceCounters, Twist
 from common.queries import query_metrics
-from common.settings import CameraSettings, Config, service_package
+from common.settings import service_package
 from deploy.crosscheck import cross_check, model_classes
 from deploy.lock import acquire
 from deploy.processes import ServiceProcess, stack_processes
 from deploy.watchdog import Observation, check_settings, judge
+from services.camera.contract import CameraSettings
+from stack.config import Config
+from stack.config_file import load_config
 from stack.hub import open_hub
 
 METRICS_TIMEOUT_S = 0.5

@@ -31,7 +31,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from common.errors import ConfigError
-from common.settings import Config, service_package
+from common.settings import service_package
+from stack.config import Config
 
 # Services whose work loop publishes counters on every pass (their heartbeat, see above); by
 # package: every camera's process (camera, camera_<name>) beats as the camera does.

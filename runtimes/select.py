@@ -22,10 +22,10 @@ from pathlib import Path
 from typing import Any
 
 from common.errors import BackendUnavailable, ConfigError
-from common.settings import DetectorSettings
 from runtimes.base import AUTO, Backend
 from runtimes.cudart import cuda_device_count, import_cudart
 from runtimes.table import BACKENDS, load_function, supported_options
+from services.detector.contract import DetectorSettings
 
 log = logging.getLogger(__name__)
 

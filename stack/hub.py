@@ -12,9 +12,9 @@ import zenoh
 from common.errors import ConfigError
 from common.keys import Keys
 from common.security import stack_principals, users_file
-from common.settings import Config
 from common.zenoh_bus import HUB_PRINCIPAL, open_configured, readable, zenoh_config
 from stack.access import access_control, congestion_overwritten, running_sensors
+from stack.config import Config
 
 
 def hub_access(config: Config) -> dict[str, Any]:

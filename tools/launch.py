@@ -28,12 +28,13 @@ import zenoh
 
 from common.bus import Bus
 from common.clock import mono_s
-from common.config_file import ENV_PREFIX, to_toml
 from common.errors import StackError
 from common.keys import Keys
 from common.queries import ready_services
-from common.settings import REPO_ROOT, Config, service_package
+from common.settings import REPO_ROOT, service_package
 from common.spawn import spawn, stop_child
+from stack.config import Config
+from stack.config_file import ENV_PREFIX, to_toml
 
 
 def free_port() -> int:

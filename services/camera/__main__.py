@@ -12,9 +12,9 @@ import dataclasses
 import sys
 
 from common.cli import Command, add_config, service_main
-from common.config_file import load_config
 from common.errors import StackError
 from common.lifecycle import exit_code, run_main, setup_logging, stop_event
+from stack.config_file import load_config
 
 
 def _serve_arguments(p: argparse.ArgumentParser) -> None:

@@ -8,8 +8,14 @@ frames only, and reads nothing.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import ClassVar
+
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
+from common.errors import ConfigError
+from common.limits import MAX_IMAGE_SIDE
+from common.setting_checks import Bounds, check_bounds
 
 FRAMES_OUT = "frames_out"
 BAD_IMAGES = "bad_images"  # a file of a folder source that is no image
@@ -32,3 +38,55 @@ def access(shape: Shape) -> dict[str, Access]:
         name: service_access(shape.keys, name, shape.keys.frame(camera))
         for camera, name in shape.cameras.items()
     }
+
+
+# -- settings -------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CameraSettings:
+    """The frame source.
+
+    ``source`` is one of: ``sample:<name>`` (a scikit-image photo: astronaut, cameraman, chelsea,
+    coffee, rocket, motorcycle), a path to an image (repeated), a folder of images (looped), a
+    video file (looped when ``loop``), ``device:<index or /dev/videoN>`` (webcam / V4L2), or a
+    network stream's URL (``rtsp://``, ``rtsps://``, ``http(s)://``, ``rtmp://``, ``udp://``,
+    ``tcp://``, ``srt://``; read by OpenCV's FFmpeg).
+    ``resize`` is (width, height), or (0, 0) to keep the source size. ``jpeg_quality`` 0 sends
+    raw bgr8; 1..100 sends JPEG at that quality. ``hfov_deg`` is the horizontal field of view,
+    which turns a pixel column into a bearing (the controller and the simulator use it).
+    ``mount_yaw_deg`` is where the camera looks on the robot, counter-clockwise from the robot's
+    forward axis (front 0, left 90, rear 180 or -180): the controller turns a bearing in the
+    image into one in the robot's frame with it, and the simulator renders with it.
+    A device or stream that gave frames and then stops (unplugged, reset) is reopened every
+    ``reopen_period_s`` until it gives frames again (services/camera/reopen.py); one that gives
+    none at start-up stops the camera with one line.
+    """
+
+    source: str = "sample:cameraman"
+    rate_hz: float = 10.0
+    resize: tuple[int, int] = (0, 0)
+    jpeg_quality: int = 0
+    frame_id: str = "camera"
+    loop: bool = True
+    hfov_deg: float = 60.0
+    mount_yaw_deg: float = 0.0
+    reopen_period_s: float = 1.0
+
+    BOUNDS: ClassVar[Bounds] = {
+        "rate_hz": (0.1, 1000),
+        "jpeg_quality": (0, 100),
+        "hfov_deg": (1, 179),
+        "mount_yaw_deg": (-180, 180),
+        "reopen_period_s": (0.05, 60),
+    }
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "camera", self.BOUNDS)
+        if (
+            min(self.resize) < 0
+            or max(self.resize) > MAX_IMAGE_SIDE
+            or (0 in self.resize and self.resize != (0, 0))
+        ):
+            raise ConfigError(
+                f"camera.resize must be [w, h] within 1..{MAX_IMAGE_SIDE} or [0, 0], "
+                f"got {list(self.resize)}"
+            )

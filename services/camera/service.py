@@ -9,10 +9,11 @@ from common.clock import mono_s
 from common.errors import ImageError
 from common.frames import image_to_frame
 from common.node import Node
-from common.settings import CameraSettings, Config
 from services.camera import contract
+from services.camera.contract import CameraSettings
 from services.camera.reopen import ReopenHooks, ReopeningSource
 from services.camera.sources import FrameSource, open_source, resize
+from stack.config import Config
 
 
 def run(config: Config, camera: str, settings: CameraSettings, stop: threading.Event) -> int:

@@ -6,9 +6,14 @@ Only the controller puts ``cmd_vel``; only the ``estop`` principal the e-stop.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import ClassVar
+
 from common.access import Access, Shape, service_access
+from common.contracts import ControllerMode, DistanceSource
 from common.counters import COMMON
-from common.freshness import Verdict
+from common.errors import ConfigError
+from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
 
 # Its inputs, each counted by its fate (:func:`input_counter`): ``detections_in``,
 # ``detections_stale`` ...; the detections' for each camera too when there are several.
@@ -21,7 +26,10 @@ ESTOP_ZERO_AT_ONCE = "estop_zero_at_once"
 COMMANDS_OUT = "commands_out"
 COMMANDS_NONZERO = "commands_nonzero"
 
-OUTCOMES = (IN, LATE, *(str(v) for v in Verdict if v is not Verdict.FRESH))
+#: The freshness verdicts an input is dropped for (common/freshness.py ``Verdict`` but fresh;
+#: named here so that the contract loads no messages: a unit test checks they agree).
+DROP_VERDICTS = ("stale", "future", "replay")
+OUTCOMES = (IN, LATE, *DROP_VERDICTS)
 
 
 def input_counter(stream: str, outcome: str) -> str:
@@ -64,3 +72,132 @@ def access(shape: Shape) -> dict[str, Access]:
 def estop_access(shape: Shape) -> dict[str, Access]:
     keys = shape.keys
     return {ESTOP_PRINCIPAL: Access(put=(keys.estop(),), read=(keys.controller_status(),))}
+
+
+# -- settings -------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ControllerSettings:
+    """The reaction policy. Speeds in m/s and rad/s, angles in degrees, times in seconds.
+
+    Every camera of the config is used: a box's bearing is turned into the robot's frame by
+    its camera's ``mount_yaw_deg`` and ``hfov_deg``, and targets are chosen among all fresh
+    cameras' boxes; a stale camera is ignored, and none fresh is the dead-man stop.
+    track:  turn towards the most central confident detection of ``target_classes`` (the
+            smallest bearing from the robot's heading); drive forward at ``forward_speed``
+            only while it is centred: within ``center_tolerance`` (a fraction of the image
+            width of the camera that sees it, as an angle from the heading) of straight ahead,
+            and while the way ahead is known clear, as in follow mode (below).
+            A target beside or behind the robot is never centred: the robot turns in place.
+    follow: lock onto the largest detection of ``target_classes[0]`` (by camera and track id,
+            so it does not jump to another person) and keep it at ``follow_distance_m``,
+            measured from the
+            box height (``distance_source = "box"``, for a target ``target_height_m`` tall) or
+            by the laser in the target's bearing (``"laser"``). Forward only while centred and
+            while the laser sector of ``sector_width_deg`` straight ahead, and the corridor
+            ``robot_width_m`` wide that the body sweeps, are clear beyond ``safety_distance_m``
+            plus the room needed to brake. A box cut by the image edge counts as arrived.
+            A target unseen for ``target_lost_timeout_s`` is dropped. When it leaves its
+            camera's view, the lock passes to a box of its class in another camera within
+            ``handover_gate_deg`` of its expected bearing, up to ``handover_window_s`` after it
+            was last seen; while it is expected between the cameras' fields of view the robot
+            keeps turning towards it (without driving) for that long.
+    Forward safety, in both modes: forward only while the laser sector of ``sector_width_deg``
+    straight ahead and the corridor ``robot_width_m`` wide are clear beyond
+    ``safety_distance_m`` plus the room needed to brake. A missing scan, or one older than
+    ``scan_timeout_s``, means no forward motion (turning in place stays allowed), unless
+    ``no_laser`` is set: the robot has no laser, forward motion towards a target in view is
+    not checked for obstacles, and every ControllerStatus says so (``no_laser``); a scan that
+    does come is still obeyed, and a target out of view is never driven on to without one.
+    Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
+    acceleration limits. Stale detections (captured or received longer than
+    ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the
+    acceleration limit. The latched e-stop is kept in ``estop_file`` (relative to the repo
+    root; empty: ``state/estop-<prefix>.json``), so that it survives every restart; a release
+    captured more than ``estop_release_max_age_s`` ago is refused.
+    """
+
+    mode: ControllerMode = ControllerMode.FOLLOW
+    target_classes: tuple[str, ...] = ("person",)
+    min_score: float = 0.3
+    control_rate_hz: float = 20.0
+    detection_timeout_s: float = 1.0
+    scan_timeout_s: float = 0.5
+    target_lost_timeout_s: float = 1.5
+    handover_gate_deg: float = 20.0
+    handover_window_s: float = 3.0
+    bearing_kp: float = 1.5
+    bearing_ki: float = 0.0
+    bearing_kd: float = 0.05
+    max_angular: float = 1.0
+    max_linear: float = 0.5
+    max_angular_accel: float = 3.0
+    max_linear_accel: float = 1.0
+    forward_speed: float = 0.3
+    center_tolerance: float = 0.1
+    distance_source: DistanceSource = DistanceSource.BOX
+    follow_distance_m: float = 1.0
+    distance_gain: float = 0.6
+    target_height_m: float = 1.7
+    safety_distance_m: float = 0.5
+    sector_width_deg: float = 30.0
+    robot_width_m: float = 0.6
+    no_laser: bool = False
+    estop_file: str = ""
+    estop_release_max_age_s: float = 2.0
+    counters_period_s: float = 1.0
+
+    # A real base: up to 5 m/s (warehouse robots run at 2..3), 10 rad/s, about 1 g of braking.
+    # Commands go out at least control_rate_hz times a second: below 1 Hz a base's own
+    # command timeout would trip between them. The dead-man (detection_timeout_s) stops the
+    # robot within 10 s at the very most.
+    BOUNDS: ClassVar[Bounds] = {
+        "min_score": (0, 1),
+        "control_rate_hz": (1, 1000),
+        "detection_timeout_s": (0.01, 10),
+        "scan_timeout_s": (0.01, 10),
+        "target_lost_timeout_s": (0.01, 60),
+        "handover_gate_deg": (1, 90),
+        "handover_window_s": (0.01, 60),
+        "bearing_kp": (0, 100),
+        "bearing_ki": (0, 100),
+        "bearing_kd": (0, 100),
+        "max_angular": (0.01, 10),
+        "max_linear": (0.01, 5),
+        "max_angular_accel": (0.01, 100),
+        "max_linear_accel": (0.01, 20),
+        "forward_speed": (0, 5),
+        "center_tolerance": (0, 1),
+        "follow_distance_m": (0.1, 20),
+        "distance_gain": (0, 10),
+        "target_height_m": (0.01, 10),
+        "safety_distance_m": (0.01, 10),
+        "sector_width_deg": (1, 360),
+        "robot_width_m": (0.05, 5),
+        "estop_release_max_age_s": (0.1, 60),
+        "counters_period_s": (0.1, 60),
+    }
+    LENGTHS: ClassVar[Bounds] = {"target_classes": (1, 100)}
+
+    def __post_init__(self) -> None:
+        enum_field(self, "mode", ControllerMode, "controller.mode")
+        enum_field(self, "distance_source", DistanceSource, "controller.distance_source")
+        check_lengths(self, "controller", self.LENGTHS)
+        if not all(self.target_classes):
+            raise ConfigError(
+                f"controller.target_classes must be class names, got {list(self.target_classes)}"
+            )
+        check_bounds(self, "controller", self.BOUNDS)
+        if (
+            self.no_laser
+            and self.mode is ControllerMode.FOLLOW
+            and self.distance_source is DistanceSource.LASER
+        ):
+            raise ConfigError(
+                'controller.no_laser = true needs distance_source = "box" in follow mode: '
+                "without a laser there is no distance to the target"
+            )
+        if self.forward_speed > self.max_linear:
+            raise ConfigError(
+                f"controller.forward_speed must be within 0..max_linear ({self.max_linear}), "
+                f"got {self.forward_speed}"
+            )

@@ -19,8 +19,8 @@ from common.contracts import ControllerState
 from common.control_messages import ControllerStatus, EStop, Header
 from common.errors import DecodeError, StackError
 from common.keys import Keys
-from common.settings import Config
 from common.zenoh_bus import Publisher, QoS, open_session
+from stack.config import Config
 
 # The e-stop command line: how long it repeats its message, how long a controller that answers
 # but keeps its old state is given before that counts as a refusal, how long it waits for a

@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Detections, LaserScan
-from common.settings import CameraSettings
+from services.camera.contract import CameraSettings
 
 
 def wrap(angle: float) -> float:

@@ -28,7 +28,8 @@ from dataclasses import dataclass
 
 from common.contracts import ControllerMode, ControllerState, DistanceSource
 from common.messages import LaserScan
-from common.settings import CameraSettings, ControllerSettings
+from services.camera.contract import CameraSettings
+from services.controller.contract import ControllerSettings
 from services.controller.geometry import (
     box_clipped,
     box_distance,

@@ -19,13 +19,13 @@ from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
 from common.node import Node, Tally
 from common.ratelimit import LogLimiter
-from common.settings import Config
 from services.controller import contract
 from services.controller.estop import EStopLatch
 from services.controller.policy import Controller, Inputs, VelocityCommand
 from services.controller.policy import stop as stop_command
 from services.controller.statelog import log_state
 from services.controller.targets import View, unknown_targets
+from stack.config import Config
 
 
 class _Stamped(Protocol):

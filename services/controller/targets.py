@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Detections
-from common.settings import CameraSettings
+from services.camera.contract import CameraSettings
 from services.controller.geometry import focal_px, robot_bearing
 
 

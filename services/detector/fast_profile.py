@@ -26,9 +26,9 @@ from common.errors import BackendUnavailable, ConfigError
 from common.files import atomic_write_bytes, sha256_file
 from common.lifecycle import Progress, print_progress
 from common.machine import cpu_model
-from common.settings import DetectorSettings
 from modelprep.files import ensure_default_model
 from runtimes.table import BACKENDS, import_backend
+from services.detector.contract import DetectorSettings
 from services.detector.variants import Variant
 
 log = logging.getLogger("runtimes.fast_profile")

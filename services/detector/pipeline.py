@@ -13,8 +13,8 @@ from common.boxes import Boxes
 from common.clock import ms_since, perf_s
 from common.letterbox import Letterbox, Preprocessor, unletterbox
 from common.lifecycle import Closing
-from common.settings import DetectorSettings
 from runtimes import Backend, open_backend
+from services.detector.contract import DetectorSettings
 from services.detector.decode import Family, decode, sane_outputs
 from services.detector.model_info import ModelInfo, read_model_info
 from services.detector.postprocess import class_mask, select

@@ -25,15 +25,16 @@ from common.messages import Detections, Frame, Header
 from common.node import Node, Put, Tally
 from common.pool_audit import MAX_LINES, PoolAudit, Report, Serving, lines
 from common.seqgaps import SeqGaps
-from common.settings import Config, DetectorSettings
 from services.detector import contract
 from services.detector.batching import measure
+from services.detector.contract import DetectorSettings
 from services.detector.pipeline import Detector
 from services.detector.pool import Change, PoolView, camera_weights
 from services.detector.schedule import CameraSlots, Waiting
 from services.detector.tracker import Tracker, tracker_clock
 from services.detector.types import DetectionResult
 from services.detector.variants import variant_of
+from stack.config import Config
 
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag (and the pool's membership)
 #: How long a joining worker asks who is already in the pool before it takes its cameras: the
@@ -95,6 +96,7 @@ class DetectorHandlers:
     its camera), and leave it in its camera's slot, from which the loop takes rounds."""
 
     def __init__(self, config: Config, tally: Tally) -> None:
+        self.config = config
         self.settings = config.detector
         self.tally = tally
         self.frame_keys = {cam: tally.keys.frame(cam) for cam in config.all_cameras}
@@ -352,7 +354,7 @@ class PoolMember:
     Counted: ``pool_warnings`` (how many hold now)."""
 
     def __init__(self, node: Node, worker_id: str, handlers: DetectorHandlers) -> None:
-        config = node.config
+        config = handlers.config
         self.node = node
         self.handlers = handlers
         self.view = PoolView(

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.boxes import Boxes
-from common.settings import TrackerSettings
+from services.detector.contract import TrackerSettings
 
 
 @dataclass(slots=True)

@@ -18,9 +18,9 @@ from typing import Any
 from common.contracts import BackendName
 from common.errors import ConfigError, ModelError
 from common.lifecycle import Progress, print_progress
-from common.settings import DetectorSettings
 from modelprep.files import NATIVE_IMGSZ, ensure_default_model
 from runtimes.select import backend_options
+from services.detector.contract import DetectorSettings
 from services.detector.pipeline import Detector
 
 log = logging.getLogger("runtimes.variants")

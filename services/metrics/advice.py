@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 
 from common.contracts import CameraMetrics, MetricsAnswer
-from common.settings import Config
+from stack.config import Config
 
 #: Detections of a camera in the window before it is judged at all.
 MIN_SAMPLES = 5

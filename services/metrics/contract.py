@@ -9,9 +9,13 @@ declares (tests/unit/metrics/test_contract.py).
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar
 
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
+from common.errors import ConfigError
+from common.setting_checks import Bounds, check_bounds
 from services.detector import contract as detector
 
 CAMERAS_REFUSED = "cameras_refused"  # detections of cameras over max_cameras
@@ -60,3 +64,49 @@ def access(shape: Shape) -> dict[str, Access]:
             serve=(keys.metrics(),),
         )
     }
+
+
+# -- settings -------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MetricsSettings:
+    """The sliding window the percentiles cover, how often the report is logged, how much
+    per-second history (FPS over time) is kept, and the optional Prometheus endpoint.
+
+    ``prometheus_port`` 0 turns the endpoint off; it listens on ``prometheus_host`` (loopback by
+    default, so that nothing is exposed to the network unless asked for).
+
+    What is believed (services/metrics/trust.py): counters only from a known service on its own
+    key, at most ``max_counters_per_service`` names each; a detector's stage times only within
+    0..``max_timing_ms``. The rest is refused and counted as ``metrics.refused.<why>``. At most
+    ``max_classes`` distinct class names are counted; a name beyond them is counted as
+    ``metrics.class_names_refused`` (names longer than 128 characters never decode).
+    Counters of a detector worker the config does not name (another host's pool worker,
+    ``detector_<worker_id>``) are believed for the first ``max_workers`` such names heard; a
+    further one is refused (``metrics.refused.too_many_workers``).
+    """
+
+    window_s: float = 10.0
+    report_period_s: float = 5.0
+    history_s: float = 600.0
+    prometheus_port: int = 0
+    prometheus_host: str = "127.0.0.1"
+    max_counters_per_service: int = 256
+    max_timing_ms: float = 1e6
+    max_classes: int = 1000
+    max_workers: int = 32
+
+    BOUNDS: ClassVar[Bounds] = {
+        "window_s": (0.1, 3600),
+        "report_period_s": (0.1, 3600),
+        "history_s": (1, 86400),
+        "prometheus_port": (0, 65535),  # 0 = off
+        "max_counters_per_service": (1, 2000),
+        "max_timing_ms": (0.001, 1e9),
+        "max_classes": (1, 10000),
+        "max_workers": (0, 1000),
+    }
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "metrics", self.BOUNDS)
+        if not self.prometheus_host:
+            raise ConfigError("metrics.prometheus_host must not be empty")

@@ -24,7 +24,7 @@ from common.node import Node, Tally
 from common.pool_audit import MAX_LINES, PoolAudit, lines
 from common.pool_rule import camera_weights
 from common.queries import query_metrics, ready_services
-from common.settings import SERVICES, Config
+from common.settings import SERVICES
 from common.zenoh_bus import open_session
 from services.metrics import contract
 from services.metrics.advice import advise
@@ -37,6 +37,7 @@ from services.metrics.trust import (
     split_counters,
     strict_json,
 )
+from stack.config import Config
 
 _M = TypeVar("_M")
 

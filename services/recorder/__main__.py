@@ -14,9 +14,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from common.cli import Command, add_config, replay_rate, service_main
-from common.config_file import load_config
 from common.errors import ConfigError
 from common.lifecycle import print_progress, run_main, setup_logging, stop_event
+from stack.config_file import load_config
 
 
 def serve(args: argparse.Namespace) -> int:

@@ -41,7 +41,6 @@ from common.codec import Message
 from common.fields import inline_fields
 from common.keys import camera_in_key
 from common.messages import Detections, Frame, Header, LaserScan, Twist
-from common.ros2_settings import CameraTopics, Ros2Settings, camera_topics
 from services.ros2 import (
     COMPRESSED_IMAGE,
     DETECTION_2D_ARRAY,
@@ -57,6 +56,7 @@ from services.ros2 import (
     twist_to_ros,
     typestore_for,
 )
+from services.ros2.contract import CameraTopics, Ros2Settings, camera_topics
 
 PROFILE = "ros2"  # the MCAP profile: ros2 readers take the CDR channels as theirs
 CDR, JSON = "cdr", "json"

@@ -28,10 +28,10 @@ from common.clock import BOOT_ID, now
 from common.errors import DecodeError, RecordingError, one_line
 from common.keys import Keys
 from common.messages import Frame, Header, LaserScan
-from common.ros2_settings import camera_topics
-from common.settings import Config
 from services.recorder.reading import PLAYABLE, Recording, check_playable, decode_input
 from services.recorder.timing import Schedule
+from services.ros2.contract import camera_topics
+from stack.config import Config
 
 log = logging.getLogger("recorder")
 

@@ -26,7 +26,6 @@ from mcap.records import Channel, Message, Schema
 from common.errors import DecodeError, RecordingError, one_line
 from common.lifecycle import Closing
 from common.messages import Frame, LaserScan
-from common.ros2_settings import RosDistro
 from services.recorder.channels import CDR, JSON, STACK_MESSAGE
 from services.ros2 import (
     COMPRESSED_IMAGE,
@@ -37,6 +36,7 @@ from services.ros2 import (
     frame_from_image,
     scan_from_ros,
 )
+from services.ros2.contract import RosDistro
 
 MAGIC = b"\x89MCAP0\r\n"
 #: The largest record read; a corrupt length field must not become a huge allocation.

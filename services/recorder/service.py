@@ -38,14 +38,15 @@ from common.messages import (
 from common.node import Node, Tally
 from common.priority import lower_priority
 from common.queries import ready_services
-from common.recorder_settings import TIME_FIELD
-from common.settings import REPO_ROOT, Config, is_detector_service
+from common.settings import REPO_ROOT, is_detector_service
 from common.zenoh_bus import Publisher, ZenohBus, open_session
 from services.recorder import contract
 from services.recorder.channels import Translator
+from services.recorder.contract import TIME_FIELD
 from services.recorder.play import Played, one_pass, playable_topics
 from services.recorder.writer import Decode, McapFile, QueuedRecorder
 from stack.access import running_sensors
+from stack.config import Config
 
 SERVICE = "recorder"
 
@@ -79,21 +80,21 @@ class Recorder(Closing):
     thread (writer.py), :meth:`listen` subscribes it to every key on a node's session, and
     :meth:`close` finishes the file."""
 
-    def __init__(self, tally: Tally, path: Path) -> None:
-        config = tally.config
+    def __init__(self, tally: Tally, path: Path, config: Config) -> None:
         self.tally = tally
         self.path = path
         self._queued = QueuedRecorder(
             McapFile(path, config.recorder), Translator(config.ros2, config.stack.camera),
             config.recorder, tally.counters,
         )  # fmt: skip
+        self._cameras = list(config.all_cameras)
         self._subs: list[Declared] = []
         self._own = tally.keys.counters(SERVICE)
         self.heard = 0  # samples from the stack: every key but the recorder's own counters
 
     def listen(self, node: Node) -> Recorder:
         """Subscribe to every key of :func:`subscriptions` on ``node``'s session."""
-        for key, cls in subscriptions(node.keys, list(node.config.all_cameras)).items():
+        for key, cls in subscriptions(node.keys, self._cameras).items():
             self._subs.append(node.subscribe_keyed(key, partial(self.on_sample, decode=cls.decode)))
         return self
 
@@ -145,7 +146,7 @@ def record(
     priority = lower_priority(config.recorder.nice, config.recorder.sched_idle)
     with Node(SERVICE, config) as node:
         node.log.info("CPU priority: %s", priority)
-        recorder = Recorder(node, path).listen(node)
+        recorder = Recorder(node, path, config).listen(node)
         node.ready()
         progress(f"recording to {path}")
         period = config.recorder.progress_period_s

@@ -26,9 +26,9 @@ from common.counters import BAD_INPUT, Counters
 from common.errors import ConfigError, DecodeError, one_line
 from common.lifecycle import Closing
 from common.priority import leave_idle
-from common.recorder_settings import Compression, RecorderSettings
 from services.recorder import contract
 from services.recorder.channels import PROFILE, Channel, Entry, Translator
+from services.recorder.contract import Compression, RecorderSettings
 
 log = logging.getLogger("recorder")
 

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 from common.lazy import exports
 
 if TYPE_CHECKING:
-    from common.ros2_settings import RosDistro
+    from services.ros2.contract import RosDistro
     from services.ros2.convert import (
         DETECTION_2D_ARRAY,
         LASER_SCAN,
@@ -96,7 +96,7 @@ __all__ = [
 __getattr__ = exports(
     __name__,
     {
-        "RosDistro": "common.ros2_settings",
+        "RosDistro": "services.ros2.contract",
         "DETECTION_2D_ARRAY": "services.ros2.convert",
         "LASER_SCAN": "services.ros2.convert",
         "TWIST": "services.ros2.convert",

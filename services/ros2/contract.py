@@ -7,8 +7,16 @@ commands out to the robot (held at zero by the controller's status).
 
 from __future__ import annotations
 
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import ClassVar
+
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
+from common.errors import ConfigError
+from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
 
 DETECTIONS_OUT = "detections_out"
 COMMANDS_OUT = "commands_out"
@@ -47,3 +55,159 @@ def access(shape: Shape) -> dict[str, Access]:
             ),
         )
     }
+
+
+# -- settings -------------------------------------------------------------------------------------
+class RosDistro(StrEnum):
+    HUMBLE = "humble"
+    JAZZY = "jazzy"
+    KILTED = "kilted"
+    ROLLING = "rolling"
+
+
+class ImageFormat(StrEnum):
+    RAW = "raw"  # sensor_msgs/msg/Image: bgr8, rgb8 or mono8
+    COMPRESSED = "compressed"  # sensor_msgs/msg/CompressedImage: jpeg
+
+
+#: In ``ros2.camera_namespace``: where the camera's name goes.
+CAMERA_FIELD = "{camera}"
+_TOPIC = re.compile(r"^/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$")
+
+
+def _topic(name: str, value: str) -> None:
+    if not _TOPIC.match(value):
+        raise ConfigError(f"ros2.{name} {value!r} is not a ROS 2 topic name (e.g. /camera/image)")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Ros2Settings:
+    """The bridge between the stack's keys and a ROS 2 graph (rmw_zenoh, no ROS install).
+
+    ``router`` are the rmw_zenoh router's endpoints (``rmw_zenohd`` listens on port 7447);
+    the bridge also listens on ``listen`` so that the robot's nodes (peers) reach it directly,
+    as rmw_zenoh's own nodes do (use ``tcp/0.0.0.0:0`` when the router is on another host);
+    ``domain_id``, ``distro``, ``node`` and ``namespace`` place the bridge in the graph. Each
+    direction can be turned off: images and scans in (``image_in``, ``scan_in``), detections
+    and commands out (``detections_out``, ``cmd_vel_out``). ``twist_stamped`` publishes
+    ``geometry_msgs/msg/TwistStamped`` instead of ``Twist`` (many Jazzy robots take it).
+    ``debug_image_out`` publishes each frame with its detections drawn on it (boxes, class,
+    score, track id) as a jpeg ``CompressedImage`` on ``debug_image_topic``, at most
+    ``debug_image_rate_hz`` times a second, at ``debug_jpeg_quality``.
+    ``image_topic``, ``detections_topic`` and ``debug_image_topic`` are the first camera's
+    (``stack.camera``); each further camera has them under ``camera_namespace``, its
+    ``{camera}`` replaced by the camera's name (:func:`camera_topics`: the rear camera's
+    images on ``/rear/camera/rgb/image_raw``, its detections on ``/rear/detections``), as a
+    camera driver started in that namespace publishes them.
+    ``router_timeout_s`` bounds the wait for the router at start-up. A command on cmd_vel
+    faster than ``max_command_linear`` (m/s) or ``max_command_angular`` (rad/s), the most
+    the controller's own settings allow, is no command a sane controller sends: the bridge
+    sends the robot zero instead and counts ``commands_out_of_range``.
+    """
+
+    router: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
+    domain_id: int = 0
+    distro: RosDistro = RosDistro.JAZZY
+    node: str = "zenoh_yolo_stack"
+    namespace: str = "/"
+    image_topic: str = "/camera/rgb/image_raw"
+    image_format: ImageFormat = ImageFormat.RAW
+    scan_topic: str = "/scan"
+    detections_topic: str = "/detections"
+    cmd_vel_topic: str = "/cmd_vel"
+    twist_stamped: bool = False
+    image_in: bool = True
+    scan_in: bool = True
+    detections_out: bool = True
+    cmd_vel_out: bool = True
+    debug_image_out: bool = False
+    debug_image_topic: str = "/detections/image"
+    debug_image_rate_hz: float = 5.0
+    debug_jpeg_quality: int = 80
+    camera_namespace: str = "/" + CAMERA_FIELD
+    router_timeout_s: float = 5.0
+    max_command_linear: float = 5.0
+    max_command_angular: float = 10.0
+
+    BOUNDS: ClassVar[Bounds] = {
+        "domain_id": (0, 232),  # the DDS domain ids that map to valid ports
+        "debug_image_rate_hz": (0.1, 100),
+        "debug_jpeg_quality": (1, 100),
+        "router_timeout_s": (0.1, 300),
+        "max_command_linear": (0.01, 100),
+        "max_command_angular": (0.01, 100),
+    }
+    LENGTHS: ClassVar[Bounds] = {"router": (1, 16), "listen": (0, 16)}
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "ros2", self.BOUNDS)
+        check_lengths(self, "ros2", self.LENGTHS)
+        enum_field(self, "distro", RosDistro, "ros2.distro")
+        enum_field(self, "image_format", ImageFormat, "ros2.image_format")
+        if not self.router or not all("/" in ep for ep in self.router):
+            raise ConfigError(
+                f"ros2.router must list endpoints like tcp/<host>:7447, got {list(self.router)}"
+            )
+        if not re.match(r"^[A-Za-z][A-Za-z0-9_]*$", self.node):
+            raise ConfigError(f"ros2.node {self.node!r} is not a ROS 2 node name")
+        if self.namespace != "/":
+            _topic("namespace", self.namespace)
+        topics = ("image_topic", "scan_topic", "detections_topic", "cmd_vel_topic")
+        for name in (*topics, "debug_image_topic"):
+            _topic(name, getattr(self, name))
+        if CAMERA_FIELD not in self.camera_namespace or not _TOPIC.match(
+            self.camera_namespace.replace(CAMERA_FIELD, "camera")
+        ):
+            raise ConfigError(
+                f"ros2.camera_namespace {self.camera_namespace!r} must be a ROS 2 namespace "
+                f"holding {CAMERA_FIELD} (e.g. /{CAMERA_FIELD} or /robot/{CAMERA_FIELD})"
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class CameraTopics:
+    """One camera's ROS 2 topics: its images in, its detections and debug images out."""
+
+    image: str
+    detections: str
+    debug_image: str
+
+
+def camera_topics(settings: Ros2Settings, first: str, camera: str) -> CameraTopics:
+    """The topics of ``camera``: the ``ros2`` table's own for the first camera (``first``,
+    stack.camera), as a one-camera stack has always used them; each further camera's are those
+    under ``ros2.camera_namespace`` with its name filled in (a relative topic stays
+    relative)."""
+    s = settings
+    if camera == first:
+        return CameraTopics(s.image_topic, s.detections_topic, s.debug_image_topic)
+    namespace = s.camera_namespace.replace(CAMERA_FIELD, camera).strip("/")
+
+    def under(topic: str) -> str:
+        inside = f"{namespace}/{topic.lstrip('/')}"
+        return f"/{inside}" if topic.startswith("/") else inside
+
+    return CameraTopics(under(s.image_topic), under(s.detections_topic), under(s.debug_image_topic))
+
+
+def check_camera_topics(settings: Ros2Settings, cameras: Sequence[str]) -> None:
+    """ConfigError unless every camera's topics (``cameras``: the first camera first) are ROS 2
+    topic names and no two cameras, nor the scan and cmd_vel, share one."""
+    seen = {settings.scan_topic: "ros2.scan_topic", settings.cmd_vel_topic: "ros2.cmd_vel_topic"}
+    for camera in cameras:
+        topics = camera_topics(settings, cameras[0], camera)
+        for what, topic in (("image", topics.image), ("detections", topics.detections),
+                            ("debug image", topics.debug_image)):  # fmt: skip
+            if not _TOPIC.match(topic):
+                raise ConfigError(
+                    f"ros2.camera_namespace {settings.camera_namespace!r} gives camera "
+                    f"{camera!r} the {what} topic {topic!r}, not a ROS 2 topic name (a name "
+                    "must start with a letter): rename the camera or change the namespace"
+                )
+            if topic in seen:
+                raise ConfigError(
+                    f"camera {camera!r}'s {what} topic {topic!r} is also {seen[topic]}: each "
+                    "camera needs topics of its own (ros2.camera_namespace)"
+                )
+            seen[topic] = f"camera {camera!r}'s {what} topic"

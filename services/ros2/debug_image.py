@@ -9,8 +9,8 @@ from collections import OrderedDict
 
 from common.annotate import annotate
 from common.frames import frame_to_bgr, image_to_frame
+from common.limits import DEFAULT_MAX_FRAME_PIXELS
 from common.messages import Detections, Frame
-from common.perception_settings import DEFAULT_MAX_FRAME_PIXELS
 
 FRAMES_KEPT = 30  # a detector never lags more than this many frames behind its camera
 

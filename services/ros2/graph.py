@@ -15,8 +15,8 @@ import zenoh
 
 from common.clock import wall_ns
 from common.lifecycle import Closing
-from common.ros2_settings import Ros2Settings
 from common.zenoh_bus import open_ros_session
+from services.ros2.contract import Ros2Settings
 from services.ros2.convert import RosMessage, cdr_encode
 from services.ros2.wire import (
     DEFAULT_QOS,

@@ -11,7 +11,7 @@ import numpy as np
 from common.errors import DecodeError
 from common.frames import jpeg_size
 from common.messages import FRAME_ENCODINGS, Frame
-from common.ros2_settings import RosDistro
+from services.ros2.contract import RosDistro
 from services.ros2.convert import RosMessage, build, header_from_ros, ros_header
 
 IMAGE = "sensor_msgs/msg/Image"

@@ -8,7 +8,7 @@ Out: Detections -> vision_msgs/Detection2DArray (``ros2.detections_topic``);
      engaged or it is silent (common/command_gate.py).
 
 Those image and detections topics are the first camera's (stack.camera); each further camera
-has its own, under ``ros2.camera_namespace`` (common.ros2_settings.camera_topics), each mapped
+has its own, under ``ros2.camera_namespace`` (services/ros2/contract.py::camera_topics), each mapped
 to and from that camera's own keys.
 
 Two sessions: the stack's bus (as principal ``ros2``) and the robot's ROS 2 graph. A payload on
@@ -28,9 +28,8 @@ from common.command_gate import CommandGate, Outcome
 from common.errors import DecodeError, ImageError
 from common.messages import ControllerStatus, Detections, Frame, Twist
 from common.node import Node, Put, Tally
-from common.ros2_settings import ImageFormat, camera_topics
-from common.settings import Config
 from services.ros2 import contract
+from services.ros2.contract import ImageFormat, camera_topics
 from services.ros2.convert import (
     DETECTION_2D_ARRAY,
     LASER_SCAN,
@@ -52,6 +51,7 @@ from services.ros2.images import (
     frame_to_compressed_image,
 )
 from services.ros2.wire import SENSOR_DATA_QOS
+from stack.config import Config
 
 
 class RosInbound:

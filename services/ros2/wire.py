@@ -19,7 +19,7 @@ from typing import Literal
 import xxhash
 
 from common.errors import DecodeError
-from common.ros2_settings import RosDistro
+from services.ros2.contract import RosDistro
 from services.ros2.typestore import typestore_for
 
 HUMBLE_TYPE_HASH = "TypeHashNotSupported"

@@ -9,8 +9,8 @@ from __future__ import annotations
 import argparse
 
 from common.cli import Command, add_config, service_main
-from common.config_file import load_config
 from common.lifecycle import run_main, setup_logging, stop_event
+from stack.config_file import load_config
 
 
 def serve(args: argparse.Namespace) -> int:

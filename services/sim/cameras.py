@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from common.settings import Config
 from services.sim.render import CameraSpec
+from stack.config import Config
 
 
 @dataclass(frozen=True, slots=True)

@@ -6,8 +6,12 @@ puts every camera's frames, the scan and the ground truth, and reads the velocit
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import ClassVar
+
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
+from common.setting_checks import Bounds, check_bounds, check_lengths
 
 FRAMES_OUT = "frames_out"  # in all and per camera
 COMMANDS_OUT_OF_RANGE = "commands_out_of_range"  # beyond what the base takes: it stops
@@ -33,3 +37,56 @@ def access(shape: Shape) -> dict[str, Access]:
             read=(keys.cmd_vel(),),
         )
     }
+
+
+# -- settings -------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SimSettings:
+    """The simulated robot and world (services/sim), standing in for a camera and a base.
+
+    ``scenario`` names a world in services/sim/scenarios.py. The scenario clock starts once
+    every service in ``wait_for`` is ready, so start-up time does not eat into the scenario.
+    The camera uses camera.hfov_deg; the image is ``width`` x ``height``. With ``ros2_robot``
+    the simulator plays a ROS 2 robot: it hosts the graph's router on ``ros2.router`` and
+    speaks ROS 2 messages on the topics of ``[ros2]``, so that the ``ros2`` bridge service
+    carries every frame, scan and command. Commands from more
+    than one publisher within ``command_sources_window_s`` are counted and warned about.
+    """
+
+    scenario: str = "demo"
+    wait_for: tuple[str, ...] = ("detector", "controller")
+    physics_hz: float = 50.0
+    camera_rate_hz: float = 5.0
+    scan_rate_hz: float = 10.0
+    truth_rate_hz: float = 20.0
+    width: int = 640
+    height: int = 480
+    camera_height_m: float = 0.6
+    laser_fov_deg: float = 270.0
+    laser_rays: int = 541
+    laser_range_max_m: float = 12.0
+    laser_noise_m: float = 0.01
+    seed: int = 0
+    ros2_robot: bool = False
+    command_sources_window_s: float = 1.0
+
+    BOUNDS: ClassVar[Bounds] = {
+        "physics_hz": (1, 1000),
+        "camera_rate_hz": (0.1, 100),
+        "scan_rate_hz": (0.1, 100),
+        "truth_rate_hz": (0.1, 100),
+        "width": (16, 4096),
+        "height": (16, 4096),
+        "camera_height_m": (0.05, 5),
+        "laser_fov_deg": (1, 360),
+        "laser_rays": (2, 10000),  # real 2D lidars: 360..3200 rays a scan
+        "laser_range_max_m": (0.1, 100),
+        "laser_noise_m": (0, 1),
+        "seed": (0, 2**32 - 1),
+        "command_sources_window_s": (0.01, 60),
+    }
+    LENGTHS: ClassVar[Bounds] = {"wait_for": (0, 6)}
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "sim", self.BOUNDS)
+        check_lengths(self, "sim", self.LENGTHS)

@@ -28,7 +28,6 @@ from common.frames import image_to_frame
 from common.lifecycle import Closing
 from common.messages import Frame, GroundTruth, LaserScan, Twist
 from common.node import Node, Tally
-from common.settings import Config
 from services.ros2 import (
     IMAGE,
     LASER_SCAN,
@@ -47,6 +46,7 @@ from services.sim.laser import LaserSpec, cast
 from services.sim.render import render
 from services.sim.scenarios import SCENARIOS
 from services.sim.world import World
+from stack.config import Config
 
 
 class Clock:

@@ -14,8 +14,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from common.cli import Command, add_config, service_main
-from common.config_file import load_config
 from common.lifecycle import run_main, setup_logging, stop_event
+from stack.config_file import load_config
 
 
 def serve(args: argparse.Namespace) -> int:

@@ -6,8 +6,13 @@ counters.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import ClassVar
+
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
+from common.errors import ConfigError
+from common.setting_checks import Bounds, check_bounds, check_lengths
 
 FRAMES_IN = "frames_in"
 DETECTIONS_UNPAIRED = "detections_unpaired"
@@ -39,3 +44,65 @@ def access(shape: Shape) -> dict[str, Access]:
             ),
         )
     }
+
+
+# -- settings -------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ViewerSettings:
+    """A Foxglove WebSocket server that shows the stack live (docs/viewer.md).
+
+    It listens on ``host``:``port``; loopback by default, because the view carries the camera's
+    images: to watch from a laptop, tunnel the port over SSH, or set ``host = "0.0.0.0"`` on a
+    network you trust (the view is read-only, but anyone who reaches it sees the camera).
+    Images are JPEG-encoded on the viewer's own thread at most ``image_rate_hz`` times a second
+    at ``jpeg_quality``, scaled down to ``max_image_width`` pixels (0 keeps the frame's width);
+    frames that arrive faster are dropped and counted. The metrics service is asked
+    ``metrics_rate_hz`` times a second; the 3D scene (simulator only) is sent ``scene_rate_hz``
+    times a second with the robot's last ``path_points`` positions as its path.
+
+    Who may connect (docs/security.md, "The live view"): a client whose request carries an
+    ``Origin`` header (every browser page) only if that origin is in ``allowed_origins``
+    (exact ``scheme://host[:port]``); a native client (no Origin) always; and under the secure
+    profile (``zenoh.auth`` not "none") only with ``?token=`` the ``viewer-token`` file of
+    ``zenoh.credentials_dir`` in its URL. A connection that has not sent its whole request
+    head within ``request_timeout_s`` is closed.
+    """
+
+    host: str = "127.0.0.1"
+    port: int = 8766  # not 8765: foxglove_bridge's default on a ROS 2 robot
+    image_rate_hz: float = 5.0
+    jpeg_quality: int = 70
+    max_image_width: int = 640
+    metrics_rate_hz: float = 1.0
+    scene_rate_hz: float = 5.0
+    path_points: int = 1000
+    allowed_origins: tuple[str, ...] = ("https://app.foxglove.dev",)
+    request_timeout_s: float = 5.0
+
+    BOUNDS: ClassVar[Bounds] = {
+        "port": (1, 65535),
+        "image_rate_hz": (0.1, 60),
+        "jpeg_quality": (1, 100),
+        "max_image_width": (0, 8192),  # 0 keeps the frame's width; else at least 64
+        "metrics_rate_hz": (0.1, 10),
+        "scene_rate_hz": (0.1, 50),
+        "path_points": (2, 100_000),
+        "request_timeout_s": (0.1, 60),
+    }
+    LENGTHS: ClassVar[Bounds] = {"allowed_origins": (0, 100)}  # () lets in native clients only
+
+    def __post_init__(self) -> None:
+        if not self.host:
+            raise ConfigError("viewer.host must not be empty")
+        check_bounds(self, "viewer", self.BOUNDS)
+        check_lengths(self, "viewer", self.LENGTHS)
+        for origin in self.allowed_origins:
+            if origin == "*" or "://" not in origin:
+                raise ConfigError(
+                    f"viewer.allowed_origins: {origin!r} is not an origin "
+                    "(scheme://host[:port]; wildcards are not accepted)"
+                )
+        if self.max_image_width != 0 and self.max_image_width < 64:
+            raise ConfigError(
+                f"viewer.max_image_width must be 0 (keep) or 64..8192, got {self.max_image_width}"
+            )

@@ -24,11 +24,11 @@ from common.node import Node, Tally
 from common.ports import holder_words
 from common.queries import query_metrics
 from common.security import viewer_token_file
-from common.settings import Config
 from services.viewer import contract, convert, scene
 from services.viewer.channels import CameraChannels, Channels
 from services.viewer.front import Front, make_check
 from services.viewer.pairing import Pairing
+from stack.config import Config
 
 SERVER_NAME = "zenoh-yolo-stack"
 

@@ -19,13 +19,13 @@ import pytest
 import zenoh
 
 from common.boxes import Boxes
-from common.config_file import load_config
 from common.errors import ConfigError, StackError
 from common.frames import image_to_frame
 from common.keys import Keys
 from common.messages import Detections, Header
 from common.queries import query_metrics, ready_services
 from common.zenoh_bus import open_session
+from stack.config_file import load_config
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 
 REPO = Path(__file__).resolve().parents[2]

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import argparse
 
-from common.config_file import load_config
 from common.lifecycle import stop_event
 from common.zenoh_bus import open_session
+from stack.config_file import load_config
 
 
 def main() -> None:

@@ -21,13 +21,14 @@ from typing import Any
 
 import zenoh
 
-from common.config_file import load_config
 from common.errors import ConfigError, DecodeError
 from common.keys import Keys
 from common.lifecycle import stop_event
 from common.messages import ControllerStatus, Detections, ServiceCounters, Twist
-from common.settings import Config, is_detector_service
+from common.settings import is_detector_service
 from common.zenoh_bus import open_session
+from stack.config import Config
+from stack.config_file import load_config
 
 _lock = threading.Lock()
 OPEN_TIMEOUT_S = 60.0  # a router (client mode) may start after the probe

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from common.settings import SupervisorSettings
 from deploy.processes import ServiceProcess
+from stack.config import SupervisorSettings
 from tests.integration.conftest import REPO, wait_for, write_config
 
 pytestmark = pytest.mark.integration

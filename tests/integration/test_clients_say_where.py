@@ -17,10 +17,10 @@ import zenoh
 from common.boxes import Boxes
 from common.frames import image_to_frame
 from common.messages import Detections, Header
-from common.recorder_settings import RecorderSettings
-from common.ros2_settings import Ros2Settings
 from services.recorder.channels import Translator
+from services.recorder.contract import RecorderSettings
 from services.recorder.writer import McapFile
+from services.ros2.contract import Ros2Settings
 from tests.integration.conftest import REPO, write_config
 
 pytestmark = pytest.mark.integration

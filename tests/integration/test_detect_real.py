@@ -64,7 +64,7 @@ def test_default_model_finds_the_object(
 
 
 def test_class_filter_on_real_photo(coco_detector: Detector, default_model: Path) -> None:
-    from common.settings import DetectorSettings
+    from services.detector.contract import DetectorSettings
 
     with Detector.open(default_model, settings=DetectorSettings(classes=("dog",))) as det:
         assert len(det.detect(bgr("chelsea"))) == 0

@@ -24,15 +24,15 @@ import pytest
 import zenoh
 
 from common.clock import mono_s
-from common.config_file import load_config
 from common.frames import image_to_frame
 from common.images import load_sample
 from common.keys import Keys
 from common.messages import Detections, Header, ServiceCounters
 from common.queries import ready_services
-from common.settings import Config
 from common.spawn import spawn, stop_child
 from common.zenoh_bus import Publisher, QoS
+from stack.config import Config
+from stack.config_file import load_config
 from stack.hub import open_hub
 from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
 from tests.unit.detector.headers import camera_header

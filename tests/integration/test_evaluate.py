@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from faster_coco_eval import COCO, COCOeval_faster
 
-from common.settings import DetectorSettings
+from services.detector.contract import DetectorSettings
 from services.detector.pipeline import Detector
 from tools.evaluation.data.write_images import ANNOTATIONS, write_images
 from tools.evaluation.datasets import load_dataset

@@ -9,7 +9,6 @@ import pytest
 
 from common.coco import COCO80
 from common.images import load_sample
-from common.settings import DetectorSettings
 from modelprep.acquire.fetch import (
     default_model_metadata,
     extract_model_files,
@@ -19,6 +18,7 @@ from modelprep.acquire.tfjs_graph import load_tfjs_graph
 from modelprep.acquire.tfjs_resize import resize_yolov5_graph
 from modelprep.acquire.tfjs_to_onnx import build_onnx_model
 from modelprep.files import NPM_PACKAGE
+from services.detector.contract import DetectorSettings
 from services.detector.variants import open_prepared, variant_of
 
 pytestmark = pytest.mark.integration

@@ -16,12 +16,12 @@ import pytest
 import zenoh
 
 from common.clock import now
-from common.config_file import load_config
 from common.contracts import ControllerState
 from common.keys import Keys
 from common.messages import ControllerStatus, Header
 from common.zenoh_bus import HUB_PRINCIPAL, zenoh_config
 from deploy.credentials import generate
+from stack.config_file import load_config
 from stack.hub import hub_access
 from tests.integration.conftest import REPO, write_config
 from tools.launch import free_port

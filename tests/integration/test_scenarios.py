@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from common.settings import ControllerSettings
+from services.controller.contract import ControllerSettings
 from tests.integration.conftest import REPO
 from tools.launch import free_port
 from tools.scenarios.score import REACH_TOLERANCE_M, STOP_MARGIN_S

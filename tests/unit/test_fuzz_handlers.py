@@ -27,11 +27,12 @@ from common.messages import (
     Twist,
 )
 from common.node import Tally
-from common.settings import Config, ControllerSettings, Ros2Settings, SimSettings
+from services.controller.contract import ControllerSettings
 from services.controller.service import ControllerHandlers
 from services.detector.service import DetectorHandlers
 from services.metrics.service import MetricsHandlers
 from services.ros2 import data_key
+from services.ros2.contract import Ros2Settings
 from services.ros2.convert import (
     LASER_SCAN,
     TWIST,
@@ -42,7 +43,9 @@ from services.ros2.convert import (
 )
 from services.ros2.images import IMAGE, frame_to_image
 from services.ros2.service import CommandsToRos, DebugImages, DetectionsToRos, RosInbound
+from services.sim.contract import SimSettings
 from services.sim.service import SimHandlers
+from stack.config import Config
 from tests.unit.fuzz import fuzz_handler, message_handler, payloads, samples, to_stack
 
 

@@ -28,12 +28,13 @@ from common.codec import Message
 from common.errors import DecodeError
 from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
 from common.node import Tally
-from common.settings import Config, ViewerSettings
 from services.recorder import service as recorder
 from services.recorder.channels import JSON, Translator
 from services.viewer import service as viewer
 from services.viewer.channels import Channels
+from services.viewer.contract import ViewerSettings
 from services.viewer.convert import MAX_STAMP_S
+from stack.config import Config
 from tests.unit.fuzz import (
     EDGE_STAMPS_NS,
     edge_stamped,
@@ -229,7 +230,7 @@ def test_the_recorders_handlers_and_writer(tmp_path: Path) -> None:
     path = tmp_path / "fuzz.mcap"
     config, ledger = Config(), _Ledger()
     tally = Tally(recorder.SERVICE, config)
-    with recorder.Recorder(tally, path) as rec:
+    with recorder.Recorder(tally, path, config) as rec:
         keys = recorder.subscriptions(tally.keys, list(config.all_cameras))
         for key, cls in keys.items():
             _fuzz_recorded(tally, rec, key, cls, ledger)

@@ -26,7 +26,7 @@ common         common
 a contract     common, another service's contract (what it reads of it); a contract is
                ``services.X.contract``
 stack          common, stack, the services' contracts (it assembles them)
-runtimes       common, runtimes, modelprep
+runtimes       common, runtimes, modelprep, the detector's contract (its settings)
 modelprep.X    common, modelprep
 services.X     common, stack, runtimes, modelprep, its own package, another service's package
                root (``services.Y``, its public API) or contract, never its internals; never
@@ -261,7 +261,7 @@ def _allowed(module: str, target: str) -> bool:
     if top == "stack":
         return target_top in ("common", "stack") or is_contract(target)
     if top == "runtimes":
-        return target_top in ("common", "runtimes", "modelprep")
+        return target_top in ("common", "runtimes", "modelprep") or is_contract(target)
     if top == "modelprep":
         return target_top in ("common", "modelprep")
     if top == "services":

@@ -31,8 +31,9 @@ import zenoh
 from common.clock import mono_s
 from common.keys import Keys
 from common.machine import machine_info
-from common.settings import REPO_ROOT, Config, StackSettings, ZenohSettings
+from common.settings import REPO_ROOT, StackSettings, ZenohSettings
 from common.spawn import spawn
+from stack.config import Config
 from stack.hub import open_hub
 from tools.launch import free_port
 

@@ -20,10 +20,10 @@ import numpy as np
 import zenoh
 
 from common.clock import BOOT_ID, mono_s, now
-from common.config_file import load_config
 from common.keys import Keys
 from common.messages import Frame, Header
 from common.zenoh_bus import open_session
+from stack.config_file import load_config
 
 FULL_HD = (1920, 1080)
 CONGESTION = {"drop": zenoh.CongestionControl.DROP, "block": zenoh.CongestionControl.BLOCK}

@@ -9,7 +9,7 @@ and the decisions):
    ``crossing`` and ``two_people`` scenarios, and time per frame. The frames are rendered
    offline with the simulator's own world and renderer, the real default detector runs once on
    each, and every tracker is fed the same boxes; see ``evaluate`` for the ground-truth rule.
-2. settings loader: common/config_file.py + common/setting_checks.py against pydantic-settings
+2. settings loader: stack/config_file.py + common/setting_checks.py against pydantic-settings
    and msgspec (``msgspec.toml`` + ``Meta`` constraints): load time of deploy/stack.toml, the
    error line for bad configs, dependency size, the lines each would replace.
 3. msgpack field walker: common/fields.py + common/codec.py against msgspec Structs decoding
@@ -56,7 +56,6 @@ if str(REPO) not in sys.path:
 from common.boxes import MAX_DETECTIONS, Boxes  # noqa: E402
 from common.clock import mono_ns, perf_s, wall_ns  # noqa: E402
 from common.codec import Message  # noqa: E402
-from common.config_file import load_config  # noqa: E402
 from common.errors import ConfigError, DecodeError  # noqa: E402
 from common.messages import (  # noqa: E402
     FRAME_ENCODINGS,
@@ -68,14 +67,12 @@ from common.messages import (  # noqa: E402
     Header,
     Twist,
 )
-from common.settings import (  # noqa: E402
-    DEFAULT_CONFIG,
-    Config,
-    ControllerSettings,
-    DetectorSettings,
-    SimSettings,
-    TrackerSettings,
-)
+from common.settings import DEFAULT_CONFIG  # noqa: E402
+from services.controller.contract import ControllerSettings  # noqa: E402
+from services.detector.contract import DetectorSettings, TrackerSettings  # noqa: E402
+from services.sim.contract import SimSettings  # noqa: E402
+from stack.config import Config  # noqa: E402
+from stack.config_file import load_config  # noqa: E402
 
 SCENARIOS_MEASURED = ("crossing", "two_people")
 # Extra worlds, not stack scenarios: two people whose boxes overlap, the case where id switches
@@ -785,9 +782,9 @@ def _code_lines(path: Path) -> int:
 
 
 def settings_section(args: argparse.Namespace) -> None:
-    print("\n== 2. Settings loader: common/config_file.py + setting_checks.py vs libraries ==")
+    print("\n== 2. Settings loader: stack/config_file.py + setting_checks.py vs libraries ==")
     loaders: list[tuple[str, Callable[[Path], Any], str]] = [
-        ("ours", lambda p: load_config(p), "common.config_file")
+        ("ours", lambda p: load_config(p), "stack.config_file")
     ]
     for label, build, package, module in (
         ("pydantic-settings", build_pydantic_settings, "pydantic-settings", "pydantic_settings"),

@@ -37,8 +37,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from common.errors import StackError
-from common.perception_settings import MAX_WORKERS
-from common.settings import CameraSettings
+from services.camera.contract import CameraSettings
+from services.detector.contract import MAX_WORKERS
 from services.detector.pool import assign, camera_weights
 from tools.benchmarks.stacks import (
     DEFAULT_RATE_HZ,

@@ -13,11 +13,11 @@ from pathlib import Path
 from typing import TypeVar
 
 from common.clock import mono_s, wall_ns
-from common.config_file import load_config
 from common.errors import StackError
 from common.machine import machine_info
-from common.settings import Config
 from services.detector.pool import camera_weights
+from stack.config import Config
+from stack.config_file import load_config
 from tools.benchmarks.pool import (
     UNEVEN,
     Kill,

@@ -23,14 +23,15 @@ from typing import Any
 import numpy as np
 
 from common.clock import mono_s
-from common.config_file import load_config, to_toml
 from common.errors import StackError
 from common.keys import Keys
 from common.machine import machine_info
 from common.messages import Detections, Twist
-from common.settings import REPO_ROOT, Config, ZenohSettings
+from common.settings import REPO_ROOT, ZenohSettings
 from common.spawn import spawn, stop_child
 from common.zenoh_bus import open_session
+from stack.config import Config
+from stack.config_file import load_config, to_toml
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 
 STARTUP_S = 180.0

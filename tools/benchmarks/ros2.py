@@ -28,15 +28,16 @@ import numpy as np
 
 from common.boxes import Boxes
 from common.clock import perf_ns, wall_ns
-from common.config_file import to_toml
 from common.keys import Keys
 from common.machine import machine_info
 from common.messages import Detections, Frame, Header
-from common.settings import Config, ZenohSettings
+from common.settings import ZenohSettings
 from common.zenoh_bus import open_session
 from services.ros2.convert import DETECTION_2D_ARRAY, cdr_decode
 from services.ros2.graph import RosGraph
 from services.ros2.images import IMAGE, frame_to_image
+from stack.config import Config
+from stack.config_file import to_toml
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 
 _TIMEOUT_S = 2.0  # a message not received by then counts as lost

@@ -42,10 +42,10 @@ from pathlib import Path
 from typing import Any
 
 from common.clock import mono_s
-from common.config_file import load_config
 from common.errors import StackError
 from common.machine import machine_info
-from common.settings import Config
+from stack.config import Config
+from stack.config_file import load_config
 from tools.benchmarks.stacks import (
     DEFAULT_RATE_HZ,
     DEFAULT_SOURCE,

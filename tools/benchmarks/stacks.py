@@ -20,12 +20,13 @@ from typing import Any
 import numpy as np
 
 from common.clock import mono_s, wall_ns
-from common.config_file import to_toml
 from common.keys import Keys
 from common.messages import Detections, ServiceCounters
-from common.settings import Config, ZenohSettings
+from common.settings import ZenohSettings
 from common.zenoh_bus import open_session
 from services.metrics.pool import Duplicates
+from stack.config import Config
+from stack.config_file import to_toml
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 
 STARTUP_S = 240.0

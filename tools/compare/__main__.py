@@ -11,9 +11,9 @@ import argparse
 from pathlib import Path
 
 from common.cli import Command, add_config, replay_rate, service_main
-from common.config_file import load_config
 from common.errors import ConfigError, RecordingError, StackError
 from common.lifecycle import print_progress, run_main, setup_logging, stop_event
+from stack.config_file import load_config
 
 
 def _compare_arguments(p: argparse.ArgumentParser) -> None:

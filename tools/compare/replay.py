@@ -10,8 +10,8 @@ from pathlib import Path
 from common.clock import mono_s
 from common.lifecycle import Progress
 from common.node import Node
-from common.settings import Config
 from services.recorder.service import SERVICE, Recorder, play
+from stack.config import Config
 
 SETTLE_S = 1.5  # the stack's last answers: recording ends once nothing new came for this long
 TAIL_MAX_S = 15.0
@@ -24,7 +24,7 @@ def replay_and_record(
     """Play ``source`` onto the stack and record everything into ``target`` (``wait``: for a
     detector first; no link to the stack fails at once, play() says where it looked)."""
     with Node(SERVICE, config) as node:
-        recorder = Recorder(node, target).listen(node)
+        recorder = Recorder(node, target, config).listen(node)
         try:
             play(config, source, stop, progress, rate=rate, wait=wait)
             progress("waiting for the stack's last detections and commands")

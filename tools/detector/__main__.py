@@ -16,8 +16,8 @@ from common.cli import Command, options_from, service_main
 from common.errors import StackError
 from common.images import SAMPLES
 from common.lifecycle import EXIT_INTERRUPTED, exit_code, run_main
-from common.settings import DetectorSettings
 from runtimes import BACKEND_CHOICES
+from services.detector.contract import DetectorSettings
 from tools.detector import cli
 
 PROG = "python -m tools.detector"

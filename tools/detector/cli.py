@@ -25,9 +25,9 @@ from common.annotate import annotate
 from common.errors import ConfigError, ImageError
 from common.images import Image, list_images, load_image, load_sample
 from common.lifecycle import EXIT_FAILED, EXIT_OK, print_progress
-from common.settings import DetectorSettings
 from modelprep.files import ensure_default_model
 from services.camera import CaptureSource, is_stream, open_stream
+from services.detector.contract import DetectorSettings
 from services.detector.pipeline import Detector
 from services.detector.types import DetectionResult
 from services.detector.variants import sized_model
@@ -274,7 +274,7 @@ def run_fetch_model(config_path: str | None, models_dir: str | None) -> int:
     only when that stack runs a detector on the default model, and then also measure the fast
     profile if the config asks for it (what ``make run`` asks before it starts the stack)."""
     if config_path:
-        from common.config_file import load_config
+        from stack.config_file import load_config
 
         config = load_config(config_path)
         if "detector" not in config.supervisor.services:
@@ -305,7 +305,7 @@ def _measure_fast(settings: DetectorSettings) -> str:
 
 def run_fast_profile(config_path: str | None) -> int:
     """Measure the CPU variants once, cache the fast profile's choice, print it."""
-    from common.config_file import load_config
+    from stack.config_file import load_config
 
     config = load_config(config_path)
     print(_measure_fast(config.detector))

@@ -14,7 +14,7 @@ import numpy as np
 from common.clock import ms_since, perf_s
 from common.images import load_sample
 from common.lifecycle import Progress
-from common.settings import DetectorSettings
+from services.detector.contract import DetectorSettings
 from services.detector.fast_profile import TIMED_RUNS, Figures
 from services.detector.variants import Variant, open_prepared
 from tools.evaluation.labelled_set import labelled_ap50

@@ -13,7 +13,7 @@ from common.lifecycle import run_main
 
 
 def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
-    from common.settings import DetectorSettings
+    from services.detector.contract import DetectorSettings
     from tools.evaluation.accuracy import DEFAULT_CONF_THRESHOLD
     from tools.evaluation.evaluate import DEFAULT_EVAL_CONF
 

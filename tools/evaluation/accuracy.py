@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.boxes import Boxes
-from common.settings import DetectorSettings
+from services.detector.contract import DetectorSettings
 from tools.evaluation.labelled import DatasetError
 
 #: Where precision and recall are read by default: the stack's own detector.conf.

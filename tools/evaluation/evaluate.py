@@ -15,7 +15,7 @@ from typing import Any
 
 from common.boxes import Boxes
 from common.lifecycle import Progress, print_progress
-from common.settings import DetectorSettings
+from services.detector.contract import DetectorSettings
 from tools.evaluation.accuracy import (
     DEFAULT_CONF_THRESHOLD,
     AccuracyReport,

@@ -20,7 +20,6 @@ from typing import Any, cast
 import zenoh
 
 from common.clock import mono_s, utc_now, wall_ns
-from common.config_file import load_config
 from common.contracts import Session
 from common.errors import ConfigError, DecodeError
 from common.keys import Keys
@@ -28,9 +27,11 @@ from common.lifecycle import Progress
 from common.machine import machine_info
 from common.messages import Detections, Header, ServiceCounters, Twist
 from common.queries import query_metrics
-from common.settings import REPO_ROOT, Config
+from common.settings import REPO_ROOT
 from common.zenoh_bus import open_session
 from services.metrics.aggregate import Aggregator
+from stack.config import Config
+from stack.config_file import load_config
 from tools.launch import start_supervisor, stop_supervisor, wait_ready, write_config
 
 SESSION_VERSION = 1

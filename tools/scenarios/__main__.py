@@ -16,9 +16,9 @@ import sys
 from typing import Any
 
 from common.cli import Command, add_config, service_main
-from common.config_file import load_config
 from common.contracts import ControllerMode, ScenarioResult
 from common.lifecycle import run_main, setup_logging
+from stack.config_file import load_config
 
 
 def _print_text(r: ScenarioResult) -> None:

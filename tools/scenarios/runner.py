@@ -22,14 +22,14 @@ from typing import Any
 import zenoh
 
 from common.clock import mono_s, wall_ns
-from common.config_file import to_toml
 from common.contracts import ControllerMode, ScenarioResult
 from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, GroundTruth, Twist
-from common.settings import Config
 from common.zenoh_bus import open_session
 from services.sim.scenarios import SCENARIOS, Scenario
+from stack.config import Config
+from stack.config_file import to_toml
 from tools.launch import free_port, service_pids, start_supervisor, stop_supervisor
 from tools.scenarios.score import ScenarioLog, score
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 from common.contracts import ScenarioResult
 from common.messages import Detections, GroundTruth, Twist
-from common.settings import ControllerSettings
+from services.controller.contract import ControllerSettings
 from services.sim.scenarios import Scenario
 from services.sim.world import World
 

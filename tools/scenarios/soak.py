@@ -22,12 +22,13 @@ from typing import Any
 import msgpack
 
 from common.clock import mono_s
-from common.config_file import to_toml
 from common.keys import Keys
 from common.messages import GroundTruth
-from common.settings import SERVICES, Config
+from common.settings import SERVICES
 from common.zenoh_bus import open_session
 from services.sim.scenarios import SCENARIOS
+from stack.config import Config
+from stack.config_file import to_toml
 from tools.launch import rss_kb, service_pids, start_supervisor, stop_supervisor, wait_ready
 from tools.scenarios.runner import STOP_TIMEOUT_S, record_into, scenario_config
 from tools.scenarios.score import ScenarioLog

@@ -13,7 +13,7 @@ import pytest
 
 from common.errors import ConfigError
 from common.images import Image
-from common.settings import CameraSettings
+from services.camera.contract import CameraSettings
 from services.camera.reopen import HEARTBEAT_S, ReopenHooks, ReopeningSource
 from services.camera.service import _reopening
 from services.camera.sources import FrameSource

@@ -1,5 +1,5 @@
 """Profiles (``extends``) and environment overrides of the further cameras' tables
-(common/config_file.py): a profile states only what it changes, at every depth."""
+(stack/config_file.py): a profile states only what it changes, at every depth."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from common.config_file import load_config
 from common.errors import ConfigError
+from stack.config_file import load_config
 
 # Three files, each extending the one before; each states only what it changes.
 BASE = """

@@ -11,8 +11,9 @@ import pytest
 from common.errors import ConfigError, ImageError, ImageTooLarge
 from common.frames import check_pixel_budget, frame_to_bgr, image_to_frame, jpeg_header
 from common.images import load_sample
+from common.limits import DEFAULT_MAX_FRAME_PIXELS
 from common.messages import Frame, Header
-from common.perception_settings import DEFAULT_MAX_FRAME_PIXELS, DetectorSettings
+from services.detector.contract import DetectorSettings
 
 HEADER = Header(stamp_ns=1, frame_id="cam", seq=7, source="test")
 

@@ -9,13 +9,13 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from common.config_file import load_config
 from common.errors import ConfigError
 from common.keys import Keys
 from common.security import PRINCIPALS, stack_principals
 from common.settings import REPO_ROOT, ZenohSettings, camera_service
 from common.zenoh_bus import QoS, open_session, zenoh_config
 from stack.access import access_control, may_put, may_read, running_sensors
+from stack.config_file import load_config
 from stack.hub import hub_access
 
 KEYS = Keys("robot1")

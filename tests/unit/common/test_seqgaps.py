@@ -7,7 +7,7 @@ from common.memory_bus import MemoryHub
 from common.messages import Header
 from common.node import Node
 from common.seqgaps import SeqGaps
-from common.settings import Config
+from stack.config import Config
 
 
 def header(seq: int, source: str = "camera", boot: str = "b1", frame_id: str = "") -> Header:

@@ -12,11 +12,12 @@ from typing import Any
 
 import pytest
 
-from common.config_file import load_config
 from common.errors import ConfigError
 from common.setting_checks import range_text
-from common.settings import DEFAULT_CONFIG, REPO_ROOT, Config
+from common.settings import DEFAULT_CONFIG, REPO_ROOT
 from services.controller.service import STOP_POLL_S, wait_either
+from stack.config import Config
+from stack.config_file import load_config
 
 # [cameras.<name>] are [camera] tables (CameraSettings): the camera table covers them.
 TABLES = {f.name: f.type for f in dataclasses.fields(Config) if f.name not in ("path", "cameras")}

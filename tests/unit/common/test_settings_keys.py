@@ -5,12 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config_file import load_config
 from common.errors import ConfigError, ImageError
 from common.frames import frame_to_bgr, image_to_frame
 from common.keys import Keys
 from common.messages import Frame, Header
 from common.settings import DEFAULT_CONFIG, REPO_ROOT
+from stack.config_file import load_config
 
 
 def test_default_config_loads() -> None:
@@ -99,7 +99,7 @@ def test_corrupt_jpeg_is_an_image_error() -> None:
 def test_to_toml_round_trips(tmp_path: Path) -> None:
     import dataclasses
 
-    from common.config_file import to_toml
+    from stack.config_file import to_toml
 
     cfg = load_config(DEFAULT_CONFIG, environ={})
     cfg = dataclasses.replace(
@@ -189,18 +189,29 @@ def test_make_run_installs_no_test_tools_and_no_torch() -> None:
     assert "DEV" not in run_deps and "DEV" not in setup_deps
 
 
-def test_every_settings_class_is_still_imported_from_common_settings() -> None:
-    import common.control_settings
-    import common.perception_settings
-    import common.settings
+def test_each_services_settings_are_declared_in_its_contract() -> None:
+    """Config is assembled from the contracts (stack/config.py); only the shared tables and the
+    supervisor's are declared elsewhere."""
+    import dataclasses
+    import typing
 
-    for module, names in (
-        (common.perception_settings, ("CameraSettings", "DetectorSettings", "TrackerSettings")),
-        (common.control_settings, ("ControllerSettings", "SimSettings")),
-    ):
-        for name in names:
-            assert getattr(common.settings, name) is getattr(module, name)
-            assert name in common.settings.__all__
+    from stack.config import Config
+
+    hints = typing.get_type_hints(Config)
+    homes = {
+        table.name: hints[table.name].__module__
+        for table in dataclasses.fields(Config)
+        if table.name not in ("path", "cameras")
+    }
+    shared = {"zenoh": "common.settings", "stack": "common.settings"}
+    own = {"tracker": "detector", "supervisor": None}
+    for table, module in homes.items():
+        if table in shared:
+            assert module == shared[table], table
+        elif own.get(table, table) is None:
+            assert module == "stack.config", table
+        else:
+            assert module == f"services.{own.get(table, table)}.contract", table
 
 
 def test_the_default_config_states_the_tracker_reset_and_keeps_its_own_max_det() -> None:
@@ -215,7 +226,7 @@ def test_the_default_stack_file_names_every_setting() -> None:
     import dataclasses
     import tomllib
 
-    from common.settings import Config
+    from stack.config import Config
 
     data = tomllib.loads(DEFAULT_CONFIG.read_text())
     missing = [

@@ -15,11 +15,13 @@ from common.boxes import Boxes
 from common.clock import BOOT_ID, now
 from common.messages import Detections, EStop, Header, LaserScan
 from common.node import Tally
-from common.settings import CameraSettings, Config, ControllerSettings
+from services.camera.contract import CameraSettings
+from services.controller.contract import ControllerSettings
 from services.controller.geometry import focal_px, in_view, robot_bearing, wrap
 from services.controller.policy import Controller, Inputs, VelocityCommand
 from services.controller.service import ControllerHandlers
 from services.controller.targets import View
+from stack.config import Config
 from tests.unit.controller.scans import scan_of
 
 W, H, HFOV = 640, 480, 60.0

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from common.boxes import Boxes
-from common.config_file import load_config
 from common.errors import ConfigError
 from common.messages import Detections, Header, LaserScan
-from common.settings import CameraSettings, ControllerSettings
+from services.camera.contract import CameraSettings
+from services.controller.contract import ControllerSettings
 from services.controller.geometry import (
     bearing,
     box_distance,
@@ -24,6 +24,7 @@ from services.controller.geometry import (
 )
 from services.controller.policy import Controller, Inputs
 from services.controller.targets import View
+from stack.config_file import load_config
 from tests.unit.controller.scans import scan_of
 
 HEADER = Header(stamp_ns=123, frame_id="camera", seq=1, source="test")

@@ -6,10 +6,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from common.config_file import load_config
-from common.settings import Config
 from deploy.processes import service_command, stack_processes
 from deploy.supervisor import config_warnings
+from stack.config import Config
+from stack.config_file import load_config
 
 
 def _config(tmp_path: Path, text: str) -> Config:

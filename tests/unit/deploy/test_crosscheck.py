@@ -9,8 +9,10 @@ import pytest
 from onnx import TensorProto, helper
 
 from common.errors import ConfigError
-from common.settings import Config, ControllerSettings, DetectorSettings, SupervisorSettings
 from deploy.crosscheck import cross_check, model_classes
+from services.controller.contract import ControllerSettings
+from services.detector.contract import DetectorSettings
+from stack.config import Config, SupervisorSettings
 
 
 def _config(**tables: object) -> Config:

@@ -9,20 +9,16 @@ from pathlib import Path
 
 import pytest
 
-from common.config_file import load_config
 from common.errors import ConfigError
 from common.keys import Keys
 from common.security import stack_principals
-from common.settings import (
-    Config,
-    DetectorSettings,
-    detector_service,
-    is_detector_service,
-    service_package,
-)
+from common.settings import detector_service, is_detector_service, service_package
 from deploy.processes import service_command, stack_processes
 from deploy.watchdog import Observation, judge
+from services.detector.contract import DetectorSettings
 from stack.access import access_control, may_announce, may_put
+from stack.config import Config
+from stack.config_file import load_config
 
 
 def _config(tmp_path: Path, text: str) -> Config:

@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from common.settings import SupervisorSettings
 from deploy.processes import Backoff, ServiceProcess
+from stack.config import SupervisorSettings
 
 
 def test_backoff_doubles_and_caps_and_resets() -> None:

@@ -3,8 +3,10 @@ from __future__ import annotations
 import pytest
 
 from common.errors import ConfigError
-from common.settings import Config, ControllerSettings, DetectorSettings, SupervisorSettings
 from deploy.watchdog import HEARTBEAT_SERVICES, Observation, check_settings, judge
+from services.controller.contract import ControllerSettings
+from services.detector.contract import DetectorSettings
+from stack.config import Config, SupervisorSettings
 
 GRACE, PROGRESS = 2.0, 5.0
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from common.errors import ConfigError, ModelError
-from common.perception_settings import DetectorSettings
 from services.detector.batching import choose, measure, probe_sizes
+from services.detector.contract import DetectorSettings
 from services.detector.pipeline import Detector
 from services.detector.service import settle_batch
 from tests.unit.detector.halves import halves_model, image

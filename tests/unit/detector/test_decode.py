@@ -11,9 +11,9 @@ import pytest
 
 from common.coco import COCO80
 from common.errors import BackendUnavailable, ConfigError, ModelError, UnknownModelFamily
-from common.settings import DetectorSettings
 from runtimes import BACKENDS, Dim, open_backend
 from runtimes.base import input_size, parse_imgsz
+from services.detector.contract import DetectorSettings
 from services.detector.decode import (
     Family,
     decode_end2end,

@@ -11,9 +11,9 @@ import pytest
 from onnx import TensorProto, helper, numpy_helper
 
 from common.errors import ConfigError, ModelError
-from common.settings import DetectorSettings
 from modelprep.acquire.tfjs_resize import check_size, grid_offsets
 from modelprep.quantize import QuantizationFailed, head_nodes, quantized_model
+from services.detector.contract import DetectorSettings
 from services.detector.fast_profile import Figures, choose
 from services.detector.variants import Variant, prepare, sized_model
 

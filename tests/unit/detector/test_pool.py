@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from common.settings import CameraSettings
+from services.camera.contract import CameraSettings
 from services.detector.pool import PoolView, assign, camera_weights, rank
 
 EVEN = {f"cam{i}": 1.0 for i in range(12)}

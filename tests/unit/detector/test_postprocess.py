@@ -9,7 +9,7 @@ import pytest
 
 from common.boxes import Boxes
 from common.errors import ConfigError
-from common.settings import DetectorSettings
+from services.detector.contract import DetectorSettings
 from services.detector.decode import decode_end2end
 from services.detector.postprocess import class_mask, nms, select
 from services.detector.types import DetectionResult

@@ -18,7 +18,8 @@ from common.frames import image_to_frame
 from common.freshness import FreshnessGate
 from common.messages import Detections, Frame
 from common.node import Tally
-from common.settings import CameraSettings, Config, DetectorSettings, TrackerSettings
+from services.camera.contract import CameraSettings
+from services.detector.contract import DetectorSettings, TrackerSettings
 from services.detector.pipeline import Detector
 from services.detector.service import (
     CameraOutput,
@@ -28,6 +29,7 @@ from services.detector.service import (
     served_batch,
 )
 from services.detector.tracker import Tracker
+from stack.config import Config
 from tests.unit.detector.halves import halves_model, image
 from tests.unit.detector.headers import camera_header
 

@@ -5,9 +5,11 @@ from __future__ import annotations
 import dataclasses
 
 from common.messages import Header
-from common.settings import Config, ControllerSettings, DetectorSettings
+from services.controller.contract import ControllerSettings
+from services.detector.contract import DetectorSettings
 from services.metrics.advice import DETECTIONS_LATE, advise
 from services.metrics.aggregate import Aggregator
+from stack.config import Config
 from tests.unit.metrics.samples import detections
 
 

@@ -58,3 +58,11 @@ def test_the_metrics_modules_read_the_detector_counters_they_name() -> None:
     read = {*cameras.DROP_COLUMNS, cameras.WORKER_COUNTER, cameras.SERVING_COUNTER}
     read |= {*cameras.BATCH_COUNTERS, *aggregate._DETECTOR_DELTAS}
     assert read <= set(metrics.READS["detector"])
+
+
+def test_the_contracts_drop_verdicts_are_the_freshness_gates() -> None:
+    from common.freshness import Verdict
+
+    dropped = tuple(str(v) for v in Verdict if v is not Verdict.FRESH)
+    assert dropped == detector.DROP_VERDICTS
+    assert dropped == controller.DROP_VERDICTS

@@ -12,8 +12,9 @@ from common.boxes import Boxes
 from common.errors import ConfigError
 from common.messages import Detections, Header, ServiceCounters
 from common.node import Tally
-from common.settings import SERVICES, Config, MetricsSettings
+from common.settings import SERVICES
 from services.metrics.aggregate import Aggregator
+from services.metrics.contract import MetricsSettings
 from services.metrics.service import MetricsHandlers
 from services.metrics.trust import (
     PoolWorkers,
@@ -22,6 +23,7 @@ from services.metrics.trust import (
     split_counters,
     strict_json,
 )
+from stack.config import Config
 
 HEADER = Header(stamp_ns=1, frame_id="", seq=1, source="x")
 KEY = "stack/counters/detector"

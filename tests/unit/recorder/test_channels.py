@@ -10,7 +10,6 @@ from rosbags.typesys import get_types_from_msg
 
 from common.boxes import Boxes
 from common.messages import ControllerStatus, Detections, Frame, Header, LaserScan, Twist
-from common.ros2_settings import Ros2Settings
 from services.recorder.channels import (
     JSON_SCHEMA,
     STACK_MESSAGE,
@@ -20,6 +19,7 @@ from services.recorder.channels import (
     to_json,
 )
 from services.ros2 import RosDistro, cdr_decode
+from services.ros2.contract import Ros2Settings
 
 HEADER = Header(stamp_ns=1_700_000_000_123_456_789, frame_id="camera", seq=7, source="sim")
 

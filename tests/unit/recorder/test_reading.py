@@ -15,12 +15,12 @@ from rosbags.rosbag2 import Writer as BagWriter
 from common.counters import Counters
 from common.errors import DecodeError, RecordingError
 from common.messages import Frame, Header, LaserScan, Twist
-from common.recorder_settings import RecorderSettings
-from common.ros2_settings import Ros2Settings
 from services.recorder.channels import Translator
+from services.recorder.contract import RecorderSettings
 from services.recorder.reading import Recording, check_playable, decode_input
 from services.recorder.writer import McapFile, QueuedRecorder
 from services.ros2 import RosDistro, cdr_encode, frame_to_image, scan_to_ros, typestore_for
+from services.ros2.contract import Ros2Settings
 
 D = RosDistro.JAZZY
 SETTINGS = RecorderSettings(chunk_size_kb=16, flush_period_s=60.0)
@@ -181,9 +181,9 @@ def test_a_writer_that_fails_says_so_and_closing_does_not_hang(tmp_path: Path) -
 
 
 def test_each_cameras_frames_play_back_onto_its_own_key(tmp_path: Path) -> None:
-    from common.perception_settings import CameraSettings
-    from common.settings import Config
+    from services.camera.contract import CameraSettings
     from services.recorder.play import Played, frame_keys, one_pass
+    from stack.config import Config
 
     config = Config(cameras=(("rear", CameraSettings()),))
     out = McapFile(tmp_path / "two.mcap", SETTINGS)

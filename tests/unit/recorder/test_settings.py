@@ -8,9 +8,10 @@ from datetime import datetime
 import pytest
 
 from common.errors import ConfigError
-from common.recorder_settings import Compression, RecorderSettings
-from common.settings import REPO_ROOT, Config
+from common.settings import REPO_ROOT
+from services.recorder.contract import Compression, RecorderSettings
 from services.recorder.service import default_path
+from stack.config import Config
 
 
 @pytest.mark.parametrize(

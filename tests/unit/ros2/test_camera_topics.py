@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from common.config_file import load_config
 from common.errors import ConfigError
-from common.ros2_settings import CameraTopics, Ros2Settings, camera_topics
+from services.ros2.contract import CameraTopics, Ros2Settings, camera_topics
+from stack.config_file import load_config
 
 
 def test_the_first_camera_keeps_the_tables_topics_a_further_one_is_namespaced() -> None:

@@ -11,7 +11,7 @@ import pytest
 from common.boxes import Boxes
 from common.errors import DecodeError
 from common.messages import Detections, Frame, Header, LaserScan, Twist
-from common.ros2_settings import RosDistro
+from services.ros2.contract import RosDistro
 from services.ros2.convert import (
     DETECTION_2D_ARRAY,
     LASER_SCAN,

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from common.errors import DecodeError
 from common.messages import Detections, Frame, LaserScan, Twist
-from common.ros2_settings import RosDistro
+from services.ros2.contract import RosDistro
 from services.ros2.convert import (
     DETECTION_2D_ARRAY,
     LASER_SCAN,

@@ -10,7 +10,7 @@ import pytest
 
 from common.errors import DecodeError
 from common.messages import Frame, Header
-from common.ros2_settings import RosDistro
+from services.ros2.contract import RosDistro
 from services.ros2.convert import RosMessage, build, cdr_decode, cdr_encode, ros_header
 from services.ros2.images import (
     COMPRESSED_IMAGE,

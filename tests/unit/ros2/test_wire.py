@@ -9,7 +9,7 @@ import pytest
 import xxhash
 
 from common.errors import DecodeError
-from common.ros2_settings import RosDistro
+from services.ros2.contract import RosDistro
 from services.ros2.wire import (
     ATTACHMENT_SIZE,
     DEFAULT_QOS,

@@ -11,7 +11,6 @@ from typing import Any
 import pytest
 
 from common.errors import BackendUnavailable, ConfigError
-from common.settings import DetectorSettings
 from runtimes import (
     BACKEND_CHOICES,
     BACKENDS,
@@ -20,6 +19,7 @@ from runtimes import (
     supported_options,
 )
 from runtimes import select as sel
+from services.detector.contract import DetectorSettings
 
 NO_TRT = "TensorRT not installed"
 NO_TORCH_GPU = "CUDA backend: PyTorch has no CUDA device"

@@ -9,11 +9,15 @@ import numpy as np
 import pytest
 
 from common.messages import GroundTruth, Header
-from common.settings import CameraSettings, Config, ControllerSettings, SimSettings, StackSettings
+from common.settings import StackSettings
+from services.camera.contract import CameraSettings
+from services.controller.contract import ControllerSettings
 from services.sim.cameras import sim_cameras
+from services.sim.contract import SimSettings
 from services.sim.render import CameraSpec, render
 from services.sim.scenarios import SCENARIOS, person
 from services.sim.world import Robot, World
+from stack.config import Config
 from tools.scenarios.score import ScenarioLog, score
 
 FRONT = CameraSpec(width=320, height=240, hfov_deg=60.0, height_m=0.6)

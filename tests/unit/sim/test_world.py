@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from common.messages import GroundTruth, Header, Twist
-from common.settings import ControllerSettings
+from services.controller.contract import ControllerSettings
 from services.sim.laser import LaserSpec, cast
 from services.sim.render import CameraSpec, render
 from services.sim.scenarios import SCENARIOS, person

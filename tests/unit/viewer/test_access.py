@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from common.errors import ConfigError
-from common.viewer_settings import ViewerSettings
 from services.viewer.access import origin_allowed, parse_head, refusal, token_ok
+from services.viewer.contract import ViewerSettings
 
 ALLOWED = ("https://app.foxglove.dev",)
 
@@ -81,8 +81,9 @@ def test_allowed_origins_are_origins(bad: str) -> None:
 
 
 def test_the_token_is_read_only_under_the_secure_profile(tmp_path: Path) -> None:
-    from common.settings import Config, ZenohSettings
+    from common.settings import ZenohSettings
     from services.viewer.service import viewer_token
+    from stack.config import Config
 
     def config(auth: str) -> Config:
         return Config(zenoh=ZenohSettings(mode="client", auth=auth, credentials_dir=str(tmp_path)))

@@ -9,9 +9,9 @@ import foxglove
 
 from common.messages import ControllerStatus, Header
 from common.node import Tally
-from common.settings import Config
 from services.viewer.channels import Channels
 from services.viewer.service import Viewer
+from stack.config import Config
 
 
 def _viewer() -> Viewer:

@@ -7,12 +7,13 @@ import json
 import pytest
 
 from common.boxes import Boxes
-from common.config_file import load_config
 from common.errors import ConfigError
 from common.messages import Detections, Frame, Header
-from common.settings import DEFAULT_CONFIG, ViewerSettings
+from common.settings import DEFAULT_CONFIG
 from services.viewer import channels, layout
+from services.viewer.contract import ViewerSettings
 from services.viewer.pairing import Pairing
+from stack.config_file import load_config
 
 
 def _frame(stamp_ns: int) -> Frame:
@@ -91,8 +92,8 @@ def test_the_shipped_layout_is_the_one_built_here() -> None:
 def test_a_port_in_use_is_one_config_error() -> None:
     import socket
 
-    from common.settings import Config
     from services.viewer.service import start_front
+    from stack.config import Config
 
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from common.config_file import load_config
 from common.errors import StackError
 from services.detector.pool import assign, rank
+from stack.config_file import load_config
 from tools.benchmarks.__main__ import _counts
 from tools.benchmarks.pool import (
     HEAVY,

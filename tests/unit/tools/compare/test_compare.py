@@ -181,10 +181,10 @@ def test_two_cameras_are_matched_each_on_its_own_and_reported_per_camera() -> No
 
 
 def test_a_recording_of_two_cameras_reads_back_by_camera_and_frame(tmp_path: Path) -> None:
-    from common.recorder_settings import RecorderSettings
-    from common.ros2_settings import Ros2Settings
     from services.recorder.channels import Translator
+    from services.recorder.contract import RecorderSettings
     from services.recorder.writer import McapFile
+    from services.ros2.contract import Ros2Settings
     from tools.compare.runs import load_run
 
     out = McapFile(tmp_path / "two.mcap", RecorderSettings())

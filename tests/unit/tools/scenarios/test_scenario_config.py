@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-from common.settings import CameraSettings, Config, DetectorSettings
+from services.camera.contract import CameraSettings
+from services.detector.contract import DetectorSettings
 from services.sim.cameras import sim_cameras
 from services.sim.scenarios import SCENARIOS
+from stack.config import Config
 from tools.scenarios.runner import config_changes, scenario_config
 
 BASE = Config(

@@ -1,7 +1,8 @@
 """Reading and writing the stack's TOML config, with environment overrides.
 
 One file (``deploy/stack.toml`` by default) configures the whole stack, one table per service
-(the dataclasses of common/settings.py). Environment variables override single fields:
+(the dataclasses of stack/config.py, each service's from its contract). Environment variables
+override single fields:
 ``STACK__<TABLE>__<FIELD>=<TOML value>``, e.g. ``STACK__DETECTOR__BACKEND=cuda`` or
 ``STACK__CONTROLLER__TARGET_CLASSES='["cup"]'``, and a further camera's as
 ``STACK__CAMERAS__<NAME>__<FIELD>`` (the camera itself is added in the file). Unknown tables or
@@ -28,8 +29,9 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from common.errors import ConfigError
-from common.perception_settings import CameraSettings
-from common.settings import DEFAULT_CONFIG, Config
+from common.settings import DEFAULT_CONFIG
+from services.camera.contract import CameraSettings
+from stack.config import Config
 
 ENV_PREFIX = "STACK__"
 EXTENDS = "extends"  # top-level key: the config file this one changes
