@@ -25,6 +25,7 @@ from foxglove.messages import (
 
 from common.annotate import class_colour
 from common.contracts import MetricsAnswer
+from common.counters import BAD_INPUT
 from common.errors import ImageError
 from common.frames import frame_to_bgr
 from common.images import Image
@@ -191,6 +192,6 @@ def metrics_json(answer: MetricsAnswer) -> dict[str, Any]:
         "detections_per_frame": answer["detections_per_frame"],
         "dropped_frames": answer["dropped_frames"],
         "drop_rate": answer["drop_rate"],
-        "bad_input": sum(v for k, v in counters.items() if k.endswith(".bad_input")),
+        "bad_input": sum(v for k, v in counters.items() if k.endswith(f".{BAD_INPUT}")),
         "latency_ms": answer["latency_ms"],
     }

@@ -44,6 +44,7 @@ from typing import Any
 from common.clock import mono_s
 from common.errors import StackError
 from common.machine import machine_info
+from services.detector import contract as detector
 from stack.config import Config
 from stack.config_file import load_config
 from tools.benchmarks.stacks import (
@@ -258,8 +259,8 @@ def _condition(
         batches = frames = 0
         for k, w in enumerate(watches):
             taken = w.take()
-            batches += taken.counters.get("batches", 0)
-            frames += taken.counters.get("batched_frames", 0)
+            batches += taken.counters.get(detector.BATCHES, 0)
+            frames += taken.counters.get(detector.BATCHED_FRAMES, 0)
             for cam, values in taken.latency_ms.items():
                 name = cam if len(watches) == 1 else f"{k}:{cam}"
                 fps[name] = len(values) / taken.elapsed_s

@@ -20,10 +20,12 @@ from typing import Any
 import numpy as np
 
 from common.clock import mono_s, wall_ns
+from common.counters import per_camera
 from common.keys import Keys
 from common.messages import Detections, ServiceCounters
 from common.settings import ZenohSettings
 from common.zenoh_bus import open_session
+from services.detector import contract as detector
 from services.metrics.pool import Duplicates
 from stack.config import Config
 from stack.config_file import to_toml
@@ -306,7 +308,7 @@ class Watch:
         for w in self.workers:
             at, counters = latest.get(w, (float("-inf"), {}))
             out[w] = (
-                {c for c in self.cameras if counters.get(f"serving.{c}", 0) > 0}
+                {c for c in self.cameras if counters.get(per_camera(detector.SERVING, c), 0) > 0}
                 if at > after
                 else None
             )
@@ -316,7 +318,8 @@ class Watch:
         """Each worker's load by its latest counters: its cameras' share of the pixel rate."""
         with self._lock:
             return {
-                w: c.get("pool_load_permille", 0) / 1000 for w, (_, c) in self._counters.items()
+                w: c.get(detector.POOL_LOAD_PERMILLE, 0) / 1000
+                for w, (_, c) in self._counters.items()
             }
 
     def first_after(self, camera: str, stamp_ns: int) -> float | None:

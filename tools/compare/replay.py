@@ -10,6 +10,7 @@ from pathlib import Path
 from common.clock import mono_s
 from common.lifecycle import Progress
 from common.node import Node
+from services.recorder import contract as recorder_contract
 from services.recorder.service import SERVICE, Recorder, play
 from stack.config import Config
 
@@ -31,7 +32,7 @@ def replay_and_record(
             written, quiet_since = -1, mono_s()
             end = mono_s() + TAIL_MAX_S
             while mono_s() < end and not stop.wait(0.1):
-                now = node.counters.get("written")
+                now = node.counters.get(recorder_contract.WRITTEN)
                 if now != written:
                     written, quiet_since = now, mono_s()
                 elif mono_s() - quiet_since > SETTLE_S:
