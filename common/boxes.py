@@ -174,11 +174,16 @@ class Boxes:
 
     def __post_init__(self) -> None:
         check_boxes(self.xyxy, self.scores, self.class_ids, self.track_ids)
-        if self.columns is not _NO_COLUMNS:
-            check_columns(self.columns, len(self))
-            # A copy behind a read-only view: the caller's dict may change, this may not.
-            frozen = MappingProxyType(dict(self.columns)) if self.columns else _NO_COLUMNS
-            object.__setattr__(self, "columns", frozen)
+        columns = self.columns
+        if columns is _NO_COLUMNS:
+            return
+        if type(columns) is dict and not columns:  # the decoder's, for most messages
+            object.__setattr__(self, "columns", _NO_COLUMNS)
+            return
+        check_columns(columns, len(self))
+        # A copy behind a read-only view: the caller's dict may change, this may not.
+        frozen = MappingProxyType(dict(columns)) if columns else _NO_COLUMNS
+        object.__setattr__(self, "columns", frozen)
 
     def __len__(self) -> int:
         return int(self.xyxy.shape[0])
