@@ -8,3 +8,6 @@ from __future__ import annotations
 MAX_DETECTIONS = 10000
 # Limits that no real camera reaches; anything above is garbage, not a frame.
 MAX_IMAGE_SIDE = 16384
+# Named per-detection columns (common/boxes.py): how many one Boxes carries, and a name's length.
+MAX_COLUMNS = 16
+MAX_COLUMN_NAME_CHARS = 64
