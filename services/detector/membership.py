@@ -5,6 +5,7 @@ over the bus protocol (``node.bus``, common/bus.py) and the node's clock (``node
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from functools import partial
 
 from common.bus import Declared
@@ -143,17 +144,20 @@ class PoolMember:
         with self._lock:
             self._last_beat = self.clock.mono_s()
 
-    def start_stall_watch(self) -> None:
+    def start_stall_watch(self, wait: Callable[[float], bool] | None = None) -> threading.Thread:
         """Call :meth:`check_stall` a few times per ``detector.pool_stall_s`` on a thread of
-        its own, until :meth:`close`."""
+        its own, until :meth:`close` (or until ``wait(period)``, the pause between checks,
+        returns True: by default the close's event)."""
         period = max(STALL_CHECK_MIN_S, self._stall_s / STALL_CHECKS)
+        pause = self._closed.wait if wait is None else wait
 
         def watch() -> None:
-            while not self._closed.wait(period):
+            while not pause(period):
                 self.check_stall()
 
         self._stall_watch = threading.Thread(target=watch, name="pool-stall-watch", daemon=True)
         self._stall_watch.start()
+        return self._stall_watch
 
     def beat(self) -> None:
         """The detection loop passed (call it on every pass, before :meth:`settle`). After a

@@ -231,6 +231,27 @@ def test_a_stall_inside_a_settle_does_not_switch_serving_back_on(
     assert hub.tokens(a.node.keys.pool_serving_of("detector")) == []
 
 
+def test_the_stall_watch_thread_checks_a_few_times_per_stall_limit(
+    hub: MemoryHub, clock: FakeClock, config: Config
+) -> None:
+    a, b = start(hub, clock, config, "detector", "detector_2")
+    pauses: list[float] = []
+
+    def pause(period: float) -> bool:
+        """The watch's wait between checks: at once, twice, then "closed"."""
+        pauses.append(period)
+        if len(pauses) == 2:
+            clock.advance(config.detector.pool_stall_s + 0.01)  # a's loop stalled meanwhile
+        return len(pauses) > 2
+
+    watch = a.pool.start_stall_watch(pause)
+    watch.join(timeout=30)  # it returns at once: three pauses, two checks
+    assert not watch.is_alive()
+    assert pauses == [config.detector.pool_stall_s / 4] * 3
+    assert a.pool.resigned and a.count("pool_resigned") == 1
+    assert b.loop_pass() == frozenset(CAMERAS)
+
+
 def test_alone_in_the_pool_a_stalled_worker_stays(
     hub: MemoryHub, clock: FakeClock, config: Config
 ) -> None:
