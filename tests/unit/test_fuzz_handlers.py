@@ -29,7 +29,7 @@ from common.messages import (
 from common.node import Tally
 from common.settings import Config, ControllerSettings, Ros2Settings, SimSettings
 from services.controller.service import ControllerHandlers
-from services.detector.service import DetectorHandlers
+from services.detector.handlers import DetectorHandlers
 from services.metrics.service import MetricsHandlers
 from services.ros2 import data_key
 from services.ros2.convert import (
