@@ -28,7 +28,7 @@ from common.codec import Message
 from common.errors import DecodeError
 from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
 from common.node import Tally
-from common.settings import Config, ViewerSettings
+from common.settings import Config, RecorderSettings, ViewerSettings
 from services.recorder import service as recorder
 from services.recorder.channels import JSON, Translator
 from services.viewer import service as viewer
@@ -227,7 +227,9 @@ def _read_back(path: Path) -> int:
 
 def test_the_recorders_handlers_and_writer(tmp_path: Path) -> None:
     path = tmp_path / "fuzz.mcap"
-    config, ledger = Config(), _Ledger()
+    # The writer takes what is queued every flush_period_s / 2 at most: at the shortest period
+    # each payload waits 25 ms at most for it, not 100 ms.
+    config, ledger = Config(recorder=RecorderSettings(flush_period_s=0.05)), _Ledger()
     tally = Tally(recorder.SERVICE, config)
     with recorder.Recorder(tally, path) as rec:
         keys = recorder.subscriptions(tally.keys, list(config.all_cameras))
