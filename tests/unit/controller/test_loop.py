@@ -211,7 +211,9 @@ def test_an_engage_stamped_a_century_ahead_can_still_be_released(tmp_path: Path)
 
 
 def test_a_corrupt_state_file_starts_engaged(tmp_path: Path) -> None:
-    (tmp_path / "estop.json").write_text('{"engaged": false, "since_ns": 1e400}')
+    (tmp_path / "estop.json").write_text(
+        '{"engaged": false, "since_ns": 1e400, "by": "x", "reason": "y"}'
+    )
     rig = Rig(tmp_path)
     try:
         rig.scan()
