@@ -35,10 +35,6 @@ def rig(tmp_path: Path) -> Iterator[Rig]:
     r.close()
 
 
-def moving(rig: Rig, start: int = 0) -> list[object]:
-    return [t for t in rig.cmds[start:] if not t.is_zero]
-
-
 @pytest.mark.parametrize("cx,sign", [(LEFT_20, 1.0), (W - LEFT_20, -1.0)], ids=["left", "right"])
 def test_a_person_off_centre_is_turned_to_in_place(rig: Rig, cx: float, sign: float) -> None:
     rig.scan()
