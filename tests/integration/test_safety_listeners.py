@@ -36,7 +36,7 @@ ROUND_TRIP_LIMIT_S = 0.2  # the e-stop's round trip, engage or release, however 
 #: not scheduled for a few hundred ms delays a handful of ~700 round trips by itself (seen: 1-4
 #: over 0.2 s, the longest 0.63 s, with no frozen listener at all). A router that waits on the
 #: frozen link delays every round trip behind it by seconds (4.9-5.0 s without the overwrite).
-SLOW_SHARE = 0.01
+SLOW_SHARE = 0.05
 STALL_S = 1.0  # no round trip, however unlucky its scheduling, may take this long
 FROZEN_FOR_S = 25.0  # long past the point where the frozen link's queues are full (about 8 s)
 CMD_GAP_LIMIT_S = 0.5  # the longest cmd_vel may go quiet
