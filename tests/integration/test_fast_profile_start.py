@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from common.lifecycle import EXIT_INTERRUPTED
-from services.detector.variants import Variant
+from perception.variants import Variant
 from tests.integration.conftest import REPO, write_config
 
 pytestmark = pytest.mark.integration

@@ -4,7 +4,7 @@ Issue 21, point 6: where a library already does what we wrote by hand, measure a
 run prints the figures of all three decisions side by side (docs/library-decisions.md has them
 and the decisions):
 
-1. tracker: services/detector/tracker.py against ByteTrack of the ``trackers`` package
+1. tracker: perception/tracker.py against ByteTrack of the ``trackers`` package
    (Roboflow's clean-room re-implementation), by identity switches and fragmentations on the
    ``crossing`` and ``two_people`` scenarios, and time per frame. The frames are rendered
    offline with the simulator's own world and renderer, the real default detector runs once on
@@ -319,7 +319,7 @@ def run_scenario(
 
 
 def _iou(a: npt.NDArray[np.floating], b: npt.NDArray[np.floating]) -> npt.NDArray[np.float64]:
-    from services.detector.tracker import iou_matrix
+    from perception import iou_matrix
 
     return iou_matrix(a, b)
 
@@ -414,7 +414,7 @@ def evaluate(
 
 
 def ours_tracker() -> Callable[..., npt.NDArray[Any]]:
-    from services.detector.tracker import Tracker
+    from perception import Tracker
 
     tr = Tracker(TrackerSettings())
 
@@ -448,7 +448,7 @@ def bytetrack_tracker(rate_hz: float, **kwargs: Any) -> Callable[..., npt.NDArra
 
 
 def tracker_section(args: argparse.Namespace) -> None:
-    print("\n== 1. Tracker: services/detector/tracker.py vs ByteTrack (`trackers` package) ==")
+    print("\n== 1. Tracker: perception/tracker.py vs ByteTrack (`trackers` package) ==")
     trackers_ok = True
     try:
         from importlib import metadata
@@ -460,13 +460,13 @@ def tracker_section(args: argparse.Namespace) -> None:
         trackers_ok = False
         missing("trackers", "ByteTrack comparison")
     from modelprep.files import default_model_path
-    from services.detector.pipeline import Detector
+    from perception import Detector
 
     model = default_model_path(Path(args.models_dir) if args.models_dir else None)
     if not model.exists():
         print(
-            f"  [skipped] the default model {model} is missing: `python -m services.detector "
-            "fetch-model`, or --models-dir DIR"
+            f"  [skipped] the default model {model} is missing: `zstack prepare"
+            "`, or --models-dir DIR"
         )
         return
     rate = SimSettings().camera_rate_hz if args.rate_hz is None else args.rate_hz

@@ -14,8 +14,8 @@ from common.errors import ConfigError, ModelError
 from common.settings import DetectorSettings
 from modelprep.acquire.tfjs_resize import check_size, grid_offsets
 from modelprep.quantize import QuantizationFailed, head_nodes, quantized_model
-from services.detector.fast_profile import Figures, choose
-from services.detector.variants import Variant, prepare, sized_model
+from perception.fast_profile import Figures, choose
+from perception.variants import Variant, prepare, sized_model
 
 
 def tiny_model(path: Path, *, side: int | str = 32, seed: int = 0) -> Path:
