@@ -74,18 +74,18 @@ def start_supervisor(
 
 def prepare_models(config: Config, log: IO[bytes]) -> None:
     """Prepare what ``config``'s detector loads, as ``zstack prepare`` does (the detector only
-    loads): a model at another input size, INT8, the fast profile's choice. Quick when it is
-    all there already; progress lines go to ``log``."""
+    loads): the model at another input size, INT8, the fast profile's choice once measured.
+    Quick when it is all there already; progress lines go to ``log``. The fast profile is
+    never measured here (minutes): unmeasured, NotPrepared says to run ``zstack prepare``."""
     if "detector" not in config.supervisor.services:
         return
     from perception import prepare_for
-    from tools.detector.fast_profile import measure
 
     def progress(line: str) -> None:
         log.write(f"prepare: {line}\n".encode())
         log.flush()
 
-    prepare_for(config.detector, progress, measure=measure)
+    prepare_for(config.detector, progress)
 
 
 def write_config(config: Config, path: Path) -> Path:
