@@ -31,7 +31,7 @@ from modelprep.files import ensure_default_model
 from perception.variants import NotPrepared, Variant, located_model, model_input_hw
 from runtimes.table import BACKENDS, import_backend
 
-log = logging.getLogger("runtimes.fast_profile")
+log = logging.getLogger("perception.fast_profile")
 
 SIZES = (640, 512, 480, 416)
 TIMED_RUNS = 20

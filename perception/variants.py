@@ -30,7 +30,7 @@ from modelprep.files import (
 from perception.pipeline import Detector
 from runtimes.select import backend_options
 
-log = logging.getLogger("runtimes.variants")
+log = logging.getLogger("perception.variants")
 
 #: Backend -> the runtime whose quantizer builds its INT8 model.
 QUANT_RUNTIMES = {"onnx": "onnxruntime", "openvino": "openvino"}
