@@ -18,11 +18,9 @@ from common.freshness import FreshnessGate, Verdict
 from common.messages import Detections, Frame, Header
 from common.node import Put, Tally
 from common.settings import Config
+from perception import DetectionResult, Detector, Tracker, tracker_clock
 from services.detector.handlers import count_for, reject_for
-from services.detector.pipeline import Detector
 from services.detector.schedule import Waiting
-from services.detector.tracker import Tracker, tracker_clock
-from services.detector.types import DetectionResult
 
 
 def to_message(

@@ -17,29 +17,20 @@ from common.bus import Declared, QoS
 from common.contracts import DetectorInfo
 from common.node import Node
 from common.settings import Config, DetectorSettings
-from services.detector.batching import measure
+from perception import Detector, load, variant_of
+from perception import measure_batch as measure
 from services.detector.handlers import DetectorHandlers
 from services.detector.membership import PoolMember
-from services.detector.pipeline import Detector
 from services.detector.rounds import Rounds, camera_outputs
-from services.detector.variants import variant_of
 
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag (and the pool's membership)
 
 
 def open_detector(s: DetectorSettings, max_batch: int = 1) -> tuple[Detector, str]:
-    """Load the configured model (the default one, fetched if needed, when none is named) at
-    its size and precision, or the fast profile's choice, for batches of up to ``max_batch``
-    frames; with a note on what was chosen."""
-    from services.detector.variants import open_prepared
-
-    if s.profile == "fast":
-        from services.detector.fast_profile import choose_fast
-
-        variant, why = choose_fast(s)  # measured ahead: zstack fast-profile
-        det, note = open_prepared(variant.settings(s), max_batch=max_batch)
-        return det, f"{why}; {note}" if note else why
-    return open_prepared(s, max_batch=max_batch)
+    """Load what ``zstack prepare`` made for ``s`` (the model at its size and precision, or the
+    fast profile's choice), for batches of up to ``max_batch`` frames, with a note on what was
+    chosen; builds and measures nothing (NotPrepared names what is missing)."""
+    return load(s, max_batch)
 
 
 def served_batch(config: Config) -> int:
@@ -119,7 +110,7 @@ def settle_batch(
 ) -> tuple[Detector, str, int]:
     """With ``batch_choice`` "measured" and rounds of several frames on a model of dynamic
     batch: time the batch sizes and keep the one that serves frames fastest
-    (services/detector/batching.py). When that is 1, the model is opened again for batch 1:
+    (perception/batching.py). When that is 1, the model is opened again for batch 1:
     the fastest batch-1 session, and the buffers the large batches took given back."""
     if per_round == 1 or s.batch_choice != "measured" or detector.info.batch_size is not None:
         return detector, note, per_round

@@ -35,6 +35,7 @@ from common.spawn import spawn, stop_child
 from common.zenoh_bus import Publisher, QoS, open_hub
 from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
 from tests.unit.detector.headers import camera_header
+from tools.launch import prepare_models
 
 pytestmark = pytest.mark.integration
 
@@ -89,6 +90,7 @@ def serve(tmp_path: Path) -> Iterator[Any]:
         hub = open_hub(config)  # the endpoint the detector joins, as the supervisor's would be
         log_path = tmp_path / "detector.log"
         with log_path.open("wb") as log:
+            prepare_models(config, log)  # the detector only loads (an input size of 320, 160)
             proc = spawn(
                 [sys.executable, "-m", "services.detector", "serve", "--config", str(path)],
                 cwd=REPO,

@@ -22,7 +22,7 @@ from common.images import load_sample
 from common.messages import Detections, Frame, Header, ServiceCounters
 from tests.integration.conftest import Stack, wait_for, write_config
 from tests.unit.common.test_pixel_budget import bomb
-from tests.unit.detector.test_nonfinite import constant_model
+from tests.unit.perception.test_nonfinite import constant_model
 from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration

@@ -21,8 +21,8 @@ from common.boxes import Boxes
 from common.messages import Detections, Header
 from common.recorder_settings import RecorderSettings
 from common.ros2_settings import Ros2Settings, RosDistro
-from services.detector.postprocess import select
-from services.detector.tracker import Tracker
+from perception.postprocess import select
+from perception.tracker import Tracker
 from services.recorder.channels import JSON_SCHEMA, Translator
 from services.recorder.writer import McapFile
 from services.ros2.convert import DETECTION_2D_ARRAY, cdr_decode, detections_to_ros

@@ -6,7 +6,7 @@ and the decisions). This module parses the command line and runs the sections; e
 is a module of its own beside it (what they share is in library_shared.py):
 
 1. tracker (library_tracker.py; its frames from library_tracker_frames.py):
-   services/detector/tracker.py against ByteTrack of the ``trackers`` package
+   perception/tracker.py against ByteTrack of the ``trackers`` package
    (Roboflow's clean-room re-implementation), by identity switches and fragmentations on the
    ``crossing`` and ``two_people`` scenarios, and time per frame. The frames are rendered
    offline with the simulator's own world and renderer, the real default detector runs once on

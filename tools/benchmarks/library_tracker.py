@@ -1,4 +1,4 @@
-"""Comparison 1 of tools/benchmarks/library_choices.py: services/detector/tracker.py against
+"""Comparison 1 of tools/benchmarks/library_choices.py: perception/tracker.py against
 ByteTrack of the ``trackers`` package (Roboflow's clean-room re-implementation), by identity
 switches and fragmentations on the ``crossing`` and ``two_people`` scenarios, and time per
 frame. Every tracker is fed the same boxes (library_tracker_frames.py); see ``evaluate`` for the
@@ -33,7 +33,7 @@ MATCH_IOU = 0.3  # least IoU between a projected truth box and a detection to ca
 
 
 def _iou(a: npt.NDArray[np.floating], b: npt.NDArray[np.floating]) -> npt.NDArray[np.float64]:
-    from services.detector.tracker import iou_matrix
+    from perception import iou_matrix
 
     return iou_matrix(a, b)
 
@@ -128,7 +128,7 @@ def evaluate(
 
 
 def ours_tracker() -> Callable[..., npt.NDArray[Any]]:
-    from services.detector.tracker import Tracker
+    from perception import Tracker
 
     tr = Tracker(TrackerSettings())
 
@@ -162,7 +162,7 @@ def bytetrack_tracker(rate_hz: float, **kwargs: Any) -> Callable[..., npt.NDArra
 
 
 def tracker_section(args: argparse.Namespace) -> None:
-    print("\n== 1. Tracker: services/detector/tracker.py vs ByteTrack (`trackers` package) ==")
+    print("\n== 1. Tracker: perception/tracker.py vs ByteTrack (`trackers` package) ==")
     trackers_ok = True
     try:
         from importlib import metadata
@@ -174,13 +174,13 @@ def tracker_section(args: argparse.Namespace) -> None:
         trackers_ok = False
         missing("trackers", "ByteTrack comparison")
     from modelprep.files import default_model_path
-    from services.detector.pipeline import Detector
+    from perception import Detector
 
     model = default_model_path(Path(args.models_dir) if args.models_dir else None)
     if not model.exists():
         print(
-            f"  [skipped] the default model {model} is missing: `python -m services.detector "
-            "fetch-model`, or --models-dir DIR"
+            f"  [skipped] the default model {model} is missing: `zstack prepare`, or "
+            "--models-dir DIR"
         )
         return
     rate = SimSettings().camera_rate_hz if args.rate_hz is None else args.rate_hz

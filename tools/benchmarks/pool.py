@@ -38,8 +38,8 @@ from typing import Any
 
 from common.errors import StackError
 from common.perception_settings import MAX_WORKERS
+from common.pool_rule import assign, camera_weights
 from common.settings import CameraSettings
-from services.detector.pool import assign, camera_weights
 from tools.benchmarks.stacks import (
     DEFAULT_RATE_HZ,
     CameraLoad,

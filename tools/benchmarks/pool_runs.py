@@ -16,8 +16,8 @@ from common.clock import mono_s, wall_ns
 from common.config_file import load_config
 from common.errors import StackError
 from common.machine import machine_info
+from common.pool_rule import camera_weights
 from common.settings import Config
-from services.detector.pool import camera_weights
 from tools.benchmarks.pool import (
     UNEVEN,
     Kill,

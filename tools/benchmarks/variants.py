@@ -22,7 +22,7 @@ from common.errors import ConfigError
 from common.images import SAMPLES, load_sample
 from common.lifecycle import print_progress
 from common.settings import DetectorSettings
-from services.detector.variants import Variant, open_prepared, variant_of
+from perception import Variant, open_prepared, variant_of
 
 REFERENCE = Variant("onnx", "fp32", 640)
 

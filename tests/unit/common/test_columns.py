@@ -121,7 +121,7 @@ def test_every_operation_that_selects_rows_selects_the_columns_rows() -> None:
 
 
 def test_the_detector_s_selection_keeps_the_columns_of_the_boxes_it_keeps() -> None:
-    from services.detector.postprocess import select
+    from perception.postprocess import select
 
     overlapping = np.array([[0, 0, 10, 10], [0, 0, 10, 10.5], [50, 50, 60, 60]], np.float32)
     candidates = Boxes(

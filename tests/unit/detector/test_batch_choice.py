@@ -1,4 +1,4 @@
-"""The detector's start-up batch choice (services/detector/batching.py): which sizes it times and
+"""The detector's start-up batch choice (perception/batching.py): which sizes it times and
 the rule that keeps a batch only where it serves frames faster per image."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import pytest
 
 from common.errors import ConfigError, ModelError
 from common.perception_settings import DetectorSettings
-from services.detector.batching import choose, measure, probe_sizes
-from services.detector.pipeline import Detector
+from perception.batching import choose, measure, probe_sizes
+from perception.pipeline import Detector
 from services.detector.service import settle_batch
 from tests.unit.detector.halves import halves_model, image
 

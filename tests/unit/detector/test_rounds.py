@@ -19,11 +19,11 @@ from common.freshness import FreshnessGate
 from common.messages import Detections, Frame
 from common.node import Tally
 from common.settings import CameraSettings, Config, DetectorSettings, TrackerSettings
+from perception.pipeline import Detector
+from perception.tracker import Tracker
 from services.detector.handlers import DetectorHandlers
-from services.detector.pipeline import Detector
 from services.detector.rounds import CameraOutput, Rounds
 from services.detector.service import round_size, served_batch
-from services.detector.tracker import Tracker
 from tests.unit.detector.halves import halves_model, image
 from tests.unit.detector.headers import camera_header
 

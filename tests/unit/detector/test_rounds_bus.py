@@ -19,9 +19,9 @@ from common.memory_bus import MemoryHub
 from common.messages import Detections, Frame
 from common.node import Node
 from common.settings import DetectorSettings
+from perception.pipeline import Detector
 from services.detector.handlers import DetectorHandlers
 from services.detector.membership import PoolMember
-from services.detector.pipeline import Detector
 from services.detector.rounds import Rounds, camera_outputs
 from tests.unit.detector.inprocess import cameras_config
 

@@ -8,7 +8,7 @@ import pytest
 from common.boxes import Boxes
 from common.errors import ConfigError
 from common.settings import TrackerSettings
-from services.detector.tracker import Tracker, iou_matrix, tracker_clock
+from perception.tracker import Tracker, iou_matrix, tracker_clock
 
 
 def _frame(
