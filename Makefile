@@ -41,16 +41,20 @@ lint: $(DEV_STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m mypy
 
+# Two pytest workers (pytest-xdist): most integration tests wait on a real-time stack, so two
+# at once fill a 2-core machine; TEST_WORKERS=0 runs one test at a time.
+TEST_WORKERS ?= 2
+
 test: $(DEV_STAMP) lint
 	$(PY) -m tools.detector prepare
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS)
 
 unit: $(DEV_STAMP)
 	$(PY) -m pytest -q tests/unit
 
 integration: $(DEV_STAMP)
 	$(PY) -m tools.detector prepare
-	$(PY) -m pytest -q -m integration
+	$(PY) -m pytest -q -n $(TEST_WORKERS) -m integration
 
 benchmark: setup
 	$(PY) -m tools.detector benchmark --runs 50
