@@ -1,6 +1,6 @@
 # Two commands do everything on a fresh machine:
-#   make run    install, fetch the default model, start the stack (Ctrl-C stops it)
-#   make test   install, fetch the default model, lint, type-check and run every test
+#   make run    install, prepare the config's models, start the stack (Ctrl-C stops it)
+#   make test   install, prepare the default model, lint, type-check and run every test
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
@@ -25,10 +25,11 @@ $(DEV_STAMP): $(STAMP)
 
 setup: $(STAMP) model
 
-# The default model, fetched only when the config uses it. Its path goes to stderr: with
+# Every model file the config needs (fetched, rebuilt at its input size, INT8, the fast
+# profile's choice): the detector only loads them. The model's path goes to stderr: with
 # `make run ARGS="--duration S"` stdout carries the run's JSON summary and nothing else.
 model: $(STAMP)
-	@$(PY) -m tools.detector fetch-model --config $(or $(CONFIG),deploy/stack.toml) >&2
+	@$(PY) -m tools.detector prepare --config $(or $(CONFIG),deploy/stack.toml) >&2
 
 run: setup
 	@$(PY) -m deploy.supervisor $(CONFIG_ARG) $(ARGS)
@@ -40,16 +41,20 @@ lint: $(DEV_STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m mypy
 
+# Two pytest workers (pytest-xdist): most integration tests wait on a real-time stack, so two
+# at once fill a 2-core machine; TEST_WORKERS=0 runs one test at a time.
+TEST_WORKERS ?= 2
+
 test: $(DEV_STAMP) lint
-	$(PY) -m tools.detector fetch-model
-	$(PY) -m pytest -q
+	$(PY) -m tools.detector prepare
+	$(PY) -m pytest -q -n $(TEST_WORKERS)
 
 unit: $(DEV_STAMP)
 	$(PY) -m pytest -q tests/unit
 
 integration: $(DEV_STAMP)
-	$(PY) -m tools.detector fetch-model
-	$(PY) -m pytest -q -m integration
+	$(PY) -m tools.detector prepare
+	$(PY) -m pytest -q -n $(TEST_WORKERS) -m integration
 
 benchmark: setup
 	$(PY) -m tools.detector benchmark --runs 50

@@ -3,7 +3,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -22,11 +23,28 @@ def class_colour(class_id: int) -> tuple[int, int, int]:
     return int(b), int(g), int(r)
 
 
+def _value_text(value: bool | int | float) -> str:
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    return str(value) if isinstance(value, int) else f"{value:.3g}"
+
+
+def column_labels(columns: Mapping[str, npt.NDArray[Any]], n: int) -> list[str]:
+    """Each of ``n`` detections' columns as label text, ``distance_m=2.41 near=yes`` (in the
+    columns' order; "" for none): how every human-readable view shows them."""
+    if not columns:
+        return [""] * n
+    per_column = [
+        [f"{name}={_value_text(v)}" for v in values.tolist()] for name, values in columns.items()
+    ]
+    return [" ".join(words) for words in zip(*per_column, strict=True)]
+
+
 def annotate(
     image_bgr: npt.NDArray[np.uint8], boxes: Boxes, class_names: Sequence[str]
 ) -> npt.NDArray[np.uint8]:
     """A copy of ``image_bgr`` with each box and a ``name score`` label drawn on it (and
-    ``#id`` when the box has a track id).
+    ``#id`` when the box has a track id, then the box's columns: :func:`column_labels`).
 
     Line width and font size follow the image size so labels stay legible on large photos.
     """
@@ -37,14 +55,16 @@ def annotate(
     corners = np.rint(boxes.xyxy).astype(np.int32).tolist()
     n = len(corners)
     tracks = boxes.track_ids.tolist() if boxes.track_ids is not None else [-1] * n
+    extras = column_labels(boxes.columns, n)
     # One loop per detection is fine here: drawing is not on the detection hot path.
-    for (x1, y1, x2, y2), name, score, cid, tid in zip(
-        corners, class_names, boxes.scores.tolist(), boxes.class_ids.tolist(), tracks,
+    for (x1, y1, x2, y2), name, score, cid, tid, extra in zip(
+        corners, class_names, boxes.scores.tolist(), boxes.class_ids.tolist(), tracks, extras,
         strict=True,
     ):  # fmt: skip
         colour = class_colour(cid)
         cv2.rectangle(out, (x1, y1), (x2, y2), colour, thickness, cv2.LINE_AA)
         text = f"{name} {score:.2f}" + (f" #{tid}" if tid >= 0 else "")
+        text += f" {extra}" if extra else ""
         (tw, th), base = cv2.getTextSize(text, _FONT, font_scale, max(1, thickness - 1))
         top = y1 - th - base if y1 - th - base >= 0 else y1  # inside the box at the top edge
         left = max(0, min(x1, w - tw))  # a box at the right edge: the label moves in, whole

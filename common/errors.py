@@ -2,8 +2,10 @@
 
     StackError                   base of everything we raise on purpose
     ├── ConfigError              bad settings or stack config: exit non-zero with one line
-    │   └── DatasetError         a labelled dataset that cannot be evaluated
-    │                            (tools/evaluation/labelled.py)
+    │   ├── DatasetError         a labelled dataset that cannot be evaluated
+    │   │                        (tools/evaluation/labelled.py)
+    │   └── NotPrepared          a model file serving needs that `zstack prepare` has not
+    │                            made yet (perception/variants.py)
     ├── DecodeError              bytes on a Zenoh key that are not a valid message
     ├── ImageError               a missing, unreadable or corrupt image
     │   └── ImageTooLarge        an image over the pixel budget, refused before decoding

@@ -19,6 +19,11 @@ The type hints it knows, how each travels, and what a decoder accepts:
 - ``Annotated[npt.NDArray[np.float32], Shape(...)]``: raw little-endian bytes of that dtype,
   exactly that shape.
 - ``X | None``: nil or X.
+- ``Annotated[Mapping[str, npt.NDArray[Any]], Columns(N, ...)]``: named per-row arrays
+  (Boxes' ``columns``), a map name -> ``{"dtype": <one of COLUMN_DTYPES>, "data": <raw
+  little-endian bytes>}``, each array (n,) with ``n`` the count of the Dim ``N``, which another
+  array field must size. A decoder bounds the number of columns and their names' length before
+  reading any, and takes a missing map as no columns (payloads from before columns existed).
 
 A float inside a tuple or a map must be finite (a NaN velocity or latency means nothing); a
 float field on its own may be anything, and ``__post_init__`` says where it may not.
@@ -92,6 +97,24 @@ class Shape:
 
     def __init__(self, *dims: int | Dim) -> None:
         object.__setattr__(self, "dims", dims)
+
+
+#: The element types a column may have: what every msgpack reader can take as raw bytes and
+#: read back exactly (bool as one byte, 0 or 1). The numpy names travel on the wire.
+COLUMN_DTYPES = ("bool", "int32", "int64", "float32", "float64")
+
+
+@dataclass(frozen=True, slots=True)
+class Columns:
+    """A field of named per-row arrays, each (rows,) of a COLUMN_DTYPES type (module docstring).
+
+    ``max_columns`` and ``max_name_chars`` bound what a decoder reads; the owner's
+    ``__post_init__`` checks the rest (the names' form, the dtypes of arrays built in memory).
+    """
+
+    rows: Dim
+    max_columns: int
+    max_name_chars: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -203,6 +226,7 @@ def _plan(cls: type, whole: bool = False) -> _Plan:
     placed: set[str] = set()
     dims: dict[str, Dim] = {}
     keys: list[str] = []
+    columns: list[Dim] = []
     for f in dataclasses.fields(cls):
         hint = hints[f.name]
         where = f"{cls.__name__}.{f.name}"
@@ -215,6 +239,12 @@ def _plan(cls: type, whole: bool = False) -> _Plan:
             continue
         keys.append(f.name)
         enc, dec = _converter(hint, (), where)
+        spec = _columns_spec(hint)
+        if spec is not None:
+            columns.append(spec.rows)
+            encoders.append((f.name, enc, (), False))
+            decoders.append((f.name, dec, False, False))  # missing: written before columns
+            continue
         here: list[tuple[Dim, int]] = []
         shape, optional = _shape_of(hint)
         for axis, d in enumerate(shape.dims if shape else ()):
@@ -232,6 +262,9 @@ def _plan(cls: type, whole: bool = False) -> _Plan:
             raise TypeError(f"{cls.__name__}: Dim {name!r} has a field's name")
         if name not in placed:
             raise TypeError(f"{cls.__name__}: Dim {name!r} sizes no array that is always there")
+    for d in columns:
+        if d.name not in placed or dims[d.name] != d:
+            raise TypeError(f"{cls.__name__}: Columns' Dim {d.name!r} sizes no array field")
     keys.extend(dims)
     if len(set(keys)) != len(keys):
         twice = sorted({k for k in keys if keys.count(k) > 1})
@@ -260,6 +293,12 @@ def _inline_decoder(cls: type) -> Decoder:
     return decode
 
 
+def _columns_spec(hint: Any) -> Columns | None:
+    if get_origin(hint) is not Annotated:
+        return None
+    return next((m for m in get_args(hint)[1:] if isinstance(m, Columns)), None)
+
+
 def _shape_of(hint: Any) -> tuple[Shape | None, bool]:
     """The Shape annotating an array field, and whether the field may be None."""
     optional = False
@@ -280,6 +319,11 @@ def _converter(hint: Any, meta: tuple[Any, ...], where: str) -> tuple[Encoder | 
     origin, args = get_origin(hint), get_args(hint)
     if origin is Annotated:
         return _converter(args[0], meta + tuple(args[1:]), where)
+    spec = next((m for m in meta if isinstance(m, Columns)), None)
+    if spec is not None:
+        if origin not in (Mapping, dict) or args[:1] != (str,):
+            raise TypeError(f"{where}: Columns annotates a Mapping[str, NDArray], got {hint}")
+        return _columns(spec)
     if origin in (Union, types.UnionType):
         rest = [a for a in args if a is not type(None)]
         if len(rest) != 1 or len(args) != 2:
@@ -353,6 +397,51 @@ def _array(dtype: np.dtype[Any], meta: tuple[Any, ...], where: str) -> tuple[Enc
         except ValueError:
             raise _Bad(f"{flat.size} values do not fit shape {shp}") from None
         return arr if native is None else arr.astype(native)  # a copy on big-endian hosts only
+
+    return encode, decode
+
+
+def _columns(spec: Columns) -> tuple[Encoder, Decoder]:
+    import numpy as np
+
+    wire = {name: np.dtype(name).newbyteorder("<") for name in COLUMN_DTYPES}
+    rows, most, longest = spec.rows.name, spec.max_columns, spec.max_name_chars
+
+    def encode(columns: Mapping[str, Any]) -> dict[str, Any]:
+        return {
+            name: {
+                "dtype": arr.dtype.name,
+                "data": np.ascontiguousarray(arr, wire[arr.dtype.name]).tobytes(),
+            }
+            for name, arr in columns.items()
+        }
+
+    def decode(v: Any, dims: Mapping[str, int]) -> dict[str, Any]:
+        if type(v) is not dict:
+            raise _Bad(f"expected map, got {_got(v)}")
+        if len(v) > most:
+            raise _Bad(f"{len(v)} columns is over the limit of {most}")
+        n = dims[rows]
+        out: dict[str, Any] = {}
+        for name, column in v.items():
+            if type(name) is not str or not 0 < len(name) <= longest:
+                raise _Bad(f"a column name must be 1..{longest} characters of str")
+            if type(column) is not dict:
+                raise _Bad(f"expected map, got {_got(column)}", (name,))
+            dtype, data = column.get("dtype"), column.get("data")
+            if type(dtype) is not str or dtype not in wire:
+                raise _Bad(f"dtype must be one of {', '.join(COLUMN_DTYPES)}", (name, "dtype"))
+            if type(data) is not bytes or len(data) != n * wire[dtype].itemsize:
+                raise _Bad(f"expected {n} {dtype} values as bytes", (name, "data"))
+            if dtype == "bool":
+                raw = np.frombuffer(data, np.uint8)
+                if (raw > 1).any():
+                    raise _Bad("a bool is byte 0 or 1", (name, "data"))
+                out[name] = raw.view(np.bool_)
+            else:
+                arr = np.frombuffer(data, wire[dtype])
+                out[name] = arr if arr.dtype.isnative else arr.astype(arr.dtype.newbyteorder("="))
+        return out
 
     return encode, decode
 

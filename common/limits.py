@@ -8,6 +8,9 @@ from __future__ import annotations
 MAX_DETECTIONS = 10000
 # Limits that no real camera reaches; anything above is garbage, not a frame.
 MAX_IMAGE_SIDE = 16384
+# Named per-detection columns (common/boxes.py): how many one Boxes carries, and a name's length.
+MAX_COLUMNS = 16
+MAX_COLUMN_NAME_CHARS = 64
 
 #: The detector's default pixel budget per frame: 2**25, 32 Mpx. It admits every real camera
 #: up to 8K UHD (7680x4320, 33.2 Mpx) and 4096x4096 inspection cameras, and bounds one decoded

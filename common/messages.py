@@ -84,8 +84,9 @@ class Detections(Message):
     ``header`` is the frame's header, unchanged, so latency is measured from the capture stamp.
     ``boxes`` (common/boxes.py) are in pixels of the ``image_width`` x ``image_height`` image,
     with ``track_ids`` -1 where no tracker has assigned an id, or None; ``class_names`` names
-    each row. The boxes travel inline: ``xyxy``, ``scores``, ``class_ids``, ``track_ids`` and
-    their count ``n`` are keys of the message body itself (docs/messages.md).
+    each row. The boxes travel inline: ``xyxy``, ``scores``, ``class_ids``, ``track_ids``,
+    ``columns`` (named per-detection arrays, e.g. ``distance_m``) and their count ``n`` are
+    keys of the message body itself (docs/messages.md).
     ``timing_ms`` holds the detector's stages (preprocess, inference, postprocess);
     ``received_ns`` and ``published_ns`` are when the detector took and sent the frame.
     """

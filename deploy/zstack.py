@@ -25,6 +25,11 @@ COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
     ),
     "benchmark": ("tools.detector", ("benchmark",), "time the detector's stages, per backend"),
     "export": ("tools.detector", ("export",), "build a TensorRT engine ahead of time"),
+    "prepare": (
+        "tools.detector",
+        ("prepare",),
+        "prepare the models a config needs (fetch, size, INT8, fast profile) before serving",
+    ),
     "fetch-model": ("tools.detector", ("fetch-model",), "fetch and convert the default model"),
     "fast-profile": (
         "tools.detector",

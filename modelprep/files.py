@@ -65,6 +65,14 @@ def default_model_path(models_dir: Path | None = None, imgsz: int = 0) -> Path:
     return _resolve(models_dir) / name
 
 
+def current_default_model(models_dir: Path | None = None, imgsz: int = 0) -> Path | None:
+    """The default model at input size ``imgsz`` if it is there and current (its stamp
+    matches), else None; never fetches nor builds (what a service that only loads asks)."""
+    size = _own_size(imgsz)
+    target = default_model_path(models_dir, size)
+    return target if stamp_is_current(target, size) else None
+
+
 def ensure_default_model(
     models_dir: Path | None = None, *, progress: Progress = print_progress, imgsz: int = 0
 ) -> Path:

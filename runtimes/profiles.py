@@ -162,7 +162,7 @@ def model_profile(
     """The profile shapes for an ONNX model and a requested ``(min, opt, max)`` batch.
 
     A dynamic input size falls back to the ``imgsz`` metadata, then to 640, as the pipeline
-    does (:mod:`services.detector.model_info`). Returns the model's metadata too.
+    does (:mod:`perception.model_info`). Returns the model's metadata too.
     """
     from runtimes.base import DEFAULT_INPUT_SIZE, parse_imgsz
 

@@ -28,13 +28,13 @@ import zenoh
 
 from common.bus import Bus
 from common.clock import mono_s
-from common.errors import StackError
+from common.errors import ConfigError, StackError
 from common.keys import Keys
 from common.queries import ready_services
 from common.settings import REPO_ROOT, service_package
 from common.spawn import spawn, stop_child
 from stack.config import Config
-from stack.config_file import ENV_PREFIX, to_toml
+from stack.config_file import ENV_PREFIX, load_config, to_toml
 
 
 def free_port() -> int:
@@ -48,7 +48,7 @@ def start_supervisor(
     config_path: str | Path, log: IO[bytes], env: Mapping[str, str] | None = None
 ) -> subprocess.Popen[bytes]:
     """Start ``python -m deploy.supervisor --config config_path`` in a process group of its own
-    (common/spawn.py).
+    (common/spawn.py), once the models its detector loads are prepared (:func:`prepare_models`).
 
     Its output (stdout and stderr, unbuffered) goes to ``log``; ``env`` replaces this process's
     environment when given. The file is the whole truth: ``STACK__*`` overrides are taken out
@@ -58,6 +58,12 @@ def start_supervisor(
     """
     base = os.environ if env is None else env
     clean = {k: v for k, v in base.items() if not k.startswith(ENV_PREFIX)}
+    try:
+        config = load_config(config_path, environ=clean)
+    except ConfigError:
+        config = None  # the supervisor says what is wrong with it, as it would unprepared
+    if config is not None:
+        prepare_models(config, log)
     return spawn(
         [sys.executable, "-m", "deploy.supervisor", "--config", str(config_path)],
         env=clean,
@@ -65,6 +71,22 @@ def start_supervisor(
         stdout=log,
         stderr=subprocess.STDOUT,
     )
+
+
+def prepare_models(config: Config, log: IO[bytes]) -> None:
+    """Prepare what ``config``'s detector loads, as ``zstack prepare`` does (the detector only
+    loads): the model at another input size, INT8, the fast profile's choice once measured.
+    Quick when it is all there already; progress lines go to ``log``. The fast profile is
+    never measured here (minutes): unmeasured, NotPrepared says to run ``zstack prepare``."""
+    if "detector" not in config.supervisor.services:
+        return
+    from perception import prepare_for
+
+    def progress(line: str) -> None:
+        log.write(f"prepare: {line}\n".encode())
+        log.flush()
+
+    prepare_for(config.detector, progress)
 
 
 def write_config(config: Config, path: Path) -> Path:

@@ -16,8 +16,10 @@ file that no longer hashes right, rebuilds the slot and says why::
     <cache_dir>/<model stem>.<runtime>-int8.json
 
 A quantization that raises, or whose model fails the caller's ``check`` (it finds nothing
-where FP32 finds objects, say), raises :class:`QuantizationFailed` with one line; the caller
-then stays on FP32.
+where FP32 finds objects, say), raises :class:`QuantizationFailed` with one line, and its
+sidecar records the failure under the key; the caller then stays on FP32. A build runs ahead
+of serving (``zstack prepare``); :func:`cached_model` is what a service asks: the INT8 model
+built for this key, None when none was, QuantizationFailed when the last build failed.
 """
 
 from __future__ import annotations
@@ -96,6 +98,8 @@ def cache_miss(sidecar: Path, out: Path, key: QuantKey) -> str | None:
     changed = [k for k, v in key.to_json().items() if stored["key"].get(k) != v]
     if changed:
         return f"{', '.join(changed)} changed"
+    if "failed" in stored:
+        return f"the last build failed: {stored['failed']}"
     try:
         if sha256_file(out) != stored.get("sha256"):
             return "the INT8 model file changed on disk"
@@ -175,6 +179,45 @@ def _version(runtime: str) -> str:
         return "unknown"
 
 
+def _key(
+    module: Any, model: Path, runtime: str, calibration_dir: Path | None
+) -> tuple[QuantKey, list[npt.NDArray[np.float32]]]:
+    """The cache key of ``model``'s INT8 build for ``runtime``, and the calibration frames."""
+    hw = input_hw(model)
+    frames, digest = _frames(hw, calibration_dir)
+    settings = json.dumps(getattr(module, "SETTINGS", {}), sort_keys=True)
+    key = QuantKey(
+        model_sha256=sha256_file(model),
+        runtime=runtime,
+        runtime_version=_version(runtime),
+        settings=settings,
+        imgsz=hw,
+        calibration=digest,
+    )
+    return key, frames
+
+
+def cached_model(
+    model: Path,
+    *,
+    runtime: str,
+    calibration_dir: Path | None = None,
+    cache_dir: Path | None = None,
+) -> Path | None:
+    """The INT8 version of ``model`` for ``runtime`` as built ahead (:func:`quantized_model`),
+    never building it: None when it was not built for these settings; QuantizationFailed (its
+    one line) when its runtime's quantizer is missing or its last build failed."""
+    module = _runtime_module(runtime)
+    key, _ = _key(module, model, runtime, calibration_dir)
+    out, sidecar = slot(model, runtime, cache_dir)
+    why = cache_miss(sidecar, out, key)
+    if why is None:
+        return out
+    if why.startswith("the last build failed: "):
+        raise QuantizationFailed(why.removeprefix("the last build failed: "))
+    return None
+
+
 def quantized_model(
     model: Path,
     *,
@@ -190,17 +233,7 @@ def quantized_model(
     ConfigError for a bad ``calibration_dir``.
     """
     module = _runtime_module(runtime)
-    hw = input_hw(model)
-    frames, digest = _frames(hw, calibration_dir)
-    settings = json.dumps(getattr(module, "SETTINGS", {}), sort_keys=True)
-    key = QuantKey(
-        model_sha256=sha256_file(model),
-        runtime=runtime,
-        runtime_version=_version(runtime),
-        settings=settings,
-        imgsz=hw,
-        calibration=digest,
-    )
+    key, frames = _key(module, model, runtime, calibration_dir)
     out, sidecar = slot(model, runtime, cache_dir)
     why = cache_miss(sidecar, out, key)
     if why is None:
@@ -209,10 +242,16 @@ def quantized_model(
     progress(
         f"INT8 cache miss ({why}): quantizing {model.name} for {runtime} on {len(frames)} frames"
     )
-    _build(module, model, out, _Reporting(frames, progress), head_nodes(model))
-    reason = check(out) if check is not None else None
-    if reason is not None:
-        raise QuantizationFailed(f"INT8 {model.name} for {runtime} is unusable: {reason}")
+    try:
+        _build(module, model, out, _Reporting(frames, progress), head_nodes(model))
+        reason = check(out) if check is not None else None
+        if reason is not None:
+            raise QuantizationFailed(f"INT8 {model.name} for {runtime} is unusable: {reason}")
+    except QuantizationFailed as exc:
+        # recorded, so that a service loading what was prepared knows to stay on FP32
+        failed = {"key": key.to_json(), "failed": str(exc)}
+        atomic_write_bytes(sidecar, json.dumps(failed, indent=2).encode())
+        raise
     record = {"key": key.to_json(), "sha256": sha256_file(out)}
     atomic_write_bytes(sidecar, json.dumps(record, indent=2).encode())
     progress(f"wrote {out}")

@@ -10,17 +10,18 @@ from collections.abc import Callable
 from functools import partial
 from typing import Generic, Protocol, TypeVar
 
-from common.bus import QoS
-from common.clock import BOOT_ID, Stamp, mono_s, now
+from common.bus import Declared
+from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock, Stamp, mono_s
 from common.contracts import ControllerState, DetectorInfo
 from common.counters import per_camera
 from common.errors import DecodeError
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
-from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
+from common.messages import Detections, EStop, Header, LaserScan
 from common.node import Node, Tally
 from common.ratelimit import LogLimiter
 from services.controller import contract
 from services.controller.estop import EStopLatch
+from services.controller.outputs import Outputs
 from services.controller.policy import Controller, Inputs, VelocityCommand
 from services.controller.policy import stop as stop_command
 from services.controller.statelog import log_state
@@ -62,8 +63,9 @@ class Latest(Generic[_S]):
     source's older view) never replaces it.
     """
 
-    def __init__(self, arrived: threading.Event | None = None) -> None:
+    def __init__(self, arrived: threading.Event | None = None, clock: Clock = SYSTEM_CLOCK) -> None:
         self._lock = threading.Lock()
+        self._clock = clock
         self._msg: _S | None = None
         self._t = 0.0
         # Set on every new message (one event may be shared: every camera's wakes the loop);
@@ -75,7 +77,7 @@ class Latest(Generic[_S]):
         with self._lock:
             if self._msg is not None and msg.header.stamp_ns < self._msg.header.stamp_ns:
                 return False
-            self._msg, self._t = msg, mono_s()
+            self._msg, self._t = msg, self._clock.mono_s()
         self.arrived.set()
         return True
 
@@ -84,7 +86,7 @@ class Latest(Generic[_S]):
         with self._lock:
             if self._msg is None:
                 return None, float("inf")
-            return self._msg, mono_s() - self._t
+            return self._msg, self._clock.mono_s() - self._t
 
 
 def _age(msg: Header | None, arrival_age_s: float, at: Stamp) -> float:
@@ -120,20 +122,23 @@ class ControllerHandlers:
         tally: Tally,
         halt: Callable[[], None] | None = None,
         halted: Callable[[], None] | None = None,
+        *,
+        clock: Clock = SYSTEM_CLOCK,
     ) -> None:
         s = config.controller
         self.tally = tally
+        self.clock = clock
         # An engage is acted on here, on the handler's thread, not at the loop's next tick:
         # ``halt`` (the zero command) once the latch holds in memory, before it is saved;
         # ``halted`` (the status, saying whether the stop could be saved) after.
         self.halt, self.halted = halt, halted
         self.tolerance_s = config.stack.clock_tolerance_s
         self.estop_release_max_age_s = s.estop_release_max_age_s
-        self.latch = EStopLatch(config.estop_path, now().wall_ns + int(self.tolerance_s * 1e9))
+        self.latch = EStopLatch(config.estop_path, clock.wall_ns() + int(self.tolerance_s * 1e9))
         cameras = list(config.all_cameras)
         self.arrived = threading.Event()  # new detections from any camera
-        self.dets: dict[str, Latest[Detections]] = {c: Latest(self.arrived) for c in cameras}
-        self.scan: Latest[LaserScan] = Latest()
+        self.dets: dict[str, Latest[Detections]] = {c: Latest(self.arrived, clock) for c in cameras}
+        self.scan: Latest[LaserScan] = Latest(clock=clock)
         self._det_keys = {c: tally.keys.detections(c) for c in cameras}
         self._det_gates = {
             c: FreshnessGate(s.detection_timeout_s, self.tolerance_s, BOOT_ID) for c in cameras
@@ -161,7 +166,7 @@ class ControllerHandlers:
         """A decoded message's fate: judge its freshness, keep it if fresh and newest, count
         the rest (``<name>_in``, ``<name>_stale|future|replay|late``; with ``camera``, also
         ``<counter>.<camera>``)."""
-        verdict, age = gate.check(msg.header, now())
+        verdict, age = gate.check(msg.header, self.clock.now())
         of = f" from {camera}" if camera else ""
         if verdict is not Verdict.FRESH:
             counter = contract.input_counter(name, verdict)
@@ -180,7 +185,7 @@ class ControllerHandlers:
         stop that can be saved. A latch that cannot be saved holds in memory and says so
         loudly."""
         tally, latch = self.tally, self.latch
-        at = now()
+        at = self.clock.now()
         latest_ns = at.wall_ns + int(self.tolerance_s * 1e9)  # no stamp the latch keeps is later
         try:
             msg = EStop.decode(payload)
@@ -217,56 +222,90 @@ class ControllerHandlers:
             tally.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
 
 
-class Outputs:
-    """The controller's cmd_vel and status, sent from the control loop and, on an e-stop
-    engage, from the e-stop handler's thread. ``lock`` is held by the loop from reading its
-    inputs to publishing its command: a command computed before an engage latched goes out
-    before the engage's zero, never after it."""
+class ControlLoop:
+    """The controller on ``node``'s bus, at ``node``'s clock: its handlers subscribed to every
+    camera's detections, the scan and the e-stop, and the control loop's body, :meth:`tick`.
 
-    def __init__(self, node: Node, config: Config) -> None:
+    ``run`` calls :meth:`tick` at least ``control_rate_hz`` times a second and at once when
+    new detections arrive (``handlers.arrived``), and :meth:`stop` last; an in-process test
+    calls them itself, on an in-memory bus with a fake clock. :meth:`close` undeclares the
+    subscriptions.
+    """
+
+    def __init__(self, config: Config, node: Node) -> None:
+        s = self.settings = config.controller
         self.node = node
-        self.mode = config.controller.mode
-        self.no_laser = config.controller.no_laser
-        self.lock = threading.RLock()
-        self.cmd_pub = node.publisher(node.keys.cmd_vel(), QoS.CONTROL)
-        self.status_pub = node.publisher(node.keys.controller_status(), QoS.TELEMETRY)
-
-    def send(self, cmd: VelocityCommand, at: Stamp, *, estop_saved: bool) -> None:
-        """``cmd`` on cmd_vel and the status, sharing one header stamped ``at``."""
-        with self.lock:
-            twist = self._twist(cmd, at)
-            status = ControllerStatus(
-                header=twist.header,
-                mode=self.mode,
-                target=cmd.target,
-                state=cmd.state,
-                reason=cmd.reason,
-                track_id=cmd.track_id,
-                estop_saved=estop_saved,
-                camera=cmd.camera,
-                stale_cameras=cmd.stale,
-                no_laser=self.no_laser,
-            )
-            self.status_pub.put(status.encode())
-
-    def halt(self) -> None:
-        """Zero on cmd_vel now (the status follows once the stop is saved)."""
-        with self.lock:
-            self._twist(VelocityCommand(0.0, 0.0, ControllerState.ESTOP, ""), now())
-            self.node.counters.add(contract.ESTOP_ZERO_AT_ONCE)
-
-    def _twist(self, cmd: VelocityCommand, at: Stamp) -> Twist:
-        twist = Twist(
-            header=self.node.header(at, frame_id="base_link"),
-            linear=(cmd.linear_x, 0.0, 0.0),
-            angular=(0.0, 0.0, cmd.angular_z),
-            input_stamp_ns=cmd.input_stamp_ns,
+        self.clock = node.clock
+        self.out = Outputs(node, config)
+        self.handlers = ControllerHandlers(
+            config, node, self.out.halt, self._halted, clock=node.clock
         )
-        self.cmd_pub.put(twist.encode())
-        self.node.counters.add(contract.COMMANDS_OUT)
-        if not cmd.is_zero:
-            self.node.counters.add(contract.COMMANDS_NONZERO)
-        return twist
+        latch = self.latch = self.handlers.latch
+        (node.log.warning if latch.engaged else node.log.info)("%s", latch.note)
+        if not latch.saved:
+            node.log.error("the e-stop state cannot be saved: %s", latch.describe())
+        cameras = config.all_cameras
+        det_keys = [node.keys.detections(c) for c in cameras]
+        self._subs: list[Declared] = [
+            *(
+                node.subscribe(k, partial(self.handlers.on_detections, c))
+                for c, k in zip(cameras, det_keys, strict=True)
+            ),
+            node.subscribe(node.keys.scan(), self.handlers.on_scan),
+            node.subscribe(node.keys.estop(), self.handlers.on_estop),
+        ]
+        self.controller = Controller(s, cameras)
+        node.log.info(
+            "mode %s on %s, targets %s", s.mode, ", ".join(det_keys), list(s.target_classes)
+        )
+        if s.no_laser:
+            node.log.warning(NO_LASER_WARNING)
+        self._last_state: ControllerState | None = None
+        # Detections that go stale between one and the next flip the state several times a
+        # second: the first changes are logged, then a summary each period (the metrics
+        # service's detections_late warning says why and what to change).
+        self._state_log = LogLimiter(clock=self.clock.mono_s)
+
+    def _halted(self) -> None:
+        """The e-stop's status, once the engage is saved (or could not be)."""
+        estop = stop_command(ControllerState.ESTOP, self.latch.describe())
+        self.out.send(estop, self.clock.now(), estop_saved=self.latch.saved)
+
+    def tick(self) -> float:
+        """One control tick: judge every input's age at one instant, send the command and
+        the status stamped with it, log a change of state, publish the counters (when due).
+        Returns the tick's instant (monotonic seconds on the node's clock)."""
+        s, handlers, latch, out = self.settings, self.handlers, self.latch, self.out
+        handlers.arrived.clear()  # before reading, so a message arriving now wakes the loop
+        with out.lock:  # an engage's zero waits for this command, never the reverse
+            # One instant per tick: the ages are judged at it and the command is stamped
+            # with it, so that a reader of cmd_vel can check the judgement.
+            at = self.clock.now()
+            tick = at.mono_ns / 1e9
+            sc, sc_arrival = handlers.scan.get()
+            views = {c: _view(d, at, s.detection_timeout_s) for c, d in handlers.dets.items()}
+            sc_age = _age(sc.header if sc is not None else None, sc_arrival, at)
+            inputs = Inputs(views, sc, sc_age, latch.engaged)
+            cmd = self.controller.step(inputs, tick)
+            if cmd.state == ControllerState.ESTOP:
+                cmd = dataclasses.replace(cmd, reason=latch.describe())
+            out.send(cmd, at, estop_saved=latch.saved)
+        if cmd.state != self._last_state:
+            log_state(self.node.log, self._state_log, cmd)
+            self._last_state = cmd.state
+        for line in self._state_log.due():
+            self.node.log.info("%s", line)
+        self.node.publish_counters()
+        return tick
+
+    def stop(self) -> None:
+        """Leave the robot still: the last word on cmd_vel is always a stop."""
+        stopped = VelocityCommand(0.0, 0.0, ControllerState.STOPPED, "shutdown")
+        self.out.send(stopped, self.clock.now(), estop_saved=self.latch.saved)
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
 
 
 def run(config: Config, stop: threading.Event) -> int:
@@ -281,75 +320,20 @@ def run(config: Config, stop: threading.Event) -> int:
     """
     s = config.controller
     with Node("controller", config, counters_period_s=s.counters_period_s) as node:
-        out = Outputs(node, config)
-
-        def halted() -> None:
-            """The e-stop's status, once the engage is saved (or could not be)."""
-            estop = stop_command(ControllerState.ESTOP, latch.describe())
-            out.send(estop, now(), estop_saved=latch.saved)
-
-        handlers = ControllerHandlers(config, node, out.halt, halted)
-        latch, scan = handlers.latch, handlers.scan
-        (node.log.warning if latch.engaged else node.log.info)("%s", latch.note)
-        if not latch.saved:
-            node.log.error("the e-stop state cannot be saved: %s", latch.describe())
-        cameras = config.all_cameras
-        det_keys = [node.keys.detections(c) for c in cameras]
-        subs = [
-            *(
-                node.subscribe(k, partial(handlers.on_detections, c))
-                for c, k in zip(cameras, det_keys, strict=True)
-            ),
-            node.subscribe(node.keys.scan(), handlers.on_scan),
-            node.subscribe(node.keys.estop(), handlers.on_estop),
-        ]
-        controller = Controller(s, cameras)
-        node.log.info(
-            "mode %s on %s, targets %s", s.mode, ", ".join(det_keys), list(s.target_classes)
-        )
-        if s.no_laser:
-            node.log.warning(NO_LASER_WARNING)
-        threading.Thread(
-            target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
-        ).start()
-        node.ready()
-        period = 1.0 / s.control_rate_hz
-        last_state: ControllerState | None = None
-        # Detections that go stale between one and the next flip the state several times a
-        # second: the first changes are logged, then a summary each period (the metrics
-        # service's detections_late warning says why and what to change).
-        state_log = LogLimiter()
+        loop = ControlLoop(config, node)
         try:
+            checker = threading.Thread(
+                target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
+            )
+            checker.start()
+            node.ready()
+            period = 1.0 / s.control_rate_hz
             while not stop.is_set():
-                handlers.arrived.clear()  # before reading, so a message arriving now wakes us
-                with out.lock:  # an engage's zero waits for this command, never the reverse
-                    # One instant per tick: the ages are judged at it and the command is
-                    # stamped with it, so that a reader of cmd_vel can check the judgement.
-                    at = now()
-                    tick = at.mono_ns / 1e9
-                    sc, sc_arrival = scan.get()
-                    views = {
-                        c: _view(d, at, s.detection_timeout_s) for c, d in handlers.dets.items()
-                    }
-                    sc_age = _age(sc.header if sc is not None else None, sc_arrival, at)
-                    inputs = Inputs(views, sc, sc_age, latch.engaged)
-                    cmd = controller.step(inputs, tick)
-                    if cmd.state == ControllerState.ESTOP:
-                        cmd = dataclasses.replace(cmd, reason=latch.describe())
-                    out.send(cmd, at, estop_saved=latch.saved)
-                if cmd.state != last_state:
-                    log_state(node.log, state_log, cmd)
-                    last_state = cmd.state
-                for line in state_log.due():
-                    node.log.info("%s", line)
-                node.publish_counters()
-                wait_either(handlers.arrived, stop, period - (mono_s() - tick))
-            # Leave the robot still: the last word on cmd_vel is always a stop.
-            stopped = VelocityCommand(0.0, 0.0, ControllerState.STOPPED, "shutdown")
-            out.send(stopped, now(), estop_saved=latch.saved)
+                tick = loop.tick()
+                wait_either(loop.handlers.arrived, stop, period - (node.clock.mono_s() - tick))
+            loop.stop()
         finally:
-            for sub in subs:
-                sub.undeclare()
+            loop.close()
     return 0
 
 

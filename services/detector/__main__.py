@@ -1,8 +1,9 @@
 """python -m services.detector [serve] [--config FILE] [--backend NAME] [--model FILE]
 
 serve (the default) runs the detector service on the Zenoh bus: newest frame in, detections out.
-What people run on photos, videos and models (detect, benchmark, fetch-model, fast-profile,
-export) is ``python -m tools.detector`` (``zstack detect`` ...).
+It only loads the models ``zstack prepare`` made: a missing one stops it with one line naming
+it and that command. What people run on photos, videos and models (detect, benchmark, prepare,
+fetch-model, fast-profile, export) is ``python -m tools.detector`` (``zstack detect`` ...).
 """
 
 from __future__ import annotations
@@ -46,9 +47,15 @@ def serve(args: argparse.Namespace) -> int:
             f"no detector worker {worker!r} (detector.workers, detector.worker_id); known: {known}"
         )
     setup_logging(worker)
+    from perception import PREPARE_COMMAND, NotPrepared
     from services.detector.service import run
 
-    return run(config, stop, worker)
+    try:
+        return run(config, stop, worker)
+    except NotPrepared as exc:  # one line naming what to run for this very config
+        words = [PREPARE_COMMAND, *(["--config", config.path] if config.path else [])]
+        words += [f"--{k}={v}" for k, v in overrides.items()]
+        raise exc.to_run(" ".join(words)) from exc
 
 
 COMMANDS = [Command("serve", "run the detector service on the Zenoh bus", _serve_arguments, serve)]

@@ -151,7 +151,7 @@ class DetectorSettings:
     docs/benchmarks.md, "Several cameras on one detector"); raise it on a GPU. Raising it is
     safe: with ``batch_choice`` "measured" the detector times batch 1, 2, 4, ... at start
     (``batch_probe_runs`` runs each) and uses a larger batch only where it saves at least
-    ``batch_min_gain`` of the time per image (services/detector/batching.py); "max" always
+    ``batch_min_gain`` of the time per image (perception/batching.py); "max" always
     fills rounds up to ``max_batch``.
     ``batch_profile`` is the (min, opt, max) batch a TensorRT engine is built for; left at
     (1, 1, 1), the engine is built for 1..the served batch instead.
@@ -160,7 +160,7 @@ class DetectorSettings:
     ``max_frame_pixels`` (width x height, JPEG or raw) is counted as ``frames_oversize`` and
     dropped before its pixels are decoded.
 
-    Post-processing, which the Detector (services/detector/pipeline.py) reads from here:
+    Post-processing, which the Detector (perception/pipeline.py) reads from here:
     ``conf`` is the least score kept (objectness x class score for YOLOv5-style models);
     ``iou`` the overlap above which a lower-scored box of the same class is suppressed;
     ``max_det`` caps detections per image (300 as in Ultralytics; the stack's config sets its
@@ -279,7 +279,7 @@ class TrackerSettings:
     after ``jumps_before_reset`` such frames in a row the stamps are believed and the tracks
     restart (a camera clock that really stepped). Only frames from another host are checked:
     a frame from this host is tracked on its monotonic stamp, which cannot step
-    (services/detector/tracker.py). ``enabled`` is the service's to read.
+    (perception/tracker.py). ``enabled`` is the service's to read.
     """
 
     enabled: bool = True

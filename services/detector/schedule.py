@@ -21,7 +21,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
-from common.clock import wall_ns
+from common.clock import SYSTEM_CLOCK, Clock
 
 _T = TypeVar("_T")
 
@@ -29,7 +29,7 @@ _T = TypeVar("_T")
 @dataclass(frozen=True, slots=True)
 class Waiting(Generic[_T]):
     """A camera's newest frame as a round takes it: ``received_ns`` is when that frame
-    arrived (``common.clock.wall_ns()``)."""
+    arrived (the slots' clock's ``wall_ns()``)."""
 
     camera: str
     item: _T
@@ -44,15 +44,17 @@ class _Slot(Generic[_T]):
 
 
 class CameraSlots(Generic[_T]):
-    """One latest-only slot per camera (thread-safe: Zenoh's threads put, the loop takes)."""
+    """One latest-only slot per camera (thread-safe: Zenoh's threads put, the loop takes); a
+    frame's arrival is stamped on ``clock``."""
 
-    def __init__(self, cameras: Iterable[str]) -> None:
+    def __init__(self, cameras: Iterable[str], clock: Clock = SYSTEM_CLOCK) -> None:
         self.cameras: tuple[str, ...] = tuple(cameras)
         if not self.cameras or len(set(self.cameras)) != len(self.cameras):
             raise ValueError(f"cameras must be distinct and at least one, got {self.cameras}")
         self._cond = threading.Condition()
         self._slots: dict[str, _Slot[_T]] = {}
         self._tickets = itertools.count()
+        self._clock = clock
 
     def put(self, camera: str, item: _T) -> bool:
         """Leave ``item`` in ``camera``'s slot; True when it replaced one nobody took (a drop).
@@ -61,7 +63,7 @@ class CameraSlots(Generic[_T]):
         """
         if camera not in self.cameras:
             raise KeyError(camera)
-        received = wall_ns()
+        received = self._clock.wall_ns()
         with self._cond:
             ticket = next(self._tickets)
             slot = self._slots.get(camera)

@@ -6,7 +6,7 @@ clock.
 A worker (``detector``, ``detector_<n>``) holds a pool token while in the pool and a serving
 token per camera it serves; it counts ``serving.<cam>`` (1 while it serves the camera),
 ``pool_load_permille``, ``pool_members``, ``cameras_gained`` and ``cameras_lost``
-(services/detector/service.py::PoolMember). The tokens go when the worker does (at once when
+(services/detector/membership.py::PoolMember). The tokens go when the worker does (at once when
 it exits or is killed, after Zenoh's lease when it hangs), so they, not the counters (a dead
 worker's last word), say who serves a camera.
 

@@ -14,7 +14,8 @@ from functools import partial
 from typing import TypeVar
 
 from common import reach
-from common.clock import mono_s, mono_to_unix_s
+from common.bus import Declared
+from common.clock import SYSTEM_CLOCK, Clock, mono_s
 from common.contracts import MetricsAnswer
 from common.counters import BAD_INPUT
 from common.errors import DecodeError, StackError
@@ -50,10 +51,16 @@ class MetricsHandlers:
     threads: the aggregator is only touched under ``lock``."""
 
     def __init__(
-        self, config: Config, tally: Tally, on_latency: LatencyListener | None = None
+        self,
+        config: Config,
+        tally: Tally,
+        on_latency: LatencyListener | None = None,
+        *,
+        clock: Clock = SYSTEM_CLOCK,
     ) -> None:
         s = self.settings = config.metrics
         self.tally = tally
+        self.clock = clock
         d = config.detector
         self.pool = LivePool(
             PoolAudit(camera_weights(config.all_cameras), d.pool_balance, d.pool_alarm_s)
@@ -80,7 +87,7 @@ class MetricsHandlers:
         max_timing_ms = self.settings.max_timing_ms
         self._take(
             "detections", Detections.decode, key, payload,
-            lambda m: self.agg.on_detections(m, mono_s(), camera=camera),
+            lambda m: self.agg.on_detections(m, self.clock.mono_s(), camera=camera),
             lambda m, _k: refuse_detections(m, max_timing_ms),
         )  # fmt: skip
 
@@ -102,7 +109,7 @@ class MetricsHandlers:
     def audit_pool(self) -> None:
         """Check the pool's tokens (common/pool_audit.py): a WARNING for what has been wrong
         for ``detector.pool_alarm_s``, a line when it clears; the answer shows what holds."""
-        now = mono_s()
+        now = self.clock.mono_s()
         with self.lock:
             if not self.pool.heard:
                 return
@@ -114,7 +121,13 @@ class MetricsHandlers:
 
     def on_cmd_vel(self, payload: bytes) -> None:
         key = self.tally.keys.cmd_vel()
-        self._take("cmd_vel", Twist.decode, key, payload, lambda m: self.agg.on_twist(m, mono_s()))
+        self._take(
+            "cmd_vel",
+            Twist.decode,
+            key,
+            payload,
+            lambda m: self.agg.on_twist(m, self.clock.mono_s()),
+        )
 
     def on_counters(self, key: str, payload: bytes) -> None:
         """``key``: the one the sample came on, which must name the service that counts."""
@@ -133,7 +146,7 @@ class MetricsHandlers:
             self.tally.reject(
                 contract.refused(why), f"{n} of {msg.service}'s counters refused: {why}"
             )
-        self.agg.on_counters(kept, mono_s())
+        self.agg.on_counters(kept, self.clock.mono_s())
 
     def _take(
         self,
@@ -163,6 +176,68 @@ class MetricsHandlers:
             feed(msg)
 
 
+class MetricsService:
+    """The metrics service on ``node``'s bus, at ``node``'s clock: its handlers subscribed to
+    every configured camera's detections, cmd_vel and every service's counters, the pool's
+    tokens watched, and the metrics query (``keys.metrics()``) answered with :meth:`answer`.
+
+    ``run`` calls :meth:`report` every period; an in-process test puts messages, moves its
+    fake clock and asks the query itself. :meth:`close` undeclares everything it declared.
+    """
+
+    def __init__(
+        self, config: Config, node: Node, on_latency: LatencyListener | None = None
+    ) -> None:
+        self.config = config
+        self.node = node
+        self.clock = node.clock
+        handlers = self.handlers = MetricsHandlers(config, node, on_latency, clock=node.clock)
+        keys = node.keys
+        # One subscriber per configured camera, so the camera is the one its key names;
+        # detections for a camera the config does not name (anyone may put them in peer
+        # mode) are not heard, so they cannot grow the answer.
+        self._declared: list[Declared] = [
+            *(
+                node.subscribe_keyed(
+                    keys.detections(camera), partial(handlers.on_detections, camera)
+                )
+                for camera in config.all_cameras
+            ),
+            node.subscribe(keys.cmd_vel(), handlers.on_cmd_vel),
+            node.subscribe_keyed(keys.all_counters(), handlers.on_counters),
+            node.bus.watch_tokens(keys.all_pool_members(), handlers.on_pool_member),
+            node.bus.watch_tokens(keys.all_pool_serving(), handlers.on_pool_serving),
+            node.bus.serve(keys.metrics(), lambda _key, _q: strict_json(self.answer()).encode()),
+        ]
+        self._next_report = self.clock.mono_s() + config.metrics.report_period_s
+
+    def answer(self) -> MetricsAnswer:
+        """The query's answer: the aggregate at this instant, and the warnings it brings."""
+        self.handlers.audit_pool()
+        at = self.clock.now()
+        to_unix = at.wall_ns / 1e9 - at.mono_ns / 1e9  # the timeline's times in Unix seconds
+        with self.handlers.lock:
+            out = self.handlers.agg.answer(self.node.header(at), at.mono_ns / 1e9, to_unix)
+        out["warnings"] = advise(self.config, out)
+        return out
+
+    def report(self) -> None:
+        """Audit the pool's tokens; once a ``report_period_s``, log the figures in a line."""
+        self.handlers.audit_pool()
+        now = self.clock.mono_s()
+        if now < self._next_report:
+            return
+        self._next_report = now + self.config.metrics.report_period_s
+        with self.handlers.lock:
+            snap = self.handlers.agg.snapshot(self.node.header(), now)
+        self.node.log.info("%s", report_line(snap))
+
+    def close(self) -> None:
+        """Undeclare the queryable first, then the watches and the subscriptions."""
+        for declared in reversed(self._declared):
+            declared.undeclare()
+
+
 def run(config: Config, stop: threading.Event) -> int:
     """Serve metrics until ``stop`` is set."""
     s = config.metrics
@@ -174,56 +249,18 @@ def run(config: Config, stop: threading.Event) -> int:
         exporter = PrometheusExporter()
         listener = exporter.observe
     with Node("metrics", config) as node:
-        handlers = MetricsHandlers(config, node, listener)
-        agg, lock = handlers.agg, handlers.lock
-
-        def answer() -> MetricsAnswer:
-            handlers.audit_pool()
-            with lock:
-                out = agg.answer(node.header(), mono_s(), mono_to_unix_s())
-            out["warnings"] = advise(config, out)
-            return out
-
-        keys = node.keys
-        # One subscriber per configured camera, so the camera is the one its key names;
-        # detections for a camera the config does not name (anyone may put them in peer
-        # mode) are not heard, so they cannot grow the answer.
-        subs = [
-            *(
-                node.subscribe_keyed(
-                    keys.detections(camera), partial(handlers.on_detections, camera)
-                )
-                for camera in config.all_cameras
-            ),
-            node.subscribe(keys.cmd_vel(), handlers.on_cmd_vel),
-            node.subscribe_keyed(keys.all_counters(), handlers.on_counters),
-        ]
-
-        watches = [
-            node.bus.watch_tokens(keys.all_pool_members(), handlers.on_pool_member),
-            node.bus.watch_tokens(keys.all_pool_serving(), handlers.on_pool_serving),
-        ]
-        queryable = node.bus.serve(keys.metrics(), lambda _key, _q: strict_json(answer()).encode())
-        if exporter is not None:
-            port = exporter.start(answer, s.prometheus_host, s.prometheus_port)
-            node.log.info("prometheus metrics on http://%s:%d/metrics", s.prometheus_host, port)
-        node.ready()
-        next_report = mono_s() + s.report_period_s
+        service = MetricsService(config, node, listener)
         try:
+            if exporter is not None:
+                port = exporter.start(service.answer, s.prometheus_host, s.prometheus_port)
+                node.log.info("prometheus metrics on http://%s:%d/metrics", s.prometheus_host, port)
+            node.ready()
             while not stop.wait(min(s.report_period_s, config.detector.pool_alarm_s / 2)):
-                handlers.audit_pool()
-                if mono_s() < next_report:
-                    continue
-                next_report = mono_s() + s.report_period_s
-                with lock:
-                    snap = agg.snapshot(node.header(), mono_s())
-                node.log.info("%s", report_line(snap))
+                service.report()
         finally:
             if exporter is not None:
                 exporter.close()
-            queryable.undeclare()
-            for sub in [*subs, *watches]:
-                sub.undeclare()
+            service.close()
     return 0
 
 

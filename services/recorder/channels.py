@@ -16,10 +16,10 @@ frames and detections go on its own topics, as the bridge maps them (``ros2.came
 ``/rear/camera/rgb/image_raw``, ``/rear/detections``), the camera read from the stack key.
 
 Everything else, and what the ROS types cannot carry (the detector's timings, the frame's
-sequence, the command's ``input_stamp_ns``), is JSON on the stack's own key: Detections and
-Twist are written twice, once each way. A JSON channel has no schema record: rosbags (0.11)
-refuses to open a file with a ``jsonschema`` schema, so the JSON schema travels in the
-channel's metadata (``jsonschema``), with the message type (``stack_message``).
+sequence, the detections' columns, the command's ``input_stamp_ns``), is JSON on the stack's
+own key: Detections and Twist are written twice, once each way. A JSON channel has no schema
+record: rosbags (0.11) refuses to open a file with a ``jsonschema`` schema, so the JSON schema
+travels in the channel's metadata (``jsonschema``), with the message type (``stack_message``).
 
 An MCAP message's ``sequence`` is the stack header's ``seq``, its ``publish_time`` the header's
 stamp and its ``log_time`` when the recorder received it.
@@ -32,6 +32,7 @@ import functools
 import json
 import types
 import typing
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -107,7 +108,7 @@ def _json_type(hint: Any) -> dict[str, Any]:
         return {"type": "array"}
     if origin is tuple:
         return {"type": "array"}
-    if origin is dict:
+    if origin in (dict, Mapping):  # Boxes' columns: name -> values
         return {"type": "object", "additionalProperties": _json_type(typing.get_args(hint)[1])}
     if dataclasses.is_dataclass(hint):
         return json_schema(hint)  # type: ignore[arg-type]
@@ -149,7 +150,7 @@ def _plain(value: Any) -> Any:
         return value.tolist()
     if isinstance(value, tuple | list):
         return [_plain(v) for v in value]
-    if isinstance(value, dict):
+    if isinstance(value, Mapping):  # a dict, or Boxes' columns (read-only): name -> values
         return {str(k): _plain(v) for k, v in value.items()}
     if isinstance(value, float) and not np.isfinite(value):
         return None  # JSON has no NaN or inf

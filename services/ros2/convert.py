@@ -143,7 +143,9 @@ def detections_to_ros(distro: RosDistro, dets: Detections) -> RosMessage:
 
     One hypothesis per detection (class name, score); the box as centre and size in pixels;
     ``id`` the track id, "" without one. Every Detection2D carries the array's header (the
-    frame's). The pose is unknown: identity, zero covariance.
+    frame's). The pose is unknown: identity, zero covariance. The boxes' named columns
+    (``distance_m`` ...) have no slot in vision_msgs and are left out (docs/ros2.md): the
+    recorder's JSON channel and the viewer's labels carry them.
     """
     types = typestore_for(distro).types
     header = ros_header(distro, dets.header.stamp_ns, dets.header.frame_id)

@@ -23,7 +23,7 @@ from foxglove.messages import (
     Timestamp,
 )
 
-from common.annotate import class_colour
+from common.annotate import class_colour, column_labels
 from common.contracts import MetricsAnswer
 from common.counters import BAD_INPUT
 from common.errors import ImageError
@@ -98,9 +98,11 @@ def _colour(class_id: int) -> Color:
     return Color(r=r / 255, g=g / 255, b=b / 255, a=1.0)
 
 
-def label(name: str, score: float, track_id: int, locked: bool) -> str:
-    """What a box says: ``person 0.87 #3``, with ``LOCKED`` before the controller's target."""
+def label(name: str, score: float, track_id: int, locked: bool, columns: str = "") -> str:
+    """What a box says: ``person 0.87 #3``, with ``LOCKED`` before the controller's target
+    and the box's columns after (``distance_m=2.41``: common.annotate.column_labels)."""
     text = f"{name} {score:.2f}" + (f" #{track_id}" if track_id >= 0 else "")
+    text += f" {columns}" if columns else ""
     return f"LOCKED {text}" if locked else text
 
 
@@ -108,7 +110,8 @@ def image_annotations(
     dets: Detections, width: int, height: int, locked_track: int
 ) -> ImageAnnotations:
     """Each detection as a box outline and a label on a ``width`` x ``height`` image (the
-    size the image is sent at; the boxes are scaled from the detector's image). The box whose
+    size the image is sent at; the boxes are scaled from the detector's image); the label
+    names every column with its value (``distance_m=2.41``). The box whose
     track id is ``locked_track`` (the controller's target; -1: none) is drawn thicker, in red."""
     ts = stamp(dets.header.stamp_ns)
     sx, sy = width / dets.image_width, height / dets.image_height
@@ -116,10 +119,11 @@ def image_annotations(
     xyxy = (boxes.xyxy.astype(np.float64) * np.array([sx, sy, sx, sy])).tolist()
     n = len(xyxy)
     tracks = boxes.track_ids.tolist() if boxes.track_ids is not None else [-1] * n
+    extras = column_labels(boxes.columns, n)
     points: list[PointsAnnotation] = []
     texts: list[TextAnnotation] = []
-    for (x1, y1, x2, y2), name, score, cid, tid in zip(
-        xyxy, dets.class_names, boxes.scores.tolist(), boxes.class_ids.tolist(), tracks,
+    for (x1, y1, x2, y2), name, score, cid, tid, extra in zip(
+        xyxy, dets.class_names, boxes.scores.tolist(), boxes.class_ids.tolist(), tracks, extras,
         strict=True,
     ):  # fmt: skip
         locked = tid >= 0 and tid == locked_track
@@ -134,7 +138,7 @@ def image_annotations(
                 thickness=LOCKED_THICKNESS_PX if locked else BOX_THICKNESS_PX,
             )
         )
-        text = label(name, score, tid, locked)
+        text = label(name, score, tid, locked, extra)
         lx, ly = label_position(x1, y1, text, width)
         texts.append(
             TextAnnotation(

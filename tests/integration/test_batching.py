@@ -13,8 +13,8 @@ import pytest
 
 from common.errors import BackendUnavailable
 from common.images import load_sample
+from perception.pipeline import Detector
 from runtimes import Backend, open_backend
-from services.detector.pipeline import Detector
 
 pytestmark = pytest.mark.integration
 

@@ -15,11 +15,11 @@ import pytest
 import torch
 from skimage import data
 
+from perception.pipeline import Detector
+from perception.types import DetectionResult
 from runtimes import BACKENDS
 from runtimes import cuda as cuda_backend
 from runtimes.onnx import OnnxBackend
-from services.detector.pipeline import Detector
-from services.detector.types import DetectionResult
 
 pytestmark = pytest.mark.integration
 

@@ -20,8 +20,8 @@ import pytest
 from onnx import TensorProto, helper, numpy_helper
 from skimage import data
 
-from services.detector.decode import Family
-from services.detector.pipeline import Detector
+from perception.decode import Family
+from perception.pipeline import Detector
 from tests.integration.conftest import run_detector_cli
 
 pytestmark = pytest.mark.integration

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 from faster_coco_eval import COCO, COCOeval_faster
 
+from perception.pipeline import Detector
 from services.detector.contract import DetectorSettings
-from services.detector.pipeline import Detector
 from tools.evaluation.data.write_images import ANNOTATIONS, write_images
 from tools.evaluation.datasets import load_dataset
 from tools.evaluation.evaluate import DEFAULT_EVAL_CONF, detect_dataset, score

@@ -1,6 +1,7 @@
-"""The fast profile under a deadline: measured ahead of time by a command of its own (progress
-on stderr, the choice on stdout, Ctrl-C or SIGTERM stops it at once leaving nothing
-half-written), and a stack that starts from the cached choice, never measuring at start-up."""
+"""The fast profile under a deadline: measured ahead of time by ``zstack prepare`` (progress on
+stderr, the model the detector will load on stdout, Ctrl-C or SIGTERM stops it at once leaving
+nothing half-written), and a stack that starts from the cached choice, never measuring at
+start-up."""
 
 from __future__ import annotations
 
@@ -14,7 +15,6 @@ from pathlib import Path
 import pytest
 
 from common.lifecycle import EXIT_INTERRUPTED
-from services.detector.variants import Variant
 from tests.integration.conftest import REPO, write_config
 
 pytestmark = pytest.mark.integration
@@ -30,8 +30,8 @@ def _supervise(config: Path, seconds: int) -> subprocess.CompletedProcess[str]:
     )  # fmt: skip
 
 
-def _fast_profile(config: Path) -> list[str]:
-    return [sys.executable, "-m", "tools.detector", "fast-profile", "--config", str(config)]
+def _prepare(config: Path) -> list[str]:
+    return [sys.executable, "-m", "tools.detector", "prepare", "--config", str(config)]
 
 
 def test_measured_ahead_started_from_the_cache(tmp_path: Path, default_model: Path) -> None:
@@ -49,12 +49,13 @@ def test_measured_ahead_started_from_the_cache(tmp_path: Path, default_model: Pa
     assert done.returncode == 2, done.stderr[-3000:]
     assert time.monotonic() - started < 45, "the detector measured at start-up"
     last = done.stderr.strip().splitlines()[-1]
-    assert "detector" in last and "zstack fast-profile" in last and len(last) < 500, last
+    assert "detector" in last and f"zstack prepare --config {config}" in last, last
+    assert 'detector.profile = "fast"' in last and len(last) < 500, last
     assert "Traceback" not in done.stderr
 
     # 2. SIGTERM while it quantizes: it stops at once and leaves nothing half-written.
     proc = subprocess.Popen(
-        _fast_profile(config), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        _prepare(config), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
     assert proc.stderr is not None
     seen = ""
@@ -67,17 +68,18 @@ def test_measured_ahead_started_from_the_cache(tmp_path: Path, default_model: Pa
         rest = proc.communicate(timeout=20)[1]
     except subprocess.TimeoutExpired:
         proc.kill()
-        pytest.fail(f"fast-profile went on 20 s after SIGTERM:\n{seen}")
+        pytest.fail(f"prepare went on 20 s after SIGTERM:\n{seen}")
     assert proc.returncode == EXIT_INTERRUPTED, seen + rest
     left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith((".int8-", "model.")))
     assert left == ["model.onnx"], left
 
-    # 3. Measured: the choice on stdout alone; the stack then starts from the cache.
-    done = subprocess.run(_fast_profile(config), cwd=REPO, capture_output=True, text=True,
+    # 3. Prepared: the chosen variant's model file on stdout alone; the stack then starts from
+    # the cache.
+    done = subprocess.run(_prepare(config), cwd=REPO, capture_output=True, text=True,
                           timeout=600)  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     (chosen,) = done.stdout.splitlines()
-    assert Variant.parse(chosen).imgsz == 640
+    assert Path(chosen).is_file() and Path(chosen).parent == tmp_path, chosen
     assert "fast profile: " in done.stderr and "[measured now]" in done.stderr
     done = _supervise(config, 15)
     assert done.returncode == 0, done.stderr[-3000:]

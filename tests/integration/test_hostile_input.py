@@ -20,10 +20,9 @@ from common.clock import BOOT_ID, now
 from common.frames import image_to_frame
 from common.images import load_sample
 from common.messages import Detections, Frame, Header, ServiceCounters
-from common.zenoh_bus import Publisher, QoS
 from tests.integration.conftest import Stack, wait_for, write_config
 from tests.unit.common.test_pixel_budget import bomb
-from tests.unit.detector.test_nonfinite import constant_model
+from tests.unit.perception.test_nonfinite import constant_model
 from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration
@@ -80,7 +79,9 @@ def warnings_of(stack: Stack, service: str) -> list[str]:
 
 def test_bombs_are_dropped_and_real_frames_still_detected(stack: Stack) -> None:
     key = stack.keys.frame("front")
-    pub = Publisher(stack.session, key, QoS.CONTROL)  # blocks rather than drops: exact counts
+    # Blocking, so that every bomb is delivered and can be counted (every role of the stack's
+    # own publishers drops under congestion: docs/security.md, QoS by role).
+    pub = stack.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
     _, dets = stack.subscribe(stack.keys.detections("front"))
     photo = load_sample("cameraman")
     data = bomb()

@@ -1,8 +1,11 @@
-"""Detections that come too late for the dead-man, on real processes (the controller and the
-metrics service under the supervisor; the test's own session stands in for a slow detector).
-The controller flips between stale and moving on each detection: it says so once, as a WARNING
-with the figures and the fixes, in the supervisor's output and in ``zstack query``, and its
-log is not flooded with a line per state change.
+"""Detections that come too late for the dead-man, on real processes (the metrics service under
+the supervisor; the test's own session stands in for a slow detector): the metrics answer says
+so with the figures and the fixes (``zstack query``), and the supervisor says it once, as a
+WARNING, however many status lines name it.
+
+The controller's side (it flips between stale and moving on each detection, and summarises the
+flip-flop instead of logging each change) and the warning's text for each case are in-process:
+tests/unit/controller/test_loop.py and tests/unit/metrics/test_service.py, test_advice.py.
 """
 
 from __future__ import annotations
@@ -16,9 +19,8 @@ import sys
 import pytest
 
 from common.clock import now
-from common.messages import ControllerStatus
 from tests.integration.conftest import REPO, Stack, wait_for
-from tests.integration.test_controller_cameras import Feeder, header
+from tests.integration.feeder import Feeder, header
 from tests.integration.test_safety import person
 
 pytestmark = pytest.mark.integration
@@ -27,7 +29,6 @@ pytestmark = pytest.mark.integration
 # second. They arrive fresh (under the 1 s timeout) and go stale 0.1 s later, 0.1 s before the
 # next one comes.
 LATE_S = 0.9
-SUMMARY = "state changes:"  # the controller's summary of the state changes it did not log
 
 
 def late_person() -> bytes:
@@ -35,25 +36,16 @@ def late_person() -> bytes:
     return dataclasses.replace(dets, published_ns=now().wall_ns).encode()
 
 
-def state_changes(raw: list[bytes]) -> int:
-    states = [ControllerStatus.decode(s).state for s in list(raw)]
-    return sum(a != b for a, b in itertools.pairwise(states))
-
-
 def test_late_detections_are_said_once_with_the_fixes(make_stack) -> None:  # type: ignore[no-untyped-def]
-    stack: Stack = make_stack(supervisor={"services": ["controller", "metrics"]})
-    stack.wait_ready({"controller", "metrics"})
-    _, statuses = stack.subscribe(stack.keys.controller_status())
+    stack: Stack = make_stack(supervisor={"services": ["metrics"]})
+    stack.wait_ready({"metrics"})
     front = stack.keys.detections("front")
     feeder = Feeder(stack)
     rounds = itertools.count()  # the feeder's rounds are 50 ms apart: one in four, 5 Hz
     feeder.feed(lambda: {front: late_person()} if next(rounds) % 4 == 0 else {})
     try:
-        # The controller summarises the flip-flop in place of a line per change (the summary
-        # comes once the limiter's period is over).
-        wait_for(lambda: SUMMARY in stack.log(), 60, "the summary of the state changes")
         wait_for(
-            lambda: stack.log().count("WARNING detections_late") >= 3, 30, "three status lines"
+            lambda: stack.log().count("WARNING detections_late") >= 3, 60, "three status lines"
         )
         query = subprocess.run(
             [sys.executable, "-m", "services.metrics", "query", "--config",
@@ -64,7 +56,6 @@ def test_late_detections_are_said_once_with_the_fixes(make_stack) -> None:  # ty
         told = json.loads(query.stdout)["warnings"]["detections_late"]
     finally:
         feeder.close()
-    changes = state_changes(statuses)
     assert stack.stop() == 0, stack.log()
     log = stack.log_path.read_text()
     for text in (told, log):
@@ -74,6 +65,3 @@ def test_late_detections_are_said_once_with_the_fixes(make_stack) -> None:  # ty
     # Said once, as a WARNING, however many status lines name it.
     assert log.count("detections come too late") == 1, log
     assert "supervisor WARNING detections come too late" in log, log
-    logged = log.count("controller INFO state ")
-    assert changes >= 20, f"only {changes} state changes: the case did not flip-flop"
-    assert logged < changes / 2, f"{logged} state lines for {changes} state changes"

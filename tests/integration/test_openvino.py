@@ -15,7 +15,7 @@ from skimage import data
 from common.letterbox import Preprocessor
 from modelprep.quantize.head import head_nodes
 from modelprep.quantize.nncf_int8 import quantize
-from services.detector.pipeline import Detector
+from perception.pipeline import Detector
 from tests.integration.test_detect_real import CHELSEA_CAT, COFFEE_CUP, bgr, box_iou
 
 pytestmark = pytest.mark.integration

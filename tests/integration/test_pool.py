@@ -3,8 +3,8 @@ processes, two detector processes (``detector.workers = 2``), the controller and
 all on one private endpoint. One stack for every step, in order:
 
 1. steady state: every camera is served by exactly one worker (their ``serving.<cam>``
-   counters split the cameras), every camera's frames come back as detections, and no frame
-   is detected twice over a window;
+   counters split the cameras), every camera's frames come back as detections, no frame is
+   detected twice over a window, and each camera's info queryable names the model;
 2. SIGKILL one worker: the survivor serves each of its cameras (its serving token, declared
    once it has subscribed to the camera's frames) within :data:`KILL_BOUND_S` of the kill (the
    dead one's links close at once), and detects frames captured after the kill; the metrics
@@ -19,6 +19,7 @@ all on one private endpoint. One stack for every step, in order:
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import threading
@@ -202,6 +203,11 @@ def test_two_workers_share_the_cameras_and_take_over_a_dead_or_hung_one(
     assert {c: m["served_by"] for c, m in answer["cameras"].items()} == {
         c: w for w, cams in split.items() for c in cams
     }
+    for cam in CAMERAS:  # every worker answers for every camera, served or not
+        replies = [r.ok for r in stack.session.get(stack.keys.detector_info(cam), timeout=10.0)]
+        infos = [json.loads(r.payload.to_string()) for r in replies if r is not None]
+        assert infos, f"no info for {cam}"
+        assert {(i["model"], i["backend"]) for i in infos} == {("yolov5s-coco-320.onnx", "onnx")}
 
     # 2. SIGKILL a worker: its cameras come back from the other within the bound.
     victim, survivor = WORKERS[1], WORKERS[0]

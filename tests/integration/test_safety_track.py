@@ -1,7 +1,9 @@
 """Track mode obeys the forward-safety rules of follow mode, on real processes: the controller
-alone, the test's own session publishing a centred person and the scan. An obstacle within
-the safety distance straight ahead, no scan at all, or a stale scan: never a forward command
-(turning in place stays allowed). The robot drives only when the way is known clear.
+alone, the test's own session publishing a centred person and the scan. No scan at all, or a
+stale scan: never a forward command (turning in place stays allowed). The robot drives only
+when the way is known clear. An obstacle within the safety distance is the obstacle
+scenario's on real processes (test_scenarios.py, both modes); every case, with the distances,
+runs in-process too (tests/unit/controller/test_loop.py).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import pytest
 
 from common.messages import ControllerStatus, LaserScan, Twist
 from tests.integration.conftest import Stack, wait_for
-from tests.integration.test_controller_cameras import Feeder, all_clear, header, people
+from tests.integration.feeder import Feeder, all_clear, header, people
 
 pytestmark = pytest.mark.integration
 
@@ -63,10 +65,9 @@ def test_track_mode_never_drives_into_an_obstacle_or_blind(make_stack) -> None: 
     stale_s = s.scan_timeout_s + 1.0
     # Each case makes its inputs afresh every round (the detections are stamped as they go).
     cases: dict[str, Callable[[], dict[str, bytes]]] = {
-        **{f"obstacle at {d} m": partial(person_and_scan, front, scan, d) for d in (0.1, 0.2, 0.3)},
         "no scan": lambda: {front: people(1)},
         f"a scan {stale_s:.1f} s old": partial(person_and_scan, front, scan, 8.0, stale_s),
-    }  # fmt: skip
+    }
     feeder = Feeder(stack)
     try:
         for case, inputs in cases.items():

@@ -107,7 +107,20 @@ def samples(stamp_ns: int | None = 1_700_000_000_000_000_000) -> dict[type[Messa
             Frame(header=h, encoding="mono8", width=3, height=1, data=b"\x00\x01\x02"),
             Frame(header=h, encoding="jpeg", width=16, height=8, data=jpeg()),
         ],
-        Detections: [dets],
+        # With named columns too, so that mutations reach their map, dtypes and bytes.
+        Detections: [
+            dets,
+            replace(
+                dets,
+                boxes=dets.boxes.with_columns(
+                    {
+                        "distance_m": np.array([2.5, np.nan]),
+                        "mask_id": np.array([1, -1], np.int32),
+                        "occluded": np.array([False, True]),
+                    }
+                ),
+            ),
+        ],
         Twist: [Twist(header=h, linear=(0.3, 0.0, 0.0), angular=(0.0, 0.0, -0.5))],
         LaserScan: [
             LaserScan(

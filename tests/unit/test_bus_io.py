@@ -66,9 +66,11 @@ def _touches(tree: ast.Module) -> Iterator[str]:
 
 
 def bus_modules() -> dict[str, list[str]]:
-    """Every module under services/ that touches the bus, with where."""
+    """Every module under services/ (and the detection library, perception/) that touches the
+    bus, with where."""
     found = {}
-    for path in sorted((ROOT / "services").rglob("*.py")):
+    paths = [*(ROOT / "services").rglob("*.py"), *(ROOT / "perception").rglob("*.py")]
+    for path in sorted(paths):
         where = list(_touches(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))))
         if where:
             found[path.relative_to(ROOT).as_posix()] = where

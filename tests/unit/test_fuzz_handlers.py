@@ -29,7 +29,7 @@ from common.messages import (
 from common.node import Tally
 from services.controller.contract import ControllerSettings
 from services.controller.service import ControllerHandlers
-from services.detector.service import DetectorHandlers
+from services.detector.handlers import DetectorHandlers
 from services.metrics.service import MetricsHandlers
 from services.ros2 import data_key
 from services.ros2.contract import Ros2Settings

@@ -30,6 +30,7 @@ from common.messages import ControllerStatus, Detections, Frame, GroundTruth, La
 from common.node import Tally
 from services.recorder import service as recorder
 from services.recorder.channels import JSON, Translator
+from services.recorder.contract import RecorderSettings
 from services.viewer import service as viewer
 from services.viewer.channels import Channels
 from services.viewer.contract import ViewerSettings
@@ -228,7 +229,9 @@ def _read_back(path: Path) -> int:
 
 def test_the_recorders_handlers_and_writer(tmp_path: Path) -> None:
     path = tmp_path / "fuzz.mcap"
-    config, ledger = Config(), _Ledger()
+    # The writer takes what is queued every flush_period_s / 2 at most: at the shortest period
+    # each payload waits 25 ms at most for it, not 100 ms.
+    config, ledger = Config(recorder=RecorderSettings(flush_period_s=0.05)), _Ledger()
     tally = Tally(recorder.SERVICE, config)
     with recorder.Recorder(tally, path, config) as rec:
         keys = recorder.subscriptions(tally.keys, list(config.all_cameras))

@@ -11,11 +11,11 @@ name a project module, absolutely or as a submodule of the table's own module (m
 (``python -m``, ``runpy`` in deploy/zstack.py) is not an import.
 
 Units. For package cycles and layers each module belongs to one unit: ``common``, ``stack``,
-``runtimes`` and ``deploy`` are one unit each; below ``services``, ``tools`` and ``modelprep``
-each second level is one (``services.detector``, ``tools.evaluation``, ``modelprep.quantize``,
-and a module directly in the folder is its own: ``tools.launch``, ``modelprep.files``); a
-service's contract is a unit of its own (``services.detector.contract``), so that what reads
-it (the stack, other services) does not depend on the service.
+``runtimes``, ``perception`` and ``deploy`` are one unit each; below ``services``, ``tools``
+and ``modelprep`` each second level is one (``services.detector``, ``tools.evaluation``,
+``modelprep.quantize``, and a module directly in the folder is its own: ``tools.launch``,
+``modelprep.files``); a service's contract is a unit of its own (``services.detector.contract``),
+so that what reads it (the stack, other services) does not depend on the service.
 
 Layers: who may import whom (``_allowed`` is exactly this table).
 
@@ -28,10 +28,14 @@ a contract     common, another service's contract (what it reads of it); a contr
 stack          common, stack, the services' contracts (it assembles them)
 runtimes       common, runtimes, modelprep, the detector's contract (its settings)
 modelprep.X    common, modelprep
-services.X     common, stack, runtimes, modelprep, its own package, another service's package
-               root (``services.Y``, its public API) or contract, never its internals; never
-               tools or deploy
-tools.X        anything but deploy (a tool starts the supervisor as a process)
+perception     common, runtimes, modelprep, perception (the detection library), the
+               detector's contract (its settings)
+services.X     common, stack, runtimes, modelprep, its own package, ``perception`` (the package
+               root: its public API, never its modules), another service's package root
+               (``services.Y``, its public API) or contract, never its internals; never tools
+               or deploy
+tools.X        anything but deploy (a tool starts the supervisor as a process), and of
+               perception only its package root (its public API)
 deploy         common, stack, the services' contracts, deploy
 =============  ==========================================================================
 
@@ -49,9 +53,9 @@ from collections.abc import Container, Iterable, Iterator, Mapping
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGES = ("common", "stack", "runtimes", "modelprep", "services", "tools", "deploy")
+PACKAGES = ("common", "stack", "runtimes", "modelprep", "perception", "services", "tools", "deploy")
 #: Units that are a whole top-level package (the others are split at the second level).
-WHOLE = ("common", "stack", "runtimes", "deploy")
+WHOLE = ("common", "stack", "runtimes", "perception", "deploy")
 
 #: Module -> the project modules it imports, each with the line of its first import there.
 Graph = dict[str, dict[str, int]]
@@ -264,14 +268,21 @@ def _allowed(module: str, target: str) -> bool:
         return target_top in ("common", "runtimes", "modelprep") or is_contract(target)
     if top == "modelprep":
         return target_top in ("common", "modelprep")
+    if top == "perception":
+        own = ("common", "runtimes", "modelprep", "perception")
+        return target_top in own or is_contract(target)
     if top == "services":
         if target_top in ("common", "stack", "runtimes", "modelprep") or is_contract(target):
             return True
+        if target_top == "perception":
+            return target == "perception"  # its public API, never its modules
         if target_top != "services":
             return False  # tools, deploy
         own = unit(module)
         return target == own or target.startswith(f"{own}.") or target.count(".") == 1
     if top == "tools":
+        if target_top == "perception":
+            return target == "perception"
         return target_top != "deploy"
     if top == "deploy":
         return target_top in ("common", "stack", "deploy") or is_contract(target)
@@ -337,7 +348,8 @@ def test_units_are_the_whole_package_or_its_second_level() -> None:
     assert unit("runtimes.onnx_torch.ops") == "runtimes"
     assert unit("deploy.supervisor") == "deploy"
     assert unit("common.boxes") == "common"
-    assert unit("services.detector.pipeline") == "services.detector"
+    assert unit("perception.pipeline") == "perception"
+    assert unit("services.detector.pool") == "services.detector"
     assert unit("services.detector") == "services.detector"
     assert unit("tools.evaluation.datasets") == "tools.evaluation"
     assert unit("tools.launch") == "tools.launch"
@@ -401,16 +413,27 @@ def test_the_layering_rule_refuses_what_the_table_refuses() -> None:
     assert not _allowed("services.recorder", "deploy.processes")
     assert not _allowed("services.detector.service", "deploy")
     # nor another service's internals
-    assert not _allowed("services.metrics.service", "services.detector.pipeline")
+    assert not _allowed("services.metrics.service", "services.detector.pool")
     assert _allowed("services.metrics.service", "services.detector")
+    # the detection library's public API, never its modules
+    assert _allowed("services.detector.service", "perception")
+    assert not _allowed("services.detector.service", "perception.pipeline")
+    assert _allowed("tools.evaluation.evaluate", "perception")
+    assert not _allowed("tools.evaluation.evaluate", "perception.pipeline")
+    # the library itself: below the services and the tools
+    assert _allowed("perception.variants", "modelprep.quantize")
+    assert _allowed("perception.pipeline", "runtimes.base")
+    assert not _allowed("perception.pipeline", "services.detector")
+    assert not _allowed("perception.loading", "tools.detector.fast_profile")
     # tools anything but deploy
-    assert _allowed("tools.evaluation.evaluate", "services.detector.pipeline")
+    assert _allowed("tools.evaluation.evaluate", "services.sim.scenarios")
     assert _allowed("tools.scenarios.runner", "tools.launch")
     assert not _allowed("tools.scenarios.runner", "deploy.processes")
     # the lower floors
     assert not _allowed("common.frames", "services.detector")
     assert not _allowed("common.frames", "runtimes.base")
     assert not _allowed("runtimes.base", "services.detector")
+    assert not _allowed("runtimes.base", "perception")
     assert _allowed("runtimes.openvino", "modelprep.quantize")
     assert not _allowed("modelprep.quantize", "runtimes.base")
     assert not _allowed("deploy.supervisor", "services.metrics")

@@ -1,6 +1,6 @@
 """Time per image by batch size on one backend, with the choice the detector would make.
 
-The detector's start-up measurement (services/detector/batching.py) times the whole detection
+The detector's start-up measurement (perception/batching.py) times the whole detection
 (letterbox, inference, decoding) at batch 1, 2, 4 ... and keeps a batch only where it saves
 ``batch_min_gain`` per image. This runs the same measurement on its own, on any backend, with
 more runs, and also times the model alone (``infer`` on a ready batch), so that a reader sees
@@ -21,8 +21,7 @@ from typing import Any
 import numpy as np
 
 from common.clock import perf_s
-from services.detector.batching import PROBE_SHAPE, measure, probe_sizes
-from services.detector.pipeline import Detector
+from perception import PROBE_SHAPE, Detector, measure_batch, probe_sizes
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,7 +61,7 @@ def run(options: BatchOptions, say: Callable[[str], None]) -> int:
     try:
         sizes = probe_sizes(options.largest)
         say(f"timing the whole detection at batch {sizes} ({options.runs} runs each)")
-        choice = measure(det.detect_batch, options.largest, options.runs, options.min_gain)
+        choice = measure_batch(det.detect_batch, options.largest, options.runs, options.min_gain)
         say("timing the model alone")
         alone = _model_alone_ms(det, sizes, options.runs)
         figures = {

@@ -32,8 +32,7 @@ from common.contracts import BackendBenchmark, BenchmarkReport
 from common.errors import ConfigError, ImageError
 from common.images import list_images, load_image, load_sample
 from common.machine import cpu_model
-from services.detector.pipeline import Detector
-from services.detector.types import DetectionResult
+from perception import DetectionResult, Detector
 
 STAGES = ("preprocess", "inference", "postprocess", "total")
 #: scikit-image photos scored for agreement when no ``--images`` folder is given.

@@ -37,9 +37,9 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from common.errors import StackError
+from common.pool_rule import assign, camera_weights
 from services.camera.contract import CameraSettings
 from services.detector.contract import MAX_WORKERS
-from services.detector.pool import assign, camera_weights
 from tools.benchmarks.stacks import (
     DEFAULT_RATE_HZ,
     CameraLoad,

@@ -15,7 +15,7 @@ from typing import TypeVar
 from common.clock import mono_s, wall_ns
 from common.errors import StackError
 from common.machine import machine_info
-from services.detector.pool import camera_weights
+from common.pool_rule import camera_weights
 from stack.config import Config
 from stack.config_file import load_config
 from tools.benchmarks.pool import (

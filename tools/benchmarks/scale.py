@@ -14,7 +14,7 @@ For each N of ``--cameras``:
 
 - ``measured``: one stack, N cameras, one detector with ``max_batch = N`` and
   ``batch_choice = "measured"`` (what a user who raises max_batch gets: the detector times the
-  batch sizes at start and batches only where it pays, services/detector/batching.py);
+  batch sizes at start and batches only where it pays, perception/batching.py);
 - ``shared``: the same with ``batch_choice = "max"``: every round batched up to N (forced);
 - ``batch1``: the same stack with ``max_batch = 1`` (one frame per inference, same load);
 - ``stacks``: N one-camera stacks, each with its own detector (what a user does today).

@@ -21,8 +21,8 @@ from common.clock import ms_since, perf_s
 from common.errors import ConfigError
 from common.images import SAMPLES, load_sample
 from common.lifecycle import print_progress
+from perception import Variant, open_prepared, variant_of
 from services.detector.contract import DetectorSettings
-from services.detector.variants import Variant, open_prepared, variant_of
 
 REFERENCE = Variant("onnx", "fp32", 640)
 

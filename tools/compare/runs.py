@@ -1,10 +1,11 @@
 """A recorded run as compare.py needs it: detections per frame, commands, frame count.
 
 Read from the JSON channels our recorder writes (services/recorder/channels.py): ``Detections``
-(with the frame's sequence number and the detector's timings), read back into the message
-itself, and ``Twist`` (with ``input_stamp_ns``). Detections are kept by frame: the camera (read
-from the stack key they were recorded on) and the frame's sequence number, which each camera
-numbers on its own. The first detections of each frame are kept (a looped replay repeats them).
+(with the frame's sequence number, the detector's timings and the boxes' columns), read back
+into the message itself, and ``Twist`` (with ``input_stamp_ns``). Detections are kept by frame:
+the camera (read from the stack key they were recorded on) and the frame's sequence number,
+which each camera numbers on its own. The first detections of each frame are kept (a looped
+replay repeats them).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from common.boxes import Boxes
 from common.errors import DecodeError, RecordingError
@@ -68,6 +70,8 @@ def detections_from_json(body: dict[str, Any]) -> Detections:
             scores=np.asarray(body["scores"], dtype=np.float32).reshape(-1),
             class_ids=np.asarray(body["class_ids"], dtype=np.int32).reshape(-1),
             track_ids=None if tracks is None else np.asarray(tracks, dtype=np.int32).reshape(-1),
+            # Absent from recordings made before columns existed: none.
+            columns=columns_from_json(body.get("columns") or {}),
         )
         return Detections(
             header=header,
@@ -83,6 +87,23 @@ def detections_from_json(body: dict[str, Any]) -> Detections:
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise DecodeError(f"not a Detections message: {exc}") from exc
+
+
+def columns_from_json(columns: dict[str, Any]) -> dict[str, npt.NDArray[Any]]:
+    """Boxes' columns as channels.to_json wrote them, name -> list of values: JSON keeps no
+    dtype, so a column of booleans comes back bool, one of integers int64, any other float64
+    (null, a NaN or inf written as JSON, as NaN)."""
+    if not isinstance(columns, dict):
+        raise TypeError(f"columns must be a map, got {type(columns).__name__}")
+    out: dict[str, npt.NDArray[Any]] = {}
+    for name, values in columns.items():
+        if values and all(type(v) is bool for v in values):
+            out[name] = np.array(values, np.bool_)
+        elif values and all(type(v) is int for v in values):
+            out[name] = np.array(values, np.int64)
+        else:
+            out[name] = np.array([np.nan if v is None else v for v in values], np.float64)
+    return out
 
 
 def detector_name(body: dict[str, Any]) -> str:

@@ -1,10 +1,10 @@
 """python -m tools.detector [detect] [PATH ...] [options]
-python -m tools.detector benchmark|fetch-model|fast-profile|export [options]
+python -m tools.detector benchmark|prepare|fetch-model|fast-profile|export [options]
 
 YOLO object detector: detect (the default) on photos, folders, videos, cameras or streams;
-benchmark its stages per backend; fetch the default model; measure the fast profile; export a
-TensorRT engine. What each command does is tools/detector/cli.py (its exit codes too); errors
-are one line on stderr.
+benchmark its stages per backend; prepare every model file a stack config needs, ahead of
+serving; fetch the default model; measure the fast profile; export a TensorRT engine. What
+each command does is tools/detector/cli.py (its exit codes too); errors are one line on stderr.
 """
 
 from __future__ import annotations
@@ -99,13 +99,23 @@ def benchmark(args: argparse.Namespace) -> int:
     )
 
 
+def _prepare_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", help="stack config (default deploy/stack.toml)")
+    p.add_argument("--backend", help="override detector.backend (as the detector's serve)")
+    p.add_argument("--model", help="override detector.model (as the detector's serve)")
+
+
+def prepare(args: argparse.Namespace) -> int:
+    overrides = {k: v for k, v in (("backend", args.backend), ("model", args.model)) if v}
+    return cli.run_prepare(args.config, overrides)
+
+
 def _fetch_model_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--models-dir", help="where to put it (default: the stack's models folder)")
-    p.add_argument("--config", help="only if this stack config uses the default model")
 
 
 def fetch_model(args: argparse.Namespace) -> int:
-    return cli.run_fetch_model(args.config, args.models_dir)
+    return cli.run_fetch_model(args.models_dir)
 
 
 def _fast_profile_arguments(p: argparse.ArgumentParser) -> None:
@@ -136,6 +146,8 @@ COMMANDS = [
             "photo", _detect_arguments, detect),
     Command("benchmark", "time each stage on one or more backends", _benchmark_arguments,
             benchmark),
+    Command("prepare", "prepare every model file a stack config needs (fetch, input size, INT8, "
+            "the fast profile), ahead of serving", _prepare_arguments, prepare),
     Command("fetch-model", "fetch and convert the default model", _fetch_model_arguments,
             fetch_model),
     Command("fast-profile", "measure the CPU variants once and cache the fast profile's choice",

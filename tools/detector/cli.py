@@ -1,6 +1,6 @@
-"""What the detector's commands do: ``detect``, ``benchmark``, ``fetch-model``, ``fast-profile``
-and ``export`` (their command line is tools/detector/__main__.py). Each takes typed values and
-returns an exit code.
+"""What the detector's commands do: ``detect``, ``benchmark``, ``prepare``, ``fetch-model``,
+``fast-profile`` and ``export`` (their command line is tools/detector/__main__.py). Each takes
+typed values and returns an exit code.
 
 Exit codes: 0 success; 1 one or more images could not be read or written (the others were still
 processed); 2 bad arguments or settings, or a video or camera device that cannot be opened or
@@ -15,7 +15,7 @@ import logging
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -26,11 +26,9 @@ from common.errors import ConfigError, ImageError
 from common.images import Image, list_images, load_image, load_sample
 from common.lifecycle import EXIT_FAILED, EXIT_OK, print_progress
 from modelprep.files import ensure_default_model
+from perception import DetectionResult, Detector, sized_model
 from services.camera import CaptureSource, is_stream, open_stream
 from services.detector.contract import DetectorSettings
-from services.detector.pipeline import Detector
-from services.detector.types import DetectionResult
-from services.detector.variants import sized_model
 from tools.detector.device import backend_for
 from tools.detector.progress import ProgressBar
 from tools.detector.results import result_json, result_text
@@ -266,36 +264,41 @@ def run_export(options: ExportOptions) -> int:
     return EXIT_OK
 
 
-# --- fetch-model and fast-profile ---------------------------------------------------------------
+# --- prepare, fetch-model and fast-profile ------------------------------------------------------
 
 
-def run_fetch_model(config_path: str | None, models_dir: str | None) -> int:
-    """Fetch and convert the default model if needed, and print its path. With ``config_path``,
-    only when that stack runs a detector on the default model, and then also measure the fast
-    profile if the config asks for it (what ``make run`` asks before it starts the stack)."""
-    if config_path:
-        from stack.config_file import load_config
+def run_prepare(config_path: str | None, overrides: dict[str, Any]) -> int:
+    """Prepare every model file the stack config (with ``overrides`` of detector settings)
+    needs, ahead of serving: the default model fetched and converted, rebuilt at the input
+    size, quantized to INT8, the fast profile measured and its choice prepared. Prints the path
+    of the model the detector will load; progress on stderr."""
+    import dataclasses
 
-        config = load_config(config_path)
-        if "detector" not in config.supervisor.services:
-            print_progress("fetch-model: the stack runs no detector: nothing to fetch")
-            return EXIT_OK
-        if not config.detector.model:
-            print(ensure_default_model(progress=print_progress))
-        else:
-            print_progress(
-                f"fetch-model: detector.model is {config.detector.model}: nothing to fetch"
-            )
-        if config.detector.profile == "fast":
-            _measure_fast(config.detector)
+    from perception import prepare_for
+    from stack.config_file import load_config
+    from tools.detector.fast_profile import measure
+
+    config = load_config(config_path)
+    if "detector" not in config.supervisor.services:
+        print_progress("prepare: the stack runs no detector: nothing to prepare")
         return EXIT_OK
+    settings = dataclasses.replace(config.detector, **overrides)
+    prepared, _ = prepare_for(settings, print_progress, measure=measure)
+    if prepared.note:
+        print_progress(f"prepare: {prepared.note}")
+    print(prepared.model)
+    return EXIT_OK
+
+
+def run_fetch_model(models_dir: str | None) -> int:
+    """Fetch and convert the default model if needed, and print its path."""
     print(ensure_default_model(Path(models_dir) if models_dir else None, progress=print_progress))
     return EXIT_OK
 
 
 def _measure_fast(settings: DetectorSettings) -> str:
     """Measure (or read from the cache) the fast profile's choice; its variant's label."""
-    from services.detector.fast_profile import choose_fast
+    from perception import choose_fast
     from tools.detector.fast_profile import measure
 
     variant, why = choose_fast(settings, print_progress, measure=measure)

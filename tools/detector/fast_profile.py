@@ -1,7 +1,7 @@
 """Measuring the fast profile: every candidate variant timed and scored on the labelled photos.
 
-The detector service only reads the cached choice (services/detector/fast_profile.py); this is
-what ``zstack fast-profile`` runs ahead of time.
+The detector service only reads the cached choice (perception/fast_profile.py); this is
+what ``zstack prepare`` (and ``zstack fast-profile``) runs ahead of time.
 """
 
 from __future__ import annotations
@@ -14,9 +14,8 @@ import numpy as np
 from common.clock import ms_since, perf_s
 from common.images import load_sample
 from common.lifecycle import Progress
+from perception import TIMED_RUNS, Figures, Variant, open_prepared
 from services.detector.contract import DetectorSettings
-from services.detector.fast_profile import TIMED_RUNS, Figures
-from services.detector.variants import Variant, open_prepared
 from tools.evaluation.labelled_set import labelled_ap50
 
 

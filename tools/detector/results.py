@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from services.detector.types import DetectionResult
+from perception import DetectionResult
 
 
 def result_record(source: str, result: DetectionResult, frame: int | None = None) -> dict[str, Any]:

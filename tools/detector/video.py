@@ -19,8 +19,8 @@ import numpy.typing as npt
 
 from common.annotate import annotate
 from common.errors import ConfigError, ImageError
+from perception import Detector
 from services.camera import CaptureSource
-from services.detector.pipeline import Detector
 from tools.detector.progress import ProgressBar
 from tools.detector.results import result_json, result_text
 

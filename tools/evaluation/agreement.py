@@ -20,7 +20,7 @@ from typing import Any
 
 from faster_coco_eval import COCO, COCOeval_faster
 
-from services.detector.types import DetectionResult
+from perception import DetectionResult
 
 
 @dataclass(frozen=True, slots=True)

@@ -33,7 +33,7 @@ DEFAULT_EVAL_CONF = 0.001
 def detect_dataset(
     detector: Any, dataset: LabelledSet, progress: Progress | None = None
 ) -> dict[int, Boxes]:
-    """Run ``detector`` (a services.detector Detector) on every image of ``dataset``: the
+    """Run ``detector`` (a perception Detector) on every image of ``dataset``: the
     boxes found in each, by image id; their class ids index ``detector.names``.
 
     Raises DatasetError when an image's real size differs from the size its labels assume.
@@ -125,7 +125,8 @@ class EvaluateOptions:
 
 def run(options: EvaluateOptions) -> int:
     """The ``evaluate`` command: load, detect, score, print."""
-    from services.detector import Detector, ensure_default_model
+    from modelprep.files import ensure_default_model
+    from perception import Detector
 
     for name, value in (
         ("--conf", options.conf),

@@ -18,8 +18,7 @@ import numpy as np
 
 from common.errors import ConfigError
 from common.images import load_sample
-from services.detector.pipeline import Detector
-from services.detector.types import DetectionResult
+from perception import DetectionResult, Detector
 from tools.evaluation.data.write_images import ANNOTATIONS as LABELLED_SET
 from tools.evaluation.data.write_images import write_images
 

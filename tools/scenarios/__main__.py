@@ -69,6 +69,12 @@ def _scenario_arguments(p: argparse.ArgumentParser) -> None:
         default=ControllerMode.FOLLOW.value,
         help="the controller's mode (default follow)",
     )
+    p.add_argument(
+        "--full-length",
+        action="store_true",
+        help="run the scenario's whole duration, not only until its pass conditions have held "
+        "for a few seconds",
+    )
 
 
 def scenario(args: argparse.Namespace) -> int:
@@ -84,6 +90,7 @@ def scenario(args: argparse.Namespace) -> int:
         log=lambda m: print(m, file=sys.stderr),
         ros2=args.ros2,
         mode=ControllerMode(args.mode),
+        full_length=args.full_length,
     )
     if args.json:
         print(json.dumps(result))

@@ -35,6 +35,7 @@ from tools.scenarios.score import ScenarioLog, score
 
 STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
 STOP_TIMEOUT_S = 30.0  # then the whole stack is killed
+SETTLE_CHECK_S = 0.5  # how often a run that may end early is scored so far
 
 
 def scenario_config(
@@ -191,10 +192,12 @@ def run_scenario(
     log: Any = None,
     ros2: bool = False,
     mode: ControllerMode = ControllerMode.FOLLOW,
+    full_length: bool = False,
 ) -> ScenarioResult:
     """Run scenario ``name`` on the real stack with the controller in ``mode`` (``ros2``:
     through the ROS 2 bridge, the simulator playing a ROS 2 robot); returns its figures (see
-    score.py)."""
+    score.py). A scenario with ``settle_s`` ends once its pass conditions have held that long
+    (after ``settle_from_s``), unless ``full_length``."""
     if name not in SCENARIOS or name == "demo":
         known = ", ".join(n for n in SCENARIOS if n != "demo")
         raise StackError(f"unknown scenario {name!r}; choose one of {known}")
@@ -214,7 +217,10 @@ def run_scenario(
             try:
                 cameras = list(config.all_cameras)
                 subs = record_into(session, Keys(config.stack.prefix), cameras, rec, frames=True)
-                _drive(proc, scenario, rec, config_path, log)
+                settled = None
+                if scenario.settle_s is not None and not full_length:
+                    settled = Settle(scenario, config, scenario.settle_s)
+                _drive(proc, scenario, rec, config_path, log, settled)
                 for sub in subs:
                     sub.undeclare()
             finally:
@@ -232,10 +238,39 @@ def _sim_time(rec: ScenarioLog) -> float:
     return rec.truths[-1].sim_time_s if rec.truths else 0.0
 
 
+class Settle:
+    """Whether a run has shown what it must: every pass condition (score.verdict) holding,
+    without a break, for ``hold_s`` of scenario time from ``scenario.settle_from_s`` on."""
+
+    def __init__(self, scenario: Scenario, config: Config, hold_s: float) -> None:
+        self.scenario, self.config, self.hold_s = scenario, config, hold_s
+        self._since: float | None = None
+        self._world = scenario.build()
+
+    def done(self, rec: ScenarioLog, sim_time_s: float) -> bool:
+        if sim_time_s < self.scenario.settle_from_s:
+            return False
+        result = score(
+            self.scenario, rec, self._world, self.config.controller, self.config.camera.hfov_deg
+        )
+        if not result["success"]:
+            self._since = None
+            return False
+        if self._since is None:
+            self._since = sim_time_s
+        return sim_time_s - self._since >= self.hold_s
+
+
 def _drive(
-    proc: subprocess.Popen[bytes], scenario: Scenario, rec: ScenarioLog, config_path: Path, log: Any
+    proc: subprocess.Popen[bytes],
+    scenario: Scenario,
+    rec: ScenarioLog,
+    config_path: Path,
+    log: Any,
+    settled: Settle | None = None,
 ) -> None:
-    """Wait for the scenario clock to run its course, killing the detector when scripted."""
+    """Wait for the scenario clock to run its course, killing the detector when scripted, or
+    until ``settled`` says the run has shown what it must."""
     start = mono_s()
     pause = threading.Event()
     while _sim_time(rec) <= 0:
@@ -248,6 +283,7 @@ def _drive(
         pause.wait(0.1)
     if log:
         log(f"{scenario.name}: running for {scenario.duration_s:.0f} s of scenario time")
+    next_check = 0.0
     while _sim_time(rec) < scenario.duration_s:
         if proc.poll() is not None:
             raise StackError("the stack exited during the scenario")
@@ -258,4 +294,14 @@ def _drive(
             rec.kill_ns = wall_ns()
             if log:
                 log(f"{scenario.name}: killed the detector at t={_sim_time(rec):.1f} s")
+        if settled is not None and mono_s() >= next_check:
+            next_check = mono_s() + SETTLE_CHECK_S
+            if settled.done(rec, _sim_time(rec)):
+                if log:
+                    log(
+                        f"{scenario.name}: ended at t={_sim_time(rec):.1f} s: every pass "
+                        f"condition held for {settled.hold_s:.0f} s (--full-length runs "
+                        f"{scenario.duration_s:.0f} s)"
+                    )
+                return
         pause.wait(0.05)

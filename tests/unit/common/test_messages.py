@@ -235,8 +235,8 @@ WIRE_KEYS = {
     "Frame": {"header", "encoding", "width", "height", "data"},
     "Detections": {
         "header", "image_width", "image_height", "n", "class_ids", "class_names", "scores",
-        "xyxy", "center_size", "track_ids", "timing_ms", "model", "backend", "received_ns",
-        "published_ns",
+        "xyxy", "center_size", "track_ids", "columns", "timing_ms", "model", "backend",
+        "received_ns", "published_ns",
     },
     "Twist": {"header", "linear", "angular", "input_stamp_ns"},
     "LaserScan": {

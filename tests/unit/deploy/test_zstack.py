@@ -24,6 +24,7 @@ REPO = Path(__file__).resolve().parents[3]
         ),
         (["detect", "a.jpg", "--json"], "tools.detector", ["detect", "a.jpg", "--json"]),
         (["fetch-model"], "tools.detector", ["fetch-model"]),
+        (["prepare", "--config", "x.toml"], "tools.detector", ["prepare", "--config", "x.toml"]),
         (["query"], "services.metrics", ["query"]),
         (["scenario", "ahead"], "tools.scenarios", ["scenario", "ahead"]),
         (["scenarios"], "tools.scenarios", ["list"]),
@@ -43,7 +44,7 @@ def test_each_command_runs_its_module(argv: list[str], module: str, args: list[s
 
 def test_every_task_of_the_issue_has_a_command() -> None:
     tasks = {"run", "detect", "benchmark", "query", "evaluate", "report", "scenario", "estop",
-             "fetch-model"}  # fmt: skip
+             "fetch-model", "prepare"}  # fmt: skip
     assert tasks <= COMMANDS.keys()
 
 

@@ -1,4 +1,4 @@
-"""The detector's start-up batch choice (services/detector/batching.py): which sizes it times and
+"""The detector's start-up batch choice (perception/batching.py): which sizes it times and
 the rule that keeps a batch only where it serves frames faster per image."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from common.errors import ConfigError, ModelError
-from services.detector.batching import choose, measure, probe_sizes
+from perception.batching import choose, measure, probe_sizes
+from perception.pipeline import Detector
 from services.detector.contract import DetectorSettings
-from services.detector.pipeline import Detector
 from services.detector.service import settle_batch
 from tests.unit.detector.halves import halves_model, image
 

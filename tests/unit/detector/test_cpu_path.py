@@ -44,7 +44,7 @@ def _off_the_path(modules: set[str]) -> list[str]:
 
 def test_importing_the_cpu_path_imports_no_acquisition_and_no_interpreter() -> None:
     modules = _modules_after(
-        "import services.detector, services.detector.service, services.detector.pipeline, "
+        "import perception, services.detector, services.detector.service, perception.pipeline, "
         "runtimes.onnx, tools.detector.cli"
     )
     assert "runtimes.onnx" in modules  # the check sees what was imported
@@ -65,7 +65,7 @@ def test_a_current_default_model_is_found_without_importing_the_acquisition(
 ) -> None:
     expected = model_files.default_model_path(current_default_model)
     modules = _modules_after(
-        "from services.detector import ensure_default_model\n"
+        "import perception\nfrom modelprep.files import ensure_default_model\n"
         f"assert str(ensure_default_model()) == {str(expected)!r}",
         env={model_files.MODELS_DIR_ENV: str(current_default_model)},
     )
@@ -76,7 +76,7 @@ def test_a_missing_default_model_imports_the_acquisition_to_fetch_it(tmp_path: P
     # No npm on PATH: the fetch fails at once, after the acquisition was imported to try it.
     modules = _modules_after(
         "from common.errors import ModelFetchError\n"
-        "from services.detector import ensure_default_model\n"
+        "import perception\nfrom modelprep.files import ensure_default_model\n"
         "try:\n"
         "    ensure_default_model()\n"
         "except ModelFetchError:\n"

@@ -1,5 +1,5 @@
-"""The detector's rounds over several cameras (services/detector/service.py's handlers and
-``Rounds``), with a real ONNX Runtime backend on a tiny model whose boxes depend on the image:
+"""The detector's rounds over several cameras (services/detector/handlers.py and
+rounds.py), with a real ONNX Runtime backend on a tiny model whose boxes depend on the image:
 each camera's detections carry its own frame's header, go to its own output, are tracked by its
 own tracker, and are counted in all and for that camera."""
 
@@ -18,17 +18,13 @@ from common.frames import image_to_frame
 from common.freshness import FreshnessGate
 from common.messages import Detections, Frame
 from common.node import Tally
+from perception.pipeline import Detector
+from perception.tracker import Tracker
 from services.camera.contract import CameraSettings
 from services.detector.contract import DetectorSettings, TrackerSettings
-from services.detector.pipeline import Detector
-from services.detector.service import (
-    CameraOutput,
-    DetectorHandlers,
-    Rounds,
-    round_size,
-    served_batch,
-)
-from services.detector.tracker import Tracker
+from services.detector.handlers import DetectorHandlers
+from services.detector.rounds import CameraOutput, Rounds
+from services.detector.service import round_size, served_batch
 from stack.config import Config
 from tests.unit.detector.halves import halves_model, image
 from tests.unit.detector.headers import camera_header

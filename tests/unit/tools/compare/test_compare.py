@@ -199,3 +199,19 @@ def test_a_recording_of_two_cameras_reads_back_by_camera_and_frame(tmp_path: Pat
         ("front", 1): ("person",),
         ("rear", 1): ("dog",),
     }
+
+
+def test_detections_recorded_before_columns_existed_read_back_with_none() -> None:
+    import json
+
+    from common.errors import DecodeError
+    from services.recorder.channels import to_json
+    from tools.compare.runs import detections_from_json
+
+    body = json.loads(to_json(_frame(3, [("person", [0, 0, 10, 10])])))
+    del body["columns"]  # what a recorder wrote before columns existed
+    old = detections_from_json(body)
+    assert dict(old.boxes.columns) == {} and old.class_names == ("person",)
+    for bad in ([1.5], {"d": "xyz"}, {"d": [1.0, 2.0]}, {"2d": [1.0]}):
+        with pytest.raises(DecodeError, match="not a Detections message"):
+            detections_from_json({**body, "columns": bad})

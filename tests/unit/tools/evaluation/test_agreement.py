@@ -7,7 +7,7 @@ import pytest
 from faster_coco_eval import COCO, COCOeval_faster
 
 from common.boxes import Boxes
-from services.detector.types import DetectionResult
+from perception.types import DetectionResult
 from tools.evaluation.agreement import score
 
 NAMES = ("person", "bicycle", "car")

@@ -4,9 +4,9 @@ Candidates are every variant this machine can run: ONNX Runtime FP32 and INT8 at
 and 416, and the same on OpenVINO when that backend is installed. Each is timed (interleaved,
 round-robin in a shuffled order) and scored (AP50 on the hand-labelled photos); the choice is
 the fastest at p50 whose AP50 is at most ``fast_max_ap50_drop`` below FP32 at 640
-(:func:`choose`, pure). Measuring takes a minute or more, so it is a step of its own, run
-ahead of time (``zstack fast-profile``, and ``make run`` when the config asks for the fast
-profile), which prints its progress and stops at once on Ctrl-C or SIGTERM, leaving nothing
+(:func:`choose`, pure). Measuring takes a minute or more, so it is a step of model preparation,
+run ahead of time (``zstack prepare``, which ``make run`` runs; ``zstack fast-profile`` measures
+alone), which prints its progress and stops at once on Ctrl-C or SIGTERM, leaving nothing
 half-written. The figures are cached beside the model, keyed by the model's sha256, the CPU
 (model and flags), the candidates and the calibration folder. The detector service only reads
 the cache: it never measures at start-up (a supervisor with a deadline would kill it midway);
@@ -27,11 +27,11 @@ from common.files import atomic_write_bytes, sha256_file
 from common.lifecycle import Progress, print_progress
 from common.machine import cpu_model
 from modelprep.files import ensure_default_model
+from perception.variants import NotPrepared, Variant, located_model, model_input_hw
 from runtimes.table import BACKENDS, import_backend
 from services.detector.contract import DetectorSettings
-from services.detector.variants import Variant
 
-log = logging.getLogger("runtimes.fast_profile")
+log = logging.getLogger("perception.fast_profile")
 
 SIZES = (640, 512, 480, 416)
 TIMED_RUNS = 20
@@ -86,8 +86,6 @@ def sizes_for(s: DetectorSettings) -> tuple[int, ...]:
     """SIZES for the default model; a named model only runs at its own fixed size."""
     if not s.model:
         return SIZES
-    from services.detector.variants import model_input_hw
-
     height, width = model_input_hw(Path(s.model))
     if height is None or height != width:
         raise ConfigError(
@@ -107,9 +105,8 @@ def cpu_flags() -> str:
     return ""
 
 
-def cache_key(s: DetectorSettings, variants: Sequence[Variant]) -> dict[str, object]:
-    """What the measured figures depend on."""
-    model = Path(s.model) if s.model else ensure_default_model()
+def cache_key(s: DetectorSettings, variants: Sequence[Variant], model: Path) -> dict[str, object]:
+    """What the measured figures for ``model`` (the base model ``s`` names) depend on."""
     return {
         "format": FORMAT,
         "model_sha256": sha256_file(model),
@@ -120,13 +117,9 @@ def cache_key(s: DetectorSettings, variants: Sequence[Variant]) -> dict[str, obj
     }
 
 
-def cache_file(s: DetectorSettings) -> Path:
-    model = Path(s.model) if s.model else ensure_default_model()
+def cache_file(model: Path) -> Path:
+    """Where the figures measured for ``model`` are cached."""
     return model.with_name(model.stem + ".fast-profile.json")
-
-
-#: What a user runs to measure the fast profile ahead of time.
-MEASURE_COMMAND = "zstack fast-profile"
 
 
 #: Times and scores variants: (settings, variants, progress) -> their figures. The one that
@@ -137,13 +130,20 @@ Measure = Callable[[DetectorSettings, Sequence[Variant], Progress], list[Figures
 def choose_fast(
     s: DetectorSettings, progress: Progress = print_progress, *, measure: Measure | None = None
 ) -> tuple[Variant, str]:
-    """The fast profile's variant for ``s`` and why: from the cache, or measured now when
-    ``measure`` is given (ConfigError naming :data:`MEASURE_COMMAND` when it is not, and nothing is
-    cached)."""
+    """The fast profile's variant for ``s`` and why: measured now when ``measure`` is given and
+    nothing is cached (the default model fetched first); without ``measure``, from the cache
+    alone (NotPrepared, one line saying what to run, when the model or the figures are
+    missing)."""
+    if s.model:
+        model = Path(s.model)
+    elif measure is not None:
+        model = ensure_default_model(progress=progress)
+    else:
+        model = located_model(DetectorSettings())  # the default model, as prepared
     variants = candidates(sizes_for(s))
     reference = variants[0].label
-    key = cache_key(s, variants)
-    path = cache_file(s)
+    key = cache_key(s, variants, model)
+    path = cache_file(model)
     figures: list[Figures] | None = None
     try:
         stored = json.loads(path.read_text(encoding="utf-8"))
@@ -154,11 +154,9 @@ def choose_fast(
     source = "cached figures"
     if figures is None:
         if measure is None:
-            raise ConfigError(
-                f'detector.profile = "fast" has not been measured for {path.stem.split(".")[0]} '
-                f"on this CPU: run `{MEASURE_COMMAND}` once (it takes a minute or two; `make "
-                "run` does it when the config asks for the fast profile), or set profile = "
-                '"default"'
+            raise NotPrepared(
+                f'detector.profile = "fast" has not been measured for {model.stem} on this CPU '
+                '(it takes a minute or two; or set profile = "default")'
             )
         progress(f"fast profile: measuring {len(variants)} variants (once; cached in {path.name})")
         figures = measure(s, variants, progress)

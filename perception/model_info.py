@@ -15,9 +15,9 @@ import numpy as np
 from common.coco import COCO80
 from common.errors import ModelError
 from common.model_metadata import parse_names
+from perception.decode import Family, OutputLayout, detect_family
 from runtimes import Backend, Dim
 from runtimes.base import input_size
-from services.detector.decode import Family, OutputLayout, detect_family
 
 
 @dataclass(frozen=True, slots=True)

@@ -11,10 +11,7 @@ import pytest
 
 from common.coco import COCO80
 from common.errors import BackendUnavailable, ConfigError, ModelError, UnknownModelFamily
-from runtimes import BACKENDS, Dim, open_backend
-from runtimes.base import input_size, parse_imgsz
-from services.detector.contract import DetectorSettings
-from services.detector.decode import (
+from perception.decode import (
     Family,
     decode_end2end,
     decode_yolov5,
@@ -22,12 +19,15 @@ from services.detector.decode import (
     detect_family,
     v5_anchor_count,
 )
-from services.detector.model_info import (
+from perception.model_info import (
     class_names,
     parse_names,
     read_model_info,
 )
-from services.detector.pipeline import Detector
+from perception.pipeline import Detector
+from runtimes import BACKENDS, Dim, open_backend
+from runtimes.base import input_size, parse_imgsz
+from services.detector.contract import DetectorSettings
 
 # --- family detection ---------------------------------------------------------------------------
 

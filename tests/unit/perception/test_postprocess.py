@@ -9,10 +9,10 @@ import pytest
 
 from common.boxes import Boxes
 from common.errors import ConfigError
+from perception.decode import decode_end2end
+from perception.postprocess import class_mask, nms, select
+from perception.types import DetectionResult
 from services.detector.contract import DetectorSettings
-from services.detector.decode import decode_end2end
-from services.detector.postprocess import class_mask, nms, select
-from services.detector.types import DetectionResult
 
 
 def iou(a: list[float], b: list[float]) -> float:

@@ -46,7 +46,7 @@ class DetectionResult:
     image_height: int = 0
     timing: StageTiming = field(default_factory=StageTiming)
     #: False when the model's output for this image held a NaN, an infinity or an absurd
-    #: magnitude (services/detector/decode.py): ``boxes`` is then empty, not a verdict.
+    #: magnitude (perception/decode.py): ``boxes`` is then empty, not a verdict.
     output_sane: bool = True
 
     def __post_init__(self) -> None:

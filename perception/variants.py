@@ -1,10 +1,12 @@
 """From settings to the model file a backend loads: input size, precision, fast profile.
 
 A *variant* is ``backend:precision:imgsz`` (``onnx:int8:480``). :func:`prepare` turns
-DetectorSettings into one: the model at that input size (the default model is rebuilt for it;
-a named model must already have it), then, for ``int8`` on a runtime we quantize for
-(:data:`QUANT_RUNTIMES`), the INT8 model from :mod:`modelprep.quantize`. An INT8 model
-that cannot be built leaves the detector on FP32, with one warning line and a ``note``.
+DetectorSettings into one, building what it needs: the model at that input size (the default
+model is rebuilt for it; a named model must already have it), then, for ``int8`` on a runtime we
+quantize for (:data:`QUANT_RUNTIMES`), the INT8 model from :mod:`modelprep.quantize`. An INT8
+model that cannot be built leaves the detector on FP32, with one warning line and a ``note``.
+That runs ahead of serving (``zstack prepare``). :func:`locate` finds the same files and builds
+nothing: what is missing raises :class:`NotPrepared`, one line naming it and what to run.
 """
 
 from __future__ import annotations
@@ -18,15 +20,36 @@ from typing import Any
 from common.contracts import BackendName
 from common.errors import ConfigError, ModelError
 from common.lifecycle import Progress, print_progress
-from modelprep.files import NATIVE_IMGSZ, ensure_default_model
+from modelprep.files import (
+    NATIVE_IMGSZ,
+    current_default_model,
+    default_model_path,
+    ensure_default_model,
+)
+from perception.pipeline import Detector
 from runtimes.select import backend_options
 from services.detector.contract import DetectorSettings
-from services.detector.pipeline import Detector
 
-log = logging.getLogger("runtimes.variants")
+log = logging.getLogger("perception.variants")
 
 #: Backend -> the runtime whose quantizer builds its INT8 model.
 QUANT_RUNTIMES = {"onnx": "onnxruntime", "openvino": "openvino"}
+#: What a user runs to prepare the models a stack config needs, ahead of serving.
+PREPARE_COMMAND = "zstack prepare"
+
+
+class NotPrepared(ConfigError):
+    """A file serving needs that was not prepared ahead: ``missing`` says which, and the one
+    line says what to run (``command``, by default :data:`PREPARE_COMMAND`)."""
+
+    def __init__(self, missing: str, command: str = PREPARE_COMMAND) -> None:
+        super().__init__(f"{missing}: run `{command}`")
+        self.missing = missing
+        self.command = command
+
+    def to_run(self, command: str) -> NotPrepared:
+        """The same, saying to run ``command`` (one that names the config file, say)."""
+        return NotPrepared(self.missing, command)
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,6 +131,19 @@ def sized_model(s: DetectorSettings, progress: Progress = print_progress) -> Pat
     return path
 
 
+def located_model(s: DetectorSettings) -> Path:
+    """What :func:`sized_model` returns, never building it: the default model at ``s.imgsz``
+    must be there and current (NotPrepared otherwise)."""
+    if s.model:
+        return sized_model(s)  # the user's own file: nothing is built for it
+    path = current_default_model(imgsz=s.imgsz)
+    if path is None:
+        size = f" at input size {s.imgsz}" if s.imgsz not in (0, NATIVE_IMGSZ) else ""
+        where = default_model_path(imgsz=s.imgsz)
+        raise NotPrepared(f"the default model{size} ({where}) is not prepared")
+    return path
+
+
 def finds_objects(reference: Path, backend: str) -> Callable[[Path], str | None]:
     """A check for an INT8 model: on the calibration photos it must find something wherever
     the FP32 ``reference`` does (a quantization that wiped the scores finds nothing)."""
@@ -135,8 +171,19 @@ def prepare(
     s: DetectorSettings, progress: Progress = print_progress, max_batch: int = 1
 ) -> Prepared:
     """The model, backend and options for settings ``s`` (profile already resolved), for
-    batches of up to ``max_batch`` frames."""
-    model = sized_model(s, progress)
+    batches of up to ``max_batch`` frames, built now where they are missing."""
+    return _resolve(s, max_batch, progress)
+
+
+def locate(s: DetectorSettings, max_batch: int = 1) -> Prepared:
+    """What :func:`prepare` returns, from the files it made, never building anything:
+    NotPrepared names what is missing."""
+    return _resolve(s, max_batch, None)
+
+
+def _resolve(s: DetectorSettings, max_batch: int, build: Progress | None) -> Prepared:
+    """:func:`prepare` with ``build`` (its progress), :func:`locate` without."""
+    model = sized_model(s, build) if build is not None else located_model(s)
     runtime = QUANT_RUNTIMES.get(s.backend)
     if runtime is None:
         return Prepared(model, s.backend, backend_options(s, max_batch))
@@ -147,16 +194,24 @@ def prepare(
     options = backend_options(replace(s, precision=""), max_batch)
     if s.precision != "int8":
         return Prepared(model, s.backend, options)
-    from modelprep.quantize import QuantizationFailed, quantized_model
+    from modelprep.quantize import QuantizationFailed, cached_model, quantized_model, slot
 
+    calibration_dir = Path(s.calibration_dir) if s.calibration_dir else None
     try:
-        quantized = quantized_model(
-            model,
-            runtime=runtime,
-            calibration_dir=Path(s.calibration_dir) if s.calibration_dir else None,
-            check=finds_objects(model, s.backend),
-            progress=progress,
-        )
+        if build is not None:
+            quantized = quantized_model(
+                model,
+                runtime=runtime,
+                calibration_dir=calibration_dir,
+                check=finds_objects(model, s.backend),
+                progress=build,
+            )
+        else:
+            found = cached_model(model, runtime=runtime, calibration_dir=calibration_dir)
+            if found is None:
+                where = slot(model, runtime)[0]
+                raise NotPrepared(f"the INT8 model of {model.name} ({where}) is not prepared")
+            quantized = found
     except QuantizationFailed as exc:
         note = f"{exc}; the detector stays on FP32"
         log.warning("%s", note)
@@ -168,8 +223,16 @@ def open_prepared(
     s: DetectorSettings, progress: Progress = print_progress, max_batch: int = 1
 ) -> tuple[Detector, str]:
     """The Detector for settings ``s`` (profile already resolved), for batches of up to
-    ``max_batch`` frames, and its note."""
-    prepared = prepare(s, progress, max_batch)
+    ``max_batch`` frames, built first where needed (:func:`prepare`), and its note."""
+    return _open(s, prepare(s, progress, max_batch))
+
+
+def open_located(s: DetectorSettings, max_batch: int = 1) -> tuple[Detector, str]:
+    """:func:`open_prepared` from what was prepared ahead (:func:`locate`): builds nothing."""
+    return _open(s, locate(s, max_batch))
+
+
+def _open(s: DetectorSettings, prepared: Prepared) -> tuple[Detector, str]:
     det = Detector.open(prepared.model, backend=prepared.backend, settings=s, **prepared.options)
     return det, prepared.note
 

@@ -13,12 +13,12 @@ from common.boxes import Boxes
 from common.clock import ms_since, perf_s
 from common.letterbox import Letterbox, Preprocessor, unletterbox
 from common.lifecycle import Closing
+from perception.decode import Family, decode, sane_outputs
+from perception.model_info import ModelInfo, read_model_info
+from perception.postprocess import class_mask, select
+from perception.types import DetectionResult, StageTiming
 from runtimes import Backend, open_backend
 from services.detector.contract import DetectorSettings
-from services.detector.decode import Family, decode, sane_outputs
-from services.detector.model_info import ModelInfo, read_model_info
-from services.detector.postprocess import class_mask, select
-from services.detector.types import DetectionResult, StageTiming
 
 
 class Detector(Closing):

@@ -7,8 +7,8 @@ import pytest
 
 from common.boxes import Boxes
 from common.errors import ConfigError
+from perception.tracker import Tracker, iou_matrix, tracker_clock
 from services.detector.contract import TrackerSettings
-from services.detector.tracker import Tracker, iou_matrix, tracker_clock
 
 
 def _frame(

@@ -10,8 +10,8 @@ import onnx
 import pytest
 from onnx import TensorProto, helper, numpy_helper
 
-from services.detector.decode import sane_outputs
-from services.detector.pipeline import Detector
+from perception.decode import sane_outputs
+from perception.pipeline import Detector
 
 ANCHORS = 16
 

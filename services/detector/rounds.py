@@ -1,0 +1,194 @@
+"""The detection loop's work (:class:`Rounds`): a round of frames, one per waiting camera, run
+through the model as one batch, each camera's detections published on its own key. Time is
+read from an injected clock (the freshness gate's ``now``, ``published_ns``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock
+from common.counters import BAD_INPUT, per_camera
+from common.errors import ImageError
+from common.frames import frame_to_bgr
+from common.freshness import FreshnessGate, Verdict
+from common.messages import Detections, Frame, Header
+from common.node import Put, Tally
+from perception import DetectionResult, Detector, Tracker, tracker_clock
+from services.detector import contract
+from services.detector.handlers import count_for, reject_for
+from services.detector.schedule import Waiting
+from stack.config import Config
+
+
+def to_message(
+    frame: Frame,
+    result: DetectionResult,
+    det: Detector,
+    received_ns: int,
+    track_ids: npt.NDArray[np.int32] | None,
+    published_ns: int,
+) -> Detections:
+    """The Detections message for ``frame``: its header, the result, the detector's stamps."""
+    t = result.timing
+    return Detections(
+        header=frame.header,
+        image_width=frame.width,
+        image_height=frame.height,
+        boxes=result.boxes.with_track_ids(track_ids),
+        class_names=tuple(result.class_names),
+        timing_ms={
+            "preprocess": t.preprocess_ms,
+            "inference": t.inference_ms,
+            "postprocess": t.postprocess_ms,
+        },
+        model=det.model_path.name,
+        backend=f"{det.backend.name}/{det.backend.device}/{det.backend.precision}",
+        received_ns=received_ns,
+        published_ns=published_ns,
+    )
+
+
+@dataclass(slots=True)
+class CameraOutput:
+    """What the detector keeps per camera: its frames' freshness (replays are judged per
+    camera), its own tracker (track ids never cross cameras) and its detections' publisher."""
+
+    camera: str
+    frame_key: str
+    gate: FreshnessGate
+    tracker: Tracker | None
+    put: Put
+
+
+def camera_outputs(
+    config: Config, frame_keys: Mapping[str, str], put_for: Callable[[str], Put]
+) -> dict[str, CameraOutput]:
+    """Each camera's output: a freshness gate, a tracker when ``tracker.enabled``, and
+    ``put_for(camera)`` to publish its detections with."""
+    s = config.detector
+    return {
+        cam: CameraOutput(
+            camera=cam,
+            frame_key=key,
+            gate=FreshnessGate(s.max_frame_age_s, config.stack.clock_tolerance_s, BOOT_ID),
+            tracker=Tracker(config.tracker) if config.tracker.enabled else None,
+            put=put_for(cam),
+        )
+        for cam, key in frame_keys.items()
+    }
+
+
+class Rounds:
+    """The detection loop's work: take a round of frames, one per waiting camera, run them
+    through the model as one batch, and publish each camera's detections with its frame's
+    header on its own key. Counted in all and per camera; a round's size is counted as
+    ``batches`` (rounds run) and ``batched_frames`` (frames in them): their ratio is the mean
+    batch size."""
+
+    def __init__(
+        self,
+        config: Config,
+        tally: Tally,
+        detector: Detector,
+        outputs: dict[str, CameraOutput],
+        clock: Clock = SYSTEM_CLOCK,
+    ) -> None:
+        self.settings = config.detector
+        self.tally = tally
+        self.detector = detector
+        self.outputs = outputs
+        self.clock = clock
+
+    def run(self, waiting: list[Waiting[Frame]]) -> None:
+        ready: list[tuple[CameraOutput, Frame, int, npt.NDArray[np.uint8]]] = []
+        for w in waiting:
+            out, frame = self.outputs[w.camera], w.item
+            # Judged as it leaves the slot: a frame that waited out a pause (or was stamped
+            # wrong, or sent again) is not worth a detection nobody may act on.
+            verdict, age = out.gate.check(frame.header, self.clock.now())
+            if verdict is not Verdict.FRESH:
+                reject_for(
+                    self.tally,
+                    w.camera,
+                    contract.frames_judged(verdict),
+                    f"{verdict} frame from {w.camera} ({age:.2f} s old) dropped",
+                    out.frame_key,
+                )
+                continue
+            try:
+                image = frame_to_bgr(frame, self.settings.max_frame_pixels)
+            except ImageError as exc:
+                self.tally.bad_input(out.frame_key, exc)
+                self.tally.counters.add(per_camera(BAD_INPUT, w.camera))
+                continue
+            ready.append((out, frame, w.received_ns, image))
+        if not ready:
+            return
+        results = self.detector.detect_batch([image for *_, image in ready])
+        self.tally.counters.add(contract.BATCHES)
+        self.tally.counters.add(contract.BATCHED_FRAMES, len(ready))
+        for (out, frame, received_ns, _), result in zip(ready, results, strict=True):
+            self._publish(out, frame, received_ns, result)
+
+    def _publish(
+        self, out: CameraOutput, frame: Frame, received_ns: int, result: DetectionResult
+    ) -> None:
+        if not result.output_sane:
+            # Zero boxes from a broken model are no verdict: publish nothing, so that the
+            # controller's detection timeout stops the robot.
+            reject_for(
+                self.tally,
+                out.camera,
+                contract.NONFINITE_OUTPUTS,
+                f"the model's output for frame {frame.header.seq} from {out.camera} is not "
+                "finite (NaN, infinity or a magnitude over 1e6): no detections published",
+                out.frame_key,
+            )
+            return
+        track_ids = (
+            None
+            if out.tracker is None
+            else _track(self.tally, out, result, frame.header, received_ns)
+        )
+        msg = to_message(frame, result, self.detector, received_ns, track_ids, self.clock.wall_ns())
+        out.put(msg.encode())
+        count_for(self.tally, out.camera, contract.DETECTIONS_OUT)
+
+
+def _track(
+    tally: Tally,
+    out: CameraOutput,
+    result: DetectionResult,
+    header: Header,
+    received_ns: int,
+) -> npt.NDArray[np.int32]:
+    """Track ids for ``result`` from its camera's tracker; a frame whose stamp jumped is
+    counted, its ids left at -1."""
+    tracker = out.tracker
+    assert tracker is not None
+    ignored, resets = tracker.ignored_frames, tracker.resets
+    at, arrival = tracker_clock(
+        header.stamp_ns, header.mono_ns, header.boot_id, received_ns, BOOT_ID
+    )
+    ids = tracker.update(result.boxes, at, arrival)
+    if tracker.ignored_frames > ignored:
+        reject_for(
+            tally,
+            out.camera,
+            contract.TRACKER_STAMP_JUMPS,
+            "frame stamp jumped: the tracker ignored it",
+            out.frame_key,
+        )
+    if tracker.resets > resets:
+        reject_for(
+            tally,
+            out.camera,
+            contract.TRACKER_RESETS,
+            "frame stamps jumped for good: tracks restarted",
+            out.frame_key,
+        )
+    return ids

@@ -1,0 +1,130 @@
+"""The controller's loop in-process: a ControlLoop on a MemoryHub with a FakeClock, and a test
+participant on the same hub that puts the inputs and hears cmd_vel and the status. Delivery is
+synchronous and the clock moves only when told: a put, a tick, and the command is on the list.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from common.boxes import Boxes
+from common.bus import QoS
+from common.clock import BOOT_ID, FakeClock
+from common.memory_bus import MemoryHub
+from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
+from common.node import Node
+from services.camera.contract import CameraSettings
+from services.controller.contract import ControllerSettings
+from services.controller.service import ControlLoop
+from stack.config import Config
+
+W, H = 640, 480
+
+
+class Rig:
+    """One controller (``loop``) and the test's participant (``probe``) on one hub."""
+
+    def __init__(
+        self,
+        tmp_path: Path,
+        cameras: dict[str, CameraSettings] | None = None,
+        clock: FakeClock | None = None,
+        **controller: Any,
+    ) -> None:
+        settings = {"mode": "track", "no_laser": False, **controller}
+        self.config = Config(
+            controller=ControllerSettings(estop_file=str(tmp_path / "estop.json"), **settings),
+            cameras=tuple((cameras or {}).items()),
+        )
+        self.clock = clock or FakeClock()
+        self.hub = MemoryHub()
+        self.node = Node(
+            "controller",
+            self.config,
+            counters_period_s=self.config.controller.counters_period_s,
+            bus=self.hub.join("controller"),
+            clock=self.clock,
+        )
+        self.loop = ControlLoop(self.config, self.node)
+        self.keys = self.node.keys
+        self.probe = self.hub.join("test")
+        self.cmds: list[Twist] = []
+        self.statuses: list[ControllerStatus] = []
+        self.probe.subscribe(
+            self.keys.cmd_vel(), lambda s: self.cmds.append(Twist.decode(s.payload))
+        )
+        self.probe.subscribe(
+            self.keys.controller_status(),
+            lambda s: self.statuses.append(ControllerStatus.decode(s.payload)),
+        )
+        self._seq = 0
+
+    @property
+    def counters(self) -> dict[str, int]:
+        return self.node.counters.snapshot()
+
+    def put(self, key: str, payload: bytes) -> None:
+        self.probe.publisher(key, QoS.SENSOR).put(payload)
+
+    def header(self, age_s: float = 0.0, source: str = "detector", ahead_s: float = 0.0) -> Header:
+        """Stamped ``age_s`` ago (or ``ahead_s`` ahead) on both clocks of the fake clock."""
+        self._seq += 1
+        at = self.clock.now()
+        shift = round((ahead_s - age_s) * 1e9)
+        return Header(
+            stamp_ns=at.wall_ns + shift, frame_id="camera", seq=self._seq, source=source,
+            mono_ns=at.mono_ns + shift, boot_id=BOOT_ID,
+        )  # fmt: skip
+
+    def detections(self, camera: str = "front", payload: bytes | None = None, **kw: Any) -> None:
+        """``payload`` (default: one centred person, stamped now) on ``camera``'s key."""
+        self.put(self.keys.detections(camera), payload or people(self.header(**kw), cx=W / 2))
+
+    def scan(self, ahead_m: float = math.inf, age_s: float = 0.0) -> None:
+        self.put(self.keys.scan(), obstacle_ahead(self.header(age_s, source="laser"), ahead_m))
+
+    def estop(self, engaged: bool, age_s: float = 0.0, ahead_s: float = 0.0) -> None:
+        header = self.header(age_s, source="estop", ahead_s=ahead_s)
+        msg = EStop(header=header, engaged=engaged, reason="test")
+        self.put(self.keys.estop(), msg.encode())
+
+    def tick(self) -> tuple[Twist, ControllerStatus]:
+        """One control tick; the command and the status it sent."""
+        before = len(self.cmds)
+        self.loop.tick()
+        assert len(self.cmds) == before + 1, "a tick sends exactly one command"
+        return self.cmds[-1], self.statuses[-1]
+
+    def close(self) -> None:
+        self.loop.close()
+        self.probe.close()
+        self.node.close()
+
+
+def people(header: Header, cx: float = W / 2, n: int = 1, h: float = 200.0) -> bytes:
+    """``n`` people (0: nobody) whose boxes are centred at column ``cx``, ``h`` pixels tall."""
+    box = [cx - 30, 240 - h / 2, cx + 30, 240 + h / 2]
+    return Detections(
+        header=header, image_width=W, image_height=H, class_names=("person",) * n,
+        boxes=Boxes(
+            xyxy=np.tile(np.array([box], np.float32), (n, 1)),
+            scores=np.full(n, 0.9, np.float32),
+            class_ids=np.zeros(n, np.int32),
+        ),
+    ).encode()  # fmt: skip
+
+
+def obstacle_ahead(header: Header, distance_m: float = math.inf) -> bytes:
+    """A 270 deg scan that sees a wall ``distance_m`` straight ahead (+-10 deg) and nothing
+    else within range (inf: all clear)."""
+    angles = np.linspace(-math.radians(135), math.radians(135), 541)
+    ranges = np.full(541, np.inf, np.float32)
+    ranges[np.abs(angles) <= math.radians(10)] = distance_m
+    return LaserScan(
+        header=header, angle_min=float(angles[0]), angle_increment=float(angles[1] - angles[0]),
+        range_min=0.05, range_max=12.0, ranges=ranges,
+    ).encode()  # fmt: skip
