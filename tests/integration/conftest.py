@@ -26,26 +26,11 @@ from common.messages import Detections, Header
 from common.queries import query_metrics, ready_services
 from common.zenoh_bus import open_session
 from stack.config_file import load_config
+from tests.polling import wait_for
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 
 REPO = Path(__file__).resolve().parents[2]
 STARTUP_S = 120.0  # model load and warm-up on a loaded 2-core CI machine
-
-
-def wait_for(
-    condition: Callable[[], Any], timeout: float, what: str | Callable[[], str], poll: float = 0.05
-) -> Any:
-    """Poll ``condition`` until it returns something truthy; fail naming ``what``."""
-    deadline = time.monotonic() + timeout
-    pause = threading.Event()  # never set: wait() is the poll interval
-    while time.monotonic() < deadline:
-        result = condition()
-        if result:
-            return result
-        pause.wait(poll)
-    pytest.fail(
-        f"timed out after {timeout:.0f} s waiting for {what if isinstance(what, str) else what()}"
-    )
 
 
 def run_detector_cli(*args: str | Path, timeout: float = 240) -> subprocess.CompletedProcess[str]:

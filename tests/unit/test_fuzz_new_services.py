@@ -13,8 +13,6 @@ survive every payload, count each once (``written`` or ``bad_input``), and leave
 from __future__ import annotations
 
 import json
-import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -36,6 +34,7 @@ from services.viewer.channels import Channels
 from services.viewer.contract import ViewerSettings
 from services.viewer.convert import MAX_STAMP_S
 from stack.config import Config
+from tests.polling import wait_for
 from tests.unit.fuzz import (
     EDGE_STAMPS_NS,
     edge_stamped,
@@ -49,13 +48,6 @@ EXAMPLES = 30  # per subscription: the viewer's 6 and the recorder's 8
 WRITER_S = 10.0  # the most one payload may wait for the recorder's writer thread
 #: The messages whose stamp the viewer turns into a Foxglove timestamp in Zenoh's callback.
 STAMPED_IN_CALLBACK = (LaserScan, GroundTruth)
-
-
-def wait_until(condition: Callable[[], Any], what: str, within_s: float) -> None:
-    deadline, pause = time.monotonic() + within_s, threading.Event()
-    while not condition():
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        pause.wait(0.002)
 
 
 def past_foxglove(stamp_ns: int) -> bool:
@@ -169,13 +161,14 @@ def _recorded(
     before = {name: c.get(name) for name in ("received", "written", "bad_input")}
     rec.on_sample(key, payload, cls.decode)
     assert c.get("received") == before["received"] + 1
-    wait_until(
+    wait_for(
         lambda: (
             rec.failed is not None
             or c.get("written") + c.get("bad_input") > before["written"] + before["bad_input"]
         ),
-        f"the writer to take a payload on {key}",
         WRITER_S,
+        f"the writer to take a payload on {key}",
+        poll=0.002,
     )
     assert rec.failed is None, f"the writer thread died on {payload[:64]!r}: {rec.failed!r}"
     try:  # what the writer should make of it

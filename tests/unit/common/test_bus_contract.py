@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import socket
-import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -17,6 +16,7 @@ import zenoh
 from common.bus import Bus, QoS, Sample
 from common.memory_bus import MemoryHub, intersects
 from common.zenoh_bus import ZenohBus
+from tests.polling import wait_for
 
 
 @dataclass
@@ -40,13 +40,8 @@ def _session(listen: list[str], connect: list[str]) -> zenoh.Session:
     return zenoh.open(conf)
 
 
-def _poll(check: Callable[[], bool], timeout_s: float = 10.0) -> bool:
-    done = threading.Event()
-    for _ in range(int(timeout_s / 0.02)):
-        if check():
-            return True
-        done.wait(0.02)
-    return check()
+def _poll(check: Callable[[], bool]) -> bool:
+    return bool(wait_for(check, 10.0, "the Zenoh sessions to agree", poll=0.02))
 
 
 @pytest.fixture(params=["memory", "zenoh"])
@@ -64,7 +59,7 @@ def pair(request: pytest.FixtureRequest) -> Iterator[Pair]:
     try:
         # Linked once b sees a's token.
         probe = za.declare_token("contract/link")
-        assert _poll(lambda: bool(zb.live_tokens("contract/link", 1.0))), "sessions not linked"
+        _poll(lambda: bool(zb.live_tokens("contract/link", 1.0)))
         probe.undeclare()
         yield Pair(za, zb, _poll)
     finally:
