@@ -107,7 +107,8 @@ def test_an_undeclared_subscription_hears_nothing_more(pair: Pair) -> None:
     pair.b.subscribe("r/x", later.append)
     _until_heard(pair, lambda: pub.put(b"3"), later)
     assert {s.payload for s in got} == {b"1"}
-    assert {s.payload for s in later} == {b"3"}
+    # (Zenoh may hand a new subscription what was still on its way when it was declared.)
+    assert b"3" in {s.payload for s in later}
 
 
 def test_tokens_are_watched_with_their_history_and_go_with_their_owner(pair: Pair) -> None:
