@@ -47,14 +47,14 @@ TEST_WORKERS ?= 2
 
 test: $(DEV_STAMP) lint
 	$(PY) -m tools.detector prepare
-	$(PY) -m pytest -q -n $(TEST_WORKERS)
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist worksteal
 
 unit: $(DEV_STAMP)
 	$(PY) -m pytest -q tests/unit
 
 integration: $(DEV_STAMP)
 	$(PY) -m tools.detector prepare
-	$(PY) -m pytest -q -n $(TEST_WORKERS) -m integration
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist worksteal -m integration
 
 benchmark: setup
 	$(PY) -m tools.detector benchmark --runs 50

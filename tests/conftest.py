@@ -17,3 +17,17 @@ def default_model() -> Path:
     from modelprep.files import ensure_default_model
 
     return ensure_default_model()
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The longest tests first: the closed-loop scenarios, then the other real-process tests,
+    then the unit tests. With two workers (make test) the short ones then fill in at the end,
+    and no long test starts last and runs alone."""
+
+    def rank(item: pytest.Item) -> int:
+        path = item.nodeid
+        if path.startswith("tests/integration/test_scenarios.py"):
+            return 0
+        return 1 if path.startswith("tests/integration/") else 2
+
+    items.sort(key=rank)  # stable: within a rank, the collection's order
