@@ -4,9 +4,18 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
+import signal
+import tempfile
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 _CHUNK_BYTES = 1 << 20
+
+#: The signals a stop comes by (common/lifecycle.py takes both as Ctrl-C).
+_STOPS = {signal.SIGINT, signal.SIGTERM}
 
 
 def sha256_file(path: Path, chunk: int = _CHUNK_BYTES) -> str:
@@ -45,3 +54,25 @@ def atomic_write_bytes(path: Path, payload: bytes, *, durable: bool = False) -> 
             os.fsync(fd)  # the rename itself
         finally:
             os.close(fd)
+
+
+@contextmanager
+def temporary_folder(parent: Path, prefix: str) -> Iterator[Path]:
+    """A fresh folder in ``parent`` for work that ends in an atomic rename, removed on the way
+    out, whichever way that is. Unlike ``tempfile.TemporaryDirectory``, an interrupt (Ctrl-C,
+    SIGTERM taken as one) that lands while the folder is being made cannot leave it behind:
+    the stop signals wait until the folder is made and owned here (on the main thread, where
+    Python runs their handlers)."""
+    path: Path | None = None
+    try:
+        main = threading.current_thread() is threading.main_thread()
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPS) if main else None
+        try:
+            path = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+        finally:
+            if held is not None:
+                signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        yield path
+    finally:
+        if path is not None:
+            shutil.rmtree(path, ignore_errors=True)  # what is left of a second interrupt

