@@ -165,12 +165,10 @@ def test_rogue_counters_are_refused(stack: Stack) -> None:
         counters = stack.metrics()["counters"]  # type: ignore[index]
         assert not [n for n in counters if "rogue" in n]
         assert counters["metrics.refused.unknown_service"] >= 2
-        # The real ones are still there (on a stack just started, once its first are in).
-        wait_for(
-            lambda: stack.metrics()["counters"].get("detector.frames_in", 0) > 0,  # type: ignore[index]
-            30,
-            "the detector's own counters beside the refused ones",
-        )
+        # The real ones are still there: the detector serves its one camera. (Not frames_in:
+        # every camera frame of this stack is over the payload limit, so a stack that got no
+        # test's frames yet, as a worker of its own under xdist, has counted none.)
+        assert counters["detector.serving"] == 1
     finally:
         rogue.close()
 
