@@ -17,6 +17,10 @@ runs can share one network without hearing each other:
     <prefix>/detector/pool/<worker>           liveliness      a detector worker in the pool
     <prefix>/detector/serving/<worker>/<zid>/<camera>
                                               liveliness      a worker (session <zid>) serves it
+    <prefix>/camera/<camera>/announce/<chunk> liveliness      a camera's source describes it
+    <prefix>/detector/workers/<worker>/<chunk>
+                                              liveliness      a pool worker describes itself
+                                                              (<chunk>: common/announce.py)
 
 Who may put on which key under the secure profile: each service's contract declares it
 (``services/<name>/contract.py``), stack/access.py builds the rules.
@@ -115,6 +119,36 @@ class Keys:
         parts = key[len(head) :].split("/", 2)
         return (parts[0], parts[1], parts[2]) if len(parts) == 3 and all(parts) else None
 
+    def camera_announcement(self, camera: str, chunk: str) -> str:
+        """A camera's announcement token (common/announce.py): ``chunk`` encodes it."""
+        return f"{self.camera_announcements_of(camera)[:-1]}{_check_chunks('announcement', chunk)}"
+
+    def camera_announcements_of(self, camera: str) -> str:
+        """Every announcement of ``camera`` (its source's access rule)."""
+        return f"{self.prefix}/camera/{_check_chunks('camera name', camera)}/announce/*"
+
+    def all_camera_announcements(self) -> str:
+        return f"{self.prefix}/camera/*/announce/*"
+
+    def camera_announcement_parts(self, key: str) -> tuple[str, str] | None:
+        """``(camera, chunk)`` of a camera announcement's key; None for another key."""
+        return _two_parts(key, f"{self.prefix}/camera/", "announce")
+
+    def worker_announcement(self, worker: str, chunk: str) -> str:
+        """A pool worker's announcement token (common/announce.py): ``chunk`` encodes it."""
+        return f"{self.worker_announcements_of(worker)[:-1]}{_check_chunks('announcement', chunk)}"
+
+    def worker_announcements_of(self, worker: str) -> str:
+        """Every announcement of ``worker`` (its access rule)."""
+        return f"{self.prefix}/detector/workers/{_check_chunks('worker id', worker)}/*"
+
+    def all_worker_announcements(self) -> str:
+        return f"{self.prefix}/detector/workers/*/*"
+
+    def worker_announcement_parts(self, key: str) -> tuple[str, str] | None:
+        """``(worker, chunk)`` of a worker announcement's key; None for another key."""
+        return _two_parts(key, f"{self.prefix}/detector/workers/", "")
+
     def scan(self) -> str:
         return f"{self.prefix}/scan"
 
@@ -144,3 +178,15 @@ class Keys:
 
     def all_health(self) -> str:
         return f"{self.prefix}/health/*"
+
+
+def _two_parts(key: str, head: str, middle: str) -> tuple[str, str] | None:
+    """``(name, chunk)`` of ``<head><name>/<middle>/<chunk>`` (``<head><name>/<chunk>`` when
+    ``middle`` is empty); None for any other key."""
+    if not key.startswith(head):
+        return None
+    parts = key[len(head) :].split("/")
+    want = 3 if middle else 2
+    if len(parts) != want or not all(parts) or (middle and parts[1] != middle):
+        return None
+    return parts[0], parts[-1]

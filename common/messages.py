@@ -18,6 +18,7 @@ y down; angles are radians, counter-clockwise positive (REP 103); ranges are met
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Annotated, Any, ClassVar
 
@@ -287,3 +288,89 @@ class MetricsSnapshot(Message):
         # The body has always been the JSON answer plus the header, so it carries the header's
         # stamp_ns at the top level too; decode ignores it.
         return {"stamp_ns": self.header.stamp_ns}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CameraAnnouncement(Message):
+    """A camera as its source describes it on the bus while it publishes the camera's frames
+    (common/announce.py carries it in a liveliness token's key: it lives exactly as long as
+    the source does). Pool workers, the controller and the metrics service take the camera set
+    and each camera's weight and geometry from these, not from their own config.
+
+    ``width``/``height``: the frames' size, 0 while the source does not know it yet (a camera
+    that keeps its device's size, before the first frame). ``rate_hz``: the frames per second
+    it sends. ``mount_yaw_deg``: where it looks on the robot, counter-clockwise from forward;
+    ``hfov_deg``: its horizontal field of view. ``frame_id``: its frames' header frame id.
+    ``source``: what announces it (``camera``, ``sim``, ``ros2``, ``play``)."""
+
+    TAG: ClassVar[str] = "CameraAnnouncement"
+    VERSION: ClassVar[int] = 1
+    camera: str
+    width: int = 0
+    height: int = 0
+    rate_hz: float
+    mount_yaw_deg: float = 0.0
+    hfov_deg: float = 60.0
+    frame_id: str = ""
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        _check_announced_name("camera", self.camera)
+        for what, side in (("width", self.width), ("height", self.height)):
+            if not 0 <= side <= MAX_IMAGE_SIDE:
+                raise ValueError(f"{what} {side} is outside 0..{MAX_IMAGE_SIDE}")
+        if (self.width == 0) != (self.height == 0):
+            raise ValueError(f"size {self.width}x{self.height}: both known or neither")
+        if not (math.isfinite(self.rate_hz) and 0 < self.rate_hz <= MAX_ANNOUNCED_RATE_HZ):
+            raise ValueError(f"rate_hz {self.rate_hz} is outside (0, {MAX_ANNOUNCED_RATE_HZ}]")
+        if not (math.isfinite(self.mount_yaw_deg) and -180 <= self.mount_yaw_deg <= 180):
+            raise ValueError(f"mount_yaw_deg {self.mount_yaw_deg} is outside [-180, 180]")
+        if not (math.isfinite(self.hfov_deg) and 0 < self.hfov_deg < 180):
+            raise ValueError(f"hfov_deg {self.hfov_deg} is outside (0, 180)")
+        for what, text in (("frame_id", self.frame_id), ("source", self.source)):
+            if len(text) > MAX_NAME_CHARS:
+                raise ValueError(f"{what} of {len(text)} characters (at most {MAX_NAME_CHARS})")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WorkerAnnouncement(Message):
+    """A detector worker as it describes itself to the pool while it is in it (common/
+    announce.py: in a liveliness token's key). ``capacity_hz``: the frames per second it can
+    detect, measured at start and kept current, at its ``input_size``, ``backend`` and batch
+    (``max_batch``, the round size it runs); the pool gives each worker a share of the
+    cameras' frame rate in proportion to it. ``seq`` grows with each re-announcement of one
+    worker process (a new capacity): of two tokens alive for one name, the higher is current."""
+
+    TAG: ClassVar[str] = "WorkerAnnouncement"
+    VERSION: ClassVar[int] = 1
+    worker: str
+    capacity_hz: float
+    input_size: int = 0
+    backend: str = ""
+    max_batch: int = 1
+    seq: int = 0
+
+    def __post_init__(self) -> None:
+        _check_announced_name("worker", self.worker)
+        if not (math.isfinite(self.capacity_hz) and 0 < self.capacity_hz <= MAX_CAPACITY_HZ):
+            raise ValueError(f"capacity_hz {self.capacity_hz} is outside (0, {MAX_CAPACITY_HZ}]")
+        if not 0 <= self.input_size <= MAX_IMAGE_SIDE:
+            raise ValueError(f"input_size {self.input_size} is outside 0..{MAX_IMAGE_SIDE}")
+        if not 1 <= self.max_batch <= 1024:
+            raise ValueError(f"max_batch {self.max_batch} is outside 1..1024")
+        if not 0 <= self.seq < 2**53:
+            raise ValueError(f"seq {self.seq} is outside 0..2**53")
+        if len(self.backend) > MAX_NAME_CHARS:
+            raise ValueError(f"backend of {len(self.backend)} characters (over {MAX_NAME_CHARS})")
+
+
+#: The highest frame rate a camera may announce, and the highest capacity a worker may: beyond
+#: any real sensor or accelerator, so that one liar cannot take every share of the pool.
+MAX_ANNOUNCED_RATE_HZ = 1000.0
+MAX_CAPACITY_HZ = 100_000.0
+_ANNOUNCED_NAME = re.compile(r"[A-Za-z0-9_.\-]{1,64}")
+
+
+def _check_announced_name(what: str, name: str) -> None:
+    if not _ANNOUNCED_NAME.fullmatch(name):
+        raise ValueError(f"{what} name {name[:80]!r} is not 1..64 of A-Z a-z 0-9 _ . -")

@@ -50,24 +50,41 @@ def rank(camera: str, worker: str) -> int:
     return int.from_bytes(digest, "big")
 
 
-def assign(workers: Iterable[str], weights: Mapping[str, float], balance: float) -> dict[str, str]:
-    """``{camera: worker}`` for every camera of ``weights`` over the live ``workers`` (see the
-    module's docstring). Empty when there is no worker. ``balance`` >= 1 is the slack over a
-    perfectly even load that a worker may take before a camera goes to its next choice."""
-    live = sorted(set(workers))
+def assign(
+    workers: Iterable[str] | Mapping[str, float], weights: Mapping[str, float], balance: float
+) -> dict[str, str]:
+    """``{camera: worker}`` for every camera of ``weights`` over the live ``workers``. Empty
+    when there is no worker. ``balance`` >= 1 is the slack over a share exactly in proportion
+    to capacity that a worker may take before a camera goes to its next choice.
+
+    ``workers`` is either the live workers' names (all of equal capacity) or ``{worker:
+    capacity}`` (common/messages.py's ``WorkerAnnouncement.capacity_hz``; > 0): each worker's
+    bound is ``balance`` x total weight x its capacity / the total capacity, so a worker twice
+    as fast takes about twice the load. A camera none has room for goes to the worker whose
+    load after it, against its capacity, is least (ties: the better-ranked)."""
+    capacity = (
+        {w: float(c) for w, c in workers.items()}
+        if isinstance(workers, Mapping)
+        else dict.fromkeys(workers, 1.0)
+    )
+    live = sorted(capacity)
     if not live:
         return {}
     if balance < 1:
         raise ValueError(f"balance must be at least 1, got {balance}")
-    bound = balance * sum(weights.values()) / len(live) + _EPS
+    if any(not c > 0 for c in capacity.values()):
+        raise ValueError(f"every capacity must be above 0, got {capacity}")
+    total_cap = sum(capacity.values())
+    total = sum(weights.values())
+    bound = {w: balance * total * capacity[w] / total_cap + _EPS for w in live}
     load = dict.fromkeys(live, 0.0)
     out: dict[str, str] = {}
     for camera in sorted(weights, key=lambda c: (-weights[c], c)):
         weight = weights[camera]
         ranked = sorted(live, key=lambda w: (-rank(camera, w), w))
-        chosen = next((w for w in ranked if load[w] + weight <= bound), None)
+        chosen = next((w for w in ranked if load[w] + weight <= bound[w]), None)
         if chosen is None:
-            chosen = min(ranked, key=lambda w: load[w])  # ties: the better-ranked
+            chosen = min(ranked, key=lambda w: (load[w] + weight) / capacity[w])
         load[chosen] += weight
         out[camera] = chosen
     return out

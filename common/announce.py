@@ -1,0 +1,163 @@
+"""Announcements: what a camera source or a detector worker says of itself on the bus, carried
+in the key of a liveliness token, so that it lives exactly as long as its announcer does.
+
+A token's key cannot carry bytes, so the announcement (a message of common/messages.py) is
+encoded into one key chunk: base64url of the message's msgpack, unpadded (letters, digits,
+``-`` and ``_``: a valid Zenoh chunk). rmw_zenoh puts its graph (node, topic, type, QoS) in
+liveliness keys the same way. The announcer's own key chunk before it names it (common/keys.py):
+
+    <prefix>/camera/<camera>/announce/<chunk>        CameraAnnouncement
+    <prefix>/detector/workers/<worker>/<chunk>       WorkerAnnouncement
+
+An announcement that changes (a camera's size learnt from its first frame, a worker's measured
+capacity) is a new token: :class:`Announcer` declares the new one before it withdraws the old,
+so a listener never sees the announcer gone. :class:`Announced` is the listener's side: every
+live announcement on a key expression by name, the newest of a name when two overlap, garbage
+(a key that does not decode, or whose name differs from the message's) reported and ignored.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import threading
+from collections.abc import Callable
+from typing import Generic, Protocol, TypeVar
+
+from common.bus import Bus, Declared
+from common.errors import DecodeError
+
+#: The longest announcement chunk read: a real one is under 300 characters.
+MAX_CHUNK_CHARS = 1024
+
+
+class _Announcement(Protocol):
+    def encode(self) -> bytes: ...
+
+
+_A = TypeVar("_A")
+
+
+def to_chunk(message: _Announcement) -> str:
+    """``message`` as one key chunk (see the module's docstring)."""
+    return base64.urlsafe_b64encode(message.encode()).rstrip(b"=").decode("ascii")
+
+
+def from_chunk(decode: Callable[[bytes], _A], chunk: str) -> _A:
+    """The message of a key chunk made by :func:`to_chunk`, decoded by ``decode`` (a
+    message type's ``decode``); DecodeError for anything else."""
+    if len(chunk) > MAX_CHUNK_CHARS:
+        raise DecodeError(f"an announcement of {len(chunk)} characters is over {MAX_CHUNK_CHARS}")
+    try:
+        raw = base64.urlsafe_b64decode(chunk + "=" * (-len(chunk) % 4))
+    except (binascii.Error, ValueError) as exc:
+        raise DecodeError(f"an announcement that is not base64url: {exc}") from exc
+    return decode(raw)
+
+
+class Announcer(Generic[_A]):
+    """One announcer's current token: :meth:`update` declares the token of a new announcement,
+    then withdraws the previous one (never a moment with none); :meth:`close` withdraws it.
+    ``key_of(chunk)`` is the announcer's key for a chunk (common/keys.py). Thread-safe."""
+
+    def __init__(self, bus: Bus, key_of: Callable[[str], str]) -> None:
+        self._bus = bus
+        self._key_of = key_of
+        self._lock = threading.Lock()
+        self._token: Declared | None = None
+        self._key = ""
+        self.current: _A | None = None
+
+    def update(self, message: _A) -> bool:
+        """Announce ``message`` (instead of the previous one); False when it is the one
+        already announced (nothing declared)."""
+        key = self._key_of(to_chunk(message))  # type: ignore[arg-type]
+        with self._lock:
+            if key == self._key and self._token is not None:
+                return False
+            token = self._bus.declare_token(key)
+            old, self._token, self._key, self.current = self._token, token, key, message
+        if old is not None:
+            old.undeclare()
+        return True
+
+    def close(self) -> None:
+        with self._lock:
+            token, self._token, self._key, self.current = self._token, None, "", None
+        if token is not None:
+            token.undeclare()
+
+
+class Announced(Generic[_A]):
+    """Every announcement alive on ``expr``, by announcer name: the listener's side.
+
+    ``parse(key)`` splits a token's key into (name, chunk), or None for a key that is not an
+    announcement; ``decode`` is the message type's decode; ``name_of`` reads the name the
+    message gives itself, which must equal the key's (a camera's source cannot announce
+    another camera under its own key). ``on_change()`` is called (on the bus's thread, no lock
+    held) whenever the set of current announcements changed; ``on_bad(key, error)`` for an
+    announcement that does not decode, which is then ignored. While two tokens of one name are
+    alive (a re-announcement's overlap), the one that came last is current. Thread-safe.
+    """
+
+    def __init__(
+        self,
+        bus: Bus,
+        expr: str,
+        parse: Callable[[str], tuple[str, str] | None],
+        decode: Callable[[bytes], _A],
+        name_of: Callable[[_A], str],
+        *,
+        on_change: Callable[[], None] | None = None,
+        on_bad: Callable[[str, Exception], None] | None = None,
+    ) -> None:
+        self._parse, self._decode, self._name_of = parse, decode, name_of
+        self._on_change = on_change
+        self._on_bad = on_bad
+        self._lock = threading.Lock()
+        # Per name, its live tokens in the order they came: key -> announcement.
+        self._live: dict[str, dict[str, _A]] = {}
+        self._watch = bus.watch_tokens(expr, self._on_token)
+
+    def current(self) -> dict[str, _A]:
+        """The current announcement of every announcer alive, by name."""
+        with self._lock:
+            return {name: list(keys.values())[-1] for name, keys in self._live.items() if keys}
+
+    def get(self, name: str) -> _A | None:
+        with self._lock:
+            keys = self._live.get(name)
+            return list(keys.values())[-1] if keys else None
+
+    def _on_token(self, key: str, alive: bool) -> None:
+        parts = self._parse(key)
+        if parts is None:
+            return
+        name, chunk = parts
+        if not alive:
+            with self._lock:
+                keys = self._live.get(name, {})
+                changed = keys.pop(key, None) is not None
+                if not keys:
+                    self._live.pop(name, None)
+            if changed and self._on_change is not None:
+                self._on_change()
+            return
+        try:
+            message = from_chunk(self._decode, chunk)
+            if self._name_of(message) != name:
+                raise DecodeError(
+                    f"an announcement under the name {name!r} names itself "
+                    f"{self._name_of(message)!r}"
+                )
+        except DecodeError as exc:
+            if self._on_bad is not None:
+                self._on_bad(key, exc)
+            return
+        with self._lock:
+            self._live.setdefault(name, {})[key] = message
+        if self._on_change is not None:
+            self._on_change()
+
+    def close(self) -> None:
+        self._watch.undeclare()

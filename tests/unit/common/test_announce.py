@@ -1,0 +1,133 @@
+"""Announcements in token keys (common/announce.py) over an in-process bus, and the pool rule
+with capacities (common/pool_rule.py)."""
+
+from __future__ import annotations
+
+import pytest
+
+from common.announce import Announced, Announcer, from_chunk, to_chunk
+from common.errors import DecodeError
+from common.keys import Keys
+from common.memory_bus import MemoryHub
+from common.messages import CameraAnnouncement, WorkerAnnouncement
+from common.pool_rule import assign
+
+KEYS = Keys("robot1")
+
+
+def _camera(name: str = "front", **kw: object) -> CameraAnnouncement:
+    fields: dict[str, object] = {"camera": name, "width": 640, "height": 480, "rate_hz": 10.0}
+    fields.update(kw)
+    return CameraAnnouncement(**fields)  # type: ignore[arg-type]
+
+
+def _cameras(bus_hub: MemoryHub, **kw: object) -> Announced[CameraAnnouncement]:
+    return Announced(
+        bus_hub.join("listener"),
+        KEYS.all_camera_announcements(),
+        KEYS.camera_announcement_parts,
+        CameraAnnouncement.decode,
+        lambda a: a.camera,
+        **kw,  # type: ignore[arg-type]
+    )
+
+
+def test_a_chunk_is_a_key_chunk_and_reads_back() -> None:
+    ann = _camera(mount_yaw_deg=-90.0, frame_id="robot/camera_left", source="sim")
+    chunk = to_chunk(ann)
+    assert KEYS.camera_announcement_parts(KEYS.camera_announcement("front", chunk)) == (
+        "front",
+        chunk,
+    )
+    assert from_chunk(CameraAnnouncement.decode, chunk) == ann
+
+
+@pytest.mark.parametrize("chunk", ["", "@@@", "AAAA", "x" * 5000, to_chunk(_camera())[:-7]])
+def test_garbage_chunks_are_decode_errors(chunk: str) -> None:
+    with pytest.raises(DecodeError):
+        from_chunk(CameraAnnouncement.decode, chunk)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"rate_hz": 0.0},
+        {"rate_hz": float("nan")},
+        {"rate_hz": 1e9},
+        {"width": 640, "height": 0},
+        {"mount_yaw_deg": 200.0},
+        {"hfov_deg": 180.0},
+        {"camera": "a/b"},
+    ],
+)
+def test_an_announcement_out_of_bounds_is_refused(bad: dict[str, object]) -> None:
+    with pytest.raises(ValueError):
+        _camera(**bad)
+
+
+def test_a_listener_sees_announcements_come_change_and_go() -> None:
+    hub = MemoryHub()
+    changes: list[int] = []
+    heard = _cameras(hub, on_change=lambda: changes.append(1))
+    source = hub.join("camera")
+    announcer: Announcer[CameraAnnouncement] = Announcer(
+        source, lambda chunk: KEYS.camera_announcement("front", chunk)
+    )
+    assert heard.current() == {}
+    announcer.update(_camera(width=0, height=0))
+    assert heard.current() == {"front": _camera(width=0, height=0)}
+    assert announcer.update(_camera(width=0, height=0)) is False  # same: nothing declared
+    announcer.update(_camera())
+    assert heard.current() == {"front": _camera()}  # the new one, never none between
+    assert len(hub.tokens(KEYS.all_camera_announcements())) == 1
+    source.close()  # the process ends: its announcement goes with it
+    assert heard.current() == {}
+    assert len(changes) == 4  # came, changed (two events: new came, old went), went
+
+
+def test_a_source_cannot_announce_another_camera_and_garbage_is_reported() -> None:
+    hub = MemoryHub()
+    bad: list[str] = []
+    heard = _cameras(hub, on_bad=lambda key, exc: bad.append(key))
+    rogue = hub.join("rogue")
+    rogue.declare_token(KEYS.camera_announcement("left", to_chunk(_camera("front"))))
+    rogue.declare_token(KEYS.camera_announcement("rear", "notbase64atall"))
+    rogue.declare_token(f"{KEYS.prefix}/camera/rear/announce")  # no chunk: not an announcement
+    assert heard.current() == {}
+    assert len(bad) == 2
+
+
+def test_workers_announce_capacity_and_the_newest_token_is_current() -> None:
+    hub = MemoryHub()
+    heard = Announced(
+        hub.join("listener"),
+        KEYS.all_worker_announcements(),
+        KEYS.worker_announcement_parts,
+        WorkerAnnouncement.decode,
+        lambda a: a.worker,
+    )
+    worker = hub.join("w")
+    first = worker.declare_token(
+        KEYS.worker_announcement("gpu", to_chunk(WorkerAnnouncement(worker="gpu", capacity_hz=5)))
+    )
+    worker.declare_token(
+        KEYS.worker_announcement(
+            "gpu", to_chunk(WorkerAnnouncement(worker="gpu", capacity_hz=50, seq=1))
+        )
+    )
+    assert heard.current()["gpu"].capacity_hz == 50
+    first.undeclare()
+    assert heard.current()["gpu"].capacity_hz == 50
+
+
+def test_shares_follow_capacity() -> None:
+    weights = {f"cam{i}": 1.0 for i in range(12)}
+    owners = assign({"fast": 3.0, "slow": 1.0}, weights, 1.0)
+    fast = sum(1 for w in owners.values() if w == "fast")
+    assert fast == 9  # 3/4 of 12, within the bound exactly
+    assert assign(["a", "b"], weights, 1.25) == assign({"a": 7.0, "b": 7.0}, weights, 1.25)
+
+
+def test_a_capacity_must_be_positive() -> None:
+    with pytest.raises(ValueError):
+        assign({"a": 0.0}, {"c": 1.0}, 1.25)
