@@ -29,6 +29,7 @@ from common.clock import wall_ns
 from common.codec import Message
 from common.errors import DecodeError
 from common.messages import (
+    CameraAnnouncement,
     ControllerStatus,
     Detections,
     EStop,
@@ -39,6 +40,7 @@ from common.messages import (
     MetricsSnapshot,
     ServiceCounters,
     Twist,
+    WorkerAnnouncement,
 )
 from common.node import Tally
 from services.ros2.convert import LASER_SCAN, TWIST, TWIST_STAMPED, scan_from_ros, twist_from_ros
@@ -130,6 +132,24 @@ def samples(stamp_ns: int | None = 1_700_000_000_000_000_000) -> dict[type[Messa
                 range_min=0.1,
                 range_max=10.0,
                 ranges=np.array([1.0, np.inf, np.nan, 2.0], np.float32),
+            )
+        ],
+        CameraAnnouncement: [
+            CameraAnnouncement(camera="front", rate_hz=10.0),
+            CameraAnnouncement(
+                camera="left",
+                width=640,
+                height=480,
+                rate_hz=5.0,
+                mount_yaw_deg=90.0,
+                hfov_deg=70.0,
+                frame_id="camera_left",
+                source="sim",
+            ),
+        ],
+        WorkerAnnouncement: [
+            WorkerAnnouncement(
+                worker="gpu", capacity_hz=120.0, input_size=640, backend="cuda", max_batch=4, seq=2
             )
         ],
         ControllerStatus: [
