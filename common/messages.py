@@ -338,8 +338,10 @@ class WorkerAnnouncement(Message):
     announce.py: in a liveliness token's key). ``capacity_hz``: the frames per second it can
     detect, measured at start and kept current, at its ``input_size``, ``backend`` and batch
     (``max_batch``, the round size it runs); the pool gives each worker a share of the
-    cameras' frame rate in proportion to it. ``seq`` grows with each re-announcement of one
-    worker process (a new capacity): of two tokens alive for one name, the higher is current."""
+    cameras' frame rate in proportion to it. ``prefixes``: the robots' key prefixes whose
+    cameras it serves (empty: the pool's own prefix only). ``seq`` grows with each
+    re-announcement of one worker process (a new capacity): of two tokens alive for one name,
+    the higher is current."""
 
     TAG: ClassVar[str] = "WorkerAnnouncement"
     VERSION: ClassVar[int] = 1
@@ -348,6 +350,7 @@ class WorkerAnnouncement(Message):
     input_size: int = 0
     backend: str = ""
     max_batch: int = 1
+    prefixes: tuple[str, ...] = ()
     seq: int = 0
 
     def __post_init__(self) -> None:
@@ -362,12 +365,18 @@ class WorkerAnnouncement(Message):
             raise ValueError(f"seq {self.seq} is outside 0..2**53")
         if len(self.backend) > MAX_NAME_CHARS:
             raise ValueError(f"backend of {len(self.backend)} characters (over {MAX_NAME_CHARS})")
+        if len(self.prefixes) > MAX_ANNOUNCED_PREFIXES:
+            raise ValueError(f"{len(self.prefixes)} prefixes (at most {MAX_ANNOUNCED_PREFIXES})")
+        for prefix in self.prefixes:
+            if not all(_ANNOUNCED_NAME.fullmatch(chunk) for chunk in prefix.split("/")):
+                raise ValueError(f"prefix {prefix[:80]!r} is not a key prefix")
 
 
 #: The highest frame rate a camera may announce, and the highest capacity a worker may: beyond
 #: any real sensor or accelerator, so that one liar cannot take every share of the pool.
 MAX_ANNOUNCED_RATE_HZ = 1000.0
 MAX_CAPACITY_HZ = 100_000.0
+MAX_ANNOUNCED_PREFIXES = 64  # robots one worker serves
 _ANNOUNCED_NAME = re.compile(r"[A-Za-z0-9_.\-]{1,64}")
 
 

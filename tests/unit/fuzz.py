@@ -149,7 +149,13 @@ def samples(stamp_ns: int | None = 1_700_000_000_000_000_000) -> dict[type[Messa
         ],
         WorkerAnnouncement: [
             WorkerAnnouncement(
-                worker="gpu", capacity_hz=120.0, input_size=640, backend="cuda", max_batch=4, seq=2
+                worker="gpu",
+                capacity_hz=120.0,
+                input_size=640,
+                backend="cuda",
+                max_batch=4,
+                prefixes=("robot1", "site/robot2"),
+                seq=2,
             )
         ],
         ControllerStatus: [
