@@ -37,8 +37,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from common.errors import StackError
-from common.pool_rule import assign, camera_weights
-from services.camera.contract import CameraSettings
+from common.pool_rule import assign
 from services.detector.contract import MAX_WORKERS
 from tools.benchmarks.stacks import (
     DEFAULT_RATE_HZ,
@@ -167,11 +166,13 @@ def plain_rendezvous(workers: Sequence[str], cameras: Sequence[str]) -> dict[str
 def shares(
     owners: Mapping[str, str], weights: Mapping[str, float], workers: Sequence[str]
 ) -> dict[str, tuple[list[str], float]]:
-    """Each worker's cameras and their share of the pixel rate under ``owners``."""
+    """Each worker's cameras and their share (0..1) of the cameras' frame rate under
+    ``owners``."""
+    total = sum(weights.values()) or 1.0
     return {
         w: (
             [c for c in weights if owners.get(c) == w],
-            sum(x for c, x in weights.items() if owners.get(c) == w),
+            sum(x for c, x in weights.items() if owners.get(c) == w) / total,
         )
         for w in workers
     }
@@ -202,12 +203,7 @@ def heavy_together_odds(
     largest: dict[str, list[float]] = {"weighted": [], "plain": []}
     for _ in range(trials):
         names = [f"c{rng.getrandbits(32):08x}" for _ in loads]
-        weights = camera_weights(
-            {
-                name: CameraSettings(rate_hz=load.rate_hz, resize=load.size)
-                for name, load in zip(names, loads, strict=True)
-            }
-        )
+        weights = {name: load.rate_hz for name, load in zip(names, loads, strict=True)}
         top = max(weights.values())
         heavy = [c for c, w in weights.items() if w >= top - 1e-9]
         for rule, per_worker in compare_rules(weights, workers, balance).items():

@@ -15,7 +15,7 @@ from typing import TypeVar
 from common.clock import mono_s, wall_ns
 from common.errors import StackError
 from common.machine import machine_info
-from common.pool_rule import camera_weights
+from common.pool_rule import camera_rates
 from stack.config import Config
 from stack.config_file import load_config
 from tools.benchmarks.pool import (
@@ -203,7 +203,7 @@ def main(options: PoolOptions, stop: threading.Event) -> int:
         rules = odds = weights = None
         if options.uneven:
             config = stack_config(base, Path(tmp) / "uneven.toml", UNEVEN, tag="pool", workers=2)
-            weights = camera_weights(config.all_cameras)
+            weights = camera_rates(config.all_cameras)
             workers = list(config.detector_services)
             rules = compare_rules(weights, workers, config.detector.pool_balance)
             odds = heavy_together_odds(UNEVEN, workers, config.detector.pool_balance)
