@@ -18,12 +18,14 @@ parts, in one run:
   more, none twice) and for every camera to be detected once more, before the next kill.
   Frames detected twice (the same camera and frame) are counted throughout.
 - **uneven load** (``--uneven``): 2 heavy cameras (10 Hz, 640x480) and 2 light ones (2 Hz,
-  320x240) on 2 workers. The pool weighs each camera by its pixel rate
-  (services/detector/pool.py): the table shows each worker's cameras and pixel-rate share
+  320x240) on 2 workers. The pool weighs each camera by its frame rate
+  (services/detector/pool.py): the table shows each worker's cameras and frame-rate share
   under that rule and under plain rendezvous (unweighted, no load bound: every camera to the
   worker that ranks highest for it), both computed with the pure rule, and how often each
   rule puts both heavy cameras on one worker over ``UNEVEN_TRIALS`` random sets of camera
   names; then the measured per-camera FPS under the weighted rule.
+- **capacity** (``--capacity``, tools/benchmarks/pool_capacity.py): a fast and a slow worker
+  (two input sizes), shares by measured capacity against the even split.
 
 Progress goes to stderr, the tables (or ``--json``) to stdout; Ctrl-C stops at once.
 """
@@ -71,6 +73,11 @@ class PoolOptions:
     rate_hz: float = DEFAULT_RATE_HZ
     kills: int = 20
     uneven: bool = True
+    capacity: bool = True
+    fast_size: int = 320
+    slow_size: int = 640
+    capacity_cameras: int = 6
+    capacity_rate_hz: float = 3.0
     as_json: bool = False
 
     def __post_init__(self) -> None:
@@ -86,6 +93,17 @@ class PoolOptions:
             raise StackError(f"--kills must be within 0..1000, got {self.kills}")
         if self.kills and (2 not in self.workers or min(self.cameras) < 2):
             raise StackError("--kills needs 2 among --workers and 2 or more cameras")
+        for what, size in (("--fast-size", self.fast_size), ("--slow-size", self.slow_size)):
+            if size % 32 or not 160 <= size <= 1280:
+                raise StackError(f"{what} must be a multiple of 32 within 160..1280, got {size}")
+        if not 2 <= self.capacity_cameras <= 32:
+            raise StackError(
+                f"--capacity-cameras must be within 2..32, got {self.capacity_cameras}"
+            )
+        if not 0.1 <= self.capacity_rate_hz <= 100:
+            raise StackError(
+                f"--capacity-rate must be within 0.1..100 Hz, got {self.capacity_rate_hz}"
+            )
 
 
 # ---------------------------------------------------------------- results
@@ -104,7 +122,7 @@ class Result(PerCamera):
     p50_ms: dict[str, float]
     p95_ms: dict[str, float]
     served: dict[str, list[str]]  # each worker's cameras, by its counters at the end
-    loads: dict[str, float]  # each worker's pixel-rate share (0..1), by its counters
+    loads: dict[str, float]  # each worker's frame-rate share (0..1), by its counters
     duplicates: int
 
 
@@ -244,7 +262,7 @@ def render_results(results: Sequence[Result]) -> str:
         )
     lines.append(
         "(p50/p95: the worst camera's capture-to-detections; fair: slowest camera's "
-        "FPS / fastest's; dup: frames detected twice; load: pixel-rate share)"
+        "FPS / fastest's; dup: frames detected twice; load: frame-rate share)"
     )
     rows = pool_ratios(results)
     if rows:
@@ -276,7 +294,7 @@ def render_rules(
     lines = [
         "uneven load: "
         + ", ".join(f"{c} {w:.3f}" for c, w in weights.items())
-        + " (pixel-rate weights)"
+        + " (frame-rate weights)"
     ]
     names = {"weighted": "weighted (the pool's rule)", "plain": "plain rendezvous, unweighted"}
     for rule, per_worker in rules.items():
@@ -300,9 +318,11 @@ def to_json(
     odds: Any,
     options: PoolOptions,
     machine: Any,
+    capacity: Sequence[Any] = (),
 ) -> str:
     return json.dumps(
         {
+            "capacity": [r.as_dict() for r in capacity],
             "results": [r.as_dict() for r in results],
             "ratios": pool_ratios(results),
             "handover": {
