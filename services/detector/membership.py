@@ -8,6 +8,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import replace
 from functools import partial
+from typing import Any
 
 from common.announce import Announced, Announcer
 from common.bus import Declared
@@ -31,6 +32,7 @@ AUDIT_PERIOD_S = 0.5  # how often the loop audits the pool's tokens (common/pool
 #: :data:`STALL_CHECK_MIN_S`): a stall is noticed within a quarter of the limit after it.
 STALL_CHECKS = 4
 STALL_CHECK_MIN_S = 0.05
+CATCH_UP_CHECKS = 20  # how often a joining worker looks whether it heard every announcement
 
 #: What the service does when this worker comes to serve a camera (its label in counters, and
 #: the camera: its robot's prefix and its name there) and when it stops.
@@ -125,6 +127,7 @@ class PoolMember:
         self._on_lost = on_lost
         self._stall_s = s.pool_stall_s
         self._closed = threading.Event()
+        self._heard = threading.Event()  # an announcement came or went
         self._stall_watch: threading.Thread | None = None
         self.announcement = WorkerAnnouncement(
             worker=worker_id,
@@ -221,6 +224,7 @@ class PoolMember:
                 on_change=self._changed,
                 on_bad=self._bad,
             )
+        self._catch_up()
         watches = [bus.watch_tokens(keys.all_pool_members(), self._on_member)]
         for key in members:
             self._member(key, joined=True)
@@ -231,7 +235,28 @@ class PoolMember:
         with self._lock:
             self._last_beat = self.clock.mono_s()
 
+    def _catch_up(self) -> None:
+        """Wait (at most :data:`POOL_ASK_TIMEOUT_S`) until the listeners hold every
+        announcement alive on the bus now, so that the first assignment is the pool's, not
+        that of a worker that believes itself alone (which would serve every camera for a
+        moment). On an in-process bus they are there at once."""
+        bus = self.node.bus
+        expected: list[tuple[Announced[Any], set[str]]] = []
+        if self._workers is not None:
+            keys = bus.live_tokens(self.pool_keys.all_worker_announcements(), POOL_ASK_TIMEOUT_S)
+            expected.append((self._workers, _names(keys, self.pool_keys.worker_announcement_parts)))
+        for prefix, heard in self._cameras.items():
+            robot = Keys(prefix)
+            keys = bus.live_tokens(robot.all_camera_announcements(), POOL_ASK_TIMEOUT_S)
+            expected.append((heard, _names(keys, robot.camera_announcement_parts)))
+        for _ in range(CATCH_UP_CHECKS):
+            if all(names <= heard.current().keys() for heard, names in expected):
+                return
+            self._heard.wait(POOL_ASK_TIMEOUT_S / CATCH_UP_CHECKS)
+            self._heard.clear()
+
     def _changed(self) -> None:
+        self._heard.set()
         with self._lock:
             self._dirty = True
 
@@ -496,3 +521,8 @@ class PoolMember:
                 self._token.undeclare()
                 self._token = None
         self._announcer.close()  # after the token: a token alone is ignored, never a member
+
+
+def _names(keys: list[str], parse: Callable[[str], tuple[str, str] | None]) -> set[str]:
+    """The announcers' names of announcement ``keys`` (common/keys.py's ``*_parts``)."""
+    return {parts[0] for parts in map(parse, keys) if parts is not None}
