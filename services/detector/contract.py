@@ -237,7 +237,7 @@ class DetectorSettings:
     capacity_hz: float = 0.0
     capacity_step: float = 0.25
     capacity_period_s: float = 10.0
-    capacity_smoothing: float = 0.1
+    capacity_smoothing: float = 0.05
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),

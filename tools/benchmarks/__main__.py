@@ -158,16 +158,16 @@ def _pool_arguments(p: argparse.ArgumentParser) -> None:
         help="a fast and a slow worker: shares by measured capacity vs even (default on)",
     )
     p.add_argument("--fast-size", type=int, default=320, help="the fast worker's input size")
-    p.add_argument("--slow-size", type=int, default=640, help="the slow worker's input size")
+    p.add_argument("--slow-size", type=int, default=480, help="the slow worker's input size")
     p.add_argument(
-        "--capacity-cameras", type=int, default=6, help="cameras of the capacity part (default 6)"
+        "--capacity-cameras", type=int, default=8, help="cameras of the capacity part (default 8)"
     )
     p.add_argument(
         "--capacity-rate",
         dest="capacity_rate_hz",
         type=float,
-        default=3.0,
-        help="their rate in Hz (default 3)",
+        default=2.0,
+        help="their rate in Hz (default 2)",
     )
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 

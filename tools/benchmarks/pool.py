@@ -75,9 +75,9 @@ class PoolOptions:
     uneven: bool = True
     capacity: bool = True
     fast_size: int = 320
-    slow_size: int = 640
-    capacity_cameras: int = 6
-    capacity_rate_hz: float = 3.0
+    slow_size: int = 480
+    capacity_cameras: int = 8
+    capacity_rate_hz: float = 2.0
     as_json: bool = False
 
     def __post_init__(self) -> None:

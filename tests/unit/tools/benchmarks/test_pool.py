@@ -4,6 +4,7 @@ compared, the odds over random names, the configs it writes, the text and the op
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -194,6 +195,7 @@ def test_the_capacity_part_reports_each_workers_share_gap_and_the_p95_ratio() ->
             label=label,
             input_size={"detector": 320, "detector_2": 640},
             capacity_hz={"detector": 30.0, "detector_2": 10.0},
+            announcements={"detector": 0, "detector_2": 1},
             load_share={"detector": load, "detector_2": 1 - load},
             served={"detector": ["a"], "detector_2": ["b"]},
             fps={"a": 3.0, "b": 3.0},
@@ -202,8 +204,10 @@ def test_the_capacity_part_reports_each_workers_share_gap_and_the_p95_ratio() ->
 
     measured, even = run("capacity", 0.7, 200.0), run("even", 0.5, 800.0)
     assert measured.capacity_share == {"detector": 0.75, "detector_2": 0.25}
-    assert measured.share_gap["detector_2"] == pytest.approx(0.2)
+    assert measured.share_gap["detector_2"] == pytest.approx(0.05)
     text = render([measured, even])
-    assert "largest share gap 20% (NOT within 15 %)" in text
+    assert "largest share gap 5% of the load (within 15 %; one camera is 50%)" in text
+    far = dataclasses.replace(measured, load_share={"detector": 0.5, "detector_2": 0.5})
+    assert "gap 25% of the load (NOT within 15 %" in render([far])
     assert "200 ms by capacity vs 800 ms even (0.25x)" in text
     assert json.loads(json.dumps(measured.as_dict()))["worst_p95_ms"] == 200.0
