@@ -68,8 +68,6 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
         detector, note, per_round = settle_batch(detector, note, per_round, s, node.log)
         b = detector.backend  # the one that runs (settle_batch may have opened it again)
         handlers = DetectorHandlers(config, node, node.clock, frame_keys={})
-        outputs: dict[str, CameraOutput] = {}
-        rounds = Rounds(config, node, detector, outputs, node.clock)
         info = json.dumps(
             DetectorInfo(
                 model=detector.model_path.name,
@@ -81,22 +79,8 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
                 note=note,
             )
         )
-        queryables: dict[str, Declared] = {}
-
-        def gained(name: str, cam: PoolCamera) -> None:
-            robot = Keys(cam.prefix)
-            if name not in outputs:
-                put = node.publisher(robot.detections(cam.camera), QoS.PERCEPTION).put
-                outputs.update(
-                    camera_outputs(config, {name: handlers.frame_keys[name]}, lambda _: put)
-                )
-            queryables[name] = _info_queryable(node, robot.detector_info(cam.camera), info)
-
-        def lost(name: str) -> None:
-            queryable = queryables.pop(name, None)
-            if queryable is not None:
-                queryable.undeclare()
-
+        cameras = ServedCameras(config, node, handlers, info)
+        rounds = Rounds(config, node, detector, cameras.outputs, node.clock)
         # Warm the backend up before announcing readiness: the first run allocates, and each
         # batch size may (a CUDA graph, an OpenVINO shape) on its first run.
         warm = np.full((480, 640, 3), 114, np.uint8)
@@ -123,8 +107,8 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
             input_size=detector.info.input_height,
             backend=f"{b.name}/{b.device}/{b.precision}",
             max_batch=per_round,
-            on_gained=gained,
-            on_lost=lost,
+            on_gained=cameras.gained,
+            on_lost=cameras.lost,
         )
         pool.join()
         pool.start_stall_watch()
@@ -144,10 +128,42 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
                     )
         finally:
             pool.close()
-            for queryable in queryables.values():
-                queryable.undeclare()
+            cameras.close()
             detector.close()
     return 0
+
+
+class ServedCameras:
+    """What the worker keeps for each camera it comes to serve (the pool member's
+    ``on_gained`` and ``on_lost``): its output (freshness gate, tracker, and a publisher on
+    the detections key of the camera's own robot) and, while it serves it, the detector's
+    info queryable on that robot's key. ``outputs`` is what the rounds publish through."""
+
+    def __init__(self, config: Config, node: Node, handlers: DetectorHandlers, info: str) -> None:
+        self.config = config
+        self.node = node
+        self.handlers = handlers
+        self.info = info
+        self.outputs: dict[str, CameraOutput] = {}
+        self.queryables: dict[str, Declared] = {}
+
+    def gained(self, name: str, cam: PoolCamera) -> None:
+        robot = Keys(cam.prefix)
+        if name not in self.outputs:
+            put = self.node.publisher(robot.detections(cam.camera), QoS.PERCEPTION).put
+            frame_keys = {name: self.handlers.frame_keys[name]}
+            self.outputs.update(camera_outputs(self.config, frame_keys, lambda _: put))
+        key = robot.detector_info(cam.camera)
+        self.queryables[name] = _info_queryable(self.node, key, self.info)
+
+    def lost(self, name: str) -> None:
+        queryable = self.queryables.pop(name, None)
+        if queryable is not None:
+            queryable.undeclare()
+
+    def close(self) -> None:
+        for name in list(self.queryables):
+            self.lost(name)
 
 
 def settle_batch(

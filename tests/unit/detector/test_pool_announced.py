@@ -19,7 +19,9 @@ from common.frames import image_to_frame
 from common.keys import Keys
 from common.memory_bus import MemoryHub
 from common.node import Node
-from services.detector.membership import AUDIT_PERIOD_S
+from services.detector.handlers import DetectorHandlers
+from services.detector.membership import AUDIT_PERIOD_S, PoolMember
+from services.detector.service import ServedCameras
 from stack.config import Config
 from tests.unit.detector.inprocess import CameraSource, Worker, cameras_config
 
@@ -203,3 +205,29 @@ def test_one_worker_serves_two_robots_each_on_its_own_keys(
     assert "robot2:front" in both.handlers.serving
     assert one.handlers.serving <= {"front"}
     assert sorted(owners([both, one])) == ["front", "robot2:front"]
+
+
+def test_each_robots_detections_and_info_go_on_its_own_keys(
+    hub: MemoryHub, clock: FakeClock
+) -> None:
+    """The service's side of a gained camera (services/detector/service.py's
+    ServedCameras): its detections publisher and info queryable on its own robot's keys."""
+    source = CameraSource(hub, "robot2")
+    source.announce("front")
+    config = cameras_config(("front",), prefixes=("stack", "robot2"))
+    node = Node("detector", config, bus=hub.join("detector"), clock=clock)
+    handlers = DetectorHandlers(config, node, clock, frame_keys={})
+    cameras = ServedCameras(config, node, handlers, '{"model": "m"}')
+    pool = PoolMember(node, "detector", handlers, on_gained=cameras.gained, on_lost=cameras.lost)
+    pool.join()
+    heard: list[str] = []
+    hub.join("probe").subscribe("**/detections", lambda s: heard.append(s.key))
+    assert handlers.serving == {"robot2:front"}
+    cameras.outputs["robot2:front"].put(b"detections")
+    assert heard == [Keys("robot2").detections("front")]
+    asker = hub.join("asker")
+    info = Keys("robot2").detector_info("front")
+    assert [r.payload for r in asker.query(info, 1.0)] == [b'{"model": "m"}']
+    source.withdraw("front")  # dropped: its info is no longer answered here
+    pool.settle()
+    assert handlers.serving == frozenset() and asker.query(info, 1.0) == []
