@@ -23,7 +23,7 @@ import dataclasses
 import subprocess
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,10 +31,20 @@ from common.announce import from_chunk
 from common.errors import DecodeError
 from common.keys import Keys
 from common.messages import WorkerAnnouncement
+from common.spawn import spawn, stop_child
 from stack.config import Config
 from stack.config_file import to_toml
-from tools.benchmarks.stacks import CameraLoad, Watch, progress, stack_config, start_stack, stop_all
+from tools.benchmarks.stacks import (
+    CameraLoad,
+    Stack,
+    Watch,
+    progress,
+    stack_config,
+    start_stack,
+    stop_all,
+)
 
+STOP_S = 30.0  # the slow worker's clean exit after a SIGINT, before it is killed
 EVEN_HZ = 10.0  # the capacity both workers announce in the even condition
 WORKERS = ("detector", "detector_2")  # the fast (the supervisor's) and the slow one
 #: The issue's bar: each worker's load share within 15 % (of the whole) of its capacity's.
@@ -119,18 +129,25 @@ def configs(
     return fast, slow_path
 
 
-def run_condition(
-    label: str, fast: Config, slow_path: Path, options: Any, stop: threading.Event
-) -> CapacityRun:
-    """Start the stack and the slow worker, measure (pool_runs.py's measure), stop both."""
-    from tools.benchmarks.pool_runs import measure
+#: pool_runs.py's measure: (label, stack, watch, options, stop) -> its Result.
+Measure = Callable[[str, Stack, Watch, Any, threading.Event], Any]
 
+
+def run_condition(
+    label: str,
+    fast: Config,
+    slow_path: Path,
+    options: Any,
+    stop: threading.Event,
+    measure: Measure,
+) -> CapacityRun:
+    """Start the stack and the slow worker, ``measure``, stop both."""
     stack = start_stack(fast, Path(fast.path))
     log = slow_path.with_suffix(".log").open("wb")
-    worker = subprocess.Popen(
+    worker = spawn(
         [sys.executable, "-m", "services.detector", "serve",
          "--config", str(slow_path), "--worker", WORKERS[1]],
-        stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+        stdout=log, stderr=subprocess.STDOUT,
     )  # fmt: skip
     watch: Watch | None = None
     try:
@@ -139,11 +156,7 @@ def run_condition(
         result = measure(label, stack, watch, options, stop)
         heard = announced(watch.session, watch.keys)
     finally:
-        worker.send_signal(2)  # SIGINT, as Ctrl-C
-        try:
-            worker.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            worker.kill()
+        stop_child(worker, STOP_S)
         log.close()
         if watch is not None:
             watch.close()
@@ -160,8 +173,10 @@ def run_condition(
     )
 
 
-def run(base: Config, tmp: Path, options: Any, stop: threading.Event) -> list[CapacityRun]:
-    """Both conditions, capacity first."""
+def run(
+    base: Config, tmp: Path, options: Any, stop: threading.Event, measure: Measure
+) -> list[CapacityRun]:
+    """Both conditions, capacity first (``measure``: pool_runs.py's)."""
     runs = []
     for label in ("capacity", "even"):
         progress(f"[capacity] {label}: {options.capacity_cameras} cameras at "
@@ -171,7 +186,7 @@ def run(base: Config, tmp: Path, options: Any, stop: threading.Event) -> list[Ca
             base, tmp, label, options.capacity_cameras, options.capacity_rate_hz,
             (options.fast_size, options.slow_size),
         )  # fmt: skip
-        runs.append(run_condition(label, fast, slow_path, options, stop))
+        runs.append(run_condition(label, fast, slow_path, options, stop, measure))
         progress("  " + render_run(runs[-1]))
     return runs
 

@@ -211,7 +211,9 @@ def main(options: PoolOptions, stop: threading.Event) -> int:
             progress(f"[uneven] {render_rules(rules, weights, odds)}")
             with _running(config, stop) as (s, watch):
                 results.append(measure("uneven", s, watch, options, stop))
-        capacity = pool_capacity.run(base, Path(tmp), options, stop) if options.capacity else []
+        capacity = (
+            pool_capacity.run(base, Path(tmp), options, stop, measure) if options.capacity else []
+        )
     if options.as_json:
         print(to_json(results, kills, duplicates, rules, odds, options, machine_info(), capacity))
         return 0
