@@ -126,7 +126,7 @@ class _Found:
 def _findings(
     members: Mapping[str, PoolWorker],
     serving: Iterable[Serving],
-    weights: Mapping[str, PoolCamera],
+    cameras: Mapping[str, PoolCamera],
     balance: float,
 ) -> list[_Found]:
     live = sorted(members)
@@ -135,7 +135,7 @@ def _findings(
     for worker, zid, camera in set(serving):
         by_camera.setdefault(camera, set()).add((worker, zid))
         by_worker.setdefault(worker, set()).add(zid)
-    owners = assign_pool(members, weights, balance)
+    owners = assign_pool(members, cameras, balance)
     out: list[_Found] = []
     for worker in live:
         given = sorted(c for c, w in owners.items() if w == worker)
@@ -144,7 +144,7 @@ def _findings(
                 f"pool member {worker} serves none of the cameras the pool gives it "
                 f"({', '.join(given)}): a hung worker, or one that does not hear them"
             )))  # fmt: skip
-    for camera in weights if live else ():  # no pool at all is no pool's fault
+    for camera in cameras if live else ():  # no pool at all is no pool's fault
         if camera not in by_camera:
             owner = owners.get(camera)
             out.append(_Found("unserved", camera, (
@@ -152,7 +152,7 @@ def _findings(
                 + (f" (the pool gives it to {owner})" if owner else " (no worker serves its robot)")
             )))  # fmt: skip
     for camera, servers in sorted(by_camera.items()):
-        if len(servers) > 1 and camera in weights:  # another table's camera is not ours
+        if len(servers) > 1 and camera in cameras:  # another table's camera is not ours
             names = ", ".join(f"{w} ({z})" for w, z in sorted(servers))
             out.append(_Found("served_twice", camera, (
                 f"camera {camera} is served by {len(servers)} workers at once: {names}; "

@@ -199,7 +199,7 @@ def shares(
 def compare_rules(
     weights: Mapping[str, float], workers: Sequence[str], balance: float
 ) -> dict[str, dict[str, tuple[list[str], float]]]:
-    """Each worker's cameras and pixel-rate share, weighted (the pool's rule) and not."""
+    """Each worker's cameras and frame-rate share, weighted (the pool's rule) and not."""
     return {
         "weighted": shares(assign(workers, weights, balance), weights, workers),
         "plain": shares(plain_rendezvous(workers, list(weights)), weights, workers),
@@ -215,7 +215,7 @@ def heavy_together_odds(
 ) -> dict[str, Any]:
     """Over ``trials`` random sets of camera names for ``loads``: how often each rule gives
     one worker every camera of the heaviest weight, and the mean and worst of the largest
-    pixel-rate share a worker gets."""
+    frame-rate share a worker gets."""
     rng = random.Random(seed)
     together = {"weighted": 0, "plain": 0}
     largest: dict[str, list[float]] = {"weighted": [], "plain": []}
