@@ -83,6 +83,24 @@ SETTLE_S = 4.0
 # with a frame id of its own. It states no rate, so it is rendered at the first camera's
 # (services/sim/cameras.py).
 REAR_CAMERA: dict[str, Any] = {"mount_yaw_deg": 180.0, "frame_id": "camera_rear"}
+# A camera looking left, for the scenarios seen by three cameras.
+LEFT_CAMERA: dict[str, Any] = {"mount_yaw_deg": 90.0, "frame_id": "camera_left"}
+
+#: When bob steps into the rear camera's view in scenario "appears" (scenario seconds): he
+#: stands behind and to the right of the robot, where no camera looks, until then, and is
+#: in the rear camera's view ``APPEARS_STEP_S`` later.
+APPEARS_AT_S = 10.0
+APPEARS_STEP_S = 0.2
+
+
+def _appears() -> World:
+    bob = person(
+        "bob",
+        (0.0, -3.0, -6.0),
+        (APPEARS_AT_S, -3.0, -6.0),
+        (APPEARS_AT_S + APPEARS_STEP_S, -3.0, -0.5),
+    )
+    return World(Robot(), targets=[person("alice", (0, 4.0, 0.0)), bob])
 
 
 SCENARIOS: dict[str, Scenario] = {
@@ -128,5 +146,10 @@ SCENARIOS: dict[str, Scenario] = {
                  detector={"imgsz": 320},
                  why="two cameras double the detector's work; at 320 each round of detections "
                      "stays fresh on a 2-core CPU"),
+        Scenario("appears",
+                 "alice ahead; bob steps into the empty rear camera's view at 10 s: the lock "
+                 "stays on alice (the attention benchmark times bob's first detection)",
+                 _appears, 25.0, cameras={"left": LEFT_CAMERA, "rear": REAR_CAMERA},
+                 settle_s=SETTLE_S, settle_from_s=APPEARS_AT_S + 5.0),
     )
 }  # fmt: skip

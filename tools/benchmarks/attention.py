@@ -1,0 +1,131 @@
+"""python -m tools.benchmarks attention: the target's camera first when short of capacity.
+
+Three cameras (front, left, rear) at the default input (640) on one detector worker, which
+on a 2-core CPU detects about 3 frames a second of the 30 they send. Each scenario is run with
+``detector.attention`` on and off (off: the fair rounds), through the scenario runner
+(tools/scenarios/runner.py), side by side:
+
+- ``ahead`` and ``behind`` with all three cameras: whether each passes, each camera's
+  detections a second, and the target camera's over the empty left camera's;
+- ``appears`` (alice ahead, bob steps into the empty rear camera's view at 10 s): the time
+  from bob's entering the rear camera's field of view (the simulator's truth) to the first
+  detections of the rear camera naming a person on a frame captured after it.
+
+Progress goes to stderr, the table (or ``--json``) to stdout.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+from collections.abc import Callable
+from typing import Any
+
+from common.contracts import ScenarioResult
+from common.messages import GroundTruth
+from services.sim.scenarios import LEFT_CAMERA, REAR_CAMERA, SCENARIOS
+from stack.config import Config
+from tools.scenarios.runner import run_scenario
+from tools.scenarios.score import ScenarioLog
+
+CAMERAS = {"left": LEFT_CAMERA, "rear": REAR_CAMERA}
+SCENARIO_NAMES = ("ahead", "behind", "appears")
+EMPTY = "left"  # no scenario here puts anyone in its view
+
+
+def _variant(name: str, attention: bool) -> Any:
+    sc = SCENARIOS[name]
+    detector = {**sc.detector, "imgsz": 0, "attention": attention}  # 0: the model's own, 640
+    return dataclasses.replace(sc, cameras=CAMERAS, detector=detector)
+
+
+def _entered_view_ns(rec: ScenarioLog, target: str, yaw_deg: float, hfov_deg: float) -> int | None:
+    """When ``target``'s centre first lay within the camera's field of view (its truth's wall
+    stamp); None if it never did."""
+    for truth in rec.truths:
+        if target not in truth.target_ids:
+            continue
+        if abs(_bearing_deg(truth, truth.target_ids.index(target), yaw_deg)) <= hfov_deg / 2:
+            return truth.header.stamp_ns
+    return None
+
+
+def _bearing_deg(truth: GroundTruth, i: int, yaw_deg: float) -> float:
+    x, y, theta = truth.robot
+    tx, ty = truth.targets_xy[i]
+    b = math.atan2(ty - y, tx - x) - theta - math.radians(yaw_deg)
+    return math.degrees(math.atan2(math.sin(b), math.cos(b)))
+
+
+def first_detection_s(rec: ScenarioLog, camera: str, since_ns: int) -> float | None:
+    """Seconds from ``since_ns`` to the publication of ``camera``'s first detections naming a
+    person on a frame captured at or after it."""
+    for det in rec.detections.get(camera, []):
+        if det.header.stamp_ns >= since_ns and "person" in det.class_names:
+            return (det.published_ns - since_ns) / 1e9
+    return None
+
+
+def measure(base: Config, name: str, attention: bool, log: Callable[[str], None]) -> dict[str, Any]:
+    rec = ScenarioLog()
+    result: ScenarioResult = run_scenario(
+        base, name, log=log, variant=_variant(name, attention), rec=rec
+    )
+    duration = max(float(result.get("duration_s") or 0.0), 1e-9)
+    per_s = {c: n / duration for c, n in result.get("detections_per_camera", {}).items()}
+    seen = result.get("seen_per_camera", {})
+    target = max(seen, key=lambda c: seen[c]) if seen and max(seen.values()) else None
+    figures: dict[str, Any] = {
+        "scenario": name,
+        "attention": attention,
+        "success": bool(result["success"]),
+        "duration_s": duration,
+        "detections_per_s": per_s,
+        "target_camera": target,
+        "target_over_empty": (
+            per_s[target] / per_s[EMPTY] if target and per_s.get(EMPTY) else None
+        ),
+        "log": result.get("log"),
+    }
+    if name == "appears":
+        hfov = base.camera.hfov_deg
+        entered = _entered_view_ns(rec, "bob", float(REAR_CAMERA["mount_yaw_deg"]), hfov)
+        figures["first_detection_s"] = (
+            None if entered is None else first_detection_s(rec, "rear", entered)
+        )
+    return figures
+
+
+def _fmt(v: Any) -> str:
+    return "-" if v is None else f"{v:.2f}" if isinstance(v, float) else str(v)
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    lines = [
+        f"{'scenario':9} {'attention':9} {'pass':5} {'front/s':>8} {'left/s':>7} {'rear/s':>7} "
+        f"{'target':7} {'target/left':>11} {'bob found (s)':>13}"
+    ]
+    for r in rows:
+        d = r["detections_per_s"]
+        lines.append(
+            f"{r['scenario']:9} {'on' if r['attention'] else 'off':9} "
+            f"{'yes' if r['success'] else 'NO':5} {_fmt(d.get('front')):>8} "
+            f"{_fmt(d.get('left')):>7} {_fmt(d.get('rear')):>7} {_fmt(r['target_camera']):7} "
+            f"{_fmt(r['target_over_empty']):>11} {_fmt(r.get('first_detection_s')):>13}"
+        )
+    return "\n".join(lines)
+
+
+def main(base: Config, names: tuple[str, ...], as_json: bool) -> int:
+    def log(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    rows = []
+    for name in names:
+        for attention in (True, False):
+            log(f"attention benchmark: {name}, attention {'on' if attention else 'off'}")
+            rows.append(measure(base, name, attention, log))
+    print(json.dumps(rows) if as_json else table(rows))
+    return 0
