@@ -7,9 +7,13 @@ on a 2-core CPU detects about 3 frames a second of the 30 they send. Each scenar
 
 - ``ahead`` and ``behind`` with all three cameras: whether each passes, each camera's
   detections a second, and the target camera's over the empty left camera's;
-- ``appears`` (alice ahead, bob steps into the empty rear camera's view at 10 s): the time
-  from bob's entering the rear camera's field of view (the simulator's truth) to the first
-  detections of the rear camera naming a person on a frame captured after it.
+- ``appears`` (alice ahead; bob steps into the empty rear camera's view for 2 s, four times):
+  for each time, from bob's entering the rear camera's field of view (the simulator's truth)
+  to the first detections of the rear camera naming a person on a frame captured while he
+  was in it ("missed": none).
+
+Detections a second count the frames captured while the scenario clock ran (before, the
+controller is not up and every camera is served alike).
 
 Progress goes to stderr, the table (or ``--json``) to stdout.
 """
@@ -41,31 +45,52 @@ def _variant(name: str, attention: bool) -> Any:
     return dataclasses.replace(sc, cameras=CAMERAS, detector=detector)
 
 
-def _entered_view_ns(rec: ScenarioLog, target: str, yaw_deg: float, hfov_deg: float) -> int | None:
-    """When ``target``'s centre first lay within the camera's field of view (its truth's wall
-    stamp); None if it never did."""
-    for truth in rec.truths:
-        if target not in truth.target_ids:
-            continue
-        if abs(_bearing_deg(truth, truth.target_ids.index(target), yaw_deg)) <= hfov_deg / 2:
-            return truth.header.stamp_ns
-    return None
-
-
-def _bearing_deg(truth: GroundTruth, i: int, yaw_deg: float) -> float:
+def _in_view(truth: GroundTruth, target: str, yaw_deg: float, hfov_deg: float) -> bool:
+    if target not in truth.target_ids:
+        return False
     x, y, theta = truth.robot
-    tx, ty = truth.targets_xy[i]
+    tx, ty = truth.targets_xy[truth.target_ids.index(target)]
     b = math.atan2(ty - y, tx - x) - theta - math.radians(yaw_deg)
-    return math.degrees(math.atan2(math.sin(b), math.cos(b)))
+    return abs(math.degrees(math.atan2(math.sin(b), math.cos(b)))) <= hfov_deg / 2
 
 
-def first_detection_s(rec: ScenarioLog, camera: str, since_ns: int) -> float | None:
+def visits(rec: ScenarioLog, target: str, yaw_deg: float, hfov_deg: float) -> list[tuple[int, int]]:
+    """Each stretch of ``target``'s centre within the camera's field of view, as the wall
+    stamps of the first and last truth that had it there."""
+    out: list[tuple[int, int]] = []
+    start = last = None
+    for truth in rec.truths:
+        if _in_view(truth, target, yaw_deg, hfov_deg):
+            start = truth.header.stamp_ns if start is None else start
+            last = truth.header.stamp_ns
+        elif start is not None and last is not None:
+            out.append((start, last))
+            start = last = None
+    if start is not None and last is not None:
+        out.append((start, last))
+    return out
+
+
+def first_detection_s(rec: ScenarioLog, camera: str, since_ns: int, until_ns: int) -> float | None:
     """Seconds from ``since_ns`` to the publication of ``camera``'s first detections naming a
-    person on a frame captured at or after it."""
+    person on a frame captured from ``since_ns`` to ``until_ns``; None if there were none."""
     for det in rec.detections.get(camera, []):
-        if det.header.stamp_ns >= since_ns and "person" in det.class_names:
+        if since_ns <= det.header.stamp_ns <= until_ns and "person" in det.class_names:
             return (det.published_ns - since_ns) / 1e9
     return None
+
+
+def rates(rec: ScenarioLog) -> dict[str, float]:
+    """Each camera's detections a second, of frames captured while the scenario clock ran
+    (before it starts the controller is not yet up, and every camera is served alike)."""
+    running = [t.header.stamp_ns for t in rec.truths if t.sim_time_s > 0]
+    if len(running) < 2:
+        return {}
+    t0, t1 = running[0], running[-1]
+    return {
+        cam: sum(t0 <= d.header.stamp_ns <= t1 for d in dets) / ((t1 - t0) / 1e9)
+        for cam, dets in rec.detections.items()
+    }
 
 
 def measure(base: Config, name: str, attention: bool, log: Callable[[str], None]) -> dict[str, Any]:
@@ -73,15 +98,14 @@ def measure(base: Config, name: str, attention: bool, log: Callable[[str], None]
     result: ScenarioResult = run_scenario(
         base, name, log=log, variant=_variant(name, attention), rec=rec
     )
-    duration = max(float(result.get("duration_s") or 0.0), 1e-9)
-    per_s = {c: n / duration for c, n in result.get("detections_per_camera", {}).items()}
+    per_s = rates(rec)
     seen = result.get("seen_per_camera", {})
     target = max(seen, key=lambda c: seen[c]) if seen and max(seen.values()) else None
     figures: dict[str, Any] = {
         "scenario": name,
         "attention": attention,
         "success": bool(result["success"]),
-        "duration_s": duration,
+        "duration_s": result.get("duration_s"),
         "detections_per_s": per_s,
         "target_camera": target,
         "target_over_empty": (
@@ -90,11 +114,11 @@ def measure(base: Config, name: str, attention: bool, log: Callable[[str], None]
         "log": result.get("log"),
     }
     if name == "appears":
-        hfov = base.camera.hfov_deg
-        entered = _entered_view_ns(rec, "bob", float(REAR_CAMERA["mount_yaw_deg"]), hfov)
-        figures["first_detection_s"] = (
-            None if entered is None else first_detection_s(rec, "rear", entered)
-        )
+        yaw = float(REAR_CAMERA["mount_yaw_deg"])
+        figures["first_detection_s"] = [
+            first_detection_s(rec, "rear", start, end)
+            for start, end in visits(rec, "bob", yaw, base.camera.hfov_deg)
+        ]
     return figures
 
 
@@ -105,7 +129,7 @@ def _fmt(v: Any) -> str:
 def table(rows: list[dict[str, Any]]) -> str:
     lines = [
         f"{'scenario':9} {'attention':9} {'pass':5} {'front/s':>8} {'left/s':>7} {'rear/s':>7} "
-        f"{'target':7} {'target/left':>11} {'bob found (s)':>13}"
+        f"{'target':7} {'target/left':>11}  bob found after (s)"
     ]
     for r in rows:
         d = r["detections_per_s"]
@@ -113,7 +137,10 @@ def table(rows: list[dict[str, Any]]) -> str:
             f"{r['scenario']:9} {'on' if r['attention'] else 'off':9} "
             f"{'yes' if r['success'] else 'NO':5} {_fmt(d.get('front')):>8} "
             f"{_fmt(d.get('left')):>7} {_fmt(d.get('rear')):>7} {_fmt(r['target_camera']):7} "
-            f"{_fmt(r['target_over_empty']):>11} {_fmt(r.get('first_detection_s')):>13}"
+            f"{_fmt(r['target_over_empty']):>11}  "
+            + " ".join(
+                _fmt(v) if v is not None else "missed" for v in r.get("first_detection_s", [])
+            )
         )
     return "\n".join(lines)
 
