@@ -73,11 +73,14 @@ class Attention:
                 seen[name] = now
 
     def priority(self) -> frozenset[str]:
-        """The cameras with priority now (none while disabled)."""
+        """The cameras of this worker with priority now (none while disabled)."""
         with self._lock:
             return self._priority(self.clock.mono_s())
 
-    def _priority(self, now: float) -> frozenset[str]:
+    def _priority(self, now: float, waiting: Sequence[str] = ()) -> frozenset[str]:
+        """Those of this worker's cameras (taken once, or ``waiting`` now) with priority: in a
+        pool the controller's lock may be on a camera another worker serves, which must not
+        take this worker's rounds out of their fair order."""
         if not self.enabled:
             return frozenset()
         found = set()
@@ -86,14 +89,14 @@ class Attention:
         for camera, seen in self._seen.items():
             if any(now - seen.get(name, -math.inf) <= self.hold_s for name in self._targets):
                 found.add(camera)
-        return frozenset(found)
+        return frozenset(c for c in found if c in self._taken or c in waiting)
 
     def arrange(self, cameras: Sequence[str]) -> list[tuple[str, str]]:
         """``cameras`` (longest-waiting first) in the order a round takes them: unchanged
         without priorities, else due, priority, the rest (the module's docstring)."""
         now = self.clock.mono_s()
         with self._lock:
-            first = self._priority(now)
+            first = self._priority(now, cameras)
             if not first:
                 return [(cam, "") for cam in cameras]
             due_at = {cam: self._taken.get(cam, -math.inf) + self.period_s for cam in cameras}

@@ -16,6 +16,7 @@ def _attention(clock: FakeClock, enabled: bool = True) -> Attention:
 def test_the_locked_camera_has_priority_for_hold_s_after_the_last_status() -> None:
     clock = FakeClock()
     att = _attention(clock)
+    att.taken(["rear"])
     assert att.priority() == frozenset()
     att.controller("rear", ("person",))
     assert att.priority() == {"rear"}
@@ -31,6 +32,7 @@ def test_the_locked_camera_has_priority_for_hold_s_after_the_last_status() -> No
 def test_a_camera_that_saw_a_target_class_has_priority_for_hold_s() -> None:
     clock = FakeClock()
     att = _attention(clock)
+    att.taken(["left", "front"])
     att.saw("left", ["person", "dog"])
     assert att.priority() == frozenset()  # no target classes heard yet
     att.controller("", ("person",))
@@ -88,6 +90,24 @@ def test_the_camera_due_longest_goes_first_and_a_never_taken_one_is_due() -> Non
         ("x", FLOOR),
         ("y", FLOOR),
         ("p", PRIORITY),
+    ]
+
+
+def test_a_lock_on_a_camera_this_worker_never_had_leaves_its_rounds_fair() -> None:
+    """In a pool the controller's camera may be another worker's."""
+    clock = FakeClock()
+    att = _attention(clock)
+    att.taken(["a", "b"])
+    clock.advance(5.0)  # both due, were anything prioritised
+    att.controller("elsewhere", ("person",))
+    assert att.priority() == frozenset()
+    assert att.arrange(["b", "a"]) == [("b", ""), ("a", "")]
+    # Once that camera is this worker's (its frame waits here), it has priority (and, never
+    # taken, is due first).
+    assert att.arrange(["b", "a", "elsewhere"]) == [
+        ("elsewhere", PRIORITY),
+        ("b", FLOOR),
+        ("a", FLOOR),
     ]
 
 
