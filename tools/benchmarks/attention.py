@@ -6,7 +6,10 @@ on a 2-core CPU detects about 3 frames a second of the 30 they send. Each scenar
 (tools/scenarios/runner.py), side by side:
 
 - ``ahead`` and ``behind`` with all three cameras: whether each passes, each camera's
-  detections a second, and the target camera's over the empty left camera's;
+  detections a second, and a camera's detections a second while a person is in its view
+  (the simulator's truth at each frame's capture) against while nobody is, over every camera
+  (in ``behind`` the person passes from the rear camera's view to the front one's as the
+  robot turns);
 - ``appears`` (alice ahead; bob steps into the empty rear camera's view for 2 s, four times):
   for each time, from bob's entering the rear camera's field of view (the simulator's truth)
   to the first detections of the rear camera naming a person on a frame captured while he
@@ -20,7 +23,9 @@ Progress goes to stderr, the table (or ``--json``) to stdout.
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
+import itertools
 import json
 import math
 import sys
@@ -36,7 +41,6 @@ from tools.scenarios.score import ScenarioLog
 
 CAMERAS = {"left": LEFT_CAMERA, "rear": REAR_CAMERA}
 SCENARIO_NAMES = ("ahead", "behind", "appears")
-EMPTY = "left"  # no scenario here puts anyone in its view
 
 
 def _variant(name: str, attention: bool) -> Any:
@@ -93,24 +97,50 @@ def rates(rec: ScenarioLog) -> dict[str, float]:
     }
 
 
+def seeing_rates(
+    rec: ScenarioLog, yaws: dict[str, float], hfov_deg: float
+) -> tuple[float | None, float | None]:
+    """Detections a second of a camera while a person is in its view, and while nobody is
+    (the simulator's truth at each frame's capture), over every camera, in the scenario's
+    window: ``(seeing, empty)``, None where no camera was ever so."""
+    truths = [t for t in rec.truths if t.sim_time_s > 0]
+    if len(truths) < 2:
+        return None, None
+    stamps = [t.header.stamp_ns for t in truths]
+
+    def occupied(truth: GroundTruth, cam: str) -> bool:
+        return any(_in_view(truth, who, yaws[cam], hfov_deg) for who in truth.target_ids)
+
+    time_s = {True: 0.0, False: 0.0}
+    for a, b in itertools.pairwise(truths):
+        for cam in yaws:
+            time_s[occupied(a, cam)] += (b.header.stamp_ns - a.header.stamp_ns) / 1e9
+    count = {True: 0, False: 0}
+    for cam, dets in rec.detections.items():
+        for det in dets:
+            i = bisect.bisect_right(stamps, det.header.stamp_ns) - 1
+            if 0 <= i < len(truths) - 1:
+                count[occupied(truths[i], cam)] += 1
+    seeing, empty = (count[k] / time_s[k] if time_s[k] > 0 else None for k in (True, False))
+    return seeing, empty
+
+
 def measure(base: Config, name: str, attention: bool, log: Callable[[str], None]) -> dict[str, Any]:
     rec = ScenarioLog()
     result: ScenarioResult = run_scenario(
         base, name, log=log, variant=_variant(name, attention), rec=rec
     )
-    per_s = rates(rec)
-    seen = result.get("seen_per_camera", {})
-    target = max(seen, key=lambda c: seen[c]) if seen and max(seen.values()) else None
+    yaws = {"front": 0.0, **{c: float(v["mount_yaw_deg"]) for c, v in CAMERAS.items()}}
+    seeing, empty = seeing_rates(rec, yaws, base.camera.hfov_deg)
     figures: dict[str, Any] = {
         "scenario": name,
         "attention": attention,
         "success": bool(result["success"]),
         "duration_s": result.get("duration_s"),
-        "detections_per_s": per_s,
-        "target_camera": target,
-        "target_over_empty": (
-            per_s[target] / per_s[EMPTY] if target and per_s.get(EMPTY) else None
-        ),
+        "detections_per_s": rates(rec),
+        "seeing_per_s": seeing,
+        "empty_per_s": empty,
+        "seeing_over_empty": seeing / empty if seeing is not None and empty else None,
         "log": result.get("log"),
     }
     if name == "appears":
@@ -129,15 +159,16 @@ def _fmt(v: Any) -> str:
 def table(rows: list[dict[str, Any]]) -> str:
     lines = [
         f"{'scenario':9} {'attention':9} {'pass':5} {'front/s':>8} {'left/s':>7} {'rear/s':>7} "
-        f"{'target':7} {'target/left':>11}  bob found after (s)"
+        f"{'seeing/s':>8} {'empty/s':>7} {'ratio':>5}  bob found after (s)"
     ]
     for r in rows:
         d = r["detections_per_s"]
         lines.append(
             f"{r['scenario']:9} {'on' if r['attention'] else 'off':9} "
             f"{'yes' if r['success'] else 'NO':5} {_fmt(d.get('front')):>8} "
-            f"{_fmt(d.get('left')):>7} {_fmt(d.get('rear')):>7} {_fmt(r['target_camera']):7} "
-            f"{_fmt(r['target_over_empty']):>11}  "
+            f"{_fmt(d.get('left')):>7} {_fmt(d.get('rear')):>7} "
+            f"{_fmt(r['seeing_per_s']):>8} {_fmt(r['empty_per_s']):>7} "
+            f"{_fmt(r['seeing_over_empty']):>5}  "
             + " ".join(
                 _fmt(v) if v is not None else "missed" for v in r.get("first_detection_s", [])
             )
