@@ -210,6 +210,12 @@ def _attention_arguments(p: argparse.ArgumentParser) -> None:
         choices=["ahead", "behind", "appears"],
         help="the scenarios to run, each with attention on and off (default all three)",
     )
+    p.add_argument(
+        "--camera-rate",
+        type=float,
+        default=10.0,
+        help="frames a second the simulator renders of each camera (default 10)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -218,7 +224,7 @@ def attention(args: argparse.Namespace) -> int:
     from stack.config_file import load_config
     from tools.benchmarks.attention import main
 
-    return main(load_config(args.config), tuple(args.scenarios), args.json)
+    return main(load_config(args.config), tuple(args.scenarios), args.json, args.camera_rate)
 
 
 def _estop_arguments(p: argparse.ArgumentParser) -> None:
