@@ -21,6 +21,8 @@ DETECTIONS = "detections"
 SCANS = "scans"
 IN = "in"  # fresh, and the newest held
 LATE = "late"  # fresh, but older than the one held
+#: Detections from a camera with no live announcement: ignored.
+DETECTIONS_UNANNOUNCED = "detections_unannounced"
 ESTOP_RELEASE_REFUSED = "estop_release_refused"
 ESTOP_ZERO_AT_ONCE = "estop_zero_at_once"
 COMMANDS_OUT = "commands_out"
@@ -44,6 +46,7 @@ COUNTERS = frozenset(
         *COMMON,
         *PER_CAMERA,
         *(input_counter(SCANS, o) for o in OUTCOMES),
+        DETECTIONS_UNANNOUNCED,
         ESTOP_RELEASE_REFUSED,
         ESTOP_ZERO_AT_ONCE,
         COMMANDS_OUT,

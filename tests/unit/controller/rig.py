@@ -1,21 +1,35 @@
 """The controller's loop in-process: a ControlLoop on a MemoryHub with a FakeClock, and a test
 participant on the same hub that puts the inputs and hears cmd_vel and the status. Delivery is
 synchronous and the clock moves only when told: a put, a tick, and the command is on the list.
+Each camera of the config is announced (as its source would: common/announce.py) on a
+participant of its own, from before the controller starts; ``announce`` and ``withdraw`` change
+that at run time.
 """
 
 from __future__ import annotations
 
 import math
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from common.boxes import Boxes
+from common.announce import Announcer
 from common.bus import QoS
 from common.clock import BOOT_ID, FakeClock
-from common.memory_bus import MemoryHub
-from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
+from common.keys import Keys
+from common.memory_bus import MemoryBus, MemoryHub
+from common.messages import (
+    CameraAnnouncement,
+    ControllerStatus,
+    Detections,
+    EStop,
+    Header,
+    LaserScan,
+    Twist,
+)
 from common.node import Node
 from services.camera.contract import CameraSettings
 from services.controller.contract import ControllerSettings
@@ -33,6 +47,8 @@ class Rig:
         tmp_path: Path,
         cameras: dict[str, CameraSettings] | None = None,
         clock: FakeClock | None = None,
+        *,
+        announced: bool = True,
         **controller: Any,
     ) -> None:
         settings = {"mode": "track", "no_laser": False, **controller}
@@ -42,6 +58,11 @@ class Rig:
         )
         self.clock = clock or FakeClock()
         self.hub = MemoryHub()
+        self.keys = Keys(self.config.stack.prefix)
+        self.sources: dict[str, tuple[MemoryBus, Announcer[CameraAnnouncement]]] = {}
+        if announced:
+            for name, camera in self.config.all_cameras.items():
+                self.announce(name, camera)
         self.node = Node(
             "controller",
             self.config,
@@ -50,7 +71,6 @@ class Rig:
             clock=self.clock,
         )
         self.loop = ControlLoop(self.config, self.node)
-        self.keys = self.node.keys
         self.probe = self.hub.join("test")
         self.cmds: list[Twist] = []
         self.statuses: list[ControllerStatus] = []
@@ -62,6 +82,19 @@ class Rig:
             lambda s: self.statuses.append(ControllerStatus.decode(s.payload)),
         )
         self._seq = 0
+
+    def announce(self, name: str, camera: CameraSettings | None = None, **fields: Any) -> None:
+        """Announce camera ``name`` as a source would (``camera``'s geometry, then ``fields``),
+        or announce it anew (a new token before the old one goes)."""
+        if name not in self.sources:
+            bus = self.hub.join(f"source_{name}")
+            self.sources[name] = (bus, Announcer(bus, partial(self.keys.camera_announcement, name)))
+        self.sources[name][1].update(announcement(name, camera or CameraSettings(), **fields))
+
+    def withdraw(self, name: str) -> None:
+        """Camera ``name``'s source is gone: its session closes, its announcement with it."""
+        bus, _ = self.sources.pop(name)
+        bus.close()
 
     @property
     def counters(self) -> dict[str, int]:
@@ -101,8 +134,20 @@ class Rig:
 
     def close(self) -> None:
         self.loop.close()
+        for name in list(self.sources):
+            self.withdraw(name)
         self.probe.close()
         self.node.close()
+
+
+def announcement(name: str, camera: CameraSettings, **fields: Any) -> CameraAnnouncement:
+    """What a source announces of camera ``name`` configured as ``camera``."""
+    mine = {
+        "camera": name, "width": W, "height": H, "rate_hz": camera.rate_hz,
+        "mount_yaw_deg": camera.mount_yaw_deg, "hfov_deg": camera.hfov_deg,
+        "frame_id": camera.frame_id, "source": "test",
+    }  # fmt: skip
+    return CameraAnnouncement(**{**mine, **fields})
 
 
 def people(header: Header, cx: float = W / 2, n: int = 1, h: float = 200.0) -> bytes:

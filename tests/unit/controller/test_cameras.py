@@ -22,6 +22,7 @@ from services.controller.policy import Controller, Inputs, VelocityCommand
 from services.controller.service import ControllerHandlers
 from services.controller.targets import View
 from stack.config import Config
+from tests.unit.controller.rig import announcement
 from tests.unit.controller.scans import scan_of
 
 W, H, HFOV = 640, 480, 60.0
@@ -262,6 +263,7 @@ def test_handlers_keep_each_cameras_detections_apart(tmp_path: Path) -> None:
     )
     tally = Tally("controller", config)
     handlers = ControllerHandlers(config, tally)
+    handlers.set_cameras({c: announcement(c, cam) for c, cam in config.all_cameras.items()})
     at = now()
 
     def fresh(ns_ago: int) -> bytes:
