@@ -9,32 +9,23 @@ that at run time.
 from __future__ import annotations
 
 import math
-from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from common.boxes import Boxes
-from common.announce import Announcer
 from common.bus import QoS
 from common.clock import BOOT_ID, FakeClock
 from common.keys import Keys
-from common.memory_bus import MemoryBus, MemoryHub
-from common.messages import (
-    CameraAnnouncement,
-    ControllerStatus,
-    Detections,
-    EStop,
-    Header,
-    LaserScan,
-    Twist,
-)
+from common.memory_bus import MemoryHub
+from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
 from common.node import Node
 from services.camera.contract import CameraSettings
 from services.controller.contract import ControllerSettings
 from services.controller.service import ControlLoop
 from stack.config import Config
+from tests.unit.announced import Sources
 
 W, H = 640, 480
 
@@ -59,7 +50,7 @@ class Rig:
         self.clock = clock or FakeClock()
         self.hub = MemoryHub()
         self.keys = Keys(self.config.stack.prefix)
-        self.sources: dict[str, tuple[MemoryBus, Announcer[CameraAnnouncement]]] = {}
+        self.sources = Sources(self.hub, self.keys)
         if announced:
             for name, camera in self.config.all_cameras.items():
                 self.announce(name, camera)
@@ -86,15 +77,11 @@ class Rig:
     def announce(self, name: str, camera: CameraSettings | None = None, **fields: Any) -> None:
         """Announce camera ``name`` as a source would (``camera``'s geometry, then ``fields``),
         or announce it anew (a new token before the old one goes)."""
-        if name not in self.sources:
-            bus = self.hub.join(f"source_{name}")
-            self.sources[name] = (bus, Announcer(bus, partial(self.keys.camera_announcement, name)))
-        self.sources[name][1].update(announcement(name, camera or CameraSettings(), **fields))
+        self.sources.announce(name, camera, **fields)
 
     def withdraw(self, name: str) -> None:
         """Camera ``name``'s source is gone: its session closes, its announcement with it."""
-        bus, _ = self.sources.pop(name)
-        bus.close()
+        self.sources.withdraw(name)
 
     @property
     def counters(self) -> dict[str, int]:
@@ -134,20 +121,9 @@ class Rig:
 
     def close(self) -> None:
         self.loop.close()
-        for name in list(self.sources):
-            self.withdraw(name)
+        self.sources.close()
         self.probe.close()
         self.node.close()
-
-
-def announcement(name: str, camera: CameraSettings, **fields: Any) -> CameraAnnouncement:
-    """What a source announces of camera ``name`` configured as ``camera``."""
-    mine = {
-        "camera": name, "width": W, "height": H, "rate_hz": camera.rate_hz,
-        "mount_yaw_deg": camera.mount_yaw_deg, "hfov_deg": camera.hfov_deg,
-        "frame_id": camera.frame_id, "source": "test",
-    }  # fmt: skip
-    return CameraAnnouncement(**{**mine, **fields})
 
 
 def people(header: Header, cx: float = W / 2, n: int = 1, h: float = 200.0) -> bytes:

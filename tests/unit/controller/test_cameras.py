@@ -22,7 +22,7 @@ from services.controller.policy import Controller, Inputs, VelocityCommand
 from services.controller.service import ControllerHandlers
 from services.controller.targets import View
 from stack.config import Config
-from tests.unit.controller.rig import announcement
+from tests.unit.announced import announcement
 from tests.unit.controller.scans import scan_of
 
 W, H, HFOV = 640, 480, 60.0
