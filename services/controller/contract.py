@@ -68,6 +68,7 @@ def access(shape: Shape) -> dict[str, Access]:
             keys.cmd_vel(),
             keys.controller_status(),
             read=(keys.all_detections(), keys.scan(), keys.estop()),
+            watch=(keys.all_camera_announcements(),),  # its cameras: the announced ones
         )
     }
 

@@ -65,6 +65,12 @@ def access(shape: Shape) -> dict[str, Access]:
             SERVICE,
             read=(keys.all_detections(), keys.cmd_vel(), keys.all_counters()),
             serve=(keys.metrics(),),
+            # The cameras announced, and the pool's members and what each serves.
+            watch=(
+                keys.all_camera_announcements(),
+                keys.all_pool_members(),
+                keys.all_pool_serving(),
+            ),
         )
     }
 
