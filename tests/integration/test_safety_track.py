@@ -59,6 +59,7 @@ def test_track_mode_never_drives_into_an_obstacle_or_blind(make_stack) -> None: 
     )
     s = stack.config.controller
     stack.wait_ready({"controller"})
+    stack.announce()  # the test stands in for the camera and the detector
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
     _, status_raw = stack.subscribe(stack.keys.controller_status())
     front, scan = stack.keys.detections("front"), stack.keys.scan()
@@ -95,6 +96,7 @@ def test_without_a_laser_only_a_deliberate_setting_drives_and_every_status_says_
         controller={"mode": "track", "no_laser": True},
     )
     stack.wait_ready({"controller"})
+    stack.announce()  # the test stands in for the camera and the detector
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
     _, status_raw = stack.subscribe(stack.keys.controller_status())
     front, scan = stack.keys.detections("front"), stack.keys.scan()
