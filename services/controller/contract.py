@@ -83,9 +83,11 @@ def estop_access(shape: Shape) -> dict[str, Access]:
 class ControllerSettings:
     """The reaction policy. Speeds in m/s and rad/s, angles in degrees, times in seconds.
 
-    Every camera of the config is used: a box's bearing is turned into the robot's frame by
-    its camera's ``mount_yaw_deg`` and ``hfov_deg``, and targets are chosen among all fresh
-    cameras' boxes; a stale camera is ignored, and none fresh is the dead-man stop.
+    Every camera announced on the bus (common/announce.py, by its source: not the config's) is
+    used: a box's bearing is turned into the robot's frame by the ``mount_yaw_deg`` and
+    ``hfov_deg`` its camera announces, and targets are chosen among all fresh cameras' boxes;
+    a stale camera is ignored, and none fresh is the dead-man stop. Detections of a camera
+    not announced are ignored; the target's camera withdrawn is a stop.
     track:  turn towards the most central confident detection of ``target_classes`` (the
             smallest bearing from the robot's heading); drive forward at ``forward_speed``
             only while it is centred: within ``center_tolerance`` (a fraction of the image

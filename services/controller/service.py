@@ -266,7 +266,8 @@ class ControllerHandlers:
 
 class ControlLoop:
     """The controller on ``node``'s bus, at ``node``'s clock: its handlers subscribed to every
-    camera's detections, the scan and the e-stop, and the control loop's body, :meth:`tick`.
+    camera's detections, the scan and the e-stop, the cameras' announcements watched (its
+    cameras and their geometry), and the control loop's body, :meth:`tick`.
 
     ``run`` calls :meth:`tick` at least ``control_rate_hz`` times a second and at once when
     new detections arrive (``handlers.arrived``), and :meth:`stop` last; an in-process test
@@ -398,9 +399,9 @@ def run(config: Config, stop: threading.Event) -> int:
     A command goes out at least ``control_rate_hz`` times a second, and at once when new
     detections arrive: waiting for the next tick would add up to a whole period of latency.
     Inputs are judged on arrival (common/freshness.py): stale, future-stamped or replayed
-    detections and scans are counted and never acted on. Every camera of the config is
-    subscribed to, and each one's detections are aged on their own at the control instant
-    (policy.py: a stale camera is ignored; none fresh is the dead-man stop).
+    detections and scans are counted and never acted on. Every announced camera's detections
+    are used, each aged on its own at the control instant (policy.py: a stale camera is
+    ignored; none fresh is the dead-man stop).
     """
     s = config.controller
     with Node("controller", config, counters_period_s=s.counters_period_s) as node:

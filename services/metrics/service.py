@@ -199,8 +199,9 @@ class MetricsHandlers:
 
 class MetricsService:
     """The metrics service on ``node``'s bus, at ``node``'s clock: its handlers subscribed to
-    every configured camera's detections, cmd_vel and every service's counters, the pool's
-    tokens watched, and the metrics query (``keys.metrics()``) answered with :meth:`answer`.
+    every announced camera's detections, cmd_vel and every service's counters, the cameras'
+    announcements and the pool's tokens watched, and the metrics query (``keys.metrics()``)
+    answered with :meth:`answer`.
 
     ``run`` calls :meth:`report` every period; an in-process test puts messages, moves its
     fake clock and asks the query itself. :meth:`close` undeclares everything it declared.
