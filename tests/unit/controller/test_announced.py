@@ -131,3 +131,19 @@ def test_the_announced_yaw_turns_the_bearing(rig: Rig, yaw: float, sign: float) 
     assert status.state == "turning" and twist.linear[0] == pytest.approx(0.0, abs=1e-9), status
     assert twist.angular[2] * sign > 0, twist
     assert status.reason == f"bearing {yaw:+.1f} deg"
+
+
+def test_a_garbage_announcement_is_counted_and_adds_no_camera(tmp_path: Path) -> None:
+    rig = Rig(tmp_path, announced=False)
+    try:
+        rogue = rig.hub.join("rogue")
+        rogue.declare_token(rig.keys.camera_announcement("front", "bm90LWFuLWFubm91bmNlbWVudA"))
+        rig.scan()
+        rig.detections("front")
+        twist, status = rig.tick()
+        assert twist.is_zero and status.reason == "no camera announced", status
+        c = rig.counters
+        assert c["bad_input.camera_announcement"] == 1, c
+        assert c[contract.DETECTIONS_UNANNOUNCED] == 1, c
+    finally:
+        rig.close()
