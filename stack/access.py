@@ -15,9 +15,7 @@ robot's keys.
 Each principal may also subscribe only to what it reads: the camera frames only to the
 detector, the live view, the recorder and the ROS 2 bridge. Zenoh allows a subscription only
 when its key expression lies within an allowed one, so a wider one (``<prefix>/**``) is denied
-whole, not trimmed. Queries and liveliness subscriptions stay open to every principal; what
-a service watches (the cameras' announcements, the pool's tokens) is declared in its contract
-all the same (``watch``), and allowed by a rule of its own.
+whole, not trimmed. Queries and liveliness subscriptions stay open to every principal.
 Anything not allowed is denied.
 """
 
@@ -80,6 +78,8 @@ KIND_MESSAGES = {
     "token": ["liveliness_token"],
     "serve": ["declare_queryable", "reply"],
     "read": ["declare_subscriber"],
+    # What a service watches (announcements, the pool's tokens), declared in its contract and
+    # allowed by a rule of its own even while every principal may ask (the "ask" rule).
     "watch": ["declare_liveliness_subscriber", "liveliness_query"],
 }
 
