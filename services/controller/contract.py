@@ -16,7 +16,7 @@ from common.errors import ConfigError
 from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
 
 # Its inputs, each counted by its fate (:func:`input_counter`): ``detections_in``,
-# ``detections_stale`` ...; the detections' for each camera too when there are several.
+# ``detections_stale`` ...; the detections' for each announced camera too.
 DETECTIONS = "detections"
 SCANS = "scans"
 IN = "in"  # fresh, and the newest held
