@@ -155,7 +155,7 @@ class ControllerHandlers:
 
     def set_cameras(self, cameras: Mapping[str, CameraAnnouncement]) -> None:
         """The cameras announced now: a new one's detections are taken from now on, a
-        withdrawn one's are dropped (and it is remembered for :meth:`take_cameras`)."""
+        withdrawn one's are dropped (and it is remembered for :meth:`take`)."""
         with self._cameras_lock:
             gone = [c for c in self.cameras if c not in cameras]
             for camera in gone:
@@ -171,17 +171,13 @@ class ControllerHandlers:
             self.cameras = dict(cameras)
         self.arrived.set()  # the loop looks at once: a withdrawn target's camera is a stop
 
-    def take_cameras(self) -> tuple[dict[str, CameraAnnouncement], set[str]]:
-        """The cameras announced now, and those withdrawn since the last call."""
+    def take(self, at: Stamp) -> tuple[dict[str, CameraAnnouncement], set[str], dict[str, View]]:
+        """At one moment: the cameras announced now, those withdrawn since the last call, and
+        each announced camera's newest detections aged at the control instant ``at``."""
         with self._cameras_lock:
             withdrawn, self._withdrawn = self._withdrawn, set()
-            return dict(self.cameras), withdrawn
-
-    def views(self, at: Stamp) -> dict[str, View]:
-        """Each announced camera's newest detections, aged at the control instant ``at``."""
-        with self._cameras_lock:
-            dets = dict(self.dets)
-        return {c: _view(d, at, self.detection_timeout_s) for c, d in dets.items()}
+            views = {c: _view(d, at, self.detection_timeout_s) for c, d in self.dets.items()}
+            return dict(self.cameras), withdrawn, views
 
     def on_detections(self, camera: str, payload: bytes) -> None:
         """Detections from ``camera``'s key: used only while ``camera`` is announced."""
@@ -363,10 +359,9 @@ class ControlLoop:
             # with it, so that a reader of cmd_vel can check the judgement.
             at = self.clock.now()
             tick = at.mono_ns / 1e9
-            cameras, withdrawn = handlers.take_cameras()
+            cameras, withdrawn, views = handlers.take(at)
             self.controller.set_cameras(cameras, withdrawn)
             sc, sc_arrival = handlers.scan.get()
-            views = handlers.views(at)
             sc_age = _age(sc.header if sc is not None else None, sc_arrival, at)
             inputs = Inputs(views, sc, sc_age, latch.engaged)
             cmd = self.controller.step(inputs, tick)
