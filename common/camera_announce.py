@@ -70,17 +70,24 @@ class CameraAnnouncements(Closing):
             announcer.update(message)
         return message
 
-    def saw(self, camera: str, width: int, height: int) -> None:
-        """A frame of ``width`` x ``height`` was published on ``camera``: announce the size if
-        it is new. Cheap when it is not (two comparisons); nothing for a camera not announced."""
+    def saw(self, camera: str, width: int, height: int, frame_id: str | None = None) -> None:
+        """A frame of ``width`` x ``height`` (with header ``frame_id``, when the source takes
+        it from its frames) was published on ``camera``: announce what is new of it. Cheap
+        when nothing is (a few comparisons); nothing for a camera not announced. A frame id no
+        announcement can carry (over 128 characters) is left as it was."""
         with self._lock:
             announcer = self._announcers.get(camera)
             current = announcer.current if announcer is not None else None
             if announcer is None or current is None:
                 return
-            if (current.width, current.height) == (width, height):
+            frame_id = current.frame_id if frame_id is None else frame_id
+            if (current.width, current.height, current.frame_id) == (width, height, frame_id):
                 return
-            announcer.update(dataclasses.replace(current, width=width, height=height))
+            try:
+                new = dataclasses.replace(current, width=width, height=height, frame_id=frame_id)
+            except ValueError:
+                new = dataclasses.replace(current, width=width, height=height)
+            announcer.update(new)
 
     def current(self, camera: str) -> CameraAnnouncement | None:
         """What is announced of ``camera`` now (None when nothing is)."""
