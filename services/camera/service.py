@@ -17,7 +17,6 @@ from services.camera.reopen import ReopenHooks, ReopeningSource
 from services.camera.sources import FrameSource, open_source, resize
 from stack.config import Config
 
-
 #: What opens a camera's source (``open_source``; an in-process test's own source).
 Opener = Callable[..., FrameSource]
 

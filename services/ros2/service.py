@@ -55,7 +55,6 @@ from services.ros2.images import (
 from services.ros2.wire import SENSOR_DATA_QOS
 from stack.config import Config
 
-
 #: What the bridge says it is in the announcements of the cameras it bridges.
 ANNOUNCED_SOURCE = "ros2"
 
