@@ -12,15 +12,20 @@ from common.messages import CameraAnnouncement
 
 
 def heard_cameras(
-    hub: MemoryHub, keys: Keys, on_change: Callable[[], None] | None = None
+    hub: MemoryHub,
+    keys: Keys,
+    on_change: Callable[[], None] | None = None,
+    *,
+    principal: str | None = None,
 ) -> Announced[CameraAnnouncement]:
-    """Every camera announced on ``keys``, as a pool worker would see them; garbage fails."""
+    """Every camera announced on ``keys``, as a pool worker would see them (joined as
+    ``principal``: a hub with access rules needs one); garbage fails."""
 
     def bad(key: str, error: Exception) -> None:
         raise AssertionError(f"a bad announcement on {key}: {error}")
 
     return Announced(
-        hub.join("listener"),
+        hub.join("listener", principal=principal),
         keys.all_camera_announcements(),
         keys.camera_announcement_parts,
         CameraAnnouncement.decode,
