@@ -45,6 +45,19 @@ POOL_RESIGNED = "pool_resigned"  # left the pool on a stalled detection loop
 CAPACITY_HZ = "capacity_hz"  # the capacity it announces (frames/s, rounded)
 POOL_STRAYS = "pool_strays"  # pool tokens with no worker announcement: ignored
 CAPACITY_ANNOUNCED = "capacity_announced"  # re-announcements of a moved capacity
+# Attention (services/detector/attention.py): a gauge, per camera 1 while it has priority (in
+# all: the cameras with priority), and the frames rounds took for each reason, counted only
+# while some camera has priority (the fair rounds count none).
+ATTENTION_PRIORITY = "attention_priority"
+TAKEN_PRIORITY = "taken_priority"  # a priority camera's frame
+TAKEN_FLOOR = "taken_floor"  # a camera due for its floor rate, ahead of the priority ones
+TAKEN_SPARE = "taken_spare"  # another camera's, with no priority camera waiting
+
+
+def taken_for(reason: str) -> str:
+    """The counter of frames taken for ``reason`` (services/detector/attention.py)."""
+    return f"taken_{reason}"
+
 
 #: The pool's gauges (set, not counted up).
 POOL_GAUGES = (SERVING, POOL_MEMBERS, POOL_LOAD_PERMILLE, POOL_WARNINGS, CAPACITY_HZ, POOL_STRAYS)
@@ -76,6 +89,10 @@ PER_CAMERA = frozenset(
         SERVING,
         CAMERAS_GAINED,
         CAMERAS_LOST,
+        ATTENTION_PRIORITY,
+        TAKEN_PRIORITY,
+        TAKEN_FLOOR,
+        TAKEN_SPARE,
     }
 )
 #: Every counter a worker publishes (plain names; see PER_CAMERA for the per-camera ones).
@@ -99,18 +116,19 @@ COUNTERS = frozenset(
 # -- the bus ---------------------------------------------------------------------------------
 def access(shape: Shape) -> dict[str, Access]:
     """Each worker reads frames and puts detections, never frames: every camera's, as any
-    worker may come to serve any camera (services/detector/pool.py).
-    Its tokens are its own only: its health, its pool membership, its announcement and its
-    serving tokens under its own name, so that no worker can pose as another, or as many, and
-    skew the assignment or its audit. It serves the model's description on each camera's info
-    key."""
+    worker may come to serve any camera (services/detector/pool.py); it reads the
+    controller's status too, for the camera that sees the target and the target classes
+    (services/detector/attention.py). Its tokens are its own only: its health, its pool
+    membership, its announcement and its serving tokens under its own name, so that no worker
+    can pose as another, or as many, and skew the assignment or its audit. It serves the
+    model's description on each camera's info key."""
     keys = shape.keys
     return {
         w: service_access(
             keys,
             w,
             *(keys.detections(c) for c in shape.cameras),
-            read=(keys.all_frames(),),
+            read=(keys.all_frames(), keys.controller_status()),
             token=(
                 keys.health(w),
                 keys.pool_member(w),
@@ -206,6 +224,13 @@ class DetectorSettings:
     What is wrong with the pool (a member that serves nothing, a camera nobody or two serve, a
     name held twice) is a warning once it has lasted ``pool_alarm_s`` (common/pool_audit.py).
     A pool token with no announcement is no member (ignored; counted as ``pool_strays``).
+
+    Attention (docs/detector.md, "Attention"; services/detector/attention.py): with
+    ``attention`` on, when the cameras send more than the worker detects, the camera holding
+    the controller's lock and those that saw one of its target classes within
+    ``attention_hold_s`` go first, and every other camera is still detected on at least
+    ``attention_floor_hz`` times a second (within a round or two). Off, or with no camera
+    prioritised, the rounds are the fair rotation.
     """
 
     model: str = ""
@@ -238,6 +263,9 @@ class DetectorSettings:
     capacity_step: float = 0.25
     capacity_period_s: float = 10.0
     capacity_smoothing: float = 0.05
+    attention: bool = True
+    attention_floor_hz: float = 0.5
+    attention_hold_s: float = 2.0
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
@@ -256,6 +284,8 @@ class DetectorSettings:
         "pool_balance": (1, 4),
         "pool_stall_s": (1, 60),
         "pool_alarm_s": (1, 600),
+        "attention_floor_hz": (0.05, 100),
+        "attention_hold_s": (0, 60),
         "capacity_hz": (0, MAX_CAPACITY_HZ),
         "capacity_step": (0.01, 10),
         "capacity_period_s": (0.5, 3600),

@@ -19,13 +19,14 @@ from common.keys import Keys
 from common.node import Node
 from perception import Detector, load, variant_of
 from perception import measure_batch as measure
+from services.detector.attention import Attention
 from services.detector.capacity import Capacity
 from services.detector.capacity import measure as measure_capacity
 from services.detector.contract import BATCHED_FRAMES, DetectorSettings
 from services.detector.handlers import DetectorHandlers
 from services.detector.membership import PoolMember
 from services.detector.pool import PoolCamera
-from services.detector.rounds import CameraOutput, Rounds, camera_outputs
+from services.detector.rounds import CameraOutput, Rounds, camera_outputs, heed_controller
 from stack.config import Config
 
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag (and the pool's membership)
@@ -68,6 +69,10 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
         detector, note, per_round = settle_batch(detector, note, per_round, s, node.log)
         b = detector.backend  # the one that runs (settle_batch may have opened it again)
         handlers = DetectorHandlers(config, node, node.clock, frame_keys={})
+        # Attention when short of capacity (services/detector/attention.py): the rounds'
+        # order, fed by the controller's status and each camera's detections.
+        attention = Attention(node.clock, s.attention_floor_hz, s.attention_hold_s, s.attention)
+        status_sub = node.subscribe(node.keys.controller_status(), heed_controller(node, attention))
         info = json.dumps(
             DetectorInfo(
                 model=detector.model_path.name,
@@ -80,7 +85,7 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
             )
         )
         cameras = ServedCameras(config, node, handlers, info)
-        rounds = Rounds(config, node, detector, cameras.outputs, node.clock)
+        rounds = Rounds(config, node, detector, cameras.outputs, node.clock, attention)
         # Warm the backend up before announcing readiness: the first run allocates, and each
         # batch size may (a CUDA graph, an OpenVINO shape) on its first run.
         warm = np.full((480, 640, 3), 114, np.uint8)
@@ -119,7 +124,7 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
                 pool.settle()
                 pool.audit()
                 node.publish_counters()
-                waiting = handlers.slots.take(per_round, _WAIT_S)
+                waiting = handlers.slots.take(per_round, _WAIT_S, attention)
                 if waiting:
                     before, start = node.counters.get(BATCHED_FRAMES), node.clock.mono_s()
                     rounds.run(waiting)
@@ -127,6 +132,7 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
                         node.counters.get(BATCHED_FRAMES) - before, node.clock.mono_s() - start
                     )
         finally:
+            status_sub.undeclare()
             pool.close()
             cameras.close()
             detector.close()
