@@ -1,0 +1,70 @@
+"""The README's example configs, as the tests read them (tests/unit/test_readme_configs.py loads
+every one; tests/integration/test_readme_pool.py runs the pool's two on two network namespaces).
+
+A ```toml block of README.md is a whole config file, saved at the repository root (so an
+``extends`` names a file from there): there are no fragments. A block whose first line is a
+comment naming a file (``# robot.toml: ...``) is that file; the tests find it by that name.
+
+:func:`as_tested` makes the only changes a test may make to a block, each one a thing that
+differs between the reader's machines and the test's, and nothing else.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+README = REPO / "README.md"
+
+#: The robot's address in the README's two-host examples.
+ROBOT_ADDRESS = "10.0.0.2"
+#: The GPU backends, run on the CPU's backend where there is no GPU.
+GPU_BACKENDS = ("cuda", "tensorrt")
+
+_BLOCK = re.compile(r"^```toml\n(.*?)^```$", re.MULTILINE | re.DOTALL)
+_NAME = re.compile(r"#\s*([\w.-]+\.toml)\b")
+_DEVICE = re.compile(r'"device:(\d+)"')
+_BACKEND = re.compile(r'^(backend\s*=\s*)"(?:{})"'.format("|".join(GPU_BACKENDS)), re.MULTILINE)
+
+
+@dataclass(frozen=True)
+class Block:
+    """One ```toml block: where it starts (1-based line of its fence), its file name if its
+    first line names one, and its text."""
+
+    line: int
+    name: str
+    text: str
+
+
+def toml_blocks(path: Path = README) -> list[Block]:
+    text = path.read_text(encoding="utf-8")
+    out = []
+    for m in _BLOCK.finditer(text):
+        body = m.group(1)
+        first = body.split("\n", 1)[0]
+        named = _NAME.match(first)
+        out.append(Block(text.count("\n", 0, m.start()) + 1, named.group(1) if named else "", body))
+    return out
+
+
+def named_block(name: str, path: Path = README) -> Block:
+    found = [b for b in toml_blocks(path) if b.name == name]
+    if len(found) != 1:
+        raise LookupError(f"{path.name}: {len(found)} ```toml blocks named {name}, expected 1")
+    return found[0]
+
+
+def as_tested(text: str, *, robot_address: str, samples: tuple[str, ...]) -> str:
+    """``text`` as a test runs it: the robot's address is the test's, camera ``device:N`` is
+    the bundled photo ``samples[N]`` (``sample:<name>``), and a GPU backend is ``onnx`` (ONNX
+    Runtime on the CPU). Nothing else changes."""
+
+    def sample(m: re.Match[str]) -> str:
+        return f'"sample:{samples[int(m.group(1))]}"'
+
+    out = text.replace(ROBOT_ADDRESS, robot_address)
+    out = _DEVICE.sub(sample, out)
+    return _BACKEND.sub(r'\1"onnx"', out)
