@@ -4,8 +4,9 @@ What the detector pool of a running stack looks like from one host, for a test i
 network namespace (tests/integration/test_readme_pool.py): it joins as "observer", listens for
 ``--seconds`` and prints one JSON object: the workers' announcements (capacity, prefixes), the
 cameras' (rate), the serving tokens at the start and at the end of the window (worker ->
-cameras), the distinct publishers of each camera's detections in the window, and the
-controller's latest status. Exit 1 with one line if the router cannot be reached.
+cameras), the distinct publishers of each camera's detections in the window, and what the
+controller's statuses said in it: each set of stale cameras and the cameras its target was on.
+Exit 1 with one line if the router cannot be reached.
 """
 
 from __future__ import annotations
@@ -79,7 +80,8 @@ def main() -> int:
         return 1
     lock = threading.Lock()
     sources: dict[str, set[str]] = defaultdict(set)
-    status: dict[str, Any] = {}
+    stale_sets: set[tuple[str, ...]] = set()
+    targets: set[str] = set()
 
     def on_detections(sample: Sample) -> None:
         camera = sample.key.split("/")[-2]  # <prefix>/detector/<camera>/detections
@@ -92,7 +94,9 @@ def main() -> int:
         except DecodeError:
             return
         with lock:
-            status.update(state=str(s.state), camera=s.camera, stale=list(s.stale_cameras))
+            stale_sets.add(tuple(sorted(s.stale_cameras)))
+            if s.camera:
+                targets.add(s.camera)
 
     subs = [
         bus.subscribe(keys.all_detections(), on_detections),
@@ -110,7 +114,11 @@ def main() -> int:
         sub.undeclare()
     with lock:
         view["publishers"] = {c: len(s) for c, s in sorted(sources.items())}
-        view["status"] = dict(status)
+        view["controller"] = {
+            "statuses": bool(stale_sets),
+            "stale_sets": sorted(list(s) for s in stale_sets),
+            "target_cameras": sorted(targets),
+        }
     bus.close()
     print(json.dumps(view))
     return 0

@@ -73,9 +73,7 @@ def test_as_tested_changes_only_the_address_the_devices_and_the_gpu_backend() ->
     gpu_tested = as_tested(gpu, robot_address="10.9.9.9", samples=())
     assert tomllib.loads(gpu_tested)["detector"]["backend"] == "onnx"
     changed = [
-        (a, b)
-        for a, b in zip(gpu.splitlines(), gpu_tested.splitlines(), strict=True)
-        if a != b
+        (a, b) for a, b in zip(gpu.splitlines(), gpu_tested.splitlines(), strict=True) if a != b
     ]
     assert [a.split("=")[0].strip() for a, _ in changed] == ["connect", "backend"], changed
 
@@ -84,7 +82,7 @@ def test_a_bad_block_is_caught(tmp_path: Path) -> None:
     """The check can fail: a misspelt setting in a block is a ConfigError naming it."""
     readme = tmp_path / "README.md"
     readme.write_text(
-        "text\n```toml\n# gpu.toml: x\n[detector]\nworker = \"gpu\"\n```\n", encoding="utf-8"
+        'text\n```toml\n# gpu.toml: x\n[detector]\nworker = "gpu"\n```\n', encoding="utf-8"
     )
     [block] = toml_blocks(readme)
     assert (block.line, block.name) == (2, "gpu.toml")

@@ -1,0 +1,201 @@
+"""The README's GPU box beside a robot, run as written on two network namespaces.
+
+    namespace A, the GPU box: README's gpu.toml      namespace B, the robot (10.78.0.2): robot.toml
+      `zstack prepare`, then `zstack run`              `zstack run`: cameras, a CPU worker,
+      (one detector worker, no camera table)           controller, metrics; the test's eyes
+                                                       (pool_view.py, `zstack query`)
+
+The two configs are taken from README.md's ```toml blocks named ``# robot.toml`` and
+``# gpu.toml`` (tests/readme.py) with only the changes :func:`tests.readme.as_tested` makes:
+the robot's address is namespace B's, the cameras' ``device:N`` are bundled photos (a person
+in front, a cat behind) and the GPU backend is ONNX Runtime on the CPU (no GPU here). Both
+workers join, the cameras are split as the pool's rule splits them by the capacities the
+workers announce, each camera is served (and its detections published) by exactly one worker,
+the robot's controller gets detections of every camera and targets the person, and
+`zstack query` on the robot shows what the README says it shows.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import pytest
+
+from common.pool_rule import assign
+from stack.config_file import load_config
+from tests.integration.conftest import REPO, STARTUP_S, wait_for
+from tests.readme import as_tested, named_block
+
+pytestmark = pytest.mark.integration
+
+ADDR_A, ADDR_B = "10.78.0.1", "10.78.0.2"  # private namespaces: no clash with anything
+SAMPLES = ("astronaut", "chelsea")  # device:0 (front) sees a person, device:1 (rear) a cat
+PERSON_CAMERA = "front"
+WORKERS = ("detector_gpu", "detector_robot")  # README: worker_id "gpu" and "robot"
+SETTLE_S = 2 * STARTUP_S  # two CPU workers measuring their capacity on a loaded 2-core box
+
+
+def _ip(*args: str) -> None:
+    done = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
+    if done.returncode != 0:
+        raise RuntimeError(f"ip {' '.join(args)}: {done.stderr.strip()}")
+
+
+@dataclass
+class Hosts:
+    """Two namespaces (unique per run) joined by a veth pair; the processes started in them."""
+
+    a: str
+    b: str
+    procs: list[subprocess.Popen[bytes]] = field(default_factory=list)
+
+    def _args(self, ns: str, args: list[str]) -> list[str]:
+        return ["ip", "netns", "exec", ns, sys.executable, *args]
+
+    def start(self, ns: str, args: list[str], out: IO[bytes]) -> subprocess.Popen[bytes]:
+        proc = subprocess.Popen(
+            self._args(ns, args), cwd=REPO, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+        )  # fmt: skip
+        self.procs.append(proc)
+        return proc
+
+    def call(self, ns: str, args: list[str], timeout: float) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            self._args(ns, args), cwd=REPO, capture_output=True, text=True, timeout=timeout
+        )
+
+
+@pytest.fixture
+def hosts() -> Iterator[Hosts]:
+    if os.geteuid() != 0:
+        pytest.skip("needs root to create network namespaces (ip netns)")
+    if shutil.which("ip") is None:
+        pytest.skip("needs iproute2's `ip` for network namespaces")
+    tag = uuid.uuid4().hex[:6]
+    h = Hosts(a=f"zyr-{tag}-a", b=f"zyr-{tag}-b")
+    veth_a, veth_b = f"zr{tag}a", f"zr{tag}b"
+    try:
+        _ip("netns", "add", h.a)
+    except RuntimeError as exc:
+        pytest.skip(f"cannot create a network namespace here: {exc}")
+    try:
+        _ip("netns", "add", h.b)
+        _ip("link", "add", veth_a, "type", "veth", "peer", "name", veth_b)
+        for ns, dev, addr in ((h.a, veth_a, ADDR_A), (h.b, veth_b, ADDR_B)):
+            _ip("link", "set", dev, "netns", ns)
+            _ip("-n", ns, "addr", "add", f"{addr}/24", "dev", dev)
+            _ip("-n", ns, "link", "set", dev, "up")
+            _ip("-n", ns, "link", "set", "lo", "up")
+        yield h
+    finally:
+        for proc in h.procs:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        for ns in (h.a, h.b):  # deleting a namespace deletes its end of the veth pair too
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=30)
+
+
+def _config(where: Path, name: str) -> Path:
+    where.mkdir()
+    path = where / name
+    path.write_text(
+        as_tested(named_block(name).text, robot_address=ADDR_B, samples=SAMPLES), encoding="utf-8"
+    )
+    load_config(path, environ={})  # one clear line here if the README's block does not load
+    return path
+
+
+def _view(hosts: Hosts, robot: Path) -> dict[str, Any] | None:
+    """The pool as seen on the robot over a few seconds (tests/integration/pool_view.py)."""
+    args = ["-m", "tests.integration.pool_view", "--config", str(robot), "--seconds", "4"]
+    done = hosts.call(hosts.b, args, timeout=60)
+    return json.loads(done.stdout) if done.returncode == 0 else None
+
+
+def _settled(view: dict[str, Any] | None) -> bool:
+    """Both workers announced, every camera served by one of them and published by one, the
+    same before and after the window, and the controller fresh on every camera at least once."""
+    if view is None or sorted(view["workers"]) != sorted(WORKERS) or not view["cameras"]:
+        return False
+    serving = view["serving"]
+    served = [c for cams in serving.values() for c in cams]
+    stale_sets = view["controller"]["stale_sets"]
+    fresh = {c for c in view["cameras"] if any(c not in stale for stale in stale_sets)}
+    return (
+        serving == view["serving_before"]
+        and sorted(served) == sorted(view["cameras"])
+        and all(view["publishers"].get(c) == 1 for c in view["cameras"])
+        and fresh == set(view["cameras"])
+        and PERSON_CAMERA in view["controller"]["target_cameras"]
+    )
+
+
+def _query(hosts: Hosts, robot: Path) -> dict[str, Any] | None:
+    """``zstack query --config robot.toml`` on the robot, as the README says to check."""
+    args = ["-m", "deploy.zstack", "query", "--config", str(robot), "--timeout", "2"]
+    done = hosts.call(hosts.b, args, timeout=60)
+    return json.loads(done.stdout) if done.returncode == 0 else None
+
+
+def test_the_readme_gpu_box_and_robot_run_as_written(hosts: Hosts, tmp_path: Path) -> None:
+    robot = _config(tmp_path / "robot", "robot.toml")
+    gpu = _config(tmp_path / "gpu", "gpu.toml")
+    prepared = hosts.call(hosts.a, ["-m", "deploy.zstack", "prepare", "--config", str(gpu)], 600)
+    assert prepared.returncode == 0, prepared.stderr[-2000:]
+    log_a, log_b = tmp_path / "gpu.log", tmp_path / "robot.log"
+    sup_b = hosts.start(hosts.b, ["-m", "deploy.zstack", "run", "--config", str(robot)],
+                        log_b.open("wb"))  # fmt: skip
+    sup_a = hosts.start(hosts.a, ["-m", "deploy.zstack", "run", "--config", str(gpu)],
+                        log_a.open("wb"))  # fmt: skip
+    last: list[dict[str, Any] | None] = [None]
+
+    def logs() -> str:
+        tails = (p.read_text(errors="replace")[-4000:] for p in (log_a, log_b))
+        return "last view: {}\n--- GPU box:\n{}\n--- robot:\n{}".format(last[0], *tails)
+
+    def settled() -> dict[str, Any] | None:
+        last[0] = _view(hosts, robot)
+        return last[0] if _settled(last[0]) else None
+
+    view = wait_for(settled, SETTLE_S, lambda: f"both workers serving:\n{logs()}", poll=1.0)
+
+    # The split is the pool's rule over what the workers announced: capacity against rate.
+    capacities = {w: a["capacity_hz"] for w, a in view["workers"].items()}
+    balance = load_config(robot, environ={}).detector.pool_balance
+    owners = assign(capacities, view["cameras"], balance)
+    assert {c: w for w, cams in view["serving"].items() for c in cams} == owners, view
+    assert all(a["capacity_hz"] > 0 for a in view["workers"].values())
+
+    # `zstack query` on the robot: both workers live with those cameras, their capacities,
+    # each camera's one server, and no pool warning.
+    def queried() -> dict[str, Any] | None:
+        answer = _query(hosts, robot)
+        if answer is None or answer.get("pool_warnings"):
+            return None
+        workers = answer.get("workers") or {}
+        listed = {w: sorted(m["cameras"]) for w, m in workers.items() if m["live"]}
+        expected = {w: sorted(view["serving"].get(w, [])) for w in WORKERS}
+        return answer if listed == expected else None
+
+    answer = wait_for(queried, 60, lambda: f"zstack query to show the pool:\n{logs()}", poll=1.0)
+    assert all(f"{w}.capacity_hz" in answer["counters"] for w in WORKERS), answer["counters"]
+    for camera, owner in owners.items():
+        assert answer["cameras"][camera]["served_by"] == owner, answer["cameras"][camera]
+    print(f"README pool: capacities {capacities}, split {view['serving']}")
+
+    for proc in (sup_a, sup_b):
+        proc.send_signal(signal.SIGINT)
+    for name, proc in (("GPU box", sup_a), ("robot", sup_b)):
+        assert proc.wait(timeout=30) == 0, f"{name}'s supervisor:\n{logs()}"
