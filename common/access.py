@@ -56,12 +56,18 @@ class Shape:
     """What a contract's access depends on. ``cameras``: each camera's service (and
     principal) by camera name, the first camera first; ``workers``: the detector workers'
     names, each a principal; ``live_sensors``: the stack runs a camera, the simulator or the
-    ROS 2 bridge (so nothing may be played back onto their keys)."""
+    ROS 2 bridge (so nothing may be played back onto their keys); ``prefixes``: the robot
+    prefixes the workers serve (``detector.prefixes``; empty: the stack's own only)."""
 
     keys: Keys
     cameras: Mapping[str, str]
     workers: tuple[str, ...]
     live_sensors: bool = True
+    prefixes: tuple[str, ...] = ()
+
+    def other_robots(self) -> tuple[Keys, ...]:
+        """The keys of each robot the workers serve besides the stack's own."""
+        return tuple(Keys(p) for p in dict.fromkeys(self.prefixes) if p != self.keys.prefix)
 
     def frames(self) -> tuple[str, ...]:
         """Each configured camera's frame key: nobody may put on a camera the stack lacks."""

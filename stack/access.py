@@ -15,8 +15,15 @@ robot's keys.
 Each principal may also subscribe only to what it reads: the camera frames only to the
 detector, the live view, the recorder and the ROS 2 bridge. Zenoh allows a subscription only
 when its key expression lies within an allowed one, so a wider one (``<prefix>/**``) is denied
-whole, not trimmed. Queries and liveliness subscriptions stay open to every principal.
-Anything not allowed is denied.
+whole, not trimmed. Queries and liveliness subscriptions are open to every principal, within
+the stack's prefix and the robot prefixes its detector workers serve: nothing of another
+robot's on the same (or a linked) router. Anything not allowed is denied.
+
+Routers linked across hosts admit each other as the router's principal (``supervisor``, by
+its certificate): a router lets a linked one do what the principals the other hosts run
+(``zenoh.remote_principals``) may do, together, and nothing more; each host's own router
+confines each of its own principals on ingress, as on one host (docs/security.md, "Two hosts,
+secured").
 """
 
 from __future__ import annotations
@@ -33,7 +40,7 @@ from common.security import (
     camera_services,
     stack_principals,
 )
-from common.settings import service_package
+from common.settings import is_detector_service, service_package
 from services.camera import contract as camera
 from services.controller import contract as controller
 from services.detector import contract as detector
@@ -97,6 +104,29 @@ def _observer(shape: Shape) -> dict[str, Access]:
     return {OBSERVER_PRINCIPAL: Access(read=watching)}
 
 
+def linked_router_access(table: Mapping[str, Access], remote: Iterable[str]) -> Access:
+    """What a linked router (another host's, admitted as ROUTER_PRINCIPAL) may do: what the
+    ``remote`` principals (those the other hosts run) may do, together, in ``table``'s
+    order. ValueError, one line, for a name that is no principal of the stack."""
+    remote = tuple(dict.fromkeys(remote))
+    unknown = [p for p in remote if p not in table or p == ROUTER_PRINCIPAL]
+    if unknown:
+        known = ", ".join(p for p in table if p != ROUTER_PRINCIPAL)
+        raise ValueError(
+            f"zenoh.remote_principals names {', '.join(map(repr, unknown))}: not a principal of "
+            f"this stack (known: {known}; another host's detector worker: detector_<worker_id>)"
+        )
+    kinds: dict[str, dict[str, None]] = {k: {} for k in ("put", "token", "serve", "read")}
+    for principal in remote:
+        allowed = table[principal]
+        for kind, exprs in (
+            ("put", allowed.put), ("token", allowed.token),
+            ("serve", allowed.serve), ("read", allowed.read),
+        ):  # fmt: skip
+            kinds[kind].update(dict.fromkeys(exprs))
+    return Access(**{kind: tuple(exprs) for kind, exprs in kinds.items()})
+
+
 def access_table(shape: Shape) -> dict[str, Access]:
     """What each principal of the stack may do, from its service's contract. Puts name each
     configured camera's key: nobody may put on a camera the stack does not have. Reads and the
@@ -123,9 +153,24 @@ def _table(
     cameras: str | Mapping[str, str],
     live_sensors: bool = True,
     workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+    prefixes: Iterable[str] = (),
+    remote: Iterable[str] = (),
 ) -> dict[str, Access]:
-    shape = Shape(keys, camera_services(cameras), tuple(workers), live_sensors)
-    return access_table(shape)
+    """Each principal's access; with ``remote`` (the principals other hosts run), another
+    host's detector workers among them, and the linked routers' (ROUTER_PRINCIPAL's)."""
+    remote = tuple(remote)
+    pool = tuple(dict.fromkeys((*workers, *(p for p in remote if is_detector_service(p)))))
+    shape = Shape(keys, camera_services(cameras), pool, live_sensors, tuple(prefixes))
+    table = access_table(shape)
+    if remote:
+        table[ROUTER_PRINCIPAL] = linked_router_access(table, remote)
+    return table
+
+
+def ask_scope(keys: Keys, prefixes: Iterable[str] = ()) -> list[str]:
+    """Where every principal may ask (query, watch and look up tokens): the stack's prefix and
+    each robot prefix its detector workers serve."""
+    return [f"{p}/**" for p in dict.fromkeys((keys.prefix, *prefixes))]
 
 
 def access_control(
@@ -136,19 +181,26 @@ def access_control(
     *,
     live_sensors: bool = True,
     workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+    prefixes: Iterable[str] = (),
+    remote: Iterable[str] = (),
 ) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for the router: deny by default, then allow each
     principal its own keys on ingress (puts, tokens, queryables, subscriptions), queries and
-    liveliness for everyone, and everything on egress (the router delivers only what it
-    accepted, and only to subscriptions it accepted). ``cameras``: see
+    liveliness for everyone within :func:`ask_scope`, and everything on egress (the router
+    delivers only what it accepted, and only to subscriptions it accepted). ``cameras``: see
     common.security.camera_services; ``principals`` (default: stack_principals) limits the
     rules to those named; ``workers``: the detector workers' names (``Config.detector_services``),
-    each a principal."""
+    each a principal; ``prefixes``: the robot prefixes they serve (empty: the stack's own);
+    ``remote``: the principals other hosts run, whose traffic a linked router brings
+    (:func:`linked_router_access`; another host's workers are principals here too)."""
     if auth not in AUTH_MODES[1:]:
         raise ValueError(f"access control needs an authenticated mode, got {auth!r}")
+    remote = tuple(remote)
     workers = tuple(workers)
     if principals is None:
-        principals = stack_principals(cameras, workers)
+        remote_workers = [p for p in remote if is_detector_service(p)]
+        principals = stack_principals(cameras, (*workers, *remote_workers))
+    prefixes = tuple(prefixes)
     match = "usernames" if auth == "password" else "cert_common_names"
     rules: list[dict[str, Any]] = [
         {
@@ -163,12 +215,14 @@ def access_control(
             "messages": list(_ASK_MESSAGES),
             "flows": ["ingress"],
             "permission": "allow",
-            "key_exprs": ["**"],
+            "key_exprs": ask_scope(keys, prefixes),
         },
     ]
     subjects: list[dict[str, Any]] = [{"id": "everyone", match: list(principals)}]
     policies: list[dict[str, Any]] = [{"rules": ["egress", "ask"], "subjects": ["everyone"]}]
-    for principal, allowed in _table(keys, cameras, live_sensors, workers).items():
+    for principal, allowed in _table(
+        keys, cameras, live_sensors, workers, prefixes, remote
+    ).items():
         if principal not in principals:
             continue
         subjects.append({"id": principal, match: [principal]})

@@ -92,16 +92,21 @@ def access(shape: Shape) -> dict[str, Access]:
     worker may come to serve any camera (services/detector/pool.py). Its tokens are its own
     only: its health, its pool membership and its serving tokens under its own name, so that
     no worker can pose as another, or as many, and skew the assignment or its audit. It serves
-    the model's description on each camera's info key."""
+    the model's description on each camera's info key. A pool serving further robots
+    (``shape.prefixes``) reads each one's frames and puts its detections, and serves its info,
+    on every camera under its prefix (their cameras come and go with their announcements),
+    and nothing else of theirs: no frame, no command."""
     keys = shape.keys
+    robots = shape.other_robots()
     return {
         w: service_access(
             keys,
             w,
             *(keys.detections(c) for c in shape.cameras),
-            read=(keys.all_frames(),),
+            *(r.all_detections() for r in robots),
+            read=(keys.all_frames(), *(r.all_frames() for r in robots)),
             token=(keys.health(w), keys.pool_member(w), keys.pool_serving_of(w)),
-            serve=(keys.all_detector_info(),),
+            serve=(keys.all_detector_info(), *(r.all_detector_info() for r in robots)),
         )
         for w in dict.fromkeys(shape.workers)
     }

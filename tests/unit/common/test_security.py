@@ -72,14 +72,14 @@ def test_only_the_controller_puts_cmd_vel_and_only_estop_the_estop() -> None:
     assert _allowed(acl, "metrics", "liveliness_token") == {KEYS.health("metrics")}
     assert KEYS.counters("estop") not in _allowed(acl, "estop", "put")
     # Each reads what it needs; the camera's pictures only the detector, the live view, the
-    # recorder and the ROS 2 bridge. Queries and liveliness stay open to all.
+    # recorder and the ROS 2 bridge. Queries and liveliness stay open to all, within the prefix.
     readers = {p for p in PRINCIPALS if _may(acl, p, "declare_subscriber", KEYS.frame("front"))}
     assert readers == {"detector", "viewer", "ros2", "recorder"}
     assert _allowed(acl, "recorder", "declare_subscriber") == {f"{KEYS.prefix}/**"}
     assert KEYS.cmd_vel() in _allowed(acl, "observer", "declare_subscriber")
     assert _allowed(acl, "camera", "declare_subscriber") == set()
     assert _allowed(acl, "estop", "declare_subscriber") == {KEYS.controller_status()}
-    assert _allowed(acl, "camera", "query") == {"**"}
+    assert _allowed(acl, "camera", "query") == {f"{KEYS.prefix}/**"}
 
 
 def test_certificate_mode_matches_common_names() -> None:
