@@ -29,6 +29,7 @@ secured").
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from dataclasses import replace
 from typing import Any
 
 from common.access import Access, Shape
@@ -116,15 +117,7 @@ def linked_router_access(table: Mapping[str, Access], remote: Iterable[str]) -> 
             f"zenoh.remote_principals names {', '.join(map(repr, unknown))}: not a principal of "
             f"this stack (known: {known}; another host's detector worker: detector_<worker_id>)"
         )
-    kinds: dict[str, dict[str, None]] = {k: {} for k in ("put", "token", "serve", "read")}
-    for principal in remote:
-        allowed = table[principal]
-        for kind, exprs in (
-            ("put", allowed.put), ("token", allowed.token),
-            ("serve", allowed.serve), ("read", allowed.read),
-        ):  # fmt: skip
-            kinds[kind].update(dict.fromkeys(exprs))
-    return Access(**{kind: tuple(exprs) for kind, exprs in kinds.items()})
+    return merged(table[p] for p in remote)
 
 
 def access_table(shape: Shape) -> dict[str, Access]:
@@ -163,13 +156,27 @@ def _table(
     shape = Shape(keys, camera_services(cameras), pool, live_sensors, tuple(prefixes))
     table = access_table(shape)
     if remote:
-        table[ROUTER_PRINCIPAL] = linked_router_access(table, remote)
+        # A pool's router linked to the routers of the robots it serves: their principals
+        # act on their own robot's keys, so the link may do what they may on each prefix.
+        robots = (shape, *(replace(shape, keys=k, prefixes=()) for k in shape.other_robots()))
+        tables = [table, *(access_table(r) for r in robots[1:])]
+        table[ROUTER_PRINCIPAL] = merged(linked_router_access(t, remote) for t in tables)
     return table
 
 
+def merged(accesses: Iterable[Access]) -> Access:
+    """What any of ``accesses`` allows, in order."""
+    out: dict[str, dict[str, None]] = {k: {} for k in ("put", "token", "serve", "read")}
+    for a in accesses:
+        for kind, exprs in (("put", a.put), ("token", a.token), ("serve", a.serve),
+                            ("read", a.read)):  # fmt: skip
+            out[kind].update(dict.fromkeys(exprs))
+    return Access(**{kind: tuple(exprs) for kind, exprs in out.items()})
+
+
 def ask_scope(keys: Keys, prefixes: Iterable[str] = ()) -> list[str]:
-    """Where every principal may ask (query, watch and look up tokens): the stack's prefix and
-    each robot prefix its detector workers serve."""
+    """Where to ask (query, watch and look up tokens): the stack's prefix (every principal),
+    then each further robot prefix the detector workers serve (they, and a linked router)."""
     return [f"{p}/**" for p in dict.fromkeys((keys.prefix, *prefixes))]
 
 
@@ -215,11 +222,19 @@ def access_control(
             "messages": list(_ASK_MESSAGES),
             "flows": ["ingress"],
             "permission": "allow",
-            "key_exprs": ask_scope(keys, prefixes),
+            "key_exprs": ask_scope(keys),
         },
     ]
     subjects: list[dict[str, Any]] = [{"id": "everyone", match: list(principals)}]
     policies: list[dict[str, Any]] = [{"rules": ["egress", "ask"], "subjects": ["everyone"]}]
+    served = ask_scope(keys, prefixes)[1:]
+    if served:
+        # The other robots a pool serves: only its workers (and a linked router, which
+        # brings the asks of the other hosts' principals) may ask there.
+        askers = [p for p in principals if is_detector_service(p) or p == ROUTER_PRINCIPAL]
+        rules.append({**rules[-1], "id": "ask_served", "key_exprs": served})
+        subjects.append({"id": "served_askers", match: askers})
+        policies.append({"rules": ["ask_served"], "subjects": ["served_askers"]})
     for principal, allowed in _table(
         keys, cameras, live_sensors, workers, prefixes, remote
     ).items():
