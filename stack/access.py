@@ -5,12 +5,13 @@ reads. Pure: nothing here opens a session; stack/hub.py hands the rules to the r
 Each process has its own principal (common/security.py) and may publish only its own keys:
 only the controller puts ``cmd_vel``, only the ``estop`` principal the e-stop, only the
 cameras, the simulator and the ROS 2 bridge frames and scans, only stack services counters and
-health tokens. Each camera process may put only its own camera's frames; the detector puts
-every camera's detections and no frame. Each detector worker of a pool may put every camera's
-detections (any worker may serve any camera), but announces only its own health and pool
-tokens. The recorder (playing a recording back) may put frames and scans only on a stack that
-runs no live sensor (no camera, simulator or ROS 2 bridge): a replay must never reach a live
-robot's keys.
+health tokens. Each camera process may put only its own camera's frames and announce only its
+own camera (the simulator, the ROS 2 bridge and a replay: each camera whose frames they may
+put); the detector puts every camera's detections and no frame. Each detector worker of a pool
+may put every camera's detections (any worker may serve any camera), but announces only its own
+health and pool tokens. The recorder (playing a recording back) may put frames and scans only on
+a stack that runs no live sensor (no camera, simulator or ROS 2 bridge): a replay must never
+reach a live robot's keys.
 
 Each principal may also subscribe only to what it reads: the camera frames only to the
 detector, the live view, the recorder and the ROS 2 bridge. Zenoh allows a subscription only

@@ -3,7 +3,7 @@
 
 Each camera is a process and a principal of its own (``camera`` for the first camera,
 ``camera_<name>`` for each further one: ``Config.camera_services``); it puts its own camera's
-frames only, and reads nothing.
+frames only, announces its own camera only (its CameraAnnouncement tokens), and reads nothing.
 """
 
 from __future__ import annotations
@@ -33,9 +33,15 @@ LIVE_SENSOR = True
 
 
 def access(shape: Shape) -> dict[str, Access]:
-    """Each camera process puts its own camera's frames."""
+    """Each camera process puts its own camera's frames and announces its own camera."""
+    keys = shape.keys
     return {
-        name: service_access(shape.keys, name, shape.keys.frame(camera))
+        name: service_access(
+            keys,
+            name,
+            keys.frame(camera),
+            token=(keys.health(name), keys.camera_announcements_of(camera)),
+        )
         for camera, name in shape.cameras.items()
     }
 

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
-from common.bus import QoS
+from common.bus import Bus, QoS
+from common.camera_announce import CameraAnnouncements
 from common.clock import mono_s
 from common.errors import ImageError
 from common.frames import image_to_frame
@@ -15,8 +17,22 @@ from services.camera.reopen import ReopenHooks, ReopeningSource
 from services.camera.sources import FrameSource, open_source, resize
 from stack.config import Config
 
+#: What opens a camera's source (``open_source``; an in-process test's own source).
+Opener = Callable[..., FrameSource]
 
-def run(config: Config, camera: str, settings: CameraSettings, stop: threading.Event) -> int:
+#: What a camera process says it is in its camera's announcement.
+ANNOUNCED_SOURCE = "camera"
+
+
+def run(
+    config: Config,
+    camera: str,
+    settings: CameraSettings,
+    stop: threading.Event,
+    *,
+    bus: Bus | None = None,
+    opener: Opener = open_source,
+) -> int:
     """Publish ``camera``'s frames (read with ``settings``) on its key until ``stop`` is set or
     the source ends; returns the exit code. The process is that camera's service
     (``config.camera_services``): its health token, counters and principal are its own, so the
@@ -27,18 +43,40 @@ def run(config: Config, camera: str, settings: CameraSettings, stop: threading.E
     with the log rate limited per key (common/ratelimit.py, through Node.reject). A live device
     that stops giving frames never ends: it is reopened every ``camera.reopen_period_s``
     (services/camera/reopen.py).
+
+    The camera is announced on the bus (common/camera_announce.py) from start to stop, with
+    its configured rate, mounting yaw, field of view and frame id; its size is ``resize``, or
+    0x0 until the first frame gives the source's. A reopened source keeps the announcement
+    (its size is announced again should it differ). ``bus``: an in-process test's.
     """
-    with Node(config.camera_services[camera], config) as node:
+    with (
+        Node(config.camera_services[camera], config, bus=bus) as node,
+        CameraAnnouncements(node.bus, node.keys, ANNOUNCED_SOURCE) as announcements,
+    ):
 
         def on_bad(exc: ImageError) -> None:
             node.reject(contract.BAD_IMAGES, str(exc))  # a looped folder repeats it: rate-limited
 
         source = _reopening(
-            open_source(settings.source, loop=settings.loop, on_bad=on_bad), settings, node, stop
+            opener(settings.source, loop=settings.loop, on_bad=on_bad),
+            settings,
+            node,
+            stop,
+            opener,
         )
         key = node.keys.frame(camera)
         publisher = node.publisher(key, QoS.SENSOR)
         node.log.info("publishing %s on %s at %.1f Hz", source.description, key, settings.rate_hz)
+        width, height = settings.resize
+        announcements.announce(
+            camera,
+            rate_hz=settings.rate_hz,
+            mount_yaw_deg=settings.mount_yaw_deg,
+            hfov_deg=settings.hfov_deg,
+            frame_id=settings.frame_id,
+            width=width,
+            height=height,
+        )
         node.ready()
         period = 1.0 / settings.rate_hz
         next_t = mono_s()
@@ -59,6 +97,7 @@ def run(config: Config, camera: str, settings: CameraSettings, stop: threading.E
                         jpeg_quality=settings.jpeg_quality,
                     )
                     publisher.put(frame.encode())
+                    announcements.saw(camera, frame.width, frame.height)
                     node.counters.add(contract.FRAMES_OUT)
                 except (ImageError, ValueError) as exc:
                     # An unreadable file, or an image larger than a Frame may carry: skip it.
@@ -74,7 +113,11 @@ def run(config: Config, camera: str, settings: CameraSettings, stop: threading.E
 
 
 def _reopening(
-    source: FrameSource, settings: CameraSettings, node: Node, stop: threading.Event
+    source: FrameSource,
+    settings: CameraSettings,
+    node: Node,
+    stop: threading.Event,
+    opener: Opener = open_source,
 ) -> FrameSource:
     """A live source wrapped to be reopened when it stops (counted: ``source_lost``,
     ``source_reopened``, ``source_reopen_failed``); any other source as it is."""
@@ -94,7 +137,7 @@ def _reopening(
 
     return ReopeningSource(
         source,
-        lambda: open_source(settings.source, loop=settings.loop),
+        lambda: opener(settings.source, loop=settings.loop),
         period_s=settings.reopen_period_s,
         stop=stop,
         hooks=ReopenHooks(

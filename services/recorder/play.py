@@ -13,6 +13,12 @@ With several cameras each camera's frames go back on its own key: an image topic
 whose ROS 2 topic it is (``ros2.camera_namespace``, as the recorder wrote it and the bridge
 maps it, :func:`frame_keys`); an image topic of no configured camera (a bag from another
 robot) plays as the first camera's, as with one camera.
+
+Each camera whose frames are played is announced while the play lasts (CameraAnnouncement,
+common/camera_announce.py): the size and frame id of its first recorded frame, the rate it
+was recorded at times the play's speed (its configured rate when the recording cannot tell:
+one frame), its mounting and field of view from its config (:func:`recorded_cameras`,
+:func:`announce_played`).
 """
 
 from __future__ import annotations
@@ -24,11 +30,19 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from common.camera_announce import CameraAnnouncements
 from common.clock import BOOT_ID, now
 from common.errors import DecodeError, RecordingError, one_line
 from common.keys import Keys
 from common.messages import Frame, Header, LaserScan
-from services.recorder.reading import PLAYABLE, Recording, check_playable, decode_input
+from services.recorder.reading import (
+    PLAYABLE,
+    Input,
+    Recording,
+    check_playable,
+    decode_input,
+    input_kind,
+)
 from services.recorder.timing import Schedule
 from services.ros2.contract import camera_topics
 from stack.config import Config
@@ -36,6 +50,8 @@ from stack.config import Config
 log = logging.getLogger("recorder")
 
 SOURCE = "replay"
+#: What the player says it is in the announcements of the cameras it plays.
+ANNOUNCED_SOURCE = "play"
 
 
 @dataclass(slots=True)
@@ -66,6 +82,76 @@ def frame_keys(config: Config) -> dict[str, str]:
         image = camera_topics(config.ros2, first, camera).image
         out[image] = out[f"{image.rstrip('/')}/compressed"] = keys.frame(camera)
     return out
+
+
+@dataclass(slots=True)
+class RecordedCamera:
+    """What a recording holds of one camera's frames: its first frame's size and frame id, and
+    how many frames there are between the first and last log time."""
+
+    width: int
+    height: int
+    frame_id: str
+    first_ns: int
+    last_ns: int
+    frames: int = 1
+
+    def rate_hz(self) -> float | None:
+        """The frames per second it was recorded at; None when that cannot be told (one frame,
+        or every frame logged at one time)."""
+        span_ns = self.last_ns - self.first_ns
+        return (self.frames - 1) * 1e9 / span_ns if self.frames > 1 and span_ns > 0 else None
+
+
+def recorded_cameras(config: Config, path: Path, topics: list[str]) -> dict[str, RecordedCamera]:
+    """Each camera whose frames ``topics`` of ``path`` play (onto its key, as
+    :func:`one_pass` plays them), by name, from one reading of the file. Frames before the
+    first that decodes are not counted (the play skips them too)."""
+    keys = Keys(config.stack.prefix)
+    cameras = {keys.frame(c): c for c in config.all_cameras}
+    onto, first_camera = frame_keys(config), config.stack.camera
+    out: dict[str, RecordedCamera] = {}
+    with Recording(path) as rec:
+        for record in rec.records(topics):
+            if input_kind(record) is not Input.FRAME:
+                continue
+            camera = cameras.get(onto.get(record.channel.topic, ""), first_camera)
+            log_ns = record.message.log_time
+            seen = out.get(camera)
+            if seen is not None:
+                seen.frames += 1
+                seen.first_ns, seen.last_ns = min(seen.first_ns, log_ns), max(seen.last_ns, log_ns)
+                continue
+            try:
+                frame = decode_input(record, config.ros2.distro, source=SOURCE, seq=1)
+            except DecodeError:
+                continue
+            if isinstance(frame, Frame):
+                out[camera] = RecordedCamera(
+                    frame.width, frame.height, frame.header.frame_id, log_ns, log_ns
+                )
+    return out
+
+
+def announce_played(
+    config: Config,
+    announcements: CameraAnnouncements,
+    recorded: dict[str, RecordedCamera],
+    rate: float,
+) -> None:
+    """Announce each camera of ``recorded`` as it is played at speed ``rate``."""
+    for camera, seen in recorded.items():
+        c = config.all_cameras[camera]
+        announcements.announce(
+            camera,
+            rate_hz=(seen.rate_hz() or c.rate_hz) * rate,
+            mount_yaw_deg=c.mount_yaw_deg,
+            hfov_deg=c.hfov_deg,
+            frame_id=c.frame_id,
+            width=seen.width,
+            height=seen.height,
+        )
+        announcements.saw(camera, seen.width, seen.height, seen.frame_id)  # the recorded id
 
 
 def one_pass(

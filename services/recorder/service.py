@@ -10,7 +10,7 @@ service as ``recorder.*``; a progress line says messages, MB and drops.
 from __future__ import annotations
 
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from datetime import datetime
 from functools import partial
 from math import inf
@@ -20,6 +20,7 @@ import zenoh
 
 from common import reach
 from common.bus import Declared, QoS
+from common.camera_announce import CameraAnnouncements
 from common.clock import local_now, mono_s, wall_ns
 from common.codec import Message
 from common.errors import StackError
@@ -43,7 +44,14 @@ from common.zenoh_bus import Publisher, ZenohBus, open_session
 from services.recorder import contract
 from services.recorder.channels import Translator
 from services.recorder.contract import TIME_FIELD
-from services.recorder.play import Played, one_pass, playable_topics
+from services.recorder.play import (
+    ANNOUNCED_SOURCE,
+    Played,
+    announce_played,
+    one_pass,
+    playable_topics,
+    recorded_cameras,
+)
 from services.recorder.writer import Decode, McapFile, QueuedRecorder
 from stack.access import running_sensors
 from stack.config import Config
@@ -202,10 +210,13 @@ def _ready_to_play(
     stop: threading.Event,
     progress: Progress,
     wait: bool,
+    clear: Callable[[], None],
 ) -> set[str]:
     """The services ready on the stack once the replay may start: a link to the stack at once
     (else one StackError line naming the endpoint), no live sensor, and with ``wait`` a ready
-    detector within recorder.detector_wait_s (frames played before it would be lost)."""
+    detector within recorder.detector_wait_s (frames played before it would be lost).
+    ``clear()`` is called once no live sensor is seen, before the wait for a detector (the
+    played cameras are announced then: a pool's workers serve the cameras announced)."""
     keys, prefix = Keys(config.stack.prefix), config.stack.prefix
     if not reach.connected(session, PLAY_LINK_TIMEOUT_S):
         raise StackError(
@@ -215,7 +226,7 @@ def _ready_to_play(
             )
         )  # fmt: skip
     deadline = mono_s() + (config.recorder.detector_wait_s if wait else 0.0)
-    said = False
+    said = cleared = False
     while True:
         ready = ready_services(session, keys, READY_POLL_S)
         live = running_sensors(ready)
@@ -229,6 +240,9 @@ def _ready_to_play(
                 "a stack without camera, sim or ros2 (e.g. supervisor.services = "
                 '["detector", "controller", "metrics"])'
             )
+        if not cleared:
+            cleared = True
+            clear()
         if any(is_detector_service(name) for name in ready):
             return ready
         if not wait:
@@ -265,12 +279,19 @@ def play(
     wait: bool = True,
 ) -> Played:
     """Publish the recording's frames and scans (play.py) until it ends (or ``stop``;
-    ``loop``: again); with ``wait``, not before a detector is ready to see them."""
+    ``loop``: again); with ``wait``, not before a detector is ready to see them. Each camera
+    played is announced until then (play.py's announce_played)."""
     chosen = playable_topics(path, topics)
+    recorded = recorded_cameras(config, path, chosen)
     keys = Keys(config.stack.prefix)
-    session = open_session(config.zenoh, PLAY_PRINCIPAL)
+    bus = ZenohBus(open_session(config.zenoh, PLAY_PRINCIPAL))
+    session = bus.session
+    announcements = CameraAnnouncements(bus, keys, ANNOUNCED_SOURCE)
     try:
-        _ready_to_play(config, session, path, stop, progress, wait)
+        _ready_to_play(
+            config, session, path, stop, progress, wait,
+            lambda: announce_played(config, announcements, recorded, rate),
+        )  # fmt: skip
         pubs = {keys.frame(camera): Publisher(session, keys.frame(camera), QoS.SENSOR)
                 for camera in config.all_cameras}  # fmt: skip
         pubs[keys.scan()] = Publisher(session, keys.scan(), QoS.SENSOR)
@@ -284,4 +305,5 @@ def play(
                 break
         return played
     finally:
-        session.close()
+        announcements.close()
+        bus.close()

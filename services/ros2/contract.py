@@ -1,8 +1,8 @@
 """The ROS 2 bridge's contract: its counters and what it puts and reads. Imports only
 ``common``.
 
-The bridge feeds the robot's cameras and laser into the stack, and the stack's detections and
-commands out to the robot (held at zero by the controller's status).
+The bridge feeds the robot's cameras (each announced) and laser into the stack, and the stack's
+detections and commands out to the robot (held at zero by the controller's status).
 """
 
 from __future__ import annotations
@@ -53,6 +53,7 @@ def access(shape: Shape) -> dict[str, Access]:
                 keys.cmd_vel(),
                 keys.controller_status(),
             ),
+            token=(keys.health(SERVICE), *map(keys.camera_announcements_of, shape.cameras)),
         )
     }
 

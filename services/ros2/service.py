@@ -21,8 +21,10 @@ commands zero.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
 from common.bus import Declared, QoS
+from common.camera_announce import CameraAnnouncements
 from common.clock import BOOT_ID, mono_s, now
 from common.command_gate import CommandGate, Outcome
 from common.errors import DecodeError, ImageError
@@ -53,34 +55,79 @@ from services.ros2.images import (
 from services.ros2.wire import SENSOR_DATA_QOS
 from stack.config import Config
 
+#: What the bridge says it is in the announcements of the cameras it bridges.
+ANNOUNCED_SOURCE = "ros2"
+
+#: Told of each frame a RosInbound put: ``(frame)``.
+OnFrame = Callable[[Frame], None]
+
 
 class RosInbound:
-    """A ROS topic into the stack: CDR in, the stack's message out through ``put``. Garbage is
-    counted as ``bad_input.<topic>`` (the key's last chunk is the type hash)."""
+    """A ROS topic into the stack: CDR in, the stack's message out through ``put`` (each
+    frame then told to ``on_frame``). Garbage is counted as ``bad_input.<topic>`` (the key's
+    last chunk is the type hash)."""
 
-    def __init__(self, config: Config, tally: Tally, ros_type: str, topic: str, put: Put) -> None:
+    def __init__(
+        self,
+        config: Config,
+        tally: Tally,
+        ros_type: str,
+        topic: str,
+        put: Put,
+        on_frame: OnFrame | None = None,
+    ) -> None:
         self.distro = config.ros2.distro
         self.tally = tally
         self.ros_type = ros_type
         self.topic = topic
         self.put = put
+        self.on_frame = on_frame
         self._counter = contract.topic_in(ros_type)
 
     def on_payload(self, key: str, cdr: memoryview) -> None:
         """``key``: the rmw_zenoh data key the sample came on."""
+        frame: Frame | None = None
         try:
             msg = cdr_decode(self.distro, self.ros_type, cdr)
             if self.ros_type == LASER_SCAN:
                 payload = scan_from_ros(msg, source="ros2").encode()
-            elif self.ros_type == IMAGE:
-                payload = frame_from_image(msg, source="ros2").encode()
             else:
-                payload = frame_from_compressed_image(msg, source="ros2").encode()
+                if self.ros_type == IMAGE:
+                    frame = frame_from_image(msg, source="ros2")
+                else:
+                    frame = frame_from_compressed_image(msg, source="ros2")
+                payload = frame.encode()
         except DecodeError as exc:
             self.tally.bad_input(key, exc, topic=self.topic)
             return
         self.tally.counters.add(self._counter)
         self.put(payload)
+        if frame is not None and self.on_frame is not None:
+            self.on_frame(frame)
+
+
+def announce_bridged(config: Config, announcements: CameraAnnouncements) -> dict[str, OnFrame]:
+    """Announce each camera whose images the bridge puts on the stack's keys (none without
+    ``ros2.image_in``): its rate, mounting and field of view from its config, its size 0x0
+    until its first image, whose size and frame id are then announced. Returns, per camera,
+    what to tell of each frame put."""
+    if not config.ros2.image_in:
+        return {}
+    told: dict[str, OnFrame] = {}
+    for camera, c in config.all_cameras.items():
+        announcements.announce(
+            camera,
+            rate_hz=c.rate_hz,
+            mount_yaw_deg=c.mount_yaw_deg,
+            hfov_deg=c.hfov_deg,
+            frame_id=c.frame_id,
+        )
+
+        def on_frame(frame: Frame, camera: str = camera) -> None:
+            announcements.saw(camera, frame.width, frame.height, frame.header.frame_id)
+
+        told[camera] = on_frame
+    return told
 
 
 class DetectionsToRos:
@@ -196,16 +243,18 @@ class DebugImages:
         self.tally.counters.add(contract.DEBUG_IMAGES_OUT)
 
 
-def _bridge_camera(config: Config, node: Node, graph: RosGraph, camera: str) -> list[Declared]:
-    """Map ``camera``'s images in and its detections (and debug images) out, on its own ROS
-    topics; the subscriptions on the stack's keys made for it."""
+def _bridge_camera(
+    config: Config, node: Node, graph: RosGraph, camera: str, on_frame: OnFrame | None
+) -> list[Declared]:
+    """Map ``camera``'s images in (each told to ``on_frame``) and its detections (and debug
+    images) out, on its own ROS topics; the subscriptions on the stack's keys made for it."""
     s, keys = config.ros2, node.keys
     topics = camera_topics(s, config.stack.camera, camera)
     subs: list[Declared] = []
     if s.image_in:
         image_type = IMAGE if s.image_format is ImageFormat.RAW else COMPRESSED_IMAGE
         frames = node.publisher(keys.frame(camera), QoS.SENSOR)
-        image_in = RosInbound(config, node, image_type, topics.image, frames.put)
+        image_in = RosInbound(config, node, image_type, topics.image, frames.put, on_frame)
         graph.subscribe(topics.image, image_type, image_in.on_payload, SENSOR_DATA_QOS)
     if s.debug_image_out:
         debug = graph.publisher(topics.debug_image, COMPRESSED_IMAGE)
@@ -222,11 +271,16 @@ def _bridge_camera(config: Config, node: Node, graph: RosGraph, camera: str) -> 
 def run(config: Config, stop: threading.Event) -> int:
     """Bridge until ``stop`` is set."""
     s = config.ros2
-    with Node("ros2", config) as node, RosGraph(s) as graph:
+    with (
+        Node("ros2", config) as node,
+        CameraAnnouncements(node.bus, node.keys, ANNOUNCED_SOURCE) as announcements,
+        RosGraph(s) as graph,
+    ):
         keys = node.keys
         subs: list[Declared] = []
+        told = announce_bridged(config, announcements)
         for camera in config.all_cameras:
-            subs += _bridge_camera(config, node, graph, camera)
+            subs += _bridge_camera(config, node, graph, camera, told.get(camera))
         if s.scan_in:
             scans = node.publisher(keys.scan(), QoS.SENSOR)
             scan_in = RosInbound(config, node, LASER_SCAN, s.scan_topic, scans.put)

@@ -1,7 +1,8 @@
 """The simulator's contract: its counters and what it puts and reads. Imports only ``common``.
 
 The simulator renders every camera from one world and plays the laser and the robot's base: it
-puts every camera's frames, the scan and the ground truth, and reads the velocity commands.
+puts every camera's frames (and announces every camera), the scan and the ground truth, and
+reads the velocity commands.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ def access(shape: Shape) -> dict[str, Access]:
             keys.scan(),
             keys.sim_truth(),
             read=(keys.cmd_vel(),),
+            token=(keys.health(SERVICE), *map(keys.camera_announcements_of, shape.cameras)),
         )
     }
 

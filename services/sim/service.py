@@ -19,7 +19,8 @@ from typing import Protocol
 
 import numpy as np
 
-from common.bus import Publisher, QoS
+from common.bus import Bus, Publisher, QoS
+from common.camera_announce import CameraAnnouncements
 from common.clock import mono_s, wall_ns
 from common.command_sources import CommandSources
 from common.counters import per_camera
@@ -64,6 +65,9 @@ class Clock:
 
 
 OnCommand = Callable[[Twist, str], None]
+
+#: What the simulator says it is in its cameras' announcements.
+ANNOUNCED_SOURCE = "sim"
 
 
 class SimHandlers:
@@ -152,8 +156,29 @@ def build_world(config: Config) -> World:
     return SCENARIOS[name].build()
 
 
-def run(config: Config, stop: threading.Event) -> int:
-    """Simulate in real time until ``stop`` is set."""
+def announce_cameras(
+    announcements: CameraAnnouncements, cameras: list[SimCamera], physics_hz: float
+) -> None:
+    """Announce each camera the simulator renders on the stack's keys, as it renders it (no
+    faster than the physics: frames are rendered on its ticks)."""
+    for c in cameras:
+        announcements.announce(
+            c.name,
+            rate_hz=min(c.rate_hz, physics_hz),
+            mount_yaw_deg=c.spec.mount_yaw_deg,
+            hfov_deg=c.spec.hfov_deg,
+            frame_id=c.frame_id,
+            width=c.spec.width,
+            height=c.spec.height,
+        )
+
+
+def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int:
+    """Simulate in real time until ``stop`` is set (``bus``: an in-process test's).
+
+    Each camera whose frames it puts on the stack's keys is announced (CameraAnnouncement,
+    common/camera_announce.py) while it runs; as a ROS 2 robot (``sim.ros2_robot``) it puts
+    none there, and the ``ros2`` bridge that does announces them."""
     s = config.sim
     world = build_world(config)
     lock = threading.Lock()
@@ -163,7 +188,7 @@ def run(config: Config, stop: threading.Event) -> int:
     laser = LaserSpec(s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m)
     rng = np.random.default_rng(s.seed)
     sources = CommandSources(s.command_sources_window_s)
-    with Node("sim", config) as node, ExitStack() as closing:
+    with Node("sim", config, bus=bus) as node, ExitStack() as closing:
         keys = node.keys
 
         def command(twist: Twist, source: str) -> None:
@@ -196,6 +221,10 @@ def run(config: Config, stop: threading.Event) -> int:
             stack_robot = StackRobot(config, node, handlers)
             closing.callback(stack_robot.close)
             out = stack_robot
+            announcements = closing.enter_context(
+                CameraAnnouncements(node.bus, keys, ANNOUNCED_SOURCE)
+            )
+            announce_cameras(announcements, cameras, s.physics_hz)
 
         def new_clocks() -> dict[str, Clock]:
             return {

@@ -1,5 +1,6 @@
 """Several cameras under the supervisor: one process per camera, each its own service, each
-on its own key; a killed camera is restarted alone while the others keep publishing."""
+on its own key and announcing its camera; a killed camera is restarted alone while the others
+keep publishing, and its announcement goes with it (and comes back with the restart)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,9 @@ from typing import Any
 
 import pytest
 
-from common.messages import Detections, Frame
+from common.announce import Announced
+from common.messages import CameraAnnouncement, Detections, Frame
+from common.zenoh_bus import ZenohBus
 from tests.integration.conftest import REPO, Stack, wait_for, write_config
 from tools.launch import service_pids
 
@@ -26,6 +29,30 @@ FURTHER: dict[str, Any] = {
     "cameras.rear": {"source": SOURCES["rear"], "mount_yaw_deg": 180.0, "frame_id": "rear"},
     "cameras.left": {"source": SOURCES["left"], "mount_yaw_deg": 90.0, "frame_id": "left"},
 }
+
+
+class Announcements:
+    """Every camera's announcement as a pool worker sees it (common.announce.Announced on the
+    test's session), and which cameras were announced after each change: (monotonic time,
+    names)."""
+
+    def __init__(self, stack: Stack) -> None:
+        self.changes: list[tuple[float, set[str]]] = []
+        self._started = threading.Event()
+        keys = stack.keys
+        self.heard: Announced[CameraAnnouncement] = Announced(
+            ZenohBus(stack.session),  # not closed here: the stack closes its session
+            keys.all_camera_announcements(),
+            keys.camera_announcement_parts,
+            CameraAnnouncement.decode,
+            lambda a: a.camera,
+            on_change=self._changed,
+        )
+        self._started.set()
+
+    def _changed(self) -> None:
+        if self._started.is_set():
+            self.changes.append((time.monotonic(), set(self.heard.current())))
 
 
 class Arrivals:
@@ -58,6 +85,7 @@ def test_each_camera_is_a_process_and_a_killed_one_restarts_alone(make_stack) ->
         **FURTHER,
     )
     arrivals = Arrivals(stack)
+    announced = Announcements(stack)
     dets = {c: stack.subscribe(stack.keys.detections(c))[1] for c in SOURCES}
 
     def detected_since(camera: str, t: float) -> list[Detections]:
@@ -75,6 +103,21 @@ def test_each_camera_is_a_process_and_a_killed_one_restarts_alone(make_stack) ->
         assert frames[-1].header.frame_id == ("camera" if camera == "front" else camera)
     sizes = {c: arrivals.since(c, 0)[-1].width for c in SOURCES}
     assert len(set(sizes.values())) == 3, sizes  # three different photos, one per camera
+    # Each camera announced by its process, with its settings and its photo's size.
+    expected = {
+        camera: CameraAnnouncement(
+            camera=camera, width=f.width, height=f.height, rate_hz=4.0,
+            mount_yaw_deg={"front": 0.0, "rear": 180.0, "left": 90.0}[camera], hfov_deg=60.0,
+            frame_id=f.header.frame_id, source="camera",
+        )
+        for camera in SOURCES
+        for f in arrivals.since(camera, 0)[-1:]
+    }  # fmt: skip
+    wait_for(
+        lambda: announced.heard.current() == expected,
+        30,
+        lambda: f"each camera's announcement {expected}, got {announced.heard.current()}",
+    )
     # One detector serves every camera: each camera's detections on its own key, carrying
     # the stamp of a frame that camera sent and that camera's frame id.
     for camera in SOURCES:
@@ -105,6 +148,20 @@ def test_each_camera_is_a_process_and_a_killed_one_restarts_alone(make_stack) ->
         return [p for p in service_pids("camera_left", stack.config_path) if p != killed]
 
     wait_for(restarted, 30, "the supervisor to restart camera_left")
+    # Its announcement went with the killed process (the router dropped its session's
+    # tokens) and came back with the new one; the others' stayed.
+    wait_for(
+        lambda: [t for t, names in announced.changes if t > killed_at and "left" not in names],
+        30,
+        lambda: f"left's announcement to go after the SIGKILL: {announced.changes}",
+    )
+    wait_for(
+        lambda: announced.heard.current() == expected,
+        60,
+        lambda: f"left announced again after its restart: {announced.heard.current()}",
+    )
+    after = [names for t, names in announced.changes if t > killed_at]
+    assert all({"front", "rear"} <= names for names in after), after
     first_new = wait_for(
         lambda: arrivals.since("left", killed_at + 0.2), 60, "left's frames after the restart"
     )[0]

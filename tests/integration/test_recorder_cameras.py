@@ -15,7 +15,9 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from common.messages import Frame, ServiceCounters
+from common.announce import Announced
+from common.messages import CameraAnnouncement, Frame, ServiceCounters
+from common.zenoh_bus import ZenohBus
 from tests.integration.conftest import REPO, Stack, publish_cameras, wait_for
 from tools.compare.runs import load_run
 
@@ -82,6 +84,13 @@ def test_two_cameras_recorded_compared_and_played_per_camera(make_stack, tmp_pat
     fresh: Stack = make_stack(supervisor={"services": ["metrics"]}, **REAR)
     fresh.wait_ready({"metrics"})
     frames = {name: fresh.subscribe(fresh.keys.frame(name))[1] for name in CAMERAS}
+    heard = Announced(
+        ZenohBus(fresh.session),  # not closed here: the stack closes its session
+        fresh.keys.all_camera_announcements(),
+        fresh.keys.camera_announcement_parts,
+        CameraAnnouncement.decode,
+        lambda a: a.camera,
+    )
     player = subprocess.Popen(
         [sys.executable, "-m", "services.recorder", "play", str(recording), "--loop",
          "--no-wait", "--config", str(fresh.config_path)],  # no detector there: on purpose
@@ -93,9 +102,19 @@ def test_two_cameras_recorded_compared_and_played_per_camera(make_stack, tmp_pat
             60,
             lambda: f"replayed frames on both keys { {n: len(f) for n, f in frames.items()} }",
         )
+        # ... each camera announced by the player while it plays, at its recorded size.
+        wanted = {c: (size, "play") for c, (size, _) in CAMERAS.items()}
+        wait_for(
+            lambda: (
+                {c: ((a.width, a.height), a.source) for c, a in heard.current().items()} == wanted
+            ),
+            20,
+            lambda: f"both cameras announced by the player: {heard.current()}",
+        )
     finally:
         player.send_signal(signal.SIGINT)
         assert player.wait(20) == 0
+    wait_for(lambda: not heard.current(), 20, "the announcements to go when the play ends")
     for name, (size, _label) in CAMERAS.items():
         sizes = {(f.width, f.height) for f in map(Frame.decode, list(frames[name]))}
         assert sizes == {size}, (name, sizes)

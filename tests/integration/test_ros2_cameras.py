@@ -12,8 +12,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from common.announce import Announced
 from common.boxes import Boxes
-from common.messages import Detections, Frame, Header
+from common.messages import CameraAnnouncement, Detections, Frame, Header
+from common.zenoh_bus import ZenohBus
 from tests.integration.conftest import Stack, free_port, wait_for
 from tests.integration.test_ros2 import DETS_HASH, RobotSide
 
@@ -88,6 +90,31 @@ def test_each_camera_has_its_own_ros_topics(make_stack) -> None:  # type: ignore
                       for r in det.results}  # fmt: skip
             assert labels == {cam["label"]}, (name, labels)
             assert {d.header.frame_id for d in list(out[name])} == {name}
+
+        # Each camera bridged in is announced: the config's rate and mounting, its images' size.
+        heard = Announced(
+            ZenohBus(stack.session),  # not closed here: the stack closes its session
+            stack.keys.all_camera_announcements(),
+            stack.keys.camera_announcement_parts,
+            CameraAnnouncement.decode,
+            lambda a: a.camera,
+        )
+        sized = {
+            name: (cam["size"], 180.0 if name == "rear" else 0.0) for name, cam in CAMERAS.items()
+        }
+        wait_for(
+            lambda: (
+                {
+                    c: ((a.width, a.height), a.mount_yaw_deg)
+                    for c, a in heard.current().items()
+                    if a.source == "ros2" and a.rate_hz == stack.config.camera.rate_hz
+                }
+                == sized
+            ),
+            20,
+            lambda: f"both cameras announced by the bridge: {heard.current()}",
+        )
+        heard.close()
 
         # Both cameras' endpoints are in the ROS 2 graph.
         wanted = [("MS", "%camera%rgb%image_raw"), ("MS", "%rear%camera%rgb%image_raw"),

@@ -1,7 +1,8 @@
 """The secure profile with two cameras (issue 22): each camera process joins as its own principal
-and may put only its own camera's frames; the detector puts every camera's detections and no
-frame. Real camera processes, real sessions and the router's real access control: a refused put
-never reaches a listener that may read its key.
+and may put only its own camera's frames and announce only its own camera; the detector puts
+every camera's detections and no frame. Real camera processes, real sessions and the router's
+real access control: a refused put never reaches a listener that may read its key, a refused
+token never a liveliness subscriber.
 """
 
 from __future__ import annotations
@@ -17,9 +18,10 @@ import numpy as np
 import pytest
 import zenoh
 
+from common.announce import from_chunk, to_chunk
 from common.clock import now
 from common.frames import image_to_frame
-from common.messages import Detections, Frame, Header
+from common.messages import CameraAnnouncement, Detections, Frame, Header
 from common.security import stack_principals
 from common.spawn import spawn, stop_child
 from deploy.credentials import generate
@@ -133,9 +135,65 @@ def test_each_camera_puts_only_its_own_frames_and_the_detector_only_detections(
         return [h for k, h in list(frames) if k == frame_keys[camera] and h.source in mine]
 
     wait_for(lambda: all(len(camera_frames(c)) >= 3 for c in CAMERAS), 30, "each camera's frames")
+    announced: set[str] = set()  # the announcement tokens alive, as the observer sees them
+
+    def on_token(sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        (announced.add if sample.kind == zenoh.SampleKind.PUT else announced.discard)(key)
+
+    stack.session.liveliness().declare_subscriber(
+        keys.all_camera_announcements(), on_token, history=True
+    )
+
+    def announced_by_processes() -> dict[str, CameraAnnouncement]:
+        """Each camera's announcement as its process made it (source ``camera``)."""
+        out = {}
+        for key in list(announced):
+            parts = keys.camera_announcement_parts(key)
+            if parts is not None:
+                msg = from_chunk(CameraAnnouncement.decode, parts[1])
+                if msg.source == "camera":
+                    out[parts[0]] = msg
+        return out
+
+    # Each camera process's own announcement is let through by the router.
+    got = wait_for(
+        lambda: (a := announced_by_processes()).keys() == CAMERAS.keys() and a,
+        30,
+        lambda: f"each camera process's announcement: {sorted(announced)}",
+    )
+    assert {c: (a.frame_id, a.mount_yaw_deg) for c, a in got.items()} == {
+        "front": (FRAME_IDS["front"], 0.0), "rear": (FRAME_IDS["rear"], 180.0)
+    }  # fmt: skip
 
     sessions = {p: stack.open(p) for p in ("camera", "camera_rear", "detector")}
     try:
+        # A camera's principal may not announce the other camera: its token on the other's
+        # key never arrives, while its token on its own key (declared after it) does.
+        for camera, principal in CAMERAS.items():
+            (other,) = set(CAMERAS) - {camera}
+            fake = to_chunk(CameraAnnouncement(camera=other, rate_hz=99.0, source=principal))
+            own = to_chunk(CameraAnnouncement(camera=camera, rate_hz=99.0, source=principal))
+            forged = (
+                sessions[principal]
+                .liveliness()
+                .declare_token(keys.camera_announcement(other, fake))
+            )
+            mine = (
+                sessions[principal]
+                .liveliness()
+                .declare_token(keys.camera_announcement(camera, own))
+            )
+            wait_for(
+                lambda c=camera, o=own: keys.camera_announcement(c, o) in announced,
+                30,
+                f"{principal}'s announcement of its own camera",
+            )
+            assert keys.camera_announcement(other, fake) not in announced, (
+                f"{principal} announced camera {other}"
+            )
+            forged.undeclare()
+            mine.undeclare()
         # Each camera's principal: the other camera's key is refused, its own is not.
         for camera, principal in CAMERAS.items():
             (other,) = set(CAMERAS) - {camera}

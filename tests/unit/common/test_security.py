@@ -170,11 +170,15 @@ def test_each_camera_principal_puts_only_its_own_frames(names: tuple[str, ...]) 
     everyone = next(s for s in acl["subjects"] if s["id"] == "everyone")
     assert everyone["usernames"] == list(principals)
     for camera, principal in cameras.items():
-        # Its own frames, counters and health token; nothing else, and it reads nothing.
+        # Its own frames, counters, health token and camera's announcements; nothing else, and
+        # it reads nothing.
         own = {KEYS.frame(camera), KEYS.counters(principal)}
         assert _allowed(acl, principal, "put") == own
         assert set(may_put(KEYS, cameras, principal)) == own
-        assert _allowed(acl, principal, "liveliness_token") == {KEYS.health(principal)}
+        assert _allowed(acl, principal, "liveliness_token") == {
+            KEYS.health(principal),
+            KEYS.camera_announcements_of(camera),
+        }
         assert _allowed(acl, principal, "declare_subscriber") == set()
         assert _allowed(acl, principal, "declare_queryable") == set()
         for other in set(names) - {camera}:

@@ -10,10 +10,12 @@ import pytest
 
 from common.access import Shape
 from common.bus import QoS, Sample
+from common.camera_announce import CameraAnnouncements
 from common.keys import Keys
 from common.memory_bus import MemoryHub
 from common.security import stack_principals
 from stack.access import access_control, access_table
+from tests.unit.heard import heard_cameras
 
 KEYS = Keys("stack")
 CAMERAS = {"front": "camera", "rear": "camera_rear"}
@@ -39,11 +41,13 @@ PUT_KEYS = (
     *(KEYS.counters(p) for p in PRINCIPALS),
     f"{KEYS.prefix}/made/up",
 )  # fmt: skip
-#: Every token a principal could declare: each one's health, each worker's pool tokens.
+#: Every token a principal could declare: each one's health, each worker's pool tokens, each
+#: camera's announcement (and an unconfigured camera's).
 TOKENS = (
     *(KEYS.health(p) for p in PRINCIPALS),
     *(KEYS.pool_member(w) for w in WORKERS),
     *(KEYS.pool_serving(w, "z1", c) for w, c in itertools.product(WORKERS, CAMERAS)),
+    *(KEYS.camera_announcement(c, "QUJD") for c in (*CAMERAS, "side")),
 )
 
 
@@ -74,9 +78,30 @@ def test_each_principal_announces_exactly_the_tokens_its_contract_declares() -> 
             key
             for key in TOKENS
             for d in declared
-            if key == d or (d.endswith("/**") and key.startswith(d.removesuffix("**")))
+            if key == d
+            or (d.endswith("/**") and key.startswith(d.removesuffix("**")))
+            or _one_chunk_wildcards(d, key)
         }
         assert set(hub.tokens()) == own, principal
+
+
+@pytest.mark.parametrize("live_sensors", [True, False])
+def test_each_camera_source_announces_its_own_cameras_and_no_other(live_sensors: bool) -> None:
+    """A camera process announces only its own camera; the simulator and the ROS 2 bridge
+    every configured camera; a player (the recorder's principal) only on a stack without live
+    sensors; nobody an unconfigured camera."""
+    both = ["front", "rear"]
+    own = {"camera": ["front"], "camera_rear": ["rear"], "sim": both, "ros2": both,
+           "recorder": [] if live_sensors else both}  # fmt: skip
+    for principal in PRINCIPALS:
+        hub = _hub(live_sensors=live_sensors)
+        heard = heard_cameras(hub, KEYS, principal="observer")
+        with CameraAnnouncements(hub.join(principal, principal=principal), KEYS, principal) as a:
+            for camera in (*CAMERAS, "side"):
+                a.announce(camera, rate_hz=5.0, mount_yaw_deg=0.0, hfov_deg=60.0, frame_id="f")
+            assert sorted(heard.current()) == own.get(principal, []), principal
+            denied = {key for who, kind, key in hub.denied if kind == "liveliness_token"}
+            assert len(denied) == 3 - len(own.get(principal, [])), principal
 
 
 def test_a_worker_cannot_announce_another_workers_pool_token() -> None:
