@@ -18,18 +18,26 @@ from common.keys import Keys
 @dataclass(frozen=True, slots=True)
 class Access:
     """What one principal may do: put on ``put``, announce ``token``, serve ``serve``,
-    subscribe within ``read`` (a subscription must lie within one of them). Anything else is
+    subscribe within ``read`` (a subscription must lie within one of them), watch the
+    liveliness tokens within ``watch`` (announcements, the pool's tokens). Anything else is
     denied."""
 
     put: tuple[str, ...] = ()
     token: tuple[str, ...] = ()
     serve: tuple[str, ...] = ()
     read: tuple[str, ...] = ()
+    watch: tuple[str, ...] = ()
 
     def kinds(self) -> dict[str, tuple[str, ...]]:
         """``{kind: key expressions}`` for each kind it has any of, in the order put, token,
-        read, serve."""
-        kinds = {"put": self.put, "token": self.token, "read": self.read, "serve": self.serve}
+        read, serve, watch."""
+        kinds = {
+            "put": self.put,
+            "token": self.token,
+            "read": self.read,
+            "serve": self.serve,
+            "watch": self.watch,
+        }
         return {kind: exprs for kind, exprs in kinds.items() if exprs}
 
 
@@ -40,14 +48,17 @@ def service_access(
     read: tuple[str, ...] = (),
     token: tuple[str, ...] = (),
     serve: tuple[str, ...] = (),
+    watch: tuple[str, ...] = (),
 ) -> Access:
     """A stack service's access: its own ``puts`` and its counters; its health token (or
-    ``token`` when given: its health must be among them); what it serves and reads."""
+    ``token`` when given: its health must be among them); what it serves, reads and
+    watches."""
     return Access(
         put=(*puts, keys.counters(name)),
         token=token or (keys.health(name),),
         serve=serve,
         read=read,
+        watch=watch,
     )
 
 

@@ -101,12 +101,28 @@ class WorkerMetrics(TypedDict):
     reported_s_ago: float
 
 
+class AnnouncedCamera(TypedDict):
+    """A camera as its source announces it (common/messages.py ``CameraAnnouncement``), in the
+    metrics answer's ``cameras_announced``: its frames' size (0x0 while unknown), rate, where
+    it looks on the robot, its field of view, its frames' frame id and what announces it."""
+
+    width: int
+    height: int
+    rate_hz: float
+    mount_yaw_deg: float
+    hfov_deg: float
+    frame_id: str
+    source: str
+
+
 class MetricsAnswer(TypedDict):
     """The metrics service's answer to a query (``zstack query``), and a session's summary.
 
     The top-level figures are every camera's together (with one camera, that camera's);
-    ``cameras`` has each configured camera's, first camera first (absent from answers recorded
-    before several cameras existed). ``workers`` has each detector worker's (the pool), and
+    ``cameras`` has each announced camera's, in the order they were first announced (absent
+    from answers recorded before several cameras existed); ``cameras_announced`` what each
+    camera's source announces of it now (absent from older answers). ``workers`` has each
+    detector worker's (the pool), and
     ``duplicate_detections`` counts frames detected twice (by two workers during a hand-over);
     ``pool_warnings`` says what has been wrong with the pool for ``detector.pool_alarm_s``
     (common/pool_audit.py). ``warnings`` names settings that work against each other on this
@@ -129,6 +145,7 @@ class MetricsAnswer(TypedDict):
     frames_offered: int
     timeline: TimelineSeries
     cameras: NotRequired[dict[str, CameraMetrics]]
+    cameras_announced: NotRequired[dict[str, AnnouncedCamera]]
     workers: NotRequired[dict[str, WorkerMetrics]]
     duplicate_detections: NotRequired[int]
     pool_warnings: NotRequired[list[str]]

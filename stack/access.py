@@ -87,6 +87,9 @@ KIND_MESSAGES = {
     "token": ["liveliness_token"],
     "serve": ["declare_queryable", "reply"],
     "read": ["declare_subscriber"],
+    # What a service watches (announcements, the pool's tokens), declared in its contract and
+    # allowed by a rule of its own even while every principal may ask (the "ask" rule).
+    "watch": ["declare_liveliness_subscriber", "liveliness_query"],
 }
 
 

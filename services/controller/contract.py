@@ -16,11 +16,13 @@ from common.errors import ConfigError
 from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
 
 # Its inputs, each counted by its fate (:func:`input_counter`): ``detections_in``,
-# ``detections_stale`` ...; the detections' for each camera too when there are several.
+# ``detections_stale`` ...; the detections' for each announced camera too.
 DETECTIONS = "detections"
 SCANS = "scans"
 IN = "in"  # fresh, and the newest held
 LATE = "late"  # fresh, but older than the one held
+#: Detections from a camera with no live announcement: ignored.
+DETECTIONS_UNANNOUNCED = "detections_unannounced"
 ESTOP_RELEASE_REFUSED = "estop_release_refused"
 ESTOP_ZERO_AT_ONCE = "estop_zero_at_once"
 COMMANDS_OUT = "commands_out"
@@ -44,6 +46,7 @@ COUNTERS = frozenset(
         *COMMON,
         *PER_CAMERA,
         *(input_counter(SCANS, o) for o in OUTCOMES),
+        DETECTIONS_UNANNOUNCED,
         ESTOP_RELEASE_REFUSED,
         ESTOP_ZERO_AT_ONCE,
         COMMANDS_OUT,
@@ -65,6 +68,7 @@ def access(shape: Shape) -> dict[str, Access]:
             keys.cmd_vel(),
             keys.controller_status(),
             read=(keys.all_detections(), keys.scan(), keys.estop()),
+            watch=(keys.all_camera_announcements(),),  # its cameras: the announced ones
         )
     }
 
@@ -79,9 +83,11 @@ def estop_access(shape: Shape) -> dict[str, Access]:
 class ControllerSettings:
     """The reaction policy. Speeds in m/s and rad/s, angles in degrees, times in seconds.
 
-    Every camera of the config is used: a box's bearing is turned into the robot's frame by
-    its camera's ``mount_yaw_deg`` and ``hfov_deg``, and targets are chosen among all fresh
-    cameras' boxes; a stale camera is ignored, and none fresh is the dead-man stop.
+    Every camera announced on the bus (common/announce.py, by its source: not the config's) is
+    used: a box's bearing is turned into the robot's frame by the ``mount_yaw_deg`` and
+    ``hfov_deg`` its camera announces, and targets are chosen among all fresh cameras' boxes;
+    a stale camera is ignored, and none fresh is the dead-man stop. Detections of a camera
+    not announced are ignored; the target's camera withdrawn is a stop.
     track:  turn towards the most central confident detection of ``target_classes`` (the
             smallest bearing from the robot's heading); drive forward at ``forward_speed``
             only while it is centred: within ``center_tolerance`` (a fraction of the image

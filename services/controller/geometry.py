@@ -2,7 +2,7 @@
 
 Conventions (REP 103): +x forward, angles counter-clockwise positive, in radians. Image x grows
 to the right, so a box right of the image centre has a negative bearing. A camera looks along
-its mounting yaw (``CameraSettings.mount_yaw_deg``: front 0, left 90, rear 180); its horizontal
+its mounting yaw (``mount_yaw_deg`` of its announcement: front 0, left 90, rear 180); its horizontal
 field of view turns a pixel column into a bearing with the pinhole model, and the yaw turns
 that bearing into the robot's frame. The laser's angles are in the robot's frame already.
 """
@@ -10,12 +10,23 @@ that bearing into the robot's frame. The laser's angles are in the robot's frame
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from common.messages import Detections, LaserScan
-from services.camera.contract import CameraSettings
+
+
+class Mount(Protocol):
+    """Where a camera looks on the robot and how wide: a camera's announcement
+    (common/messages.py ``CameraAnnouncement``) or its settings."""
+
+    @property
+    def mount_yaw_deg(self) -> float: ...
+
+    @property
+    def hfov_deg(self) -> float: ...
 
 
 def wrap(angle: float) -> float:
@@ -38,13 +49,13 @@ def bearing(dets: Detections, i: int, hfov_deg: float) -> float:
     return -math.atan2(dx, focal_px(dets.image_width, hfov_deg))
 
 
-def robot_bearing(dets: Detections, i: int, camera: CameraSettings) -> float:
+def robot_bearing(dets: Detections, i: int, camera: Mount) -> float:
     """Bearing of box ``i``'s centre in the robot's frame: the camera's mounting yaw plus the
     bearing in its image, wrapped to (-pi, pi]. A front camera's (yaw 0) is its image bearing."""
     return wrap(math.radians(camera.mount_yaw_deg) + bearing(dets, i, camera.hfov_deg))
 
 
-def in_view(robot_bearing_rad: float, camera: CameraSettings) -> bool:
+def in_view(robot_bearing_rad: float, camera: Mount) -> bool:
     """Whether a bearing in the robot's frame lies within ``camera``'s horizontal field."""
     off = wrap(robot_bearing_rad - math.radians(camera.mount_yaw_deg))
     return abs(off) <= math.radians(camera.hfov_deg) / 2.0

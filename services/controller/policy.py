@@ -7,7 +7,9 @@ bearing and gives a negative angular velocity, and one seen by the rear camera h
 near +-180 deg.
 
 Several cameras: each camera's detections are judged on their own; a stale or silent camera is
-ignored, and only when no camera is fresh does the dead-man stop the robot. The target is
+ignored, and only when no camera is fresh does the dead-man stop the robot. The cameras and
+their geometry are those announced now (``set_cameras``); when the target's camera is withdrawn
+the next command is a stop and the target is let go of. The target is
 chosen among the fresh cameras' boxes together (services/controller/targets.py). A target far
 off the robot's heading (behind it, beside it) is turned to in place: the robot drives forward
 only while the target is centred (``center_tolerance``) and, in either mode, while a fresh scan
@@ -23,14 +25,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 from common.contracts import ControllerMode, ControllerState, DistanceSource
 from common.messages import LaserScan
-from services.camera.contract import CameraSettings
 from services.controller.contract import ControllerSettings
 from services.controller.geometry import (
+    Mount,
     box_clipped,
     box_distance,
     in_view,
@@ -93,11 +95,11 @@ class Controller:
     swing past its target and lose it. Each camera's frames have their own capture time.
     """
 
-    def __init__(self, s: ControllerSettings, cameras: Mapping[str, CameraSettings]) -> None:
-        if not cameras:
-            raise ValueError("the controller needs at least one camera")
+    def __init__(self, s: ControllerSettings, cameras: Mapping[str, Mount]) -> None:
         self.s = s
-        self.cameras = dict(cameras)
+        self.cameras: dict[str, Mount] = dict(cameras)
+        # A camera of the target's that was withdrawn since the last step: the next is a stop.
+        self.target_withdrawn = ""
         self.pid = PID(
             PIDGains(s.bearing_kp, s.bearing_ki, s.bearing_kd, s.max_angular, s.max_angular)
         )
@@ -110,6 +112,22 @@ class Controller:
         self.stopping_m = 0.0
         self.turns: deque[tuple[float, float]] = deque(maxlen=1024)  # (time, w) commanded
         self.last_bearing: tuple[float, float] | None = None  # (bearing, when captured)
+
+    def set_cameras(self, cameras: Mapping[str, Mount], withdrawn: Iterable[str] = ()) -> None:
+        """The cameras announced now, with their geometry, and those withdrawn since the last
+        call (a camera withdrawn and announced again in between is among both). The target's
+        camera among the withdrawn makes the next step a stop that lets the target go: what
+        was seen through a camera that is gone is not driven on."""
+        self.cameras = dict(cameras)
+        mine = self.target_camera()
+        if mine and mine in set(withdrawn):
+            self.target_withdrawn = mine
+
+    def target_camera(self) -> str:
+        """The camera the target is locked on or was last aimed at through ("" for none)."""
+        if self.locked is not None:
+            return self.locked[0]
+        return self.last_aim.camera if self.last_aim is not None else ""
 
     def step(self, inp: Inputs, now: float) -> VelocityCommand:
         """The command for this tick; ``now`` is a monotonic time in seconds."""
@@ -125,6 +143,11 @@ class Controller:
         self.last_step = now
         if inp.estop:
             return self._halt(stop(ControllerState.ESTOP, "emergency stop latched"))
+        if self.target_withdrawn:
+            gone, self.target_withdrawn = self.target_withdrawn, ""
+            return self._halt(
+                stop(ControllerState.STALE, f"the target's camera {gone} is no longer announced")
+            )
         timeout = self.s.detection_timeout_s
         fresh = {c: v for c, v in views.items() if v.fresh(timeout)}
         if not fresh:
@@ -155,6 +178,8 @@ class Controller:
         def age(v: View) -> str:
             return "none received yet" if v.dets is None else f"{v.age_s:.2f} s old"
 
+        if not views:
+            return "no camera announced"
         if len(views) == 1:
             [v] = views.values()
             return "no detections received yet" if v.dets is None else f"detections are {age(v)}"

@@ -6,17 +6,18 @@ from __future__ import annotations
 import dataclasses
 import json
 import threading
-from collections.abc import Callable
-from functools import partial
+from collections.abc import Callable, Mapping
 from typing import Generic, Protocol, TypeVar
 
+from common.announce import Announced
 from common.bus import Declared
 from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock, Stamp, mono_s
 from common.contracts import ControllerState, DetectorInfo
 from common.counters import per_camera
 from common.errors import DecodeError
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
-from common.messages import Detections, EStop, Header, LaserScan
+from common.keys import camera_in_key
+from common.messages import CameraAnnouncement, Detections, EStop, Header, LaserScan
 from common.node import Node, Tally
 from common.ratelimit import LogLimiter
 from services.controller import contract
@@ -110,10 +111,13 @@ class ControllerHandlers:
     (common/freshness.py) and the newest fresh one is held for the control loop; an e-stop
     message latches or releases the stop, kept on disk (controller/estop.py).
 
-    Every camera of the config has its own gate and its own newest detections (``dets``, by
-    camera name, the first camera first): one camera's stamps never judge another's, and a
-    stale camera is ignored while the others are used. With several cameras, each camera's
-    counts are kept beside the totals (``detections_in.rear``, ...).
+    The cameras are those announced now (:meth:`set_cameras`, from the cameras' announcements
+    on the bus; none until one is announced). Each has its own gate and its own newest
+    detections (``dets``, by camera name): one camera's stamps never judge another's, and a
+    stale camera is ignored while the others are used. Detections from a camera with no live
+    announcement are ignored and counted (``detections_unannounced``); a withdrawn camera's
+    held detections are dropped. Each camera's counts are kept beside the totals
+    (``detections_in.rear``, ...).
     """
 
     def __init__(
@@ -135,25 +139,59 @@ class ControllerHandlers:
         self.tolerance_s = config.stack.clock_tolerance_s
         self.estop_release_max_age_s = s.estop_release_max_age_s
         self.latch = EStopLatch(config.estop_path, clock.wall_ns() + int(self.tolerance_s * 1e9))
-        cameras = list(config.all_cameras)
-        self.arrived = threading.Event()  # new detections from any camera
-        self.dets: dict[str, Latest[Detections]] = {c: Latest(self.arrived, clock) for c in cameras}
+        self.detection_timeout_s = s.detection_timeout_s
+        self.arrived = threading.Event()  # new detections from any camera, or a camera's change
+        # The cameras announced now and each one's newest detections, both by camera name in
+        # the order they were announced; the cameras withdrawn since the loop last took them.
+        self._cameras_lock = threading.Lock()
+        self.cameras: dict[str, CameraAnnouncement] = {}
+        self.dets: dict[str, Latest[Detections]] = {}
+        self._withdrawn: set[str] = set()
+        # A gate outlives its camera's withdrawal: a camera announced again still refuses a
+        # replay of what it sent before.
+        self._det_gates: dict[str, FreshnessGate] = {}
         self.scan: Latest[LaserScan] = Latest(clock=clock)
-        self._det_keys = {c: tally.keys.detections(c) for c in cameras}
-        self._det_gates = {
-            c: FreshnessGate(s.detection_timeout_s, self.tolerance_s, BOOT_ID) for c in cameras
-        }
-        self._per_camera = len(cameras) > 1
         self._scan_gate = FreshnessGate(s.scan_timeout_s, self.tolerance_s, BOOT_ID)
 
+    def set_cameras(self, cameras: Mapping[str, CameraAnnouncement]) -> None:
+        """The cameras announced now: a new one's detections are taken from now on, a
+        withdrawn one's are dropped (and it is remembered for :meth:`take`)."""
+        with self._cameras_lock:
+            gone = [c for c in self.cameras if c not in cameras]
+            for camera in gone:
+                del self.dets[camera]
+            self._withdrawn.update(gone)
+            for camera in cameras:
+                if camera not in self.dets:
+                    self.dets[camera] = Latest(self.arrived, self.clock)
+                    self._det_gates.setdefault(
+                        camera,
+                        FreshnessGate(self.detection_timeout_s, self.tolerance_s, BOOT_ID),
+                    )
+            self.cameras = dict(cameras)
+        self.arrived.set()  # the loop looks at once: a withdrawn target's camera is a stop
+
+    def take(self, at: Stamp) -> tuple[dict[str, CameraAnnouncement], set[str], dict[str, View]]:
+        """At one moment: the cameras announced now, those withdrawn since the last call, and
+        each announced camera's newest detections aged at the control instant ``at``."""
+        with self._cameras_lock:
+            withdrawn, self._withdrawn = self._withdrawn, set()
+            views = {c: _view(d, at, self.detection_timeout_s) for c, d in self.dets.items()}
+            return dict(self.cameras), withdrawn, views
+
     def on_detections(self, camera: str, payload: bytes) -> None:
-        """Detections from ``camera``'s key (a camera of the config)."""
-        msg = self.tally.decode(self._det_keys[camera], Detections.decode, payload)
-        if msg is not None:
-            where = camera if self._per_camera else ""
-            self._fresh_input(
-                msg, self._det_gates[camera], self.dets[camera], contract.DETECTIONS, where
+        """Detections from ``camera``'s key: used only while ``camera`` is announced."""
+        with self._cameras_lock:
+            latest, gate = self.dets.get(camera), self._det_gates.get(camera)
+        if latest is None or gate is None:
+            self.tally.reject(
+                contract.DETECTIONS_UNANNOUNCED,
+                f"detections from {camera!r:.80}, a camera not announced, ignored",
             )
+            return
+        msg = self.tally.decode(self.tally.keys.detections(camera), Detections.decode, payload)
+        if msg is not None:
+            self._fresh_input(msg, gate, latest, contract.DETECTIONS, camera)
 
     def on_scan(self, payload: bytes) -> None:
         msg = self.tally.decode(self.tally.keys.scan(), LaserScan.decode, payload)
@@ -224,7 +262,8 @@ class ControllerHandlers:
 
 class ControlLoop:
     """The controller on ``node``'s bus, at ``node``'s clock: its handlers subscribed to every
-    camera's detections, the scan and the e-stop, and the control loop's body, :meth:`tick`.
+    camera's detections, the scan and the e-stop, the cameras' announcements watched (its
+    cameras and their geometry), and the control loop's body, :meth:`tick`.
 
     ``run`` calls :meth:`tick` at least ``control_rate_hz`` times a second and at once when
     new detections arrive (``handlers.arrived``), and :meth:`stop` last; an in-process test
@@ -244,20 +283,31 @@ class ControlLoop:
         (node.log.warning if latch.engaged else node.log.info)("%s", latch.note)
         if not latch.saved:
             node.log.error("the e-stop state cannot be saved: %s", latch.describe())
-        cameras = config.all_cameras
-        det_keys = [node.keys.detections(c) for c in cameras]
+        keys = node.keys
+        self.controller = Controller(s, {})
+        # Every camera's detections on one subscription: those of a camera not announced are
+        # heard only to be counted (ControllerHandlers.on_detections).
         self._subs: list[Declared] = [
-            *(
-                node.subscribe(k, partial(self.handlers.on_detections, c))
-                for c, k in zip(cameras, det_keys, strict=True)
-            ),
-            node.subscribe(node.keys.scan(), self.handlers.on_scan),
-            node.subscribe(node.keys.estop(), self.handlers.on_estop),
+            node.subscribe_keyed(keys.all_detections(), self._on_detections),
+            node.subscribe(keys.scan(), self.handlers.on_scan),
+            node.subscribe(keys.estop(), self.handlers.on_estop),
         ]
-        self.controller = Controller(s, cameras)
-        node.log.info(
-            "mode %s on %s, targets %s", s.mode, ", ".join(det_keys), list(s.target_classes)
+        self._cameras_lock = threading.Lock()  # one change of the camera set at a time
+        self.announced: Announced[CameraAnnouncement] | None = None
+        self.announced = Announced(
+            node.bus,
+            keys.all_camera_announcements(),
+            keys.camera_announcement_parts,
+            CameraAnnouncement.decode,
+            lambda a: a.camera,
+            on_change=self._on_cameras,
+            on_bad=self._on_bad_announcement,
         )
+        self._on_cameras()  # those already announced (a Zenoh watch reports them as it starts)
+        node.log.info(
+            "mode %s on the cameras announced under %s, targets %s",
+            s.mode, keys.all_camera_announcements(), list(s.target_classes),
+        )  # fmt: skip
         if s.no_laser:
             node.log.warning(NO_LASER_WARNING)
         self._last_state: ControllerState | None = None
@@ -265,6 +315,33 @@ class ControlLoop:
         # second: the first changes are logged, then a summary each period (the metrics
         # service's detections_late warning says why and what to change).
         self._state_log = LogLimiter(clock=self.clock.mono_s)
+
+    def _on_detections(self, key: str, payload: bytes) -> None:
+        camera = camera_in_key(key)
+        if camera is None:  # unreachable: the subscription's keys all name a camera
+            self.node.bad_input(key, DecodeError("not a camera's detections key"))
+            return
+        self.handlers.on_detections(camera, payload)
+
+    def _on_cameras(self) -> None:
+        """The set of announced cameras changed: the handlers take the new one at once."""
+        if self.announced is None:  # called back while it is being declared: done after
+            return
+        with self._cameras_lock:
+            before = set(self.handlers.cameras)
+            now = self.announced.current()
+            self.handlers.set_cameras(dict(sorted(now.items())))
+        for camera in sorted(now.keys() - before):
+            a = now[camera]
+            self.node.log.info(
+                "camera %s announced by %s: yaw %+.0f deg, fov %.0f deg",
+                camera, a.source or "?", a.mount_yaw_deg, a.hfov_deg,
+            )  # fmt: skip
+        for camera in sorted(before - now.keys()):
+            self.node.log.warning("camera %s withdrawn: its detections are ignored", camera)
+
+    def _on_bad_announcement(self, key: str, error: Exception) -> None:
+        self.node.bad_input(key, error, topic="camera_announcement")
 
     def _halted(self) -> None:
         """The e-stop's status, once the engage is saved (or could not be)."""
@@ -275,15 +352,16 @@ class ControlLoop:
         """One control tick: judge every input's age at one instant, send the command and
         the status stamped with it, log a change of state, publish the counters (when due).
         Returns the tick's instant (monotonic seconds on the node's clock)."""
-        s, handlers, latch, out = self.settings, self.handlers, self.latch, self.out
+        handlers, latch, out = self.handlers, self.latch, self.out
         handlers.arrived.clear()  # before reading, so a message arriving now wakes the loop
         with out.lock:  # an engage's zero waits for this command, never the reverse
             # One instant per tick: the ages are judged at it and the command is stamped
             # with it, so that a reader of cmd_vel can check the judgement.
             at = self.clock.now()
             tick = at.mono_ns / 1e9
+            cameras, withdrawn, views = handlers.take(at)
+            self.controller.set_cameras(cameras, withdrawn)
             sc, sc_arrival = handlers.scan.get()
-            views = {c: _view(d, at, s.detection_timeout_s) for c, d in handlers.dets.items()}
             sc_age = _age(sc.header if sc is not None else None, sc_arrival, at)
             inputs = Inputs(views, sc, sc_age, latch.engaged)
             cmd = self.controller.step(inputs, tick)
@@ -304,6 +382,8 @@ class ControlLoop:
         self.out.send(stopped, self.clock.now(), estop_saved=self.latch.saved)
 
     def close(self) -> None:
+        if self.announced is not None:
+            self.announced.close()
         for sub in self._subs:
             sub.undeclare()
 
@@ -314,9 +394,9 @@ def run(config: Config, stop: threading.Event) -> int:
     A command goes out at least ``control_rate_hz`` times a second, and at once when new
     detections arrive: waiting for the next tick would add up to a whole period of latency.
     Inputs are judged on arrival (common/freshness.py): stale, future-stamped or replayed
-    detections and scans are counted and never acted on. Every camera of the config is
-    subscribed to, and each one's detections are aged on their own at the control instant
-    (policy.py: a stale camera is ignored; none fresh is the dead-man stop).
+    detections and scans are counted and never acted on. Every announced camera's detections
+    are used, each aged on its own at the control instant (policy.py: a stale camera is
+    ignored; none fresh is the dead-man stop).
     """
     s = config.controller
     with Node("controller", config, counters_period_s=s.counters_period_s) as node:

@@ -18,8 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Detections
-from services.camera.contract import CameraSettings
-from services.controller.geometry import focal_px, robot_bearing
+from services.controller.geometry import Mount, focal_px, robot_bearing
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,7 +91,7 @@ def unknown_targets(targets: tuple[str, ...], model_classes: list[str]) -> list[
 def sightings(
     fresh: Mapping[str, Detections],
     captured: Mapping[str, float],
-    cameras: Mapping[str, CameraSettings],
+    cameras: Mapping[str, Mount],
     classes: tuple[str, ...],
     min_score: float,
 ) -> list[Sighting]:

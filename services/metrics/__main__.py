@@ -1,6 +1,7 @@
 """python -m services.metrics [serve|query] ...
 
-serve (the default) runs the metrics service; query asks a running one and prints its JSON.
+serve (the default) runs the metrics service; query asks a running one and prints its JSON
+(on stdout), after the cameras announced and every warning as a WARNING line (on stderr).
 Accuracy on a labelled dataset is ``python -m tools.evaluation``; a report of a run,
 ``python -m tools.report``.
 """
@@ -9,11 +10,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections.abc import Sequence
 
 from common.cli import Command, add_config, service_main
 from common.cli import build_parser as _build
 from common.lifecycle import run_main, setup_logging, stop_event
+from services.metrics.summary import summary
 from stack.config_file import load_config
 
 
@@ -37,6 +40,8 @@ def query(args: argparse.Namespace) -> int:
     from services.metrics import service
 
     answer = service.query(config, args.timeout)
+    for line in summary(answer, config.stack.prefix):  # for a person; the JSON for programs
+        print(line, file=sys.stderr)
     print(json.dumps(answer, indent=2))
     return 0
 

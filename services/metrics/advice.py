@@ -23,7 +23,9 @@ DETECTIONS_LATE = "detections_late"
 def advise(config: Config, answer: MetricsAnswer) -> dict[str, str]:
     """The warnings that hold for ``answer`` under ``config`` (empty when none)."""
     out = {}
-    late = late_detections(config, answer.get("cameras", {}))
+    cameras = answer.get("cameras", {})
+    count = len(answer.get("cameras_announced", cameras))  # the cameras there are now
+    late = late_detections(config, cameras, count)
     if late:
         out[DETECTIONS_LATE] = late
     return out
@@ -38,8 +40,10 @@ def _oldest_ms(m: CameraMetrics) -> float | None:
     return lat["p95"] + 1000.0 / m["fps"]
 
 
-def late_detections(config: Config, cameras: dict[str, CameraMetrics]) -> str:
-    """The ``detections_late`` line, or "" when every camera's detections come in time."""
+def late_detections(config: Config, cameras: dict[str, CameraMetrics], count: int = 0) -> str:
+    """The ``detections_late`` line, or "" when every camera's detections come in time;
+    ``count``: how many cameras there are (default: as many as ``cameras``)."""
+    count = count or len(cameras)
     timeout_ms = config.controller.detection_timeout_s * 1000.0
     late = {
         name: oldest
@@ -62,8 +66,8 @@ def late_detections(config: Config, cameras: dict[str, CameraMetrics]) -> str:
         fixes.append('detector.profile = "fast"')
     if d.imgsz == 0 or d.imgsz > 320:
         fixes.append(f"a smaller detector.imgsz (now {d.imgsz or 'the model size'}; 480 or 320)")
-    if len(config.all_cameras) > 1:
-        fixes.append(f"fewer cameras (now {len(config.all_cameras)})")
+    if count > 1:
+        fixes.append(f"fewer cameras (now {count})")
     need_s = math.ceil(max(late.values()) * 1.2 / 100.0) / 10.0  # 20 % spare, to 0.1 s
     fixes.append(f"controller.detection_timeout_s of {need_s:.1f} s or more")
     return (

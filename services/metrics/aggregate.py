@@ -95,6 +95,10 @@ class Aggregator:
     def detections_total(self) -> int:
         return self._all.detections_total
 
+    def add_camera(self, camera: str) -> None:
+        """Show ``camera``'s figures from now on (if there is room), before its detections."""
+        self._camera(camera)
+
     def _camera(self, camera: str) -> Figures | None:
         """``camera``'s figures, added if there is room."""
         figures = self._figures.get(camera)

@@ -19,6 +19,7 @@ from common.setting_checks import Bounds, check_bounds
 from services.detector import contract as detector
 
 CAMERAS_REFUSED = "cameras_refused"  # detections of cameras over max_cameras
+DETECTIONS_UNANNOUNCED = "detections_unannounced"  # of a camera with no live announcement
 DUPLICATE_DETECTIONS = "duplicate_detections"
 CLASS_NAMES_REFUSED = "class_names_refused"
 
@@ -28,7 +29,9 @@ def refused(why: str) -> str:
     return f"refused.{why}"
 
 
-COUNTERS = frozenset({*COMMON, CAMERAS_REFUSED, DUPLICATE_DETECTIONS, CLASS_NAMES_REFUSED})
+COUNTERS = frozenset(
+    {*COMMON, CAMERAS_REFUSED, DETECTIONS_UNANNOUNCED, DUPLICATE_DETECTIONS, CLASS_NAMES_REFUSED}
+)
 PER_CAMERA: frozenset[str] = frozenset()
 
 #: Other services' counters it reads by name, by the package that writes them (every other
@@ -62,6 +65,12 @@ def access(shape: Shape) -> dict[str, Access]:
             SERVICE,
             read=(keys.all_detections(), keys.cmd_vel(), keys.all_counters()),
             serve=(keys.metrics(),),
+            # The cameras announced, and the pool's members and what each serves.
+            watch=(
+                keys.all_camera_announcements(),
+                keys.all_pool_members(),
+                keys.all_pool_serving(),
+            ),
         )
     }
 

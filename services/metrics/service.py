@@ -9,18 +9,18 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
-from functools import partial
+from collections.abc import Callable, Mapping
 from typing import TypeVar
 
 from common import reach
+from common.announce import Announced
 from common.bus import Declared
 from common.clock import SYSTEM_CLOCK, Clock, mono_s
-from common.contracts import MetricsAnswer
+from common.contracts import AnnouncedCamera, MetricsAnswer
 from common.counters import BAD_INPUT
 from common.errors import DecodeError, StackError
-from common.keys import Keys
-from common.messages import Detections, ServiceCounters, Twist
+from common.keys import Keys, camera_in_key
+from common.messages import CameraAnnouncement, Detections, ServiceCounters, Twist
 from common.node import Node, Tally
 from common.pool_audit import MAX_LINES, PoolAudit, lines
 from common.pool_rule import camera_weights
@@ -65,15 +65,17 @@ class MetricsHandlers:
         self.pool = LivePool(
             PoolAudit(camera_weights(config.all_cameras), d.pool_balance, d.pool_alarm_s)
         )
+        # The cameras' figures are shown as they are announced (set_cameras), not from config.
         self.agg = Aggregator(
             s.window_s,
             s.history_s,
             on_latency=on_latency,
             max_counters_per_service=s.max_counters_per_service,
             max_classes=s.max_classes,
-            cameras=config.all_cameras,
             pool=self.pool,
         )
+        #: The cameras announced now, by name (their figures stay when they are withdrawn).
+        self.announced: dict[str, CameraAnnouncement] = {}
         #: The services whose counters are believed: this stack's (camera_<name> and the
         #: detector workers too) and, bounded, any other detector worker: another host's.
         self.known = frozenset(
@@ -82,8 +84,27 @@ class MetricsHandlers:
         self.pool_workers = PoolWorkers(s.max_workers)
         self.lock = threading.Lock()
 
+    def set_cameras(self, cameras: Mapping[str, CameraAnnouncement]) -> None:
+        """The cameras announced now: each gets its figures; only their detections count."""
+        with self.lock:
+            self.announced = dict(cameras)
+            for camera in cameras:
+                self.agg.add_camera(camera)
+
     def on_detections(self, camera: str, key: str, payload: bytes) -> None:
-        """``camera``'s detections; ``key``: the one the sample came on (that camera's)."""
+        """``camera``'s detections; ``key``: the one the sample came on (that camera's).
+        Those of a camera not announced now are counted and dropped: made-up camera names
+        (anyone may put in peer mode) cannot grow the answer."""
+        with self.lock:
+            announced = camera in self.announced
+            if not announced:
+                self.agg.count(contract.DETECTIONS_UNANNOUNCED)
+        if not announced:
+            self.tally.reject(
+                contract.DETECTIONS_UNANNOUNCED,
+                f"detections of {camera!r:.80}, a camera not announced, ignored",
+            )
+            return
         max_timing_ms = self.settings.max_timing_ms
         self._take(
             "detections", Detections.decode, key, payload,
@@ -178,8 +199,9 @@ class MetricsHandlers:
 
 class MetricsService:
     """The metrics service on ``node``'s bus, at ``node``'s clock: its handlers subscribed to
-    every configured camera's detections, cmd_vel and every service's counters, the pool's
-    tokens watched, and the metrics query (``keys.metrics()``) answered with :meth:`answer`.
+    every announced camera's detections, cmd_vel and every service's counters, the cameras'
+    announcements and the pool's tokens watched, and the metrics query (``keys.metrics()``)
+    answered with :meth:`answer`.
 
     ``run`` calls :meth:`report` every period; an in-process test puts messages, moves its
     fake clock and asks the query itself. :meth:`close` undeclares everything it declared.
@@ -193,16 +215,22 @@ class MetricsService:
         self.clock = node.clock
         handlers = self.handlers = MetricsHandlers(config, node, on_latency, clock=node.clock)
         keys = node.keys
-        # One subscriber per configured camera, so the camera is the one its key names;
-        # detections for a camera the config does not name (anyone may put them in peer
-        # mode) are not heard, so they cannot grow the answer.
+        # The cameras are the announced ones (common/announce.py): every camera's detections
+        # on one subscription, the camera the one its key names; those of a camera not
+        # announced are dropped (MetricsHandlers.on_detections).
+        self.announced: Announced[CameraAnnouncement] | None = None
+        self.announced = Announced(
+            node.bus,
+            keys.all_camera_announcements(),
+            keys.camera_announcement_parts,
+            CameraAnnouncement.decode,
+            lambda a: a.camera,
+            on_change=self._on_cameras,
+            on_bad=lambda key, exc: node.bad_input(key, exc, topic="camera_announcement"),
+        )
+        self._on_cameras()  # those already announced (a Zenoh watch reports them as it starts)
         self._declared: list[Declared] = [
-            *(
-                node.subscribe_keyed(
-                    keys.detections(camera), partial(handlers.on_detections, camera)
-                )
-                for camera in config.all_cameras
-            ),
+            node.subscribe_keyed(keys.all_detections(), self._on_detections),
             node.subscribe(keys.cmd_vel(), handlers.on_cmd_vel),
             node.subscribe_keyed(keys.all_counters(), handlers.on_counters),
             node.bus.watch_tokens(keys.all_pool_members(), handlers.on_pool_member),
@@ -211,6 +239,17 @@ class MetricsService:
         ]
         self._next_report = self.clock.mono_s() + config.metrics.report_period_s
 
+    def _on_cameras(self) -> None:
+        if self.announced is not None:  # else called back while it is being declared
+            self.handlers.set_cameras(self.announced.current())
+
+    def _on_detections(self, key: str, payload: bytes) -> None:
+        camera = camera_in_key(key)
+        if camera is None:  # unreachable: the subscription's keys all name a camera
+            self.node.bad_input(key, DecodeError("not a camera's detections key"))
+            return
+        self.handlers.on_detections(camera, key, payload)
+
     def answer(self) -> MetricsAnswer:
         """The query's answer: the aggregate at this instant, and the warnings it brings."""
         self.handlers.audit_pool()
@@ -218,6 +257,9 @@ class MetricsService:
         to_unix = at.wall_ns / 1e9 - at.mono_ns / 1e9  # the timeline's times in Unix seconds
         with self.handlers.lock:
             out = self.handlers.agg.answer(self.node.header(at), at.mono_ns / 1e9, to_unix)
+        out["cameras_announced"] = {
+            name: announced_camera(a) for name, a in sorted(self.handlers.announced.items())
+        }
         out["warnings"] = advise(self.config, out)
         return out
 
@@ -236,6 +278,16 @@ class MetricsService:
         """Undeclare the queryable first, then the watches and the subscriptions."""
         for declared in reversed(self._declared):
             declared.undeclare()
+        if self.announced is not None:
+            self.announced.close()
+
+
+def announced_camera(a: CameraAnnouncement) -> AnnouncedCamera:
+    """A camera's announcement as the metrics answer shows it."""
+    return AnnouncedCamera(
+        width=a.width, height=a.height, rate_hz=a.rate_hz, mount_yaw_deg=a.mount_yaw_deg,
+        hfov_deg=a.hfov_deg, frame_id=a.frame_id, source=a.source,
+    )  # fmt: skip
 
 
 def run(config: Config, stop: threading.Event) -> int:

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import zenoh
 
+from common.announce import to_chunk
 from common.boxes import Boxes
 from common.errors import ConfigError, StackError
 from common.frames import image_to_frame
@@ -27,6 +28,7 @@ from common.queries import query_metrics, ready_services
 from common.zenoh_bus import open_session
 from stack.config_file import load_config
 from tests.polling import wait_for
+from tests.unit.announced import announcement
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
 
 REPO = Path(__file__).resolve().parents[2]
@@ -83,6 +85,7 @@ class Stack:
         env = {k: v for k, v in os.environ.items() if not k.startswith("STACK__")}
         self.proc = start_supervisor(config_path, self._log, env)
         self.session = self.open("observer")
+        self.tokens: list[zenoh.LivelinessToken] = []  # the cameras the test announces
 
     def open(self, principal: str) -> zenoh.Session:
         """A session of the stack as ``principal``. In client mode the supervisor's router may
@@ -107,6 +110,18 @@ class Stack:
             cwd=REPO, capture_output=True, text=True, timeout=60,
         )  # fmt: skip
         assert done.returncode == 0, done.stderr
+
+    def announce(self, camera: str = "", **fields: Any) -> zenoh.LivelinessToken:
+        """Announce ``camera`` (default: the first) of the config, as its source would, from
+        the test's session: for a test that stands in for the camera (and the detector), the
+        controller and the metrics take their cameras from the announcements. The token is
+        kept (a token dropped is undeclared) until it is undeclared or the session closes."""
+        name = camera or self.config.stack.camera
+        msg = announcement(name, self.config.camera_settings(name), **fields)
+        key = self.keys.camera_announcement(name, to_chunk(msg))
+        token = self.session.liveliness().declare_token(key)
+        self.tokens.append(token)
+        return token
 
     def ready_services(self) -> set[str]:
         return ready_services(self.session, self.keys)
@@ -149,8 +164,10 @@ def publish_cameras(
     score: float,
 ) -> None:
     """Stand in for the cameras and the detector until ``stop``: each camera (name: picture
-    size, class) at 10 Hz, each frame filled with ``fill`` and followed by the detections made
-    on it, one box ``box(w, h)`` of that camera's class with ``score``."""
+        size, class) at 10 Hz, each frame filled with ``fill`` and followed by the detections made
+        on it, one box ``box(w, h)`` of that camera's class with ``score``. Each camera is announced
+    while it publishes."""
+    tokens = [stack.announce(name, width=w, height=h) for name, ((w, h), _) in cameras.items()]
     seq = 0
     while not stop.wait(0.1):
         seq += 1
@@ -165,6 +182,8 @@ def publish_cameras(
             )  # fmt: skip
             stack.session.put(stack.keys.frame(name), frame.encode())
             stack.session.put(stack.keys.detections(name), dets.encode())
+    for token in tokens:
+        token.undeclare()
 
 
 @pytest.fixture

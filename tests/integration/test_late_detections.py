@@ -39,6 +39,7 @@ def late_person() -> bytes:
 def test_late_detections_are_said_once_with_the_fixes(make_stack) -> None:  # type: ignore[no-untyped-def]
     stack: Stack = make_stack(supervisor={"services": ["metrics"]})
     stack.wait_ready({"metrics"})
+    stack.announce()  # the test stands in for the camera and the detector
     front = stack.keys.detections("front")
     feeder = Feeder(stack)
     rounds = itertools.count()  # the feeder's rounds are 50 ms apart: one in four, 5 Hz
@@ -54,6 +55,10 @@ def test_late_detections_are_said_once_with_the_fixes(make_stack) -> None:  # ty
         )  # fmt: skip
         assert query.returncode == 0, query.stderr
         told = json.loads(query.stdout)["warnings"]["detections_late"]
+        # Before the JSON, for a person: the cameras announced, and the warning as a line.
+        prefix = stack.config.stack.prefix
+        assert f"cameras announced under {prefix}: 1\n  front " in query.stderr, query.stderr
+        assert f"WARNING detections_late: {told}" in query.stderr, query.stderr
     finally:
         feeder.close()
     assert stack.stop() == 0, stack.log()

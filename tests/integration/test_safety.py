@@ -126,6 +126,7 @@ def test_estop_survives_a_killed_controller_and_a_restarted_stack(make_stack, tm
 def test_stale_future_and_replayed_detections_never_move_the_robot(make_stack) -> None:  # type: ignore[no-untyped-def]
     stack: Stack = make_stack(supervisor={"services": ["controller"]})
     stack.wait_ready({"controller"})
+    stack.announce()  # the test stands in for the camera and the detector
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
     _, counts = stack.subscribe(stack.keys.counters("controller"))
     pub = stack.session.declare_publisher(stack.keys.detections("front"))

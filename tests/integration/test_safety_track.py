@@ -15,7 +15,7 @@ from functools import partial
 import numpy as np
 import pytest
 
-from common.messages import ControllerStatus, LaserScan, Twist
+from common.messages import ControllerStatus, LaserScan, ServiceCounters, Twist
 from tests.integration.conftest import Stack, wait_for
 from tests.integration.feeder import Feeder, all_clear, header, people
 
@@ -44,6 +44,11 @@ def person_and_scan(
     return {front: people(1), scan: obstacle_ahead(distance_m, age_s)}
 
 
+def unannounced(raw: list[bytes]) -> int:
+    """The controller's latest count of detections of a camera not announced."""
+    return ServiceCounters.decode(raw[-1]).counters.get("detections_unannounced", 0) if raw else 0
+
+
 def forward(raw: list[bytes], start: int = 0) -> list[Twist]:
     return [t for t in map(Twist.decode, list(raw)[start:]) if t.linear[0] > 0]
 
@@ -59,6 +64,7 @@ def test_track_mode_never_drives_into_an_obstacle_or_blind(make_stack) -> None: 
     )
     s = stack.config.controller
     stack.wait_ready({"controller"})
+    stack.announce()  # the test stands in for the camera and the detector
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
     _, status_raw = stack.subscribe(stack.keys.controller_status())
     front, scan = stack.keys.detections("front"), stack.keys.scan()
@@ -95,13 +101,29 @@ def test_without_a_laser_only_a_deliberate_setting_drives_and_every_status_says_
         controller={"mode": "track", "no_laser": True},
     )
     stack.wait_ready({"controller"})
+    token = stack.announce()  # the test stands in for the camera and the detector
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
     _, status_raw = stack.subscribe(stack.keys.controller_status())
+    _, counts = stack.subscribe(stack.keys.counters("controller"))
     front, scan = stack.keys.detections("front"), stack.keys.scan()
     feeder = Feeder(stack)
     try:
         feeder.feed(lambda: {front: people(1)})
         wait_for(lambda: forward(cmds), 30, "forward motion with no laser, as set")
+        # The camera's announcement withdrawn (its source gone) while its detections still
+        # come: a stop at once, then nothing moves on them.
+        token.undeclare()
+        gone = "the target's camera front is no longer announced"
+        [stop] = wait_for(
+            lambda: [x for x in statuses(status_raw) if x.reason == gone][:1], 30, "the stop"
+        )
+        wait_for(lambda: unannounced(counts) >= 10, 30, "the unannounced detections to be counted")
+        after = [Twist.decode(c) for c in list(cmds)]
+        after = [t for t in after if t.header.stamp_ns >= stop.header.stamp_ns]
+        assert after and all(t.is_zero for t in after), "moved on an unannounced camera"
+        stack.announce()  # announced again: used again
+        since = len(cmds)
+        wait_for(lambda: forward(cmds, since), 30, "forward motion once announced again")
         # A scan that does come is obeyed all the same.
         feeder.feed(partial(person_and_scan, front, scan, 0.2))
         since = len(status_raw)

@@ -46,6 +46,7 @@ from services.ros2.service import CommandsToRos, DebugImages, DetectionsToRos, R
 from services.sim.contract import SimSettings
 from services.sim.service import SimHandlers
 from stack.config import Config
+from tests.unit.announced import announcement
 from tests.unit.fuzz import fuzz_handler, message_handler, payloads, samples, to_stack
 
 
@@ -55,6 +56,7 @@ def test_the_controllers_handlers(tmp_path: Path) -> None:
     handlers = ControllerHandlers(config, tally)
     keys = tally.keys
     camera = config.stack.camera
+    handlers.set_cameras({camera: announcement(camera, config.camera)})
     on_detections = partial(handlers.on_detections, camera)
     message_handler(tally, on_detections, keys.detections(camera), Detections)
     message_handler(tally, handlers.on_scan, keys.scan(), LaserScan)
@@ -69,6 +71,7 @@ def test_the_metrics_services_handlers() -> None:
     handlers = MetricsHandlers(config, tally)
     keys = tally.keys
     camera, counters = config.stack.camera, keys.all_counters()
+    handlers.set_cameras({camera: announcement(camera, config.camera)})
     detections = keys.detections(camera)
     on_detections = partial(handlers.on_detections, camera, detections)
     message_handler(tally, on_detections, detections, Detections)

@@ -1,6 +1,9 @@
 """The controller's loop in-process: a ControlLoop on a MemoryHub with a FakeClock, and a test
 participant on the same hub that puts the inputs and hears cmd_vel and the status. Delivery is
 synchronous and the clock moves only when told: a put, a tick, and the command is on the list.
+Each camera of the config is announced (as its source would: common/announce.py) on a
+participant of its own, from before the controller starts; ``announce`` and ``withdraw`` change
+that at run time.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import numpy as np
 from common.boxes import Boxes
 from common.bus import QoS
 from common.clock import BOOT_ID, FakeClock
+from common.keys import Keys
 from common.memory_bus import MemoryHub
 from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan, Twist
 from common.node import Node
@@ -21,6 +25,7 @@ from services.camera.contract import CameraSettings
 from services.controller.contract import ControllerSettings
 from services.controller.service import ControlLoop
 from stack.config import Config
+from tests.unit.announced import Sources
 
 W, H = 640, 480
 
@@ -33,6 +38,8 @@ class Rig:
         tmp_path: Path,
         cameras: dict[str, CameraSettings] | None = None,
         clock: FakeClock | None = None,
+        *,
+        announced: bool = True,
         **controller: Any,
     ) -> None:
         settings = {"mode": "track", "no_laser": False, **controller}
@@ -42,6 +49,11 @@ class Rig:
         )
         self.clock = clock or FakeClock()
         self.hub = MemoryHub()
+        self.keys = Keys(self.config.stack.prefix)
+        self.sources = Sources(self.hub, self.keys)
+        if announced:
+            for name, camera in self.config.all_cameras.items():
+                self.announce(name, camera)
         self.node = Node(
             "controller",
             self.config,
@@ -50,7 +62,6 @@ class Rig:
             clock=self.clock,
         )
         self.loop = ControlLoop(self.config, self.node)
-        self.keys = self.node.keys
         self.probe = self.hub.join("test")
         self.cmds: list[Twist] = []
         self.statuses: list[ControllerStatus] = []
@@ -62,6 +73,15 @@ class Rig:
             lambda s: self.statuses.append(ControllerStatus.decode(s.payload)),
         )
         self._seq = 0
+
+    def announce(self, name: str, camera: CameraSettings | None = None, **fields: Any) -> None:
+        """Announce camera ``name`` as a source would (``camera``'s geometry, then ``fields``),
+        or announce it anew (a new token before the old one goes)."""
+        self.sources.announce(name, camera, **fields)
+
+    def withdraw(self, name: str) -> None:
+        """Camera ``name``'s source is gone: its session closes, its announcement with it."""
+        self.sources.withdraw(name)
 
     @property
     def counters(self) -> dict[str, int]:
@@ -101,6 +121,7 @@ class Rig:
 
     def close(self) -> None:
         self.loop.close()
+        self.sources.close()
         self.probe.close()
         self.node.close()
 

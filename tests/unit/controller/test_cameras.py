@@ -22,6 +22,7 @@ from services.controller.policy import Controller, Inputs, VelocityCommand
 from services.controller.service import ControllerHandlers
 from services.controller.targets import View
 from stack.config import Config
+from tests.unit.announced import announcement
 from tests.unit.controller.scans import scan_of
 
 W, H, HFOV = 640, 480, 60.0
@@ -255,6 +256,22 @@ def test_the_hand_over_window_is_bounded() -> None:
     assert cmd.camera == "second" and cmd.state == "following" and soon.locked == ("second", 3)
 
 
+def test_the_locked_targets_camera_withdrawn_is_a_stop_and_an_unlock() -> None:
+    ctl = Controller(FOLLOW, TWO)
+    behind = Inputs(views(front=nobody(), rear=person(W / 2, track=7)), laser(), 0.0)
+    assert not ctl.step(behind, now=0.0).is_zero and ctl.locked == ("rear", 7)
+    ctl.set_cameras({"front": FRONT}, withdrawn=["rear"])
+    # Its detections still held by the caller are not looked at: the camera is gone.
+    cmd = ctl.step(behind, now=0.05)
+    assert cmd.is_zero and cmd.state == "stale" and ctl.locked is None, cmd
+    assert cmd.reason == "the target's camera rear is no longer announced"
+    # Another camera withdrawn leaves a lock alone.
+    ctl = Controller(FOLLOW, TWO)
+    assert not ctl.step(behind, now=0.0).is_zero
+    ctl.set_cameras({"rear": REAR}, withdrawn=["front"])
+    assert not ctl.step(behind, now=0.05).is_zero and ctl.locked == ("rear", 7)
+
+
 def test_handlers_keep_each_cameras_detections_apart(tmp_path: Path) -> None:
     config = Config(
         controller=ControllerSettings(estop_file=str(tmp_path / "estop.json")),
@@ -262,6 +279,7 @@ def test_handlers_keep_each_cameras_detections_apart(tmp_path: Path) -> None:
     )
     tally = Tally("controller", config)
     handlers = ControllerHandlers(config, tally)
+    handlers.set_cameras({c: announcement(c, cam) for c, cam in config.all_cameras.items()})
     at = now()
 
     def fresh(ns_ago: int) -> bytes:

@@ -14,6 +14,7 @@ import pytest
 
 from common.bus import QoS
 from common.clock import BOOT_ID, FakeClock
+from common.keys import Keys
 from common.memory_bus import MemoryBus, MemoryHub
 from common.messages import Header, ServiceCounters, Twist
 from common.node import Node
@@ -21,6 +22,7 @@ from services.camera.contract import CameraSettings
 from services.detector.contract import DetectorSettings
 from services.metrics.service import MetricsService
 from stack.config import Config
+from tests.unit.announced import Sources
 from tests.unit.metrics.samples import detections
 
 MS = 1_000_000
@@ -44,6 +46,9 @@ class Rig:
         )
         self.clock = FakeClock()
         self.hub = MemoryHub()
+        self.sources = Sources(self.hub, Keys(self.config.stack.prefix))
+        for name, camera in self.config.all_cameras.items():  # as their sources would
+            self.sources.announce(name, camera)
         self.node = Node("metrics", self.config, bus=self.hub.join("metrics"), clock=self.clock)
         self.service = MetricsService(self.config, self.node)
         self.keys = self.node.keys
@@ -70,6 +75,7 @@ class Rig:
 
     def close(self) -> None:
         self.service.close()
+        self.sources.close()
         self.probe.close()
         self.node.close()
 
@@ -182,6 +188,33 @@ def test_detections_that_come_too_late_bring_a_warning_with_the_fixes(rig: Rig) 
     assert "detections come too late" in told and "front: " in told and "p95 900 ms" in told
     assert 'detector.profile = "fast"' in told and "detector.imgsz" in told, told
     assert "fewer cameras (now 2)" in told and "controller.detection_timeout_s" in told, told
+
+
+def test_the_cameras_are_the_announced_ones(rig: Rig) -> None:
+    answer = rig.query()
+    assert list(answer["cameras"]) == ["front", "rear"]  # before any detections
+    assert answer["cameras_announced"]["rear"] == {
+        "width": 640, "height": 480, "rate_hz": 10.0, "mount_yaw_deg": 180.0,
+        "hfov_deg": 60.0, "frame_id": "camera", "source": "test",
+    }  # fmt: skip
+    # A camera announced at run time gets its figures at once, and its detections count.
+    rig.sources.announce("left", mount_yaw_deg=90.0, rate_hz=5.0)
+    assert list(rig.query()["cameras"]) == ["front", "rear", "left"]
+    header = rig.header("left", 1, rig.clock.wall_ns())
+    rig.put(rig.keys.detections("left"), detections(header, 1).encode())
+    answer = rig.query()
+    assert answer["cameras"]["left"]["frames"] == 1 and answer["frames"] == 1
+    assert answer["cameras_announced"]["left"]["mount_yaw_deg"] == 90.0
+    # Detections of a camera nobody announces, or no longer, are counted and dropped.
+    rig.sources.withdraw("left")
+    for seq, camera in enumerate(("left", "ghost", "ghost"), start=2):
+        header = rig.header(camera, seq, rig.clock.wall_ns())
+        rig.put(rig.keys.detections(camera), detections(header, 1).encode())
+    answer = rig.query()
+    assert answer["frames"] == 1 and "ghost" not in answer["cameras"]
+    assert answer["cameras"]["left"]["frames"] == 1  # its figures stay
+    assert sorted(answer["cameras_announced"]) == ["front", "rear"]
+    assert answer["counters"]["metrics.detections_unannounced"] == 3
 
 
 def _worker(rig: Rig, name: str, cameras: list[str]) -> MemoryBus:

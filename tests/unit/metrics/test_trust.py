@@ -24,6 +24,7 @@ from services.metrics.trust import (
     strict_json,
 )
 from stack.config import Config
+from tests.unit.announced import announcement
 
 HEADER = Header(stamp_ns=1, frame_id="", seq=1, source="x")
 KEY = "stack/counters/detector"
@@ -132,6 +133,7 @@ def test_every_refusal_heard_is_counted_from_any_number_of_threads() -> None:
     # count: every refusal the handler hears is counted, from Zenoh's threads at once too.
     config = Config()
     handlers = MetricsHandlers(config, Tally("metrics", config))
+    handlers.set_cameras({"front": announcement("front", config.camera)})
     key = handlers.tally.keys.detections("front")
     bad = Detections(
         header=HEADER, image_width=4, image_height=4, boxes=Boxes(), class_names=(),

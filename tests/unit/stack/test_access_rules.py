@@ -216,3 +216,13 @@ def test_a_hub_with_rules_admits_no_anonymous_participant() -> None:
     open_hub.join("a").subscribe("**", got.append)
     open_hub.join("b").publisher(KEYS.cmd_vel(), QoS.CONTROL).put(b"x")
     assert len(got) == 1
+
+
+def test_the_controller_and_the_metrics_may_watch_the_camera_announcements() -> None:
+    table = access_table(Shape(KEYS, CAMERAS, WORKERS))
+    for principal in ("controller", "metrics"):
+        assert KEYS.all_camera_announcements() in table[principal].watch, principal
+    acl = access_control(KEYS, CAMERAS, "password", workers=WORKERS)
+    [rule] = [r for r in acl["rules"] if r["id"] == "controller_watch"]
+    assert rule["messages"] == ["declare_liveliness_subscriber", "liveliness_query"]
+    assert rule["key_exprs"] == [KEYS.all_camera_announcements()]
