@@ -29,8 +29,8 @@ secured").
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Mapping
-from dataclasses import replace
 from typing import Any
 
 from common.access import Access, Shape
@@ -162,7 +162,10 @@ def _table(
     if remote:
         # A pool's router linked to the routers of the robots it serves: their principals
         # act on their own robot's keys, so the link may do what they may on each prefix.
-        robots = (shape, *(replace(shape, keys=k, prefixes=()) for k in shape.other_robots()))
+        robots = (
+            shape,
+            *(dataclasses.replace(shape, keys=k, prefixes=()) for k in shape.other_robots()),
+        )
         tables = [table, *(access_table(r) for r in robots[1:])]
         table[ROUTER_PRINCIPAL] = merged(linked_router_access(t, remote) for t in tables)
     return table
@@ -170,11 +173,10 @@ def _table(
 
 def merged(accesses: Iterable[Access]) -> Access:
     """What any of ``accesses`` allows, in order."""
-    out: dict[str, dict[str, None]] = {k: {} for k in ("put", "token", "serve", "read")}
+    out: dict[str, dict[str, None]] = {}
     for a in accesses:
-        for kind, exprs in (("put", a.put), ("token", a.token), ("serve", a.serve),
-                            ("read", a.read)):  # fmt: skip
-            out[kind].update(dict.fromkeys(exprs))
+        for kind, exprs in dataclasses.asdict(a).items():
+            out.setdefault(kind, {}).update(dict.fromkeys(exprs))
     return Access(**{kind: tuple(exprs) for kind, exprs in out.items()})
 
 
