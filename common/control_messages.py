@@ -53,7 +53,10 @@ class ControllerStatus(Message):
     then says the stop is not durable. ``camera`` names the camera that sees the target ("" for
     none); ``stale_cameras`` the cameras whose detections are stale or have not come (ignored
     until they are fresh again). ``no_laser`` is True when the controller is set to drive without
-    a laser (``controller.no_laser``): forward motion is then not checked for obstacles."""
+    a laser (``controller.no_laser``): forward motion is then not checked for obstacles.
+    ``target_classes`` are the classes the controller follows or tracks
+    (``controller.target_classes``): the detector gives the cameras that see one priority
+    (services/detector/attention.py) without reading the controller's config."""
 
     TAG: ClassVar[str] = "ControllerStatus"
     VERSION: ClassVar[int] = 1
@@ -67,3 +70,4 @@ class ControllerStatus(Message):
     camera: str = ""
     stale_cameras: tuple[str, ...] = ()
     no_laser: bool = False
+    target_classes: tuple[str, ...] = ()

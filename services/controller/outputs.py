@@ -24,6 +24,7 @@ class Outputs:
         self.node = node
         self.mode = config.controller.mode
         self.no_laser = config.controller.no_laser
+        self.target_classes = tuple(config.controller.target_classes)
         self.lock = threading.RLock()
         self.cmd_pub = node.publisher(node.keys.cmd_vel(), QoS.CONTROL)
         self.status_pub = node.publisher(node.keys.controller_status(), QoS.TELEMETRY)
@@ -43,6 +44,7 @@ class Outputs:
                 camera=cmd.camera,
                 stale_cameras=cmd.stale,
                 no_laser=self.no_laser,
+                target_classes=self.target_classes,
             )
             self.status_pub.put(status.encode())
 

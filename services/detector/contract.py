@@ -38,6 +38,19 @@ POOL_WARNINGS = "pool_warnings"
 CAMERAS_GAINED = "cameras_gained"  # hand-overs
 CAMERAS_LOST = "cameras_lost"
 POOL_RESIGNED = "pool_resigned"  # left the pool on a stalled detection loop
+# Attention (services/detector/attention.py): a gauge, per camera 1 while it has priority (in
+# all: the cameras with priority), and the frames rounds took for each reason, counted only
+# while some camera has priority (the fair rounds count none).
+ATTENTION_PRIORITY = "attention_priority"
+TAKEN_PRIORITY = "taken_priority"  # a priority camera's frame
+TAKEN_FLOOR = "taken_floor"  # a camera due for its floor rate, ahead of the priority ones
+TAKEN_SPARE = "taken_spare"  # another camera's, with no priority camera waiting
+
+
+def taken_for(reason: str) -> str:
+    """The counter of frames taken for ``reason`` (services/detector/attention.py)."""
+    return f"taken_{reason}"
+
 
 #: The pool's gauges (set, not counted up).
 POOL_GAUGES = (SERVING, POOL_MEMBERS, POOL_LOAD_PERMILLE, POOL_WARNINGS)
@@ -69,6 +82,10 @@ PER_CAMERA = frozenset(
         SERVING,
         CAMERAS_GAINED,
         CAMERAS_LOST,
+        ATTENTION_PRIORITY,
+        TAKEN_PRIORITY,
+        TAKEN_FLOOR,
+        TAKEN_SPARE,
     }
 )
 #: Every counter a worker publishes (plain names; see PER_CAMERA for the per-camera ones).
@@ -89,13 +106,16 @@ COUNTERS = frozenset(
 # -- the bus ---------------------------------------------------------------------------------
 def access(shape: Shape) -> dict[str, Access]:
     """Each worker reads frames and puts detections, never frames: every camera's, as any
-    worker may come to serve any camera (services/detector/pool.py). Its tokens are its own
+    worker may come to serve any camera (services/detector/pool.py); it reads the
+    controller's status too, for the camera that sees the target and the target classes
+    (services/detector/attention.py). Its tokens are its own
     only: its health, its pool membership and its serving tokens under its own name, so that
     no worker can pose as another, or as many, and skew the assignment or its audit. It serves
     the model's description on each camera's info key. A pool serving further robots
     (``shape.prefixes``) reads each one's frames and puts its detections, and serves its info,
     on every camera under its prefix (their cameras come and go with their announcements),
-    and nothing else of theirs: no frame, no command."""
+    and reads its controller's status (attention), and nothing else of theirs: no frame, no
+    command."""
     keys = shape.keys
     robots = shape.other_robots()
     return {
@@ -104,7 +124,11 @@ def access(shape: Shape) -> dict[str, Access]:
             w,
             *(keys.detections(c) for c in shape.cameras),
             *(r.all_detections() for r in robots),
-            read=(keys.all_frames(), *(r.all_frames() for r in robots)),
+            read=(
+                keys.all_frames(),
+                keys.controller_status(),
+                *(k for r in robots for k in (r.all_frames(), r.controller_status())),
+            ),
             token=(keys.health(w), keys.pool_member(w), keys.pool_serving_of(w)),
             serve=(keys.all_detector_info(), *(r.all_detector_info() for r in robots)),
         )
@@ -183,6 +207,13 @@ class DetectorSettings:
     for ``pool_stall_s`` leaves the pool (its cameras go to the others) until it runs again.
     What is wrong with the pool (a member that serves nothing, a camera nobody or two serve, a
     name held twice) is a warning once it has lasted ``pool_alarm_s`` (common/pool_audit.py).
+
+    Attention (docs/detector.md, "Attention"; services/detector/attention.py): with
+    ``attention`` on, when the cameras send more than the worker detects, the camera holding
+    the controller's lock and those that saw one of its target classes within
+    ``attention_hold_s`` go first, and every other camera is still detected on at least
+    ``attention_floor_hz`` times a second (within a round or two). Off, or with no camera
+    prioritised, the rounds are the fair rotation.
     """
 
     model: str = ""
@@ -209,6 +240,9 @@ class DetectorSettings:
     pool_balance: float = 1.0
     pool_stall_s: float = 5.0
     pool_alarm_s: float = 10.0
+    attention: bool = True
+    attention_floor_hz: float = 0.5
+    attention_hold_s: float = 2.0
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
@@ -227,6 +261,8 @@ class DetectorSettings:
         "pool_balance": (1, 4),
         "pool_stall_s": (1, 60),
         "pool_alarm_s": (1, 600),
+        "attention_floor_hz": (0.05, 100),
+        "attention_hold_s": (0, 60),
     }
     LENGTHS: ClassVar[Bounds] = {"classes": (0, MAX_CLASSES)}
 

@@ -15,10 +15,11 @@ from common.counters import BAD_INPUT, per_camera
 from common.errors import ImageError
 from common.frames import frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
-from common.messages import Detections, Frame, Header
+from common.messages import ControllerStatus, Detections, Frame, Header
 from common.node import Put, Tally
 from perception import DetectionResult, Detector, Tracker, tracker_clock
 from services.detector import contract
+from services.detector.attention import Attention
 from services.detector.handlers import count_for, reject_for
 from services.detector.schedule import Waiting
 from stack.config import Config
@@ -87,7 +88,9 @@ class Rounds:
     through the model as one batch, and publish each camera's detections with its frame's
     header on its own key. Counted in all and per camera; a round's size is counted as
     ``batches`` (rounds run) and ``batched_frames`` (frames in them): their ratio is the mean
-    batch size."""
+    batch size. With ``attention``, each camera's published detections are its sightings, the
+    frames are counted by why the round took them, and which cameras have priority is a
+    gauge (services/detector/attention.py)."""
 
     def __init__(
         self,
@@ -96,16 +99,38 @@ class Rounds:
         detector: Detector,
         outputs: dict[str, CameraOutput],
         clock: Clock = SYSTEM_CLOCK,
+        attention: Attention | None = None,
     ) -> None:
         self.settings = config.detector
         self.tally = tally
         self.detector = detector
         self.outputs = outputs
         self.clock = clock
+        self.attention = attention
+        self._priority: frozenset[str] = frozenset()
 
     def run(self, waiting: list[Waiting[Frame]]) -> None:
+        self._run(waiting)
+        if self.attention is not None:
+            self._gauge_priority(self.attention.priority())
+
+    def _gauge_priority(self, now: frozenset[str]) -> None:
+        """``attention_priority`` (per camera: 1 while it has priority) moved to ``now``."""
+        if now == self._priority:
+            return
+        counters = self.tally.counters
+        for cam in now - self._priority:
+            counters.add(per_camera(contract.ATTENTION_PRIORITY, cam), 1)
+        for cam in self._priority - now:
+            counters.add(per_camera(contract.ATTENTION_PRIORITY, cam), -1)
+        counters.add(contract.ATTENTION_PRIORITY, len(now) - len(self._priority))
+        self._priority = now
+
+    def _run(self, waiting: list[Waiting[Frame]]) -> None:
         ready: list[tuple[CameraOutput, Frame, int, npt.NDArray[np.uint8]]] = []
         for w in waiting:
+            if w.reason:
+                count_for(self.tally, w.camera, contract.taken_for(w.reason))
             out, frame = self.outputs[w.camera], w.item
             # Judged as it leaves the slot: a frame that waited out a pause (or was stamped
             # wrong, or sent again) is not worth a detection nobody may act on.
@@ -157,6 +182,21 @@ class Rounds:
         msg = to_message(frame, result, self.detector, received_ns, track_ids, self.clock.wall_ns())
         out.put(msg.encode())
         count_for(self.tally, out.camera, contract.DETECTIONS_OUT)
+        if self.attention is not None:
+            self.attention.saw(out.camera, result.class_names)
+
+
+def heed_controller(tally: Tally, attention: Attention) -> Callable[[bytes], None]:
+    """The handler of the controller's status (``keys.controller_status()``): its locked
+    camera and target classes to ``attention``; garbage counted as bad input and dropped."""
+    key = tally.keys.controller_status()
+
+    def on_status(payload: bytes) -> None:
+        status = tally.decode(key, ControllerStatus.decode, payload)
+        if status is not None:
+            attention.controller(status.camera, status.target_classes)
+
+    return on_status
 
 
 def _track(

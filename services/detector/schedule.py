@@ -11,15 +11,20 @@ stays in its place in the queue like one sending 5, and a camera that was just s
 to the back. Hence the bound the unit tests prove: with ``n`` cameras, a camera with a frame
 waiting is served within ``ceil(n / max_batch)`` rounds, whatever the others' rates, since
 at most ``n - 1`` cameras can be ahead of it and every round serves the ``max_batch`` oldest.
+
+A round may be taken in another :class:`Order` (services/detector/attention.py: the target's
+cameras first, every other camera at a floor rate). The order is handed the waiting cameras
+longest-waiting first and may only rearrange them; without one, or when it leaves them as
+they are, the rounds are the fair ones above.
 """
 
 from __future__ import annotations
 
 import itertools
 import threading
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import Generic, Protocol, TypeVar
 
 from common.clock import SYSTEM_CLOCK, Clock
 
@@ -34,6 +39,20 @@ class Waiting(Generic[_T]):
     camera: str
     item: _T
     received_ns: int
+    reason: str = ""  # why the round took it, as the Order said ("" without one)
+
+
+class Order(Protocol):
+    """The order in which a round takes the waiting cameras."""
+
+    def arrange(self, cameras: Sequence[str]) -> list[tuple[str, str]]:
+        """``cameras`` (those with a frame waiting, longest-waiting first) in the order to
+        take them, each with the reason it is where it is; the same cameras, each once."""
+        ...
+
+    def taken(self, cameras: Sequence[str]) -> None:
+        """``cameras`` were taken in a round, now."""
+        ...
 
 
 @dataclass(slots=True)
@@ -74,17 +93,24 @@ class CameraSlots(Generic[_T]):
             self._cond.notify()
         return False
 
-    def take(self, max_batch: int, timeout: float) -> list[Waiting[_T]]:
+    def take(self, max_batch: int, timeout: float, order: Order | None = None) -> list[Waiting[_T]]:
         """The next round: the waiting frames of at most ``max_batch`` cameras, those waiting
-        longest first; empty after ``timeout`` seconds with nothing waiting."""
+        longest first, or first in ``order``; empty after ``timeout`` seconds with nothing
+        waiting."""
         if max_batch < 1:
             raise ValueError(f"max_batch must be at least 1, got {max_batch}")
         with self._cond:
             if not self._slots and not self._cond.wait_for(lambda: bool(self._slots), timeout):
                 return []
-            oldest = sorted(self._slots, key=lambda cam: self._slots[cam].since)[:max_batch]
-            taken = [(cam, self._slots.pop(cam)) for cam in oldest]
-        return [Waiting(cam, slot.item, slot.received_ns) for cam, slot in taken]
+            oldest = sorted(self._slots, key=lambda cam: self._slots[cam].since)
+            arranged = [(cam, "") for cam in oldest] if order is None else order.arrange(oldest)
+            if sorted(cam for cam, _ in arranged) != sorted(oldest):
+                raise ValueError(f"the order {arranged} is not a rearrangement of {oldest}")
+            chosen = arranged[:max_batch]
+            taken = [(cam, why, self._slots.pop(cam)) for cam, why in chosen]
+            if order is not None:
+                order.taken([cam for cam, _ in chosen])
+        return [Waiting(cam, slot.item, slot.received_ns, why) for cam, why, slot in taken]
 
     def clear(self, camera: str) -> bool:
         """Drop ``camera``'s waiting frame, if any (its camera went to another worker); True

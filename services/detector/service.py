@@ -18,10 +18,11 @@ from common.contracts import DetectorInfo
 from common.node import Node
 from perception import Detector, load, variant_of
 from perception import measure_batch as measure
+from services.detector.attention import Attention
 from services.detector.contract import DetectorSettings
 from services.detector.handlers import DetectorHandlers
 from services.detector.membership import PoolMember
-from services.detector.rounds import Rounds, camera_outputs
+from services.detector.rounds import Rounds, camera_outputs, heed_controller
 from stack.config import Config
 
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag (and the pool's membership)
@@ -67,7 +68,11 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
             handlers.frame_keys,
             lambda cam: node.publisher(node.keys.detections(cam), QoS.PERCEPTION).put,
         )
-        rounds = Rounds(config, node, detector, outputs, node.clock)
+        # Attention when short of capacity (services/detector/attention.py): the rounds'
+        # order, fed by the controller's status and each camera's detections.
+        attention = Attention(node.clock, s.attention_floor_hz, s.attention_hold_s, s.attention)
+        status_sub = node.subscribe(node.keys.controller_status(), heed_controller(node, attention))
+        rounds = Rounds(config, node, detector, outputs, node.clock, attention)
         pool = PoolMember(node, worker, handlers)
         info = json.dumps(
             DetectorInfo(
@@ -95,10 +100,11 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
                 pool.settle()
                 pool.audit()
                 node.publish_counters()
-                waiting = handlers.slots.take(per_round, _WAIT_S)
+                waiting = handlers.slots.take(per_round, _WAIT_S, attention)
                 if waiting:
                     rounds.run(waiting)
         finally:
+            status_sub.undeclare()
             pool.close()
             for queryable in queryables:
                 queryable.undeclare()

@@ -6,6 +6,9 @@ seldom, that they age past ``controller.detection_timeout_s`` before the next on
 controller's dead-man then stops the robot between detections and the next one starts it again:
 on a slow CPU it flipped between ``stale`` and ``following`` about 3 times a second. Judged per
 camera as capture->detections p95 plus the time between detections (1 / its detections rate).
+A camera its worker serves at the attention floor by design (services/detector/attention.py:
+the worker gives other cameras priority and not this one, which sees no target) is not judged:
+the controller ignores its stale detections, and it gains priority once it sees a target.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 import math
 
 from common.contracts import CameraMetrics, MetricsAnswer
+from services.detector.contract import ATTENTION_PRIORITY
 from stack.config import Config
 
 #: Detections of a camera in the window before it is judged at all.
@@ -25,10 +29,26 @@ def advise(config: Config, answer: MetricsAnswer) -> dict[str, str]:
     out = {}
     cameras = answer.get("cameras", {})
     count = len(answer.get("cameras_announced", cameras))  # the cameras there are now
-    late = late_detections(config, cameras, count)
+    floor = at_floor(answer.get("counters", {}), cameras)
+    late = late_detections(config, {c: m for c, m in cameras.items() if c not in floor}, count)
     if late:
         out[DETECTIONS_LATE] = late
     return out
+
+
+def at_floor(totals: dict[str, int], cameras: dict[str, CameraMetrics]) -> frozenset[str]:
+    """The cameras served at the attention floor now: their worker's ``attention_priority``
+    gauge counts some camera, and its ``attention_priority.<camera>`` not this one."""
+    out = set()
+    for name, m in cameras.items():
+        worker = m.get("served_by", "")
+        if (
+            worker
+            and totals.get(f"{worker}.{ATTENTION_PRIORITY}", 0) > 0
+            and m.get("counters", {}).get(f"{worker}.{ATTENTION_PRIORITY}", 0) == 0
+        ):
+            out.add(name)
+    return frozenset(out)
 
 
 def _oldest_ms(m: CameraMetrics) -> float | None:

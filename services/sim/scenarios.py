@@ -83,6 +83,27 @@ SETTLE_S = 4.0
 # with a frame id of its own. It states no rate, so it is rendered at the first camera's
 # (services/sim/cameras.py).
 REAR_CAMERA: dict[str, Any] = {"mount_yaw_deg": 180.0, "frame_id": "camera_rear"}
+# A camera looking left, for the scenarios seen by three cameras.
+LEFT_CAMERA: dict[str, Any] = {"mount_yaw_deg": 90.0, "frame_id": "camera_left"}
+
+#: When bob steps into the rear camera's view in scenario "appears" (scenario seconds): he
+#: stands behind and to the right of the robot, where no camera looks, steps into the rear
+#: camera's view at each of these times (in ``APPEARS_STEP_S``), stays ``APPEARS_STAY_S`` and
+#: steps out again; each entrance is one sample of the time to find him.
+APPEARS_AT_S = (8.0, 14.0, 20.0, 26.0)
+APPEARS_STEP_S = 0.2
+APPEARS_STAY_S = 2.0
+_BOB_OUT, _BOB_IN = (-3.0, -6.0), (-3.0, -0.5)
+
+
+def _appears() -> World:
+    path = [(0.0, *_BOB_OUT)]
+    for t in APPEARS_AT_S:
+        leave = t + APPEARS_STEP_S + APPEARS_STAY_S
+        path += [(t, *_BOB_OUT), (t + APPEARS_STEP_S, *_BOB_IN), (leave, *_BOB_IN)]
+        path.append((leave + APPEARS_STEP_S, *_BOB_OUT))
+    bob = person("bob", *path)
+    return World(Robot(), targets=[person("alice", (0, 4.0, 0.0)), bob])
 
 
 SCENARIOS: dict[str, Scenario] = {
@@ -128,5 +149,11 @@ SCENARIOS: dict[str, Scenario] = {
                  detector={"imgsz": 320},
                  why="two cameras double the detector's work; at 320 each round of detections "
                      "stays fresh on a 2-core CPU"),
+        Scenario("appears",
+                 "alice ahead; bob steps into the empty rear camera's view for 2 s at 8, 14, 20 "
+                 "and 26 s: the lock stays on alice (the attention benchmark times bob's first "
+                 "detections)",
+                 _appears, 32.0, cameras={"left": LEFT_CAMERA, "rear": REAR_CAMERA},
+                 settle_s=SETTLE_S, settle_from_s=APPEARS_AT_S[-1] + 3.0),
     )
 }  # fmt: skip

@@ -1,11 +1,13 @@
-"""python -m tools.benchmarks recorder|ros2|scale|pool|batch|estop [options]
+"""python -m tools.benchmarks recorder|ros2|scale|pool|batch|attention|estop [options]
 
 recorder runs the default stack with and without the recorder, side by side; ros2 measures
 what the ROS 2 bridge adds against the direct path; scale runs 1, 2, 4, 8 cameras on one
 detector against as many one-camera stacks, batched and batch 1; pool runs 4 and 8 cameras on 1
 and 2 detector workers, times the hand-over after a worker's SIGKILL and the assignment under
 uneven load; batch times one backend per image at batch 1, 2, 4 ... (the whole detection and
-the model alone) with the choice the detector would make; estop times ``zstack estop
+the model alone) with the choice the detector would make; attention runs three cameras at 640
+on one CPU worker with attention on and off (frames per camera, time to find a person stepping
+into an empty camera); estop times ``zstack estop
 engage``'s start to its first put against another revision. (The detector's own benchmark is
 ``python -m tools.detector benchmark``.)
 """
@@ -199,6 +201,32 @@ def batch(args: argparse.Namespace) -> int:
     return bench.run(options, lambda line: print(line, file=sys.stderr, flush=True))
 
 
+def _attention_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", help="the stack to start from (default deploy/stack.toml)")
+    p.add_argument(
+        "--scenarios",
+        nargs="+",
+        default=["ahead", "behind", "appears"],
+        choices=["ahead", "behind", "appears"],
+        help="the scenarios to run, each with attention on and off (default all three)",
+    )
+    p.add_argument(
+        "--camera-rate",
+        type=float,
+        default=10.0,
+        help="frames a second the simulator renders of each camera (default 10)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def attention(args: argparse.Namespace) -> int:
+    setup_logging("attention-bench", "WARNING")
+    from stack.config_file import load_config
+    from tools.benchmarks.attention import main
+
+    return main(load_config(args.config), tuple(args.scenarios), args.json, args.camera_rate)
+
+
 def _estop_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=20, help="starts of each revision (default 20)")
     p.add_argument(
@@ -226,6 +254,9 @@ COMMANDS = [
             _pool_arguments, pool),
     Command("batch", "time per image by batch size on one backend, and the detector's choice",
             _batch_arguments, batch),
+    Command("attention", "three cameras at 640 on a CPU: the target's camera first, and the "
+            "time to find a person stepping into an empty one, attention on and off",
+            _attention_arguments, attention),
     Command("estop", "how soon zstack estop puts its first EStop, against another revision",
             _estop_arguments, estop),
 ]  # fmt: skip

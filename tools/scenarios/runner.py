@@ -193,15 +193,20 @@ def run_scenario(
     ros2: bool = False,
     mode: ControllerMode = ControllerMode.FOLLOW,
     full_length: bool = False,
+    variant: Scenario | None = None,
+    rec: ScenarioLog | None = None,
 ) -> ScenarioResult:
     """Run scenario ``name`` on the real stack with the controller in ``mode`` (``ros2``:
     through the ROS 2 bridge, the simulator playing a ROS 2 robot); returns its figures (see
     score.py). A scenario with ``settle_s`` ends once its pass conditions have held that long
-    (after ``settle_from_s``), unless ``full_length``."""
+    (after ``settle_from_s``), unless ``full_length``. A benchmark may run a ``variant`` of
+    the scenario (further cameras, detector settings, another world: it keeps the name and
+    the simulator plays ``name``'s world unless the variant's ``world`` is one of SCENARIOS)
+    and keep what was heard in ``rec``."""
     if name not in SCENARIOS or name == "demo":
         known = ", ".join(n for n in SCENARIOS if n != "demo")
         raise StackError(f"unknown scenario {name!r}; choose one of {known}")
-    scenario = SCENARIOS[name]
+    scenario = SCENARIOS[name] if variant is None else variant
     config = scenario_config(base, scenario, ros2, mode)
     if log is not None:
         for line in config_changes(base, config, scenario):
@@ -209,7 +214,7 @@ def run_scenario(
     workdir = Path(tempfile.mkdtemp(prefix=f"scenario-{name}-"))
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))
-    rec = ScenarioLog()
+    rec = ScenarioLog() if rec is None else rec
     with (workdir / "stack.log").open("wb") as stack_log:
         proc = start_supervisor(config_path, stack_log)
         try:

@@ -73,6 +73,8 @@ MESSAGES = [
         state="following",
         reason="offset +0.01",
         track_id=3,
+        camera="rear",
+        target_classes=("person", "dog"),
     ),
     ServiceCounters(header=HEADER, service="detector", counters={"dropped": 3, "bad_input": 1}),
     EStop(header=HEADER, engaged=True, reason="operator"),
@@ -243,7 +245,7 @@ WIRE_KEYS = {
         "header", "angle_min", "angle_increment", "range_min", "range_max", "n", "ranges"
     },
     "ControllerStatus": {"header", "mode", "target", "state", "reason", "track_id",
-                         "estop_saved", "camera", "stale_cameras", "no_laser"},
+                         "estop_saved", "camera", "stale_cameras", "no_laser", "target_classes"},
     "ServiceCounters": {"header", "service", "counters"},
     "EStop": {"header", "engaged", "reason"},
     "GroundTruth": {

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from common.messages import Header
+from common.messages import Header, ServiceCounters
 from services.controller.contract import ControllerSettings
 from services.detector.contract import DetectorSettings
 from services.metrics.advice import DETECTIONS_LATE, advise
@@ -52,3 +52,28 @@ def test_only_the_fixes_not_yet_made_are_offered() -> None:
 
 def test_too_few_detections_are_not_judged() -> None:
     assert advise(Config(), answer_for(900.0, 0.2, n=3)) == {}
+
+
+def _three_cameras(priority: dict[str, int]):  # type: ignore[no-untyped-def]
+    """front late (900 ms, one every 200 ms) and left seldom (one every 2 s, at a floor), both
+    served by ``detector``, whose attention gauges are ``priority`` (camera -> 0/1)."""
+    agg = Aggregator(10.0, cameras=["front", "left"])
+    counters = {"serving.front": 1, "serving.left": 1, "attention_priority": sum(priority.values())}
+    counters |= {f"attention_priority.{cam}": v for cam, v in priority.items()}
+    hdr = Header(stamp_ns=0, frame_id="", seq=0, source="detector")
+    agg.on_counters(ServiceCounters(header=hdr, service="detector", counters=counters), 0.0)
+    for cam, every_s, n in (("front", 0.2, 40), ("left", 2.0, 5)):
+        for i in range(n):
+            t = i * every_s
+            h = Header(stamp_ns=int(t * 1e9), frame_id=cam, seq=i, source="camera")
+            agg.on_detections(detections(h, 1, published_ms=900.0), t, camera=cam)
+    return agg.answer(Header(stamp_ns=1, frame_id="", seq=1, source="metrics"), 8.5)
+
+
+def test_a_camera_at_the_attention_floor_is_not_judged_late() -> None:
+    # front has priority, left is served at the floor by design: only front is said.
+    text = advise(Config(), _three_cameras({"front": 1, "left": 0}))[DETECTIONS_LATE]
+    assert "front: " in text and "left: " not in text, text
+    # With nothing prioritised the rounds are fair, and a late camera is late.
+    text = advise(Config(), _three_cameras({"front": 0}))[DETECTIONS_LATE]
+    assert "front: " in text and "left: " in text, text

@@ -171,3 +171,29 @@ def test_demo_person_stays_in_view_of_a_follower_for_ten_minutes() -> None:
         world.advance(dt)
     assert worst_bearing < 30.0, worst_bearing
     assert nearest > 0.7, nearest
+
+
+def test_in_appears_bob_is_in_no_cameras_view_but_the_rears_while_he_steps_in() -> None:
+    """Scenario "appears" (the attention benchmark): bob's bearing from each of its cameras,
+    the robot anywhere on its way to alice (x from 0 to 3 m, facing her)."""
+    from services.sim.scenarios import APPEARS_AT_S, APPEARS_STAY_S, APPEARS_STEP_S
+
+    sc = SCENARIOS["appears"]
+    bob = next(t for t in sc.build().targets if t.id == "bob")
+    yaws = {"front": 0.0, **{c: v["mount_yaw_deg"] for c, v in sc.cameras.items()}}
+    half_fov = 30.0 + 5.0  # the default 60 degrees, and a margin for bob's width
+
+    def seen_by(t: float, robot_x: float) -> set[str]:
+        bx, by = bob.position(t)
+        b = math.degrees(math.atan2(by, bx - robot_x))
+        off = {c: (b - yaw + 180.0) % 360.0 - 180.0 for c, yaw in yaws.items()}
+        return {c for c, d in off.items() if abs(d) <= half_fov}
+
+    for x in (0.0, 1.5, 3.0):
+        assert seen_by(0.0, x) == set()
+        for t in APPEARS_AT_S:
+            assert seen_by(t, x) == set()  # out of every view until he steps in
+            assert seen_by(t + APPEARS_STEP_S, x) == {"rear"}
+            assert seen_by(t + APPEARS_STEP_S + APPEARS_STAY_S, x) == {"rear"}
+            assert seen_by(t + 2 * APPEARS_STEP_S + APPEARS_STAY_S, x) == set()
+    assert sc.duration_s > APPEARS_AT_S[-1] + APPEARS_STEP_S + APPEARS_STAY_S
