@@ -89,7 +89,7 @@ class WorkerMetrics(TypedDict):
     """One detector worker of the pool in the metrics answer (services/metrics/pool.py): whether
     its pool token is live (``false`` once it has gone: exited, killed, or hung past Zenoh's
     lease) and the cameras its serving tokens name; from its counters, their share of every
-    camera's pixel rate (``load``, 0..1), the live workers it counts, its hand-overs since it
+    camera's frame rate (``load``, 0..1), the live workers it counts, its hand-overs since it
     started, and how long ago its counters came (a gone worker's last word stays)."""
 
     live: bool

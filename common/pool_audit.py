@@ -1,15 +1,16 @@
 """What is wrong with the detector pool, as anyone who hears its liveliness tokens can tell. Pure:
 no bus, no clock.
 
-The pool trusts its membership: a token on ``<prefix>/detector/pool/<name>`` is a worker, and
-each worker serves what the rule (common/pool_rule.py) gives it by its own copy of the camera
-table. Each worker also declares, for every camera it serves, a token
-``<prefix>/detector/serving/<worker>/<zenoh id>/<camera>`` (common/keys.py). From both, each
+A member of the pool is a worker holding a token on ``<pool>/detector/pool/<name>`` and an
+announcement (WorkerAnnouncement) under ``<pool>/detector/workers/<name>/``: a token alone is
+ignored. Each worker serves what the rule (common/pool_rule.py) gives it from the cameras
+announced on the bus. Each worker also declares, for every camera it serves, a token
+``<pool>/detector/serving/<worker>/<zenoh id>/<camera>`` (common/keys.py). From both, each
 worker and the metrics service audit the pool (:class:`PoolAudit`) and warn when, for longer
 than ``detector.pool_alarm_s``:
 
-- ``idle_member``: a member serves none of the cameras the rule gives it (a stray token from
-  a raw session, a worker with another camera table, a hung one);
+- ``idle_member``: a member serves none of the cameras the rule gives it (a hung worker, one
+  that has not yet heard a camera's announcement);
 - ``unserved``: a camera of this table has no worker serving it;
 - ``served_twice``: a camera is served by two workers (or two processes of one name);
 - ``name_twice``: one worker name is held by two processes (two hosts with one ``worker_id``).
@@ -23,7 +24,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
-from common.pool_rule import assign
+from common.pool_rule import PoolCamera, PoolWorker, assign_pool
 
 #: A serving token's parts: (worker, zenoh id of its session, camera).
 Serving = tuple[str, str, str]
@@ -69,8 +70,10 @@ def lines(findings: list[Finding], now: float, limit: int = MAX_LINES) -> list[s
 
 
 class PoolAudit:
-    """Checks the pool's tokens against the rule over this table's cameras (``weights``, as
-    common/pool_rule.py's ``camera_weights``) and remembers since when each finding holds. Not
+    """Checks the pool's tokens against the rule and remembers since when each finding holds.
+    The cameras and members are given to :meth:`check` as heard (announced cameras by pool
+    name, members with their announced capacity and prefixes); without them, the cameras are
+    ``weights`` (``{camera: rate_hz}``, one robot) and the members of equal capacity. Not
     thread-safe: the caller holds its lock."""
 
     def __init__(self, weights: Mapping[str, float], balance: float, alarm_s: float) -> None:
@@ -80,9 +83,23 @@ class PoolAudit:
         self._since: dict[tuple[str, str], float] = {}
         self._raised: dict[tuple[str, str], Finding] = {}
 
-    def check(self, now: float, members: Iterable[str], serving: Iterable[Serving]) -> Report:
-        """The findings at ``now`` for the live ``members`` and ``serving`` tokens."""
-        findings = _findings(members, serving, self.weights, self.balance)
+    def check(
+        self,
+        now: float,
+        members: Iterable[str] | Mapping[str, PoolWorker],
+        serving: Iterable[Serving],
+        *,
+        cameras: Mapping[str, PoolCamera] | None = None,
+    ) -> Report:
+        """The findings at ``now`` for the live ``members`` (names, or each one's capacity
+        and prefixes as announced) and ``serving`` tokens, over ``cameras`` (by pool name; by
+        default ``weights``)."""
+        if cameras is None:
+            cameras = {c: PoolCamera("", c, w) for c, w in self.weights.items()}
+        if not isinstance(members, Mapping):
+            robots = frozenset(c.prefix for c in cameras.values())
+            members = {m: PoolWorker(1.0, robots) for m in members}
+        findings = _findings(members, serving, cameras, self.balance)
         found = {(f.kind, f.subject): f.detail for f in findings}
         self._since = {k: self._since.get(k, now) for k in found}
         report = Report()
@@ -107,36 +124,39 @@ class _Found:
 
 
 def _findings(
-    members: Iterable[str], serving: Iterable[Serving], weights: Mapping[str, float], balance: float
+    members: Mapping[str, PoolWorker],
+    serving: Iterable[Serving],
+    cameras: Mapping[str, PoolCamera],
+    balance: float,
 ) -> list[_Found]:
-    live = sorted(set(members))
+    live = sorted(members)
     by_camera: dict[str, set[tuple[str, str]]] = {}
     by_worker: dict[str, set[str]] = {}
     for worker, zid, camera in set(serving):
         by_camera.setdefault(camera, set()).add((worker, zid))
         by_worker.setdefault(worker, set()).add(zid)
-    owners = assign(live, weights, balance)
+    owners = assign_pool(members, cameras, balance)
     out: list[_Found] = []
     for worker in live:
         given = sorted(c for c, w in owners.items() if w == worker)
         if given and worker not in by_worker:
             out.append(_Found("idle_member", worker, (
                 f"pool member {worker} serves none of the cameras the pool gives it "
-                f"({', '.join(given)}): a stray token, or a worker with another camera table"
+                f"({', '.join(given)}): a hung worker, or one that does not hear them"
             )))  # fmt: skip
-    for camera in weights if live else ():  # no pool at all is no pool's fault
+    for camera in cameras if live else ():  # no pool at all is no pool's fault
         if camera not in by_camera:
             owner = owners.get(camera)
             out.append(_Found("unserved", camera, (
                 f"camera {camera} is served by no detector worker"
-                + (f" (the pool gives it to {owner})" if owner else " (no worker in the pool)")
+                + (f" (the pool gives it to {owner})" if owner else " (no worker serves its robot)")
             )))  # fmt: skip
     for camera, servers in sorted(by_camera.items()):
-        if len(servers) > 1 and camera in weights:  # another table's camera is not ours
+        if len(servers) > 1 and camera in cameras:  # another table's camera is not ours
             names = ", ".join(f"{w} ({z})" for w, z in sorted(servers))
             out.append(_Found("served_twice", camera, (
                 f"camera {camera} is served by {len(servers)} workers at once: {names}; "
-                "do their hosts have different camera tables?"
+                "do they hear different pools or cameras?"
             )))  # fmt: skip
     for worker, zids in sorted(by_worker.items()):
         if len(zids) > 1:

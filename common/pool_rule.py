@@ -5,43 +5,76 @@ whoever audits the pool (common/pool_audit.py, run by the workers and the metric
 Rendezvous (highest-random-weight) hashing with bounded loads. Each camera ranks the live
 workers by a stable hash of (camera, worker) (blake2b: the same on every host and run, unlike
 Python's salted ``hash``). Cameras are placed heaviest first (ties by name); each goes to the
-highest-ranked worker whose load plus the camera's weight stays within ``balance`` x (total
-weight / live workers), or, when none has room, to the least-loaded worker. A camera's weight
-is its pixel rate (``rate_hz`` x width x height, normalised to sum to 1), so that one worker
-does not get all the heavy cameras.
+highest-ranked worker whose load plus the camera's weight stays within its bound, ``balance`` x
+the total weight x the worker's share of the capacity, or, when none has room, to the worker
+whose load after it, against its capacity, is least. A camera's weight is the frame rate it
+announces (``CameraAnnouncement.rate_hz``), a worker's capacity the frame rate it can detect
+(``WorkerAnnouncement.capacity_hz``): one unit, frames per second, so that a worker twice as
+fast takes about twice the frames.
+
+A pool may serve several robots (key prefixes): :func:`assign_pool` divides each robot's
+cameras among the live workers that list its prefix, robot by robot, so that every worker that
+serves a robot computes the same owners from what it hears (that robot's cameras and every
+worker's announcement) and needs nothing of the other robots.
+
+A camera's name in the pool (:func:`pool_name`) is its bare name when it is announced under the
+pool's own prefix (one robot: the names of its config), else ``<prefix>/<camera>``; in counter
+names (``serving.<camera>``) that reads ``<prefix>:<camera>`` (:func:`label`).
 """
 
 from __future__ import annotations
 
 import hashlib
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from typing import Protocol
+
+_EPS = 1e-9  # float slack on the load bound
 
 
 class CameraRate(Protocol):
-    """What the rule reads of a camera's settings (services/camera/contract.py)."""
-
-    @property
-    def resize(self) -> tuple[int, int]: ...
+    """What :func:`camera_rates` reads of a camera's settings (services/camera/contract.py)."""
 
     @property
     def rate_hz(self) -> float: ...
 
 
-#: The pixel count assumed for a camera that keeps its source's size (``resize = [0, 0]``):
-#: the stack's config cannot know it before the first frame, and VGA is the common case.
-DEFAULT_PIXELS = 640 * 480
-_EPS = 1e-9  # float slack on the load bound: weights are sums of normalised fractions
+@dataclass(frozen=True, slots=True)
+class PoolCamera:
+    """A camera as the pool sees it: the robot ``prefix`` it is announced under, its name
+    there and the frames per second it announces (its weight)."""
+
+    prefix: str
+    camera: str
+    rate_hz: float
 
 
-def camera_weights(cameras: Mapping[str, CameraRate]) -> dict[str, float]:
-    """Each camera's share of the pixels per second all ``cameras`` send (summing to 1)."""
-    raw = {}
-    for name, cam in cameras.items():
-        width, height = cam.resize
-        raw[name] = cam.rate_hz * (width * height if width and height else DEFAULT_PIXELS)
-    total = sum(raw.values())
-    return {name: w / total for name, w in raw.items()}
+@dataclass(frozen=True, slots=True)
+class PoolWorker:
+    """A live worker as the pool sees it: the frames per second it can detect and the robot
+    prefixes whose cameras it serves."""
+
+    capacity_hz: float
+    prefixes: frozenset[str]
+
+
+def pool_name(prefix: str, camera: str, pool_prefix: str) -> str:
+    """``camera`` of robot ``prefix``'s name in the pool under ``pool_prefix``: bare for the
+    pool's own robot, ``<prefix>/<camera>`` for another's (a key chunk path: serving tokens)."""
+    return camera if prefix == pool_prefix else f"{prefix}/{camera}"
+
+
+def label(name: str) -> str:
+    """A pool name as it reads in a counter's name (``frames_in.<label>``, split at the last
+    dot: common/counters.py): ``robot2/front`` is ``robot2:front``; a bare name is itself."""
+    if "/" not in name:
+        return name
+    return name.replace(".", "_").replace("/", ":")
+
+
+def camera_rates(cameras: Mapping[str, CameraRate]) -> dict[str, float]:
+    """Each configured camera's weight, its ``rate_hz`` (for who audits a config's cameras)."""
+    return {name: cam.rate_hz for name, cam in cameras.items()}
 
 
 def rank(camera: str, worker: str) -> int:
@@ -87,4 +120,18 @@ def assign(
             chosen = min(ranked, key=lambda w: (load[w] + weight) / capacity[w])
         load[chosen] += weight
         out[camera] = chosen
+    return out
+
+
+def assign_pool(
+    workers: Mapping[str, PoolWorker], cameras: Mapping[str, PoolCamera], balance: float
+) -> dict[str, str]:
+    """``{pool name: worker}`` for the ``cameras`` (by pool name) of every robot prefix that
+    a live worker lists: each robot's cameras by :func:`assign` among the workers that list
+    its prefix, with their capacities. A camera of a robot no worker lists has no owner."""
+    out: dict[str, str] = {}
+    for prefix in sorted({c.prefix for c in cameras.values()}):
+        eligible = {w: p.capacity_hz for w, p in workers.items() if prefix in p.prefixes}
+        rates = {n: c.rate_hz for n, c in cameras.items() if c.prefix == prefix}
+        out.update(assign(eligible, rates, balance))
     return out

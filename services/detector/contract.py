@@ -19,6 +19,10 @@ from common.errors import ConfigError
 from common.limits import DEFAULT_MAX_FRAME_PIXELS, MAX_DETECTIONS, MAX_IMAGE_SIDE
 from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
 
+#: As common/messages.py's (the contract loads no messages: a unit test checks they agree).
+MAX_CAPACITY_HZ = 100_000.0
+MAX_ANNOUNCED_PREFIXES = 64
+
 # -- counters --------------------------------------------------------------------------------
 FRAMES_IN = "frames_in"  # frames offered: heard on a camera this worker serves
 FRAMES_MISSED = "frames_missed"  # gaps in a camera's frame numbering
@@ -33,11 +37,14 @@ TRACKER_RESETS = "tracker_resets"
 # The pool (gauges: moved by their difference, so they read as the current value).
 SERVING = "serving"  # cameras served; per camera 1 while it serves the camera
 POOL_MEMBERS = "pool_members"
-POOL_LOAD_PERMILLE = "pool_load_permille"  # its cameras' share of every camera's pixel rate
+POOL_LOAD_PERMILLE = "pool_load_permille"  # its cameras' share of every camera's frame rate
 POOL_WARNINGS = "pool_warnings"
 CAMERAS_GAINED = "cameras_gained"  # hand-overs
 CAMERAS_LOST = "cameras_lost"
 POOL_RESIGNED = "pool_resigned"  # left the pool on a stalled detection loop
+CAPACITY_HZ = "capacity_hz"  # the capacity it announces (frames/s, rounded)
+POOL_STRAYS = "pool_strays"  # pool tokens with no worker announcement: ignored
+CAPACITY_ANNOUNCED = "capacity_announced"  # re-announcements of a moved capacity
 # Attention (services/detector/attention.py): a gauge, per camera 1 while it has priority (in
 # all: the cameras with priority), and the frames rounds took for each reason, counted only
 # while some camera has priority (the fair rounds count none).
@@ -53,7 +60,7 @@ def taken_for(reason: str) -> str:
 
 
 #: The pool's gauges (set, not counted up).
-POOL_GAUGES = (SERVING, POOL_MEMBERS, POOL_LOAD_PERMILLE, POOL_WARNINGS)
+POOL_GAUGES = (SERVING, POOL_MEMBERS, POOL_LOAD_PERMILLE, POOL_WARNINGS, CAPACITY_HZ, POOL_STRAYS)
 
 
 def frames_judged(verdict: str) -> str:
@@ -99,6 +106,9 @@ COUNTERS = frozenset(
         POOL_LOAD_PERMILLE,
         POOL_WARNINGS,
         POOL_RESIGNED,
+        CAPACITY_HZ,
+        POOL_STRAYS,
+        CAPACITY_ANNOUNCED,
     }
 )
 
@@ -108,10 +118,10 @@ def access(shape: Shape) -> dict[str, Access]:
     """Each worker reads frames and puts detections, never frames: every camera's, as any
     worker may come to serve any camera (services/detector/pool.py); it reads the
     controller's status too, for the camera that sees the target and the target classes
-    (services/detector/attention.py). Its tokens are its own
-    only: its health, its pool membership and its serving tokens under its own name, so that
-    no worker can pose as another, or as many, and skew the assignment or its audit. It serves
-    the model's description on each camera's info key. A pool serving further robots
+    (services/detector/attention.py). Its tokens are its own only: its health, its pool
+    membership, its announcement and its serving tokens under its own name, so that no worker
+    can pose as another, or as many, and skew the assignment or its audit. It serves the
+    model's description on each camera's info key. A pool serving further robots
     (``shape.prefixes``) reads each one's frames and puts its detections, and serves its info,
     on every camera under its prefix (their cameras come and go with their announcements),
     and reads its controller's status (attention), and nothing else of theirs: no frame, no
@@ -129,7 +139,12 @@ def access(shape: Shape) -> dict[str, Access]:
                 keys.controller_status(),
                 *(k for r in robots for k in (r.all_frames(), r.controller_status())),
             ),
-            token=(keys.health(w), keys.pool_member(w), keys.pool_serving_of(w)),
+            token=(
+                keys.health(w),
+                keys.pool_member(w),
+                keys.worker_announcements_of(w),
+                keys.pool_serving_of(w),
+            ),
             serve=(keys.all_detector_info(), *(r.all_detector_info() for r in robots)),
         )
         for w in dict.fromkeys(shape.workers)
@@ -154,6 +169,8 @@ MAX_WORKERS = 8
 _WORKER_ID = re.compile(r"[a-z](?:[a-z0-9_]{0,22}[a-z0-9])?")
 _NUMBERED = re.compile(r"_[0-9]+$")
 
+
+_PREFIX_CHUNK = re.compile(r"[A-Za-z0-9_.\-]{1,64}")  # as a WorkerAnnouncement's prefixes
 
 MIN_IMGSZ, MAX_IMGSZ = 160, 1280
 PROFILES = ("default", "fast")
@@ -196,17 +213,27 @@ class DetectorSettings:
     own); ``classes`` keeps only those class names, and empty keeps every class.
 
     The pool (docs/detector.md, "A pool of workers"): ``workers`` detector processes on this
-    host divide the cameras between them, with those on other hosts that share the key
-    prefix; 1 (the default) is one detector serving every camera. Each worker has one name, its
-    service, process, health token, counters, pool id and principal: ``detector``,
+    host divide the cameras between them, with those on other hosts in the same pool (its
+    tokens and announcements under ``pool_prefix``; empty: the stack's prefix); 1 (the
+    default) is one detector serving every camera. A worker serves the cameras announced
+    (CameraAnnouncement) under each robot prefix of ``prefixes`` (empty: the stack's prefix),
+    whatever its own config's camera tables say. Each worker announces its capacity, the
+    frames per second it detects: ``capacity_hz``, or, when 0, measured at start (after the
+    warm-up, ``batch_probe_runs`` timed rounds) and kept current as a moving average (weight
+    ``capacity_smoothing`` per round) of its busy rounds' throughput, announced again when it
+    moved by more than ``capacity_step`` (a fraction) and at most every
+    ``capacity_period_s``. Each worker has one name, its service, process, health token,
+    counters, pool id and principal: ``detector``,
     ``detector_2`` ... or, with ``worker_id`` set, ``detector_<id>``, ``detector_<id>_2`` ...
     (common/settings.py::detector_service). Names must differ across hosts, so on several hosts
-    give each its own ``worker_id`` (``"robot1"``). ``pool_balance`` is the slack over an
-    even share of the cameras' pixel rate that a worker may take before a camera goes to its
-    next choice (services/detector/pool.py). A worker whose detection loop has not passed
-    for ``pool_stall_s`` leaves the pool (its cameras go to the others) until it runs again.
+    give each its own ``worker_id`` (``"robot1"``). ``pool_balance`` is the slack over a
+    share of the cameras' frame rate in proportion to its capacity that a worker may take
+    before a camera goes to its next choice (services/detector/pool.py). A worker whose
+    detection loop has not passed for ``pool_stall_s`` leaves the pool (its cameras go to
+    the others) until it runs again.
     What is wrong with the pool (a member that serves nothing, a camera nobody or two serve, a
     name held twice) is a warning once it has lasted ``pool_alarm_s`` (common/pool_audit.py).
+    A pool token with no announcement is no member (ignored; counted as ``pool_strays``).
 
     Attention (docs/detector.md, "Attention"; services/detector/attention.py): with
     ``attention`` on, when the cameras send more than the worker detects, the camera holding
@@ -240,6 +267,12 @@ class DetectorSettings:
     pool_balance: float = 1.0
     pool_stall_s: float = 5.0
     pool_alarm_s: float = 10.0
+    pool_prefix: str = ""
+    prefixes: tuple[str, ...] = ()
+    capacity_hz: float = 0.0
+    capacity_step: float = 0.25
+    capacity_period_s: float = 10.0
+    capacity_smoothing: float = 0.05
     attention: bool = True
     attention_floor_hz: float = 0.5
     attention_hold_s: float = 2.0
@@ -263,8 +296,15 @@ class DetectorSettings:
         "pool_alarm_s": (1, 600),
         "attention_floor_hz": (0.05, 100),
         "attention_hold_s": (0, 60),
+        "capacity_hz": (0, MAX_CAPACITY_HZ),
+        "capacity_step": (0.01, 10),
+        "capacity_period_s": (0.5, 3600),
+        "capacity_smoothing": (0.01, 1),
     }
-    LENGTHS: ClassVar[Bounds] = {"classes": (0, MAX_CLASSES)}
+    LENGTHS: ClassVar[Bounds] = {
+        "classes": (0, MAX_CLASSES),
+        "prefixes": (0, MAX_ANNOUNCED_PREFIXES),
+    }
 
     def __post_init__(self) -> None:
         check_bounds(self, "detector", self.BOUNDS)
@@ -303,6 +343,17 @@ class DetectorSettings:
                 "with a letter and not end in _<number>: it names the workers (detector_<id>, "
                 "detector_<id>_2 ...), their keys, processes and principals"
             )
+        named = [("prefixes", p) for p in self.prefixes]
+        if self.pool_prefix:
+            named.append(("pool_prefix", self.pool_prefix))
+        for what, prefix in named:
+            if not all(_PREFIX_CHUNK.fullmatch(chunk) for chunk in prefix.split("/")):
+                raise ConfigError(
+                    f"detector.{what} {prefix!r} must be a key prefix: '/'-separated words of "
+                    "letters, digits, '_', '-', '.'"
+                )
+        if len(set(self.prefixes)) != len(self.prefixes):
+            raise ConfigError(f"detector.prefixes names one twice: {list(self.prefixes)}")
         if not all(self.classes):
             raise ConfigError(
                 f"detector.classes must be non-empty class names, got {list(self.classes)}"

@@ -4,6 +4,7 @@ call ``on_frame`` are the pool member's (services/detector/membership.py)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from functools import partial
 
 from common.clock import SYSTEM_CLOCK, Clock
@@ -21,19 +22,42 @@ from stack.config import Config
 class DetectorHandlers:
     """What the detector does with a frame as it arrives: decode it, count it (in all and for
     its camera), and leave it in its camera's slot, from which the loop takes rounds. A
-    frame's arrival is stamped on ``clock``."""
+    frame's arrival is stamped on ``clock``.
 
-    def __init__(self, config: Config, tally: Tally, clock: Clock = SYSTEM_CLOCK) -> None:
+    ``frame_keys``: each camera's frame key by its name in counters (common/pool_rule.py's
+    ``label``); by default the config's cameras on the stack's keys. A pool worker starts with
+    none and adds each camera it comes to serve (:meth:`add_camera`)."""
+
+    def __init__(
+        self,
+        config: Config,
+        tally: Tally,
+        clock: Clock = SYSTEM_CLOCK,
+        frame_keys: Mapping[str, str] | None = None,
+    ) -> None:
         self.config = config
         self.settings = config.detector
         self.tally = tally
-        self.frame_keys = {cam: tally.keys.frame(cam) for cam in config.all_cameras}
+        self.frame_keys = (
+            {cam: tally.keys.frame(cam) for cam in config.all_cameras}
+            if frame_keys is None
+            else dict(frame_keys)
+        )
         self.slots: CameraSlots[Frame] = CameraSlots(self.frame_keys, clock)
         self.gaps = {cam: SeqGaps() for cam in self.frame_keys}  # one numbering per camera
         #: The cameras this worker serves (all of them outside a pool); a frame of another,
         #: late from a subscription just undeclared, is left to its new worker. Written by the
         #: pool member under its lock (services/detector/membership.py).
         self.serving: frozenset[str] = frozenset(self.frame_keys)
+
+    def add_camera(self, camera: str, frame_key: str) -> None:
+        """Know ``camera`` (its frames on ``frame_key``) from now on (the loop's thread, before
+        it subscribes to the frames; nothing when it is known)."""
+        if camera in self.frame_keys:
+            return
+        self.gaps[camera] = SeqGaps()
+        self.slots.add(camera)
+        self.frame_keys[camera] = frame_key
 
     def serve(
         self, cameras: frozenset[str], gained: tuple[str, ...], lost: tuple[str, ...]

@@ -6,16 +6,23 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from dataclasses import replace
 from functools import partial
+from typing import Any
 
+from common.announce import Announced, Announcer
 from common.bus import Declared
 from common.counters import per_camera
 from common.errors import StackError
+from common.keys import Keys
+from common.messages import CameraAnnouncement, WorkerAnnouncement
 from common.node import Node
 from common.pool_audit import MAX_LINES, PoolAudit, Report, Serving, lines
+from common.pool_rule import label, pool_name
 from services.detector import contract
+from services.detector.capacity import Capacity
 from services.detector.handlers import DetectorHandlers, count_for
-from services.detector.pool import Change, PoolView, camera_weights
+from services.detector.pool import Change, PoolCamera, PoolView, PoolWorker
 
 #: How long a joining worker asks who is already in the pool before it takes its cameras: the
 #: query ends as soon as every peer answered; this bounds it on a slow link.
@@ -25,19 +32,35 @@ AUDIT_PERIOD_S = 0.5  # how often the loop audits the pool's tokens (common/pool
 #: :data:`STALL_CHECK_MIN_S`): a stall is noticed within a quarter of the limit after it.
 STALL_CHECKS = 4
 STALL_CHECK_MIN_S = 0.05
+CATCH_UP_CHECKS = 20  # how often a joining worker looks whether it heard every announcement
+
+#: What the service does when this worker comes to serve a camera (its label in counters, and
+#: the camera: its robot's prefix and its name there) and when it stops.
+OnGained = Callable[[str, PoolCamera], None]
+OnLost = Callable[[str], None]
 
 
 class PoolMember:
-    """This worker's place in the detector pool (services/detector/pool.py): its liveliness
-    token ``<prefix>/detector/pool/<worker id>``, the others' tokens as they come and go, and a
-    frame subscription for each camera it serves.
+    """This worker's place in the detector pool (services/detector/pool.py). The pool lives
+    under ``detector.pool_prefix`` (empty: the stack's prefix): this worker's liveliness token
+    ``<pool>/detector/pool/<worker id>`` and its announcement ``<pool>/detector/workers/
+    <worker id>/<chunk>`` (a WorkerAnnouncement: its capacity, input size, backend, round
+    size and the robot prefixes it serves), the others' as they come and go; the cameras
+    announced under each robot prefix of ``detector.prefixes`` (empty: the stack's prefix);
+    and a frame subscription for each camera it serves, its detections going back on that
+    camera's own robot's keys (the service's ``on_gained``).
 
-    The bus's threads only note a join or a leave; the detection loop calls :meth:`settle`
-    between rounds, which recomputes the assignment and declares and undeclares subscriptions
-    there (never inside a bus callback). Counted: ``serving`` and ``serving.<cam>`` (1 while
-    served), ``pool_members``, ``pool_load_permille`` (the served cameras' share of every
-    camera's pixel rate), ``cameras_gained`` and ``cameras_lost`` (and ``.<cam>``: hand-overs
-    after the first assignment).
+    The bus's threads only note a change; the detection loop calls :meth:`settle` between
+    rounds, which recomputes the assignment and declares and undeclares subscriptions there
+    (never inside a bus callback). Counted: ``serving`` and ``serving.<cam>`` (1 while
+    served; ``<cam>`` is the camera's label, common/pool_rule.py), ``pool_members``,
+    ``pool_load_permille`` (the served cameras' share of every heard camera's frame rate),
+    ``capacity_hz``, ``pool_strays`` (pool tokens with no announcement, ignored),
+    ``capacity_announced``, ``cameras_gained`` and ``cameras_lost`` (and ``.<cam>``:
+    hand-overs after the first assignment).
+
+    Its capacity (services/detector/capacity.py) is fed by the loop (:meth:`observe_round`)
+    and announced again by :meth:`settle` when it moved enough; the pool then follows it.
 
     A worker whose loop stalls (an inference that never returns, a deadlock) while the bus's
     threads still keep its token alive would hold its cameras until the watchdog restarts it.
@@ -48,7 +71,7 @@ class PoolMember:
     next beat declares the token again and it takes its share back. A worker alone in the pool
     stays: nobody could take over. Counted as ``pool_resigned``.
 
-    For each camera it serves, the worker declares a serving token ``<prefix>/detector/serving/
+    For each camera it serves, the worker declares a serving token ``<pool>/detector/serving/
     <worker>/<zenoh id>/<camera>`` (withdrawn with its pool token on a stall), and it hears
     everyone's: :meth:`audit` checks them against the membership (common/pool_audit.py) and
     logs a WARNING for what has been wrong for ``detector.pool_alarm_s`` (a member that serves
@@ -59,42 +82,73 @@ class PoolMember:
     :meth:`check_stall` and :meth:`audit` itself.
 
     **Locks.** Three threads write here: the detection loop (:meth:`beat`, :meth:`settle`,
-    :meth:`audit`, :meth:`close`), the stall watch (:meth:`check_stall`) and the bus's
-    callbacks (a member's or a serving token's coming and going). Two locks, always taken in
-    this order when both are:
+    :meth:`audit`, :meth:`observe_round`, :meth:`close`), the stall watch
+    (:meth:`check_stall`) and the bus's callbacks (a member's, an announcement's or a serving
+    token's coming and going). Two locks, always taken in this order when both are:
 
     - ``_token_lock`` covers this worker's own tokens: ``_token`` (its pool token) and
       ``_serving_tokens``, and is held over their declaring and undeclaring, so that a
       resignation and a settle's serving tokens never interleave. No bus callback takes it.
     - ``_lock`` covers every other attribute written after construction (``_last_beat``,
       ``_resigned``, ``_dirty``, ``view``, ``_servers``, ``_subs``, ``_watches``, ``_gauges``,
-      ``_handed_over``, ``_audit``, ``_audit_next``) and the handlers' ``serving``. It is never
-      held over a bus call: a bus may deliver this worker's own token change to a callback at
-      once, in the calling thread, and the callbacks take ``_lock``.
+      ``_handed_over``, ``_audit``, ``_audit_next``, ``_strays``) and the handlers'
+      ``serving``. It is never held over a bus call: a bus may deliver this worker's own token
+      change to a callback at once, in the calling thread, and the callbacks take ``_lock``.
 
     Subscriptions are declared and undeclared by the loop alone, outside both locks (a slow
     declaration must not keep the stall watch from resigning); only the ``_subs`` dict that
-    holds them is written under ``_lock``.
+    holds them is written under ``_lock``. The announcer (:class:`common.announce.Announcer`)
+    and the capacity are the loop's alone.
     """
 
-    def __init__(self, node: Node, worker_id: str, handlers: DetectorHandlers) -> None:
+    def __init__(
+        self,
+        node: Node,
+        worker_id: str,
+        handlers: DetectorHandlers,
+        *,
+        capacity: Capacity | None = None,
+        input_size: int = 0,
+        backend: str = "",
+        max_batch: int = 1,
+        on_gained: OnGained | None = None,
+        on_lost: OnLost | None = None,
+    ) -> None:
         config = handlers.config
+        s = config.detector
         self.node = node
         self.clock = node.clock
         self.handlers = handlers
         self.zid = node.bus.zid
-        self._stall_s = config.detector.pool_stall_s
+        self.pool_keys = Keys(s.pool_prefix or config.stack.prefix)
+        self.prefixes = s.prefixes or (config.stack.prefix,)
+        self.capacity = capacity or Capacity(1.0, s, self.clock.mono_s())
+        self._on_gained = on_gained
+        self._on_lost = on_lost
+        self._stall_s = s.pool_stall_s
         self._closed = threading.Event()
+        self._heard = threading.Event()  # an announcement came or went
         self._stall_watch: threading.Thread | None = None
+        self.announcement = WorkerAnnouncement(
+            worker=worker_id,
+            capacity_hz=self.capacity.announced,
+            input_size=input_size,
+            backend=backend,
+            max_batch=max_batch,
+            prefixes=tuple(self.prefixes),
+        )
+        self._announcer: Announcer[WorkerAnnouncement] = Announcer(
+            node.bus, partial(self.pool_keys.worker_announcement, worker_id)
+        )
+        self._workers: Announced[WorkerAnnouncement] | None = None
+        self._cameras: dict[str, Announced[CameraAnnouncement]] = {}
         self._token_lock = threading.Lock()
         self._lock = threading.Lock()
         # Under _token_lock:
         self._token: Declared | None = None
         self._serving_tokens: dict[str, Declared] = {}
         # Under _lock:
-        self.view = PoolView(
-            worker_id, camera_weights(config.all_cameras), config.detector.pool_balance
-        )
+        self.view = PoolView(worker_id, self._mine(), s.pool_balance)
         self._last_beat = self.clock.mono_s()
         self._resigned = False
         self._dirty = True
@@ -103,15 +157,25 @@ class PoolMember:
         self._gauges: dict[str, int] = {}
         self._handed_over = False
         self._servers: set[Serving] = set()  # everyone's serving tokens, as heard
-        self._audit = PoolAudit(self.view.weights, self.view.balance, config.detector.pool_alarm_s)
+        self._audit = PoolAudit({}, s.pool_balance, s.pool_alarm_s)
         self._audit_next = 0.0
+        self._strays: list[str] = []
         with self._lock:
             for cam in handlers.frame_keys:
                 self._gauge(per_camera(contract.SERVING, cam), 0)
             for name in contract.POOL_GAUGES:
                 self._gauge(name, 0)
-        for name in (contract.CAMERAS_GAINED, contract.CAMERAS_LOST, contract.POOL_RESIGNED):
+            self._gauge(contract.CAPACITY_HZ, round(self.capacity.announced))
+        for name in (
+            contract.CAMERAS_GAINED,
+            contract.CAMERAS_LOST,
+            contract.POOL_RESIGNED,
+            contract.CAPACITY_ANNOUNCED,
+        ):
             node.counters.add(name, 0)
+
+    def _mine(self) -> PoolWorker:
+        return PoolWorker(self.announcement.capacity_hz, frozenset(self.prefixes))
 
     @property
     def resigned(self) -> bool:
@@ -120,21 +184,47 @@ class PoolMember:
             return self._resigned
 
     def join(self) -> None:
-        """Learn who is in the pool, declare this worker's token and take its cameras. A worker
-        of this name already there is a StackError (one line, exit 1): two processes of one
-        name would each serve every camera the rule gives the name. (One the query misses, two
-        started at once, is the audit's ``name_twice`` warning.) The supervisor tries again
-        after its backoff: a process just killed takes its token with its links."""
-        keys, bus = self.node.keys, self.node.bus
+        """Learn who is in the pool, announce this worker, declare its token and take its
+        cameras. A worker of this name already there (its pool token or its announcement
+        alive) is a StackError (one line, exit 1): two processes of one name would each serve
+        every camera the rule gives the name. (One the query misses, two started at once, is
+        the audit's ``name_twice`` warning.) The supervisor tries again after its backoff: a
+        process just killed takes its tokens with its links."""
+        keys, bus, me = self.pool_keys, self.node.bus, self.view.me
         members = bus.live_tokens(keys.all_pool_members(), POOL_ASK_TIMEOUT_S)
-        mine = keys.pool_member(self.view.me)
-        if mine in members:
+        mine = keys.pool_member(me)
+        held = [mine] if mine in members else []
+        held += bus.live_tokens(keys.worker_announcements_of(me), POOL_ASK_TIMEOUT_S)
+        if held:
             raise StackError(
-                f"a detector worker named {self.view.me!r} is already in the pool ({mine}): "
+                f"a detector worker named {me!r} is already in the pool ({held[0][:120]}): "
                 "not starting a second; give each host its own detector.worker_id"
             )
+        # The announcement before the token: a token alone is no member (a stray).
+        self._announcer.update(self.announcement)
         with self._token_lock:
             self._token = bus.declare_token(mine)
+        self._workers = Announced(
+            bus,
+            keys.all_worker_announcements(),
+            keys.worker_announcement_parts,
+            WorkerAnnouncement.decode,
+            lambda a: a.worker,
+            on_change=self._changed,
+            on_bad=self._bad,
+        )
+        for prefix in self.prefixes:
+            robot = Keys(prefix)
+            self._cameras[prefix] = Announced(
+                bus,
+                robot.all_camera_announcements(),
+                robot.camera_announcement_parts,
+                CameraAnnouncement.decode,
+                lambda a: a.camera,
+                on_change=self._changed,
+                on_bad=self._bad,
+            )
+        self._catch_up()
         watches = [bus.watch_tokens(keys.all_pool_members(), self._on_member)]
         for key in members:
             self._member(key, joined=True)
@@ -144,6 +234,39 @@ class PoolMember:
         self.settle()
         with self._lock:
             self._last_beat = self.clock.mono_s()
+
+    def _catch_up(self) -> None:
+        """Wait (at most :data:`POOL_ASK_TIMEOUT_S`) until the listeners hold every
+        announcement alive on the bus now, so that the first assignment is the pool's, not
+        that of a worker that believes itself alone (which would serve every camera for a
+        moment). On an in-process bus they are there at once."""
+        bus = self.node.bus
+        expected: list[tuple[Announced[Any], set[str]]] = []
+        if self._workers is not None:
+            keys = bus.live_tokens(self.pool_keys.all_worker_announcements(), POOL_ASK_TIMEOUT_S)
+            expected.append((self._workers, _names(keys, self.pool_keys.worker_announcement_parts)))
+        for prefix, heard in self._cameras.items():
+            robot = Keys(prefix)
+            keys = bus.live_tokens(robot.all_camera_announcements(), POOL_ASK_TIMEOUT_S)
+            expected.append((heard, _names(keys, robot.camera_announcement_parts)))
+        for _ in range(CATCH_UP_CHECKS):
+            if all(names <= heard.current().keys() for heard, names in expected):
+                return
+            self._heard.wait(POOL_ASK_TIMEOUT_S / CATCH_UP_CHECKS)
+            self._heard.clear()
+
+    def _changed(self) -> None:
+        self._heard.set()
+        with self._lock:
+            self._dirty = True
+
+    def _bad(self, key: str, error: Exception) -> None:
+        self.node.bad_input(key, error)
+
+    def observe_round(self, frames: int, seconds: float) -> None:
+        """A busy round of the loop: ``frames`` detected in ``seconds`` (the capacity's
+        moving average; announced again by :meth:`settle` when it moved enough)."""
+        self.capacity.observe(frames, seconds)
 
     def start_stall_watch(self, wait: Callable[[float], bool] | None = None) -> threading.Thread:
         """Call :meth:`check_stall` a few times per ``detector.pool_stall_s`` on a thread of
@@ -172,7 +295,7 @@ class PoolMember:
                 if back:
                     self._dirty = True
             if back:
-                keys = self.node.keys
+                keys = self.pool_keys
                 self._token = self.node.bus.declare_token(keys.pool_member(self.view.me))
         if back:
             self.node.log.warning("the detection loop runs again: back in the pool")
@@ -209,7 +332,7 @@ class PoolMember:
         return stalled
 
     def _on_serving(self, key: str, alive: bool) -> None:
-        parts = self.node.keys.pool_serving_parts(key)
+        parts = self.pool_keys.pool_serving_parts(key)
         if parts is None:
             return
         with self._lock:
@@ -229,7 +352,9 @@ class PoolMember:
         with self._token_lock:
             mine = {(self.view.me, self.zid, cam) for cam in self._serving_tokens}
         with self._lock:
-            report = self._audit.check(now, set(self.view.members), self._servers | mine)
+            report = self._audit.check(
+                now, self.view.members, self._servers | mine, cameras=self.view.cameras
+            )
             self._gauge(contract.POOL_WARNINGS, len(report.current))
         for line in lines(report.raised, now):
             self.node.log.warning("pool: %s", line)
@@ -245,7 +370,7 @@ class PoolMember:
 
     def _sync_serving(self, serving: frozenset[str]) -> None:
         """One serving token for each camera of ``serving``, and none for another."""
-        keys, bus = self.node.keys, self.node.bus
+        keys, bus = self.pool_keys, self.node.bus
         with self._token_lock:
             if self._token is None:
                 return  # resigned or closed: it serves nothing until it is back
@@ -268,46 +393,98 @@ class PoolMember:
             self._dirty = True
 
     def settle(self) -> None:
-        """Apply a membership change, if any, to this worker's subscriptions and counters."""
+        """Announce a capacity that moved enough; apply a change of the pool (members,
+        announcements, cameras), if any, to this worker's subscriptions and counters."""
+        self._announce_capacity()
         with self._lock:
             if not self._dirty:
                 return
             self._dirty = False
+            self._read_announcements()
+            strays = self.view.strays()
+            fresh = [w for w in strays if w not in self._strays]
+            self._strays = strays
+            self._gauge(contract.POOL_STRAYS, len(strays))
             change = self.view.settle()
+        if fresh:
+            self.node.log.warning(
+                "pool token(s) with no worker announcement ignored (no member): %s",
+                ", ".join(fresh[:MAX_LINES]),
+            )
         self._apply(change)
+
+    def _announce_capacity(self) -> None:
+        capacity = self.capacity.due(self.clock.mono_s())
+        if capacity is None:
+            return
+        self.announcement = replace(
+            self.announcement, capacity_hz=capacity, seq=self.announcement.seq + 1
+        )
+        self._announcer.update(self.announcement)
+        self.node.counters.add(contract.CAPACITY_ANNOUNCED)
+        self.node.log.info("capacity now %.1f frames/s: announced", capacity)
+        with self._lock:
+            self.view.mine = self._mine()
+            self._gauge(contract.CAPACITY_HZ, round(capacity))
+            self._dirty = True
+
+    def _read_announcements(self) -> None:
+        """The view's workers and cameras from the announcements heard (the caller holds
+        _lock; the listeners take only their own)."""
+        pool = self.pool_keys.prefix
+        if self._workers is not None:
+            self.view.announced = {
+                w: PoolWorker(a.capacity_hz, frozenset(a.prefixes or (pool,)))
+                for w, a in self._workers.current().items()
+                if w != self.view.me
+            }
+        self.view.cameras = {
+            pool_name(prefix, cam, pool): PoolCamera(prefix, cam, a.rate_hz)
+            for prefix, heard in self._cameras.items()
+            for cam, a in heard.current().items()
+        }
 
     def _apply(self, change: Change) -> None:
         node, handlers = self.node, self.handlers
+        gained = [label(cam) for cam in change.gained]
+        lost = [label(cam) for cam in change.lost]
+        serving = frozenset(label(cam) for cam in change.serving)
         with self._lock:
-            dropped = [self._subs.pop(cam) for cam in change.lost if cam in self._subs]
+            dropped = [self._subs.pop(cam) for cam in lost if cam in self._subs]
         for sub in dropped:
             sub.undeclare()
+        if self._on_lost is not None:
+            for name in lost:
+                self._on_lost(name)
+        for name, cam in zip(gained, change.gained, strict=True):
+            where = change.cameras[cam]
+            handlers.add_camera(name, Keys(where.prefix).frame(where.camera))
+            if self._on_gained is not None:
+                self._on_gained(name, where)
         with self._lock:
             # Under the lock the stall watch resigns under: a change computed before a
             # resignation (this pass stalled inside it) never switches serving back on; the
             # settle() after the next beat() serves the share again.
-            handlers.serve(
-                frozenset() if self._resigned else change.serving, change.gained, change.lost
-            )
+            handlers.serve(frozenset() if self._resigned else serving, tuple(gained), tuple(lost))
         # Bounded: no queue of stale frames ahead of the slot, which keeps the newest only.
         added = {
             cam: node.subscribe_bounded(handlers.frame_keys[cam], partial(handlers.on_frame, cam))
-            for cam in change.gained
+            for cam in gained
         }
         with self._lock:
             self._subs.update(added)
-            for cam in (*change.gained, *change.lost):
-                self._gauge(per_camera(contract.SERVING, cam), int(cam in change.serving))
+            for cam in (*gained, *lost):
+                self._gauge(per_camera(contract.SERVING, cam), int(cam in serving))
             handed_over = self._handed_over  # the first assignment, at start, is no hand-over
             self._handed_over = True
-            self._gauge(contract.SERVING, len(change.serving))
+            self._gauge(contract.SERVING, len(serving))
             self._gauge(contract.POOL_MEMBERS, change.members)
             self._gauge(contract.POOL_LOAD_PERMILLE, round(change.load * 1000))
         self._sync_serving(change.serving)
         if handed_over:
-            for cam in change.gained:
+            for cam in gained:
                 count_for(node, cam, contract.CAMERAS_GAINED)
-            for cam in change.lost:
+            for cam in lost:
                 count_for(node, cam, contract.CAMERAS_LOST)
         if change.gained or change.lost:
             node.log.info(
@@ -334,8 +511,18 @@ class PoolMember:
             self._watches.clear()
         for d in declared:
             d.undeclare()
+        for heard in self._cameras.values():
+            heard.close()
+        if self._workers is not None:
+            self._workers.close()
         with self._token_lock:
             self._withdraw_serving()
             if self._token is not None:
                 self._token.undeclare()
                 self._token = None
+        self._announcer.close()  # after the token: a token alone is ignored, never a member
+
+
+def _names(keys: list[str], parse: Callable[[str], tuple[str, str] | None]) -> set[str]:
+    """The announcers' names of announcement ``keys`` (common/keys.py's ``*_parts``)."""
+    return {parts[0] for parts in map(parse, keys) if parts is not None}

@@ -1,11 +1,18 @@
 """Which detector worker serves which camera: the pool's assignment rule. Pure: no bus, no clock.
 
-A pool has no coordinator. Every worker hears the same membership (Zenoh liveliness tokens
-``<prefix>/detector/pool/<worker>``, declared in service.py) and computes the same assignment
-from it with :func:`assign`, so the workers agree on who serves which camera without talking.
+A pool has no coordinator. Every worker hears the same bus view and computes the same
+assignment from it with common/pool_rule.py's :func:`assign_pool`, so the workers agree on who
+serves which camera without talking:
+
+- the members: a worker is one while it holds both its pool token ``<pool>/detector/pool/
+  <worker>`` and its announcement ``<pool>/detector/workers/<worker>/<chunk>`` (a
+  WorkerAnnouncement: its capacity and the robot prefixes it serves). A token without an
+  announcement (a raw session's, a stray) is no member: it cannot take cameras nobody serves;
+- the cameras: those announced (CameraAnnouncement) under each robot prefix the workers serve,
+  each weighed by its announced frame rate, never a worker's own config.
 
 The rule (common/pool_rule.py, shared with whoever audits the pool): rendezvous hashing with
-bounded loads, each camera weighted by its pixel rate.
+loads bounded in proportion to each worker's capacity, robot by robot.
 
 What follows (tests/unit/detector/test_pool.py): every camera has exactly one owner; a
 worker that joins takes about its share and no more; a worker that leaves hands on only its
@@ -16,54 +23,72 @@ next, so a tight ``balance`` can move a few more).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from common.pool_rule import DEFAULT_PIXELS, assign, camera_weights, rank
+from common.pool_rule import PoolCamera, PoolWorker, assign, assign_pool, rank
 
-__all__ = ["DEFAULT_PIXELS", "Change", "PoolView", "assign", "camera_weights", "rank"]
+__all__ = ["Change", "PoolCamera", "PoolView", "PoolWorker", "assign", "assign_pool", "rank"]
 
 
 @dataclass(frozen=True, slots=True)
 class Change:
-    """What one worker must do after the membership changed: serve ``gained``, stop serving
-    ``lost``; ``serving`` is all it now serves, ``load`` their weight (0..1) and ``members``
-    how many live workers it counted."""
+    """What one worker must do after the pool changed: serve ``gained``, stop serving
+    ``lost`` (pool names); ``serving`` is all it now serves (``cameras``: each one's robot
+    and name there), ``load`` their share (0..1) of the frame rate of every camera it hears,
+    and ``members`` how many live workers it counted."""
 
     gained: tuple[str, ...]
     lost: tuple[str, ...]
     serving: frozenset[str]
     load: float
     members: int
+    cameras: Mapping[str, PoolCamera] = field(default_factory=dict)
 
 
 class PoolView:
-    """One worker's view of the pool: the live members (itself always among them) and the
-    cameras it serves. Not thread-safe: the caller holds its lock."""
+    """One worker's view of the pool: the pool tokens and worker announcements heard, the
+    announced cameras and the cameras it serves. It is always a member itself, as ``mine``
+    says (its own announcement). Not thread-safe: the caller holds its lock."""
 
-    def __init__(self, me: str, weights: Mapping[str, float], balance: float) -> None:
+    def __init__(self, me: str, mine: PoolWorker, balance: float) -> None:
         self.me = me
-        self.weights = dict(weights)
+        self.mine = mine
         self.balance = balance
-        self.members: set[str] = {me}
+        self.tokens: set[str] = set()
+        self.announced: dict[str, PoolWorker] = {}
+        self.cameras: dict[str, PoolCamera] = {}
         self.serving: frozenset[str] = frozenset()
 
+    @property
+    def members(self) -> dict[str, PoolWorker]:
+        """The live members: a pool token and an announcement each; itself always."""
+        out = {w: self.announced[w] for w in self.tokens if w in self.announced}
+        out[self.me] = self.mine
+        return out
+
+    def strays(self) -> list[str]:
+        """Pool tokens with no announcement: ignored (no member)."""
+        return sorted(w for w in self.tokens if w not in self.announced and w != self.me)
+
     def joined(self, worker: str) -> None:
-        self.members.add(worker)
+        self.tokens.add(worker)
 
     def left(self, worker: str) -> None:
         if worker != self.me:  # our own token's loss is the lease's news, not a resignation
-            self.members.discard(worker)
+            self.tokens.discard(worker)
 
     def settle(self) -> Change:
-        """Recompute the assignment from the members; what changed for this worker."""
-        owners = assign(self.members, self.weights, self.balance)
+        """Recompute the assignment; what changed for this worker."""
+        owners = assign_pool(self.members, self.cameras, self.balance)
         serving = frozenset(c for c, w in owners.items() if w == self.me)
+        total = sum(c.rate_hz for c in self.cameras.values())
         change = Change(
             gained=tuple(sorted(serving - self.serving)),
             lost=tuple(sorted(self.serving - serving)),
             serving=serving,
-            load=sum(self.weights[c] for c in serving),
+            load=sum(self.cameras[c].rate_hz for c in serving) / total if total else 0.0,
             members=len(self.members),
+            cameras={c: self.cameras[c] for c in serving},
         )
         self.serving = serving
         return change

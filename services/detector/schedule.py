@@ -64,12 +64,13 @@ class _Slot(Generic[_T]):
 
 class CameraSlots(Generic[_T]):
     """One latest-only slot per camera (thread-safe: Zenoh's threads put, the loop takes); a
-    frame's arrival is stamped on ``clock``."""
+    frame's arrival is stamped on ``clock``. Cameras may be added later (:meth:`add`: a
+    camera announced at run time)."""
 
-    def __init__(self, cameras: Iterable[str], clock: Clock = SYSTEM_CLOCK) -> None:
+    def __init__(self, cameras: Iterable[str] = (), clock: Clock = SYSTEM_CLOCK) -> None:
         self.cameras: tuple[str, ...] = tuple(cameras)
-        if not self.cameras or len(set(self.cameras)) != len(self.cameras):
-            raise ValueError(f"cameras must be distinct and at least one, got {self.cameras}")
+        if len(set(self.cameras)) != len(self.cameras):
+            raise ValueError(f"cameras must be distinct, got {self.cameras}")
         self._cond = threading.Condition()
         self._slots: dict[str, _Slot[_T]] = {}
         self._tickets = itertools.count()
@@ -92,6 +93,12 @@ class CameraSlots(Generic[_T]):
             self._slots[camera] = _Slot(item, received, ticket)
             self._cond.notify()
         return False
+
+    def add(self, camera: str) -> None:
+        """A slot for ``camera`` too (nothing when it has one)."""
+        with self._cond:
+            if camera not in self.cameras:
+                self.cameras = (*self.cameras, camera)
 
     def take(self, max_batch: int, timeout: float, order: Order | None = None) -> list[Waiting[_T]]:
         """The next round: the waiting frames of at most ``max_batch`` cameras, those waiting

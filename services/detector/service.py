@@ -15,14 +15,18 @@ import numpy as np
 
 from common.bus import Declared, QoS
 from common.contracts import DetectorInfo
+from common.keys import Keys
 from common.node import Node
 from perception import Detector, load, variant_of
 from perception import measure_batch as measure
 from services.detector.attention import Attention
-from services.detector.contract import DetectorSettings
+from services.detector.capacity import Capacity
+from services.detector.capacity import measure as measure_capacity
+from services.detector.contract import BATCHED_FRAMES, DetectorSettings
 from services.detector.handlers import DetectorHandlers
 from services.detector.membership import PoolMember
-from services.detector.rounds import Rounds, camera_outputs, heed_controller
+from services.detector.pool import PoolCamera
+from services.detector.rounds import CameraOutput, Rounds, camera_outputs, heed_controller
 from stack.config import Config
 
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag (and the pool's membership)
@@ -36,15 +40,17 @@ def open_detector(s: DetectorSettings, max_batch: int = 1) -> tuple[Detector, st
 
 
 def served_batch(config: Config) -> int:
-    """The most frames one round takes: ``detector.max_batch``, never more than there are
-    cameras (one frame per camera per round), so one camera always runs batches of 1."""
-    return min(config.detector.max_batch, len(config.all_cameras))
+    """The most frames one round takes: ``detector.max_batch`` (a round takes one frame per
+    camera with one waiting, so one camera always runs batches of 1). The cameras are those
+    announced at run time, not the config's."""
+    return config.detector.max_batch
 
 
 def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
     """Detect on the newest frame of every camera this worker serves until ``stop`` is set;
     ``worker``: its one name (one of ``Config.detector_services``), its service, pool id and
-    principal."""
+    principal. Its cameras are those announced on the bus that the pool gives it
+    (services/detector/membership.py); each one's detections go on its own robot's keys."""
     s = config.detector
     with Node(worker, config, counters_period_s=s.counters_period_s) as node:
         served = served_batch(config)
@@ -62,18 +68,11 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
         per_round = round_size(detector, served, node.log)
         detector, note, per_round = settle_batch(detector, note, per_round, s, node.log)
         b = detector.backend  # the one that runs (settle_batch may have opened it again)
-        handlers = DetectorHandlers(config, node, node.clock)
-        outputs = camera_outputs(
-            config,
-            handlers.frame_keys,
-            lambda cam: node.publisher(node.keys.detections(cam), QoS.PERCEPTION).put,
-        )
+        handlers = DetectorHandlers(config, node, node.clock, frame_keys={})
         # Attention when short of capacity (services/detector/attention.py): the rounds'
         # order, fed by the controller's status and each camera's detections.
         attention = Attention(node.clock, s.attention_floor_hz, s.attention_hold_s, s.attention)
         status_sub = node.subscribe(node.keys.controller_status(), heed_controller(node, attention))
-        rounds = Rounds(config, node, detector, outputs, node.clock, attention)
-        pool = PoolMember(node, worker, handlers)
         info = json.dumps(
             DetectorInfo(
                 model=detector.model_path.name,
@@ -85,12 +84,37 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
                 note=note,
             )
         )
-        queryables = [_info_queryable(node, node.keys.detector_info(cam), info) for cam in outputs]
+        cameras = ServedCameras(config, node, handlers, info)
+        rounds = Rounds(config, node, detector, cameras.outputs, node.clock, attention)
         # Warm the backend up before announcing readiness: the first run allocates, and each
         # batch size may (a CUDA graph, an OpenVINO shape) on its first run.
         warm = np.full((480, 640, 3), 114, np.uint8)
         for size in sorted({1, per_round}):
             detector.detect_batch([warm] * size)
+        measured = 0.0
+        if s.capacity_hz == 0:
+            measured = measure_capacity(
+                lambda: len(detector.detect_batch([warm] * per_round)),
+                s.batch_probe_runs,
+                node.clock,
+            )
+        capacity = Capacity(measured, s, node.clock.mono_s())
+        node.log.info(
+            "capacity %.1f frames/s (%s)",
+            capacity.announced,
+            "detector.capacity_hz" if capacity.fixed else "measured",
+        )
+        pool = PoolMember(
+            node,
+            worker,
+            handlers,
+            capacity=capacity,
+            input_size=detector.info.input_height,
+            backend=f"{b.name}/{b.device}/{b.precision}",
+            max_batch=per_round,
+            on_gained=cameras.gained,
+            on_lost=cameras.lost,
+        )
         pool.join()
         pool.start_stall_watch()
         node.ready()
@@ -102,14 +126,50 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
                 node.publish_counters()
                 waiting = handlers.slots.take(per_round, _WAIT_S, attention)
                 if waiting:
+                    before, start = node.counters.get(BATCHED_FRAMES), node.clock.mono_s()
                     rounds.run(waiting)
+                    pool.observe_round(
+                        node.counters.get(BATCHED_FRAMES) - before, node.clock.mono_s() - start
+                    )
         finally:
             status_sub.undeclare()
             pool.close()
-            for queryable in queryables:
-                queryable.undeclare()
+            cameras.close()
             detector.close()
     return 0
+
+
+class ServedCameras:
+    """What the worker keeps for each camera it comes to serve (the pool member's
+    ``on_gained`` and ``on_lost``): its output (freshness gate, tracker, and a publisher on
+    the detections key of the camera's own robot) and, while it serves it, the detector's
+    info queryable on that robot's key. ``outputs`` is what the rounds publish through."""
+
+    def __init__(self, config: Config, node: Node, handlers: DetectorHandlers, info: str) -> None:
+        self.config = config
+        self.node = node
+        self.handlers = handlers
+        self.info = info
+        self.outputs: dict[str, CameraOutput] = {}
+        self.queryables: dict[str, Declared] = {}
+
+    def gained(self, name: str, cam: PoolCamera) -> None:
+        robot = Keys(cam.prefix)
+        if name not in self.outputs:
+            put = self.node.publisher(robot.detections(cam.camera), QoS.PERCEPTION).put
+            frame_keys = {name: self.handlers.frame_keys[name]}
+            self.outputs.update(camera_outputs(self.config, frame_keys, lambda _: put))
+        key = robot.detector_info(cam.camera)
+        self.queryables[name] = _info_queryable(self.node, key, self.info)
+
+    def lost(self, name: str) -> None:
+        queryable = self.queryables.pop(name, None)
+        if queryable is not None:
+            queryable.undeclare()
+
+    def close(self) -> None:
+        for name in list(self.queryables):
+            self.lost(name)
 
 
 def settle_batch(

@@ -23,7 +23,7 @@ from common.keys import Keys, camera_in_key
 from common.messages import CameraAnnouncement, Detections, ServiceCounters, Twist
 from common.node import Node, Tally
 from common.pool_audit import MAX_LINES, PoolAudit, lines
-from common.pool_rule import camera_weights
+from common.pool_rule import camera_rates
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES
 from common.zenoh_bus import open_session
@@ -63,7 +63,7 @@ class MetricsHandlers:
         self.clock = clock
         d = config.detector
         self.pool = LivePool(
-            PoolAudit(camera_weights(config.all_cameras), d.pool_balance, d.pool_alarm_s)
+            PoolAudit(camera_rates(config.all_cameras), d.pool_balance, d.pool_alarm_s)
         )
         # The cameras' figures are shown as they are announced (set_cameras), not from config.
         self.agg = Aggregator(

@@ -1,6 +1,8 @@
 """One detector process serving several cameras (issue 22): the real service alone
 (``python -m services.detector serve``, the real default model), fed real frames by this test's
-own Zenoh session, which plays the supervisor's hub. No camera process runs.
+own Zenoh session, which plays the supervisor's hub. No camera process runs: the test
+announces each camera (CameraAnnouncement) as its source would, and sends once the detector
+serves them.
 
 A camera flooding at 100 Hz beside one at 5 Hz: the 5 Hz camera still gets a detection for at
 least 90 % of its frames (each frame's subscription its own thread, the rounds fair). That each
@@ -23,11 +25,12 @@ import cv2
 import pytest
 import zenoh
 
+from common.announce import to_chunk
 from common.clock import mono_s
 from common.frames import image_to_frame
 from common.images import load_sample
 from common.keys import Keys
-from common.messages import Detections, Header, ServiceCounters
+from common.messages import CameraAnnouncement, Detections, Header, ServiceCounters
 from common.queries import ready_services
 from common.spawn import spawn, stop_child
 from common.zenoh_bus import Publisher, QoS
@@ -134,9 +137,15 @@ def serve(tmp_path: Path) -> Iterator[Any]:
 class Camera:
     """A camera as the test plays it: one photo, sent with a fresh header each time."""
 
-    def __init__(self, det: Detector, name: str, sample: str, size: tuple[int, int]) -> None:
+    def __init__(
+        self, det: Detector, name: str, sample: str, size: tuple[int, int], rate_hz: float
+    ) -> None:
         self.name = name
         self.photo = cv2.resize(load_sample(sample), size)
+        about = CameraAnnouncement(camera=name, width=size[0], height=size[1], rate_hz=rate_hz)
+        self.token = det.hub.liveliness().declare_token(
+            det.keys.camera_announcement(name, to_chunk(about))
+        )
         self.pub = Publisher(det.hub, det.keys.frame(name), QoS.SENSOR)
         self.sent: dict[int, Header] = {}  # seq -> the header sent
 
@@ -165,8 +174,13 @@ def test_a_100_hz_flood_never_starves_a_5_hz_camera(serve: Any, max_batch: int) 
         # "max": rounds really batch (measured, this CPU would keep batch 1).
         detector={"imgsz": 160, "max_batch": max_batch, "batch_choice": "max"},
     )
-    flood = Camera(det, "flood", "astronaut", (320, 240))
-    slow = Camera(det, "slow", "chelsea", (320, 240))
+    flood = Camera(det, "flood", "astronaut", (320, 240), 100.0)
+    slow = Camera(det, "slow", "chelsea", (320, 240), 5.0)
+    wait_for(
+        lambda: det.counter("serving.flood") == det.counter("serving.slow") == 1,
+        30,
+        lambda: f"the detector to serve both announced cameras:\n{det.log()}",
+    )
     pace = threading.Event()  # never set: wait() paces the sending, it waits for nothing
     start = mono_s()
     next_flood, next_slow = start, start

@@ -153,6 +153,24 @@ def _pool_arguments(p: argparse.ArgumentParser) -> None:
         default=True,
         help="2 heavy and 2 light cameras on 2 workers (default on)",
     )
+    p.add_argument(
+        "--capacity",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="a fast and a slow worker: shares by measured capacity vs even (default on)",
+    )
+    p.add_argument("--fast-size", type=int, default=320, help="the fast worker's input size")
+    p.add_argument("--slow-size", type=int, default=480, help="the slow worker's input size")
+    p.add_argument(
+        "--capacity-cameras", type=int, default=8, help="cameras of the capacity part (default 8)"
+    )
+    p.add_argument(
+        "--capacity-rate",
+        dest="capacity_rate_hz",
+        type=float,
+        default=2.0,
+        help="their rate in Hz (default 2)",
+    )
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 

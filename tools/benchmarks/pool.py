@@ -18,12 +18,14 @@ parts, in one run:
   more, none twice) and for every camera to be detected once more, before the next kill.
   Frames detected twice (the same camera and frame) are counted throughout.
 - **uneven load** (``--uneven``): 2 heavy cameras (10 Hz, 640x480) and 2 light ones (2 Hz,
-  320x240) on 2 workers. The pool weighs each camera by its pixel rate
-  (services/detector/pool.py): the table shows each worker's cameras and pixel-rate share
+  320x240) on 2 workers. The pool weighs each camera by its frame rate
+  (services/detector/pool.py): the table shows each worker's cameras and frame-rate share
   under that rule and under plain rendezvous (unweighted, no load bound: every camera to the
   worker that ranks highest for it), both computed with the pure rule, and how often each
   rule puts both heavy cameras on one worker over ``UNEVEN_TRIALS`` random sets of camera
   names; then the measured per-camera FPS under the weighted rule.
+- **capacity** (``--capacity``, tools/benchmarks/pool_capacity.py): a fast and a slow worker
+  (two input sizes), shares by measured capacity against the even split.
 
 Progress goes to stderr, the tables (or ``--json``) to stdout; Ctrl-C stops at once.
 """
@@ -37,8 +39,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from common.errors import StackError
-from common.pool_rule import assign, camera_weights
-from services.camera.contract import CameraSettings
+from common.pool_rule import assign
 from services.detector.contract import MAX_WORKERS
 from tools.benchmarks.stacks import (
     DEFAULT_RATE_HZ,
@@ -72,6 +73,11 @@ class PoolOptions:
     rate_hz: float = DEFAULT_RATE_HZ
     kills: int = 20
     uneven: bool = True
+    capacity: bool = True
+    fast_size: int = 320
+    slow_size: int = 480
+    capacity_cameras: int = 8
+    capacity_rate_hz: float = 2.0
     as_json: bool = False
 
     def __post_init__(self) -> None:
@@ -87,6 +93,17 @@ class PoolOptions:
             raise StackError(f"--kills must be within 0..1000, got {self.kills}")
         if self.kills and (2 not in self.workers or min(self.cameras) < 2):
             raise StackError("--kills needs 2 among --workers and 2 or more cameras")
+        for what, size in (("--fast-size", self.fast_size), ("--slow-size", self.slow_size)):
+            if size % 32 or not 160 <= size <= 1280:
+                raise StackError(f"{what} must be a multiple of 32 within 160..1280, got {size}")
+        if not 2 <= self.capacity_cameras <= 32:
+            raise StackError(
+                f"--capacity-cameras must be within 2..32, got {self.capacity_cameras}"
+            )
+        if not 0.1 <= self.capacity_rate_hz <= 100:
+            raise StackError(
+                f"--capacity-rate must be within 0.1..100 Hz, got {self.capacity_rate_hz}"
+            )
 
 
 # ---------------------------------------------------------------- results
@@ -105,7 +122,7 @@ class Result(PerCamera):
     p50_ms: dict[str, float]
     p95_ms: dict[str, float]
     served: dict[str, list[str]]  # each worker's cameras, by its counters at the end
-    loads: dict[str, float]  # each worker's pixel-rate share (0..1), by its counters
+    loads: dict[str, float]  # each worker's frame-rate share (0..1), by its counters
     duplicates: int
 
 
@@ -167,11 +184,13 @@ def plain_rendezvous(workers: Sequence[str], cameras: Sequence[str]) -> dict[str
 def shares(
     owners: Mapping[str, str], weights: Mapping[str, float], workers: Sequence[str]
 ) -> dict[str, tuple[list[str], float]]:
-    """Each worker's cameras and their share of the pixel rate under ``owners``."""
+    """Each worker's cameras and their share (0..1) of the cameras' frame rate under
+    ``owners``."""
+    total = sum(weights.values()) or 1.0
     return {
         w: (
             [c for c in weights if owners.get(c) == w],
-            sum(x for c, x in weights.items() if owners.get(c) == w),
+            sum(x for c, x in weights.items() if owners.get(c) == w) / total,
         )
         for w in workers
     }
@@ -180,7 +199,7 @@ def shares(
 def compare_rules(
     weights: Mapping[str, float], workers: Sequence[str], balance: float
 ) -> dict[str, dict[str, tuple[list[str], float]]]:
-    """Each worker's cameras and pixel-rate share, weighted (the pool's rule) and not."""
+    """Each worker's cameras and frame-rate share, weighted (the pool's rule) and not."""
     return {
         "weighted": shares(assign(workers, weights, balance), weights, workers),
         "plain": shares(plain_rendezvous(workers, list(weights)), weights, workers),
@@ -196,18 +215,13 @@ def heavy_together_odds(
 ) -> dict[str, Any]:
     """Over ``trials`` random sets of camera names for ``loads``: how often each rule gives
     one worker every camera of the heaviest weight, and the mean and worst of the largest
-    pixel-rate share a worker gets."""
+    frame-rate share a worker gets."""
     rng = random.Random(seed)
     together = {"weighted": 0, "plain": 0}
     largest: dict[str, list[float]] = {"weighted": [], "plain": []}
     for _ in range(trials):
         names = [f"c{rng.getrandbits(32):08x}" for _ in loads]
-        weights = camera_weights(
-            {
-                name: CameraSettings(rate_hz=load.rate_hz, resize=load.size)
-                for name, load in zip(names, loads, strict=True)
-            }
-        )
+        weights = {name: load.rate_hz for name, load in zip(names, loads, strict=True)}
         top = max(weights.values())
         heavy = [c for c, w in weights.items() if w >= top - 1e-9]
         for rule, per_worker in compare_rules(weights, workers, balance).items():
@@ -248,7 +262,7 @@ def render_results(results: Sequence[Result]) -> str:
         )
     lines.append(
         "(p50/p95: the worst camera's capture-to-detections; fair: slowest camera's "
-        "FPS / fastest's; dup: frames detected twice; load: pixel-rate share)"
+        "FPS / fastest's; dup: frames detected twice; load: frame-rate share)"
     )
     rows = pool_ratios(results)
     if rows:
@@ -280,7 +294,7 @@ def render_rules(
     lines = [
         "uneven load: "
         + ", ".join(f"{c} {w:.3f}" for c, w in weights.items())
-        + " (pixel-rate weights)"
+        + " (frame-rate weights)"
     ]
     names = {"weighted": "weighted (the pool's rule)", "plain": "plain rendezvous, unweighted"}
     for rule, per_worker in rules.items():
@@ -304,9 +318,11 @@ def to_json(
     odds: Any,
     options: PoolOptions,
     machine: Any,
+    capacity: Sequence[Any] = (),
 ) -> str:
     return json.dumps(
         {
+            "capacity": [r.as_dict() for r in capacity],
             "results": [r.as_dict() for r in results],
             "ratios": pool_ratios(results),
             "handover": {

@@ -15,9 +15,10 @@ from typing import TypeVar
 from common.clock import mono_s, wall_ns
 from common.errors import StackError
 from common.machine import machine_info
-from common.pool_rule import camera_weights
+from common.pool_rule import camera_rates
 from stack.config import Config
 from stack.config_file import load_config
+from tools.benchmarks import pool_capacity
 from tools.benchmarks.pool import (
     UNEVEN,
     Kill,
@@ -88,7 +89,7 @@ def _running(config: Config, stop: threading.Event) -> Iterator[tuple[Stack, Wat
         stop_all([stack])
 
 
-def _measure(
+def measure(
     label: str, stack: Stack, watch: Watch, options: PoolOptions, stop: threading.Event
 ) -> Result:
     """Wait for the split and the warm-up, then measure ``options.seconds``."""
@@ -195,7 +196,7 @@ def main(options: PoolOptions, stop: threading.Event) -> int:
             loads = [CameraLoad(options.rate_hz)] * n
             config = stack_config(base, Path(tmp) / f"n{n}-w{w}.toml", loads, tag="pool", workers=w)
             with _running(config, stop) as (s, watch):
-                results.append(_measure("even", s, watch, options, stop))
+                results.append(measure("even", s, watch, options, stop))
                 if (n, w) == kill_in:
                     progress(f"  {options.kills} SIGKILLs")
                     kills, duplicates = _kill_series(s, watch, options.kills, stop)
@@ -203,15 +204,18 @@ def main(options: PoolOptions, stop: threading.Event) -> int:
         rules = odds = weights = None
         if options.uneven:
             config = stack_config(base, Path(tmp) / "uneven.toml", UNEVEN, tag="pool", workers=2)
-            weights = camera_weights(config.all_cameras)
+            weights = camera_rates(config.all_cameras)
             workers = list(config.detector_services)
             rules = compare_rules(weights, workers, config.detector.pool_balance)
             odds = heavy_together_odds(UNEVEN, workers, config.detector.pool_balance)
             progress(f"[uneven] {render_rules(rules, weights, odds)}")
             with _running(config, stop) as (s, watch):
-                results.append(_measure("uneven", s, watch, options, stop))
+                results.append(measure("uneven", s, watch, options, stop))
+        capacity = (
+            pool_capacity.run(base, Path(tmp), options, stop, measure) if options.capacity else []
+        )
     if options.as_json:
-        print(to_json(results, kills, duplicates, rules, odds, options, machine_info()))
+        print(to_json(results, kills, duplicates, rules, odds, options, machine_info(), capacity))
         return 0
     print(render_results(results))
     if kills:
@@ -224,4 +228,6 @@ def main(options: PoolOptions, stop: threading.Event) -> int:
             + ", ".join(f"{c} {uneven.fps[c]:.2f} of {uneven.asked_hz[c]:g} Hz" for c in uneven.fps)
             + f"; fairness {uneven.fairness:.2f}; served {uneven.served}"
         )
+    if capacity:
+        print("\n" + pool_capacity.render(capacity))
     return 0

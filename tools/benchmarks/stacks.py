@@ -230,10 +230,11 @@ class Watch:
     detected twice; and always each camera's detections (arrival on this process's monotonic
     clock, capture stamp) and each worker's latest counters (arrival, counters)."""
 
-    def __init__(self, stack: Stack) -> None:
+    def __init__(self, stack: Stack, workers: Sequence[str] = ()) -> None:
+        """``workers``: the detector workers to hear (default: the config's)."""
         self.stack = stack
         self.cameras = list(stack.config.all_cameras)
-        self.workers = list(stack.config.detector_services)
+        self.workers = list(workers or stack.config.detector_services)
         self.keys = Keys(stack.config.stack.prefix)
         self._lock = threading.Lock()
         self._counters: dict[str, tuple[float, dict[str, int]]] = {}
@@ -315,7 +316,7 @@ class Watch:
         return out
 
     def loads(self) -> dict[str, float]:
-        """Each worker's load by its latest counters: its cameras' share of the pixel rate."""
+        """Each worker's load by its latest counters: its cameras' share of the frame rate."""
         with self._lock:
             return {
                 w: c.get(detector.POOL_LOAD_PERMILLE, 0) / 1000

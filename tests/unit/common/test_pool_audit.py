@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from common.pool_audit import MAX_LINES, PoolAudit, Report, lines
-from common.pool_rule import assign
+from common.pool_rule import PoolCamera, PoolWorker, assign, assign_pool
 
 EVEN = {"front": 0.5, "rear": 0.5}
 ALARM_S = 10.0
@@ -85,3 +85,26 @@ def test_a_flood_of_stray_tokens_is_said_in_a_bounded_number_of_lines() -> None:
     said = lines(report.raised, ALARM_S)
     assert len(said) == MAX_LINES + 1
     assert said[-1] == f"and {len(report.raised) - MAX_LINES} more findings about the pool"
+
+
+def test_announced_members_and_cameras_are_audited_by_capacity_and_robot() -> None:
+    """As the workers audit (issue 31): members with their announced capacity and robots,
+    cameras as announced. The fast worker serving all of robot r1's cameras is what the rule
+    gives it; robot r2's camera, which no member lists, is unserved."""
+    audit = PoolAudit({}, 1.0, ALARM_S)
+    cameras = {
+        "front": PoolCamera("r1", "front", 2.0),
+        "rear": PoolCamera("r1", "rear", 2.0),
+        "r2/front": PoolCamera("r2", "front", 2.0),
+    }
+    members = {
+        "fast": PoolWorker(30.0, frozenset({"r1"})),
+        "slow": PoolWorker(1.0, frozenset({"r1"})),
+    }
+    owners = assign_pool(members, cameras, 1.0)
+    assert owners == {"front": "fast", "rear": "fast"}  # slow's share is under one camera
+    serving = {("fast", "zf", "front"), ("fast", "zf", "rear")}
+    audit.check(0.0, members, serving, cameras=cameras)
+    report = audit.check(ALARM_S, members, serving, cameras=cameras)
+    assert kinds(report) == {("unserved", "r2/front")}
+    assert "no worker serves its robot" in report.current[0].detail

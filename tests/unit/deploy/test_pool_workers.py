@@ -103,7 +103,8 @@ def test_each_worker_is_a_principal_that_announces_only_itself() -> None:
     for w in workers:
         rule = next(r for r in acl["rules"] if r["id"] == f"{w}_token")
         assert set(rule["key_exprs"]) == {
-            keys.health(w), keys.pool_member(w), keys.pool_serving_of(w),
+            keys.health(w), keys.pool_member(w), keys.worker_announcements_of(w),
+            keys.pool_serving_of(w),
         }  # fmt: skip
         assert set(may_announce(keys, cameras, w, workers=workers)) == set(rule["key_exprs"])
         # Every camera's detections (any worker may serve any camera), its counters, no frame.
@@ -114,5 +115,6 @@ def test_each_worker_is_a_principal_that_announces_only_itself() -> None:
     acl = access_control(keys, "front", "password")
     rule = next(r for r in acl["rules"] if r["id"] == "detector_token")
     assert set(rule["key_exprs"]) == {
-        keys.health("detector"), keys.pool_member("detector"), keys.pool_serving_of("detector"),
+        keys.health("detector"), keys.pool_member("detector"),
+        keys.worker_announcements_of("detector"), keys.pool_serving_of("detector"),
     }  # fmt: skip

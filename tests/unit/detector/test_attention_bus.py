@@ -6,10 +6,12 @@ with a FakeClock and the real default model; in one process, no waits."""
 from __future__ import annotations
 
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 
 import pytest
 
+from common.announce import Announcer
 from common.bus import QoS
 from common.clock import FakeClock
 from common.counters import per_camera
@@ -17,7 +19,7 @@ from common.frames import image_to_frame
 from common.images import load_sample
 from common.keys import Keys
 from common.memory_bus import MemoryHub
-from common.messages import ControllerStatus
+from common.messages import CameraAnnouncement, ControllerStatus
 from common.node import Node
 from perception.pipeline import Detector
 from services.detector import contract
@@ -62,11 +64,15 @@ class Station:
             lambda cam: node.publisher(node.keys.detections(cam), QoS.PERCEPTION).put,
         )
         self.rounds = Rounds(config, node, detector, outputs, self.clock, self.attention)
-        PoolMember(node, "detector", self.handlers).join()
         self.cameras = {
             cam: Node(p, config, bus=self.hub.join(p, principal=p), clock=self.clock)
             for cam, p in principals.items()
         }
+        for cam, cam_node in self.cameras.items():  # each source announces its camera
+            Announcer(cam_node.bus, partial(keys.camera_announcement, cam)).update(
+                CameraAnnouncement(camera=cam, rate_hz=5.0)
+            )
+        PoolMember(node, "detector", self.handlers).join()
         ctl = self.hub.join("controller", principal="controller")
         self.controller = Node("controller", config, bus=ctl, clock=self.clock)
 

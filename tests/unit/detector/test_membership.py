@@ -11,25 +11,31 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from common.announce import to_chunk
 from common.bus import Declared, QoS
 from common.clock import FakeClock
 from common.counters import per_camera
 from common.errors import StackError
 from common.frames import image_to_frame
 from common.memory_bus import MemoryHub
-from common.messages import Header
+from common.messages import Header, WorkerAnnouncement
 from common.node import Node
 from services.detector.membership import AUDIT_PERIOD_S
-from services.detector.pool import assign, camera_weights
+from services.detector.pool import assign
 from stack.config import Config
-from tests.unit.detector.inprocess import Worker, cameras_config
+from tests.unit.detector.inprocess import CameraSource, Worker, cameras_config
 
 CAMERAS = ("front", "rear", "left", "right", "top", "back")
 
 
 @pytest.fixture
 def hub() -> MemoryHub:
-    return MemoryHub()
+    """The bus, with CAMERAS announced on it (equal rates) by their source."""
+    hub = MemoryHub()
+    source = CameraSource(hub)
+    for cam in CAMERAS:
+        source.announce(cam)
+    return hub
 
 
 @pytest.fixture
@@ -75,6 +81,8 @@ def assert_each_camera_served_once(workers: list[Worker], hub: MemoryHub) -> Non
         for cam in CAMERAS:
             assert w.count(per_camera("serving", cam)) == int(cam in w.handlers.serving)
     assert abs(sum(w.count("pool_load_permille") for w in workers) - 1000) <= len(workers)
+    heard = {k.rsplit("/", 2)[-2] for k in hub.tokens(keys.all_worker_announcements())}
+    assert heard >= {w.name for w in workers}  # each member announces itself
 
 
 def put_frame(hub: MemoryHub, config: Config, camera: str, clock: FakeClock) -> None:
@@ -187,7 +195,7 @@ def test_a_settle_while_resigned_never_serves_again_until_the_next_beat(
     # Only its next beat brings it back, with its share of the three.
     d = config.detector
     owners = assign(
-        ["detector", "detector_2", "detector_3"], camera_weights(config.all_cameras), d.pool_balance
+        ["detector", "detector_2", "detector_3"], dict.fromkeys(CAMERAS, 5.0), d.pool_balance
     )
     assert a.loop_pass() == {cam for cam, w in owners.items() if w == "detector"} != share
     b.loop_pass()
@@ -280,10 +288,15 @@ def test_the_audit_warns_of_a_camera_nobody_serves_after_the_alarm_time_and_clea
 ) -> None:
     alarm_s = config.detector.pool_alarm_s
     (a,) = start(hub, clock, config, "detector")
-    # A member that serves nothing (a raw session's token): the cameras the rule gives it
-    # are served by nobody.
+    # A member that serves nothing (a hung worker: its token and announcement alive): the
+    # cameras the rule gives it are served by nobody.
     probe = hub.join("raw")
-    ghost = probe.declare_token(a.node.keys.pool_member("ghost"))
+    keys = a.node.keys
+    hung = WorkerAnnouncement(worker="ghost", capacity_hz=1.0, prefixes=("stack",))
+    ghost = [
+        probe.declare_token(keys.worker_announcement("ghost", to_chunk(hung))),
+        probe.declare_token(keys.pool_member("ghost")),
+    ]
     given = frozenset(CAMERAS) - a.loop_pass()
     assert given, "the ghost was given no camera: the test tests nothing"
     clock.advance(AUDIT_PERIOD_S)
@@ -298,8 +311,9 @@ def test_the_audit_warns_of_a_camera_nobody_serves_after_the_alarm_time_and_clea
     assert a.count("pool_warnings") == len(report.current) == len(given) + 1
     assert "is served by no detector worker" in caplog.text
     assert a.pool.audit() is None  # not again within the audit period
-    # The stray token goes: the worker takes every camera again and the warnings clear.
-    ghost.undeclare()
+    # The hung worker goes: the worker takes every camera again and the warnings clear.
+    for token in ghost:
+        token.undeclare()
     caplog.clear()
     assert a.loop_pass() == frozenset(CAMERAS)
     clock.advance(AUDIT_PERIOD_S)

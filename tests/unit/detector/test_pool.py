@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import pytest
 
+from common.pool_rule import camera_rates, label, pool_name
 from services.camera.contract import CameraSettings
-from services.detector.pool import PoolView, assign, camera_weights, rank
+from services.detector.pool import PoolCamera, PoolView, PoolWorker, assign, assign_pool, rank
 
 EVEN = {f"cam{i}": 1.0 for i in range(12)}
 
@@ -70,29 +71,54 @@ def test_balance_below_one_is_refused() -> None:
         assign(["a"], EVEN, 0.5)
 
 
-def test_weights_are_pixel_rates_normalised() -> None:
+def test_a_configs_cameras_weigh_their_frame_rates() -> None:
     cams = {
         "hd": CameraSettings(rate_hz=10.0, resize=(1280, 720)),
-        "vga": CameraSettings(rate_hz=10.0, resize=(640, 480)),
-        "source_size": CameraSettings(rate_hz=5.0),  # counted as VGA
+        "source_size": CameraSettings(rate_hz=5.0),
     }
-    w = camera_weights(cams)
-    assert sum(w.values()) == pytest.approx(1.0)
-    assert w["hd"] / w["vga"] == pytest.approx(3.0)
-    assert w["vga"] / w["source_size"] == pytest.approx(2.0)
+    assert camera_rates(cams) == {"hd": 10.0, "source_size": 5.0}
+
+
+def test_a_camera_of_another_robot_is_named_with_its_prefix() -> None:
+    assert pool_name("stack", "front", "stack") == "front"
+    assert pool_name("site/robot2", "front", "stack") == "site/robot2/front"
+    assert label("site/robot2/front") == "site:robot2:front"
+    assert label("r.2/front") == "r_2:front"  # a counter's camera follows its last dot
+    assert label("front") == "front"
+
+
+def test_each_robots_cameras_go_to_the_workers_that_list_it_by_capacity() -> None:
+    cams = {
+        **{f"c{i}": PoolCamera("r1", f"c{i}", 5.0) for i in range(8)},
+        **{f"r2/c{i}": PoolCamera("r2", f"c{i}", 5.0) for i in range(4)},
+    }
+    workers = {
+        "gpu": PoolWorker(30.0, frozenset({"r1", "r2"})),
+        "cpu": PoolWorker(10.0, frozenset({"r1"})),
+    }
+    owners = assign_pool(workers, cams, 1.0)
+    assert set(owners) == set(cams)
+    assert {owners[f"r2/c{i}"] for i in range(4)} == {"gpu"}  # only gpu lists r2
+    assert sum(1 for i in range(8) if owners[f"c{i}"] == "gpu") == 6  # 3/4 of r1's
+    assert assign_pool({"cpu": workers["cpu"]}, cams, 1.0) == {f"c{i}": "cpu" for i in range(8)}
 
 
 def test_view_reports_gains_and_losses() -> None:
-    weights = {"a": 1.0, "b": 1.0, "c": 1.0, "d": 1.0}
-    view = PoolView("w1", weights, 1.25)
+    cams = {c: PoolCamera("stack", c, 5.0) for c in "abcd"}
+    one = frozenset({"stack"})
+    view = PoolView("w1", PoolWorker(1.0, one), 1.25)
+    view.cameras = cams
     first = view.settle()
-    assert set(first.gained) == set(weights) and first.lost == () and first.members == 1
+    assert set(first.gained) == set(cams) and first.lost == () and first.members == 1
     view.joined("w2")
+    assert view.settle().gained == ()  # a token alone is no member
+    assert view.strays() == ["w2"]
+    view.announced["w2"] = PoolWorker(1.0, one)
     shared = view.settle()
-    assert shared.gained == () and 1 <= len(shared.lost) <= 3
-    assert shared.serving == set(weights) - set(shared.lost)
+    assert shared.gained == () and 1 <= len(shared.lost) <= 3 and shared.members == 2
+    assert shared.serving == set(cams) - set(shared.lost)
     view.left("w2")
     back = view.settle()
-    assert set(back.gained) == set(shared.lost) and back.serving == set(weights)
+    assert set(back.gained) == set(shared.lost) and back.serving == set(cams)
     view.left("w1")  # its own token's loss: it keeps counting itself
-    assert view.settle().serving == set(weights)
+    assert view.settle().serving == set(cams)

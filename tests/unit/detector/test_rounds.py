@@ -149,11 +149,13 @@ def test_a_stale_frame_is_counted_for_its_camera_and_not_detected_on(served: Ser
     assert served.count("batched_frames") == 1  # the stale frame never reached the model
 
 
-def test_the_served_batch_is_max_batch_but_never_more_than_the_cameras(tmp_path: Path) -> None:
+def test_the_served_batch_is_max_batch_whatever_the_configs_cameras(tmp_path: Path) -> None:
+    """The cameras are those announced at run time: a round takes at most one frame per
+    camera waiting (so one camera runs batches of 1), up to ``detector.max_batch``."""
     model = halves_model(tmp_path)
-    assert served_batch(three_cameras(model, max_batch=4)) == 3
+    assert served_batch(three_cameras(model, max_batch=4)) == 4
     assert served_batch(three_cameras(model, max_batch=2)) == 2
-    assert served_batch(Config(detector=DetectorSettings(max_batch=32))) == 1
+    assert served_batch(Config(detector=DetectorSettings(max_batch=32))) == 32
 
 
 def test_detect_batch_equals_one_detect_per_image(served: Served) -> None:

@@ -23,7 +23,7 @@ from services.detector.contract import DetectorSettings
 from services.detector.handlers import DetectorHandlers
 from services.detector.membership import PoolMember
 from services.detector.rounds import Rounds, camera_outputs
-from tests.unit.detector.inprocess import cameras_config
+from tests.unit.detector.inprocess import CameraSource, cameras_config
 
 CAMERAS = ("front", "rear")
 
@@ -54,7 +54,10 @@ class Station:
         )
         self.rounds = Rounds(config, node, detector, outputs, self.clock)
         self.pool = PoolMember(node, "detector", self.handlers)
-        self.pool.join()  # alone: it subscribes to every camera's frames
+        self.source = CameraSource(self.hub)  # the cameras' announcements, as their source's
+        for cam in CAMERAS:
+            self.source.announce(cam)
+        self.pool.join()  # alone: it subscribes to every announced camera's frames
         self.camera = Node("camera", config, bus=self.hub.join("camera"), clock=self.clock)
         self.heard: dict[str, list[Detections]] = {cam: [] for cam in CAMERAS}
         probe = self.hub.join("probe")

@@ -46,6 +46,7 @@ PUT_KEYS = (
 TOKENS = (
     *(KEYS.health(p) for p in PRINCIPALS),
     *(KEYS.pool_member(w) for w in WORKERS),
+    *(KEYS.worker_announcement(w, "AAAA") for w in WORKERS),
     *(KEYS.pool_serving(w, "z1", c) for w, c in itertools.product(WORKERS, CAMERAS)),
     *(KEYS.camera_announcement(c, "QUJD") for c in (*CAMERAS, "side")),
 )

@@ -4,6 +4,7 @@ compared, the odds over random names, the configs it writes, the text and the op
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -184,3 +185,29 @@ def test_options_are_checked() -> None:
     assert _counts(1, 8)("1,2") == (1, 2)
     with pytest.raises(argparse.ArgumentTypeError):
         _counts(1, 8)("9")
+
+
+def test_the_capacity_part_reports_each_workers_share_gap_and_the_p95_ratio() -> None:
+    from tools.benchmarks.pool_capacity import CapacityRun, render
+
+    def run(label: str, load: float, p95: float) -> CapacityRun:
+        return CapacityRun(
+            label=label,
+            input_size={"detector": 320, "detector_2": 640},
+            capacity_hz={"detector": 30.0, "detector_2": 10.0},
+            announcements={"detector": 0, "detector_2": 1},
+            load_share={"detector": load, "detector_2": 1 - load},
+            served={"detector": ["a"], "detector_2": ["b"]},
+            fps={"a": 3.0, "b": 3.0},
+            p95_ms={"a": 100.0, "b": p95},
+        )
+
+    measured, even = run("capacity", 0.7, 200.0), run("even", 0.5, 800.0)
+    assert measured.capacity_share == {"detector": 0.75, "detector_2": 0.25}
+    assert measured.share_gap["detector_2"] == pytest.approx(0.05)
+    text = render([measured, even])
+    assert "largest share gap 5% of the load (within 15 %; one camera is 50%)" in text
+    far = dataclasses.replace(measured, load_share={"detector": 0.5, "detector_2": 0.5})
+    assert "gap 25% of the load (NOT within 15 %" in render([far])
+    assert "200 ms by capacity vs 800 ms even (0.25x)" in text
+    assert json.loads(json.dumps(measured.as_dict()))["worst_p95_ms"] == 200.0
