@@ -152,19 +152,23 @@ def _table(
     workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
     prefixes: Iterable[str] = (),
     remote: Iterable[str] = (),
+    pool_prefix: str = "",
 ) -> dict[str, Access]:
     """Each principal's access; with ``remote`` (the principals other hosts run), another
     host's detector workers among them, and the linked routers' (ROUTER_PRINCIPAL's)."""
     remote = tuple(remote)
     pool = tuple(dict.fromkeys((*workers, *(p for p in remote if is_detector_service(p)))))
-    shape = Shape(keys, camera_services(cameras), pool, live_sensors, tuple(prefixes))
+    shape = Shape(keys, camera_services(cameras), pool, live_sensors, tuple(prefixes), pool_prefix)
     table = access_table(shape)
     if remote:
         # A pool's router linked to the routers of the robots it serves: their principals
         # act on their own robot's keys, so the link may do what they may on each prefix.
         robots = (
             shape,
-            *(dataclasses.replace(shape, keys=k, prefixes=()) for k in shape.other_robots()),
+            *(
+                dataclasses.replace(shape, keys=k, prefixes=(), pool_prefix="")
+                for k in shape.other_robots()
+            ),
         )
         tables = [table, *(access_table(r) for r in robots[1:])]
         table[ROUTER_PRINCIPAL] = merged(linked_router_access(t, remote) for t in tables)
@@ -181,8 +185,9 @@ def merged(accesses: Iterable[Access]) -> Access:
 
 
 def ask_scope(keys: Keys, prefixes: Iterable[str] = ()) -> list[str]:
-    """Where to ask (query, watch and look up tokens): the stack's prefix (every principal),
-    then each further robot prefix the detector workers serve (they, and a linked router)."""
+    """Where to ask (query, watch and look up tokens): the stack's prefix, then ``prefixes``
+    (every principal asks in the pool's; only the workers and a linked router in the further
+    robots' their pool serves)."""
     return [f"{p}/**" for p in dict.fromkeys((keys.prefix, *prefixes))]
 
 
@@ -196,6 +201,7 @@ def access_control(
     workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
     prefixes: Iterable[str] = (),
     remote: Iterable[str] = (),
+    pool_prefix: str = "",
 ) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for the router: deny by default, then allow each
     principal its own keys on ingress (puts, tokens, queryables, subscriptions), queries and
@@ -204,6 +210,7 @@ def access_control(
     common.security.camera_services; ``principals`` (default: stack_principals) limits the
     rules to those named; ``workers``: the detector workers' names (``Config.detector_services``),
     each a principal; ``prefixes``: the robot prefixes they serve (empty: the stack's own);
+    ``pool_prefix``: where their pool lives (empty: the stack's prefix), where all may ask;
     ``remote``: the principals other hosts run, whose traffic a linked router brings
     (:func:`linked_router_access`; another host's workers are principals here too)."""
     if auth not in AUTH_MODES[1:]:
@@ -228,12 +235,12 @@ def access_control(
             "messages": list(_ASK_MESSAGES),
             "flows": ["ingress"],
             "permission": "allow",
-            "key_exprs": ask_scope(keys),
+            "key_exprs": ask_scope(keys, (pool_prefix,) if pool_prefix else ()),
         },
     ]
     subjects: list[dict[str, Any]] = [{"id": "everyone", match: list(principals)}]
     policies: list[dict[str, Any]] = [{"rules": ["egress", "ask"], "subjects": ["everyone"]}]
-    served = ask_scope(keys, prefixes)[1:]
+    served = [e for e in ask_scope(keys, prefixes) if e not in rules[-1]["key_exprs"]]
     if served:
         # The other robots a pool serves: only its workers (and a linked router, which
         # brings the asks of the other hosts' principals) may ask there.
@@ -242,7 +249,7 @@ def access_control(
         subjects.append({"id": "served_askers", match: askers})
         policies.append({"rules": ["ask_served"], "subjects": ["served_askers"]})
     for principal, allowed in _table(
-        keys, cameras, live_sensors, workers, prefixes, remote
+        keys, cameras, live_sensors, workers, prefixes, remote, pool_prefix
     ).items():
         if principal not in principals:
             continue
@@ -289,6 +296,7 @@ def congestion_overwritten(
     cameras: str | Mapping[str, str],
     *,
     workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+    prefixes: Iterable[str] = (),
 ) -> tuple[str, ...]:
     """The keys on which the router puts congestion control DROP on every sample it takes in,
     whatever its publisher asked for: every key any principal may put on (a replay's too),
@@ -296,7 +304,7 @@ def congestion_overwritten(
     listener's) and hold up everyone's traffic behind it (docs/security.md, "QoS by role")."""
     puts: dict[str, None] = {}
     for live in (True, False):
-        for allowed in _table(keys, cameras, live, workers).values():
+        for allowed in _table(keys, cameras, live, workers, prefixes).values():
             puts.update(dict.fromkeys(allowed.put))
     return tuple(k for k in puts if k != keys.estop())
 

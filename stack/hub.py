@@ -32,7 +32,9 @@ def hub_access(config: Config) -> dict[str, Any]:
             z.auth,
             live_sensors=live,
             workers=config.detector_services,
+            prefixes=config.detector.prefixes,
             remote=z.remote_principals,
+            pool_prefix=config.detector.pool_prefix,
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from exc
@@ -44,7 +46,9 @@ def hub_drop_keys(config: Config) -> tuple[str, ...]:
     keys = Keys(config.stack.prefix)
     remote = [p for p in config.zenoh.remote_principals if is_detector_service(p)]
     workers = (*config.detector_services, *remote)
-    return congestion_overwritten(keys, config.camera_services, workers=workers)
+    return congestion_overwritten(
+        keys, config.camera_services, workers=workers, prefixes=config.detector.prefixes
+    )
 
 
 def check_credentials(config: Config) -> None:

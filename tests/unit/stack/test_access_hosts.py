@@ -210,3 +210,24 @@ def test_a_gpu_boxs_router_serving_two_robots_confines_its_worker_to_frames_and_
     worker.live_tokens("robot3/health/*", 1.0)
     asked = [key for who, kind, key in hub.denied if who == GPU_WORKER and kind != "put"]
     assert asked == ["robot3/health/*"]
+
+
+def test_a_pool_under_its_own_prefix_announces_there_and_every_principal_may_watch_it() -> None:
+    """``detector.pool_prefix``: the workers' pool tokens and announcements live there, the
+    workers may declare only their own, and every principal may ask there (the metrics
+    watch the pool); nothing else of the pool prefix is anyone's."""
+    pool = Keys("pool")
+    acl = access_control(
+        ROBOT1, CAMERAS, "certificate", workers=("detector",), pool_prefix=pool.prefix
+    )
+    hub = MemoryHub(acl)
+    worker = hub.join("detector", principal="detector")
+    for key in (pool.pool_member("detector"), pool.pool_member("detector_9"),
+                ROBOT1.pool_member("detector")):  # fmt: skip
+        worker.declare_token(key)
+    assert hub.tokens() == [pool.pool_member("detector")]
+    seen: list[str] = []
+    hub.join("metrics", principal="metrics").watch_tokens(
+        pool.all_pool_members(), lambda k, alive: seen.append(k)
+    )
+    assert seen == [pool.pool_member("detector")]
