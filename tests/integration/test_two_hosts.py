@@ -234,6 +234,7 @@ def test_detector_on_another_host_survives_a_cut_link(hosts: Hosts, tmp_path: Pa
 #: its own config): all on host B, the robot.
 POOL_CAMERAS = {"front": "cameraman", "rear": "astronaut"}
 POOL_WORKERS = {"a": "detector_a", "b": "detector_b"}  # detector.worker_id -> its worker
+POOL_CAPACITY_HZ = 10.0  # detector.capacity_hz of both workers
 
 
 def _pool_tables(stack: dict[str, str], worker_id: str) -> dict[str, Any]:
@@ -242,7 +243,10 @@ def _pool_tables(stack: dict[str, str], worker_id: str) -> dict[str, Any]:
         "stack": stack,
         "camera": {**cams["front"], "rate_hz": 3.0, "resize": [320, 240]},
         "cameras.rear": cams["rear"],
-        "detector": {"worker_id": worker_id, "imgsz": 320},
+        # One stated capacity for both workers: shares follow capacity, and one measured at
+        # start on a loaded machine may be twice the other's, which would give one worker
+        # both cameras; these tests are about the split across hosts, not the measure.
+        "detector": {"worker_id": worker_id, "imgsz": 320, "capacity_hz": POOL_CAPACITY_HZ},
     }
 
 
