@@ -67,12 +67,25 @@ class Shape:
     """What a contract's access depends on. ``cameras``: each camera's service (and
     principal) by camera name, the first camera first; ``workers``: the detector workers'
     names, each a principal; ``live_sensors``: the stack runs a camera, the simulator or the
-    ROS 2 bridge (so nothing may be played back onto their keys)."""
+    ROS 2 bridge (so nothing may be played back onto their keys); ``prefixes``: the robot
+    prefixes the workers serve (``detector.prefixes``; empty: the stack's own only);
+    ``pool_prefix``: where their pool lives (``detector.pool_prefix``)."""
 
     keys: Keys
     cameras: Mapping[str, str]
     workers: tuple[str, ...]
     live_sensors: bool = True
+    prefixes: tuple[str, ...] = ()
+    pool_prefix: str = ""
+
+    def pool_keys(self) -> Keys:
+        """Where the workers' pool tokens and announcements live (``detector.pool_prefix``;
+        empty: the stack's prefix)."""
+        return Keys(self.pool_prefix) if self.pool_prefix else self.keys
+
+    def other_robots(self) -> tuple[Keys, ...]:
+        """The keys of each robot the workers serve besides the stack's own."""
+        return tuple(Keys(p) for p in dict.fromkeys(self.prefixes) if p != self.keys.prefix)
 
     def frames(self) -> tuple[str, ...]:
         """Each configured camera's frame key: nobody may put on a camera the stack lacks."""

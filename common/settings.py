@@ -94,6 +94,14 @@ class ZenohSettings:
     it needs client mode. An endpoint ``tls/<host>:<port>`` encrypts the links with the same
     credentials; "certificate" needs one (mutual TLS). See docs/security.md.
 
+    Routers linked across hosts (``connect`` on a host whose supervisor is a router): each
+    router admits the other's traffic as the principal of the router's certificate
+    (``supervisor``), and lets it do what ``remote_principals`` may do together: the
+    principals the other hosts run (``detector_a`` on the robot; the robot's cameras, worker,
+    controller, metrics ... on the GPU box). Empty: a linked router may only ask (queries,
+    liveliness). Under access control that needs ``auth = "certificate"``: with passwords
+    the router that dials cannot tell which router answered, and its rules deny it all.
+
     ``max_payload_bytes`` is the largest payload a service sends; a larger one is counted
     (``payload_too_large``) and not sent, because Zenoh silently loses big payloads under
     congestion control DROP (64 MiB on loopback; 48 MiB still arrived). 32 MiB leaves a
@@ -109,9 +117,14 @@ class ZenohSettings:
     auth: str = "none"
     credentials_dir: str = "secrets"
     max_payload_bytes: int = 32 * 1024 * 1024
+    remote_principals: tuple[str, ...] = ()
 
     BOUNDS: ClassVar[Bounds] = {"max_payload_bytes": (MIN_PAYLOAD_LIMIT, MAX_PAYLOAD_LIMIT)}
-    LENGTHS: ClassVar[Bounds] = {"connect": (0, 16), "listen": (0, 16)}
+    LENGTHS: ClassVar[Bounds] = {
+        "connect": (0, 16),
+        "listen": (0, 16),
+        "remote_principals": (0, 64),
+    }
 
     def __post_init__(self) -> None:
         check_bounds(self, "zenoh", self.BOUNDS)
@@ -131,6 +144,13 @@ class ZenohSettings:
             )
         if self.auth == "certificate" and not self.uses_tls:
             raise ConfigError('zenoh.auth = "certificate" needs a tls/<host>:<port> endpoint')
+        if self.auth == "password" and self.connect:
+            raise ConfigError(
+                'zenoh.connect (routers linked across hosts) needs zenoh.auth = "certificate" '
+                "under access control: with passwords the router that dials cannot tell which "
+                "router answered, so its rules would refuse all of that router's traffic "
+                '(docs/security.md, "Two hosts, secured")'
+            )
         if not self.credentials_dir:
             raise ConfigError("zenoh.credentials_dir must not be empty")
 

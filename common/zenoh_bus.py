@@ -289,6 +289,11 @@ def _security(settings: ZenohSettings, principal: str, hub: bool) -> dict[str, A
             )
             tls["listen_private_key"] = readable(key_file(creds, principal), "private key")
             tls["enable_mtls"] = settings.auth == "certificate"
+            if settings.auth == "certificate" and settings.connect:
+                # Linked to another host's router: prove this router with the same certificate
+                # (client authentication too), so that the other admits it as the supervisor.
+                tls["connect_certificate"] = tls["listen_certificate"]
+                tls["connect_private_key"] = tls["listen_private_key"]
         elif settings.auth == "certificate":
             tls["connect_certificate"] = readable(
                 cert_file(creds, principal), "certificate", secret=False

@@ -7,8 +7,9 @@ router's ``user:password`` dictionary, and a private CA with a key and certifica
 (common name = principal). The principals are those of the config's stack: one per camera
 (``camera``, and ``camera_<name>`` for each further camera), one per detector worker
 (``detector``, ``detector_2`` ..., or ``detector_<worker_id>`` ...), one per other service,
-``estop``, ``observer`` and the supervisor; and each --worker NAME, a detector worker another
-host runs (``detector_a``), so that one set of credentials (one CA) serves a pool across hosts.
+``estop``, ``observer`` and the supervisor; and each --worker NAME (and each worker of the
+config's ``zenoh.remote_principals``), a detector worker another host runs (``detector_a``), so
+that one set of credentials (one CA) serves a pool across hosts.
 Only the supervisor's certificate can serve the TLS listener: it alone names ``localhost``,
 ``127.0.0.1`` and each --host and allows server authentication. Every other certificate names
 no host and allows client authentication only, so a client that checks the router's name
@@ -275,14 +276,16 @@ def _credentials_arguments(p: argparse.ArgumentParser) -> None:
 
 def credential_workers(config: Config, others: list[str]) -> tuple[str, ...]:
     """The detector workers to make principals for: the config's, then ``others`` (other
-    hosts' workers, by name); ConfigError, one line, for a name no worker can have."""
+    hosts' workers, by name), then those among the config's ``zenoh.remote_principals``;
+    ConfigError, one line, for a name no worker can have."""
     for name in others:
         if not is_detector_service(name):
             raise ConfigError(
                 f"--worker {name!r} is not a detector worker's name: detector, detector_<n>, "
                 "detector_<worker_id> or detector_<worker_id>_<n> (docs/detector.md)"
             )
-    return tuple(dict.fromkeys((*config.detector_services, *others)))
+    remote = [p for p in config.zenoh.remote_principals if is_detector_service(p)]
+    return tuple(dict.fromkeys((*config.detector_services, *others, *remote)))
 
 
 def _credentials(args: argparse.Namespace) -> int:

@@ -16,12 +16,20 @@ reach a live robot's keys.
 Each principal may also subscribe only to what it reads: the camera frames only to the
 detector, the live view, the recorder and the ROS 2 bridge. Zenoh allows a subscription only
 when its key expression lies within an allowed one, so a wider one (``<prefix>/**``) is denied
-whole, not trimmed. Queries and liveliness subscriptions stay open to every principal.
-Anything not allowed is denied.
+whole, not trimmed. Queries and liveliness subscriptions are open to every principal, within
+the stack's prefix and the robot prefixes its detector workers serve: nothing of another
+robot's on the same (or a linked) router. Anything not allowed is denied.
+
+Routers linked across hosts admit each other as the router's principal (``supervisor``, by
+its certificate): a router lets a linked one do what the principals the other hosts run
+(``zenoh.remote_principals``) may do, together, and nothing more; each host's own router
+confines each of its own principals on ingress, as on one host (docs/security.md, "Two hosts,
+secured").
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -34,7 +42,7 @@ from common.security import (
     camera_services,
     stack_principals,
 )
-from common.settings import service_package
+from common.settings import is_detector_service, service_package
 from services.camera import contract as camera
 from services.controller import contract as controller
 from services.detector import contract as detector
@@ -101,6 +109,21 @@ def _observer(shape: Shape) -> dict[str, Access]:
     return {OBSERVER_PRINCIPAL: Access(read=watching)}
 
 
+def linked_router_access(table: Mapping[str, Access], remote: Iterable[str]) -> Access:
+    """What a linked router (another host's, admitted as ROUTER_PRINCIPAL) may do: what the
+    ``remote`` principals (those the other hosts run) may do, together, in ``table``'s
+    order. ValueError, one line, for a name that is no principal of the stack."""
+    remote = tuple(dict.fromkeys(remote))
+    unknown = [p for p in remote if p not in table or p == ROUTER_PRINCIPAL]
+    if unknown:
+        known = ", ".join(p for p in table if p != ROUTER_PRINCIPAL)
+        raise ValueError(
+            f"zenoh.remote_principals names {', '.join(map(repr, unknown))}: not a principal of "
+            f"this stack (known: {known}; another host's detector worker: detector_<worker_id>)"
+        )
+    return merged(table[p] for p in remote)
+
+
 def access_table(shape: Shape) -> dict[str, Access]:
     """What each principal of the stack may do, from its service's contract. Puts name each
     configured camera's key: nobody may put on a camera the stack does not have. Reads and the
@@ -127,9 +150,45 @@ def _table(
     cameras: str | Mapping[str, str],
     live_sensors: bool = True,
     workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+    prefixes: Iterable[str] = (),
+    remote: Iterable[str] = (),
+    pool_prefix: str = "",
 ) -> dict[str, Access]:
-    shape = Shape(keys, camera_services(cameras), tuple(workers), live_sensors)
-    return access_table(shape)
+    """Each principal's access; with ``remote`` (the principals other hosts run), another
+    host's detector workers among them, and the linked routers' (ROUTER_PRINCIPAL's)."""
+    remote = tuple(remote)
+    pool = tuple(dict.fromkeys((*workers, *(p for p in remote if is_detector_service(p)))))
+    shape = Shape(keys, camera_services(cameras), pool, live_sensors, tuple(prefixes), pool_prefix)
+    table = access_table(shape)
+    if remote:
+        # A pool's router linked to the routers of the robots it serves: their principals
+        # act on their own robot's keys, so the link may do what they may on each prefix.
+        robots = (
+            shape,
+            *(
+                dataclasses.replace(shape, keys=k, prefixes=(), pool_prefix="")
+                for k in shape.other_robots()
+            ),
+        )
+        tables = [table, *(access_table(r) for r in robots[1:])]
+        table[ROUTER_PRINCIPAL] = merged(linked_router_access(t, remote) for t in tables)
+    return table
+
+
+def merged(accesses: Iterable[Access]) -> Access:
+    """What any of ``accesses`` allows, in order."""
+    out: dict[str, dict[str, None]] = {}
+    for a in accesses:
+        for kind, exprs in dataclasses.asdict(a).items():
+            out.setdefault(kind, {}).update(dict.fromkeys(exprs))
+    return Access(**{kind: tuple(exprs) for kind, exprs in out.items()})
+
+
+def ask_scope(keys: Keys, prefixes: Iterable[str] = ()) -> list[str]:
+    """Where to ask (query, watch and look up tokens): the stack's prefix, then ``prefixes``
+    (every principal asks in the pool's; only the workers and a linked router in the further
+    robots' their pool serves)."""
+    return [f"{p}/**" for p in dict.fromkeys((keys.prefix, *prefixes))]
 
 
 def access_control(
@@ -140,19 +199,28 @@ def access_control(
     *,
     live_sensors: bool = True,
     workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+    prefixes: Iterable[str] = (),
+    remote: Iterable[str] = (),
+    pool_prefix: str = "",
 ) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for the router: deny by default, then allow each
     principal its own keys on ingress (puts, tokens, queryables, subscriptions), queries and
-    liveliness for everyone, and everything on egress (the router delivers only what it
-    accepted, and only to subscriptions it accepted). ``cameras``: see
+    liveliness for everyone within :func:`ask_scope`, and everything on egress (the router
+    delivers only what it accepted, and only to subscriptions it accepted). ``cameras``: see
     common.security.camera_services; ``principals`` (default: stack_principals) limits the
     rules to those named; ``workers``: the detector workers' names (``Config.detector_services``),
-    each a principal."""
+    each a principal; ``prefixes``: the robot prefixes they serve (empty: the stack's own);
+    ``pool_prefix``: where their pool lives (empty: the stack's prefix), where all may ask;
+    ``remote``: the principals other hosts run, whose traffic a linked router brings
+    (:func:`linked_router_access`; another host's workers are principals here too)."""
     if auth not in AUTH_MODES[1:]:
         raise ValueError(f"access control needs an authenticated mode, got {auth!r}")
+    remote = tuple(remote)
     workers = tuple(workers)
     if principals is None:
-        principals = stack_principals(cameras, workers)
+        remote_workers = [p for p in remote if is_detector_service(p)]
+        principals = stack_principals(cameras, (*workers, *remote_workers))
+    prefixes = tuple(prefixes)
     match = "usernames" if auth == "password" else "cert_common_names"
     rules: list[dict[str, Any]] = [
         {
@@ -167,12 +235,22 @@ def access_control(
             "messages": list(_ASK_MESSAGES),
             "flows": ["ingress"],
             "permission": "allow",
-            "key_exprs": ["**"],
+            "key_exprs": ask_scope(keys, (pool_prefix,) if pool_prefix else ()),
         },
     ]
     subjects: list[dict[str, Any]] = [{"id": "everyone", match: list(principals)}]
     policies: list[dict[str, Any]] = [{"rules": ["egress", "ask"], "subjects": ["everyone"]}]
-    for principal, allowed in _table(keys, cameras, live_sensors, workers).items():
+    served = [e for e in ask_scope(keys, prefixes) if e not in rules[-1]["key_exprs"]]
+    if served:
+        # The other robots a pool serves: only its workers (and a linked router, which
+        # brings the asks of the other hosts' principals) may ask there.
+        askers = [p for p in principals if is_detector_service(p) or p == ROUTER_PRINCIPAL]
+        rules.append({**rules[-1], "id": "ask_served", "key_exprs": served})
+        subjects.append({"id": "served_askers", match: askers})
+        policies.append({"rules": ["ask_served"], "subjects": ["served_askers"]})
+    for principal, allowed in _table(
+        keys, cameras, live_sensors, workers, prefixes, remote, pool_prefix
+    ).items():
         if principal not in principals:
             continue
         subjects.append({"id": principal, match: [principal]})
@@ -218,6 +296,7 @@ def congestion_overwritten(
     cameras: str | Mapping[str, str],
     *,
     workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+    prefixes: Iterable[str] = (),
 ) -> tuple[str, ...]:
     """The keys on which the router puts congestion control DROP on every sample it takes in,
     whatever its publisher asked for: every key any principal may put on (a replay's too),
@@ -225,7 +304,7 @@ def congestion_overwritten(
     listener's) and hold up everyone's traffic behind it (docs/security.md, "QoS by role")."""
     puts: dict[str, None] = {}
     for live in (True, False):
-        for allowed in _table(keys, cameras, live, workers).values():
+        for allowed in _table(keys, cameras, live, workers, prefixes).values():
             puts.update(dict.fromkeys(allowed.put))
     return tuple(k for k in puts if k != keys.estop())
 

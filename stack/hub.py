@@ -12,6 +12,7 @@ import zenoh
 from common.errors import ConfigError
 from common.keys import Keys
 from common.security import stack_principals, users_file
+from common.settings import is_detector_service
 from common.zenoh_bus import HUB_PRINCIPAL, open_configured, readable, zenoh_config
 from stack.access import access_control, congestion_overwritten, running_sensors
 from stack.config import Config
@@ -24,16 +25,30 @@ def hub_access(config: Config) -> dict[str, Any]:
         return {}
     live = bool(running_sensors(config.supervisor.services))
     keys = Keys(config.stack.prefix)
-    return access_control(
-        keys, config.camera_services, z.auth, live_sensors=live, workers=config.detector_services
-    )
+    try:
+        return access_control(
+            keys,
+            config.camera_services,
+            z.auth,
+            live_sensors=live,
+            workers=config.detector_services,
+            prefixes=config.detector.prefixes,
+            remote=z.remote_principals,
+            pool_prefix=config.detector.pool_prefix,
+        )
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from exc
 
 
 def hub_drop_keys(config: Config) -> tuple[str, ...]:
     """The keys on which the supervisor's router overwrites congestion control to DROP: every
     key of the stack but the e-stop (stack.access.congestion_overwritten)."""
     keys = Keys(config.stack.prefix)
-    return congestion_overwritten(keys, config.camera_services, workers=config.detector_services)
+    remote = [p for p in config.zenoh.remote_principals if is_detector_service(p)]
+    workers = (*config.detector_services, *remote)
+    return congestion_overwritten(
+        keys, config.camera_services, workers=workers, prefixes=config.detector.prefixes
+    )
 
 
 def check_credentials(config: Config) -> None:

@@ -1,9 +1,10 @@
 """The README's example configs, as the tests read them (tests/unit/test_readme_configs.py loads
 every one; tests/integration/test_readme_pool.py runs the pool's two on two network namespaces).
 
-A ```toml block of README.md is a whole config file, saved at the repository root (so an
-``extends`` names a file from there): there are no fragments. A block whose first line is a
-comment naming a file (``# robot.toml: ...``) is that file; the tests find it by that name.
+A ```toml block of README.md is a whole config file, saved at the repository root: there are no
+fragments. A block whose first line is a comment naming a file (``# robot.toml: ...``) is that
+file; the tests find it by that name, and another block's ``extends`` may name it (else an
+``extends`` names a file from the repository root).
 
 :func:`as_tested` makes the only changes a test may make to a block, each one a thing that
 differs between the reader's machines and the test's, and nothing else.

@@ -119,23 +119,33 @@ def access(shape: Shape) -> dict[str, Access]:
     worker may come to serve any camera (services/detector/pool.py); it reads the
     controller's status too, for the camera that sees the target and the target classes
     (services/detector/attention.py). Its tokens are its own only: its health, its pool
-    membership, its announcement and its serving tokens under its own name, so that no worker
-    can pose as another, or as many, and skew the assignment or its audit. It serves the
-    model's description on each camera's info key."""
-    keys = shape.keys
+    membership, its announcement and its serving tokens under its own name (those of the pool
+    under ``detector.pool_prefix``), so that no worker can pose as another, or as many, and
+    skew the assignment or its audit. It serves the model's description on each camera's info
+    key. A pool serving further robots (``shape.prefixes``) reads each one's frames and puts
+    its detections, and serves its info, on every camera under its prefix (their cameras come
+    and go with their announcements), and reads its controller's status (attention), and
+    nothing else of theirs: no frame, no command."""
+    keys, pool = shape.keys, shape.pool_keys()
+    robots = shape.other_robots()
     return {
         w: service_access(
             keys,
             w,
             *(keys.detections(c) for c in shape.cameras),
-            read=(keys.all_frames(), keys.controller_status()),
+            *(r.all_detections() for r in robots),
+            read=(
+                keys.all_frames(),
+                keys.controller_status(),
+                *(k for r in robots for k in (r.all_frames(), r.controller_status())),
+            ),
             token=(
                 keys.health(w),
-                keys.pool_member(w),
-                keys.worker_announcements_of(w),
-                keys.pool_serving_of(w),
+                pool.pool_member(w),
+                pool.worker_announcements_of(w),
+                pool.pool_serving_of(w),
             ),
-            serve=(keys.all_detector_info(),),
+            serve=(keys.all_detector_info(), *(r.all_detector_info() for r in robots)),
         )
         for w in dict.fromkeys(shape.workers)
     }

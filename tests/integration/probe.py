@@ -2,8 +2,9 @@
 
 A test's eyes inside a network namespace (tests/integration/test_two_hosts.py): it joins the
 stack as "observer" and prints one JSON line per detections (of any camera), cmd_vel and
-controller status sample, per detector worker's counters (the cameras it serves, the members
-of the pool it counts) and per health token that comes or goes, stamped with the system's
+controller status sample (a detections line names its header's source), per detector
+worker's counters (the cameras it serves, the members of the pool it counts, the garbage frames
+it dropped) and per health token that comes or goes, stamped with the system's
 monotonic clock (shared by every namespace of the host), so that a test in another namespace
 can read what the stack does there. It prints
 ``{"kind": "open"}`` once its session is up, and runs until SIGINT or SIGTERM.
@@ -63,7 +64,10 @@ def _on_detections(sample: zenoh.Sample) -> None:
         emit("garbage", key=str(sample.key_expr), error=str(exc))
         return
     age_ms = (time.time_ns() - d.header.stamp_ns) / 1e6
-    emit("detections", camera=camera, classes=list(d.class_names), age_ms=age_ms)
+    emit(
+        "detections", camera=camera, classes=list(d.class_names), age_ms=age_ms,
+        source=d.header.source,
+    )  # fmt: skip
 
 
 def _worker(raw: bytes) -> dict[str, Any]:
@@ -71,7 +75,10 @@ def _worker(raw: bytes) -> dict[str, Any]:
     serving = sorted(
         n.split(".", 1)[1] for n, v in c.counters.items() if n.startswith("serving.") and v > 0
     )
-    return {"service": c.service, "serving": serving, "members": c.counters.get("pool_members", 0)}
+    return {
+        "service": c.service, "serving": serving, "members": c.counters.get("pool_members", 0),
+        "bad_frames": c.counters.get("bad_input.frame", 0),
+    }  # fmt: skip
 
 
 def _twist(raw: bytes) -> dict[str, Any]:

@@ -171,6 +171,13 @@ def _pool_arguments(p: argparse.ArgumentParser) -> None:
         default=2.0,
         help="their rate in Hz (default 2)",
     )
+    p.add_argument(
+        "--robots",
+        type=int,
+        default=0,
+        help="N simulated robots (2..8) on one pool of 2 workers vs one robot with as many "
+        "cameras (default 0: skipped)",
+    )
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 

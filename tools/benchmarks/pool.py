@@ -26,6 +26,8 @@ parts, in one run:
   names; then the measured per-camera FPS under the weighted rule.
 - **capacity** (``--capacity``, tools/benchmarks/pool_capacity.py): a fast and a slow worker
   (two input sizes), shares by measured capacity against the even split.
+- **robots** (``--robots N``, tools/benchmarks/pool_robots.py): N simulated robots (their own
+  prefixes) on one pool of 2 workers, against one robot with as many cameras.
 
 Progress goes to stderr, the tables (or ``--json``) to stdout; Ctrl-C stops at once.
 """
@@ -78,6 +80,7 @@ class PoolOptions:
     slow_size: int = 480
     capacity_cameras: int = 8
     capacity_rate_hz: float = 2.0
+    robots: int = 0
     as_json: bool = False
 
     def __post_init__(self) -> None:
@@ -96,6 +99,8 @@ class PoolOptions:
         for what, size in (("--fast-size", self.fast_size), ("--slow-size", self.slow_size)):
             if size % 32 or not 160 <= size <= 1280:
                 raise StackError(f"{what} must be a multiple of 32 within 160..1280, got {size}")
+        if not 0 <= self.robots <= 8 or self.robots == 1:
+            raise StackError(f"--robots must be 0 (skip) or within 2..8, got {self.robots}")
         if not 2 <= self.capacity_cameras <= 32:
             raise StackError(
                 f"--capacity-cameras must be within 2..32, got {self.capacity_cameras}"

@@ -4,6 +4,7 @@ condition's stack, measure it, SIGKILL workers and time the hand-overs."""
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import tempfile
@@ -18,7 +19,7 @@ from common.machine import machine_info
 from common.pool_rule import camera_rates
 from stack.config import Config
 from stack.config_file import load_config
-from tools.benchmarks import pool_capacity
+from tools.benchmarks import pool_capacity, pool_robots
 from tools.benchmarks.pool import (
     UNEVEN,
     Kill,
@@ -214,8 +215,12 @@ def main(options: PoolOptions, stop: threading.Event) -> int:
         capacity = (
             pool_capacity.run(base, Path(tmp), options, stop, measure) if options.capacity else []
         )
+        robots = pool_robots.run(base, Path(tmp), options, stop) if options.robots else []
     if options.as_json:
-        print(to_json(results, kills, duplicates, rules, odds, options, machine_info(), capacity))
+        out = to_json(results, kills, duplicates, rules, odds, options, machine_info(), capacity)
+        if robots:
+            out = json.dumps({**json.loads(out), "robots": [r.as_dict() for r in robots]})
+        print(out)
         return 0
     print(render_results(results))
     if kills:
@@ -230,4 +235,6 @@ def main(options: PoolOptions, stop: threading.Event) -> int:
         )
     if capacity:
         print("\n" + pool_capacity.render(capacity))
+    if robots:
+        print("\n" + pool_robots.render(robots))
     return 0

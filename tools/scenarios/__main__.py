@@ -70,6 +70,16 @@ def _scenario_arguments(p: argparse.ArgumentParser) -> None:
         help="the controller's mode (default follow)",
     )
     p.add_argument(
+        "--robots",
+        type=int,
+        default=1,
+        help="simulated robots, each a stack of its own, sharing one detector pool (default 1: "
+        "one robot with its own detector)",
+    )
+    p.add_argument(
+        "--workers", type=int, default=2, help="the shared pool's workers, with --robots"
+    )
+    p.add_argument(
         "--full-length",
         action="store_true",
         help="run the scenario's whole duration, not only until its pass conditions have held "
@@ -84,6 +94,20 @@ def scenario(args: argparse.Namespace) -> int:
     setup_logging("scenario", "WARNING")
     from tools.scenarios.runner import run_scenario
 
+    if args.robots > 1:
+        from tools.scenarios.robots import run_robots
+
+        runs = run_robots(
+            config, args.name, args.robots, args.workers, ControllerMode(args.mode),
+            log=lambda m: print(m, file=sys.stderr),
+        )  # fmt: skip
+        if args.json:
+            print(json.dumps(runs))
+        else:
+            for prefix, r in zip(runs["prefixes"], runs["robots"], strict=True):
+                print(f"--- robot {prefix}")
+                _print_text(r)
+        return 0 if all(r["success"] for r in runs["robots"]) else 1
     result = run_scenario(
         config,
         args.name,

@@ -14,6 +14,7 @@ from common.keys import Keys
 from common.security import PRINCIPALS, stack_principals
 from common.settings import REPO_ROOT, ZenohSettings, camera_service
 from common.zenoh_bus import QoS, open_session, zenoh_config
+from deploy.credentials import generate
 from stack.access import access_control, may_put, may_read, running_sensors
 from stack.config_file import load_config
 from stack.hub import hub_access
@@ -72,14 +73,14 @@ def test_only_the_controller_puts_cmd_vel_and_only_estop_the_estop() -> None:
     assert _allowed(acl, "metrics", "liveliness_token") == {KEYS.health("metrics")}
     assert KEYS.counters("estop") not in _allowed(acl, "estop", "put")
     # Each reads what it needs; the camera's pictures only the detector, the live view, the
-    # recorder and the ROS 2 bridge. Queries and liveliness stay open to all.
+    # recorder and the ROS 2 bridge. Queries and liveliness stay open to all, within the prefix.
     readers = {p for p in PRINCIPALS if _may(acl, p, "declare_subscriber", KEYS.frame("front"))}
     assert readers == {"detector", "viewer", "ros2", "recorder"}
     assert _allowed(acl, "recorder", "declare_subscriber") == {f"{KEYS.prefix}/**"}
     assert KEYS.cmd_vel() in _allowed(acl, "observer", "declare_subscriber")
     assert _allowed(acl, "camera", "declare_subscriber") == set()
     assert _allowed(acl, "estop", "declare_subscriber") == {KEYS.controller_status()}
-    assert _allowed(acl, "camera", "query") == {"**"}
+    assert _allowed(acl, "camera", "query") == {f"{KEYS.prefix}/**"}
 
 
 def test_certificate_mode_matches_common_names() -> None:
@@ -287,3 +288,40 @@ def test_the_router_drops_under_congestion_on_every_key_but_the_estop() -> None:
     # A peer-mode hub routes nothing: no overwrite there.
     peer = json.loads(str(zenoh_config(ZenohSettings(), "supervisor", access={}, drop_keys=drop)))
     assert peer["qos"]["network"] == []
+
+
+def test_linked_routers_need_certificates_and_link_with_the_routers_own(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r'needs zenoh\.auth = "certificate"'):
+        ZenohSettings(mode="client", auth="password", connect=("tcp/10.0.0.2:7448",))
+    generate(tmp_path / "c")
+    linked = ZenohSettings(
+        mode="client", auth="certificate", endpoint="tls/127.0.0.1:7448",
+        connect=("tls/10.0.0.2:7448",), credentials_dir=str(tmp_path / "c"),
+    )  # fmt: skip
+    tls = json.loads(str(zenoh_config(linked, "supervisor", access={"enabled": True})))[
+        "transport"
+    ]["link"]["tls"]
+    assert tls["connect_certificate"] == tls["listen_certificate"]
+    assert tls["connect_certificate"].endswith("supervisor.pem")
+    assert tls["connect_private_key"].endswith("supervisor.key")
+    alone = dataclasses.replace(linked, connect=())
+    tls = json.loads(str(zenoh_config(alone, "supervisor", access={"enabled": True})))["transport"][
+        "link"
+    ]["tls"]
+    assert tls["connect_certificate"] is None
+
+
+def test_a_remote_principal_the_stack_lacks_is_one_line() -> None:
+    cfg = load_config(REPO_ROOT / "deploy" / "secure.toml", environ={})
+    ok = dataclasses.replace(
+        cfg, zenoh=dataclasses.replace(cfg.zenoh, remote_principals=("detector_a",))
+    )
+    assert hub_access(ok)["default_permission"] == "deny"
+    bad = dataclasses.replace(
+        cfg, zenoh=dataclasses.replace(cfg.zenoh, remote_principals=("lidar",))
+    )
+    with pytest.raises(
+        ConfigError, match=r"^zenoh.remote_principals names 'lidar': not a pri"
+    ) as e:
+        hub_access(bad)
+    assert "\n" not in str(e.value)

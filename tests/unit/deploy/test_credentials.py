@@ -315,3 +315,21 @@ def test_mtls_router_admits_only_clients_with_a_certificate(
             assert str(client.zid())
         with pytest.raises(zenoh.ZError):
             zenoh.open(config("client", {}, connect=[endpoint]))
+
+
+def test_cli_makes_a_principal_for_the_workers_the_config_links_to(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    creds = tmp_path / "creds"
+    config = tmp_path / "robot.toml"
+    config.write_text(
+        f'[zenoh]\nmode = "client"\nauth = "certificate"\nendpoint = "tls/10.0.0.2:7448"\n'
+        f'credentials_dir = "{creds}"\nremote_principals = ["detector_a"]\n'
+        '[detector]\nworker_id = "b"\n'
+    )
+    monkeypatch.setattr(sys, "argv", ["credentials", "--config", str(config)])
+    with pytest.raises(SystemExit) as done:
+        run_main(credentials.main, "credentials")
+    assert done.value.code == 0, capsys.readouterr().err
+    users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
+    assert users == list(stack_principals("front", ("detector_b", "detector_a")))

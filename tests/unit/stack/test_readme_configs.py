@@ -1,9 +1,9 @@
 """Every ```toml block of README.md is a config the stack loads (stack/config_file.py), so the
 README's examples cannot drift from the settings. The rule (tests/readme.py): a block is a whole
-config file saved at the repository root, ``extends`` resolved from there; no fragments.
+config file saved at the repository root, beside the other named blocks; no fragments.
 
-The pool's two (``# robot.toml``, ``# gpu.toml``) are also held to what the README says of them;
-tests/integration/test_readme_pool.py runs them."""
+The pool's two (``# robot.toml``, ``# gpu.toml``; their secured forms extend them) are also held
+to what the README says of them; tests/integration/test_readme_pool.py runs them."""
 
 from __future__ import annotations
 
@@ -20,11 +20,16 @@ BLOCKS = toml_blocks()
 
 
 def _save(block: Block, where: Path) -> Path:
-    """``block`` as a file at the repository root would read: its ``extends`` from there."""
+    """``block`` as a file at the repository root would read, beside the README's other named
+    blocks: an ``extends`` names one of those, or a file from the repository root."""
+    names = {b.name for b in BLOCKS if b.name}
+    for other in BLOCKS:
+        if other.name and other is not block:
+            (where / other.name).write_text(other.text, encoding="utf-8")
     data = tomllib.loads(block.text)  # a block that is not TOML fails here, naming itself
     text = block.text
     base = data.get("extends")
-    if isinstance(base, str):
+    if isinstance(base, str) and base not in names:
         text = text.replace(f'"{base}"', f'"{(REPO / base).as_posix()}"', 1)
     path = where / (block.name or f"readme-{block.line}.toml")
     path.write_text(text, encoding="utf-8")
@@ -32,7 +37,9 @@ def _save(block: Block, where: Path) -> Path:
 
 
 def test_the_readme_has_toml_blocks() -> None:
-    assert len(BLOCKS) >= 4, [b.line for b in BLOCKS]  # the profile, two pool hosts, cameras
+    assert len(BLOCKS) >= 6, [
+        b.line for b in BLOCKS
+    ]  # profile, pool hosts (plain, secured), cameras
 
 
 @pytest.mark.parametrize("block", BLOCKS, ids=[f"README.md:{b.line}" for b in BLOCKS])
