@@ -69,3 +69,12 @@ def as_tested(text: str, *, robot_address: str, samples: tuple[str, ...]) -> str
     out = text.replace(ROBOT_ADDRESS, robot_address)
     out = _DEVICE.sub(sample, out)
     return _BACKEND.sub(r'\1"onnx"', out)
+
+
+def with_credentials(text: str, credentials_dir: Path) -> str:
+    """A secured block with the test's credentials folder in place of the README's default
+    (``secrets/``, the user's own): a ``credentials_dir`` line first in its ``[zenoh]`` table."""
+    head, sep, tail = text.partition("[zenoh]\n")
+    if not sep:
+        raise ValueError("the block has no [zenoh] table")
+    return f'{head}{sep}credentials_dir = "{credentials_dir.as_posix()}"\n{tail}'

@@ -8,7 +8,9 @@
 The two configs are taken from README.md's ```toml blocks named ``# robot.toml`` and
 ``# gpu.toml`` (tests/readme.py) with only the changes :func:`tests.readme.as_tested` makes:
 the robot's address is namespace B's, the cameras' ``device:N`` are bundled photos (a person
-in front, a cat behind) and the GPU backend is ONNX Runtime on the CPU (no GPU here). Both
+in front, a cat behind), the GPU backend is ONNX Runtime on the CPU (no GPU here) and, for the
+secured pair (``# robot-secure.toml``, ``# gpu-secure.toml``, which extend the plain ones),
+``zenoh.credentials_dir`` is the test's folder, the credentials made as the README says. Both
 workers join, the cameras are split as the pool's rule splits them by the capacities the
 workers announce, each camera is served (and its detections published) by exactly one worker,
 the robot's controller gets detections of every camera and targets the person, and
@@ -32,9 +34,10 @@ from typing import IO, Any
 import pytest
 
 from common.pool_rule import assign
+from common.security import ROUTER_PRINCIPAL, ca_file, cert_file, key_file
 from stack.config_file import load_config
 from tests.integration.conftest import REPO, STARTUP_S, wait_for
-from tests.readme import as_tested, named_block
+from tests.readme import as_tested, named_block, with_credentials
 
 pytestmark = pytest.mark.integration
 
@@ -107,14 +110,38 @@ def hosts() -> Iterator[Hosts]:
             subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=30)
 
 
-def _config(where: Path, name: str) -> Path:
-    where.mkdir()
+def _write(where: Path, name: str, credentials: Path | None = None) -> Path:
+    where.mkdir(exist_ok=True)
+    text = as_tested(named_block(name).text, robot_address=ADDR_B, samples=SAMPLES)
     path = where / name
-    path.write_text(
-        as_tested(named_block(name).text, robot_address=ADDR_B, samples=SAMPLES), encoding="utf-8"
-    )
-    load_config(path, environ={})  # one clear line here if the README's block does not load
+    path.write_text(text if credentials is None else with_credentials(text, credentials))
     return path
+
+
+def _configs(tmp_path: Path, secure: bool) -> tuple[Path, Path]:
+    """The robot's and the GPU box's configs, each in a folder of its own. Secured: the plain
+    ones beside them (they extend those), and the credentials made once, on the robot, as the
+    README says; the GPU box gets a copy of the CA, the router's and its worker's files."""
+    robot, gpu = _write(tmp_path / "robot", "robot.toml"), _write(tmp_path / "gpu", "gpu.toml")
+    if secure:
+        made, copied = tmp_path / "secrets_robot", tmp_path / "secrets_gpu"
+        robot = _write(tmp_path / "robot", "robot-secure.toml", made)
+        gpu = _write(tmp_path / "gpu", "gpu-secure.toml", copied)
+        done = subprocess.run(
+            [sys.executable, "-m", "deploy.zstack", "credentials", "--config", str(robot),
+             "--host", ADDR_B],
+            cwd=REPO, capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr[-2000:]
+        copied.mkdir(mode=0o700)
+        worker = f"detector_{load_config(gpu, environ={}).detector.worker_id}"
+        for principal in (ROUTER_PRINCIPAL, worker):
+            for file in (cert_file(made, principal), key_file(made, principal)):
+                shutil.copy2(file, copied / file.name)
+        shutil.copy2(ca_file(made), copied / ca_file(made).name)
+    for path in (robot, gpu):
+        load_config(path, environ={})  # one clear line here if a README block does not load
+    return robot, gpu
 
 
 def _view(hosts: Hosts, robot: Path) -> dict[str, Any] | None:
@@ -153,9 +180,11 @@ def _query(hosts: Hosts, robot: Path) -> dict[str, Any] | None:
     return json.loads(done.stdout) if done.returncode == 0 else None
 
 
-def test_the_readme_gpu_box_and_robot_run_as_written(hosts: Hosts, tmp_path: Path) -> None:
-    robot = _config(tmp_path / "robot", "robot.toml")
-    gpu = _config(tmp_path / "gpu", "gpu.toml")
+@pytest.mark.parametrize("secure", [False, True], ids=["plain", "secured"])
+def test_the_readme_gpu_box_and_robot_run_as_written(
+    hosts: Hosts, tmp_path: Path, secure: bool
+) -> None:
+    robot, gpu = _configs(tmp_path, secure)
     prepared = hosts.call(hosts.a, ["-m", "deploy.zstack", "prepare", "--config", str(gpu)], 600)
     assert prepared.returncode == 0, prepared.stderr[-2000:]
     log_a, log_b = tmp_path / "gpu.log", tmp_path / "robot.log"
@@ -172,6 +201,9 @@ def test_the_readme_gpu_box_and_robot_run_as_written(hosts: Hosts, tmp_path: Pat
     balance = load_config(robot, environ={}).detector.pool_balance
 
     def settled() -> dict[str, Any] | None:
+        for name, proc in (("GPU box", sup_a), ("robot", sup_b)):
+            if proc.poll() is not None:  # a config the supervisor refuses: say so at once
+                pytest.fail(f"{name}'s supervisor exited ({proc.returncode}):\n{logs()}")
         last[0] = _view(hosts, robot)
         return last[0] if _settled(last[0], balance) else None
 
