@@ -79,6 +79,17 @@ def label(name: str) -> str:
     return name.replace(".", "_").replace("/", ":")
 
 
+def robot_of(camera_label: str) -> str:
+    """The robot part of a camera's :func:`label` ("" for a camera of the pool's own robot):
+    ``robot2:front`` is of ``robot2``. A bare name never holds a ':' (a key chunk's letters)."""
+    return camera_label.rpartition(":")[0]
+
+
+def robot_label(prefix: str, pool_prefix: str) -> str:
+    """Robot ``prefix``'s part in its cameras' labels (:func:`robot_of`)."""
+    return robot_of(label(pool_name(prefix, "camera", pool_prefix)))
+
+
 def camera_rates(cameras: Mapping[str, CameraRate]) -> dict[str, float]:
     """Each configured camera's weight, its ``rate_hz`` (for who audits a config's cameras)."""
     return {name: cam.rate_hz for name, cam in cameras.items()}
