@@ -171,6 +171,13 @@ def _pool_arguments(p: argparse.ArgumentParser) -> None:
         default=2.0,
         help="their rate in Hz (default 2)",
     )
+    p.add_argument(
+        "--robots",
+        type=int,
+        default=0,
+        help="instead: N simulated robots (2..8) on one pool of the largest of --workers",
+    )
+    p.add_argument("--robot-cameras", type=int, default=2, help="each robot's cameras (default 2)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 

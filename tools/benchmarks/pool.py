@@ -27,6 +27,9 @@ parts, in one run:
 - **capacity** (``--capacity``, tools/benchmarks/pool_capacity.py): a fast and a slow worker
   (two input sizes), shares by measured capacity against the even split.
 
+``--robots N`` runs instead the robots part (tools/benchmarks/pool_robots.py): N simulated
+robots, each with ``--robot-cameras`` cameras, on one pool of the largest of ``--workers``.
+
 Progress goes to stderr, the tables (or ``--json``) to stdout; Ctrl-C stops at once.
 """
 
@@ -78,6 +81,8 @@ class PoolOptions:
     slow_size: int = 480
     capacity_cameras: int = 8
     capacity_rate_hz: float = 2.0
+    robots: int = 0
+    robot_cameras: int = 2
     as_json: bool = False
 
     def __post_init__(self) -> None:
@@ -96,6 +101,11 @@ class PoolOptions:
         for what, size in (("--fast-size", self.fast_size), ("--slow-size", self.slow_size)):
             if size % 32 or not 160 <= size <= 1280:
                 raise StackError(f"{what} must be a multiple of 32 within 160..1280, got {size}")
+        if not (self.robots == 0 or 2 <= self.robots <= 8) or not 1 <= self.robot_cameras <= 8:
+            raise StackError(
+                f"--robots must be 2..8 and --robot-cameras 1..8, got {self.robots} and "
+                f"{self.robot_cameras}"
+            )
         if not 2 <= self.capacity_cameras <= 32:
             raise StackError(
                 f"--capacity-cameras must be within 2..32, got {self.capacity_cameras}"

@@ -4,6 +4,8 @@ condition's stack, measure it, SIGKILL workers and time the hand-overs."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import json
 import os
 import signal
 import tempfile
@@ -18,7 +20,7 @@ from common.machine import machine_info
 from common.pool_rule import camera_rates
 from stack.config import Config
 from stack.config_file import load_config
-from tools.benchmarks import pool_capacity
+from tools.benchmarks import pool_capacity, pool_robots
 from tools.benchmarks.pool import (
     UNEVEN,
     Kill,
@@ -181,6 +183,17 @@ def _kill_series(
 def main(options: PoolOptions, stop: threading.Event) -> int:
     """Run every part of ``options`` and print the tables (or JSON)."""
     base = load_config(options.config)
+    if options.robots:
+        with tempfile.TemporaryDirectory(prefix="pool-robots-") as tmp:
+            progress(f"[robots] {options.robots} robots of {options.robot_cameras} cameras at "
+                     f"{options.rate_hz:g} Hz on {max(options.workers)} workers")  # fmt: skip
+            robots = pool_robots.run(base, Path(tmp), options, stop)
+        if options.as_json:
+            out = {**robots.as_dict(), "options": dataclasses.asdict(options)}
+            print(json.dumps({**out, "machine": machine_info()}, indent=2, default=str))
+        else:
+            print(pool_robots.render(robots))
+        return 0
     results: list[Result] = []
     kills: list[Kill] = []
     duplicates = 0
