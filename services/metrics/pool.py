@@ -111,6 +111,8 @@ class LivePool:
             self.report = self.audit.check(now, self.members, self.servers)
         else:
             members = {m: self.announced[m] for m in self.members if m in self.announced}
+            if not self.announced:  # none readable (an access rule without them): as before,
+                members = {m: PoolWorker(1.0, frozenset({self.robot})) for m in self.members}
             cameras = {
                 self.pool_name(c): PoolCamera(self.robot, c, rate)
                 for c, rate in self.cameras.items()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import random
 
+from common.pool_audit import PoolAudit
 from common.pool_rule import PoolCamera, PoolWorker, assign, assign_pool, pool_name
 
 BALANCE = 1.25
@@ -88,3 +89,18 @@ def test_a_fast_worker_takes_more_of_each_robot_it_shares() -> None:
     for robot in ("robot1", "robot2"):
         gpu = sum(1 for n, o in owners.items() if o == "gpu" and cameras[n].prefix == robot)
         assert gpu == 4, (robot, owners)  # 4/5 of each robot, as the capacities are
+
+
+def test_the_audit_computes_what_the_workers_serve() -> None:
+    """common/pool_audit.py over the rule's own owners: nothing to report, in any pool."""
+    for seed in range(100):
+        workers, cameras = random_pool(seed)
+        owners = assign_pool(workers, cameras, BALANCE)
+        serving = {(w, f"z{w}", name) for name, w in owners.items()}
+        audit = PoolAudit({}, BALANCE, 1.0)
+        audit.check(0.0, workers, serving, cameras=cameras)
+        report = audit.check(2.0, workers, serving, cameras=cameras)
+        unlisted = {n for n, c in cameras.items() if n not in owners}
+        assert {(f.kind, f.subject) for f in report.current} == {
+            ("unserved", n) for n in unlisted
+        }, seed
