@@ -13,9 +13,16 @@ announces (``CameraAnnouncement.rate_hz``), a worker's capacity the frame rate i
 fast takes about twice the frames.
 
 A pool may serve several robots (key prefixes): :func:`assign_pool` divides each robot's
-cameras among the live workers that list its prefix, robot by robot, so that every worker that
-serves a robot computes the same owners from what it hears (that robot's cameras and every
-worker's announcement) and needs nothing of the other robots.
+cameras among the live workers that list its prefix, robot by robot, each worker with its
+capacity split evenly among the robots it lists (:func:`robot_capacity`). Robot by robot,
+because a worker hears only the cameras of the robots it lists (under the secure profile it may
+read nothing else), yet every worker that serves a robot must compute that robot's owners
+alike: from that robot's cameras and the workers' announcements, nothing of the other robots.
+One pass over every robot's cameras would need every robot's cameras in every view. The even
+split keeps a worker that lists two robots to about its capacity's share of the whole pool's
+load (a whole share for each robot would make it take a full share of each, twice its own);
+its cost: a worker that lists a robot with no cameras keeps that robot's part of its capacity
+unused, as far as the bound goes (``balance`` and the fallback below still place every camera).
 
 A camera's name in the pool (:func:`pool_name`) is its bare name when it is announced under the
 pool's own prefix (one robot: the names of its config), else ``<prefix>/<camera>``; in counter
@@ -72,6 +79,17 @@ def label(name: str) -> str:
     return name.replace(".", "_").replace("/", ":")
 
 
+def robot_of(camera_label: str) -> str:
+    """The robot part of a camera's :func:`label` ("" for a camera of the pool's own robot):
+    ``robot2:front`` is of ``robot2``. A bare name never holds a ':' (a key chunk's letters)."""
+    return camera_label.rpartition(":")[0]
+
+
+def robot_label(prefix: str, pool_prefix: str) -> str:
+    """Robot ``prefix``'s part in its cameras' labels (:func:`robot_of`)."""
+    return robot_of(label(pool_name(prefix, "camera", pool_prefix)))
+
+
 def camera_rates(cameras: Mapping[str, CameraRate]) -> dict[str, float]:
     """Each configured camera's weight, its ``rate_hz`` (for who audits a config's cameras)."""
     return {name: cam.rate_hz for name, cam in cameras.items()}
@@ -123,15 +141,22 @@ def assign(
     return out
 
 
+def robot_capacity(worker: PoolWorker) -> float:
+    """The part of ``worker``'s capacity that the rule gives each robot it lists: an even
+    split (the module's docstring says why)."""
+    return worker.capacity_hz / max(1, len(worker.prefixes))
+
+
 def assign_pool(
     workers: Mapping[str, PoolWorker], cameras: Mapping[str, PoolCamera], balance: float
 ) -> dict[str, str]:
     """``{pool name: worker}`` for the ``cameras`` (by pool name) of every robot prefix that
     a live worker lists: each robot's cameras by :func:`assign` among the workers that list
-    its prefix, with their capacities. A camera of a robot no worker lists has no owner."""
+    its prefix, each with its :func:`robot_capacity`. A camera of a robot no worker lists has
+    no owner. With one robot this is :func:`assign` over the workers' capacities."""
     out: dict[str, str] = {}
     for prefix in sorted({c.prefix for c in cameras.values()}):
-        eligible = {w: p.capacity_hz for w, p in workers.items() if prefix in p.prefixes}
+        eligible = {w: robot_capacity(p) for w, p in workers.items() if prefix in p.prefixes}
         rates = {n: c.rate_hz for n, c in cameras.items() if c.prefix == prefix}
         out.update(assign(eligible, rates, balance))
     return out

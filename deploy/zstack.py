@@ -64,7 +64,7 @@ COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
     "pool-benchmark": (
         "tools.benchmarks",
         ("pool",),
-        "cameras on 1 and 2 detector workers; the hand-over after a SIGKILL",
+        "cameras on 1 and 2 detector workers; the hand-over after a SIGKILL; --robots N",
     ),
     "soak": ("tools.scenarios", ("soak",), "the whole stack for a long run under a garbage flood"),
     "credentials": ("deploy.credentials", (), "write the secure profile's credentials"),

@@ -20,6 +20,11 @@ camera's view is then detected within ``1 / floor_hz + (ceil(n / max_batch) + 1)
 frame taken is the newest, the detection one round later; the controller acts on the first
 detection, no confirmation frames), and that camera has priority from then on.
 
+One worker may serve several robots (docs/detector.md, "Several robots"): a camera is known
+by its label in the pool (common/pool_rule.py: ``front`` for the pool's own robot,
+``robot2:front`` for robot2's), each robot's controller locks one of its own cameras, and a
+camera's sightings count against its own robot's target classes.
+
 Pure: time is read from the injected clock; thread-safe (the controller's status arrives on
 a bus thread, the loop arranges and notes sightings).
 """
@@ -31,6 +36,7 @@ import threading
 from collections.abc import Iterable, Sequence
 
 from common.clock import Clock
+from common.pool_rule import robot_of
 
 #: Why a round took a camera where it did (``Waiting.reason``; counted per reason).
 PRIORITY = "priority"  # it holds the lock or saw a target class lately
@@ -51,18 +57,23 @@ class Attention:
         self.hold_s = hold_s
         self.enabled = enabled
         self._lock = threading.Lock()
-        self._locked: tuple[str, float] | None = None  # (camera, heard at) from the controller
-        self._targets: frozenset[str] = frozenset()
+        # Per robot (common/pool_rule.py's robot_of: "" for the pool's own), from its controller
+        self._locked: dict[str, tuple[str, float]] = {}  # robot -> (camera, heard at)
+        self._targets: dict[str, frozenset[str]] = {}  # robot -> its target classes
         self._seen: dict[str, dict[str, float]] = {}  # camera -> class -> last seen at
         self._taken: dict[str, float] = {}  # camera -> last taken at
 
-    def controller(self, camera: str, target_classes: Iterable[str]) -> None:
-        """The controller's latest status: the camera that sees its target ("" for none) and
-        its target classes."""
+    def controller(self, camera: str, target_classes: Iterable[str], robot: str = "") -> None:
+        """A controller's latest status: the camera that sees its target (its label in the
+        pool; "" for none) and its target classes; ``robot``: whose controller (the robot
+        part of its cameras' labels, "" for the pool's own)."""
         now = self.clock.mono_s()
         with self._lock:
-            self._locked = (camera, now) if camera else None
-            self._targets = frozenset(target_classes)
+            if camera:
+                self._locked[robot] = (camera, now)
+            else:
+                self._locked.pop(robot, None)
+            self._targets[robot] = frozenset(target_classes)
 
     def saw(self, camera: str, class_names: Iterable[str]) -> None:
         """``camera``'s detections just published named ``class_names``."""
@@ -83,11 +94,10 @@ class Attention:
         take this worker's rounds out of their fair order."""
         if not self.enabled:
             return frozenset()
-        found = set()
-        if self._locked is not None and now - self._locked[1] <= self.hold_s:
-            found.add(self._locked[0])
+        found = {camera for camera, at in self._locked.values() if now - at <= self.hold_s}
         for camera, seen in self._seen.items():
-            if any(now - seen.get(name, -math.inf) <= self.hold_s for name in self._targets):
+            targets = self._targets.get(robot_of(camera), frozenset())
+            if any(now - seen.get(name, -math.inf) <= self.hold_s for name in targets):
                 found.add(camera)
         return frozenset(c for c in found if c in self._taken or c in waiting)
 

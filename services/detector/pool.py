@@ -12,7 +12,10 @@ serves which camera without talking:
   each weighed by its announced frame rate, never a worker's own config.
 
 The rule (common/pool_rule.py, shared with whoever audits the pool): rendezvous hashing with
-loads bounded in proportion to each worker's capacity, robot by robot.
+loads bounded in proportion to each worker's capacity, robot by robot, a worker's capacity
+split evenly among the robots it lists (so that one serving two robots takes its share of the
+pool, not a share of each; and each robot's owners follow from that robot's cameras alone,
+all that a worker listing only that robot hears).
 
 What follows (tests/unit/detector/test_pool.py): every camera has exactly one owner; a
 worker that joins takes about its share and no more; a worker that leaves hands on only its

@@ -10,13 +10,16 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from common.bus import Declared
 from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock
 from common.counters import BAD_INPUT, per_camera
 from common.errors import ImageError
 from common.frames import frame_to_bgr
 from common.freshness import FreshnessGate, Verdict
+from common.keys import Keys
 from common.messages import ControllerStatus, Detections, Frame, Header
-from common.node import Put, Tally
+from common.node import Node, Put, Tally
+from common.pool_rule import label, pool_name, robot_label
 from perception import DetectionResult, Detector, Tracker, tracker_clock
 from services.detector import contract
 from services.detector.attention import Attention
@@ -186,17 +189,38 @@ class Rounds:
             self.attention.saw(out.camera, result.class_names)
 
 
-def heed_controller(tally: Tally, attention: Attention) -> Callable[[bytes], None]:
-    """The handler of the controller's status (``keys.controller_status()``): its locked
-    camera and target classes to ``attention``; garbage counted as bad input and dropped."""
-    key = tally.keys.controller_status()
+def heed_controller(
+    tally: Tally, attention: Attention, prefix: str = "", pool_prefix: str = ""
+) -> Callable[[bytes], None]:
+    """The handler of robot ``prefix``'s controller status (``Keys(prefix).
+    controller_status()``; by default the worker's own robot's): its locked camera, by its
+    label in the pool under ``pool_prefix`` (common/pool_rule.py), and target classes to
+    ``attention``; garbage counted as bad input and dropped."""
+    prefix = prefix or tally.keys.prefix
+    pool_prefix = pool_prefix or tally.keys.prefix
+    key = Keys(prefix).controller_status()
+    robot = robot_label(prefix, pool_prefix)
 
     def on_status(payload: bytes) -> None:
         status = tally.decode(key, ControllerStatus.decode, payload)
         if status is not None:
-            attention.controller(status.camera, status.target_classes)
+            cam = label(pool_name(prefix, status.camera, pool_prefix)) if status.camera else ""
+            attention.controller(cam, status.target_classes, robot)
 
     return on_status
+
+
+def heed_controllers(node: Node, config: Config, attention: Attention) -> list[Declared]:
+    """Subscribe ``attention`` to the controller status of every robot the worker serves
+    (``detector.prefixes``; empty: its own robot's)."""
+    s = config.detector
+    pool_prefix = s.pool_prefix or config.stack.prefix
+    return [
+        node.subscribe(
+            Keys(prefix).controller_status(), heed_controller(node, attention, prefix, pool_prefix)
+        )
+        for prefix in s.prefixes or (config.stack.prefix,)
+    ]
 
 
 def _track(

@@ -26,7 +26,7 @@ from services.detector.contract import BATCHED_FRAMES, DetectorSettings
 from services.detector.handlers import DetectorHandlers
 from services.detector.membership import PoolMember
 from services.detector.pool import PoolCamera
-from services.detector.rounds import CameraOutput, Rounds, camera_outputs, heed_controller
+from services.detector.rounds import CameraOutput, Rounds, camera_outputs, heed_controllers
 from stack.config import Config
 
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag (and the pool's membership)
@@ -72,7 +72,7 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
         # Attention when short of capacity (services/detector/attention.py): the rounds'
         # order, fed by the controller's status and each camera's detections.
         attention = Attention(node.clock, s.attention_floor_hz, s.attention_hold_s, s.attention)
-        status_sub = node.subscribe(node.keys.controller_status(), heed_controller(node, attention))
+        status_subs = heed_controllers(node, config, attention)  # each robot's controller
         info = json.dumps(
             DetectorInfo(
                 model=detector.model_path.name,
@@ -132,7 +132,8 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
                         node.counters.get(BATCHED_FRAMES) - before, node.clock.mono_s() - start
                     )
         finally:
-            status_sub.undeclare()
+            for sub in status_subs:
+                sub.undeclare()
             pool.close()
             cameras.close()
             detector.close()

@@ -58,18 +58,20 @@ SERVICE = "metrics"
 
 
 def access(shape: Shape) -> dict[str, Access]:
-    keys = shape.keys
+    keys, pool = shape.keys, shape.pool_keys()
     return {
         SERVICE: service_access(
             keys,
             SERVICE,
             read=(keys.all_detections(), keys.cmd_vel(), keys.all_counters()),
             serve=(keys.metrics(),),
-            # The cameras announced, and the pool's members and what each serves.
+            # The cameras announced, and the pool's members, their announcements (capacity,
+            # robots) and what each serves, under the pool's prefix.
             watch=(
                 keys.all_camera_announcements(),
-                keys.all_pool_members(),
-                keys.all_pool_serving(),
+                pool.all_pool_members(),
+                pool.all_worker_announcements(),
+                pool.all_pool_serving(),
             ),
         )
     }

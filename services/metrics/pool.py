@@ -25,6 +25,7 @@ from common.contracts import WorkerMetrics
 from common.counters import per_camera
 from common.messages import Header
 from common.pool_audit import PoolAudit, Report, Serving
+from common.pool_rule import PoolCamera, PoolWorker, pool_name
 from common.settings import service_package
 from services.detector import contract as detector
 
@@ -58,14 +59,38 @@ class Duplicates:
 
 class LivePool:
     """The pool's tokens as heard now: its members and their serving tokens, and the audit of
-    them (:meth:`check`; ``report`` is the latest). Not thread-safe: the caller holds its lock."""
+    them (:meth:`check`; ``report`` is the latest). Not thread-safe: the caller holds its lock.
 
-    def __init__(self, audit: PoolAudit) -> None:
+    The metrics service of robot ``robot`` in a pool under ``pool_prefix`` (common/pool_rule.py;
+    both "": one robot, its own pool) audits what the workers compute: its robot's cameras as
+    announced (``cameras``: ``{camera: rate_hz}``; None: the audit's configured weights) and
+    the members as they announce themselves (``announced``: capacity and robots; a pool token
+    without an announcement is no member, as the workers count). The serving tokens name
+    cameras by their pool name; what the answer shows is this robot's cameras only, by their
+    own names."""
+
+    def __init__(self, audit: PoolAudit, robot: str = "", pool_prefix: str = "") -> None:
         self.audit = audit
+        self.robot = robot
+        self.pool_prefix = pool_prefix
         self.members: set[str] = set()
         self.servers: set[Serving] = set()
+        self.announced: dict[str, PoolWorker] = {}
+        self.cameras: dict[str, float] | None = None
         self.heard = False  # a pool token was ever heard: the tokens, not counters, decide
         self.report = Report()
+
+    def pool_name(self, camera: str) -> str:
+        """This robot's ``camera`` as the pool names it (in serving tokens)."""
+        return pool_name(self.robot, camera, self.pool_prefix)
+
+    def own(self, name: str) -> str | None:
+        """The camera of this robot that pool name ``name`` is; None for another robot's."""
+        if self.robot == self.pool_prefix:
+            return None if "/" in name else name
+        head = f"{self.robot}/"
+        rest = name[len(head) :]
+        return rest if name.startswith(head) and rest and "/" not in rest else None
 
     def member(self, worker: str, *, live: bool) -> None:
         self.heard = True
@@ -82,15 +107,28 @@ class LivePool:
             self.servers.discard(token)
 
     def check(self, now: float) -> Report:
-        self.report = self.audit.check(now, self.members, self.servers)
+        if self.cameras is None:
+            self.report = self.audit.check(now, self.members, self.servers)
+        else:
+            members = {m: self.announced[m] for m in self.members if m in self.announced}
+            if not self.announced:  # none readable (an access rule without them): as before,
+                members = {m: PoolWorker(1.0, frozenset({self.robot})) for m in self.members}
+            cameras = {
+                self.pool_name(c): PoolCamera(self.robot, c, rate)
+                for c, rate in self.cameras.items()
+            }
+            self.report = self.audit.check(now, members, self.servers, cameras=cameras)
         return self.report
 
     def served_by(self, camera: str) -> str:
         """The live workers serving ``camera`` (", "-joined when two do: a warning)."""
-        return ", ".join(sorted({w for w, _, c in self.servers if c == camera}))
+        name = self.pool_name(camera)
+        return ", ".join(sorted({w for w, _, c in self.servers if c == name}))
 
     def cameras_of(self, worker: str) -> set[str]:
-        return {c for w, _, c in self.servers if w == worker}
+        """The cameras of this robot that ``worker`` serves (another robot's are not shown)."""
+        own = (self.own(c) for w, _, c in self.servers if w == worker)
+        return {c for c in own if c is not None}
 
 
 def workers(

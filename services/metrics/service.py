@@ -20,10 +20,16 @@ from common.contracts import AnnouncedCamera, MetricsAnswer
 from common.counters import BAD_INPUT
 from common.errors import DecodeError, StackError
 from common.keys import Keys, camera_in_key
-from common.messages import CameraAnnouncement, Detections, ServiceCounters, Twist
+from common.messages import (
+    CameraAnnouncement,
+    Detections,
+    ServiceCounters,
+    Twist,
+    WorkerAnnouncement,
+)
 from common.node import Node, Tally
 from common.pool_audit import MAX_LINES, PoolAudit, lines
-from common.pool_rule import camera_rates
+from common.pool_rule import PoolWorker, camera_rates
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES
 from common.zenoh_bus import open_session
@@ -62,8 +68,13 @@ class MetricsHandlers:
         self.tally = tally
         self.clock = clock
         d = config.detector
+        #: The pool's keys (detector.pool_prefix; empty: this robot's): its tokens and its
+        #: workers' announcements are there.
+        self.pool_keys = Keys(d.pool_prefix or config.stack.prefix)
         self.pool = LivePool(
-            PoolAudit(camera_rates(config.all_cameras), d.pool_balance, d.pool_alarm_s)
+            PoolAudit(camera_rates(config.all_cameras), d.pool_balance, d.pool_alarm_s),
+            robot=config.stack.prefix,
+            pool_prefix=self.pool_keys.prefix,
         )
         # The cameras' figures are shown as they are announced (set_cameras), not from config.
         self.agg = Aggregator(
@@ -88,8 +99,20 @@ class MetricsHandlers:
         """The cameras announced now: each gets its figures; only their detections count."""
         with self.lock:
             self.announced = dict(cameras)
+            self.pool.cameras = {name: a.rate_hz for name, a in cameras.items()}
             for camera in cameras:
                 self.agg.add_camera(camera)
+
+    def set_workers(self, workers: Mapping[str, WorkerAnnouncement]) -> None:
+        """The pool's workers as announced now (their capacity and robots): the audit weighs
+        them as the workers do (common/pool_rule.py)."""
+        pool = self.pool_keys.prefix
+        with self.lock:
+            self.pool.announced = {
+                w: PoolWorker(a.capacity_hz, frozenset(a.prefixes or (pool,)))
+                for w, a in workers.items()
+            }
+        self.audit_pool()
 
     def on_detections(self, camera: str, key: str, payload: bytes) -> None:
         """``camera``'s detections; ``key``: the one the sample came on (that camera's).
@@ -120,7 +143,7 @@ class MetricsHandlers:
 
     def on_pool_serving(self, key: str, live: bool) -> None:
         """A worker's serving token (common/keys.py::pool_serving) came or went."""
-        token = self.tally.keys.pool_serving_parts(key)
+        token = self.pool_keys.pool_serving_parts(key)
         if token is None:
             return
         with self.lock:
@@ -229,12 +252,24 @@ class MetricsService:
             on_bad=lambda key, exc: node.bad_input(key, exc, topic="camera_announcement"),
         )
         self._on_cameras()  # those already announced (a Zenoh watch reports them as it starts)
+        pool = handlers.pool_keys
+        self.workers: Announced[WorkerAnnouncement] | None = None
+        self.workers = Announced(
+            node.bus,
+            pool.all_worker_announcements(),
+            pool.worker_announcement_parts,
+            WorkerAnnouncement.decode,
+            lambda a: a.worker,
+            on_change=self._on_workers,
+            on_bad=lambda key, exc: node.bad_input(key, exc, topic="worker_announcement"),
+        )
+        self._on_workers()
         self._declared: list[Declared] = [
             node.subscribe_keyed(keys.all_detections(), self._on_detections),
             node.subscribe(keys.cmd_vel(), handlers.on_cmd_vel),
             node.subscribe_keyed(keys.all_counters(), handlers.on_counters),
-            node.bus.watch_tokens(keys.all_pool_members(), handlers.on_pool_member),
-            node.bus.watch_tokens(keys.all_pool_serving(), handlers.on_pool_serving),
+            node.bus.watch_tokens(pool.all_pool_members(), handlers.on_pool_member),
+            node.bus.watch_tokens(pool.all_pool_serving(), handlers.on_pool_serving),
             node.bus.serve(keys.metrics(), lambda _key, _q: strict_json(self.answer()).encode()),
         ]
         self._next_report = self.clock.mono_s() + config.metrics.report_period_s
@@ -242,6 +277,10 @@ class MetricsService:
     def _on_cameras(self) -> None:
         if self.announced is not None:  # else called back while it is being declared
             self.handlers.set_cameras(self.announced.current())
+
+    def _on_workers(self) -> None:
+        if self.workers is not None:  # else called back while it is being declared
+            self.handlers.set_workers(self.workers.current())
 
     def _on_detections(self, key: str, payload: bytes) -> None:
         camera = camera_in_key(key)
@@ -280,6 +319,8 @@ class MetricsService:
             declared.undeclare()
         if self.announced is not None:
             self.announced.close()
+        if self.workers is not None:
+            self.workers.close()
 
 
 def announced_camera(a: CameraAnnouncement) -> AnnouncedCamera:

@@ -126,7 +126,7 @@ def pool(make_stack: Any) -> Iterator[tuple[Stack, Watch]]:
         stack={"camera": first},
         camera={**cams[first], "rate_hz": 3.0, "resize": [320, 240]},
         **{f"cameras.{n}": cams[n] for n in others},
-        detector={"workers": 2, "imgsz": 320},
+        detector={"workers": 2, "imgsz": 320, "capacity_hz": 10.0},  # equal, fixed: no move
         # A killed worker comes back after this, not at once: with a 0.2 s backoff it rejoined
         # 0.7 s after the SIGKILL on a quiet machine, before the survivor's counters and the
         # metrics could show it serving every camera (a race of the test, not of the pool).

@@ -109,7 +109,7 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
         stack={"camera": "front"},
         camera={"source": "sample:cameraman", "rate_hz": 10.0},
         **{f"cameras.{c}": {"source": "sample:coffee", "frame_id": c} for c in ("left", "rear")},
-        detector={"imgsz": 320},
+        detector={"imgsz": 320, "capacity_hz": 10.0},
     )
     stack = Stack(config, tmp / "supervisor.log")
     try:
@@ -133,7 +133,7 @@ def test_two_workers_whose_configs_disagree_serve_every_announced_camera_once(
         zenoh={"endpoint": stack.config.zenoh.endpoint, "multicast_scouting": False},
         stack={"prefix": keys.prefix, "camera": "rear"},
         camera={"source": "sample:coffee", "rate_hz": 2.0},
-        detector={"imgsz": 320, "workers": 2},
+        detector={"imgsz": 320, "workers": 2, "capacity_hz": 10.0},
     )
     log = tmp_path_factory.mktemp("worker_b") / "worker_b.log"
     with log.open("wb") as out:

@@ -82,7 +82,7 @@ def pool(make_stack: Any, tmp_path: Path) -> Iterator[tuple[Stack, Heard]]:
             "resize": [320, 240],
         },
         **{"cameras.rear": {"source": "sample:astronaut", "frame_id": "rear"}},
-        detector={"workers": 2, "imgsz": 320},
+        detector={"workers": 2, "imgsz": 320, "capacity_hz": 10.0},
     )
     heard = Heard()
     keys = stack.keys

@@ -8,15 +8,18 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator
+from dataclasses import replace
+from functools import partial
 from typing import Any
 
 import pytest
 
+from common.announce import Announcer
 from common.bus import QoS
 from common.clock import BOOT_ID, FakeClock
 from common.keys import Keys
 from common.memory_bus import MemoryBus, MemoryHub
-from common.messages import Header, ServiceCounters, Twist
+from common.messages import Header, ServiceCounters, Twist, WorkerAnnouncement
 from common.node import Node
 from services.camera.contract import CameraSettings
 from services.detector.contract import DetectorSettings
@@ -217,12 +220,24 @@ def test_the_cameras_are_the_announced_ones(rig: Rig) -> None:
     assert answer["counters"]["metrics.detections_unannounced"] == 3
 
 
-def _worker(rig: Rig, name: str, cameras: list[str]) -> MemoryBus:
-    """A detector worker's tokens, as its session declares them; gone when it is closed."""
+def _worker(
+    rig: Rig,
+    name: str,
+    cameras: list[str],
+    capacity_hz: float = 10.0,
+    keys: Keys | None = None,
+    prefixes: tuple[str, ...] = (),
+) -> MemoryBus:
+    """A detector worker's tokens and announcement (its capacity and robots), as its session
+    declares them under the pool's ``keys`` (the rig's by default); gone when it is closed.
+    ``cameras``: the pool names of those it serves."""
+    keys = keys or rig.keys
     bus = rig.hub.join(name)
-    bus.declare_token(rig.keys.pool_member(name))
+    announcement = WorkerAnnouncement(worker=name, capacity_hz=capacity_hz, prefixes=prefixes)
+    Announcer(bus, partial(keys.worker_announcement, name)).update(announcement)
+    bus.declare_token(keys.pool_member(name))
     for camera in cameras:
-        bus.declare_token(rig.keys.pool_serving(name, bus.zid, camera))
+        bus.declare_token(keys.pool_serving(name, bus.zid, camera))
     return bus
 
 
@@ -255,6 +270,66 @@ def test_the_pool_tokens_say_who_serves_and_what_is_wrong(rig: Rig) -> None:
     assert any("camera rear is served by no detector worker" in w for w in warnings), warnings
     assert not any("served by 2" in w for w in warnings), warnings
     second.close()
+
+
+def test_the_pool_is_audited_by_the_announced_capacities(rig: Rig) -> None:
+    """A fast and a slow worker: the rule gives the fast one both cameras (the slow one's
+    share is under one camera), which is no idle member (an audit of equal capacities would
+    give each one camera and warn that the slow one serves none); a token alone is no member,
+    so it is not warned of either."""
+    fast = _worker(rig, "detector", ["front", "rear"], capacity_hz=30.0)
+    slow = _worker(rig, "detector_2", [], capacity_hz=1.0)
+    stray = rig.hub.join("stray")
+    stray.declare_token(rig.keys.pool_member("stray"))
+    rig.query()
+    rig.clock.advance(POOL_ALARM_S + 0.5)
+    assert rig.query()["pool_warnings"] == []
+    # The fast one gone: both cameras go to the slow one, which does not serve them.
+    fast.close()
+    rig.query()
+    rig.clock.advance(POOL_ALARM_S + 0.5)
+    warnings = rig.query()["pool_warnings"]
+    assert any("detector_2 serves none of the cameras" in w for w in warnings), warnings
+    slow.close()
+    stray.close()
+
+
+def test_a_robots_metrics_see_its_own_cameras_in_a_pool_under_another_prefix() -> None:
+    """robot2's metrics, its cameras served by a pool under robot1 (detector.pool_prefix):
+    the pool's tokens are heard there, its cameras' pool names (robot2/front) read as its
+    own, and robot1's front (bare in the pool) is not robot2's front."""
+    base = Config(detector=DetectorSettings(pool_alarm_s=POOL_ALARM_S, pool_prefix="robot1"))
+    config = replace(base, stack=replace(base.stack, prefix="robot2"))
+    clock, hub = FakeClock(), MemoryHub()
+    sources = Sources(hub, Keys("robot2"))
+    sources.announce("front", config.camera)
+    node = Node("metrics", config, bus=hub.join("metrics"), clock=clock)
+    service = MetricsService(config, node)
+    rig = Rig.__new__(Rig)
+    rig.hub, rig.keys, rig.clock = hub, Keys("robot2"), clock
+    rig.probe = hub.join("test")
+    pool = Keys("robot1")
+    both = ("robot1", "robot2")
+    one = _worker(rig, "detector", ["front"], keys=pool, prefixes=both)  # robot1's front
+    two = _worker(rig, "detector_2", ["robot2/front"], keys=pool, prefixes=both)
+    rig.counters("detector_2", serving=1)
+    rig.counters("detector", serving=1)
+    answer = rig.query()
+    assert answer["cameras"]["front"]["served_by"] == "detector_2"
+    assert answer["workers"]["detector_2"]["cameras"] == ["front"]
+    assert answer["workers"]["detector"]["cameras"] == []  # robot1's front is not ours
+    two.close()
+    clock.advance(POOL_ALARM_S + 0.5)
+    rig.query()
+    clock.advance(POOL_ALARM_S + 0.5)
+    warnings = rig.query()["pool_warnings"]
+    assert warnings == ["camera robot2/front is served by no detector worker (the pool gives "
+                        "it to detector) for 5 s"], warnings  # fmt: skip
+    for bus in (one, rig.probe):
+        bus.close()
+    service.close()
+    sources.close()
+    node.close()
 
 
 def test_garbage_and_strangers_are_counted_never_answered(rig: Rig) -> None:
