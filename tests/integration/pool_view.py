@@ -2,10 +2,11 @@
 
 What the detector pool of a running stack looks like from one host, for a test in another
 network namespace (tests/integration/test_readme_pool.py): it joins as "observer", listens for
-``--seconds`` and prints one JSON object: the workers' announcements (capacity, prefixes), the
-cameras' (rate), the serving tokens at the start and at the end of the window (worker ->
-cameras), the distinct publishers of each camera's detections in the window, and what the
-controller's statuses said in it: each set of stale cameras and the cameras its target was on.
+``--seconds`` and prints one JSON object: the workers' announcements (capacity, prefixes); its
+robot's cameras' (rate); the serving tokens, worker -> cameras, at the start and at the end of
+the window (under ``detector.pool_prefix``: another robot's cameras by their pool names,
+``<prefix>/<camera>``); the distinct publishers of each camera's detections in the window; and
+what the controller's statuses said in it: each set of stale cameras and its target's cameras.
 Exit 1 with one line if the router cannot be reached.
 """
 
@@ -73,6 +74,7 @@ def main() -> int:
     args = parser.parse_args()
     config = load_config(args.config, environ={})
     keys = Keys(config.stack.prefix)
+    pool = Keys(config.detector.pool_prefix or config.stack.prefix)  # the pool's own tokens
     try:
         bus = ZenohBus(open_session(config.zenoh, "observer"))
     except ConfigError as exc:
@@ -102,13 +104,13 @@ def main() -> int:
         bus.subscribe(keys.all_detections(), on_detections),
         bus.subscribe(keys.controller_status(), on_status),
     ]
-    before = _serving(bus, keys)
+    before = _serving(bus, pool)
     time.sleep(args.seconds)  # the listening window itself, not a wait for a condition
     view = {
-        "workers": _workers(bus, keys),
+        "workers": _workers(bus, pool),
         "cameras": _cameras(bus, keys),
         "serving_before": before,
-        "serving": _serving(bus, keys),
+        "serving": _serving(bus, pool),
     }
     for sub in subs:
         sub.undeclare()
