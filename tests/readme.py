@@ -13,14 +13,16 @@ differs between the reader's machines and the test's, and nothing else.
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 README = REPO / "README.md"
 
-#: The robot's address in the README's two-host examples.
-ROBOT_ADDRESS = "10.0.0.2"
+#: The hosts' addresses in the README's examples: the robot beside a GPU box, and two robots
+#: sharing one.
+ROBOT_ADDRESS, ROBOT1_ADDRESS, ROBOT2_ADDRESS = "10.0.0.2", "10.0.0.11", "10.0.0.12"
 #: The GPU backends, run on the CPU's backend where there is no GPU.
 GPU_BACKENDS = ("cuda", "tensorrt")
 
@@ -58,15 +60,17 @@ def named_block(name: str, path: Path = README) -> Block:
     return found[0]
 
 
-def as_tested(text: str, *, robot_address: str, samples: tuple[str, ...]) -> str:
-    """``text`` as a test runs it: the robot's address is the test's, camera ``device:N`` is
-    the bundled photo ``samples[N]`` (``sample:<name>``), and a GPU backend is ``onnx`` (ONNX
-    Runtime on the CPU). Nothing else changes."""
+def as_tested(text: str, *, addresses: Mapping[str, str], samples: tuple[str, ...]) -> str:
+    """``text`` as a test runs it: each README address of ``addresses`` is the test's host's,
+    camera ``device:N`` is the bundled photo ``samples[N]`` (``sample:<name>``), and a GPU
+    backend is ``onnx`` (ONNX Runtime on the CPU). Nothing else changes."""
 
     def sample(m: re.Match[str]) -> str:
         return f'"sample:{samples[int(m.group(1))]}"'
 
-    out = text.replace(ROBOT_ADDRESS, robot_address)
+    out = text
+    for readme, tested in addresses.items():
+        out = out.replace(readme, tested)
     out = _DEVICE.sub(sample, out)
     return _BACKEND.sub(r'\1"onnx"', out)
 

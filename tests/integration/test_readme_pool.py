@@ -37,7 +37,14 @@ from common.pool_rule import assign
 from common.security import ROUTER_PRINCIPAL, ca_file, cert_file, key_file
 from stack.config_file import load_config
 from tests.integration.conftest import REPO, STARTUP_S, wait_for
-from tests.readme import as_tested, named_block, with_credentials
+from tests.readme import (
+    ROBOT1_ADDRESS,
+    ROBOT2_ADDRESS,
+    ROBOT_ADDRESS,
+    as_tested,
+    named_block,
+    with_credentials,
+)
 
 pytestmark = pytest.mark.integration
 
@@ -45,6 +52,9 @@ ADDR_A, ADDR_B = "10.78.0.1", "10.78.0.2"  # private namespaces: no clash with a
 SAMPLES = ("astronaut", "chelsea")  # device:0 (front) sees a person, device:1 (rear) a cat
 PERSON_CAMERA = "front"
 WORKERS = ("detector_gpu", "detector_robot")  # README: worker_id "gpu" and "robot"
+#: README "Several robots": the GPU box linked to each robot's router, a /24 each.
+SITE = [("gpu", "10.79.1.1", "robot1", "10.79.1.2"), ("gpu", "10.79.2.1", "robot2", "10.79.2.2")]
+SITE_ADDRESSES = {ROBOT1_ADDRESS: "10.79.1.2", ROBOT2_ADDRESS: "10.79.2.2"}
 SETTLE_S = 2 * STARTUP_S  # two CPU workers measuring their capacity on a loaded 2-core box
 
 
@@ -56,11 +66,19 @@ def _ip(*args: str) -> None:
 
 @dataclass
 class Hosts:
-    """Two namespaces (unique per run) joined by a veth pair; the processes started in them."""
+    """Network namespaces (unique per run) joined by veth pairs, by role; the processes
+    started in them."""
 
-    a: str
-    b: str
+    ns: dict[str, str]
     procs: list[subprocess.Popen[bytes]] = field(default_factory=list)
+
+    @property
+    def a(self) -> str:
+        return self.ns["a"]
+
+    @property
+    def b(self) -> str:
+        return self.ns["b"]
 
     def _args(self, ns: str, args: list[str]) -> list[str]:
         return ["ip", "netns", "exec", ns, sys.executable, *args]
@@ -79,40 +97,53 @@ class Hosts:
         )
 
 
-@pytest.fixture
-def hosts() -> Iterator[Hosts]:
+#: A link: (role, its address, role, its address), one veth pair in a /24 of its own.
+Link = tuple[str, str, str, str]
+
+
+def _network(links: list[Link]) -> Iterator[Hosts]:
     if os.geteuid() != 0:
         pytest.skip("needs root to create network namespaces (ip netns)")
     if shutil.which("ip") is None:
         pytest.skip("needs iproute2's `ip` for network namespaces")
     tag = uuid.uuid4().hex[:6]
-    h = Hosts(a=f"zyr-{tag}-a", b=f"zyr-{tag}-b")
-    veth_a, veth_b = f"zr{tag}a", f"zr{tag}b"
+    roles = sorted({r for link in links for r in (link[0], link[2])})
+    h = Hosts(ns={r: f"zyr-{tag}-{r}" for r in roles})
+    made: list[str] = []
     try:
-        _ip("netns", "add", h.a)
-    except RuntimeError as exc:
-        pytest.skip(f"cannot create a network namespace here: {exc}")
-    try:
-        _ip("netns", "add", h.b)
-        _ip("link", "add", veth_a, "type", "veth", "peer", "name", veth_b)
-        for ns, dev, addr in ((h.a, veth_a, ADDR_A), (h.b, veth_b, ADDR_B)):
-            _ip("link", "set", dev, "netns", ns)
-            _ip("-n", ns, "addr", "add", f"{addr}/24", "dev", dev)
-            _ip("-n", ns, "link", "set", dev, "up")
+        for ns in h.ns.values():
+            try:
+                _ip("netns", "add", ns)
+            except RuntimeError as exc:
+                pytest.skip(f"cannot create a network namespace here: {exc}")
+            made.append(ns)
             _ip("-n", ns, "link", "set", "lo", "up")
+        for i, (role_1, addr_1, role_2, addr_2) in enumerate(links):
+            dev_1, dev_2 = f"zr{tag}{i}x", f"zr{tag}{i}y"
+            _ip("link", "add", dev_1, "type", "veth", "peer", "name", dev_2)
+            for role, dev, addr in ((role_1, dev_1, addr_1), (role_2, dev_2, addr_2)):
+                _ip("link", "set", dev, "netns", h.ns[role])
+                _ip("-n", h.ns[role], "addr", "add", f"{addr}/24", "dev", dev)
+                _ip("-n", h.ns[role], "link", "set", dev, "up")
         yield h
     finally:
         for proc in h.procs:
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait()
-        for ns in (h.a, h.b):  # deleting a namespace deletes its end of the veth pair too
+        for ns in made:  # deleting a namespace deletes its ends of the veth pairs too
             subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=30)
+
+
+@pytest.fixture
+def hosts() -> Iterator[Hosts]:
+    """A, the GPU box, and B, the robot."""
+    yield from _network([("a", ADDR_A, "b", ADDR_B)])
 
 
 def _write(where: Path, name: str, credentials: Path | None = None) -> Path:
     where.mkdir(exist_ok=True)
-    text = as_tested(named_block(name).text, robot_address=ADDR_B, samples=SAMPLES)
+    text = as_tested(named_block(name).text, addresses={ROBOT_ADDRESS: ADDR_B}, samples=SAMPLES)
     path = where / name
     path.write_text(text if credentials is None else with_credentials(text, credentials))
     return path
@@ -233,3 +264,68 @@ def test_the_readme_gpu_box_and_robot_run_as_written(
         proc.send_signal(signal.SIGINT)
     for name, proc in (("GPU box", sup_a), ("robot", sup_b)):
         assert proc.wait(timeout=30) == 0, f"{name}'s supervisor:\n{logs()}"
+
+
+def test_the_readme_two_robots_on_one_gpu_box_run_as_written(tmp_path: Path) -> None:
+    """README's several robots: gpu-box.toml's one worker serves the cameras of robot1.toml
+    and of robot2.toml (robot1's "alike, with robot2 and 10.0.0.12"), each robot's detections
+    on its own keys from that one worker, each robot's controller fresh on its camera."""
+    gen = _network(SITE)
+    hosts = next(gen)
+    try:
+        one = as_tested(named_block("robot1.toml").text, addresses={}, samples=())
+        two = one.replace("robot1", "robot2").replace(ROBOT1_ADDRESS, ROBOT2_ADDRESS)
+        texts = {"gpu": named_block("gpu-box.toml").text, "robot1": one, "robot2": two}
+        configs = {}
+        for role, text in texts.items():
+            (tmp_path / role).mkdir()
+            configs[role] = tmp_path / role / f"{role}.toml"
+            configs[role].write_text(as_tested(text, addresses=SITE_ADDRESSES, samples=()))
+            load_config(configs[role], environ={})
+        prepare = ["-m", "deploy.zstack", "prepare", "--config", str(configs["gpu"])]
+        prepared = hosts.call(hosts.ns["gpu"], prepare, 600)
+        assert prepared.returncode == 0, prepared.stderr[-2000:]
+        logs_at = {role: tmp_path / f"{role}.log" for role in configs}
+        sups = {
+            role: hosts.start(hosts.ns[role], ["-m", "deploy.zstack", "run", "--config",
+                              str(configs[role])], logs_at[role].open("wb"))
+            for role in ("robot1", "robot2", "gpu")
+        }  # fmt: skip
+        worker = f"detector_{load_config(configs['gpu'], environ={}).detector.worker_id}"
+
+        def logs() -> str:
+            return "\n".join(
+                f"--- {r}:\n{p.read_text(errors='replace')[-3000:]}" for r, p in logs_at.items()
+            )
+
+        def served(role: str) -> dict[str, Any] | None:
+            for name, proc in sups.items():
+                if proc.poll() is not None:
+                    pytest.fail(f"{name}'s supervisor exited ({proc.returncode}):\n{logs()}")
+            cfg = load_config(configs[role], environ={})
+            args = ["-m", "tests.integration.pool_view", "--config", str(configs[role])]
+            done = hosts.call(hosts.ns[role], [*args, "--seconds", "4"], timeout=60)
+            view = json.loads(done.stdout) if done.returncode == 0 else None
+            if view is None or sorted(view["workers"]) != [worker] or not view["cameras"]:
+                return None
+            mine = {f"{cfg.stack.prefix}/{c}" for c in view["cameras"]}
+            stale_sets = view["controller"]["stale_sets"]
+            fresh = {c for c in view["cameras"] if any(c not in s for s in stale_sets)}
+            ok = (
+                mine <= set(view["serving"].get(worker, []))
+                and all(view["publishers"].get(c) == 1 for c in view["cameras"])
+                and fresh == set(view["cameras"])
+                and cfg.stack.camera in view["controller"]["target_cameras"]
+            )
+            return view if ok else None
+
+        for role in ("robot1", "robot2"):
+            view = wait_for(lambda r=role: served(r), SETTLE_S,
+                            lambda: f"{worker} serving every robot:\n{logs()}", 1.0)  # fmt: skip
+        print(f"README robots: {worker} serves {view['serving'][worker]}")
+        for proc in sups.values():
+            proc.send_signal(signal.SIGINT)
+        for name, proc in sups.items():
+            assert proc.wait(timeout=30) == 0, f"{name}'s supervisor:\n{logs()}"
+    finally:
+        gen.close()

@@ -73,11 +73,11 @@ def test_the_gpu_box_needs_only_its_endpoint_backend_and_worker_id(tmp_path: Pat
 def test_as_tested_changes_only_the_address_the_devices_and_the_gpu_backend() -> None:
     robot = named_block("robot.toml").text
     gpu = named_block("gpu.toml").text
-    tested = as_tested(robot, robot_address="10.9.9.9", samples=("astronaut", "chelsea"))
+    tested = as_tested(robot, addresses={"10.0.0.2": "10.9.9.9"}, samples=("astronaut", "chelsea"))
     assert "10.0.0.2" not in tested and "device:" not in tested
     assert '"sample:astronaut"' in tested and '"sample:chelsea"' in tested
     assert tested.count("\n") == robot.count("\n")
-    gpu_tested = as_tested(gpu, robot_address="10.9.9.9", samples=())
+    gpu_tested = as_tested(gpu, addresses={"10.0.0.2": "10.9.9.9"}, samples=())
     assert tomllib.loads(gpu_tested)["detector"]["backend"] == "onnx"
     changed = [
         (a, b) for a, b in zip(gpu.splitlines(), gpu_tested.splitlines(), strict=True) if a != b
