@@ -15,6 +15,10 @@ workers join, the cameras are split as the pool's rule splits them by the capaci
 workers announce, each camera is served (and its detections published) by exactly one worker,
 the robot's controller gets detections of every camera and targets the person, and
 `zstack query` on the robot shows what the README says it shows.
+
+The README's several robots (``# gpu-box.toml``, ``# robot1.toml``, robot2 made from robot1 as
+the README says) run on three namespaces, the GPU box linked to each robot: its one worker
+serves both robots' cameras, each robot's controller fresh on its own.
 """
 
 from __future__ import annotations
