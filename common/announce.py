@@ -26,6 +26,8 @@ from typing import Generic, Protocol, TypeVar
 
 from common.bus import Bus, Declared
 from common.errors import DecodeError
+from common.keys import Keys
+from common.messages import CameraAnnouncement, WorkerAnnouncement
 
 #: The longest announcement chunk read: a real one is under 300 characters.
 MAX_CHUNK_CHARS = 1024
@@ -161,3 +163,39 @@ class Announced(Generic[_A]):
 
     def close(self) -> None:
         self._watch.undeclare()
+
+
+def announced_cameras(
+    bus: Bus,
+    keys: Keys,
+    on_change: Callable[[], None] | None = None,
+    on_bad: Callable[[str, Exception], None] | None = None,
+) -> Announced[CameraAnnouncement]:
+    """Every camera announced under ``keys``' prefix (the listener's side)."""
+    return Announced(
+        bus,
+        keys.all_camera_announcements(),
+        keys.camera_announcement_parts,
+        CameraAnnouncement.decode,
+        lambda a: a.camera,
+        on_change=on_change,
+        on_bad=on_bad,
+    )
+
+
+def announced_workers(
+    bus: Bus,
+    keys: Keys,
+    on_change: Callable[[], None] | None = None,
+    on_bad: Callable[[str, Exception], None] | None = None,
+) -> Announced[WorkerAnnouncement]:
+    """Every pool worker announced under ``keys``' prefix (the pool's)."""
+    return Announced(
+        bus,
+        keys.all_worker_announcements(),
+        keys.worker_announcement_parts,
+        WorkerAnnouncement.decode,
+        lambda a: a.worker,
+        on_change=on_change,
+        on_bad=on_bad,
+    )

@@ -9,7 +9,7 @@ import threading
 from collections.abc import Callable, Mapping
 from typing import Generic, Protocol, TypeVar
 
-from common.announce import Announced
+from common.announce import Announced, announced_cameras
 from common.bus import Declared
 from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock, Stamp, mono_s
 from common.contracts import ControllerState, DetectorInfo
@@ -294,14 +294,8 @@ class ControlLoop:
         ]
         self._cameras_lock = threading.Lock()  # one change of the camera set at a time
         self.announced: Announced[CameraAnnouncement] | None = None
-        self.announced = Announced(
-            node.bus,
-            keys.all_camera_announcements(),
-            keys.camera_announcement_parts,
-            CameraAnnouncement.decode,
-            lambda a: a.camera,
-            on_change=self._on_cameras,
-            on_bad=self._on_bad_announcement,
+        self.announced = announced_cameras(
+            node.bus, keys, self._on_cameras, self._on_bad_announcement
         )
         self._on_cameras()  # those already announced (a Zenoh watch reports them as it starts)
         node.log.info(

@@ -10,7 +10,7 @@ from dataclasses import replace
 from functools import partial
 from typing import Any
 
-from common.announce import Announced, Announcer
+from common.announce import Announced, Announcer, announced_cameras, announced_workers
 from common.bus import Declared
 from common.counters import per_camera
 from common.errors import StackError
@@ -204,26 +204,10 @@ class PoolMember:
         self._announcer.update(self.announcement)
         with self._token_lock:
             self._token = bus.declare_token(mine)
-        self._workers = Announced(
-            bus,
-            keys.all_worker_announcements(),
-            keys.worker_announcement_parts,
-            WorkerAnnouncement.decode,
-            lambda a: a.worker,
-            on_change=self._changed,
-            on_bad=self._bad,
-        )
+        self._workers = announced_workers(bus, keys, self._changed, self._bad)
         for prefix in self.prefixes:
             robot = Keys(prefix)
-            self._cameras[prefix] = Announced(
-                bus,
-                robot.all_camera_announcements(),
-                robot.camera_announcement_parts,
-                CameraAnnouncement.decode,
-                lambda a: a.camera,
-                on_change=self._changed,
-                on_bad=self._bad,
-            )
+            self._cameras[prefix] = announced_cameras(bus, robot, self._changed, self._bad)
         self._catch_up()
         watches = [bus.watch_tokens(keys.all_pool_members(), self._on_member)]
         for key in members:

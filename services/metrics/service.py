@@ -13,7 +13,7 @@ from collections.abc import Callable, Mapping
 from typing import TypeVar
 
 from common import reach
-from common.announce import Announced
+from common.announce import Announced, announced_cameras, announced_workers
 from common.bus import Declared
 from common.clock import SYSTEM_CLOCK, Clock, mono_s
 from common.contracts import AnnouncedCamera, MetricsAnswer
@@ -242,26 +242,20 @@ class MetricsService:
         # on one subscription, the camera the one its key names; those of a camera not
         # announced are dropped (MetricsHandlers.on_detections).
         self.announced: Announced[CameraAnnouncement] | None = None
-        self.announced = Announced(
+        self.announced = announced_cameras(
             node.bus,
-            keys.all_camera_announcements(),
-            keys.camera_announcement_parts,
-            CameraAnnouncement.decode,
-            lambda a: a.camera,
-            on_change=self._on_cameras,
-            on_bad=lambda key, exc: node.bad_input(key, exc, topic="camera_announcement"),
+            keys,
+            self._on_cameras,
+            lambda key, exc: node.bad_input(key, exc, topic="camera_announcement"),
         )
         self._on_cameras()  # those already announced (a Zenoh watch reports them as it starts)
         pool = handlers.pool_keys
         self.workers: Announced[WorkerAnnouncement] | None = None
-        self.workers = Announced(
+        self.workers = announced_workers(
             node.bus,
-            pool.all_worker_announcements(),
-            pool.worker_announcement_parts,
-            WorkerAnnouncement.decode,
-            lambda a: a.worker,
-            on_change=self._on_workers,
-            on_bad=lambda key, exc: node.bad_input(key, exc, topic="worker_announcement"),
+            pool,
+            self._on_workers,
+            lambda key, exc: node.bad_input(key, exc, topic="worker_announcement"),
         )
         self._on_workers()
         self._declared: list[Declared] = [
