@@ -34,6 +34,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from common.access import Access, Shape
+from common.errors import ConfigError
 from common.keys import Keys
 from common.security import (
     AUTH_MODES,
@@ -42,7 +43,7 @@ from common.security import (
     camera_services,
     stack_principals,
 )
-from common.settings import is_detector_service, service_package
+from common.settings import check_camera_name, is_detector_service, service_package
 from services.camera import contract as camera
 from services.controller import contract as controller
 from services.detector import contract as detector
@@ -158,7 +159,10 @@ def _table(
     host's detector workers among them, and the linked routers' (ROUTER_PRINCIPAL's)."""
     remote = tuple(remote)
     pool = tuple(dict.fromkeys((*workers, *(p for p in remote if is_detector_service(p)))))
-    shape = Shape(keys, camera_services(cameras), pool, live_sensors, tuple(prefixes), pool_prefix)
+    shape = Shape(
+        keys, remote_cameras(camera_services(cameras), remote), pool, live_sensors,
+        tuple(prefixes), pool_prefix,
+    )  # fmt: skip
     table = access_table(shape)
     if remote:
         # A pool's router linked to the routers of the robots it serves: their principals
@@ -173,6 +177,24 @@ def _table(
         tables = [table, *(access_table(r) for r in robots[1:])]
         table[ROUTER_PRINCIPAL] = merged(linked_router_access(t, remote) for t in tables)
     return table
+
+
+def remote_cameras(cameras: Mapping[str, str], remote: Iterable[str]) -> dict[str, str]:
+    """``cameras`` (``{camera: principal}``) with each further camera another host runs:
+    ``camera_<name>`` among the ``remote`` principals is camera ``<name>``, so that a GPU box,
+    which has no camera table, admits the robot's cameras over the link. ValueError, one
+    line, for a name that is no camera's."""
+    out = dict(cameras)
+    for principal in remote:
+        if service_package(principal) != "camera" or principal in out.values():
+            continue
+        name = principal.removeprefix("camera_")
+        try:
+            check_camera_name(name)
+        except ConfigError as exc:
+            raise ValueError(f"zenoh.remote_principals names {principal!r}: {exc}") from exc
+        out[name] = principal
+    return out
 
 
 def merged(accesses: Iterable[Access]) -> Access:

@@ -92,10 +92,31 @@ def test_another_hosts_worker_joining_this_router_is_confined_as_its_own_router_
 
 
 def test_an_unknown_remote_principal_is_refused_in_one_line() -> None:
-    with pytest.raises(ValueError, match=r"remote_principals names 'camera_side'.*known: "):
-        access_control(ROBOT1, CAMERAS, "certificate", remote=("camera_side",))
+    with pytest.raises(ValueError, match=r"remote_principals names 'planner'.*known: "):
+        access_control(ROBOT1, CAMERAS, "certificate", remote=("planner",))
+    with pytest.raises(ValueError, match=r"remote_principals names 'camera_Side'"):
+        access_control(ROBOT1, CAMERAS, "certificate", remote=("camera_Side",))
     with pytest.raises(ValueError, match="'supervisor'"):
         access_control(ROBOT1, CAMERAS, "certificate", remote=(ROUTER_PRINCIPAL,))
+
+
+def test_a_gpu_boxs_router_admits_the_robots_further_cameras_named_only_in_remote_principals() -> (
+    None
+):
+    # The GPU box has no camera table (its one default camera); the robot runs front and rear.
+    gpu = MemoryHub(
+        access_control(
+            ROBOT1, "front", "certificate", workers=(GPU_WORKER,),
+            remote=("camera", "camera_rear", "detector_b", "controller", "metrics"),
+        )
+    )  # fmt: skip
+    worker = gpu.join(GPU_WORKER, principal=GPU_WORKER)
+    heard: list[Sample] = []
+    worker.subscribe(ROBOT1.all_frames(), heard.append)
+    link = gpu.join("robot router", principal=ROUTER_PRINCIPAL)
+    for camera in ("front", "rear", "side"):
+        _put(link, ROBOT1.frame(camera))
+    assert [s.key for s in heard] == [ROBOT1.frame("front"), ROBOT1.frame("rear")]
 
 
 # --- two robots ----------------------------------------------------------------------------
