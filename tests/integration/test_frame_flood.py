@@ -43,8 +43,8 @@ def rss(det: Detector) -> int:
 
 def test_a_flood_of_large_frames_is_bounded(serve: Any) -> None:  # noqa: F811
     det: Detector = serve({"flooded": {"frame_id": "flooded"}, "steady": {"frame_id": "steady"}})
-    flooded = Camera(det, "flooded", "astronaut", FULL_HD)
-    steady = Camera(det, "steady", "chelsea", (640, 480))
+    flooded = Camera(det, "flooded", "astronaut", FULL_HD, 5.0)
+    steady = Camera(det, "steady", "chelsea", (640, 480), 5.0)
     pace = threading.Event()  # never set: wait() paces the sending, it waits for nothing
 
     def send_both(until: float, cameras: list[Camera]) -> None:
