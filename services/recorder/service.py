@@ -19,7 +19,7 @@ from pathlib import Path
 import zenoh
 
 from common import reach
-from common.bus import Declared, QoS
+from common.bus import Bus, Declared, QoS
 from common.camera_announce import CameraAnnouncements
 from common.clock import local_now, mono_s, wall_ns
 from common.codec import Message
@@ -37,6 +37,7 @@ from common.messages import (
     Twist,
 )
 from common.node import Node, Tally
+from common.pool_rule import pool_name
 from common.priority import lower_priority
 from common.queries import ready_services
 from common.settings import REPO_ROOT, is_detector_service
@@ -211,12 +212,14 @@ def _ready_to_play(
     progress: Progress,
     wait: bool,
     clear: Callable[[], None],
+    served: Callable[[], bool] = lambda: True,
 ) -> set[str]:
     """The services ready on the stack once the replay may start: a link to the stack at once
     (else one StackError line naming the endpoint), no live sensor, and with ``wait`` a ready
-    detector within recorder.detector_wait_s (frames played before it would be lost).
-    ``clear()`` is called once no live sensor is seen, before the wait for a detector (the
-    played cameras are announced then: a pool's workers serve the cameras announced)."""
+    detector serving every played camera (``served()``) within recorder.detector_wait_s
+    (frames played before would be lost). ``clear()`` is called once no live sensor is seen,
+    before the wait for a detector (the played cameras are announced then: a pool's workers
+    serve the cameras announced, each once it has heard its announcement)."""
     keys, prefix = Keys(config.stack.prefix), config.stack.prefix
     if not reach.connected(session, PLAY_LINK_TIMEOUT_S):
         raise StackError(
@@ -243,7 +246,7 @@ def _ready_to_play(
         if not cleared:
             cleared = True
             clear()
-        if any(is_detector_service(name) for name in ready):
+        if any(is_detector_service(name) for name in ready) and served():
             return ready
         if not wait:
             progress("no detector is ready on this stack: playing anyway (--no-wait)")
@@ -251,8 +254,9 @@ def _ready_to_play(
         if mono_s() >= deadline:
             raise StackError(
                 reach.unreached(
-                    f"no detector was ready within {config.recorder.detector_wait_s:g} s "
-                    "(recorder.detector_wait_s) to detect on the replay",
+                    f"no detector was ready and serving the played cameras within "
+                    f"{config.recorder.detector_wait_s:g} s (recorder.detector_wait_s) to "
+                    "detect on the replay",
                     config.zenoh, prefix, PLAY_PRINCIPAL, linked=True, ready=frozenset(ready),
                 )
                 + "; --no-wait plays without waiting"
@@ -265,6 +269,16 @@ def _ready_to_play(
             )
         if stop.wait(READY_POLL_S):
             return ready
+
+
+def served_cameras(bus: Bus, config: Config) -> set[str]:
+    """The cameras of this stack that a detector worker serves now (its serving tokens, under
+    the pool's prefix: services/detector/membership.py)."""
+    prefix = config.stack.prefix
+    pool = Keys(config.detector.pool_prefix or prefix)
+    parts = (pool.pool_serving_parts(k) for k in bus.live_tokens(pool.all_pool_serving(), 1.0))
+    robot = pool_name(prefix, "", pool.prefix)  # "" on the pool's own robot, "<prefix>/" else
+    return {p[2].removeprefix(robot) for p in parts if p is not None and p[2].startswith(robot)}
 
 
 def play(
@@ -291,6 +305,7 @@ def play(
         _ready_to_play(
             config, session, path, stop, progress, wait,
             lambda: announce_played(config, announcements, recorded, rate),
+            lambda: set(recorded) <= served_cameras(bus, config),
         )  # fmt: skip
         pubs = {keys.frame(camera): Publisher(session, keys.frame(camera), QoS.SENSOR)
                 for camera in config.all_cameras}  # fmt: skip
