@@ -246,7 +246,8 @@ def _ready_to_play(
         if not cleared:
             cleared = True
             clear()
-        if any(is_detector_service(name) for name in ready) and served():
+        detector = any(is_detector_service(name) for name in ready)
+        if detector and served():
             return ready
         if not wait:
             progress("no detector is ready on this stack: playing anyway (--no-wait)")
@@ -254,9 +255,13 @@ def _ready_to_play(
         if mono_s() >= deadline:
             raise StackError(
                 reach.unreached(
-                    f"no detector was ready and serving the played cameras within "
-                    f"{config.recorder.detector_wait_s:g} s (recorder.detector_wait_s) to "
-                    "detect on the replay",
+                    (
+                        "a detector is ready but serves not every played camera"
+                        if detector
+                        else "no detector was ready"
+                    )
+                    + f" within {config.recorder.detector_wait_s:g} s "
+                    "(recorder.detector_wait_s) to detect on the replay",
                     config.zenoh, prefix, PLAY_PRINCIPAL, linked=True, ready=frozenset(ready),
                 )
                 + "; --no-wait plays without waiting"
