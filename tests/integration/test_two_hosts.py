@@ -33,7 +33,7 @@ import sys
 import threading
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -219,6 +219,18 @@ def test_detector_on_another_host_survives_a_cut_link(hosts: Hosts, tmp_path: Pa
     # Nothing was restarted, by hand or by either watchdog: A's detector kept its health token
     # and its heartbeat with A's own supervisor, and B's services never depended on host A.
     assert service_pids("detector", gpu_box) == [detector]
+    _nothing_restarted_and_both_stop(log_a, log_b, sup_a, sup_b, logs)
+
+
+def _nothing_restarted_and_both_stop(
+    log_a: Path,
+    log_b: Path,
+    sup_a: subprocess.Popen[bytes],
+    sup_b: subprocess.Popen[bytes],
+    logs: Callable[[], str],
+) -> None:
+    """No service of either host was found hung or restarted, and both supervisors stop
+    cleanly on SIGINT."""
     for name, path in (("A", log_a), ("B", log_b)):
         text = path.read_text(errors="replace")
         assert "hung (" not in text and "restarted" not in text, f"host {name}:\n{logs()}"
@@ -355,13 +367,7 @@ def test_a_pool_across_two_hosts_shares_splits_and_settles_with_no_restart(
     )
     assert {w: service_pids(w, cfg) for w, cfg in
             ((worker_a, gpu_box), (worker_b, robot))} == pids  # fmt: skip
-    for name, path in (("A", log_a), ("B", log_b)):
-        text = path.read_text(errors="replace")
-        assert "hung (" not in text and "restarted" not in text, f"host {name}:\n{logs()}"
-    for proc in (sup_a, sup_b):
-        proc.send_signal(signal.SIGINT)
-    for name, proc in (("A", sup_a), ("B", sup_b)):
-        assert proc.wait(timeout=30) == 0, f"supervisor {name}:\n{logs()}"
+    _nothing_restarted_and_both_stop(log_a, log_b, sup_a, sup_b, logs)
 
 
 # --- The secure profile across the two hosts (issue 31, item 6) --------------------------------
@@ -495,10 +501,4 @@ def test_the_secure_profile_across_two_linked_routers_confines_every_principal(
     )
     for name, proc in rogues.items():
         assert proc.wait(timeout=30) == 0, f"rogue {name}"
-    for name, path in (("A", log_a), ("B", log_b)):
-        text = path.read_text(errors="replace")
-        assert "hung (" not in text and "restarted" not in text, f"host {name}:\n{logs()}"
-    for proc in (sup_a, sup_b):
-        proc.send_signal(signal.SIGINT)
-    for name, proc in (("A", sup_a), ("B", sup_b)):
-        assert proc.wait(timeout=30) == 0, f"supervisor {name}:\n{logs()}"
+    _nothing_restarted_and_both_stop(log_a, log_b, sup_a, sup_b, logs)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from common.announce import Announced
+from common.announce import Announced, announced_cameras
 from common.keys import Keys
 from common.memory_bus import MemoryHub
 from common.messages import CameraAnnouncement
@@ -24,12 +24,4 @@ def heard_cameras(
     def bad(key: str, error: Exception) -> None:
         raise AssertionError(f"a bad announcement on {key}: {error}")
 
-    return Announced(
-        hub.join("listener", principal=principal),
-        keys.all_camera_announcements(),
-        keys.camera_announcement_parts,
-        CameraAnnouncement.decode,
-        lambda a: a.camera,
-        on_change=on_change,
-        on_bad=bad,
-    )
+    return announced_cameras(hub.join("listener", principal=principal), keys, on_change, bad)
