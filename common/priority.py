@@ -33,6 +33,16 @@ def lower_priority(nice: int, idle: bool) -> str:
     return ", ".join(done) or "unchanged"
 
 
+def process_threads(pid: int | None = None) -> list[int]:
+    """Every thread of process ``pid`` (this one by default; native ids; Linux), those a
+    library started included (Zenoh's runtime, which inherits the idle class); elsewhere just
+    the calling thread (this process) or none (another)."""
+    try:
+        return [int(tid) for tid in os.listdir(f"/proc/{'self' if pid is None else pid}/task")]
+    except OSError:
+        return [0] if pid is None else []
+
+
 def leave_idle(*threads: int) -> str:
     """Put ``threads`` (native thread ids; 0 is the calling thread) back in the normal class,
     keeping their nice value; returns what was done, for the log.
@@ -41,9 +51,12 @@ def leave_idle(*threads: int) -> str:
     recorder told to stop on a saturated machine could not finish its file before the
     supervisor's stop timeout killed it (a file of its header alone, seen with both cores
     busy). Finishing the file is a moment's work at nice 10."""
+    failed = []
     for tid in threads:
         try:
             os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
         except (AttributeError, OSError) as exc:  # not Linux, refused, or the thread is gone
-            return f"still SCHED_IDLE ({exc})"
+            failed.append(f"{tid}: {exc}")
+    if failed:  # the others are back all the same
+        return f"still SCHED_IDLE ({'; '.join(failed)[:200]})"
     return "back in the normal class to finish"

@@ -13,6 +13,7 @@ from typing import IO
 
 from common.clock import mono_s
 from common.lifecycle import PERMANENT_FAILURES, SUPERVISOR_PID_ENV
+from common.priority import leave_idle, process_threads
 from common.spawn import ask_to_stop, spawn, wait_or_kill
 from stack.config import Config, SupervisorSettings
 
@@ -182,6 +183,10 @@ class ServiceProcess:
 
     def signal_stop(self) -> None:
         if self.proc is not None:
+            # A service in the idle CPU class (the recorder) gets no CPU at all while every
+            # core is busy: not even to act on the stop. Out of it first, every thread, so
+            # that it ends within stop_timeout_s however busy the cores.
+            leave_idle(*process_threads(self.proc.pid))
             ask_to_stop(self.proc)
 
     def wait_stopped(self, deadline: float) -> None:

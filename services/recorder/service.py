@@ -38,7 +38,7 @@ from common.messages import (
 )
 from common.node import Node, Tally
 from common.pool_rule import pool_name
-from common.priority import lower_priority
+from common.priority import leave_idle, lower_priority, process_threads
 from common.queries import ready_services
 from common.settings import REPO_ROOT, is_detector_service
 from common.zenoh_bus import Publisher, ZenohBus, open_session
@@ -132,6 +132,11 @@ class Recorder(Closing):
         return line
 
     def close(self) -> None:
+        # Out of the idle class first, every thread (Zenoh's too): undeclaring, finishing the
+        # file and closing the session must end before the supervisor's stop timeout, and an
+        # idle-class thread gets no CPU at all while every core is busy (a recorder killed
+        # at stop with both cores busy, its subscriptions still being undeclared).
+        self.tally.log.debug("stopping: %s", leave_idle(*process_threads()))
         for sub in self._subs:
             sub.undeclare()
         self._queued.close()

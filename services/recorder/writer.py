@@ -25,7 +25,7 @@ from common.codec import Message
 from common.counters import BAD_INPUT, Counters
 from common.errors import ConfigError, DecodeError, one_line
 from common.lifecycle import Closing
-from common.priority import leave_idle
+from common.priority import leave_idle, process_threads
 from services.recorder import contract
 from services.recorder.channels import PROFILE, Channel, Entry, Translator
 from services.recorder.contract import Compression, RecorderSettings
@@ -205,8 +205,10 @@ class QueuedRecorder(Closing):
         """Write what is queued, then finish the file, out of the idle class (a stop is a
         moment's work that must end before the supervisor's stop timeout, however busy the
         cores)."""
-        writer = self._thread.native_id
-        log.debug("closing: %s", leave_idle(0, *([writer] if writer is not None else [])))
+        # Every thread, Zenoh's too: the session's close after the file's needs them, and an
+        # idle-class one starved there until the stop timeout killed the recorder (both cores
+        # busy, the file already done).
+        log.debug("closing: %s", leave_idle(*process_threads()))
         self._closing.set()
         self._thread.join()
         if self._error is None:

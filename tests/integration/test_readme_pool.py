@@ -29,6 +29,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -74,6 +75,10 @@ class Hosts:
     started in them."""
 
     ns: dict[str, str]
+    #: Each host's own temporary folder (TMPDIR), as on real hosts: the supervisor's lock
+    #: (deploy/lock.py) is named after the endpoint and prefix, which two tests' GPU boxes
+    #: share (README's), and namespaces share this machine's /tmp.
+    tmp: dict[str, str] = field(default_factory=dict)
     procs: list[subprocess.Popen[bytes]] = field(default_factory=list)
 
     @property
@@ -87,9 +92,12 @@ class Hosts:
     def _args(self, ns: str, args: list[str]) -> list[str]:
         return ["ip", "netns", "exec", ns, sys.executable, *args]
 
+    def _env(self, ns: str) -> dict[str, str]:
+        return {**os.environ, "PYTHONUNBUFFERED": "1", "TMPDIR": self.tmp[ns]}
+
     def start(self, ns: str, args: list[str], out: IO[bytes]) -> subprocess.Popen[bytes]:
         proc = subprocess.Popen(
-            self._args(ns, args), cwd=REPO, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            self._args(ns, args), cwd=REPO, env=self._env(ns),
             stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
         )  # fmt: skip
         self.procs.append(proc)
@@ -97,8 +105,9 @@ class Hosts:
 
     def call(self, ns: str, args: list[str], timeout: float) -> subprocess.CompletedProcess[str]:
         return subprocess.run(
-            self._args(ns, args), cwd=REPO, capture_output=True, text=True, timeout=timeout
-        )
+            self._args(ns, args), cwd=REPO, env=self._env(ns), capture_output=True, text=True,
+            timeout=timeout,
+        )  # fmt: skip
 
 
 #: A link: (role, its address, role, its address), one veth pair in a /24 of its own.
@@ -115,6 +124,7 @@ def _network(links: list[Link]) -> Iterator[Hosts]:
     h = Hosts(ns={r: f"zyr-{tag}-{r}" for r in roles})
     made: list[str] = []
     try:
+        h.tmp = {ns: tempfile.mkdtemp(prefix=f"{ns}-") for ns in h.ns.values()}
         for ns in h.ns.values():
             try:
                 _ip("netns", "add", ns)
@@ -137,6 +147,8 @@ def _network(links: list[Link]) -> Iterator[Hosts]:
                 proc.wait()
         for ns in made:  # deleting a namespace deletes its ends of the veth pairs too
             subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=30)
+        for folder in h.tmp.values():
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture
