@@ -42,6 +42,7 @@ from common.pool_rule import assign
 from common.security import ROUTER_PRINCIPAL, ca_file, cert_file, key_file
 from stack.config_file import load_config
 from tests.integration.conftest import REPO, STARTUP_S, wait_for
+from tests.integration.netns import ip
 from tests.readme import (
     ROBOT1_ADDRESS,
     ROBOT2_ADDRESS,
@@ -61,12 +62,6 @@ WORKERS = ("detector_gpu", "detector_robot")  # README: worker_id "gpu" and "rob
 SITE = [("gpu", "10.79.1.1", "robot1", "10.79.1.2"), ("gpu", "10.79.2.1", "robot2", "10.79.2.2")]
 SITE_ADDRESSES = {ROBOT1_ADDRESS: "10.79.1.2", ROBOT2_ADDRESS: "10.79.2.2"}
 SETTLE_S = 2 * STARTUP_S  # two CPU workers measuring their capacity on a loaded 2-core box
-
-
-def _ip(*args: str) -> None:
-    done = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
-    if done.returncode != 0:
-        raise RuntimeError(f"ip {' '.join(args)}: {done.stderr.strip()}")
 
 
 @dataclass
@@ -127,18 +122,18 @@ def _network(links: list[Link]) -> Iterator[Hosts]:
         h.tmp = {ns: tempfile.mkdtemp(prefix=f"{ns}-") for ns in h.ns.values()}
         for ns in h.ns.values():
             try:
-                _ip("netns", "add", ns)
+                ip("netns", "add", ns)
             except RuntimeError as exc:
                 pytest.skip(f"cannot create a network namespace here: {exc}")
             made.append(ns)
-            _ip("-n", ns, "link", "set", "lo", "up")
+            ip("-n", ns, "link", "set", "lo", "up")
         for i, (role_1, addr_1, role_2, addr_2) in enumerate(links):
             dev_1, dev_2 = f"zr{tag}{i}x", f"zr{tag}{i}y"
-            _ip("link", "add", dev_1, "type", "veth", "peer", "name", dev_2)
+            ip("link", "add", dev_1, "type", "veth", "peer", "name", dev_2)
             for role, dev, addr in ((role_1, dev_1, addr_1), (role_2, dev_2, addr_2)):
-                _ip("link", "set", dev, "netns", h.ns[role])
-                _ip("-n", h.ns[role], "addr", "add", f"{addr}/24", "dev", dev)
-                _ip("-n", h.ns[role], "link", "set", dev, "up")
+                ip("link", "set", dev, "netns", h.ns[role])
+                ip("-n", h.ns[role], "addr", "add", f"{addr}/24", "dev", dev)
+                ip("-n", h.ns[role], "link", "set", dev, "up")
         yield h
     finally:
         for proc in h.procs:

@@ -43,6 +43,7 @@ import pytest
 from common.security import ROUTER_PRINCIPAL, ca_file, cert_file, key_file, stack_principals
 from deploy.credentials import generate
 from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
+from tests.integration.netns import ip
 from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration
@@ -52,12 +53,6 @@ DEAD_MAN_S = 2.0  # controller.detection_timeout_s: inference takes ~1 s on a lo
 MARGIN_S = 1.0  # one control tick, scheduling on a loaded machine
 LEASE_S = 10.0  # Zenoh's default lease: a silent peer is dropped after it
 MODE = "client"  # routers on both hosts: README "Two hosts"
-
-
-def _ip(*args: str) -> None:
-    done = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
-    if done.returncode != 0:
-        raise RuntimeError(f"ip {' '.join(args)}: {done.stderr.strip()}")
 
 
 @dataclass
@@ -80,7 +75,7 @@ class Hosts:
         return proc
 
     def link(self, up: bool) -> float:
-        _ip("-n", self.a, "link", "set", self.veth_a, "up" if up else "down")
+        ip("-n", self.a, "link", "set", self.veth_a, "up" if up else "down")
         return time.monotonic()
 
 
@@ -94,17 +89,17 @@ def hosts() -> Iterator[Hosts]:
     h = Hosts(a=f"zys-{tag}-a", b=f"zys-{tag}-b", veth_a=f"zy{tag}a")
     veth_b = f"zy{tag}b"
     try:
-        _ip("netns", "add", h.a)
+        ip("netns", "add", h.a)
     except RuntimeError as exc:
         pytest.skip(f"cannot create a network namespace here: {exc}")
     try:
-        _ip("netns", "add", h.b)
-        _ip("link", "add", h.veth_a, "type", "veth", "peer", "name", veth_b)
+        ip("netns", "add", h.b)
+        ip("link", "add", h.veth_a, "type", "veth", "peer", "name", veth_b)
         for ns, dev, addr in ((h.a, h.veth_a, ADDR_A), (h.b, veth_b, ADDR_B)):
-            _ip("link", "set", dev, "netns", ns)
-            _ip("-n", ns, "addr", "add", f"{addr}/24", "dev", dev)
-            _ip("-n", ns, "link", "set", dev, "up")
-            _ip("-n", ns, "link", "set", "lo", "up")
+            ip("link", "set", dev, "netns", ns)
+            ip("-n", ns, "addr", "add", f"{addr}/24", "dev", dev)
+            ip("-n", ns, "link", "set", dev, "up")
+            ip("-n", ns, "link", "set", "lo", "up")
         yield h
     finally:
         for proc in h.procs:
@@ -222,6 +217,20 @@ def test_detector_on_another_host_survives_a_cut_link(hosts: Hosts, tmp_path: Pa
     _nothing_restarted_and_both_stop(log_a, log_b, sup_a, sup_b, logs)
 
 
+def _start_pool_hosts(
+    hosts: Hosts, tmp_path: Path, robot: Path, gpu_box: Path
+) -> tuple[Path, Path, subprocess.Popen[bytes], subprocess.Popen[bytes], Probe]:
+    """Host B's supervisor (the robot) and A's (the GPU box), and a probe on B: their logs,
+    the two supervisors and the probe."""
+    log_a, log_b = tmp_path / "a.log", tmp_path / "b.log"
+    supervise = ["-m", "deploy.supervisor", "--config"]
+    sup_b = hosts.run(hosts.b, [*supervise, str(robot)], log_b.open("wb"))
+    sup_a = hosts.run(hosts.a, [*supervise, str(gpu_box)], log_a.open("wb"))
+    probe = Probe(hosts.run(hosts.b, ["-m", "tests.integration.probe", "--config", str(robot)],
+                            subprocess.PIPE))  # fmt: skip
+    return log_a, log_b, sup_a, sup_b, probe
+
+
 def _nothing_restarted_and_both_stop(
     log_a: Path,
     log_b: Path,
@@ -320,12 +329,7 @@ def test_a_pool_across_two_hosts_shares_splits_and_settles_with_no_restart(
         supervisor={"services": ["detector"]},
         **_pool_tables(stack, "a"),
     )
-    log_a, log_b = tmp_path / "a.log", tmp_path / "b.log"
-    supervise = ["-m", "deploy.supervisor", "--config"]
-    sup_b = hosts.run(hosts.b, [*supervise, str(robot)], log_b.open("wb"))
-    sup_a = hosts.run(hosts.a, [*supervise, str(gpu_box)], log_a.open("wb"))
-    probe = Probe(hosts.run(hosts.b, ["-m", "tests.integration.probe", "--config", str(robot)],
-                            subprocess.PIPE))  # fmt: skip
+    log_a, log_b, sup_a, sup_b, probe = _start_pool_hosts(hosts, tmp_path, robot, gpu_box)
     worker_a, worker_b = POOL_WORKERS["a"], POOL_WORKERS["b"]
 
     def logs() -> str:
@@ -444,12 +448,7 @@ def test_the_secure_profile_across_two_linked_routers_confines_every_principal(
         supervisor={"services": ["detector"]},
         **_pool_tables(stack, "a"),
     )  # fmt: skip
-    log_a, log_b = tmp_path / "a.log", tmp_path / "b.log"
-    supervise = ["-m", "deploy.supervisor", "--config"]
-    sup_b = hosts.run(hosts.b, [*supervise, str(robot)], log_b.open("wb"))
-    sup_a = hosts.run(hosts.a, [*supervise, str(gpu_box)], log_a.open("wb"))
-    probe = Probe(hosts.run(hosts.b, ["-m", "tests.integration.probe", "--config", str(robot)],
-                            subprocess.PIPE))  # fmt: skip
+    log_a, log_b, sup_a, sup_b, probe = _start_pool_hosts(hosts, tmp_path, robot, gpu_box)
 
     def logs() -> str:
         return f"--- host A:\n{_log(log_a)}\n--- host B:\n{_log(log_b)}"
