@@ -98,6 +98,9 @@ class Recorder(Closing):
         )  # fmt: skip
         self._cameras = list(config.all_cameras)
         self._subs: list[Declared] = []
+        #: At a stop, what is queued is written for at most this long: half the supervisor's
+        #: stop timeout, so that the file is finished before it would kill the recorder.
+        self._close_budget_s = config.supervisor.stop_timeout_s / 2
         self._own = tally.keys.counters(SERVICE)
         self.heard = 0  # samples from the stack: every key but the recorder's own counters
 
@@ -139,7 +142,7 @@ class Recorder(Closing):
         self.tally.log.debug("stopping: %s", leave_idle(*process_threads()))
         for sub in self._subs:
             sub.undeclare()
-        self._queued.close()
+        self._queued.close(self._close_budget_s)
 
 
 def record(

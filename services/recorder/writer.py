@@ -156,6 +156,7 @@ class QueuedRecorder(Closing):
         self._limit = settings.queue_size
         self._queue: deque[_Item] = deque()  # append and popleft are atomic
         self._closing = threading.Event()
+        self._close_by = float("inf")  # on closing: the queue is written until then, then dropped
         self._poll_s = min(0.1, settings.flush_period_s / 2)
         self._thread = threading.Thread(target=self._run, name="recorder-writer", daemon=True)
         self._error: Exception | None = None
@@ -180,7 +181,11 @@ class QueuedRecorder(Closing):
         try:
             while True:
                 closing = self._closing.wait(self._poll_s)
-                while self._queue:  # what came in meanwhile; on closing, all that is left
+                while self._queue:  # what came in meanwhile; on closing, what time allows
+                    if self._closing.is_set() and mono_s() >= self._close_by:
+                        self._counters.add(contract.DROPPED, len(self._queue))
+                        self._queue.clear()
+                        break
                     self._write(self._queue.popleft())
                 self.file.tick()
                 if closing:
@@ -201,14 +206,15 @@ class QueuedRecorder(Closing):
             self.file.add(entry, item.log_ns)
         self._counters.add(contract.WRITTEN)
 
-    def close(self) -> None:
-        """Write what is queued, then finish the file, out of the idle class (a stop is a
-        moment's work that must end before the supervisor's stop timeout, however busy the
-        cores)."""
+    def close(self, budget_s: float = float("inf")) -> None:
+        """Write what is queued for at most ``budget_s`` (the rest is dropped, counted), then
+        finish the file, out of the idle class: a stop must end before the supervisor's stop
+        timeout however busy the cores, with a whole file rather than a killed one."""
         # Every thread, Zenoh's too: the session's close after the file's needs them, and an
         # idle-class one starved there until the stop timeout killed the recorder (both cores
         # busy, the file already done).
         log.debug("closing: %s", leave_idle(*process_threads()))
+        self._close_by = mono_s() + budget_s
         self._closing.set()
         self._thread.join()
         if self._error is None:

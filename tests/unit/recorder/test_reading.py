@@ -21,6 +21,7 @@ from services.recorder.reading import Recording, check_playable, decode_input
 from services.recorder.writer import McapFile, QueuedRecorder
 from services.ros2 import RosDistro, cdr_encode, frame_to_image, scan_to_ros, typestore_for
 from services.ros2.contract import Ros2Settings
+from tests.polling import wait_for
 
 D = RosDistro.JAZZY
 SETTINGS = RecorderSettings(chunk_size_kb=16, flush_period_s=60.0)
@@ -164,6 +165,39 @@ def test_a_full_queue_drops_and_counts_and_never_blocks(tmp_path: Path) -> None:
     with Recording(tmp_path / "q.mcap") as reader:
         topics = [r.channel.topic for r in reader.records()]
     assert topics.count("/cmd_vel") == 3 and not reader.truncated
+
+
+def test_at_a_stop_the_queue_is_written_within_its_budget_and_the_rest_dropped(
+    tmp_path: Path,
+) -> None:
+    entered, gate = threading.Event(), threading.Event()
+
+    def slow_decode(payload: bytes) -> Twist:
+        entered.set()
+        gate.wait(10)  # the writer is busy with the first one until the close
+        return Twist.decode(payload)
+
+    counters = Counters()
+    settings = RecorderSettings(queue_size=10)
+    rec = QueuedRecorder(McapFile(tmp_path / "b.mcap", settings),
+                         Translator(Ros2Settings(), "front"), settings, counters)  # fmt: skip
+    twist = Twist(header=Header(stamp_ns=10**18, frame_id="base", seq=1, source="controller"))
+    payload = twist.encode()
+    assert rec.offer("stack/controller/cmd_vel", payload, 1, slow_decode)
+    assert entered.wait(10)
+    for _ in range(4):
+        assert rec.offer("stack/controller/cmd_vel", payload, 2, slow_decode)
+    # No time left: what is still queued once the close begins is dropped, the file finished.
+    closing = threading.Thread(target=rec.close, kwargs={"budget_s": 0.0})
+    closing.start()
+    wait_for(rec._closing.is_set, 10, "the close to begin")
+    gate.set()
+    closing.join(10)
+    assert not closing.is_alive()
+    assert counters.snapshot() == {"received": 5, "dropped": 4, "written": 1}
+    with Recording(tmp_path / "b.mcap") as reader:
+        topics = [r.channel.topic for r in reader.records()]
+    assert topics.count("/cmd_vel") == 1 and not reader.truncated
 
 
 def test_a_writer_that_fails_says_so_and_closing_does_not_hang(tmp_path: Path) -> None:
