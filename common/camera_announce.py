@@ -44,9 +44,15 @@ class CameraAnnouncements(Closing):
         frame_id: str,
         width: int = 0,
         height: int = 0,
+        depth: bool = False,
+        mount_height_m: float = 0.0,
+        mount_x_m: float = 0.0,
+        mount_y_m: float = 0.0,
     ) -> CameraAnnouncement:
         """Announce ``camera`` (instead of what was announced of it before). ``rate_hz`` is
-        capped at the highest rate an announcement may carry. ConfigError (one line) for a
+        capped at the highest rate an announcement may carry. ``depth``: the source publishes
+        aligned depth images of it too; ``mount_*``: where it stands on the robot
+        (CameraAnnouncement). ConfigError (one line) for a
         description no announcement can carry (a frame id of over 128 characters)."""
         try:
             message = CameraAnnouncement(
@@ -58,6 +64,10 @@ class CameraAnnouncements(Closing):
                 hfov_deg=hfov_deg,
                 frame_id=frame_id,
                 source=self._source,
+                depth=depth,
+                mount_height_m=mount_height_m,
+                mount_x_m=mount_x_m,
+                mount_y_m=mount_y_m,
             )
         except ValueError as exc:
             raise ConfigError(f"camera {camera!r} cannot be announced: {exc}") from exc

@@ -4,6 +4,7 @@ All keys live under a configurable prefix (default ``stack``) so that several ro
 runs can share one network without hearing each other:
 
     <prefix>/camera/<camera>/frame            Frame           camera  -> detector
+    <prefix>/camera/<camera>/depth            DepthFrame      camera  -> detector, controller
     <prefix>/detector/<camera>/detections     Detections      detector -> controller, metrics
     <prefix>/detector/<camera>/info           queryable       detector -> JSON: model, classes
     <prefix>/scan                             LaserScan       robot/sim -> controller
@@ -46,11 +47,12 @@ def _check_chunks(what: str, value: str) -> str:
 
 
 def camera_in_key(key: str) -> str | None:
-    """The camera whose frames or detections ``key`` carries, under any prefix (a recording
-    may come from another stack's); None for any other key."""
+    """The camera whose frames, depth images or detections ``key`` carries, under any prefix
+    (a recording may come from another stack's); None for any other key."""
     parts = key.split("/")
     if len(parts) >= 4 and (parts[-3], parts[-1]) in (
         ("camera", "frame"),
+        ("camera", "depth"),
         ("detector", "detections"),
     ):
         return parts[-2]
@@ -68,6 +70,13 @@ class Keys:
 
     def frame(self, camera: str) -> str:
         return f"{self.prefix}/camera/{_check_chunks('camera name', camera)}/frame"
+
+    def depth(self, camera: str) -> str:
+        """``camera``'s depth images (DepthFrame), aligned to its colour frames."""
+        return f"{self.prefix}/camera/{_check_chunks('camera name', camera)}/depth"
+
+    def all_depths(self) -> str:
+        return f"{self.prefix}/camera/*/depth"
 
     def detections(self, camera: str) -> str:
         return f"{self.prefix}/detector/{_check_chunks('camera name', camera)}/detections"

@@ -78,6 +78,73 @@ class Frame(Message):
             raise ValueError("empty jpeg")
 
 
+#: Depth encodings, as ``sensor_msgs/Image``'s: bytes per pixel. ``16UC1`` is millimetres (0: no
+#: reading), ``32FC1`` metres (0, NaN or inf: no reading); both little-endian.
+DEPTH_ENCODINGS: dict[str, int] = {"16UC1": 2, "32FC1": 4}
+#: The longest range a depth image may state (m): beyond every RGB-D sensor's.
+MAX_DEPTH_RANGE_M = 1000.0
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DepthFrame(Message):
+    """One depth image, aligned to its camera's colour frames: ``sensor_msgs/Image`` (16UC1 or
+    32FC1) with the pinhole part of its ``sensor_msgs/CameraInfo``.
+
+    Pixel (u, v) of the depth image sees what pixel (u * colour_width / width, v *
+    colour_height / height) of the colour frame sees (the source aligns depth to colour), so
+    one set of intrinsics, ``fx``, ``fy``, ``cx``, ``cy`` in pixels of *this* image, serves
+    both. The optical frame is REP 103's camera optical frame: x right, y down, z forward; a
+    reading is the z of what the pixel sees. ``header.stamp_ns`` is the capture time: the
+    detector pairs a colour frame with the depth image of its camera whose stamp is nearest,
+    within ``detector.depth_pair_tolerance_ms``. ``range_min_m``/``range_max_m``: the
+    sensor's valid range (readings outside it are no readings); 0 for ``range_max_m`` when
+    the source does not state one. ``header.frame_id`` is the colour frames'.
+    """
+
+    TAG: ClassVar[str] = "DepthFrame"
+    VERSION: ClassVar[int] = 1
+    header: Header
+    encoding: str
+    width: int
+    height: int
+    data: bytes
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    range_min_m: float = 0.0
+    range_max_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.encoding not in DEPTH_ENCODINGS:
+            raise ValueError(f"unknown depth encoding {self.encoding!r} (16UC1 or 32FC1)")
+        if not (0 < self.width <= MAX_IMAGE_SIDE and 0 < self.height <= MAX_IMAGE_SIDE):
+            raise ValueError(f"absurd depth image size {self.width}x{self.height}")
+        need = self.width * self.height * DEPTH_ENCODINGS[self.encoding]
+        if len(self.data) != need:
+            raise ValueError(
+                f"{self.encoding} {self.width}x{self.height} needs {need} bytes, "
+                f"got {len(self.data)}"
+            )
+        for what, f in (("fx", self.fx), ("fy", self.fy)):
+            if not (math.isfinite(f) and 0 < f < 1e6):
+                raise ValueError(f"focal length {what} {f} is outside (0, 1e6) pixels")
+        for what, c, side in (("cx", self.cx, self.width), ("cy", self.cy, self.height)):
+            if not (math.isfinite(c) and -side <= c <= 2 * side):
+                raise ValueError(f"principal point {what} {c} is far outside the image")
+        if not (
+            math.isfinite(self.range_min_m)
+            and math.isfinite(self.range_max_m)
+            and 0 <= self.range_min_m <= MAX_DEPTH_RANGE_M
+            and 0 <= self.range_max_m <= MAX_DEPTH_RANGE_M
+            and (self.range_max_m == 0 or self.range_min_m < self.range_max_m)
+        ):
+            raise ValueError(
+                f"range {self.range_min_m}..{self.range_max_m} m is not 0 <= min < max "
+                f"<= {MAX_DEPTH_RANGE_M:g} (max 0: not stated)"
+            )
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Detections(Message):
     """The detections of one frame: ``vision_msgs/Detection2DArray`` as a struct of arrays.
@@ -301,7 +368,12 @@ class CameraAnnouncement(Message):
     that keeps its device's size, before the first frame). ``rate_hz``: the frames per second
     it sends. ``mount_yaw_deg``: where it looks on the robot, counter-clockwise from forward;
     ``hfov_deg``: its horizontal field of view. ``frame_id``: its frames' header frame id.
-    ``source``: what announces it (``camera``, ``sim``, ``ros2``, ``play``)."""
+    ``source``: what announces it (``camera``, ``sim``, ``ros2``, ``play``). ``depth``: the
+    source also publishes aligned depth images of it (DepthFrame, ``Keys.depth``).
+    ``mount_height_m``: its optical centre's height above the floor (0: not known; a virtual
+    scan from its depth needs it, to take the floor out); ``mount_x_m``/``mount_y_m``: where
+    it stands on the robot, forward and left of the base's centre (REP 103). The camera is
+    taken to look level (no pitch or roll)."""
 
     TAG: ClassVar[str] = "CameraAnnouncement"
     VERSION: ClassVar[int] = 1
@@ -313,9 +385,18 @@ class CameraAnnouncement(Message):
     hfov_deg: float = 60.0
     frame_id: str = ""
     source: str = ""
+    depth: bool = False
+    mount_height_m: float = 0.0
+    mount_x_m: float = 0.0
+    mount_y_m: float = 0.0
 
     def __post_init__(self) -> None:
         _check_announced_name("camera", self.camera)
+        if not (math.isfinite(self.mount_height_m) and 0 <= self.mount_height_m <= 10):
+            raise ValueError(f"mount_height_m {self.mount_height_m} is outside [0, 10]")
+        for what, offset in (("mount_x_m", self.mount_x_m), ("mount_y_m", self.mount_y_m)):
+            if not (math.isfinite(offset) and abs(offset) <= 10):
+                raise ValueError(f"{what} {offset} is outside [-10, 10]")
         for what, side in (("width", self.width), ("height", self.height)):
             if not 0 <= side <= MAX_IMAGE_SIDE:
                 raise ValueError(f"{what} {side} is outside 0..{MAX_IMAGE_SIDE}")
