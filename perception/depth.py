@@ -137,3 +137,33 @@ def measure(
         for name, value in zip(COLUMNS, row, strict=True):
             out[name][i] = value
     return out
+
+
+@dataclass(frozen=True, slots=True)
+class Mounting:
+    """Where a camera stands on the robot (its CameraAnnouncement's ``mount_*``): ``x_m``
+    forward and ``y_m`` left of the base's centre, ``height_m`` above the floor, looking
+    ``yaw_deg`` counter-clockwise from forward, level."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    height_m: float = 0.0
+    yaw_deg: float = 0.0
+
+
+def to_robot(
+    x: npt.NDArray[np.float32],
+    y: npt.NDArray[np.float32],
+    z: npt.NDArray[np.float32],
+    mount: Mounting,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Points in a camera's optical frame (x right, y down, z forward) as (forward, left, up)
+    in the robot's base frame on the floor (REP 103), by the camera's mounting."""
+    fwd, left, up = z.astype(np.float64), -x.astype(np.float64), -y.astype(np.float64)
+    yaw = np.radians(mount.yaw_deg)
+    c, s = np.cos(yaw), np.sin(yaw)
+    return (
+        mount.x_m + c * fwd - s * left,
+        mount.y_m + s * fwd + c * left,
+        mount.height_m + up,
+    )
