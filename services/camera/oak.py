@@ -31,7 +31,7 @@ FRAME_TIMEOUT_S = 2.0
 
 def open_oak(device_id: str) -> OakSource:
     """The OAK camera of ``device_id`` (its MxId/device id or IP; the first found when empty)."""
-    spec = f"oak:{device_id}"
+    spec = "camera source " + repr(f"oak:{device_id}")
     dai = import_extra("depthai", "oak", spec)
     return OakSource(dai, device_id, spec)
 

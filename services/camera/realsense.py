@@ -29,7 +29,7 @@ FRAME_TIMEOUT_MS = 2000
 
 def open_realsense(serial: str) -> RealSenseSource:
     """The RealSense camera of ``serial`` (the first one found when empty)."""
-    spec = f"realsense:{serial}"
+    spec = "camera source " + repr(f"realsense:{serial}")
     rs = import_extra("pyrealsense2", "realsense", spec)
     return RealSenseSource(rs, serial, spec)
 
