@@ -103,6 +103,7 @@ def _pipeline(dai: ModuleType, device: Any) -> tuple[Any, Any]:
     sync = pipeline.create(dai.node.Sync)
     colour.link(sync.inputs["colour"])
     stereo.depth.link(sync.inputs["depth"])
-    # Not blocking, few: a slow reader gets the newest pairs, never a growing backlog.
-    queue = sync.out.createOutputQueue(maxSize=4, blocking=False)
+    # One, not blocking: the service reads at camera.rate_hz and takes the newest pair, never
+    # a backlog of older ones.
+    queue = sync.out.createOutputQueue(maxSize=1, blocking=False)
     return pipeline, queue
