@@ -101,3 +101,17 @@ def test_a_realsense_camera_without_pyrealsense2_is_one_line(tmp_path: Path) -> 
         "camera: error: camera source 'realsense:': pyrealsense2 is not installed; install the "
         "realsense extra: pip install '.[realsense]'"
     ]
+
+
+def test_a_missing_depth_folder_is_one_line(tmp_path: Path) -> None:
+    rgb, _ = _rgbd(tmp_path)
+    missing = tmp_path / "no_depth_here"
+    config = write_config(tmp_path, camera={"source": str(rgb), "depth_source": str(missing)})
+    done = subprocess.run(
+        [sys.executable, "-m", "services.camera", "serve", "--config", str(config)],
+        cwd=REPO, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines() == [
+        f"camera: error: camera.depth_source '{missing}': no such folder"
+    ]
