@@ -44,6 +44,11 @@ class OakSource:
 
     def __init__(self, dai: ModuleType, device_id: str, spec: str) -> None:
         self.description = f"OAK {device_id or '(first found)'}"
+        # A closed queue (the device gone) raises this, not a RuntimeError.
+        self._lost: tuple[type[BaseException], ...] = (
+            RuntimeError,
+            dai.MessageQueue.QueueException,
+        )
         if not dai.Device.getAllAvailableDevices():
             raise ConfigError(f"{spec}: no OAK camera found (depthai sees none)")
         try:
@@ -67,7 +72,7 @@ class OakSource:
             group: Any = self._queue.get(datetime.timedelta(seconds=FRAME_TIMEOUT_S))
             colour = group["colour"] if group is not None else None
             depth = group["depth"] if group is not None else None
-        except RuntimeError:
+        except self._lost:
             colour = depth = None
         if colour is None:
             if not self.frames_read:

@@ -1,4 +1,5 @@
-"""The camera service: read a source at a fixed rate and publish Frame messages."""
+"""The camera service: read a source at a fixed rate and publish Frame messages, and with an
+RGB-D source (services/camera/sources.py ``DepthCapable``) one DepthFrame per frame."""
 
 from __future__ import annotations
 
@@ -57,6 +58,10 @@ def run(
     its configured rate, mounting yaw, field of view and frame id; its size is ``resize``, or
     0x0 until the first frame gives the source's. A reopened source keeps the announcement
     (its size is announced again should it differ). ``bus``: an in-process test's.
+
+    A source with depth (``realsense:``, ``oak:``, ``camera.depth_source``) also publishes
+    each frame's aligned depth on ``keys.depth(camera)`` with the frame's header (DepthOut),
+    and announces the camera with ``depth`` and its ``mount_*`` settings.
     """
     with (
         Node(config.camera_services[camera], config, bus=bus) as node,
