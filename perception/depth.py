@@ -186,7 +186,7 @@ def _measure_box(
     xs = (us - intr.cx) * zs / intr.fx
     ys = (vs - intr.cy) * zs / intr.fy
     q = (p.extent_percentile, 100.0 - p.extent_percentile)
-    (xlo, xhi), (ylo, yhi), (zlo, zhi) = (np.percentile(a, q) for a in (xs, ys, zs))
+    (xlo, ylo, zlo), (xhi, yhi, zhi) = np.percentile(np.stack((xs, ys, zs)), q, axis=1)
     x, y = (xlo + xhi) / 2, (ylo + yhi) / 2
     # An object's pixels spread evenly over its width and height: the robust range leaves
     # out 2 * extent_percentile % of it.
