@@ -38,8 +38,9 @@ import numpy as np
 import numpy.typing as npt
 
 from common.clock import ms_since, perf_s
-from perception.depth import Depth, Intrinsics, depth_metres, measure
-from tools.benchmarks.depth_reference import measure_reference
+from perception import Intrinsics, depth_metres
+from perception import measure_depth as measure
+from tools.benchmarks.depth_reference import Depth, measure_reference
 from tools.benchmarks.library_shared import log
 
 METHODS = ("depth", "yolo_ros", "laser", "box")
@@ -165,7 +166,7 @@ def run(opts: DepthBenchOptions) -> dict[str, Any]:
     from common.messages import Detections, Header
     from common.settings import DEFAULT_CONFIG
     from modelprep.files import default_model_path
-    from perception.pipeline import Detector
+    from perception import Detector
     from services.controller.contract import ControllerSettings
     from services.controller.geometry import box_clipped, box_distance, sector_range
     from services.detector.contract import DetectorSettings

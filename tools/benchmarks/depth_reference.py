@@ -20,9 +20,12 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from perception.depth import COLUMNS, Depth, Intrinsics, unknown
+from perception import DEPTH_COLUMNS as COLUMNS
+from perception import Intrinsics
+from perception import unknown_depth as unknown
 
 F = npt.NDArray[np.float64]
+Depth = npt.NDArray[np.float32]  # (h, w) metres, NaN where there is no reading
 
 
 def measure_reference(
