@@ -97,6 +97,21 @@ def test_box_mostly_background() -> None:
     assert r["size_x_m"] == pytest.approx(30 * 1.5 / F, rel=0.1)
 
 
+def test_flying_pixels_between_target_and_background() -> None:
+    """Real depth cameras read values between two surfaces at their boundary ("flying
+    pixels"): a thin bridge of readings from the target to the wall must not join them into
+    one cluster, whose median would then be the wall's."""
+    rng = np.random.default_rng(6)
+    d = scene(1.5, rect=(305, 100, 335, 400), background_z=3.0)
+    for cols in (slice(302, 305), slice(335, 338)):
+        d[100:400, cols] = rng.uniform(1.5, 3.0, (300, 3)).astype(np.float32)
+    d = stereo_noise(d, 0.005, seed=7)
+    b = box(245, 90, 395, 410)
+    assert naive_mean(d, b) > 2.5
+    r = row(measure(d, INTR, b))
+    assert r["z_m"] == pytest.approx(1.5, abs=0.02)
+
+
 def test_a_small_nearer_occluder_is_not_the_object() -> None:
     """Something nearer covering a little of the box (a hand, a chair back) is passed over:
     the object is the nearest cluster with enough weight, not the nearest reading."""
