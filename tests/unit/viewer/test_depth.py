@@ -65,13 +65,14 @@ def test_a_depth_image_is_16uc1_millimetres_no_reading_zero() -> None:
 
 
 def test_a_depth_image_is_scaled_by_nearest_neighbour() -> None:
-    # Left half 1 m, right half 5 m: a blend would make readings nobody measured.
-    mm = np.hstack([np.full((64, 64), 1000), np.full((64, 64), 5000)]).astype(np.uint16)
+    # 1 m, then 5 m from column 63 on: halved, one pixel sees both; a blend (3 m) would be a
+    # reading nobody measured.
+    mm = np.hstack([np.full((64, 63), 1000), np.full((64, 65), 5000)]).astype(np.uint16)
     msg = _decode(depth.depth_image(_depth_frame("16UC1", mm), max_width=64))
     pixels = _pixels(msg)
     assert pixels.shape == (32, 64)
     assert set(np.unique(pixels).tolist()) == {1000, 5000}
-    assert (pixels[:, :32] == 1000).all() and (pixels[:, 32:] == 5000).all()
+    assert (pixels[:, :31] == 1000).all() and (pixels[:, 32:] == 5000).all()
 
 
 def _rotate(q: dict[str, float], v: np.ndarray) -> np.ndarray:
