@@ -2,7 +2,7 @@
 optical frame, and where each camera stands on the robot. Pure: messages in, Foxglove out.
 
 Frames: a camera's optical frame (REP 103: x right, y down, z forward) is named by the frame id
-its images carry (``optical_frame``); the transform from the robot's ``base_link`` (x forward,
+its images carry (``optical_frames``); the transform from the robot's ``base_link`` (x forward,
 y left, z up) to it is the camera's announced mounting: ``mount_x_m`` forward, ``mount_y_m``
 left, ``mount_height_m`` up, turned ``mount_yaw_deg`` counter-clockwise, looking level, as
 ``perception.depth.to_robot`` takes it.
@@ -11,6 +11,7 @@ left, ``mount_height_m`` up, turned ``mount_yaw_deg`` counter-clockwise, looking
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Mapping
 
 import cv2
@@ -48,12 +49,15 @@ LABEL_FONT_PX = 14.0
 OPTICAL = (-0.5, 0.5, -0.5, 0.5)
 
 
-def optical_frame(camera: str, announced: CameraAnnouncement | None) -> str:
-    """The frame a camera's depth image and 3D boxes are in: the frame id its source announces
-    (its images carry it), else ``<camera>_optical``."""
-    if announced is not None and announced.frame_id:
-        return announced.frame_id
-    return f"{camera}_optical"
+def optical_frames(cameras: Mapping[str, CameraAnnouncement]) -> dict[str, str]:
+    """The frame each camera's 3D boxes are in: the frame id its source announces (its images
+    carry it), else (none, or one that another camera announces too: cameras left at the
+    default ``camera``) ``<camera>_optical``, so that no two cameras share a frame."""
+    ids = Counter(a.frame_id for a in cameras.values())
+    return {
+        name: a.frame_id if a.frame_id and ids[a.frame_id] == 1 else f"{name}_optical"
+        for name, a in cameras.items()
+    }
 
 
 def depth_image(frame: DepthFrame, max_width: int) -> RawImage:
@@ -106,12 +110,13 @@ def camera_transforms(cameras: Mapping[str, CameraAnnouncement], stamp_ns: int) 
     """``base_link`` -> each announced camera's optical frame, by its mounting (a camera of
     unknown height, 0, is drawn on the floor)."""
     ts = stamp(stamp_ns)
+    frames = optical_frames(cameras)
     return FrameTransforms(
         transforms=[
             FrameTransform(
                 timestamp=ts,
                 parent_frame_id=ROBOT_FRAME,
-                child_frame_id=optical_frame(name, a),
+                child_frame_id=frames[name],
                 translation=Vector3(x=a.mount_x_m, y=a.mount_y_m, z=a.mount_height_m),
                 rotation=mount_rotation(a.mount_yaw_deg),
             )

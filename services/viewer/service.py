@@ -195,7 +195,7 @@ class Viewer:
             return
         self._next_boxes[camera] = now + 1.0 / self.settings.image_rate_hz
         with self._announced_lock:
-            frame_id = depth.optical_frame(camera, self.announced.get(camera))
+            frame_id = depth.optical_frames(self.announced).get(camera, f"{camera}_optical")
         try:
             boxes = depth.boxes_scene(
                 dets, camera, frame_id, self.locked_on(camera), self.settings.boxes_lifetime_s

@@ -97,6 +97,9 @@ def test_each_camera_stands_where_its_mounting_says(yaw: float) -> None:
     front, rear = msg["transforms"]
     assert (front["parentFrameId"], front["childFrameId"]) == ("base_link", "front_optical")
     assert rear["childFrameId"] == "rear_optical"  # no frame id announced
+    # Two cameras left at one frame id (the default "camera") would share a frame: not so.
+    twins = {"a": _announcement("a", frame_id="camera"), "b": _announcement("b", frame_id="camera")}
+    assert depth.optical_frames(twins) == {"a": "a_optical", "b": "b_optical"}
     t = front["translation"]
     origin = np.array([t.get("x", 0.0), t.get("y", 0.0), t.get("z", 0.0)])
     # Points of the optical frame (x right, y down, z forward) land where to_robot puts them.
