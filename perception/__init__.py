@@ -15,6 +15,9 @@ service (services/detector/) and the tools are built on it.
     choose_fast         the fast profile's choice (``Figures``, ``Measure``, ``TIMED_RUNS``)
     measure_batch       the batch size that serves frames fastest (``probe_sizes``,
                         ``PROBE_SHAPE``, ``BatchChoice``)
+    depth_metres        a depth image as metres, NaN where no reading (``depth.py``; its column
+                        names ``DEPTH_COLUMNS``, ``DEPTH_DISTANCE``, ``DEPTH_CENTRE``,
+                        ``DEPTH_SIZE``)
 
 The detection path: ``pipeline.py`` (``preprocess``, a runtimes/ backend, ``decode.py``,
 ``postprocess.py``) -> ``tracker.py``; ``model_info.py`` reads what a model says of itself.
@@ -24,6 +27,11 @@ Model files: ``variants.py`` (settings -> the file a backend loads), ``fast_prof
 
 from perception.batching import PROBE_SHAPE, BatchChoice, probe_sizes
 from perception.batching import measure as measure_batch
+from perception.depth import CENTRE as DEPTH_CENTRE
+from perception.depth import COLUMNS as DEPTH_COLUMNS
+from perception.depth import DISTANCE as DEPTH_DISTANCE
+from perception.depth import SIZE as DEPTH_SIZE
+from perception.depth import depth_metres
 from perception.fast_profile import TIMED_RUNS, Figures, Measure, choose_fast
 from perception.loading import load, prepare_for
 from perception.pipeline import Detector
@@ -41,6 +49,10 @@ from perception.variants import (
 )
 
 __all__ = [
+    "DEPTH_CENTRE",
+    "DEPTH_COLUMNS",
+    "DEPTH_DISTANCE",
+    "DEPTH_SIZE",
     "PREPARE_COMMAND",
     "PROBE_SHAPE",
     "TIMED_RUNS",
@@ -55,6 +67,7 @@ __all__ = [
     "Tracker",
     "Variant",
     "choose_fast",
+    "depth_metres",
     "iou_matrix",
     "load",
     "measure_batch",

@@ -5,7 +5,7 @@ Frames: a camera's optical frame (REP 103: x right, y down, z forward) is named 
 its images carry (``optical_frames``); the transform from the robot's ``base_link`` (x forward,
 y left, z up) to it is the camera's announced mounting: ``mount_x_m`` forward, ``mount_y_m``
 left, ``mount_height_m`` up, turned ``mount_yaw_deg`` counter-clockwise, looking level, as
-``perception.depth.to_robot`` takes it.
+``perception.depth.to_robot`` takes it. The depth columns' names are perception's.
 """
 
 from __future__ import annotations
@@ -34,7 +34,11 @@ from foxglove.messages import (
 
 from common.annotate import class_colour
 from common.messages import CameraAnnouncement, DepthFrame, Detections
-from perception.depth import CENTRE, COLUMNS, DISTANCE, SIZE, depth_metres
+from perception import DEPTH_CENTRE as CENTRE
+from perception import DEPTH_COLUMNS as COLUMNS
+from perception import DEPTH_DISTANCE as DISTANCE
+from perception import DEPTH_SIZE as SIZE
+from perception import depth_metres
 from services.viewer.convert import ROBOT_FRAME, scaled_size, stamp
 
 #: The depth image as sent: 16-bit millimetres, 0 where there is no reading (as a RealSense
