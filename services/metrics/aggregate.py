@@ -293,7 +293,7 @@ def report_line(snap: MetricsSnapshot) -> str:
     lat = snap.latency_ms
     bad = sum(v for k, v in snap.counters.items() if k.endswith(".bad_input"))
     depth = ""
-    if lat["depth"]["count"]:  # a depth camera's frames were measured in the window
+    if lat.get("depth", {}).get("count"):  # a depth camera's frames measured in the window
         unpaired = sum(
             v for k, v in snap.counters.items() if _is_detector(k, contract.DEPTH_UNPAIRED)
         )

@@ -76,7 +76,8 @@ class ViewerSettings:
     A camera announced with depth has its depth image (16UC1, mm) sent as its colour images
     are, while a client watches it; detections with depth are drawn as 3D boxes at most
     ``image_rate_hz`` times a second per camera, each camera's lasting ``boxes_lifetime_s``
-    (they vanish when its detections stop).
+    from their capture stamp (they vanish when its detections stop; shorter than the
+    detector's latency plus its period, they blink).
 
     Who may connect (docs/security.md, "The live view"): a client whose request carries an
     ``Origin`` header (every browser page) only if that origin is in ``allowed_origins``
@@ -96,7 +97,7 @@ class ViewerSettings:
     path_points: int = 1000
     allowed_origins: tuple[str, ...] = ("https://app.foxglove.dev",)
     request_timeout_s: float = 5.0
-    boxes_lifetime_s: float = 1.0
+    boxes_lifetime_s: float = 2.0
 
     BOUNDS: ClassVar[Bounds] = {
         "port": (1, 65535),
