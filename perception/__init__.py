@@ -17,7 +17,9 @@ service (services/detector/) and the tools are built on it.
                         ``PROBE_SHAPE``, ``BatchChoice``)
     measure_depth       each box's distance, 3D centre and extent from an aligned depth image
                         (``depth.py``, docs/depth.md: ``depth_metres``, ``Intrinsics``,
-                        ``DepthParams``, ``DEPTH_COLUMNS``, ``unknown_depth``)
+                        ``DepthParams``, ``Mounting``, ``to_robot``, ``to_depth_pixels``,
+                        ``unknown_depth``; column names ``DEPTH_COLUMNS``, ``DEPTH_DISTANCE``,
+                        ``DEPTH_CENTRE``, ``DEPTH_SIZE``)
 
 The detection path: ``pipeline.py`` (``preprocess``, a runtimes/ backend, ``decode.py``,
 ``postprocess.py``) -> ``tracker.py``; ``model_info.py`` reads what a model says of itself.
@@ -27,8 +29,18 @@ Model files: ``variants.py`` (settings -> the file a backend loads), ``fast_prof
 
 from perception.batching import PROBE_SHAPE, BatchChoice, probe_sizes
 from perception.batching import measure as measure_batch
+from perception.depth import CENTRE as DEPTH_CENTRE
 from perception.depth import COLUMNS as DEPTH_COLUMNS
-from perception.depth import DepthParams, Intrinsics, depth_metres
+from perception.depth import DISTANCE as DEPTH_DISTANCE
+from perception.depth import SIZE as DEPTH_SIZE
+from perception.depth import (
+    DepthParams,
+    Intrinsics,
+    Mounting,
+    depth_metres,
+    to_depth_pixels,
+    to_robot,
+)
 from perception.depth import measure as measure_depth
 from perception.depth import unknown as unknown_depth
 from perception.fast_profile import TIMED_RUNS, Figures, Measure, choose_fast
@@ -48,7 +60,10 @@ from perception.variants import (
 )
 
 __all__ = [
+    "DEPTH_CENTRE",
     "DEPTH_COLUMNS",
+    "DEPTH_DISTANCE",
+    "DEPTH_SIZE",
     "PREPARE_COMMAND",
     "PROBE_SHAPE",
     "TIMED_RUNS",
@@ -59,6 +74,7 @@ __all__ = [
     "Figures",
     "Intrinsics",
     "Measure",
+    "Mounting",
     "NotPrepared",
     "Prepared",
     "StageTiming",
@@ -75,6 +91,8 @@ __all__ = [
     "prepare_for",
     "probe_sizes",
     "sized_model",
+    "to_depth_pixels",
+    "to_robot",
     "tracker_clock",
     "unknown_depth",
     "variant_of",
