@@ -136,9 +136,7 @@ class Ros2Settings:
     camera driver started in that namespace publishes them.
     ``depth_in`` takes each camera's depth image (``depth_topic``, ``sensor_msgs/Image``,
     16UC1 in mm or 32FC1 in m, aligned to the colour images) and its ``CameraInfo``
-    (``depth_info_topic``) in as DepthFrames; such a camera is announced with ``depth``, and
-    the first camera with its mounting ``mount_height_m``, ``mount_x_m``, ``mount_y_m`` (metres:
-    optical centre above the floor, 0 = unknown; forward and left of the base's centre).
+    (``depth_info_topic``) in as DepthFrames; each camera is then announced with ``depth``.
     ``detections_3d_out`` publishes the detections that carry depth columns as
     ``vision_msgs/Detection3DArray`` on ``detections_3d_topic``: in the camera's optical frame
     (the detections' frame id), or with ``detections_3d_frame`` (e.g. ``base_link``) in the
@@ -173,9 +171,6 @@ class Ros2Settings:
     depth_in: bool = False
     depth_topic: str = "/camera/aligned_depth_to_color/image_raw"
     depth_info_topic: str = "/camera/aligned_depth_to_color/camera_info"
-    mount_height_m: float = 0.0
-    mount_x_m: float = 0.0
-    mount_y_m: float = 0.0
     detections_3d_out: bool = True
     detections_3d_topic: str = "/detections_3d"
     detections_3d_frame: str = ""
@@ -187,10 +182,6 @@ class Ros2Settings:
         "domain_id": (0, 232),  # the DDS domain ids that map to valid ports
         "debug_image_rate_hz": (0.1, 100),
         "debug_jpeg_quality": (1, 100),
-        # CameraAnnouncement's own limits.
-        "mount_height_m": (0, 10),
-        "mount_x_m": (-10, 10),
-        "mount_y_m": (-10, 10),
         "router_timeout_s": (0.1, 300),
         "max_command_linear": (0.01, 100),
         "max_command_angular": (0.01, 100),

@@ -14,7 +14,7 @@ import numpy as np
 
 from common.errors import DecodeError
 from common.messages import DEPTH_ENCODINGS, DepthFrame, Detections
-from perception.depth import CENTRE, SIZE, Mounting, to_robot
+from perception import DEPTH_CENTRE, DEPTH_SIZE, Mounting, to_robot
 from services.ros2.contract import RosDistro
 from services.ros2.convert import RosMessage, header_from_ros, ros_header
 from services.ros2.typestore import typestore_for
@@ -108,7 +108,7 @@ def depth_from_image(
 
 def has_3d(dets: Detections) -> bool:
     """Whether ``dets`` carry the depth stage's 3D centre and size columns."""
-    return all(name in dets.boxes.columns for name in (*CENTRE, *SIZE))
+    return all(name in dets.boxes.columns for name in (*DEPTH_CENTRE, *DEPTH_SIZE))
 
 
 def detections_3d_to_ros(
@@ -131,8 +131,8 @@ def detections_3d_to_ros(
     """
     types = typestore_for(distro).types
     cols = dets.boxes.columns
-    x, y, z = (np.asarray(cols[name], np.float32) for name in CENTRE)
-    sx, sy, sz = (np.asarray(cols[name], np.float64) for name in SIZE)
+    x, y, z = (np.asarray(cols[name], np.float32) for name in DEPTH_CENTRE)
+    sx, sy, sz = (np.asarray(cols[name], np.float64) for name in DEPTH_SIZE)
     known = np.isfinite(np.stack([x, y, z, sx, sy, sz])).all(axis=0)
     if mount is None:
         frame = dets.header.frame_id

@@ -9,7 +9,7 @@ from collections.abc import Callable
 from common.errors import DecodeError
 from common.messages import CameraAnnouncement, Detections
 from common.node import Put, Tally
-from perception.depth import Mounting
+from perception import Mounting
 from services.ros2 import contract
 from services.ros2.convert import cdr_decode, cdr_encode
 from services.ros2.depth import (

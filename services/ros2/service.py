@@ -115,15 +115,13 @@ class RosInbound:
 def announce_bridged(config: Config, announcements: CameraAnnouncements) -> dict[str, OnFrame]:
     """Announce each camera whose images the bridge puts on the stack's keys (none without
     ``ros2.image_in``): its rate, mounting and field of view from its config, with
-    ``ros2.depth_in`` as a depth camera (the first camera mounted at ``ros2.mount_*``), its
-    size 0x0 until its first image, whose size and frame id are then announced. Returns, per
-    camera, what to tell of each frame put."""
+    ``ros2.depth_in`` as a depth camera, its size 0x0 until its first image, whose size and
+    frame id are then announced. Returns, per camera, what to tell of each frame put."""
     s = config.ros2
     if not s.image_in:
         return {}
     told: dict[str, OnFrame] = {}
     for camera, c in config.all_cameras.items():
-        first = camera == config.stack.camera
         announcements.announce(
             camera,
             rate_hz=c.rate_hz,
@@ -131,9 +129,6 @@ def announce_bridged(config: Config, announcements: CameraAnnouncements) -> dict
             hfov_deg=c.hfov_deg,
             frame_id=c.frame_id,
             depth=s.depth_in,
-            mount_height_m=s.mount_height_m if first else 0.0,
-            mount_x_m=s.mount_x_m if first else 0.0,
-            mount_y_m=s.mount_y_m if first else 0.0,
         )
 
         def on_frame(frame: Frame, camera: str = camera) -> None:

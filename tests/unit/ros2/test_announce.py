@@ -73,18 +73,13 @@ def test_a_bridge_that_takes_no_images_announces_no_camera() -> None:
         assert heard.current() == {}
 
 
-def test_with_depth_in_each_camera_is_a_depth_camera_the_first_mounted_as_configured() -> None:
+def test_with_depth_in_each_bridged_camera_is_announced_as_a_depth_camera() -> None:
     hub = MemoryHub()
     heard = heard_cameras(hub, KEYS)
-    ros2 = dataclasses.replace(
-        CONFIG.ros2, depth_in=True, mount_height_m=0.45, mount_x_m=0.2, mount_y_m=-0.05
-    )
-    config = dataclasses.replace(CONFIG, ros2=ros2)
+    config = dataclasses.replace(CONFIG, ros2=dataclasses.replace(CONFIG.ros2, depth_in=True))
     with CameraAnnouncements(hub.join("ros2"), KEYS, ANNOUNCED_SOURCE) as announcements:
         announce_bridged(config, announcements)
         assert heard.current() == {
-            FRONT: _announced(
-                FRONT, depth=True, mount_height_m=0.45, mount_x_m=0.2, mount_y_m=-0.05
-            ),
-            "rear": _announced("rear", depth=True),  # its mounting is not configured: unknown
+            FRONT: _announced(FRONT, depth=True),
+            "rear": _announced("rear", depth=True),
         }
