@@ -86,7 +86,8 @@ def test_the_vision_msgs_definitions_are_shipped_as_package_data() -> None:
 
 def test_the_pure_layer_imports_no_zenoh() -> None:
     code = (
-        "import sys, services.ros2.convert, services.ros2.images, services.ros2.wire; "
+        "import sys, services.ros2.convert, services.ros2.images, services.ros2.wire, "
+        "services.ros2.depth; "
         "assert 'zenoh' not in sys.modules, 'zenoh imported'"
     )
     subprocess.run([sys.executable, "-c", code], cwd=ROOT, check=True, timeout=60)
