@@ -95,7 +95,7 @@ def depth_from_image(
     rows = np.asarray(data, np.uint8).reshape(height, step)[:, :row]
     order = ">" if int(msg.is_bigendian) else "<"
     kind = "u2" if encoding == "16UC1" else "f4"
-    pixels = np.ascontiguousarray(rows).view(f"{order}{kind}").astype(f"<{kind}")
+    pixels = np.ascontiguousarray(rows).view(f"{order}{kind}").astype(f"<{kind}", copy=False)
     header = header_from_ros(msg.header, source=source, seq=seq)
     try:
         return DepthFrame(
