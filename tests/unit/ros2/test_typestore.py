@@ -15,8 +15,9 @@ from services.ros2.typestore import MSG_DIR, RosDistro, shipped_msg_types, store
 ROOT = Path(__file__).resolve().parents[3]
 TWIST_HASH = "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
 DETECTION_2D_ARRAY_HASH = "RIHS01_214274120007f4a683866481336b70310268cfa107aebe9d594a6acf75bda968"
-# Computed by rosbags from the vision_msgs 4.1.1 definitions (as the 2D hash above, which was
-# also checked against the official generator); no published value to compare with.
+# The same from rosbags and from the official rosidl_generator_type_description (Kilted wheel,
+# vision_msgs 4.1.1's .msg through rosidl_adapter, its dependencies checked by the Twist and
+# Detection2DArray hashes above coming out the same); no published value to compare with.
 DETECTION_3D_ARRAY_HASH = "RIHS01_793f5eab9595ac1c0da07873cc859db42eae51f0ee76056db8562515d830e018"
 VISION_MSGS = {
     "Detection2DArray",
