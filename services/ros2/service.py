@@ -32,7 +32,7 @@ from common.camera_announce import CameraAnnouncements
 from common.clock import BOOT_ID, mono_s, now
 from common.command_gate import CommandGate, Outcome
 from common.errors import DecodeError, ImageError
-from common.messages import ControllerStatus, Detections, Frame, Twist
+from common.messages import CameraAnnouncement, ControllerStatus, Detections, Frame, Twist
 from common.node import Node, Put, Tally
 from services.ros2 import contract
 from services.ros2.contract import ImageFormat, camera_topics
@@ -293,6 +293,10 @@ def _bridge_camera(
     return subs
 
 
+def _nothing_announced(camera: str) -> CameraAnnouncement | None:
+    return None
+
+
 def run(config: Config, stop: threading.Event) -> int:
     """Bridge until ``stop`` is set."""
     s = config.ros2
@@ -304,16 +308,19 @@ def run(config: Config, stop: threading.Event) -> int:
         keys = node.keys
         subs: list[Declared] = []
         told = announce_bridged(config, announcements)
-        # Every camera's announced mounting (the bridge's own or another source's), for 3D
-        # detections in the robot's frame.
-        cameras = announced_cameras(
-            node.bus,
-            keys,
-            on_bad=lambda key, exc: node.bad_input(key, exc, topic="camera_announcement"),
-        )
-        graph.on_close(cameras.close)
+        announced: AnnouncementOf = _nothing_announced
+        if s.detections_3d_out and s.detections_3d_frame:
+            # Every camera's announced mounting (the bridge's own or another source's), for
+            # 3D detections in the robot's frame.
+            cameras = announced_cameras(
+                node.bus,
+                keys,
+                on_bad=lambda key, exc: node.bad_input(key, exc, topic="camera_announcement"),
+            )
+            graph.on_close(cameras.close)
+            announced = cameras.get
         for camera in config.all_cameras:
-            subs += _bridge_camera(config, node, graph, camera, told.get(camera), cameras.get)
+            subs += _bridge_camera(config, node, graph, camera, told.get(camera), announced)
         if s.scan_in:
             scans = node.publisher(keys.scan(), QoS.SENSOR)
             scan_in = RosInbound(config, node, LASER_SCAN, s.scan_topic, scans.put)
