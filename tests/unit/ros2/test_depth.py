@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -306,3 +307,24 @@ def test_mutated_depth_images_and_camera_infos_never_escape_the_handler() -> Non
     check()
     for payload in out:
         DepthFrame.decode(payload)  # what went out is a valid message
+
+
+def test_depth_and_camera_info_as_ros_2_itself_serializes_them() -> None:
+    """CDR written by rclpy (``data/make_rclpy_cdr.py``: ROS 2 Kilted's own serializer), not
+    by rosbags: the bridge reads its intrinsics, stamp, frame id and every depth value."""
+    data = Path(__file__).with_name("data")
+    tally = Tally("ros2", Config())
+    out = Puts()
+    inbound = DepthInbound(Config(), tally, out.put, depth_topic="/d", info_topic="/i")
+    inbound.on_info("i", memoryview((data / "rclpy_camera_info.cdr").read_bytes()))
+    for encoding in ("16UC1", "32FC1"):
+        inbound.on_depth("d", memoryview((data / f"rclpy_{encoding}.cdr").read_bytes()))
+    frames = [DepthFrame.decode(p) for p in out]
+    assert [f.encoding for f in frames] == ["16UC1", "32FC1"]
+    ramp_mm = np.arange(16 * 12, dtype=np.uint16).reshape(12, 16) * 10 + 400
+    for frame in frames:
+        assert (frame.fx, frame.fy, frame.cx, frame.cy) == (300.0, 310.0, 7.5, 5.5)
+        assert (frame.width, frame.height) == (16, 12)
+        assert frame.header.stamp_ns == 1_700_000_000_000_000_123
+        assert frame.header.frame_id == "camera_color_optical_frame"
+        np.testing.assert_allclose(depth_metres(frame), ramp_mm / 1000, rtol=1e-6)
