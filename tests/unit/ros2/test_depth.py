@@ -34,7 +34,7 @@ from services.ros2.depth_handlers import DepthInbound, Detections3DToRos
 from services.ros2.images import IMAGE
 from services.ros2.typestore import typestore_for
 from stack.config import Config
-from tests.unit.fuzz import fuzz, payloads
+from tests.unit.fuzz import fuzz, message_handler, payloads
 
 STAMP_NS = 1_700_000_000_250_000_000
 DISTROS = [RosDistro.HUMBLE, RosDistro.JAZZY, RosDistro.KILTED, RosDistro.ROLLING]
@@ -328,3 +328,20 @@ def test_depth_and_camera_info_as_ros_2_itself_serializes_them() -> None:
         assert frame.header.stamp_ns == 1_700_000_000_000_000_123
         assert frame.header.frame_id == "camera_color_optical_frame"
         np.testing.assert_allclose(depth_metres(frame), ramp_mm / 1000, rtol=1e-6)
+
+
+@pytest.mark.parametrize("frame", ["", "base_link"])
+def test_fuzzed_detections_never_escape_the_3d_handler(frame: str) -> None:
+    config = Config()
+    config = dataclasses.replace(
+        config, ros2=dataclasses.replace(config.ros2, detections_3d_frame=frame)
+    )
+    tally = Tally("ros2", config)
+    out = Puts()
+    mount = CameraAnnouncement(camera="camera", rate_hz=10.0, mount_yaw_deg=30.0)
+    handler = Detections3DToRos(config, tally, out.put, "camera", {"camera": mount}.get)
+    message_handler(tally, handler.on_detections, handler.key, Detections)
+    handler.on_detections(detections().encode())  # and one with depth, surely
+    assert out
+    for payload in out:  # what went out reads back as a Detection3DArray
+        typestore_for(RosDistro.JAZZY).deserialize_cdr(payload, DETECTION_3D_ARRAY)
