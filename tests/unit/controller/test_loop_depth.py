@@ -101,3 +101,13 @@ def test_a_newer_depth_image_replaces_one_not_looked_at(rig: Rig) -> None:
     assert rig.loop.depth is not None
     assert rig.loop.depth.handle_waiting(0.0) == 1
     assert rig.counters["depth_dropped"] == 2 and rig.counters["depth_in"] == 1
+
+
+def test_garbage_on_a_depth_key_is_counted_and_dropped(rig: Rig) -> None:
+    rig.put(rig.keys.depth("front"), b"\x93not a depth frame")
+    assert rig.loop.depth is not None
+    rig.loop.depth.handle_waiting(0.0)
+    assert rig.counters["bad_input"] == 1 and rig.counters["bad_input.depth"] == 1
+    rig.detections()
+    twist, status = rig.tick()
+    assert status.state == "blocked" and twist.linear[0] == 0.0
