@@ -15,6 +15,10 @@ service (services/detector/) and the tools are built on it.
     choose_fast         the fast profile's choice (``Figures``, ``Measure``, ``TIMED_RUNS``)
     measure_batch       the batch size that serves frames fastest (``probe_sizes``,
                         ``PROBE_SHAPE``, ``BatchChoice``)
+    measure_depth       each box's distance, 3D centre and extent from an aligned depth image
+                        (``depth.py``, docs/depth.md: ``depth_metres``, ``Intrinsics``,
+                        ``DepthParams``, ``DEPTH_COLUMNS``, ``unknown_depth``,
+                        ``to_depth_pixels``)
 
 The detection path: ``pipeline.py`` (``preprocess``, a runtimes/ backend, ``decode.py``,
 ``postprocess.py``) -> ``tracker.py``; ``model_info.py`` reads what a model says of itself.
@@ -24,6 +28,10 @@ Model files: ``variants.py`` (settings -> the file a backend loads), ``fast_prof
 
 from perception.batching import PROBE_SHAPE, BatchChoice, probe_sizes
 from perception.batching import measure as measure_batch
+from perception.depth import COLUMNS as DEPTH_COLUMNS
+from perception.depth import DepthParams, Intrinsics, depth_metres, to_depth_pixels
+from perception.depth import measure as measure_depth
+from perception.depth import unknown as unknown_depth
 from perception.fast_profile import TIMED_RUNS, Figures, Measure, choose_fast
 from perception.loading import load, prepare_for
 from perception.pipeline import Detector
@@ -41,13 +49,16 @@ from perception.variants import (
 )
 
 __all__ = [
+    "DEPTH_COLUMNS",
     "PREPARE_COMMAND",
     "PROBE_SHAPE",
     "TIMED_RUNS",
     "BatchChoice",
+    "DepthParams",
     "DetectionResult",
     "Detector",
     "Figures",
+    "Intrinsics",
     "Measure",
     "NotPrepared",
     "Prepared",
@@ -55,14 +66,18 @@ __all__ = [
     "Tracker",
     "Variant",
     "choose_fast",
+    "depth_metres",
     "iou_matrix",
     "load",
     "measure_batch",
+    "measure_depth",
     "open_prepared",
     "prepare",
     "prepare_for",
     "probe_sizes",
     "sized_model",
+    "to_depth_pixels",
     "tracker_clock",
+    "unknown_depth",
     "variant_of",
 ]

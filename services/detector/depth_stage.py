@@ -19,17 +19,17 @@ detections went out is too late: those detections are 2D only (counted ``depth_u
 from __future__ import annotations
 
 import threading
-import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 from common.boxes import Boxes
+from common.clock import ms_since, perf_s
 from common.counters import BAD_INPUT, per_camera
 from common.errors import DecodeError
 from common.messages import DepthFrame, Header
 from common.node import Tally
-from perception.depth import DepthParams, Intrinsics, depth_metres, measure, to_depth_pixels
+from perception import DepthParams, Intrinsics, depth_metres, measure_depth, to_depth_pixels
 from services.detector import contract
 from services.detector.contract import DetectorSettings
 from services.detector.counting import count_for
@@ -200,11 +200,11 @@ class DepthStage:
         if paired is None:
             count_for(self.tally, camera, contract.DEPTH_UNPAIRED)
             return boxes, None
-        start = time.perf_counter()
+        start = perf_s()
         intr = Intrinsics.of(paired)
         xyxy = to_depth_pixels(boxes.xyxy, image_size, intr)
-        columns = measure(depth_metres(paired), intr, xyxy, self.params)
+        columns = measure_depth(depth_metres(paired), intr, xyxy, self.params)
         out = boxes.with_columns(columns)
-        ms = (time.perf_counter() - start) * 1000.0
+        ms = ms_since(start)
         count_for(self.tally, camera, contract.DEPTH_PAIRED)
         return out, ms
