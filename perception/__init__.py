@@ -18,7 +18,8 @@ service (services/detector/) and the tools are built on it.
     measure_depth       each box's distance, 3D centre and extent from an aligned depth image
                         (``depth.py``, docs/depth.md: ``depth_metres``, ``Intrinsics``,
                         ``DepthParams``, ``DEPTH_COLUMNS``, ``unknown_depth``,
-                        ``to_depth_pixels``)
+                        ``to_depth_pixels``; ``Mounting`` and ``to_robot``: a camera's
+                        points in the robot's frame, as the controller's virtual scan needs)
 
 The detection path: ``pipeline.py`` (``preprocess``, a runtimes/ backend, ``decode.py``,
 ``postprocess.py``) -> ``tracker.py``; ``model_info.py`` reads what a model says of itself.
@@ -29,7 +30,14 @@ Model files: ``variants.py`` (settings -> the file a backend loads), ``fast_prof
 from perception.batching import PROBE_SHAPE, BatchChoice, probe_sizes
 from perception.batching import measure as measure_batch
 from perception.depth import COLUMNS as DEPTH_COLUMNS
-from perception.depth import DepthParams, Intrinsics, depth_metres, to_depth_pixels
+from perception.depth import (
+    DepthParams,
+    Intrinsics,
+    Mounting,
+    depth_metres,
+    to_depth_pixels,
+    to_robot,
+)
 from perception.depth import measure as measure_depth
 from perception.depth import unknown as unknown_depth
 from perception.fast_profile import TIMED_RUNS, Figures, Measure, choose_fast
@@ -60,6 +68,7 @@ __all__ = [
     "Figures",
     "Intrinsics",
     "Measure",
+    "Mounting",
     "NotPrepared",
     "Prepared",
     "StageTiming",
@@ -77,6 +86,7 @@ __all__ = [
     "probe_sizes",
     "sized_model",
     "to_depth_pixels",
+    "to_robot",
     "tracker_clock",
     "unknown_depth",
     "variant_of",

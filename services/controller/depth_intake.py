@@ -22,7 +22,7 @@ from common.counters import per_camera
 from common.freshness import FreshnessGate, Verdict, capture_age_s
 from common.messages import CameraAnnouncement, DepthFrame, LaserScan
 from common.node import Tally
-from perception.depth import Intrinsics, Mounting, depth_metres
+from perception import Intrinsics, Mounting, depth_metres
 from services.controller import contract
 from services.controller.contract import ControllerSettings
 from services.controller.depth_scan import (

@@ -37,7 +37,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Header, LaserScan
-from perception.depth import Depth, Intrinsics, Mounting, to_robot
+from perception import Intrinsics, Mounting, to_robot
 from services.controller.geometry import wrap
 
 #: The range a scan states when its depth image states none (DepthFrame.range_max_m 0).
@@ -60,7 +60,7 @@ def usable(mount: Mounting) -> bool:
 
 
 def virtual_scan(
-    depth: Depth,
+    depth: npt.NDArray[np.float32],
     intr: Intrinsics,
     mount: Mounting,
     params: ScanParams,

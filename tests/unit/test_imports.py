@@ -31,9 +31,9 @@ modelprep.X    common, modelprep
 perception     common, runtimes, modelprep, perception (the detection library), the
                detector's contract (its settings)
 services.X     common, stack, runtimes, modelprep, its own package, ``perception`` (the package
-               root: its public API; and ``perception.depth``, never its other modules),
-               another service's package root (``services.Y``, its public API) or contract,
-               never its internals; never tools or deploy
+               root: its public API, never its modules), another service's package root
+               (``services.Y``, its public API) or contract, never its internals; never tools
+               or deploy
 tools.X        anything but deploy (a tool starts the supervisor as a process), and of
                perception only its package root (its public API)
 deploy         common, stack, the services' contracts, deploy
@@ -53,10 +53,6 @@ from collections.abc import Container, Iterable, Iterator, Mapping
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-#: What of perception others may import: its package root, and perception/depth.py (the depth
-#: interface of issue 32: pure numpy, no model, no runtime), which the controller's virtual
-#: scan and the detector's depth stage use without loading the detection library.
-PERCEPTION_API = ("perception", "perception.depth")
 PACKAGES = ("common", "stack", "runtimes", "modelprep", "perception", "services", "tools", "deploy")
 #: Units that are a whole top-level package (the others are split at the second level).
 WHOLE = ("common", "stack", "runtimes", "perception", "deploy")
@@ -279,14 +275,14 @@ def _allowed(module: str, target: str) -> bool:
         if target_top in ("common", "stack", "runtimes", "modelprep") or is_contract(target):
             return True
         if target_top == "perception":
-            return target in PERCEPTION_API  # its public API, never its other modules
+            return target == "perception"  # its public API, never its modules
         if target_top != "services":
             return False  # tools, deploy
         own = unit(module)
         return target == own or target.startswith(f"{own}.") or target.count(".") == 1
     if top == "tools":
         if target_top == "perception":
-            return target in PERCEPTION_API
+            return target == "perception"
         return target_top != "deploy"
     if top == "deploy":
         return target_top in ("common", "stack", "deploy") or is_contract(target)
