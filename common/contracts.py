@@ -36,6 +36,7 @@ class ControllerState(StrEnum):
 class DistanceSource(StrEnum):
     BOX = "box"  # from the box height and the target's known height
     LASER = "laser"  # the laser's range in the target's bearing
+    DEPTH = "depth"  # the depth camera's: the target's ``distance_m`` column (perception/depth.py)
 
 
 class BackendName(StrEnum):

@@ -201,10 +201,11 @@ def test_each_camera_principal_puts_only_its_own_frames(names: tuple[str, ...]) 
     # The detector: every camera's detections and its own counters, never a frame.
     detector = {*(KEYS.detections(c) for c in names), KEYS.counters("detector")}
     assert _allowed(acl, "detector", "put") == detector
-    # It reads every camera's frames, and the controller's status (attention: the camera that
-    # sees the target first).
+    # It reads every camera's frames and depth images, and the controller's status
+    # (attention: the camera that sees the target first).
     assert _allowed(acl, "detector", "declare_subscriber") == {
         KEYS.all_frames(),
+        KEYS.all_depths(),
         KEYS.controller_status(),
     }
     # A camera the stack does not have: nobody may put its frames or its detections.
