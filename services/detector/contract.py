@@ -262,9 +262,11 @@ class DetectorSettings:
     Depth (docs/detector.md, "Depth"; services/detector/depth_stage.py): for a camera announced
     with depth, each colour frame is paired with the depth frame of its camera whose stamp is
     nearest, within ``depth_pair_tolerance_ms``; the last ``depth_buffer`` depth frames of each
-    camera are kept to pair from. A box needs at least ``depth_min_valid_pixels`` valid depth
-    pixels in its region, and at least ``depth_min_valid_fraction`` of it, else it gets NaN
-    (unknown) in every depth column (perception/depth.py's DepthParams).
+    camera are kept to pair from; a frame whose depth frame has not come when its detections are
+    built waits up to ``depth_wait_ms`` for it (only when its camera's last frame paired). A box
+    needs at least ``depth_min_valid_pixels`` valid depth pixels in its region, and at least
+    ``depth_min_valid_fraction`` of it, else it gets NaN (unknown) in every depth column
+    (perception/depth.py's DepthParams).
     """
 
     model: str = ""
@@ -302,6 +304,7 @@ class DetectorSettings:
     attention_hold_s: float = 2.0
     depth_pair_tolerance_ms: float = 20.0
     depth_buffer: int = 4
+    depth_wait_ms: float = 10.0
     depth_min_valid_pixels: int = 20
     depth_min_valid_fraction: float = 0.05
 
@@ -330,6 +333,7 @@ class DetectorSettings:
         "capacity_smoothing": (0.01, 1),
         "depth_pair_tolerance_ms": (0, 1000),
         "depth_buffer": (1, MAX_DEPTH_BUFFER),
+        "depth_wait_ms": (0, 200),
         "depth_min_valid_pixels": (1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE),
         "depth_min_valid_fraction": (0, 1),
     }

@@ -6,14 +6,16 @@ subscriptions that call :meth:`DepthStage.on_depth` are the pool member's
 
 When the pairing looks. A source publishes a camera's depth frame with the same header as the
 colour frame it was captured with, but the two travel apart and either may come first. The
-pairing never waits: it is decided when the round's detections are built, after the model ran,
-so a depth frame that arrives up to a round's inference after its colour frame is still used.
-A depth frame could leave a short buffer while its colour frame waits in its slot and then
-through the model (30 depth frames a second, a round of 100 ms or more on a CPU); so the best
-match is *claimed* as the colour frame arrives, and bettered by each depth frame that arrives
-after it, until the detections are built. Only the colour-vs-depth arrival skew must fit in
-the buffer, not the detector's latency. A depth frame that arrives after its colour frame's
-detections went out is too late: those detections are 2D only (counted ``depth_unpaired``).
+pairing is decided when the round's detections are built, after the model ran, so a depth frame
+that arrives up to a round's inference after its colour frame is still used; with none yet (a
+fast GPU round, a depth frame still in transit) it waits up to ``detector.depth_wait_ms`` for
+one that may still come, only when the camera's last frame paired (a depth stream gone quiet
+costs one wait, not one per frame). A depth frame could leave a short buffer while its colour
+frame waits in its slot and then through the model (30 depth frames a second, a round of 100 ms
+or more on a CPU); so the best match is *claimed* as the colour frame arrives, and bettered by
+each depth frame that arrives after it, until the detections are built. Only the colour-vs-depth
+arrival skew must fit in the buffer, not the detector's latency. A depth frame that arrives
+after that is too late: those detections are 2D only (counted ``depth_unpaired``).
 """
 
 from __future__ import annotations
@@ -81,12 +83,23 @@ class Pairing(Generic[_T]):
             self._held = _Claim(stamp_ns, self._nearest(stamp_ns))
 
     def take(self, stamp_ns: int) -> _T | None:
-        held, self._held = self._held, None
+        found = self.peek(stamp_ns)
+        self._held = None
+        return found
+
+    def peek(self, stamp_ns: int) -> _T | None:
+        """What :meth:`take` would give now, the claim left held."""
+        held = self._held
         best = held.best if held is not None and held.stamp_ns == stamp_ns else None
         now = self._nearest(stamp_ns)
         if self._nearer(stamp_ns, now, best):
             best = now
         return None if best is None else best[1]
+
+    def may_come(self, stamp_ns: int) -> bool:
+        """Whether a depth frame for ``stamp_ns`` may still come: none stamped at or after it
+        has been heard (a source sends its depth frames in stamp order)."""
+        return all(at < stamp_ns for at, _ in self.recent)
 
     def _nearest(self, stamp_ns: int) -> tuple[int, _T] | None:
         best: tuple[int, _T] | None = None
@@ -124,9 +137,13 @@ class DepthStage:
             min_valid_pixels=settings.depth_min_valid_pixels,
             min_valid_fraction=settings.depth_min_valid_fraction,
         )
-        self._lock = threading.Lock()
+        self.wait_s = settings.depth_wait_ms / 1000.0
+        self._lock = threading.Condition()  # notified as each depth frame is kept
         self._pairs: dict[str, Pairing[DepthFrame]] = {}
+        self._paired_last: dict[str, bool] = {}  # whether the camera's last frame paired
         self.keys: dict[str, str] = {}  # each camera's depth key
+        self.waiting = 0  # how many measure() calls wait for a depth frame now ...
+        self.waits = 0  # ... and have waited in all (read by tests)
 
     def add_camera(self, camera: str, key: str) -> None:
         """Pair ``camera``'s frames with its depth frames on ``key`` from now on (before the
@@ -134,6 +151,7 @@ class DepthStage:
         with self._lock:
             if camera not in self._pairs:
                 self._pairs[camera] = Pairing(self.buffer, self.tolerance_ns)
+                self._paired_last[camera] = True  # its first frame may wait
             self.keys[camera] = key
         for name in (contract.DEPTH_IN, contract.DEPTH_PAIRED, contract.DEPTH_UNPAIRED):
             count_for(self.tally, camera, name, 0)
@@ -143,6 +161,7 @@ class DepthStage:
         frames go out 2D only, uncounted, and its depth frames are let go."""
         with self._lock:
             self._pairs.pop(camera, None)
+            self._paired_last.pop(camera, None)
             self.keys.pop(camera, None)
 
     def has_depth(self, camera: str) -> bool:
@@ -170,6 +189,7 @@ class DepthStage:
             pairing = self._pairs.get(camera)
             if pairing is not None:
                 pairing.depth(frame.header.stamp_ns, frame)
+                self._lock.notify_all()
 
     def colour(self, camera: str, header: Header) -> None:
         """A colour frame of ``camera`` arrived and goes into its slot (a bus thread)."""
@@ -185,6 +205,33 @@ class DepthStage:
             if pairing is not None:
                 pairing.hold(header.stamp_ns)
 
+    def _pair(self, camera: str, stamp_ns: int) -> tuple[bool, DepthFrame | None]:
+        """Whether ``camera`` has depth, and the depth frame paired with its frame of
+        ``stamp_ns``. With none yet, while one may still come,
+        it waits up to ``detector.depth_wait_ms`` for it, but only when the camera's last
+        frame paired: a depth stream gone quiet costs one wait, not one per frame."""
+        deadline = perf_s() + self.wait_s
+        with self._lock:
+            pairing = self._pairs.get(camera)
+            if pairing is None:
+                return False, None
+            found = pairing.peek(stamp_ns)
+            if found is None and self._paired_last[camera] and pairing.may_come(stamp_ns):
+                self.waiting += 1
+                self.waits += 1
+                try:
+                    while found is None and pairing.may_come(stamp_ns):
+                        left = deadline - perf_s()
+                        if left <= 0 or self._pairs.get(camera) is not pairing:
+                            break
+                        self._lock.wait(left)
+                        found = pairing.peek(stamp_ns)
+                finally:
+                    self.waiting -= 1
+            found = pairing.take(stamp_ns)
+            self._paired_last[camera] = found is not None
+            return True, found
+
     def measure(
         self, camera: str, header: Header, image_size: tuple[int, int], boxes: Boxes
     ) -> tuple[Boxes, float | None]:
@@ -192,10 +239,8 @@ class DepthStage:
         ``header``) with every depth column, from the depth frame paired with it, and the
         stage's milliseconds; ``boxes`` as they are and None for a camera without depth or a
         frame with no depth frame within the tolerance (counted unpaired)."""
-        with self._lock:
-            pairing = self._pairs.get(camera)
-            paired = None if pairing is None else pairing.take(header.stamp_ns)
-        if pairing is None:
+        has_depth, paired = self._pair(camera, header.stamp_ns)
+        if not has_depth:
             return boxes, None
         if paired is None:
             count_for(self.tally, camera, contract.DEPTH_UNPAIRED)

@@ -3,10 +3,10 @@ real default model), fed by this test's own Zenoh session as a depth camera's so
 be: the camera announced with ``depth=True`` (CameraAnnouncements), a real photo on its frame
 key and, with the same header, a depth frame reading 2.5 m everywhere but a corner of holes.
 
-One detector serves every check in turn (each only reads what came back): a frame with its
-depth gets detections whose every row has the depth columns, 2.5 m deep, the 3D centre
-back-projecting to the box's centre; a frame with no depth gets 2D detections and is counted
-``depth_unpaired``; garbage on the depth key is counted as bad input and the detector keeps
+One detector serves every check in turn (each only reads what came back): a frame with no
+depth gets 2D detections and is counted ``depth_unpaired``; a frame with its depth gets
+detections whose every row has the depth columns, 2.5 m deep, the 3D centre back-projecting to
+the box's centre; garbage on the depth key is counted as bad input and the detector keeps
 pairing. The pairing rules themselves are unit-tested (tests/unit/detector/
 test_depth_pairing.py, test_depth_bus.py)."""
 
@@ -36,6 +36,8 @@ METRES = 2.5
 SIZE = (320, 320)  # the colour frame's (the astronaut, resized)
 DEPTH_SIDE = 160  # the depth image's: half the colour frame's, so boxes are scaled
 HOLES = (slice(0, 40), slice(0, 40))  # a corner with no reading
+#: How far a 3D centre may back-project from its box's centre, as a share of the box's side.
+CENTRE_SLACK = 0.03
 WAIT_S = 60.0  # a round of the 640 model on a loaded 2-core machine is well under a second
 
 
@@ -55,12 +57,9 @@ class DepthCamera:
         self.depths = Publisher(det.hub, det.keys.depth("front"), QoS.SENSOR)
         self.sent: dict[int, Header] = {}
 
-    def send(self, *, depth: bool) -> Header:
+    def header(self) -> Header:
         h = camera_header("front", len(self.sent) + 1)
         self.sent[h.seq] = h
-        if depth:  # first, as often as not: the pairing takes either order
-            self.depths.put(flat_depth(h, DEPTH_SIDE, DEPTH_SIDE, METRES, holes=HOLES).encode())
-        self.frames.put(image_to_frame(self.photo, h).encode())
         return h
 
     def answer(self, seqs: set[int]) -> Detections | None:
@@ -71,41 +70,68 @@ class DepthCamera:
                 return d
         return None
 
-    def until_answered(self, *, depth: bool) -> Detections:
-        """Send (a frame every poll: a frame sent before the detector's subscriptions reach
-        the router is lost) until one comes back."""
+    def until_answered(self) -> Detections:
+        """Send a frame, without depth, every poll until one comes back (a frame sent before
+        the detector's subscription reaches the router is lost)."""
         seqs: set[int] = set()
 
         def answered() -> Detections | None:
-            seqs.add(self.send(depth=depth).seq)
+            h = self.header()
+            self.frames.put(image_to_frame(self.photo, h).encode())
+            seqs.add(h.seq)
             return self.answer(seqs)
 
         return wait_for(answered, WAIT_S, lambda: f"detections of front:\n{self.det.log()}", 0.3)
 
+    def with_depth(self) -> Detections:
+        """A frame and its depth frame, the depth frame first and heard (``depth_in``) before
+        the frame is sent: on a loaded machine the depth subscription's thread may otherwise
+        lag the frame's past the model's run, which the pairing does not wait for (2D,
+        counted unpaired: a right answer, but not the one this test checks)."""
+        h = self.header()
+        heard = self.det.counter("depth_in.front")
+        depth = flat_depth(h, DEPTH_SIDE, DEPTH_SIDE, METRES, holes=HOLES).encode()
 
-def counted(det: Detector, name: str) -> int:
-    return det.counter(name)
+        def depth_heard() -> bool:
+            self.depths.put(depth)  # again when the first was lost: the same stamp
+            return self.det.counter("depth_in.front") > heard
+
+        wait_for(depth_heard, WAIT_S, lambda: f"depth_in counted:\n{self.det.log()}", 0.3)
+        self.frames.put(image_to_frame(self.photo, h).encode())
+        return wait_for(
+            lambda: self.answer({h.seq}),
+            WAIT_S,
+            lambda: f"detections of frame {h.seq}:\n{self.det.log()}",
+        )
 
 
 def test_a_photo_with_depth_gets_3d_detections_without_it_2d_and_garbage_is_dropped(
     serve: Any,  # noqa: F811 (the fixture)
 ) -> None:
-    det: Detector = serve({"front": {"frame_id": "front_optical"}})
+    det: Detector = serve(
+        {"front": {"frame_id": "front_optical"}},
+        # A frame waits for its depth frame's count (counters every 0.2 s) before it is sent.
+        detector={"counters_period_s": 0.2, "max_frame_age_s": 30.0},
+    )
     cam = DepthCamera(det)
     wait_for(
-        lambda: counted(det, "serving.front") == 1 and "depth_in.front" in det.counters[-1],
+        lambda: det.counter("serving.front") == 1 and "depth_in.front" in det.counters[-1],
         WAIT_S,
         lambda: f"the detector to serve front and its depth:\n{det.log()}",
     )
 
-    def depth_heard() -> bool:  # the depth subscription's route is through to the router
-        cam.depths.put(flat_depth(camera_header("front", 0), DEPTH_SIDE, DEPTH_SIDE, 1.0).encode())
-        return counted(det, "depth_in.front") >= 1
-
-    wait_for(depth_heard, WAIT_S, lambda: f"depth_in counted:\n{det.log()}", 0.3)
+    # No depth: 2D detections, counted unpaired.
+    without = cam.until_answered()
+    assert "person" in without.class_names
+    assert without.boxes.columns == {} and "depth" not in without.timing_ms
+    wait_for(
+        lambda: det.counter("depth_unpaired.front") >= 1,
+        WAIT_S,
+        lambda: f"depth_unpaired counted:\n{det.log()}",
+    )
 
     # With depth: every row has every column, 2.5 m deep or unknown (the corner's holes).
-    with_depth = cam.until_answered(depth=True)
+    with_depth = cam.with_depth()
     boxes = with_depth.boxes
     assert "person" in with_depth.class_names and set(boxes.columns) == set(COLUMNS)
     assert "depth" in with_depth.timing_ms
@@ -122,36 +148,28 @@ def test_a_photo_with_depth_gets_3d_detections_without_it_2d_and_garbage_is_drop
         assert row["distance_m"] == pytest.approx(math.sqrt(x * x + y * y + z * z), rel=1e-4)
         u = (fx * x / z + DEPTH_SIDE / 2) * sx
         v = (fx * y / z + DEPTH_SIDE / 2) * sy
-        x1, y1, x2, y2 = boxes.xyxy[i]
-        assert (u, v) == pytest.approx(((x1 + x2) / 2, (y1 + y2) / 2), abs=1.0)
+        x1, y1, x2, y2 = (float(b) for b in boxes.xyxy[i])
+        # The object's centre, not the box's: the method's centre is that of the valid
+        # pixels it takes for the object (sampled on a grid; the holes take some away).
+        near = 2.0 + CENTRE_SLACK * max(x2 - x1, y2 - y1)
+        assert (u, v) == pytest.approx(((x1 + x2) / 2, (y1 + y2) / 2), abs=near)
     person = with_depth.class_names.index("person")
     assert math.isfinite(float(boxes.columns["distance_m"][person]))
     assert known >= 1
     wait_for(
-        lambda: counted(det, "depth_paired.front") >= 1,
+        lambda: det.counter("depth_paired.front") >= 1,
         WAIT_S,
         lambda: f"depth_paired counted:\n{det.log()}",
-    )
-
-    # No depth: 2D detections, counted unpaired.
-    unpaired = counted(det, "depth_unpaired.front")
-    without = cam.until_answered(depth=False)
-    assert "person" in without.class_names
-    assert without.boxes.columns == {} and "depth" not in without.timing_ms
-    wait_for(
-        lambda: counted(det, "depth_unpaired.front") > unpaired,
-        WAIT_S,
-        lambda: f"depth_unpaired counted:\n{det.log()}",
     )
 
     # Garbage on the depth key: counted, dropped; the detector pairs the next frames.
     for payload in (b"\x00garbage", np.zeros(64, np.uint8).tobytes()):
         cam.depths.put(payload)
     wait_for(
-        lambda: counted(det, "bad_input.front") >= 2 and counted(det, "bad_input.depth") >= 2,
+        lambda: det.counter("bad_input.front") >= 2 and det.counter("bad_input.depth") >= 2,
         WAIT_S,
         lambda: f"bad depth counted:\n{det.log()}",
     )
-    again = cam.until_answered(depth=True)
+    again = cam.with_depth()
     assert set(again.boxes.columns) == set(COLUMNS)
     assert det.proc.poll() is None
