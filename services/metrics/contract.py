@@ -47,19 +47,26 @@ READS: Mapping[str, tuple[str, ...]] = {
         detector.POOL_MEMBERS,
         detector.CAMERAS_GAINED,
         detector.CAMERAS_LOST,
+        detector.DEPTH_IN,
+        detector.DEPTH_UNPAIRED,
     )
 }
 #: ... and those it reads for each camera (``<name>.<camera>``).
 READS_PER_CAMERA: Mapping[str, tuple[str, ...]] = {
-    "detector": (detector.FRAMES_IN, detector.DROPPED, detector.SERVING)
+    "detector": (
+        detector.FRAMES_IN,
+        detector.DROPPED,
+        detector.SERVING,
+        detector.DEPTH_IN,
+        detector.DEPTH_UNPAIRED,
+    )
 }
 
 #: The detector's depth counters (issue 32), totals and ``<name>.<camera>``: depth images
 #: taken, and colour frames of a depth camera with no depth image within the pairing
-#: tolerance. Named here until services/detector/contract.py declares them (then: its names,
-#: and in READS and READS_PER_CAMERA).
-DEPTH_IN = "depth_in"
-DEPTH_UNPAIRED = "depth_unpaired"
+#: tolerance.
+DEPTH_IN = detector.DEPTH_IN
+DEPTH_UNPAIRED = detector.DEPTH_UNPAIRED
 
 SERVICE = "metrics"
 
