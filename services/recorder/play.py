@@ -83,7 +83,16 @@ def playable_topics(path: Path, topics: Sequence[str] | None) -> list[str]:
     once; RecordingError for a file that cannot be played."""
     with Recording(path) as rec:
         channels = rec.scan()
-    check_playable(channels, topics)
+    try:
+        check_playable(channels, topics)
+    except RecordingError as exc:
+        if not rec.truncated:
+            raise
+        # What is missing may be in the part that was lost: say both.
+        raise RecordingError(
+            f"{exc}; {path} is truncated after {rec.count} messages (no end after its last "
+            "full chunk)"
+        ) from exc
     chosen = (
         list(topics)
         if topics is not None

@@ -22,7 +22,7 @@ from common.camera_announce import CameraAnnouncements
 from common.errors import RecordingError
 from common.keys import Keys
 from common.memory_bus import MemoryHub
-from common.messages import DepthFrame, Frame, Header
+from common.messages import CameraAnnouncement, DepthFrame, Frame, Header
 from common.node import Node
 from services.camera.contract import CameraSettings
 from services.recorder.channels import Translator
@@ -249,3 +249,22 @@ def test_a_truncated_recording_plays_its_depth_up_to_the_cut_then_says_so(
     with pytest.raises(RecordingError, match=r"truncated .* 0 frames, [1-5] depth images"):
         one_pass(CONFIG, cut, topics, 1000.0, lambda k, b: None, threading.Event(), played)
     assert 0 < played.depths < 6 and played.truncated
+
+
+def test_a_file_cut_before_anything_playable_says_it_is_truncated(tmp_path: Path) -> None:
+    # The first chunk holds only announcements (as a recording's first flush may); cut there.
+    out = McapFile(tmp_path / "r.mcap", RecorderSettings(chunk_size_kb=16))
+    translator = Translator(CONFIG.ros2, FRONT)
+    said = CameraAnnouncement(camera=FRONT, rate_hz=10.0, frame_id="x" * 100, depth=True)
+    announce_key = KEYS.camera_announcements_of(FRONT).removesuffix("/*")
+    while out.bytes_written < 16 * 1024:  # until the first chunk is on disk
+        for entry in translator.entries(announce_key, said):
+            out.add(entry, 10**18)
+    first_chunk = out.bytes_written
+    for entry in translator.entries(KEYS.depth(FRONT), _depth(_header(1, "f"), "16UC1")):
+        out.add(entry, 10**18)
+    out.close()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes((tmp_path / "r.mcap").read_bytes()[:first_chunk])
+    with pytest.raises(RecordingError, match=r"^nothing to play: .*; .* is truncated after \d+ "):
+        playable_topics(cut, None)
