@@ -15,6 +15,8 @@ service (services/detector/) and the tools are built on it.
     choose_fast         the fast profile's choice (``Figures``, ``Measure``, ``TIMED_RUNS``)
     measure_batch       the batch size that serves frames fastest (``probe_sizes``,
                         ``PROBE_SHAPE``, ``BatchChoice``)
+    Mounting, to_robot  a camera's optical-frame points in the robot's base frame
+                        (``depth.py``; ``DEPTH_CENTRE``, ``DEPTH_SIZE``: its column names)
 
 The detection path: ``pipeline.py`` (``preprocess``, a runtimes/ backend, ``decode.py``,
 ``postprocess.py``) -> ``tracker.py``; ``model_info.py`` reads what a model says of itself.
@@ -24,6 +26,9 @@ Model files: ``variants.py`` (settings -> the file a backend loads), ``fast_prof
 
 from perception.batching import PROBE_SHAPE, BatchChoice, probe_sizes
 from perception.batching import measure as measure_batch
+from perception.depth import CENTRE as DEPTH_CENTRE
+from perception.depth import SIZE as DEPTH_SIZE
+from perception.depth import Mounting, to_robot
 from perception.fast_profile import TIMED_RUNS, Figures, Measure, choose_fast
 from perception.loading import load, prepare_for
 from perception.pipeline import Detector
@@ -41,6 +46,8 @@ from perception.variants import (
 )
 
 __all__ = [
+    "DEPTH_CENTRE",
+    "DEPTH_SIZE",
     "PREPARE_COMMAND",
     "PROBE_SHAPE",
     "TIMED_RUNS",
@@ -49,6 +56,7 @@ __all__ = [
     "Detector",
     "Figures",
     "Measure",
+    "Mounting",
     "NotPrepared",
     "Prepared",
     "StageTiming",
@@ -63,6 +71,7 @@ __all__ = [
     "prepare_for",
     "probe_sizes",
     "sized_model",
+    "to_robot",
     "tracker_clock",
     "variant_of",
 ]

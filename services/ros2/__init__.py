@@ -5,7 +5,8 @@ The pure layer, exported here for other packages (the simulator plays a ROS robo
     RosDistro, typestore_for      rosbags' message types per distribution, vision_msgs added
     data_key, Attachment, ...  rmw_zenoh's keys, per-sample attachment and liveliness tokens
     cdr_encode, cdr_decode     CDR as rmw_zenoh carries it; garbage raises DecodeError
-    *_to_ros, *_from_ros       the translations (images in ``images.py``, the rest ``convert.py``)
+    *_to_ros, *_from_ros       the translations (images in ``images.py``, depth and 3D
+                               detections in ``depth.py``, the rest ``convert.py``)
 
 and the one I/O piece other packages need: ``RosGraph``, a node in a ROS 2 graph (``graph.py``:
 the session, its publishers and subscribers, their liveliness tokens). The translation modules
@@ -33,6 +34,13 @@ if TYPE_CHECKING:
         twist_from_ros,
         twist_to_ros,
     )
+    from services.ros2.depth import (
+        CAMERA_INFO,
+        DETECTION_3D_ARRAY,
+        depth_from_image,
+        detections_3d_to_ros,
+        intrinsics_from_camera_info,
+    )
     from services.ros2.graph import RosGraph, RosPublisher
     from services.ros2.images import (
         COMPRESSED_IMAGE,
@@ -57,9 +65,11 @@ if TYPE_CHECKING:
     )
 
 __all__ = [
+    "CAMERA_INFO",
     "COMPRESSED_IMAGE",
     "DEFAULT_QOS",
     "DETECTION_2D_ARRAY",
+    "DETECTION_3D_ARRAY",
     "IMAGE",
     "LASER_SCAN",
     "SENSOR_DATA_QOS",
@@ -74,6 +84,8 @@ __all__ = [
     "cdr_decode",
     "cdr_encode",
     "data_key",
+    "depth_from_image",
+    "detections_3d_to_ros",
     "detections_to_ros",
     "endpoint_token",
     "frame_from_compressed_image",
@@ -81,6 +93,7 @@ __all__ = [
     "frame_to_compressed_image",
     "frame_to_image",
     "gid_for",
+    "intrinsics_from_camera_info",
     "node_token",
     "qos_string",
     "scan_from_ros",
@@ -109,6 +122,11 @@ __getattr__ = exports(
         "scan_to_ros": "services.ros2.convert",
         "twist_from_ros": "services.ros2.convert",
         "twist_to_ros": "services.ros2.convert",
+        "CAMERA_INFO": "services.ros2.depth",
+        "DETECTION_3D_ARRAY": "services.ros2.depth",
+        "depth_from_image": "services.ros2.depth",
+        "detections_3d_to_ros": "services.ros2.depth",
+        "intrinsics_from_camera_info": "services.ros2.depth",
         "COMPRESSED_IMAGE": "services.ros2.images",
         "IMAGE": "services.ros2.images",
         "frame_from_compressed_image": "services.ros2.images",

@@ -21,6 +21,20 @@ from common.setting_checks import Bounds, check_bounds, check_lengths, enum_fiel
 DETECTIONS_OUT = "detections_out"
 COMMANDS_OUT = "commands_out"
 DEBUG_IMAGES_OUT = "debug_images_out"
+#: Depth in (``ros2.depth_in``): CameraInfos taken; DepthFrames put; depth images dropped
+#: because no CameraInfo of their camera had come yet, because their encoding is neither 16UC1
+#: nor 32FC1, or because their size is not the CameraInfo's.
+DEPTH_INFO_IN = "depth_info_in"
+DEPTH_OUT = "depth_out"
+DEPTH_WITHOUT_INFO = "depth_without_info"
+DEPTH_BAD_ENCODING = "depth_bad_encoding"
+DEPTH_SIZE_MISMATCH = "depth_size_mismatch"
+#: 3D out (``ros2.detections_3d_out``): Detection3DArrays sent; detections left out of them
+#: for an unknown depth (NaN); Detections not sent for want of the camera's announced mounting
+#: (``ros2.detections_3d_frame`` set).
+DETECTIONS_3D_OUT = "detections_3d_out"
+DETECTIONS_3D_UNKNOWN = "detections_3d_unknown"
+DETECTIONS_3D_UNMOUNTED = "detections_3d_unmounted"
 
 
 def topic_in(ros_type: str) -> str:
@@ -31,7 +45,22 @@ def topic_in(ros_type: str) -> str:
 
 #: Its own counts; the command gate (common/command_gate.py) adds ``commands_<why>`` and
 #: ``stops_<why>`` for what it refused or replaced by zero.
-COUNTERS = frozenset({*COMMON, DETECTIONS_OUT, COMMANDS_OUT, DEBUG_IMAGES_OUT})
+COUNTERS = frozenset(
+    {
+        *COMMON,
+        DETECTIONS_OUT,
+        COMMANDS_OUT,
+        DEBUG_IMAGES_OUT,
+        DEPTH_INFO_IN,
+        DEPTH_OUT,
+        DEPTH_WITHOUT_INFO,
+        DEPTH_BAD_ENCODING,
+        DEPTH_SIZE_MISMATCH,
+        DETECTIONS_3D_OUT,
+        DETECTIONS_3D_UNKNOWN,
+        DETECTIONS_3D_UNMOUNTED,
+    }
+)
 PER_CAMERA: frozenset[str] = frozenset()
 
 SERVICE = "ros2"
@@ -46,6 +75,7 @@ def access(shape: Shape) -> dict[str, Access]:
             keys,
             SERVICE,
             *shape.frames(),
+            *(keys.depth(camera) for camera in shape.cameras),
             keys.scan(),
             read=(
                 keys.all_frames(),
@@ -54,6 +84,8 @@ def access(shape: Shape) -> dict[str, Access]:
                 keys.controller_status(),
             ),
             token=(keys.health(SERVICE), *map(keys.camera_announcements_of, shape.cameras)),
+            # The cameras' mountings, for 3D detections in the robot's frame.
+            watch=(keys.all_camera_announcements(),),
         )
     }
 
@@ -74,6 +106,8 @@ class ImageFormat(StrEnum):
 #: In ``ros2.camera_namespace``: where the camera's name goes.
 CAMERA_FIELD = "{camera}"
 _TOPIC = re.compile(r"^/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$")
+# A tf frame id: no spaces, no wildcards, no leading '/' (tf2 refuses one).
+_FRAME_ID = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_./-]{0,127}$")
 
 
 def _topic(name: str, value: str) -> None:
@@ -100,6 +134,13 @@ class Ros2Settings:
     ``{camera}`` replaced by the camera's name (:func:`camera_topics`: the rear camera's
     images on ``/rear/camera/rgb/image_raw``, its detections on ``/rear/detections``), as a
     camera driver started in that namespace publishes them.
+    ``depth_in`` takes each camera's depth image (``depth_topic``, ``sensor_msgs/Image``,
+    16UC1 in mm or 32FC1 in m, aligned to the colour images) and its ``CameraInfo``
+    (``depth_info_topic``) in as DepthFrames; each camera is then announced with ``depth``.
+    ``detections_3d_out`` publishes the detections that carry depth columns as
+    ``vision_msgs/Detection3DArray`` on ``detections_3d_topic``: in the camera's optical frame
+    (the detections' frame id), or with ``detections_3d_frame`` (e.g. ``base_link``) in the
+    robot's base frame by the camera's announced mounting.
     ``router_timeout_s`` bounds the wait for the router at start-up. A command on cmd_vel
     faster than ``max_command_linear`` (m/s) or ``max_command_angular`` (rad/s), the most
     the controller's own settings allow, is no command a sane controller sends: the bridge
@@ -127,6 +168,12 @@ class Ros2Settings:
     debug_image_rate_hz: float = 5.0
     debug_jpeg_quality: int = 80
     camera_namespace: str = "/" + CAMERA_FIELD
+    depth_in: bool = False
+    depth_topic: str = "/camera/aligned_depth_to_color/image_raw"
+    depth_info_topic: str = "/camera/aligned_depth_to_color/camera_info"
+    detections_3d_out: bool = True
+    detections_3d_topic: str = "/detections_3d"
+    detections_3d_frame: str = ""
     router_timeout_s: float = 5.0
     max_command_linear: float = 5.0
     max_command_angular: float = 10.0
@@ -155,8 +202,14 @@ class Ros2Settings:
         if self.namespace != "/":
             _topic("namespace", self.namespace)
         topics = ("image_topic", "scan_topic", "detections_topic", "cmd_vel_topic")
-        for name in (*topics, "debug_image_topic"):
+        per_camera = ("depth_topic", "depth_info_topic", "detections_3d_topic")
+        for name in (*topics, "debug_image_topic", *per_camera):
             _topic(name, getattr(self, name))
+        if self.detections_3d_frame and not _FRAME_ID.match(self.detections_3d_frame):
+            raise ConfigError(
+                f"ros2.detections_3d_frame {self.detections_3d_frame!r} is not a frame id "
+                "(e.g. base_link; empty: the camera's optical frame)"
+            )
         if CAMERA_FIELD not in self.camera_namespace or not _TOPIC.match(
             self.camera_namespace.replace(CAMERA_FIELD, "camera")
         ):
@@ -168,11 +221,15 @@ class Ros2Settings:
 
 @dataclass(frozen=True, slots=True)
 class CameraTopics:
-    """One camera's ROS 2 topics: its images in, its detections and debug images out."""
+    """One camera's ROS 2 topics: its images, depth images and their CameraInfo in, its
+    detections (2D and 3D) and debug images out."""
 
     image: str
     detections: str
     debug_image: str
+    depth: str
+    depth_info: str
+    detections_3d: str
 
 
 def camera_topics(settings: Ros2Settings, first: str, camera: str) -> CameraTopics:
@@ -181,15 +238,17 @@ def camera_topics(settings: Ros2Settings, first: str, camera: str) -> CameraTopi
     under ``ros2.camera_namespace`` with its name filled in (a relative topic stays
     relative)."""
     s = settings
+    own = (s.image_topic, s.detections_topic, s.debug_image_topic, s.depth_topic,
+           s.depth_info_topic, s.detections_3d_topic)  # fmt: skip
     if camera == first:
-        return CameraTopics(s.image_topic, s.detections_topic, s.debug_image_topic)
+        return CameraTopics(*own)
     namespace = s.camera_namespace.replace(CAMERA_FIELD, camera).strip("/")
 
     def under(topic: str) -> str:
         inside = f"{namespace}/{topic.lstrip('/')}"
         return f"/{inside}" if topic.startswith("/") else inside
 
-    return CameraTopics(under(s.image_topic), under(s.detections_topic), under(s.debug_image_topic))
+    return CameraTopics(*map(under, own))
 
 
 def check_camera_topics(settings: Ros2Settings, cameras: Sequence[str]) -> None:
@@ -199,7 +258,9 @@ def check_camera_topics(settings: Ros2Settings, cameras: Sequence[str]) -> None:
     for camera in cameras:
         topics = camera_topics(settings, cameras[0], camera)
         for what, topic in (("image", topics.image), ("detections", topics.detections),
-                            ("debug image", topics.debug_image)):  # fmt: skip
+                            ("debug image", topics.debug_image), ("depth", topics.depth),
+                            ("depth camera info", topics.depth_info),
+                            ("3D detections", topics.detections_3d)):  # fmt: skip
             if not _TOPIC.match(topic):
                 raise ConfigError(
                     f"ros2.camera_namespace {settings.camera_namespace!r} gives camera "

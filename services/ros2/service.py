@@ -1,8 +1,11 @@
 """The ros2 service: the stack's keys to and from a ROS 2 robot over rmw_zenoh, no ROS install.
 
 In:  sensor_msgs/Image or CompressedImage (``ros2.image_topic``) -> Frame on the camera key;
-     sensor_msgs/LaserScan (``ros2.scan_topic``) -> the stack's LaserScan.
-Out: Detections -> vision_msgs/Detection2DArray (``ros2.detections_topic``);
+     sensor_msgs/LaserScan (``ros2.scan_topic``) -> the stack's LaserScan;
+     with ``ros2.depth_in``, a depth sensor_msgs/Image and its CameraInfo
+     (``ros2.depth_topic``, ``ros2.depth_info_topic``) -> DepthFrame on the camera's depth key.
+Out: Detections -> vision_msgs/Detection2DArray (``ros2.detections_topic``), and those with
+     depth columns -> vision_msgs/Detection3DArray (``ros2.detections_3d_topic``);
      the controller's Twist -> geometry_msgs/Twist or TwistStamped (``ros2.cmd_vel_topic``),
      only fresh, in order and from the controller; zero while its status says the e-stop is
      engaged or it is silent (common/command_gate.py).
@@ -23,12 +26,13 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 
+from common.announce import announced_cameras
 from common.bus import Declared, QoS
 from common.camera_announce import CameraAnnouncements
 from common.clock import BOOT_ID, mono_s, now
 from common.command_gate import CommandGate, Outcome
 from common.errors import DecodeError, ImageError
-from common.messages import ControllerStatus, Detections, Frame, Twist
+from common.messages import CameraAnnouncement, ControllerStatus, Detections, Frame, Twist
 from common.node import Node, Put, Tally
 from services.ros2 import contract
 from services.ros2.contract import ImageFormat, camera_topics
@@ -44,6 +48,8 @@ from services.ros2.convert import (
     twist_to_ros,
 )
 from services.ros2.debug_image import FrameCache, debug_image
+from services.ros2.depth import CAMERA_INFO, DETECTION_3D_ARRAY
+from services.ros2.depth_handlers import AnnouncementOf, DepthInbound, Detections3DToRos
 from services.ros2.graph import RosGraph
 from services.ros2.images import (
     COMPRESSED_IMAGE,
@@ -108,10 +114,11 @@ class RosInbound:
 
 def announce_bridged(config: Config, announcements: CameraAnnouncements) -> dict[str, OnFrame]:
     """Announce each camera whose images the bridge puts on the stack's keys (none without
-    ``ros2.image_in``): its rate, mounting and field of view from its config, its size 0x0
-    until its first image, whose size and frame id are then announced. Returns, per camera,
-    what to tell of each frame put."""
-    if not config.ros2.image_in:
+    ``ros2.image_in``): its rate, mounting and field of view from its config, with
+    ``ros2.depth_in`` as a depth camera, its size 0x0 until its first image, whose size and
+    frame id are then announced. Returns, per camera, what to tell of each frame put."""
+    s = config.ros2
+    if not s.image_in:
         return {}
     told: dict[str, OnFrame] = {}
     for camera, c in config.all_cameras.items():
@@ -121,6 +128,7 @@ def announce_bridged(config: Config, announcements: CameraAnnouncements) -> dict
             mount_yaw_deg=c.mount_yaw_deg,
             hfov_deg=c.hfov_deg,
             frame_id=c.frame_id,
+            depth=s.depth_in,
         )
 
         def on_frame(frame: Frame, camera: str = camera) -> None:
@@ -244,10 +252,16 @@ class DebugImages:
 
 
 def _bridge_camera(
-    config: Config, node: Node, graph: RosGraph, camera: str, on_frame: OnFrame | None
+    config: Config,
+    node: Node,
+    graph: RosGraph,
+    camera: str,
+    on_frame: OnFrame | None,
+    announced: AnnouncementOf,
 ) -> list[Declared]:
-    """Map ``camera``'s images in (each told to ``on_frame``) and its detections (and debug
-    images) out, on its own ROS topics; the subscriptions on the stack's keys made for it."""
+    """Map ``camera``'s images and depth in (each frame told to ``on_frame``) and its
+    detections, 3D detections (by ``announced`` mountings) and debug images out, on its own
+    ROS topics; the subscriptions on the stack's keys made for it."""
     s, keys = config.ros2, node.keys
     topics = camera_topics(s, config.stack.camera, camera)
     subs: list[Declared] = []
@@ -256,6 +270,13 @@ def _bridge_camera(
         frames = node.publisher(keys.frame(camera), QoS.SENSOR)
         image_in = RosInbound(config, node, image_type, topics.image, frames.put, on_frame)
         graph.subscribe(topics.image, image_type, image_in.on_payload, SENSOR_DATA_QOS)
+    if s.depth_in:
+        depths = node.publisher(keys.depth(camera), QoS.SENSOR)
+        depth_in = DepthInbound(
+            config, node, depths.put, depth_topic=topics.depth, info_topic=topics.depth_info
+        )
+        graph.subscribe(topics.depth_info, CAMERA_INFO, depth_in.on_info, SENSOR_DATA_QOS)
+        graph.subscribe(topics.depth, IMAGE, depth_in.on_depth, SENSOR_DATA_QOS)
     if s.debug_image_out:
         debug = graph.publisher(topics.debug_image, COMPRESSED_IMAGE)
         drawn = DebugImages(config, node, debug.put_cdr, camera)
@@ -265,7 +286,15 @@ def _bridge_camera(
         det_pub = graph.publisher(topics.detections, DETECTION_2D_ARRAY)
         dets_out = DetectionsToRos(config, node, det_pub.put_cdr, camera)
         subs.append(node.subscribe(keys.detections(camera), dets_out.on_detections))
+    if s.detections_3d_out:
+        pub_3d = graph.publisher(topics.detections_3d, DETECTION_3D_ARRAY)
+        out_3d = Detections3DToRos(config, node, pub_3d.put_cdr, camera, announced)
+        subs.append(node.subscribe(keys.detections(camera), out_3d.on_detections))
     return subs
+
+
+def _nothing_announced(camera: str) -> CameraAnnouncement | None:
+    return None
 
 
 def run(config: Config, stop: threading.Event) -> int:
@@ -279,8 +308,19 @@ def run(config: Config, stop: threading.Event) -> int:
         keys = node.keys
         subs: list[Declared] = []
         told = announce_bridged(config, announcements)
+        announced: AnnouncementOf = _nothing_announced
+        if s.detections_3d_out and s.detections_3d_frame:
+            # Every camera's announced mounting (the bridge's own or another source's), for
+            # 3D detections in the robot's frame.
+            cameras = announced_cameras(
+                node.bus,
+                keys,
+                on_bad=lambda key, exc: node.bad_input(key, exc, topic="camera_announcement"),
+            )
+            graph.on_close(cameras.close)
+            announced = cameras.get
         for camera in config.all_cameras:
-            subs += _bridge_camera(config, node, graph, camera, told.get(camera))
+            subs += _bridge_camera(config, node, graph, camera, told.get(camera), announced)
         if s.scan_in:
             scans = node.publisher(keys.scan(), QoS.SENSOR)
             scan_in = RosInbound(config, node, LASER_SCAN, s.scan_topic, scans.put)

@@ -71,3 +71,15 @@ def test_a_bridge_that_takes_no_images_announces_no_camera() -> None:
     with CameraAnnouncements(hub.join("ros2"), KEYS, ANNOUNCED_SOURCE) as announcements:
         assert announce_bridged(config, announcements) == {}
         assert heard.current() == {}
+
+
+def test_with_depth_in_each_bridged_camera_is_announced_as_a_depth_camera() -> None:
+    hub = MemoryHub()
+    heard = heard_cameras(hub, KEYS)
+    config = dataclasses.replace(CONFIG, ros2=dataclasses.replace(CONFIG.ros2, depth_in=True))
+    with CameraAnnouncements(hub.join("ros2"), KEYS, ANNOUNCED_SOURCE) as announcements:
+        announce_bridged(config, announcements)
+        assert heard.current() == {
+            FRONT: _announced(FRONT, depth=True),
+            "rear": _announced("rear", depth=True),
+        }
