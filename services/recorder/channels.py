@@ -7,7 +7,10 @@ dependencies), so that Foxglove, rosbags and ``ros2 bag`` read them:
     Frame (raw)        sensor_msgs/msg/Image              on ros2.image_topic
     Frame (jpeg)       sensor_msgs/msg/CompressedImage    on ros2.image_topic + "/compressed"
     LaserScan          sensor_msgs/msg/LaserScan          on ros2.scan_topic
-    Detections         vision_msgs/msg/Detection2DArray   on ros2.detections_topic
+    Detections         vision_msgs/msg/Detection2DArray   on ros2.detections_topic, and
+                       with depth columns vision_msgs/msg/Detection3DArray on
+                       ros2.detections_3d_topic (the camera's optical frame; the boxes of
+                       an unknown distance left out)
     Twist              geometry_msgs/msg/TwistStamped     on ros2.cmd_vel_topic (stamped:
                        a recording needs the command's time)
     DepthFrame         sensor_msgs/msg/Image (16UC1, 32FC1) on the camera's depth topic
@@ -58,8 +61,8 @@ from common.messages import (
     LaserScan,
     Twist,
 )
+from perception import DEPTH_CENTRE, DEPTH_SIZE
 from services.recorder.depth_ros import (
-    CAMERA_INFO,
     RANGE_MAX,
     RANGE_MIN,
     DepthTopics,
@@ -67,13 +70,16 @@ from services.recorder.depth_ros import (
     depth_topics,
 )
 from services.ros2 import (
+    CAMERA_INFO,
     COMPRESSED_IMAGE,
     DETECTION_2D_ARRAY,
+    DETECTION_3D_ARRAY,
     IMAGE,
     LASER_SCAN,
     TWIST_STAMPED,
     RosDistro,
     cdr_encode,
+    detections_3d_to_ros,
     detections_to_ros,
     frame_to_compressed_image,
     frame_to_image,
@@ -261,22 +267,26 @@ class Translator:
                                   frame_to_compressed_image(d, msg))]  # fmt: skip
             return [self._ros(image_topic, IMAGE, msg, header, frame_to_image(d, msg))]
         if isinstance(msg, DepthFrame):
-            topics = self._depth_topics(key)
+            depth = self._depth_topics(key)
             info, image = depth_to_ros(d, msg)
             # The range as repr: a float written as text reads back the same float.
             limits = ((RANGE_MIN, repr(msg.range_min_m)), (RANGE_MAX, repr(msg.range_max_m)))
             return [  # the intrinsics first: a reader has them when the image comes
-                self._ros(topics.info, CAMERA_INFO, msg, header, info),
-                self._ros(topics.image, IMAGE, msg, header, image, limits),
+                self._ros(depth.info, CAMERA_INFO, msg, header, info),
+                self._ros(depth.image, IMAGE, msg, header, image, limits),
             ]
         if isinstance(msg, LaserScan):
             return [self._ros(r.scan_topic, LASER_SCAN, msg, header, scan_to_ros(d, msg))]
         if isinstance(msg, Detections):
-            ros = detections_to_ros(d, msg)
-            return [
-                self._ros(self._topics(key).detections, DETECTION_2D_ARRAY, msg, header, ros),
-                self._json(key, msg, header),
-            ]
+            topics = self._topics(key)
+            out = [self._ros(topics.detections, DETECTION_2D_ARRAY, msg, header,
+                             detections_to_ros(d, msg))]  # fmt: skip
+            if all(name in msg.boxes.columns for name in (*DEPTH_CENTRE, *DEPTH_SIZE)):
+                boxes_3d, _unknown = detections_3d_to_ros(d, msg)
+                out.append(
+                    self._ros(topics.detections_3d, DETECTION_3D_ARRAY, msg, header, boxes_3d)
+                )
+            return [*out, self._json(key, msg, header)]
         if isinstance(msg, Twist):
             ros = twist_to_ros(d, msg, stamped=True)
             return [

@@ -44,7 +44,7 @@ from common.clock import BOOT_ID, now
 from common.errors import DecodeError, RecordingError, one_line
 from common.keys import Keys
 from common.messages import CameraAnnouncement, DepthFrame, Frame, Header, LaserScan
-from services.recorder.depth_ros import depth_topics, info_topic, is_depth_topic
+from services.recorder.depth_ros import depth_topics, is_depth_topic, sibling_info_topic
 from services.recorder.reading import (
     PLAYABLE,
     Input,
@@ -57,6 +57,7 @@ from services.recorder.reading import (
     input_kind,
 )
 from services.recorder.timing import Schedule
+from services.ros2 import CAMERA_INFO
 from services.ros2.contract import RosDistro, camera_topics
 from stack.config import Config
 
@@ -98,9 +99,24 @@ def playable_topics(path: Path, topics: Sequence[str] | None) -> list[str]:
         if topics is not None
         else [topic for topic, enc, schema in channels if enc == "cdr" and schema in PLAYABLE]
     )
-    present = {topic for topic, _, _ in channels}
-    infos = {info_topic(t) for t in chosen if is_depth_topic(t)} & present
-    return chosen + sorted(infos - set(chosen))
+    # A depth image's intrinsics are on a CameraInfo topic (which, depends on the config):
+    # every CameraInfo goes along with depth (they are small).
+    infos = {topic for topic, _, schema in channels if schema == CAMERA_INFO}
+    depth = any(is_depth_topic(t) for t in chosen)
+    return chosen + sorted(infos - set(chosen) if depth else ())
+
+
+def info_topics(config: Config) -> dict[str, str]:
+    """The CameraInfo topic of each configured camera's depth image topic (another depth topic
+    has its CameraInfo beside it: :func:`info_topic_of`)."""
+    first = config.stack.camera
+    return {
+        t.image: t.info for t in (depth_topics(config.ros2, first, c) for c in config.all_cameras)
+    }
+
+
+def info_topic_of(infos: dict[str, str], depth_topic: str) -> str:
+    return infos.get(depth_topic) or sibling_info_topic(depth_topic)
 
 
 def depth_keys(config: Config) -> dict[str, str]:
@@ -245,6 +261,7 @@ def one_pass(
     keys = Keys(config.stack.prefix)
     cameras, first_camera = frame_keys(config), keys.frame(config.stack.camera)
     depths, first_depth = depth_keys(config), keys.depth(config.stack.camera)
+    info_of = info_topics(config)
     infos: dict[str, Any] = {}  # the last CameraInfo on each topic
     with Recording(path) as rec:
         for index, record in enumerate(rec.records(topics)):
@@ -263,7 +280,8 @@ def one_pass(
                 if kind is Input.DEPTH_INFO:
                     infos[topic] = decode_info(record, distro)
                     continue
-                msg = _decode(record, kind, infos, distro, seq)
+                beside = info_topic_of(info_of, topic)
+                msg = _decode(record, kind, infos.get(beside), beside, distro, seq)
             except DecodeError as exc:
                 played.bad_input += 1
                 log.warning("skipped a bad message on %s: %s", topic, one_line(exc))
@@ -294,14 +312,12 @@ def one_pass(
 
 
 def _decode(
-    record: Record, kind: Input, infos: dict[str, Any], distro: RosDistro, seq: int
+    record: Record, kind: Input, info: Any, beside: str, distro: RosDistro, seq: int
 ) -> Frame | DepthFrame | LaserScan | None:
     """The message a frame, depth image or scan record plays as; DecodeError for garbage, and
-    for a depth image with no CameraInfo before it."""
+    for a depth image with no CameraInfo (``info``, the last on ``beside``) before it."""
     if kind is not Input.DEPTH:
         return decode_input(record, distro, source=SOURCE, seq=seq)
-    beside = info_topic(record.channel.topic)
-    info = infos.get(beside)
     if info is None:
         raise DecodeError(f"a depth image with no CameraInfo on {beside} before it")
     return decode_depth(record, info, distro, source=SOURCE, seq=seq)

@@ -30,13 +30,13 @@ from common.lifecycle import Closing
 from common.messages import DepthFrame, Frame, LaserScan
 from services.recorder.channels import CDR, JSON, STACK_MESSAGE
 from services.recorder.depth_ros import (
-    CAMERA_INFO,
     RANGE_MAX,
     RANGE_MIN,
     depth_from_ros,
     is_depth_topic,
 )
 from services.ros2 import (
+    CAMERA_INFO,
     COMPRESSED_IMAGE,
     IMAGE,
     LASER_SCAN,

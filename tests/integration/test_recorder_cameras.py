@@ -44,7 +44,7 @@ TOPICS = {
     "/camera/rgb/image_raw": "front", "/detections": "front",
     "/rear/camera/rgb/image_raw": "rear", "/rear/detections": "rear",
 }  # fmt: skip
-DEPTH_TOPIC = "/camera/depth/image_raw"  # the front camera's (services/recorder/depth_ros.py)
+DEPTH_TOPIC = "/camera/aligned_depth_to_color/image_raw"  # the front camera's (ros2.depth_topic)
 MOUNT_HEIGHT_M = 0.35  # the front camera's, as its source announces it
 
 

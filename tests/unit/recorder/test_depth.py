@@ -27,7 +27,7 @@ from common.node import Node
 from services.camera.contract import CameraSettings
 from services.recorder.channels import Translator
 from services.recorder.contract import RecorderSettings
-from services.recorder.depth_ros import depth_topics, info_topic
+from services.recorder.depth_ros import depth_topics
 from services.recorder.play import (
     ANNOUNCED_SOURCE,
     Played,
@@ -48,6 +48,8 @@ CONFIG = Config(
 KEYS = Keys(CONFIG.stack.prefix)
 FRONT = CONFIG.stack.camera
 FRAMES = 4
+DEPTH = "/camera/aligned_depth_to_color/image_raw"
+DEPTH_INFO = "/camera/aligned_depth_to_color/camera_info"
 
 
 def _header(seq: int, frame_id: str) -> Header:
@@ -113,8 +115,10 @@ def test_depth_is_an_image_and_its_camera_info_that_a_foreign_reader_decodes(
 ) -> None:
     path, sent = recording
     front, rear = depth_topics(CONFIG.ros2, FRONT, FRONT), depth_topics(CONFIG.ros2, FRONT, "rear")
-    assert (front.image, front.info) == ("/camera/depth/image_raw", "/camera/depth/camera_info")
-    assert rear.image == "/rear/camera/depth/image_raw" and rear.info == info_topic(rear.image)
+    # The bridge's topics (ros2.depth_topic, ros2.depth_info_topic), the rear's under its
+    # namespace.
+    assert (front.image, front.info) == (DEPTH, DEPTH_INFO)
+    assert (rear.image, rear.info) == ("/rear" + DEPTH, "/rear" + DEPTH_INFO)
     seen: dict[str, list[object]] = {}
     with path.open("rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
@@ -144,7 +148,7 @@ def test_play_puts_each_depth_image_on_its_key_with_its_colour_frames_header(
 ) -> None:
     path, sent = recording
     topics = playable_topics(path, None)
-    assert "/camera/depth/image_raw" in topics and "/camera/depth/camera_info" in topics
+    assert DEPTH in topics and DEPTH_INFO in topics
     put: list[tuple[str, bytes]] = []
     played = Played()
     one_pass(CONFIG, path, topics, 50.0, lambda k, b: put.append((k, b)), threading.Event(),
@@ -182,10 +186,8 @@ def test_the_played_camera_is_announced_with_depth_and_its_recorded_mounting(
     # Colour frames alone chosen: no depth announced.
     colour = ["/camera/rgb/image_raw", "/rear/camera/rgb/image_raw"]
     assert not any(r.depth for r in recorded_cameras(CONFIG, path, colour).values())
-    # Depth chosen alone brings its CameraInfo along.
-    assert playable_topics(path, ["/camera/depth/image_raw"]) == [
-        "/camera/depth/image_raw", "/camera/depth/camera_info",
-    ]  # fmt: skip
+    # Depth chosen alone brings the CameraInfo along.
+    assert playable_topics(path, [DEPTH]) == [DEPTH, DEPTH_INFO, "/rear" + DEPTH_INFO]
 
 
 def _bad_file(path: Path) -> list[DepthFrame]:
@@ -223,8 +225,8 @@ def test_bad_depth_entries_are_skipped_counted_and_said_in_one_line(
     assert [DepthFrame.decode(b).data for _, b in put] == [d.data for d in good]
     lines = [r.getMessage() for r in caplog.records]
     assert len(lines) == 2 and all("\n" not in line for line in lines), lines
-    assert "/camera/depth/image_raw" in lines[0] and "not valid CDR" in lines[0]
-    assert "no CameraInfo on /rear/camera/depth/camera_info" in lines[1]
+    assert DEPTH in lines[0] and "not valid CDR" in lines[0]
+    assert f"no CameraInfo on /rear{DEPTH_INFO}" in lines[1]
 
 
 def test_a_truncated_recording_plays_its_depth_up_to_the_cut_then_says_so(
@@ -268,3 +270,34 @@ def test_a_file_cut_before_anything_playable_says_it_is_truncated(tmp_path: Path
     cut.write_bytes((tmp_path / "r.mcap").read_bytes()[:first_chunk])
     with pytest.raises(RecordingError, match=r"^nothing to play: .*; .* is truncated after \d+ "):
         playable_topics(cut, None)
+
+
+def test_detections_with_depth_are_also_3d_boxes_on_the_bridges_topic() -> None:
+    from common.boxes import Boxes
+    from common.messages import Detections
+    from perception.depth import COLUMNS
+    from services.ros2 import cdr_decode
+
+    columns = {name: np.array([1.0, np.nan], np.float32) for name in COLUMNS}
+    columns["z_m"] = np.array([2.5, np.nan], np.float32)
+    dets = Detections(
+        header=_header(3, "front_optical"), image_width=8, image_height=6,
+        class_names=("person", "chair"),
+        boxes=Boxes(xyxy=np.array([[0, 0, 4, 6], [4, 0, 8, 6]], np.float32),
+                    scores=np.array([0.9, 0.8], np.float32), class_ids=np.array([0, 56], np.int32),
+                    columns=columns),
+    )  # fmt: skip
+    translator = Translator(CONFIG.ros2, FRONT)
+    flat, boxes_3d, js = translator.entries(KEYS.detections("rear"), dets)
+    assert (flat.channel.topic, boxes_3d.channel.topic) == (
+        "/rear/detections",
+        "/rear/detections_3d",
+    )
+    ros = cdr_decode(CONFIG.ros2.distro, "vision_msgs/msg/Detection3DArray", boxes_3d.data)
+    # The chair's distance is unknown: no 3D box is made up for it.
+    assert [d.results[0].hypothesis.class_id for d in ros.detections] == ["person"]
+    assert ros.detections[0].bbox.center.position.z == pytest.approx(2.5)
+    assert ros.header.frame_id == "front_optical" and js.channel.message_encoding == "json"
+    # Without depth: the 2D boxes and the JSON only, as before.
+    plain = dataclasses.replace(dets, boxes=dataclasses.replace(dets.boxes, columns={}))
+    assert len(translator.entries(KEYS.detections("rear"), plain)) == 2
