@@ -36,6 +36,7 @@ from services.recorder.play import (
     playable_topics,
     recorded_cameras,
 )
+from services.recorder.reading import Recording
 from services.recorder.service import SERVICE, Recorder
 from services.recorder.writer import McapFile
 from stack.config import Config
@@ -301,3 +302,15 @@ def test_detections_with_depth_are_also_3d_boxes_on_the_bridges_topic() -> None:
     # Without depth: the 2D boxes and the JSON only, as before.
     plain = dataclasses.replace(dets, boxes=dataclasses.replace(dets.boxes, columns={}))
     assert len(translator.entries(KEYS.detections("rear"), plain)) == 2
+
+
+def test_a_garbage_announcement_is_counted_as_bad_input_not_recorded(tmp_path: Path) -> None:
+    hub = MemoryHub()
+    with Node(SERVICE, CONFIG, bus=hub.join(SERVICE)) as node:
+        recorder = Recorder(node, tmp_path / "r.mcap", CONFIG).listen(node)
+        token = hub.join("sim").declare_token(KEYS.camera_announcement(FRONT, "bm90LWEtbWVzc2FnZQ"))
+        token.undeclare()  # its going is not recorded
+        recorder.close()
+        assert (node.counters.get("received"), node.counters.get("bad_input")) == (1, 1)
+    with Recording(tmp_path / "r.mcap") as rec:
+        assert [r.stack_type for r in rec.records()] == []
