@@ -44,7 +44,10 @@ def comparison_plot(c: Comparison, name_a: str, name_b: str, path: Path) -> Path
     hist.set_ylabel("detections")
     if rest:
         (dist,) = rest
-        dist.hist(c.distances.abs_diffs, bins=20, color="#8172b3")
+        diffs = c.distances.abs_diffs
+        # From 0: the axis shows how far apart in metres, never an offset around one value.
+        top = max(0.05, float(diffs.max())) * 1.05
+        dist.hist(diffs, bins=np.linspace(0.0, top, 21).tolist(), color="#8172b3")
         dist.set_title(f"|distance B - A| of matched\n({len(c.distances.diffs)} with both)")
         dist.set_xlabel("m")
         dist.set_ylabel("detections")
