@@ -314,3 +314,57 @@ def test_a_garbage_announcement_is_counted_as_bad_input_not_recorded(tmp_path: P
         assert (node.counters.get("received"), node.counters.get("bad_input")) == (1, 1)
     with Recording(tmp_path / "r.mcap") as rec:
         assert [r.stack_type for r in rec.records()] == []
+
+
+def test_a_ros2_bag_of_an_rgbd_camera_plays_its_depth(tmp_path: Path) -> None:
+    # A bag rosbags wrote, as `ros2 bag record` of a RealSense driver makes one: colour, the
+    # aligned depth and its camera_info (the bridge's default depth topics), and a second depth
+    # camera of another robot (no configured camera's topic: its CameraInfo beside it).
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as BagWriter
+
+    from services.recorder.depth_ros import depth_to_ros
+    from services.ros2 import cdr_encode, frame_to_image, typestore_for
+
+    d = CONFIG.ros2.distro
+    store = typestore_for(d)
+    other = "/robot2/depth/image_raw"
+    sent = []
+    with BagWriter(tmp_path / "bag", version=9, storage_plugin=StoragePlugin.MCAP) as bag:
+        conns = {
+            topic: bag.add_connection(topic, ros_type, typestore=store)
+            for topic, ros_type in (
+                ("/camera/color/image_raw", "sensor_msgs/msg/Image"),
+                (DEPTH_INFO, "sensor_msgs/msg/CameraInfo"),
+                (DEPTH, "sensor_msgs/msg/Image"),
+                ("/robot2/depth/camera_info", "sensor_msgs/msg/CameraInfo"),
+                (other, "sensor_msgs/msg/Image"),
+            )
+        }
+        for seq in (1, 2):
+            header = Header(stamp_ns=10**18 + seq * 10**8, frame_id="cam", seq=0, source="bag")
+            depth = _depth(header, "16UC1")
+            sent.append(depth)
+            info, image = depth_to_ros(d, depth)
+            t = header.stamp_ns
+            colour = frame_to_image(d, _frame(header))
+            bag.write(
+                conns["/camera/color/image_raw"], t, cdr_encode(d, "sensor_msgs/msg/Image", colour)
+            )
+            for depth_topic, info_topic in (
+                (DEPTH, DEPTH_INFO),
+                (other, "/robot2/depth/camera_info"),
+            ):
+                bag.write(conns[info_topic], t, cdr_encode(d, "sensor_msgs/msg/CameraInfo", info))
+                bag.write(conns[depth_topic], t, cdr_encode(d, "sensor_msgs/msg/Image", image))
+    topics = playable_topics(tmp_path / "bag", None)
+    put: list[tuple[str, bytes]] = []
+    played = Played()
+    one_pass(Config(), tmp_path / "bag", topics, 1000.0, lambda k, b: put.append((k, b)),
+             threading.Event(), played)  # fmt: skip
+    assert (played.frames, played.depths, played.bad_input) == (2, 4, 0)
+    depths = [DepthFrame.decode(b) for k, b in put if k == KEYS.depth(FRONT)]
+    assert [d.data for d in depths] == [s.data for s in sent for _ in (DEPTH, other)]
+    assert {(d.fx, d.cy) for d in depths} == {(4.1, 1.45)}
+    recorded = recorded_cameras(Config(), tmp_path / "bag", topics)
+    assert recorded[FRONT].depth and recorded[FRONT].announced is None
