@@ -66,7 +66,8 @@ SERVICE = "recorder"
 #: gets a tenth of a core): seeing the stop (up to 1 s after the SIGTERM, measured with two
 #: CPU burners beside the default stack), the item being written and the file's end (0.5 s
 #: past the budget), the session's close, the exit (__main__.py). With half (2.5 s of 5) the
-#: stack's stop took 4.1 s of its 5 there; with this share 2.7 to 3.9 s.
+#: stack's stop took 4.1 s of its 5 there; with this share 3.5 to 3.9 s (and 1.6 to 4.2 s with
+#: 640x480 colour and depth at 15 Hz, the recorder beside metrics only).
 CLOSE_SHARE = 0.35
 
 
