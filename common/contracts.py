@@ -36,6 +36,7 @@ class ControllerState(StrEnum):
 class DistanceSource(StrEnum):
     BOX = "box"  # from the box height and the target's known height
     LASER = "laser"  # the laser's range in the target's bearing
+    DEPTH = "depth"  # the depth camera's: the target's ``distance_m`` column (perception/depth.py)
 
 
 class BackendName(StrEnum):
@@ -68,7 +69,9 @@ class CameraMetrics(TypedDict):
     and frames offered from its worker's ``dropped.<cam>`` and ``frames_in.<cam>``; the worker
     that serves it (``served_by``, the service counting ``frames_in.<cam>``) and that worker's
     mean batch over the window; every ``<service>.<name>.<cam>`` counter as
-    ``<service>.<name>``."""
+    ``<service>.<name>``; the depth images its worker took (``depth_frames``, from
+    ``depth_in.<cam>``) and its colour frames with no depth in time (``depth_unpaired``;
+    both absent from answers made before depth)."""
 
     fps: float
     frames: int
@@ -83,6 +86,8 @@ class CameraMetrics(TypedDict):
     batch_mean: float
     counters: dict[str, int]
     duplicate_detections: NotRequired[int]
+    depth_frames: NotRequired[int]
+    depth_unpaired: NotRequired[int]
 
 
 class WorkerMetrics(TypedDict):
@@ -104,7 +109,9 @@ class WorkerMetrics(TypedDict):
 class AnnouncedCamera(TypedDict):
     """A camera as its source announces it (common/messages.py ``CameraAnnouncement``), in the
     metrics answer's ``cameras_announced``: its frames' size (0x0 while unknown), rate, where
-    it looks on the robot, its field of view, its frames' frame id and what announces it."""
+    it looks on the robot, its field of view, its frames' frame id and what announces it;
+    whether it publishes depth too, and where it stands on the robot (metres forward, left and
+    above the floor; the last four absent from answers made before depth)."""
 
     width: int
     height: int
@@ -113,6 +120,10 @@ class AnnouncedCamera(TypedDict):
     hfov_deg: float
     frame_id: str
     source: str
+    depth: NotRequired[bool]
+    mount_x_m: NotRequired[float]
+    mount_y_m: NotRequired[float]
+    mount_height_m: NotRequired[float]
 
 
 class MetricsAnswer(TypedDict):
@@ -127,7 +138,10 @@ class MetricsAnswer(TypedDict):
     ``pool_warnings`` says what has been wrong with the pool for ``detector.pool_alarm_s``
     (common/pool_audit.py). ``warnings`` names settings that work against each other on this
     machine, each with its figures and fixes (services/metrics/advice.py; absent from older
-    answers).
+    answers). ``depth_frames``: the depth images the detector workers took (their
+    ``depth_in``), ``depth_unpaired``: colour frames of a depth camera that found no depth
+    image within ``detector.depth_pair_tolerance_ms`` (2D detections only); the depth stage's
+    time is ``latency_ms["depth"]`` (absent from answers made before depth).
     """
 
     stamp_ns: int
@@ -150,6 +164,8 @@ class MetricsAnswer(TypedDict):
     duplicate_detections: NotRequired[int]
     pool_warnings: NotRequired[list[str]]
     warnings: NotRequired[dict[str, str]]
+    depth_frames: NotRequired[int]
+    depth_unpaired: NotRequired[int]
 
 
 class _SessionCore(TypedDict):

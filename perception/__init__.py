@@ -15,8 +15,11 @@ service (services/detector/) and the tools are built on it.
     choose_fast         the fast profile's choice (``Figures``, ``Measure``, ``TIMED_RUNS``)
     measure_batch       the batch size that serves frames fastest (``probe_sizes``,
                         ``PROBE_SHAPE``, ``BatchChoice``)
-    Mounting, to_robot  a camera's optical-frame points in the robot's base frame
-                        (``depth.py``; ``DEPTH_CENTRE``, ``DEPTH_SIZE``: its column names)
+    measure_depth       each box's distance, 3D centre and extent from an aligned depth image
+                        (``depth.py``, docs/depth.md: ``depth_metres``, ``Intrinsics``,
+                        ``DepthParams``, ``Mounting``, ``to_robot``, ``to_depth_pixels``,
+                        ``unknown_depth``; column names ``DEPTH_COLUMNS``, ``DEPTH_DISTANCE``,
+                        ``DEPTH_CENTRE``, ``DEPTH_SIZE``)
 
 The detection path: ``pipeline.py`` (``preprocess``, a runtimes/ backend, ``decode.py``,
 ``postprocess.py``) -> ``tracker.py``; ``model_info.py`` reads what a model says of itself.
@@ -27,8 +30,19 @@ Model files: ``variants.py`` (settings -> the file a backend loads), ``fast_prof
 from perception.batching import PROBE_SHAPE, BatchChoice, probe_sizes
 from perception.batching import measure as measure_batch
 from perception.depth import CENTRE as DEPTH_CENTRE
+from perception.depth import COLUMNS as DEPTH_COLUMNS
+from perception.depth import DISTANCE as DEPTH_DISTANCE
 from perception.depth import SIZE as DEPTH_SIZE
-from perception.depth import Mounting, to_robot
+from perception.depth import (
+    DepthParams,
+    Intrinsics,
+    Mounting,
+    depth_metres,
+    to_depth_pixels,
+    to_robot,
+)
+from perception.depth import measure as measure_depth
+from perception.depth import unknown as unknown_depth
 from perception.fast_profile import TIMED_RUNS, Figures, Measure, choose_fast
 from perception.loading import load, prepare_for
 from perception.pipeline import Detector
@@ -47,14 +61,18 @@ from perception.variants import (
 
 __all__ = [
     "DEPTH_CENTRE",
+    "DEPTH_COLUMNS",
+    "DEPTH_DISTANCE",
     "DEPTH_SIZE",
     "PREPARE_COMMAND",
     "PROBE_SHAPE",
     "TIMED_RUNS",
     "BatchChoice",
+    "DepthParams",
     "DetectionResult",
     "Detector",
     "Figures",
+    "Intrinsics",
     "Measure",
     "Mounting",
     "NotPrepared",
@@ -63,15 +81,19 @@ __all__ = [
     "Tracker",
     "Variant",
     "choose_fast",
+    "depth_metres",
     "iou_matrix",
     "load",
     "measure_batch",
+    "measure_depth",
     "open_prepared",
     "prepare",
     "prepare_for",
     "probe_sizes",
     "sized_model",
+    "to_depth_pixels",
     "to_robot",
     "tracker_clock",
+    "unknown_depth",
     "variant_of",
 ]

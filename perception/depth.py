@@ -16,6 +16,7 @@ depth image's size (:func:`to_depth_pixels`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 import numpy.typing as npt
@@ -58,10 +59,26 @@ class DepthParams:
     """How a box's depth is measured (the detector's ``depth_*`` settings).
 
     ``min_valid_pixels``/``min_valid_fraction``: fewer valid depth pixels in the box's region
-    than both makes its row unknown."""
+    than either makes its row unknown (and so does an object cluster of fewer than
+    ``min_valid_pixels``). ``max_samples``: a larger box is sampled on a regular grid of at
+    most this many pixels. ``centre_sigma``: the centre weight's Gaussian width, as a fraction
+    of the box's half-size (a pixel at the box's edge weighs exp(-0.5 / sigma**2)).
+    ``min_bin_fraction``: the depth histogram's narrowest bin, a fraction of the depth;
+    ``bin_noise_scale``: the bin width in measured noise sigmas where that is wider.
+    ``gap_fraction``: a run of bins holding less than this fraction of the box's weight
+    separates two clusters. ``min_cluster_fraction``: the nearest cluster with at least this
+    fraction of the weight is the object. ``extent_percentile``: the extent runs from this
+    percentile to its complement of the object's points."""
 
     min_valid_pixels: int = 20
     min_valid_fraction: float = 0.05
+    max_samples: int = 4096
+    centre_sigma: float = 0.5
+    min_bin_fraction: float = 0.01
+    bin_noise_scale: float = 2.0
+    gap_fraction: float = 0.005
+    min_cluster_fraction: float = 0.2
+    extent_percentile: float = 2.0
 
 
 def depth_metres(frame: DepthFrame) -> Depth:
@@ -103,40 +120,122 @@ def measure(
 ) -> dict[str, npt.NDArray[np.float32]]:
     """The depth columns (:data:`COLUMNS`) of boxes ``xyxy`` (n, 4), in pixels of ``depth``.
 
-    Baseline method: the median of the valid depths in the middle half of the box, the box's
-    centre and size back-projected at that depth, the extent in z from the 10th to 90th
-    percentile of the depths within 1 m of the median."""
+    Per box (docs/depth.md, "The method"): the valid depths of the box (clipped to the image,
+    sampled on a grid of at most ``max_samples``), each weighted by a Gaussian of its distance
+    from the box's centre; a weighted histogram of log-depth whose bin width follows the noise
+    measured between neighbouring pixels; its clusters (runs of bins split by near-empty
+    gaps); the object is the nearest cluster holding ``min_cluster_fraction`` of the weight
+    (the heaviest if none does): what is in front of the background. Its weighted median
+    depth is z; x and y are the middle of its back-projected points' robust range, the extent
+    that range (z's net of the noise). Too few valid pixels: the row stays unknown (NaN)."""
     out = unknown(len(xyxy))
-    h, w = depth.shape
-    for i, (x1, y1, x2, y2) in enumerate(xyxy.astype(np.float64)):
-        qx, qy = (x2 - x1) / 4, (y2 - y1) / 4
-        c0, c1 = int(max(0, np.floor(x1 + qx))), int(min(w, np.ceil(x2 - qx)))
-        r0, r1 = int(max(0, np.floor(y1 + qy))), int(min(h, np.ceil(y2 - qy)))
-        if c1 <= c0 or r1 <= r0:
-            continue
-        patch = depth[r0:r1, c0:c1]
-        valid = patch[np.isfinite(patch)]
-        if len(valid) < params.min_valid_pixels or len(valid) < params.min_valid_fraction * (
-            patch.size
-        ):
-            continue
-        z = float(np.median(valid))
-        near = valid[np.abs(valid - z) <= 1.0]
-        u, v = (x1 + x2) / 2, (y1 + y2) / 2
-        x, y = (u - intr.cx) * z / intr.fx, (v - intr.cy) * z / intr.fy
-        lo, hi = np.percentile(near, [10, 90])
-        row = (
-            float(np.sqrt(x * x + y * y + z * z)),
-            x,
-            y,
-            z,
-            (x2 - x1) * z / intr.fx,
-            (y2 - y1) * z / intr.fy,
-            float(hi - lo),
-        )
-        for name, value in zip(COLUMNS, row, strict=True):
-            out[name][i] = value
+    boxes = np.asarray(xyxy, np.float64).reshape(-1, 4)
+    for i in range(len(boxes)):
+        row = _measure_box(depth, intr, boxes[i], params)
+        if row is not None:
+            for name, value in zip(COLUMNS, row, strict=True):
+                out[name][i] = value
     return out
+
+
+# The z-score of a percentile, for taking the noise's share out of a robust range.
+def _z_of(percentile: float) -> float:
+    return float(NormalDist().inv_cdf(1.0 - percentile / 100.0))
+
+
+def _measure_box(
+    depth: Depth, intr: Intrinsics, box: npt.NDArray[np.float64], p: DepthParams
+) -> tuple[float, ...] | None:
+    x1, y1, x2, y2 = (float(b) for b in box)
+    if not np.isfinite(box).all() or x2 <= x1 or y2 <= y1:
+        return None  # no box, or a zero-size one
+    h, w = depth.shape
+    c0, c1 = max(0, int(np.floor(x1))), min(w, int(np.ceil(x2)))
+    r0, r1 = max(0, int(np.floor(y1))), min(h, int(np.ceil(y2)))
+    if c1 <= c0 or r1 <= r0:
+        return None  # wholly outside the image
+    step = max(1, int(np.ceil(np.sqrt((c1 - c0) * (r1 - r0) / p.max_samples))))
+    patch = depth[r0:r1:step, c0:c1:step]
+    valid = np.isfinite(patch) & (patch > 0)
+    count = int(np.count_nonzero(valid))
+    if count < p.min_valid_pixels or count < p.min_valid_fraction * patch.size:
+        return None
+    rows, cols = np.nonzero(valid)
+    z = patch[rows, cols].astype(np.float64)
+    u = c0 + cols * step + 0.5  # pixel centres
+    v = r0 + rows * step + 0.5
+    # The weight falls with the distance from the (unclipped) box's centre: the object fills
+    # the middle of its box, background and neighbours its corners.
+    du = (u - (x1 + x2) / 2) / max((x2 - x1) / 2, 0.5)
+    dv = (v - (y1 + y2) / 2) / max((y2 - y1) / 2, 0.5)
+    weight = np.exp(-0.5 * (du * du + dv * dv) / (p.centre_sigma * p.centre_sigma))
+    noise = _relative_noise(np.log(np.where(valid, patch, np.float32(np.nan))))
+    lz = np.log(z)
+    lo, span = float(lz.min()), float(lz.max() - lz.min())
+    bin_width = max(p.min_bin_fraction, p.bin_noise_scale * noise, span / 2048)
+    idx = ((lz - lo) / bin_width).astype(np.int64)
+    hist = np.bincount(idx, weight, int(idx.max()) + 1)
+    smooth = np.convolve(hist, np.full(3, 1 / 3), mode="same")
+    total = float(hist.sum())
+    first, last = _object_bins(smooth, total, p)
+    sel = (idx >= first) & (idx <= last)
+    if int(np.count_nonzero(sel)) < p.min_valid_pixels:
+        return None
+    zs, ws, us, vs = z[sel], weight[sel], u[sel], v[sel]
+    zc = _weighted_median(zs, ws)
+    xs = (us - intr.cx) * zs / intr.fx
+    ys = (vs - intr.cy) * zs / intr.fy
+    q = (p.extent_percentile, 100.0 - p.extent_percentile)
+    (xlo, ylo, zlo), (xhi, yhi, zhi) = np.percentile(np.stack((xs, ys, zs)), q, axis=1)
+    x, y = (xlo + xhi) / 2, (ylo + yhi) / 2
+    # An object's pixels spread evenly over its width and height: the robust range leaves
+    # out 2 * extent_percentile % of it.
+    spread = 1.0 - 2.0 * p.extent_percentile / 100.0
+    # The range of a flat surface's depths is the noise's: take its share out.
+    noise_range = 2 * _z_of(p.extent_percentile) * noise * zc
+    size_z = float(np.sqrt(max((zhi - zlo) ** 2 - noise_range**2, 0.0)))
+    return (
+        float(np.sqrt(x * x + y * y + zc * zc)),
+        float(x),
+        float(y),
+        zc,
+        float(xhi - xlo) / spread,
+        float(yhi - ylo) / spread,
+        size_z,
+    )
+
+
+def _relative_noise(log_patch: npt.NDArray[np.float32]) -> float:
+    """The depth noise as a fraction of the depth: the robust spread of the log-depth step
+    between horizontal neighbours (most neighbours lie on one surface; a step between two
+    surfaces is an outlier the median ignores)."""
+    d = np.abs(np.diff(log_patch, axis=1))
+    d = d[np.isfinite(d)]
+    if d.size == 0:
+        return 0.0
+    # median |a - b| of two N(0, s) draws is 0.6745 * sqrt(2) * s
+    return float(np.median(d)) / (0.6745 * float(np.sqrt(2.0)))
+
+
+def _object_bins(smooth: npt.NDArray[np.float64], total: float, p: DepthParams) -> tuple[int, int]:
+    """The first and last bin of the object's cluster: the nearest run of occupied bins that
+    holds ``min_cluster_fraction`` of the weight, else the heaviest run."""
+    occupied = smooth > p.gap_fraction * total
+    edges = np.diff(np.concatenate(([0], occupied.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    if starts.size == 0:  # weight spread thinner than the gap everywhere: one cluster
+        return 0, len(smooth) - 1
+    cumulative = np.concatenate(([0.0], np.cumsum(smooth)))
+    mass = cumulative[ends + 1] - cumulative[starts]
+    enough = np.flatnonzero(mass >= p.min_cluster_fraction * float(mass.sum()))
+    k = int(enough[0]) if enough.size else int(np.argmax(mass))
+    return int(starts[k]), int(ends[k])
+
+
+def _weighted_median(values: npt.NDArray[np.float64], weights: npt.NDArray[np.float64]) -> float:
+    order = np.argsort(values)
+    cum = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cum, 0.5 * cum[-1])])
 
 
 @dataclass(frozen=True, slots=True)

@@ -3,7 +3,8 @@
 
 Each camera is a process and a principal of its own (``camera`` for the first camera,
 ``camera_<name>`` for each further one: ``Config.camera_services``); it puts its own camera's
-frames only, announces its own camera only (its CameraAnnouncement tokens), and reads nothing.
+frames and depth images only, announces its own camera only (its CameraAnnouncement tokens),
+and reads nothing.
 """
 
 from __future__ import annotations
@@ -22,9 +23,22 @@ BAD_IMAGES = "bad_images"  # a file of a folder source that is no image
 SOURCE_LOST = "source_lost"
 SOURCE_REOPENED = "source_reopened"
 SOURCE_REOPEN_FAILED = "source_reopen_failed"
+DEPTH_OUT = "depth_out"  # depth images published (one per colour frame of a depth source)
+BAD_DEPTH = "bad_depth"  # a depth image that cannot be used: that colour frame goes without
+DEPTH_MISSING = "depth_missing"  # a colour frame of a depth source that came with no depth
 
 COUNTERS = frozenset(
-    {*COMMON, FRAMES_OUT, BAD_IMAGES, SOURCE_LOST, SOURCE_REOPENED, SOURCE_REOPEN_FAILED}
+    {
+        *COMMON,
+        FRAMES_OUT,
+        BAD_IMAGES,
+        SOURCE_LOST,
+        SOURCE_REOPENED,
+        SOURCE_REOPEN_FAILED,
+        DEPTH_OUT,
+        BAD_DEPTH,
+        DEPTH_MISSING,
+    }
 )
 PER_CAMERA: frozenset[str] = frozenset()  # each process is one camera's
 
@@ -33,13 +47,15 @@ LIVE_SENSOR = True
 
 
 def access(shape: Shape) -> dict[str, Access]:
-    """Each camera process puts its own camera's frames and announces its own camera."""
+    """Each camera process puts its own camera's frames and depth images and announces its own
+    camera."""
     keys = shape.keys
     return {
         name: service_access(
             keys,
             name,
             keys.frame(camera),
+            keys.depth(camera),
             token=(keys.health(name), keys.camera_announcements_of(camera)),
         )
         for camera, name in shape.cameras.items()
@@ -65,6 +81,16 @@ class CameraSettings:
     A device or stream that gave frames and then stops (unplugged, reset) is reopened every
     ``reopen_period_s`` until it gives frames again (services/camera/reopen.py); one that gives
     none at start-up stops the camera with one line.
+
+    Depth (docs/configuration.md, "RGB-D cameras"): ``realsense:[<serial>]`` and
+    ``oak:[<mxid>]`` sources give colour with depth aligned to it (optional extras);
+    ``depth_source``, a folder of 16-bit PNGs beside a colour folder ``source``, pairs each
+    colour image with the depth PNG of the same file stem, read in units of ``depth_scale_m``
+    metres, with ``intrinsics`` ``[fx, fy, cx, cy]`` in pixels of the images (all 0: from
+    ``hfov_deg``, the principal point at the centre). ``depth_min_m``/``depth_max_m``: the
+    sensor's valid range, published with each depth image (0 max: not stated).
+    ``mount_height_m`` (the optical centre above the floor, 0 = unknown), ``mount_x_m``
+    (forward) and ``mount_y_m`` (left) say where the camera stands on the robot, from its base.
     """
 
     source: str = "sample:cameraman"
@@ -76,6 +102,14 @@ class CameraSettings:
     hfov_deg: float = 60.0
     mount_yaw_deg: float = 0.0
     reopen_period_s: float = 1.0
+    depth_source: str = ""
+    depth_scale_m: float = 0.001
+    intrinsics: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    depth_min_m: float = 0.0
+    depth_max_m: float = 0.0
+    mount_height_m: float = 0.0
+    mount_x_m: float = 0.0
+    mount_y_m: float = 0.0
 
     BOUNDS: ClassVar[Bounds] = {
         "rate_hz": (0.1, 1000),
@@ -83,6 +117,13 @@ class CameraSettings:
         "hfov_deg": (1, 179),
         "mount_yaw_deg": (-180, 180),
         "reopen_period_s": (0.05, 60),
+        "depth_scale_m": (0.0001, 1),
+        "intrinsics": (0, 100000),
+        "depth_min_m": (0, 100),
+        "depth_max_m": (0, 1000),
+        "mount_height_m": (0, 10),
+        "mount_x_m": (-10, 10),
+        "mount_y_m": (-10, 10),
     }
 
     def __post_init__(self) -> None:
@@ -95,4 +136,15 @@ class CameraSettings:
             raise ConfigError(
                 f"camera.resize must be [w, h] within 1..{MAX_IMAGE_SIDE} or [0, 0], "
                 f"got {list(self.resize)}"
+            )
+        fx, fy, _, _ = self.intrinsics
+        if any(self.intrinsics) and not (fx > 0 and fy > 0):
+            raise ConfigError(
+                "camera.intrinsics must be [fx, fy, cx, cy] with fx, fy > 0, or all 0 (from "
+                f"hfov_deg), got {list(self.intrinsics)}"
+            )
+        if self.depth_max_m and self.depth_min_m >= self.depth_max_m:
+            raise ConfigError(
+                f"camera.depth_min_m ({self.depth_min_m:g}) must be below camera.depth_max_m "
+                f"({self.depth_max_m:g}), or depth_max_m 0 (not stated)"
             )

@@ -17,13 +17,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Protocol, cast
 
 from common.clock import mono_s
 from common.errors import ConfigError
 
 if TYPE_CHECKING:
     from common.images import Image
+    from services.camera.depth import DepthImage
     from services.camera.sources import FrameSource
 
 #: The longest stretch the wait goes without calling ``heartbeat`` (half the nodes' counters
@@ -81,6 +82,8 @@ class ReopeningSource:
         self._clock = clock
         self._frames = 0  # given by this wrapper, over every source it held
         self.description = source.description
+        #: A depth camera stays one when reopened: the depth of each frame, as its source's.
+        self.has_depth = bool(getattr(source, "has_depth", False))
 
     def read(self) -> Image | None:
         image = self._read_current()
@@ -89,6 +92,11 @@ class ReopeningSource:
         if image is not None:
             self._frames += 1
         return image
+
+    def depth(self) -> DepthImage | None:
+        """The depth of the frame read last, from the source that gave it (None when lost)."""
+        depth = getattr(self._source, "depth", None) if self.has_depth else None
+        return cast("DepthImage | None", depth()) if depth is not None else None
 
     def _read_current(self) -> Image | None:
         if self._source is None:

@@ -1,4 +1,5 @@
-"""The camera service: read a source at a fixed rate and publish Frame messages."""
+"""The camera service: read a source at a fixed rate and publish Frame messages, and with an
+RGB-D source (services/camera/sources.py ``DepthCapable``) one DepthFrame per frame."""
 
 from __future__ import annotations
 
@@ -10,11 +11,20 @@ from common.camera_announce import CameraAnnouncements
 from common.clock import mono_s
 from common.errors import ImageError
 from common.frames import image_to_frame
+from common.messages import Header
 from common.node import Node
 from services.camera import contract
 from services.camera.contract import CameraSettings
+from services.camera.depth import resized, to_depth_frame
+from services.camera.depth_folder import with_depth_folder
 from services.camera.reopen import ReopenHooks, ReopeningSource
-from services.camera.sources import FrameSource, open_source, resize
+from services.camera.sources import (
+    DepthCapable,
+    FrameSource,
+    depth_capable,
+    open_source,
+    resize,
+)
 from stack.config import Config
 
 #: What opens a camera's source (``open_source``; an in-process test's own source).
@@ -48,6 +58,10 @@ def run(
     its configured rate, mounting yaw, field of view and frame id; its size is ``resize``, or
     0x0 until the first frame gives the source's. A reopened source keeps the announcement
     (its size is announced again should it differ). ``bus``: an in-process test's.
+
+    A source with depth (``realsense:``, ``oak:``, ``camera.depth_source``) also publishes
+    each frame's aligned depth on ``keys.depth(camera)`` with the frame's header (DepthOut),
+    and announces the camera with ``depth`` and its ``mount_*`` settings.
     """
     with (
         Node(config.camera_services[camera], config, bus=bus) as node,
@@ -58,7 +72,7 @@ def run(
             node.reject(contract.BAD_IMAGES, str(exc))  # a looped folder repeats it: rate-limited
 
         source = _reopening(
-            opener(settings.source, loop=settings.loop, on_bad=on_bad),
+            _with_depth(opener(settings.source, loop=settings.loop, on_bad=on_bad), settings),
             settings,
             node,
             stop,
@@ -67,6 +81,8 @@ def run(
         key = node.keys.frame(camera)
         publisher = node.publisher(key, QoS.SENSOR)
         node.log.info("publishing %s on %s at %.1f Hz", source.description, key, settings.rate_hz)
+        depth = depth_capable(source)
+        depth_out = None if depth is None else DepthOut(node, camera, depth, settings)
         width, height = settings.resize
         announcements.announce(
             camera,
@@ -76,6 +92,10 @@ def run(
             frame_id=settings.frame_id,
             width=width,
             height=height,
+            depth=depth is not None,
+            mount_height_m=settings.mount_height_m,
+            mount_x_m=settings.mount_x_m,
+            mount_y_m=settings.mount_y_m,
         )
         node.ready()
         period = 1.0 / settings.rate_hz
@@ -91,6 +111,10 @@ def run(
                     # The header's stamp is the capture stamp every later latency is measured
                     # from: taken as the image is read, before resizing and encoding.
                     header = node.header(frame_id=settings.frame_id)
+                    if depth_out is not None:
+                        # Before its colour frame: a detector that takes the colour frame as
+                        # it comes finds its depth already there.
+                        depth_out.publish(header)
                     frame = image_to_frame(
                         resize(image, settings.resize),
                         header,
@@ -110,6 +134,55 @@ def run(
         finally:
             source.close()
     return 0
+
+
+class DepthOut:
+    """Publishes the depth of each colour frame, with that frame's header, resized with it
+    (``camera.resize``). Depth that cannot be used is logged and counted (``bad_depth``), a
+    frame without depth counted (``depth_missing``): the colour frame goes out either way."""
+
+    def __init__(
+        self, node: Node, camera: str, source: DepthCapable, settings: CameraSettings
+    ) -> None:
+        key = node.keys.depth(camera)
+        self._node = node
+        self._publisher = node.publisher(key, QoS.SENSOR)
+        self._source = source
+        self._settings = settings
+        node.log.info("with depth aligned to it on %s", key)
+
+    def publish(self, header: Header) -> None:
+        """The depth of the frame read last, with ``header``, that frame's."""
+        source = self._source
+        try:
+            image = source.depth()
+            if image is None:
+                self._node.counters.add(contract.DEPTH_MISSING)
+                return
+            message = to_depth_frame(
+                resized(image, self._settings.resize),
+                header,
+                range_min_m=self._settings.depth_min_m,
+                range_max_m=self._settings.depth_max_m,
+            )
+        except (ImageError, ValueError) as exc:
+            self._node.reject(contract.BAD_DEPTH, f"{source.description}: {exc}")
+            return
+        self._publisher.put(message.encode())
+        self._node.counters.add(contract.DEPTH_OUT)
+
+
+def _with_depth(source: FrameSource, settings: CameraSettings) -> FrameSource:
+    """``source`` paired with the depth PNGs of ``camera.depth_source``, when it names any."""
+    if not settings.depth_source:
+        return source
+    return with_depth_folder(
+        source,
+        settings.depth_source,
+        scale_m=settings.depth_scale_m,
+        intrinsics=settings.intrinsics,
+        hfov_deg=settings.hfov_deg,
+    )
 
 
 def _reopening(

@@ -1,5 +1,7 @@
-"""Frame sources: a scikit-image sample, an image, a folder of images, a video, a device, or a
-network stream (``rtsp://``, ``http://`` ...: OpenCV's FFmpeg reads it).
+"""Frame sources: a scikit-image sample, an image, a folder of images, a video, a device, a
+network stream (``rtsp://``, ``http://`` ...: OpenCV's FFmpeg reads it), or an RGB-D camera
+(``realsense:``, ``oak:``: optional extras, imported only when named; see
+:class:`DepthCapable`).
 
 Each source yields BGR uint8 images. Opening a source that does not exist raises ConfigError
 with one line; a source that ends (a video without ``loop``, an unplugged device) returns None
@@ -21,12 +23,15 @@ import os
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Protocol, cast
+from typing import TYPE_CHECKING, Protocol, cast
 
 import cv2
 
 from common.errors import ConfigError, ImageError
 from common.images import IMAGE_EXTENSIONS, Image, list_images, load_image, load_sample
+
+if TYPE_CHECKING:
+    from services.camera.depth import DepthImage
 
 #: File extensions taken for videos, even before the file exists (compared lower-case). Any
 #: other existing file that is not an image is tried as a video too.
@@ -34,6 +39,10 @@ VIDEO_EXTENSIONS = frozenset(
     {".avi", ".m4v", ".mkv", ".mov", ".mp4", ".mpeg", ".mpg", ".ts", ".webm", ".wmv"}
 )
 _DEVICE_PREFIX = "device:"
+#: RGB-D cameras with depth aligned to colour: ``realsense:`` (the first found) or
+#: ``realsense:<serial>``; ``oak:`` or ``oak:<mxid or IP>``.
+REALSENSE_PREFIX = "realsense:"
+OAK_PREFIX = "oak:"
 #: URL schemes read as network streams through OpenCV's FFmpeg backend.
 STREAM_SCHEMES = ("rtsp", "rtsps", "rtmp", "http", "https", "udp", "tcp", "srt")
 #: How long opening a network stream, or waiting for its next frame, may take.
@@ -52,6 +61,23 @@ class FrameSource(Protocol):
         ...
 
     def close(self) -> None: ...
+
+
+class DepthCapable(FrameSource, Protocol):
+    """A source that also gives depth aligned to its colour frames (``has_depth`` True):
+    ``depth()`` is the depth of the frame ``read`` returned last, None when that frame came
+    without one; ImageError when its depth cannot be used."""
+
+    has_depth: bool
+
+    def depth(self) -> DepthImage | None: ...
+
+
+def depth_capable(source: FrameSource) -> DepthCapable | None:
+    """``source`` as a depth source, or None when it gives colour only."""
+    if getattr(source, "has_depth", False):
+        return cast(DepthCapable, source)
+    return None
 
 
 class StillSource:
@@ -82,6 +108,7 @@ class FolderSource:
         self._i = 0
         self._on_bad = on_bad
         self.description = f"folder {folder} ({len(self._paths)} images)"
+        self.last_path: Path | None = None  # the file of the image read last
 
     def read(self) -> Image | None:
         """The next readable image; ConfigError when a whole pass finds none (each unreadable
@@ -90,9 +117,12 @@ class FolderSource:
             path = self._paths[self._i % len(self._paths)]
             self._i += 1
             try:
-                return load_image(path)
+                image = load_image(path)
             except ImageError as exc:
                 self._on_bad(exc)
+                continue
+            self.last_path = path
+            return image
         raise ConfigError(f"{self.description}: not one of them is a readable image")
 
     def close(self) -> None:
@@ -166,6 +196,14 @@ def open_source(
     spec: str, *, loop: bool = True, on_bad: Callable[[ImageError], None] | None = None
 ) -> FrameSource:
     """Open the source named by ``spec`` (see CameraSettings.source for the forms)."""
+    if spec.startswith(REALSENSE_PREFIX):
+        from services.camera.realsense import open_realsense  # pyrealsense2: an extra
+
+        return open_realsense(spec.removeprefix(REALSENSE_PREFIX))
+    if spec.startswith(OAK_PREFIX):
+        from services.camera.oak import open_oak  # depthai: an extra
+
+        return open_oak(spec.removeprefix(OAK_PREFIX))
     if spec.startswith("sample:"):
         name = spec.removeprefix("sample:")
         return StillSource(load_sample(name), f"scikit-image sample {name!r}")

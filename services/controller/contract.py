@@ -19,10 +19,17 @@ from common.setting_checks import Bounds, check_bounds, check_lengths, enum_fiel
 # ``detections_stale`` ...; the detections' for each announced camera too.
 DETECTIONS = "detections"
 SCANS = "scans"
+DEPTH = "depth"  # depth frames, when the controller needs depth (ControllerSettings.needs_depth)
 IN = "in"  # fresh, and the newest held
 LATE = "late"  # fresh, but older than the one held
 #: Detections from a camera with no live announcement: ignored.
 DETECTIONS_UNANNOUNCED = "detections_unannounced"
+#: Depth frames of a camera not announced, or announced without depth: ignored.
+DEPTH_UNANNOUNCED = "depth_unannounced"
+#: Depth frames of a camera whose height above the floor is unknown: no virtual scan.
+DEPTH_NO_MOUNT = "depth_no_mount"
+#: Depth frames replaced by a newer one of their camera before they were looked at.
+DEPTH_DROPPED = "depth_dropped"
 ESTOP_RELEASE_REFUSED = "estop_release_refused"
 ESTOP_ZERO_AT_ONCE = "estop_zero_at_once"
 COMMANDS_OUT = "commands_out"
@@ -40,19 +47,33 @@ def input_counter(stream: str, outcome: str) -> str:
     return f"{stream}_{outcome}"
 
 
-PER_CAMERA = frozenset(input_counter(DETECTIONS, o) for o in OUTCOMES)
+PER_CAMERA = frozenset(
+    {
+        *(input_counter(DETECTIONS, o) for o in OUTCOMES),
+        *(input_counter(DEPTH, o) for o in OUTCOMES),
+        DEPTH_NO_MOUNT,
+        DEPTH_DROPPED,
+    }
+)
 COUNTERS = frozenset(
     {
         *COMMON,
         *PER_CAMERA,
         *(input_counter(SCANS, o) for o in OUTCOMES),
         DETECTIONS_UNANNOUNCED,
+        DEPTH_UNANNOUNCED,
         ESTOP_RELEASE_REFUSED,
         ESTOP_ZERO_AT_ONCE,
         COMMANDS_OUT,
         COMMANDS_NONZERO,
     }
 )
+
+#: What ``controller.obstacle_sources`` may name: the laser's scan, the depth cameras'
+#: virtual scans (services/controller/depth_scan.py).
+LASER_SOURCE = "laser"
+DEPTH_SOURCE = "depth"
+OBSTACLE_SOURCES = (LASER_SOURCE, DEPTH_SOURCE)
 
 SERVICE = "controller"
 #: The operator's e-stop tool's principal: it puts the e-stop and reads the controller's status.
@@ -67,7 +88,9 @@ def access(shape: Shape) -> dict[str, Access]:
             SERVICE,
             keys.cmd_vel(),
             keys.controller_status(),
-            read=(keys.all_detections(), keys.scan(), keys.estop()),
+            # The depth images too: the controller reads them only when its settings need
+            # depth, but the rules are the shape's, not one config's.
+            read=(keys.all_detections(), keys.scan(), keys.estop(), keys.all_depths()),
             watch=(keys.all_camera_announcements(),),  # its cameras: the announced ones
         )
     }
@@ -97,8 +120,10 @@ class ControllerSettings:
     follow: lock onto the largest detection of ``target_classes[0]`` (by camera and track id,
             so it does not jump to another person) and keep it at ``follow_distance_m``,
             measured from the
-            box height (``distance_source = "box"``, for a target ``target_height_m`` tall) or
-            by the laser in the target's bearing (``"laser"``). Forward only while centred and
+            box height (``distance_source = "box"``, for a target ``target_height_m`` tall),
+            by the laser in the target's bearing (``"laser"``) or by the depth camera (``"depth"``:
+            the detection's ``distance_m`` column; unknown, NaN or absent, means turning
+            only). Forward only while centred and
             while the laser sector of ``sector_width_deg`` straight ahead, and the corridor
             ``robot_width_m`` wide that the body sweeps, are clear beyond ``safety_distance_m``
             plus the room needed to brake. A box cut by the image edge counts as arrived.
@@ -114,6 +139,12 @@ class ControllerSettings:
     ``no_laser`` is set: the robot has no laser, forward motion towards a target in view is
     not checked for obstacles, and every ControllerStatus says so (``no_laser``); a scan that
     does come is still obeyed, and a target out of view is never driven on to without one.
+    ``obstacle_sources`` names what must show the way clear: ``"laser"`` (the scan, above),
+    ``"depth"`` (a virtual scan made from every announced depth camera's images,
+    services/controller/depth_scan.py, under the same rules), or both. Each one listed must be
+    fresh for forward motion (depth older than ``depth_timeout_s`` is missing, as a scan
+    older than ``scan_timeout_s`` is), and every fresh one is obeyed, listed or not. The
+    depth images are read only when depth is needed (``needs_depth``).
     Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
     acceleration limits. Stale detections (captured or received longer than
     ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the
@@ -148,6 +179,12 @@ class ControllerSettings:
     sector_width_deg: float = 30.0
     robot_width_m: float = 0.6
     no_laser: bool = False
+    obstacle_sources: tuple[str, ...] = (LASER_SOURCE,)
+    depth_timeout_s: float = 0.5
+    depth_floor_margin_m: float = 0.05
+    depth_max_height_m: float = 1.5
+    depth_scan_stride_px: int = 4
+    depth_scan_resolution_deg: float = 1.0
     estop_file: str = ""
     estop_release_max_age_s: float = 2.0
     counters_period_s: float = 1.0
@@ -179,10 +216,15 @@ class ControllerSettings:
         "safety_distance_m": (0.01, 10),
         "sector_width_deg": (1, 360),
         "robot_width_m": (0.05, 5),
+        "depth_timeout_s": (0.01, 10),
+        "depth_floor_margin_m": (0.01, 1),
+        "depth_max_height_m": (0.05, 5),
+        "depth_scan_stride_px": (1, 64),
+        "depth_scan_resolution_deg": (0.1, 10),
         "estop_release_max_age_s": (0.1, 60),
         "counters_period_s": (0.1, 60),
     }
-    LENGTHS: ClassVar[Bounds] = {"target_classes": (1, 100)}
+    LENGTHS: ClassVar[Bounds] = {"target_classes": (1, 100), "obstacle_sources": (1, 2)}
 
     def __post_init__(self) -> None:
         enum_field(self, "mode", ControllerMode, "controller.mode")
@@ -202,8 +244,44 @@ class ControllerSettings:
                 'controller.no_laser = true needs distance_source = "box" in follow mode: '
                 "without a laser there is no distance to the target"
             )
+        self._check_sources()
+        if self.depth_max_height_m <= self.depth_floor_margin_m:
+            raise ConfigError(
+                f"controller.depth_max_height_m ({self.depth_max_height_m}) must be above "
+                f"depth_floor_margin_m ({self.depth_floor_margin_m})"
+            )
         if self.forward_speed > self.max_linear:
             raise ConfigError(
                 f"controller.forward_speed must be within 0..max_linear ({self.max_linear}), "
                 f"got {self.forward_speed}"
             )
+
+    def _check_sources(self) -> None:
+        """The obstacle sources: known, each once, and not at odds with ``no_laser``."""
+        sources = list(self.obstacle_sources)
+        if any(x not in OBSTACLE_SOURCES for x in sources) or len(set(sources)) != len(sources):
+            raise ConfigError(
+                f"controller.obstacle_sources must name each of {list(OBSTACLE_SOURCES)} at "
+                f"most once, got {sources}"
+            )
+        if self.no_laser and DEPTH_SOURCE in sources:
+            raise ConfigError(
+                'controller.no_laser = true (forward motion unchecked) contradicts "depth" in '
+                "obstacle_sources (checked by the depth camera): for a robot with a depth camera "
+                'and no laser set obstacle_sources = ["depth"] and no_laser = false'
+            )
+        if self.no_laser and self.distance_source is DistanceSource.DEPTH:
+            raise ConfigError(
+                'controller.no_laser = true with distance_source = "depth": the depth camera '
+                'can check the way, set obstacle_sources = ["depth"] and no_laser = false'
+            )
+
+    @property
+    def needs_depth(self) -> bool:
+        """Whether the controller reads the depth cameras' images (for their obstacles)."""
+        return self.distance_source is DistanceSource.DEPTH or DEPTH_SOURCE in self.obstacle_sources
+
+    @property
+    def laser_required(self) -> bool:
+        """Whether forward motion needs a fresh laser scan."""
+        return LASER_SOURCE in self.obstacle_sources and not self.no_laser

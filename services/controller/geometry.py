@@ -67,6 +67,21 @@ def box_distance(dets: Detections, i: int, hfov_deg: float, target_height_m: flo
     return target_height_m * focal_px(dets.image_width, hfov_deg) / height_px
 
 
+#: The detections' column with each box's distance from its camera, in metres (NaN: unknown),
+#: as the detector's depth stage writes it (perception/depth.py ``DISTANCE``).
+DISTANCE_COLUMN = "distance_m"
+
+
+def depth_distance(dets: Detections, i: int) -> float:
+    """Box ``i``'s distance from the depth camera (its ``distance_m`` column), or NaN when it
+    is unknown: no column (a frame with no depth paired), NaN, or not a positive number."""
+    column = dets.boxes.columns.get(DISTANCE_COLUMN)
+    if column is None:
+        return math.nan
+    value = float(column[i])
+    return value if math.isfinite(value) and value > 0 else math.nan
+
+
 def box_clipped(dets: Detections, i: int, margin_px: float = 2.0) -> bool:
     """Whether box ``i`` touches the top or bottom image edge (its height is then cut)."""
     y1, y2 = float(dets.boxes.xyxy[i, 1]), float(dets.boxes.xyxy[i, 3])

@@ -12,12 +12,14 @@ their geometry are those announced now (``set_cameras``); when the target's came
 the next command is a stop and the target is let go of. The target is
 chosen among the fresh cameras' boxes together (services/controller/targets.py). A target far
 off the robot's heading (behind it, beside it) is turned to in place: the robot drives forward
-only while the target is centred (``center_tolerance``) and, in either mode, while a fresh scan
-shows the way ahead clear (``Controller._blocked``). The follow lock is a camera's track
-id; when the locked target leaves that camera's view, the lock passes to a box of the same
-class in another camera within ``handover_gate_deg`` of where the target should be by now, for
-``handover_window_s`` after it was last seen, and the robot holds its turn towards it (without
-driving) while it is predicted between the cameras' fields of view.
+only while the target is centred (``center_tolerance``) and, in either mode, while the way
+ahead is known clear (``Controller._blocked``): every obstacle source the settings require
+(``obstacle_sources``: the laser's scan, the depth cameras' virtual scan) fresh, and no fresh
+one showing anything within the safety distance plus the room to brake. The follow lock is
+a camera's track id; when the locked target leaves that camera's view, the lock passes to a
+box of the same class in another camera within ``handover_gate_deg`` of where the target
+should be by now, for ``handover_window_s`` after it was last seen, and the robot holds its
+turn towards it (without driving) while it is predicted between the cameras' fields of view.
 """
 
 from __future__ import annotations
@@ -30,11 +32,12 @@ from dataclasses import dataclass
 
 from common.contracts import ControllerMode, ControllerState, DistanceSource
 from common.messages import LaserScan
-from services.controller.contract import ControllerSettings
+from services.controller.contract import DEPTH_SOURCE, ControllerSettings
 from services.controller.geometry import (
     Mount,
     box_clipped,
     box_distance,
+    depth_distance,
     in_view,
     laser_covers,
     sector_clearance,
@@ -69,12 +72,30 @@ class VelocityCommand:
 @dataclass(frozen=True, slots=True)
 class Inputs:
     """The newest inputs: each camera's :class:`View` by camera name, the scan and its age in
-    seconds (inf when none has arrived), and the e-stop."""
+    seconds (inf when none has arrived), and the e-stop; the depth cameras' virtual scan
+    (services/controller/depth_scan.py ``depth_obstacles``), its age, and why there is none
+    (``depth_missing``)."""
 
     views: Mapping[str, View]
     scan: LaserScan | None = None
     scan_age_s: float = math.inf
     estop: bool = False
+    depth: LaserScan | None = None
+    depth_age_s: float = math.inf
+    depth_missing: str = "no depth camera"
+
+
+@dataclass(frozen=True, slots=True)
+class Obstacles:
+    """One obstacle source at this tick: its scan (None when missing or stale), whether the
+    settings require it for forward motion, the reason when it is missing, and the room the
+    robot needs to stop on what it shows (braking plus the distance covered while it aged)."""
+
+    name: str
+    scan: LaserScan | None
+    required: bool
+    missing: str
+    stopping_m: float
 
 
 def stop(state: ControllerState, reason: str, input_stamp_ns: int = 0) -> VelocityCommand:
@@ -110,6 +131,7 @@ class Controller:
         self.previous = (0.0, 0.0)
         self.last_step: float | None = None
         self.stopping_m = 0.0
+        self.obstacles: tuple[Obstacles, ...] = ()
         self.turns: deque[tuple[float, float]] = deque(maxlen=1024)  # (time, w) commanded
         self.last_bearing: tuple[float, float] | None = None  # (bearing, when captured)
 
@@ -154,13 +176,28 @@ class Controller:
             return self._halt(stop(ControllerState.STALE, self._stale_reason(views)))
         s = self.s
         scan = inp.scan if inp.scan_age_s <= s.scan_timeout_s else None
+        depth = inp.depth if inp.depth_age_s <= s.depth_timeout_s else None
         # Room the robot needs to stop from the fastest this tick may command (its speed now
         # plus what the acceleration limit allows since the last tick: after a stalled tick
         # that is much more than now), braking at the acceleration limit, plus the distance
         # covered while the scan ages and the next tick comes.
         v = min(s.max_linear, max(0.0, self.previous[0]) + s.max_linear_accel * dt)
-        latency = (inp.scan_age_s if scan is not None else 0.0) + 1.0 / s.control_rate_hz
-        self.stopping_m = v * v / (2 * s.max_linear_accel) + v * latency
+        braking = v * v / (2 * s.max_linear_accel)
+
+        def stopping(age_s: float) -> float:
+            return braking + v * (age_s + 1.0 / s.control_rate_hz)
+
+        self.stopping_m = stopping(inp.scan_age_s if scan is not None else 0.0)
+        self.obstacles = (
+            Obstacles("laser", scan, s.laser_required, "no recent laser scan", self.stopping_m),
+            Obstacles(
+                "depth",
+                depth,
+                DEPTH_SOURCE in s.obstacle_sources,
+                inp.depth_missing if inp.depth is None else "no recent depth",
+                stopping(inp.depth_age_s if depth is not None else 0.0),
+            ),
+        )
         aim = self._aim(fresh, scan, now, dt)
         if aim.state == ControllerState.SEARCHING:
             return self._halt(aim)  # the target is gone: stop now, not at the braking rate
@@ -189,19 +226,31 @@ class Controller:
     def _clearance(self, scan: LaserScan) -> float:
         return sector_clearance(scan, self.s.sector_width_deg, self.s.robot_width_m / 2)
 
-    def _blocked(self, scan: LaserScan | None) -> str | None:
+    def _blocked(self) -> str | None:
         """Why the robot may not drive forward now, or None when the way ahead is known clear.
 
-        The rule of every mode: nothing within the safety distance plus the room to brake in
-        the sector and corridor ahead; no recent scan, no forward motion, unless the settings
-        say the robot has no laser (``no_laser``), when only a scan that does come is obeyed.
+        The rule of every mode, for every obstacle source of this tick (``self.obstacles``):
+        nothing within the safety distance plus the room to brake in the sector and corridor
+        ahead. A source the settings require (``obstacle_sources``) that is missing or stale
+        means no forward motion; one not required is obeyed when it comes (the laser with
+        ``no_laser``, the depth cameras on a robot that needs a laser).
         """
-        if scan is None:
-            return None if self.s.no_laser else "no recent laser scan"
-        clearance = self._clearance(scan)
-        if clearance <= self.s.safety_distance_m + self.stopping_m:
-            return f"obstacle at {clearance:.2f} m"
+        for source in self.obstacles:
+            if source.scan is None:
+                if source.required:
+                    return source.missing
+                continue
+            clearance = self._clearance(source.scan)
+            if clearance <= self.s.safety_distance_m + source.stopping_m:
+                by = "" if source.name == "laser" else f" ({source.name})"
+                return f"obstacle at {clearance:.2f} m{by}"
         return None
+
+    def _known_clear(self) -> bool:
+        """Whether some obstacle source is fresh and none shows the way ahead blocked: what
+        driving on towards a target not seen needs (``no_laser`` or not)."""
+        seen = any(source.scan is not None for source in self.obstacles)
+        return seen and self._blocked() is None
 
     def _halt(self, cmd: VelocityCommand) -> VelocityCommand:
         """Zero at once (safety stops bypass the acceleration limit) and forget the target."""
@@ -297,7 +346,7 @@ class Controller:
         captured = {c: now - min(v.capture_age_s, s.detection_timeout_s) for c, v in fresh.items()}
         best = self._pick(sightings(newest, captured, self.cameras, classes, s.min_score), now)
         if best is None:
-            return self._hold(fresh, scan, now, dt, stamp, classes)
+            return self._hold(fresh, now, dt, stamp, classes)
         if s.mode is ControllerMode.FOLLOW and self.locked is None and best.track_id >= 0:
             self.locked = (best.camera, best.track_id)
         self.last_seen = now
@@ -310,7 +359,7 @@ class Controller:
         centred = abs(err) <= math.atan(s.center_tolerance * width / best.focal_px)
         stamp = best.dets.header.stamp_ns
         if s.mode is ControllerMode.TRACK:
-            blocked = self._blocked(scan) if centred else None
+            blocked = self._blocked() if centred else None
             state = ControllerState.TURNING
             if centred:
                 state = ControllerState.TRACKING if blocked is None else ControllerState.BLOCKED
@@ -332,7 +381,6 @@ class Controller:
     def _hold(
         self,
         fresh: dict[str, View],
-        scan: LaserScan | None,
         now: float,
         dt: float,
         stamp: int,
@@ -350,7 +398,7 @@ class Controller:
             held = self.last_aim
             # Driving on towards a target not seen needs a scan that shows the way clear,
             # even with no_laser (which lets the robot drive only towards a target in view).
-            clear = scan is not None and self._blocked(scan) is None
+            clear = self._known_clear()
             linear = held.linear_x if clear and not between else 0.0
             predicted = self._predicted(now)
             angular = 0.0 if predicted is None else self.pid.update(predicted, dt)
@@ -380,7 +428,15 @@ class Controller:
             return VelocityCommand(0.0, angular, state, reason, x.name, x.track_id, stamp, x.camera)
 
         distance = math.inf
-        if s.distance_source is DistanceSource.LASER:
+        if s.distance_source is DistanceSource.DEPTH:
+            distance = depth_distance(dets, i)
+            if not math.isfinite(distance):
+                if not centred:
+                    return turn_only(
+                        ControllerState.TURNING, f"bearing {math.degrees(err):+.1f} deg"
+                    )
+                return turn_only(ControllerState.BLOCKED, "the target's depth is unknown")
+        elif s.distance_source is DistanceSource.LASER:
             if scan is None:
                 return turn_only(ControllerState.BLOCKED, "no recent laser scan for the distance")
             if not centred and not laser_covers(scan, err):
@@ -407,7 +463,7 @@ class Controller:
             return turn_only(ControllerState.TURNING, f"bearing {math.degrees(err):+.1f} deg")
         if distance <= s.follow_distance_m:
             return turn_only(ControllerState.ARRIVED, f"target at {distance:.2f} m")
-        blocked = self._blocked(scan)
+        blocked = self._blocked()
         if blocked is not None:
             return turn_only(ControllerState.BLOCKED, blocked)
         speed = min(s.max_linear, s.distance_gain * (distance - s.follow_distance_m))

@@ -1,5 +1,5 @@
-"""The controller service: every camera's latest detections and the scan in, Twist and
-ControllerStatus out."""
+"""The controller service: every camera's latest detections and the scan (and, when its
+settings need depth, the depth cameras' images) in, Twist and ControllerStatus out."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import dataclasses
 import json
 import threading
 from collections.abc import Callable, Mapping
-from typing import Generic, Protocol, TypeVar
+from typing import TYPE_CHECKING, Generic, Protocol, TypeVar
 
 from common.announce import Announced, announced_cameras
 from common.bus import Declared
@@ -28,6 +28,9 @@ from services.controller.policy import stop as stop_command
 from services.controller.statelog import log_state
 from services.controller.targets import View, unknown_targets
 from stack.config import Config
+
+if TYPE_CHECKING:
+    from services.controller.depth_intake import DepthIntake
 
 
 class _Stamped(Protocol):
@@ -292,6 +295,16 @@ class ControlLoop:
             node.subscribe(keys.scan(), self.handlers.on_scan),
             node.subscribe(keys.estop(), self.handlers.on_estop),
         ]
+        # The depth cameras' images, only when depth is needed: the callback only leaves each
+        # in its camera's slot, and the intake's own thread (``run``) turns it into a scan.
+        self.depth: DepthIntake | None = None
+        if s.needs_depth:
+            # Here, not at the top: perception loads OpenCV, which only a controller that
+            # reads depth needs.
+            from services.controller.depth_intake import DepthIntake
+
+            self.depth = DepthIntake(s, node, config.stack.clock_tolerance_s, node.clock)
+            self._subs.append(node.subscribe_keyed(keys.all_depths(), self._on_depth))
         self._cameras_lock = threading.Lock()  # one change of the camera set at a time
         self.announced: Announced[CameraAnnouncement] | None = None
         self.announced = announced_cameras(
@@ -304,6 +317,13 @@ class ControlLoop:
         )  # fmt: skip
         if s.no_laser:
             node.log.warning(NO_LASER_WARNING)
+        node.log.info(
+            "forward motion needs fresh %s; distance to the target from %s",
+            " and ".join(
+                x for x in s.obstacle_sources if not (s.no_laser and x == contract.LASER_SOURCE)
+            ) or "nothing (no_laser)",
+            s.distance_source,
+        )  # fmt: skip
         self._last_state: ControllerState | None = None
         # Detections that go stale between one and the next flip the state several times a
         # second: the first changes are logged, then a summary each period (the metrics
@@ -317,6 +337,13 @@ class ControlLoop:
             return
         self.handlers.on_detections(camera, payload)
 
+    def _on_depth(self, key: str, payload: bytes) -> None:
+        camera = camera_in_key(key)
+        if camera is None or self.depth is None:  # unreachable: subscribed only with depth
+            self.node.bad_input(key, DecodeError("not a camera's depth key"))
+            return
+        self.depth.offer(camera, payload)
+
     def _on_cameras(self) -> None:
         """The set of announced cameras changed: the handlers take the new one at once."""
         if self.announced is None:  # called back while it is being declared: done after
@@ -325,6 +352,8 @@ class ControlLoop:
             before = set(self.handlers.cameras)
             now = self.announced.current()
             self.handlers.set_cameras(dict(sorted(now.items())))
+            if self.depth is not None:
+                self.depth.set_cameras(now)
         for camera in sorted(now.keys() - before):
             a = now[camera]
             self.node.log.info(
@@ -358,6 +387,11 @@ class ControlLoop:
             sc, sc_arrival = handlers.scan.get()
             sc_age = _age(sc.header if sc is not None else None, sc_arrival, at)
             inputs = Inputs(views, sc, sc_age, latch.engaged)
+            if self.depth is not None:
+                seen = self.depth.obstacles(at)
+                inputs = dataclasses.replace(
+                    inputs, depth=seen.scan, depth_age_s=seen.age_s, depth_missing=seen.missing
+                )
             cmd = self.controller.step(inputs, tick)
             if cmd.state == ControllerState.ESTOP:
                 cmd = dataclasses.replace(cmd, reason=latch.describe())
@@ -400,6 +434,11 @@ def run(config: Config, stop: threading.Event) -> int:
                 target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
             )
             checker.start()
+            if loop.depth is not None:
+                threading.Thread(
+                    target=loop.depth.serve, args=(stop, STOP_POLL_S), name="depth-scan",
+                    daemon=True,
+                ).start()  # fmt: skip
             node.ready()
             period = 1.0 / s.control_rate_hz
             while not stop.is_set():

@@ -52,6 +52,13 @@ ATTENTION_PRIORITY = "attention_priority"
 TAKEN_PRIORITY = "taken_priority"  # a priority camera's frame
 TAKEN_FLOOR = "taken_floor"  # a camera due for its floor rate, ahead of the priority ones
 TAKEN_SPARE = "taken_spare"  # another camera's, with no priority camera waiting
+# Depth (services/detector/depth_stage.py): depth frames heard on a depth camera this worker
+# serves, and the colour frames of such a camera whose detections got depth columns (paired)
+# or went out 2D only (no depth frame within detector.depth_pair_tolerance_ms). Bad depth
+# payloads are bad input.
+DEPTH_IN = "depth_in"
+DEPTH_PAIRED = "depth_paired"
+DEPTH_UNPAIRED = "depth_unpaired"
 
 
 def taken_for(reason: str) -> str:
@@ -93,6 +100,9 @@ PER_CAMERA = frozenset(
         TAKEN_PRIORITY,
         TAKEN_FLOOR,
         TAKEN_SPARE,
+        DEPTH_IN,
+        DEPTH_PAIRED,
+        DEPTH_UNPAIRED,
     }
 )
 #: Every counter a worker publishes (plain names; see PER_CAMERA for the per-camera ones).
@@ -115,17 +125,17 @@ COUNTERS = frozenset(
 
 # -- the bus ---------------------------------------------------------------------------------
 def access(shape: Shape) -> dict[str, Access]:
-    """Each worker reads frames and puts detections, never frames: every camera's, as any
-    worker may come to serve any camera (services/detector/pool.py); it reads the
-    controller's status too, for the camera that sees the target and the target classes
+    """Each worker reads frames and depth images and puts detections, never frames: every
+    camera's, as any worker may come to serve any camera (services/detector/pool.py); it reads
+    the controller's status too, for the camera that sees the target and the target classes
     (services/detector/attention.py). Its tokens are its own only: its health, its pool
     membership, its announcement and its serving tokens under its own name (those of the pool
     under ``detector.pool_prefix``), so that no worker can pose as another, or as many, and
     skew the assignment or its audit. It serves the model's description on each camera's info
-    key. A pool serving further robots (``shape.prefixes``) reads each one's frames and puts
-    its detections, and serves its info, on every camera under its prefix (their cameras come
-    and go with their announcements), and reads its controller's status (attention), and
-    nothing else of theirs: no frame, no command."""
+    key. A pool serving further robots (``shape.prefixes``) reads each one's frames and depth
+    images and puts its detections, and serves its info, on every camera under its prefix
+    (their cameras come and go with their announcements), and reads its controller's status
+    (attention), and nothing else of theirs: no command."""
     keys, pool = shape.keys, shape.pool_keys()
     robots = shape.other_robots()
     return {
@@ -136,8 +146,13 @@ def access(shape: Shape) -> dict[str, Access]:
             *(r.all_detections() for r in robots),
             read=(
                 keys.all_frames(),
+                keys.all_depths(),
                 keys.controller_status(),
-                *(k for r in robots for k in (r.all_frames(), r.controller_status())),
+                *(
+                    k
+                    for r in robots
+                    for k in (r.all_frames(), r.all_depths(), r.controller_status())
+                ),
             ),
             token=(
                 keys.health(w),
@@ -158,6 +173,8 @@ MAX_CLASSES = 2000
 MAX_BATCH = 64
 #: The most frames one detector round may batch (``detector.max_batch``): one per camera.
 MAX_SERVED_BATCH = 32
+#: The most depth frames kept per camera to pair from (``detector.depth_buffer``).
+MAX_DEPTH_BUFFER = 64
 #: ``detector.batch_choice``: measure at start which batch pays, or always fill to max_batch.
 BATCH_CHOICES = ("measured", "max")
 
@@ -241,6 +258,13 @@ class DetectorSettings:
     ``attention_hold_s`` go first, and every other camera is still detected on at least
     ``attention_floor_hz`` times a second (within a round or two). Off, or with no camera
     prioritised, the rounds are the fair rotation.
+
+    Depth (docs/detector.md, "Depth"; services/detector/depth_stage.py): for a camera announced
+    with depth, each colour frame is paired with the depth frame of its camera whose stamp is
+    nearest, within ``depth_pair_tolerance_ms``; the last ``depth_buffer`` depth frames of each
+    camera are kept to pair from. A box needs at least ``depth_min_valid_pixels`` valid depth
+    pixels in its region, and at least ``depth_min_valid_fraction`` of it, else it gets NaN
+    (unknown) in every depth column (perception/depth.py's DepthParams).
     """
 
     model: str = ""
@@ -276,6 +300,10 @@ class DetectorSettings:
     attention: bool = True
     attention_floor_hz: float = 0.5
     attention_hold_s: float = 2.0
+    depth_pair_tolerance_ms: float = 20.0
+    depth_buffer: int = 4
+    depth_min_valid_pixels: int = 20
+    depth_min_valid_fraction: float = 0.05
 
     BOUNDS: ClassVar[Bounds] = {
         "batch_profile": (1, MAX_BATCH),
@@ -300,6 +328,10 @@ class DetectorSettings:
         "capacity_step": (0.01, 10),
         "capacity_period_s": (0.5, 3600),
         "capacity_smoothing": (0.01, 1),
+        "depth_pair_tolerance_ms": (0, 1000),
+        "depth_buffer": (1, MAX_DEPTH_BUFFER),
+        "depth_min_valid_pixels": (1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE),
+        "depth_min_valid_fraction": (0, 1),
     }
     LENGTHS: ClassVar[Bounds] = {
         "classes": (0, MAX_CLASSES),

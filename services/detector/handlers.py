@@ -1,6 +1,6 @@
-"""What the detector does with a frame as it arrives (:class:`DetectorHandlers`), and its
-per-camera counting (:func:`count_for`, :func:`reject_for`). No bus: the subscriptions that
-call ``on_frame`` are the pool member's (services/detector/membership.py)."""
+"""What the detector does with a frame or a depth frame as it arrives (:class:`DetectorHandlers`).
+No bus: the subscriptions that call ``on_frame`` and ``on_depth`` are the pool member's
+(services/detector/membership.py)."""
 
 from __future__ import annotations
 
@@ -15,14 +15,17 @@ from common.messages import Frame
 from common.node import Tally
 from common.seqgaps import SeqGaps
 from services.detector import contract
+from services.detector.counting import count_for, reject_for
+from services.detector.depth_stage import DepthStage
 from services.detector.schedule import CameraSlots
 from stack.config import Config
 
 
 class DetectorHandlers:
     """What the detector does with a frame as it arrives: decode it, count it (in all and for
-    its camera), and leave it in its camera's slot, from which the loop takes rounds. A
-    frame's arrival is stamped on ``clock``.
+    its camera), note it for the pairing with its depth frame (``depth``, for a camera with
+    depth) and leave it in its camera's slot, from which the loop takes rounds. A frame's
+    arrival is stamped on ``clock``. Depth frames go to ``depth`` (:meth:`on_depth`).
 
     ``frame_keys``: each camera's frame key by its name in counters (common/pool_rule.py's
     ``label``); by default the config's cameras on the stack's keys. A pool worker starts with
@@ -49,6 +52,9 @@ class DetectorHandlers:
         #: late from a subscription just undeclared, is left to its new worker. Written by the
         #: pool member under its lock (services/detector/membership.py).
         self.serving: frozenset[str] = frozenset(self.frame_keys)
+        #: The depth of the cameras that have it (the pool member adds and drops them as their
+        #: announcements say), paired with their frames as they arrive here.
+        self.depth = DepthStage(self.settings, tally)
 
     def add_camera(self, camera: str, frame_key: str) -> None:
         """Know ``camera`` (its frames on ``frame_key``) from now on (the loop's thread, before
@@ -93,18 +99,12 @@ class DetectorHandlers:
         except ImageTooLarge as exc:
             reject_for(self.tally, camera, contract.FRAMES_OVERSIZE, str(exc), key)
             return
+        self.depth.colour(camera, frame.header)  # before the slot: a round may take it at once
         if self.slots.put(camera, frame):
             count(contract.DROPPED)
 
-
-def count_for(tally: Tally, camera: str, name: str, n: int = 1) -> None:
-    """Count ``n`` under ``name`` (the detector's total) and under ``name.<camera>``."""
-    tally.counters.add(name, n)
-    tally.counters.add(per_camera(name, camera), n)
-
-
-def reject_for(tally: Tally, camera: str, counter: str, message: str, key: str) -> None:
-    """``Tally.reject`` (counted in all, logged rate-limited per key) and counted for
-    ``camera`` too."""
-    tally.reject(counter, message, key=key)
-    tally.counters.add(per_camera(counter, camera))
+    def on_depth(self, camera: str, payload: bytes) -> None:
+        """A depth frame of ``camera`` (services/detector/depth_stage.py); nothing for a
+        camera this worker does not serve now."""
+        if camera in self.serving:
+            self.depth.on_depth(camera, payload)

@@ -21,7 +21,8 @@ from common.pool_audit import MAX_LINES, PoolAudit, Report, Serving, lines
 from common.pool_rule import label, pool_name
 from services.detector import contract
 from services.detector.capacity import Capacity
-from services.detector.handlers import DetectorHandlers, count_for
+from services.detector.counting import count_for
+from services.detector.handlers import DetectorHandlers
 from services.detector.pool import Change, PoolCamera, PoolView, PoolWorker
 
 #: How long a joining worker asks who is already in the pool before it takes its cameras: the
@@ -48,7 +49,10 @@ class PoolMember:
     size and the robot prefixes it serves), the others' as they come and go; the cameras
     announced under each robot prefix of ``detector.prefixes`` (empty: the stack's prefix);
     and a frame subscription for each camera it serves, its detections going back on that
-    camera's own robot's keys (the service's ``on_gained``).
+    camera's own robot's keys (the service's ``on_gained``), and a depth subscription
+    (``<robot>/camera/<cam>/depth``) for each of those whose announcement says ``depth``
+    (services/detector/depth_stage.py), dropped when the camera is lost or stops announcing
+    depth.
 
     The bus's threads only note a change; the detection loop calls :meth:`settle` between
     rounds, which recomputes the assignment and declares and undeclares subscriptions there
@@ -90,7 +94,8 @@ class PoolMember:
       ``_serving_tokens``, and is held over their declaring and undeclaring, so that a
       resignation and a settle's serving tokens never interleave. No bus callback takes it.
     - ``_lock`` covers every other attribute written after construction (``_last_beat``,
-      ``_resigned``, ``_dirty``, ``view``, ``_servers``, ``_subs``, ``_watches``, ``_gauges``,
+      ``_resigned``, ``_dirty``, ``view``, ``_servers``, ``_subs``, ``_depth_subs``,
+      ``_depth_keys``, ``_watches``, ``_gauges``,
       ``_handed_over``, ``_audit``, ``_audit_next``, ``_strays``) and the handlers'
       ``serving``. It is never held over a bus call: a bus may deliver this worker's own token
       change to a callback at once, in the calling thread, and the callbacks take ``_lock``.
@@ -153,6 +158,8 @@ class PoolMember:
         self._resigned = False
         self._dirty = True
         self._subs: dict[str, Declared] = {}
+        self._depth_subs: dict[str, tuple[str, Declared]] = {}  # label -> (depth key, sub)
+        self._depth_keys: dict[str, str] = {}  # pool name -> depth key, of depth cameras
         self._watches: list[Declared] = []
         self._gauges: dict[str, int] = {}
         self._handed_over = False
@@ -422,10 +429,19 @@ class PoolMember:
                 for w, a in self._workers.current().items()
                 if w != self.view.me
             }
+        heard = [
+            (prefix, cam, a)
+            for prefix, announced in self._cameras.items()
+            for cam, a in announced.current().items()
+        ]
         self.view.cameras = {
             pool_name(prefix, cam, pool): PoolCamera(prefix, cam, a.rate_hz)
-            for prefix, heard in self._cameras.items()
-            for cam, a in heard.current().items()
+            for prefix, cam, a in heard
+        }
+        self._depth_keys = {
+            pool_name(prefix, cam, pool): Keys(prefix).depth(cam)
+            for prefix, cam, a in heard
+            if a.depth
         }
 
     def _apply(self, change: Change) -> None:
@@ -465,6 +481,7 @@ class PoolMember:
             self._gauge(contract.POOL_MEMBERS, change.members)
             self._gauge(contract.POOL_LOAD_PERMILLE, round(change.load * 1000))
         self._sync_serving(change.serving)
+        self._sync_depth(change.serving)
         if handed_over:
             for cam in gained:
                 count_for(node, cam, contract.CAMERAS_GAINED)
@@ -479,6 +496,36 @@ class PoolMember:
                 list(change.lost),
             )
 
+    def _sync_depth(self, serving: frozenset[str]) -> None:
+        """A depth subscription for each camera of ``serving`` announced with depth, and none
+        for another (a camera lost, or no longer announcing depth: its depth let go). The
+        loop's, outside the locks, as the frames' subscriptions."""
+        with self._lock:
+            wanted = {label(c): k for c, k in self._depth_keys.items() if c in serving}
+            gone = [
+                (cam, self._depth_subs.pop(cam)[1])
+                for cam, (key, _) in list(self._depth_subs.items())
+                if wanted.get(cam) != key
+            ]
+            new = {cam: key for cam, key in wanted.items() if cam not in self._depth_subs}
+        depth = self.handlers.depth
+        for cam, sub in gone:
+            sub.undeclare()
+            depth.drop_camera(cam)
+        added: dict[str, tuple[str, Declared]] = {}
+        for cam, key in new.items():
+            depth.add_camera(cam, key)
+            on_depth = partial(self.handlers.on_depth, cam)
+            added[cam] = (key, self.node.subscribe_bounded(key, on_depth))
+        with self._lock:
+            self._depth_subs.update(added)
+        if gone or added:
+            self.node.log.info(
+                "depth paired on %s (stopped on %s)",
+                sorted(wanted) or "no camera",
+                sorted(cam for cam, _ in gone) or "none",
+            )
+
     def _gauge(self, name: str, value: int) -> None:
         """Set gauge ``name`` to ``value`` (the caller holds _lock). Counters only add: a
         gauge moves by its difference."""
@@ -490,8 +537,10 @@ class PoolMember:
         if self._stall_watch is not None:
             self._stall_watch.join()
         with self._lock:
-            declared = [*self._subs.values(), *self._watches]
+            depth_subs = [sub for _, sub in self._depth_subs.values()]
+            declared = [*self._subs.values(), *depth_subs, *self._watches]
             self._subs.clear()
+            self._depth_subs.clear()
             self._watches.clear()
         for d in declared:
             d.undeclare()

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from common.boxes import Boxes
 from common.bus import Declared
 from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock
 from common.counters import BAD_INPUT, per_camera
@@ -23,7 +24,8 @@ from common.pool_rule import label, pool_name, robot_label
 from perception import DetectionResult, Detector, Tracker, tracker_clock
 from services.detector import contract
 from services.detector.attention import Attention
-from services.detector.handlers import count_for, reject_for
+from services.detector.counting import count_for, reject_for
+from services.detector.depth_stage import DepthStage
 from services.detector.schedule import Waiting
 from stack.config import Config
 
@@ -33,22 +35,28 @@ def to_message(
     result: DetectionResult,
     det: Detector,
     received_ns: int,
-    track_ids: npt.NDArray[np.int32] | None,
+    boxes: Boxes,
     published_ns: int,
+    depth_ms: float | None = None,
 ) -> Detections:
-    """The Detections message for ``frame``: its header, the result, the detector's stamps."""
+    """The Detections message for ``frame``: its header, the result (its ``boxes`` with their
+    track ids and any depth columns), the detector's stamps; ``depth_ms``: the depth stage's
+    time, when it ran (``timing_ms["depth"]``)."""
     t = result.timing
+    timing = {
+        "preprocess": t.preprocess_ms,
+        "inference": t.inference_ms,
+        "postprocess": t.postprocess_ms,
+    }
+    if depth_ms is not None:
+        timing["depth"] = depth_ms
     return Detections(
         header=frame.header,
         image_width=frame.width,
         image_height=frame.height,
-        boxes=result.boxes.with_track_ids(track_ids),
+        boxes=boxes,
         class_names=tuple(result.class_names),
-        timing_ms={
-            "preprocess": t.preprocess_ms,
-            "inference": t.inference_ms,
-            "postprocess": t.postprocess_ms,
-        },
+        timing_ms=timing,
         model=det.model_path.name,
         backend=f"{det.backend.name}/{det.backend.device}/{det.backend.precision}",
         received_ns=received_ns,
@@ -93,7 +101,9 @@ class Rounds:
     ``batches`` (rounds run) and ``batched_frames`` (frames in them): their ratio is the mean
     batch size. With ``attention``, each camera's published detections are its sightings, the
     frames are counted by why the round took them, and which cameras have priority is a
-    gauge (services/detector/attention.py)."""
+    gauge (services/detector/attention.py). With ``depth``, a frame of a camera with depth is
+    paired with its depth frame as its detections are built, after the model ran, and they
+    get the depth columns (services/detector/depth_stage.py)."""
 
     def __init__(
         self,
@@ -103,6 +113,7 @@ class Rounds:
         outputs: dict[str, CameraOutput],
         clock: Clock = SYSTEM_CLOCK,
         attention: Attention | None = None,
+        depth: DepthStage | None = None,
     ) -> None:
         self.settings = config.detector
         self.tally = tally
@@ -110,6 +121,7 @@ class Rounds:
         self.outputs = outputs
         self.clock = clock
         self.attention = attention
+        self.depth = depth
         self._priority: frozenset[str] = frozenset()
 
     def run(self, waiting: list[Waiting[Frame]]) -> None:
@@ -154,6 +166,8 @@ class Rounds:
                 self.tally.counters.add(per_camera(BAD_INPUT, w.camera))
                 continue
             ready.append((out, frame, w.received_ns, image))
+            if self.depth is not None:
+                self.depth.hold(w.camera, frame.header)
         if not ready:
             return
         results = self.detector.detect_batch([image for *_, image in ready])
@@ -182,7 +196,13 @@ class Rounds:
             if out.tracker is None
             else _track(self.tally, out, result, frame.header, received_ns)
         )
-        msg = to_message(frame, result, self.detector, received_ns, track_ids, self.clock.wall_ns())
+        boxes, depth_ms = result.boxes.with_track_ids(track_ids), None
+        if self.depth is not None:
+            size = (frame.width, frame.height)
+            boxes, depth_ms = self.depth.measure(out.camera, frame.header, size, boxes)
+        msg = to_message(
+            frame, result, self.detector, received_ns, boxes, self.clock.wall_ns(), depth_ms
+        )
         out.put(msg.encode())
         count_for(self.tally, out.camera, contract.DETECTIONS_OUT)
         if self.attention is not None:

@@ -85,7 +85,9 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
             )
         )
         cameras = ServedCameras(config, node, handlers, info)
-        rounds = Rounds(config, node, detector, cameras.outputs, node.clock, attention)
+        rounds = Rounds(
+            config, node, detector, cameras.outputs, node.clock, attention, handlers.depth
+        )
         # Warm the backend up before announcing readiness: the first run allocates, and each
         # batch size may (a CUDA graph, an OpenVINO shape) on its first run.
         warm = np.full((480, 640, 3), 114, np.uint8)

@@ -11,8 +11,9 @@ or chrony); on one host they are exact.
 
 Besides the snapshot (``common.messages.MetricsSnapshot``), :meth:`Aggregator.answer` adds what
 the message does not carry: the drop rate (frames the detector skipped because a newer one had
-arrived, over the frames offered to it), a per-second timeline (FPS over time) for plots, and
-each camera's figures.
+arrived, over the frames offered to it), a per-second timeline (FPS over time) for plots, the
+depth images the detector took and its colour frames with none in time, and each camera's
+figures.
 """
 
 from __future__ import annotations
@@ -193,12 +194,7 @@ class Aggregator:
 
     def _detector_total(self, name: str) -> int:
         """Counter ``name`` summed over every detector worker (one unless a pool)."""
-        total = 0
-        for key, value in self._counters.items():
-            service, _, counter = key.partition(".")
-            if counter == name and service_package(service) == "detector":
-                total += value
-        return total
+        return sum(v for key, v in self._counters.items() if _is_detector(key, name))
 
     def count(self, name: str, n: int = 1) -> None:
         """Count something the metrics service itself saw (e.g. its own bad input)."""
@@ -276,6 +272,8 @@ class Aggregator:
             workers=workers(self._counters, self._figures, self._reported_at, now, self.pool),
             duplicate_detections=self._duplicates.total,
             pool_warnings=[] if self.pool is None else lines(self.pool.report.current, now),
+            depth_frames=self._detector_total(contract.DEPTH_IN),
+            depth_unpaired=self._detector_total(contract.DEPTH_UNPAIRED),
         )
 
     def latency_samples(self, now: float) -> dict[str, list[float]]:
@@ -284,15 +282,27 @@ class Aggregator:
         return self._all.latency_samples(now)
 
 
+def _is_detector(key: str, name: str) -> bool:
+    """Whether ``key`` (``<service>.<counter>``) is a detector worker's total ``name``."""
+    service, _, counter = key.partition(".")
+    return counter == name and service_package(service) == "detector"
+
+
 def report_line(snap: MetricsSnapshot) -> str:
     """One human line: what a robot operator glances at."""
     lat = snap.latency_ms
     bad = sum(v for k, v in snap.counters.items() if k.endswith(".bad_input"))
+    depth = ""
+    if lat.get("depth", {}).get("count"):  # a depth camera's frames measured in the window
+        unpaired = sum(
+            v for k, v in snap.counters.items() if _is_detector(k, contract.DEPTH_UNPAIRED)
+        )
+        depth = f"depth p50 {lat['depth']['p50']:.1f} ms | depth unpaired {unpaired} | "
     return (
         f"fps {snap.fps:.1f} | det/frame {snap.detections_per_frame:.2f} | "
         f"inference p50 {lat['inference']['p50']:.0f} ms | "
         f"capture->detections p50 {lat['capture_to_detections']['p50']:.0f} ms "
         f"p95 {lat['capture_to_detections']['p95']:.0f} ms | "
-        f"end-to-end p50 {lat['end_to_end']['p50']:.0f} ms | "
+        f"end-to-end p50 {lat['end_to_end']['p50']:.0f} ms | {depth}"
         f"dropped {snap.dropped_frames} | bad input {bad}"
     )

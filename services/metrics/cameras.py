@@ -7,6 +7,7 @@ camera's under ``<name>.<camera>`` (common/counters.py::per_camera). The names r
     frames_in.<cam>       frames offered to the detector    -> frames_offered; names the worker
     dropped.<cam>         frames it skipped for a newer one -> dropped_frames, drop rates
     batches, batched_frames (the worker's plain names)     -> batch_mean of each camera it serves
+    depth_in.<cam>, depth_unpaired.<cam> (its worker's)    -> depth_frames, depth_unpaired
 
 Every other ``<name>.<cam>`` of any service (``detections_out.rear``, the controller's
 ``detections_in.rear``, the simulator's ``frames_out.rear`` ...) is shown under that camera as
@@ -22,6 +23,7 @@ from collections import deque
 
 from common.contracts import CameraMetrics
 from services.detector import contract as detector
+from services.metrics import contract
 from services.metrics.figures import Figures
 from services.metrics.window import Timeline
 
@@ -73,7 +75,11 @@ class CameraCounters:
         return self.counters.get(f"{self.served_by}.dropped", 0) if self.served_by else 0
 
     def offered(self) -> int:
-        return self.counters.get(f"{self.served_by}.{WORKER_COUNTER}", 0) if self.served_by else 0
+        return self.worker_count(WORKER_COUNTER)
+
+    def worker_count(self, name: str) -> int:
+        """The serving worker's counter ``name`` for this camera (0 if none serves it)."""
+        return self.counters.get(f"{self.served_by}.{name}", 0) if self.served_by else 0
 
     def drop_rate(self, now: float) -> float:
         recent = self._drops.totals(now, self.window_s)
@@ -94,6 +100,8 @@ class CameraCounters:
             served_by=self.served_by,
             batch_mean=batch_mean,
             counters=dict(sorted(self.counters.items())),
+            depth_frames=self.worker_count(contract.DEPTH_IN),
+            depth_unpaired=self.worker_count(contract.DEPTH_UNPAIRED),
         )
 
 

@@ -54,6 +54,13 @@ READS_PER_CAMERA: Mapping[str, tuple[str, ...]] = {
     "detector": (detector.FRAMES_IN, detector.DROPPED, detector.SERVING)
 }
 
+#: The detector's depth counters (issue 32), totals and ``<name>.<camera>``: depth images
+#: taken, and colour frames of a depth camera with no depth image within the pairing
+#: tolerance. Named here until services/detector/contract.py declares them (then: its names,
+#: and in READS and READS_PER_CAMERA).
+DEPTH_IN = "depth_in"
+DEPTH_UNPAIRED = "depth_unpaired"
+
 SERVICE = "metrics"
 
 

@@ -5,6 +5,8 @@ Latency stages, all in ms, measured from the camera's capture stamp (``header.st
 
     capture_to_detector    capture -> the detector took the frame (transport + queueing)
     preprocess / inference / postprocess    the detector's own stages
+    depth                  the detector's depth stage: pairing and measuring the boxes (only
+                           frames that had a depth image)
     capture_to_detections  capture -> detections published
     detections_to_command  detections published -> the first Twist reacting to them
     end_to_end             capture -> that first Twist (what the robot feels)
@@ -19,7 +21,7 @@ from common.messages import Detections
 from services.metrics.window import Window, percentiles
 
 NS_PER_MS = 1e6
-DETECTOR_STAGES = ("preprocess", "inference", "postprocess")
+DETECTOR_STAGES = ("preprocess", "inference", "postprocess", "depth")
 STAGES = (
     "capture_to_detector",
     *DETECTOR_STAGES,

@@ -9,6 +9,10 @@ Two kinds of series, because they answer different questions:
   per frame, drop rate, the window's own percentiles (``stack_latency_window_ms``), frame and
   detection totals, per-class detections and every service counter.
 
+The depth figures: ``stack_depth_frames`` (depth images the detector took),
+``stack_depth_unpaired`` (colour frames of a depth camera with no depth in time), per camera
+too; the depth stage's time is the ``depth`` stage of the latency series.
+
 Each camera's figures (the answer's ``cameras``) are the same series under ``stack_camera_*``
 with a ``camera`` label (``stack_camera_latency_seconds{camera,stage}``, ``stack_camera_fps
 {camera}`` ...); the series above stay every camera's together, as they were with one camera.
@@ -55,6 +59,15 @@ _CAMERA_COUNTERS = {
     "detections": "Boxes seen, per camera",
     "dropped_frames": "Frames the worker dropped, per camera",
     "frames_offered": "Frames offered to the worker, per camera",
+    "depth_frames": "Depth images the worker took, per camera",
+    "depth_unpaired": "Colour frames with no depth image in time, per camera",
+}
+#: Answer total -> help text; each becomes the counter ``stack_<key>``.
+_COUNTERS = {
+    "frames": "Detections messages seen",
+    "detections": "Boxes seen in all detections",
+    "depth_frames": "Depth images the detector took",
+    "depth_unpaired": "Colour frames of a depth camera with no depth image in time",
 }
 
 #: Returns the metrics query's JSON answer, taken under the service's lock.
@@ -83,10 +96,9 @@ class _AnswerCollector:
             for q in _QUANTILES:
                 window.add_metric([stage, q], float(pct.get(q, 0.0)))
         yield window
-        yield CounterMetricFamily("stack_frames", "Detections messages seen", value=a["frames"])
-        yield CounterMetricFamily(
-            "stack_detections", "Boxes seen in all detections", value=a["detections"]
-        )
+        for key, doc in _COUNTERS.items():
+            total = a.get(key, 0)
+            yield CounterMetricFamily(f"stack_{key}", doc, value=float(total))  # type: ignore[arg-type]
         classes = CounterMetricFamily(
             "stack_class_detections", "Boxes seen per class", labels=["class_name"]
         )
@@ -116,7 +128,7 @@ def _camera_metrics(a: MetricsAnswer) -> Iterator[Metric]:
     for key, doc in _CAMERA_COUNTERS.items():
         counter = CounterMetricFamily(f"stack_camera_{key}", doc, labels=["camera"])
         for camera, figures in cameras.items():
-            counter.add_metric([camera], float(figures[key]))  # type: ignore[literal-required]
+            counter.add_metric([camera], float(figures.get(key, 0)))  # type: ignore[arg-type]
         yield counter
     served = GaugeMetricFamily(
         "stack_camera_served_by",

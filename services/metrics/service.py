@@ -321,7 +321,8 @@ def announced_camera(a: CameraAnnouncement) -> AnnouncedCamera:
     """A camera's announcement as the metrics answer shows it."""
     return AnnouncedCamera(
         width=a.width, height=a.height, rate_hz=a.rate_hz, mount_yaw_deg=a.mount_yaw_deg,
-        hfov_deg=a.hfov_deg, frame_id=a.frame_id, source=a.source,
+        hfov_deg=a.hfov_deg, frame_id=a.frame_id, source=a.source, depth=a.depth,
+        mount_x_m=a.mount_x_m, mount_y_m=a.mount_y_m, mount_height_m=a.mount_height_m,
     )  # fmt: skip
 
 

@@ -114,7 +114,8 @@ class RosInbound:
 
 def announce_bridged(config: Config, announcements: CameraAnnouncements) -> dict[str, OnFrame]:
     """Announce each camera whose images the bridge puts on the stack's keys (none without
-    ``ros2.image_in``): its rate, mounting and field of view from its config, with
+    ``ros2.image_in``): its rate, mounting (yaw, height, position) and field of view from its
+    config, with
     ``ros2.depth_in`` as a depth camera, its size 0x0 until its first image, whose size and
     frame id are then announced. Returns, per camera, what to tell of each frame put."""
     s = config.ros2
@@ -129,6 +130,9 @@ def announce_bridged(config: Config, announcements: CameraAnnouncements) -> dict
             hfov_deg=c.hfov_deg,
             frame_id=c.frame_id,
             depth=s.depth_in,
+            mount_height_m=c.mount_height_m,
+            mount_x_m=c.mount_x_m,
+            mount_y_m=c.mount_y_m,
         )
 
         def on_frame(frame: Frame, camera: str = camera) -> None:

@@ -1,8 +1,8 @@
 """The simulator's contract: its counters and what it puts and reads. Imports only ``common``.
 
 The simulator renders every camera from one world and plays the laser and the robot's base: it
-puts every camera's frames (and announces every camera), the scan and the ground truth, and
-reads the velocity commands.
+puts every camera's frames and depth images (and announces every camera), the scan and the
+ground truth, and reads the velocity commands.
 """
 
 from __future__ import annotations
@@ -12,14 +12,18 @@ from typing import ClassVar
 
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
+from common.errors import ConfigError
 from common.setting_checks import Bounds, check_bounds, check_lengths
 
 FRAMES_OUT = "frames_out"  # in all and per camera
+DEPTH_OUT = "depth_out"  # depth images (sim.depth), in all and per camera
 COMMANDS_OUT_OF_RANGE = "commands_out_of_range"  # beyond what the base takes: it stops
 COMMANDS_FROM_SEVERAL_SOURCES = "commands_from_several_sources"
 
-PER_CAMERA = frozenset({FRAMES_OUT})
-COUNTERS = frozenset({*COMMON, FRAMES_OUT, COMMANDS_OUT_OF_RANGE, COMMANDS_FROM_SEVERAL_SOURCES})
+PER_CAMERA = frozenset({FRAMES_OUT, DEPTH_OUT})
+COUNTERS = frozenset(
+    {*COMMON, FRAMES_OUT, DEPTH_OUT, COMMANDS_OUT_OF_RANGE, COMMANDS_FROM_SEVERAL_SOURCES}
+)
 
 SERVICE = "sim"
 #: It feeds a (simulated) robot's sensors into the stack: no recording may be played onto it.
@@ -33,6 +37,7 @@ def access(shape: Shape) -> dict[str, Access]:
             keys,
             SERVICE,
             *shape.frames(),
+            *map(keys.depth, shape.cameras),
             keys.scan(),
             keys.sim_truth(),
             read=(keys.cmd_vel(),),
@@ -53,6 +58,12 @@ class SimSettings:
     speaks ROS 2 messages on the topics of ``[ros2]``, so that the ``ros2`` bridge service
     carries every frame, scan and command. Commands from more
     than one publisher within ``command_sources_window_s`` are counted and warned about.
+
+    ``laser``: false plays a robot with no laser (no scan at all). ``depth``: every camera is
+    an RGB-D camera: one DepthFrame per colour frame, with the colour frame's header, on
+    ``keys.depth(camera)`` (services/sim/depth.py), with a stereo camera's faults: the
+    ``depth_*`` settings are the fields of ``DepthNoise`` there (``depth_range_min_m`` below
+    ``depth_range_max_m``).
     """
 
     scenario: str = "demo"
@@ -71,6 +82,16 @@ class SimSettings:
     seed: int = 0
     ros2_robot: bool = False
     command_sources_window_s: float = 1.0
+    laser: bool = True
+    depth: bool = False
+    depth_range_min_m: float = 0.3
+    depth_range_max_m: float = 10.0
+    depth_noise_k: float = 0.005
+    depth_edge_px: int = 2
+    depth_edge_jump: float = 0.1
+    depth_dark_level: int = 30
+    depth_dark_dropout: float = 0.5
+    depth_dropout: float = 0.01
 
     BOUNDS: ClassVar[Bounds] = {
         "physics_hz": (1, 1000),
@@ -86,9 +107,22 @@ class SimSettings:
         "laser_noise_m": (0, 1),
         "seed": (0, 2**32 - 1),
         "command_sources_window_s": (0.01, 60),
+        "depth_range_min_m": (0, 10),
+        "depth_range_max_m": (0.1, 65),  # a 16UC1 image holds up to 65.535 m
+        "depth_noise_k": (0, 1),
+        "depth_edge_px": (0, 50),
+        "depth_edge_jump": (0.001, 10),
+        "depth_dark_level": (0, 255),
+        "depth_dark_dropout": (0, 1),
+        "depth_dropout": (0, 1),
     }
     LENGTHS: ClassVar[Bounds] = {"wait_for": (0, 6)}
 
     def __post_init__(self) -> None:
         check_bounds(self, "sim", self.BOUNDS)
         check_lengths(self, "sim", self.LENGTHS)
+        if self.depth_range_min_m >= self.depth_range_max_m:
+            raise ConfigError(
+                f"sim.depth_range_min_m ({self.depth_range_min_m:g}) must be below "
+                f"sim.depth_range_max_m ({self.depth_range_max_m:g})"
+            )

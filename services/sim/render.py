@@ -33,6 +33,9 @@ SPRITES: dict[str, tuple[str, tuple[int, int, int, int]]] = {
 # Obstacles are low boxes (bins, crates): tall enough for the laser, low enough that a person
 # behind one stays in view.
 OBSTACLE_HEIGHT_M = 0.5
+OBSTACLE_BGR = (90, 90, 95)
+#: Nothing nearer the camera than this (its centre) is drawn.
+NEAREST_DRAWN_M = 0.3
 
 
 @dataclass(frozen=True, slots=True)
@@ -68,48 +71,87 @@ def background(spec: CameraSpec) -> Image:
     return img
 
 
-def _paste(canvas: Image, img: Image, left: float, top: float, width: float, height: float) -> None:
-    """Draw ``img`` scaled to (width, height) with its top-left at (left, top), clipped."""
-    w, h = round(width), round(height)
-    if w < 2 or h < 2 or w > 8 * canvas.shape[1] or h > 8 * canvas.shape[0]:
-        return
-    x0, y0 = round(left), round(top)
-    cx0, cy0 = max(x0, 0), max(y0, 0)
-    cx1, cy1 = min(x0 + w, canvas.shape[1]), min(y0 + h, canvas.shape[0])
-    if cx1 <= cx0 or cy1 <= cy0:
-        return
-    scaled = cv2.resize(
-        img, (w, h), interpolation=cv2.INTER_AREA if w < img.shape[1] else cv2.INTER_LINEAR
-    )
-    canvas[cy0:cy1, cx0:cx1] = scaled[cy0 - y0 : cy1 - y0, cx0 - x0 : cx1 - x0]
+@dataclass(frozen=True, slots=True)
+class Placed:
+    """One thing as a camera draws it: ``target`` its index in ``world.targets`` (None: an
+    obstacle, ``obstacle`` its index), ``z`` its centre's distance ahead of the camera and
+    ``lateral`` to the camera's left (metres), ``radius`` its footprint's, ``height_m`` its
+    height, and ``rect`` (x0, y0, x1, y1, end-exclusive) the pixels it covers, clipped to the
+    image (None: not drawn at all). ``full`` is its whole unclipped rectangle, same convention.
+    ``img`` is its cut-out (None for an obstacle's box)."""
+
+    target: int | None
+    obstacle: int | None
+    z: float
+    lateral: float
+    radius: float
+    height_m: float
+    rect: tuple[int, int, int, int] | None
+    full: tuple[int, int, int, int]
+    img: Image | None
+
+
+def layout(world: World, spec: CameraSpec) -> list[Placed]:
+    """What ``spec``'s camera draws of ``world``, in drawing order: farthest first, each drawn
+    over what came before. Anything nearer than :data:`NEAREST_DRAWN_M` (or behind) is left out.
+    The one geometry the colour image (:func:`render`) and the depth image
+    (services/sim/depth.py) are both drawn from."""
+    r = world.robot
+    heading = r.theta + math.radians(spec.mount_yaw_deg)  # where the camera looks, world frame
+    c, s = math.cos(heading), math.sin(heading)
+    f, cx, cy = spec.focal_px, spec.width / 2, spec.height / 2
+    items: list[tuple[float, float, int | None, int | None, float, float, float]] = []
+    for i, (tg, (tx, ty)) in enumerate(zip(world.targets, world.target_positions(), strict=True)):
+        cut = sprite(tg.sprite, tg.mirror)
+        z, lateral = _to_camera(tx - r.x, ty - r.y, c, s)
+        w_m = tg.height_m * cut.shape[1] / cut.shape[0]
+        items.append((z, lateral, i, None, tg.radius, tg.height_m, w_m))
+    for j, ob in enumerate(world.obstacles):
+        z, lateral = _to_camera(ob.x - r.x, ob.y - r.y, c, s)
+        items.append((z, lateral, None, j, ob.radius, OBSTACLE_HEIGHT_M, 2 * ob.radius))
+    out = []
+    for z, lateral, ti, oi, radius, h_m, w_m in sorted(items, key=lambda it: -it[0]):
+        if z < NEAREST_DRAWN_M:
+            continue  # behind the camera or too close to render
+        u = cx - f * lateral / z
+        bottom = cy + f * spec.height_m / z
+        hp, wp = f * h_m / z, f * w_m / z
+        img = None
+        if ti is None:
+            # A filled box from corner to corner, both included (as cv2.rectangle fills).
+            x0, x1 = round(u - wp / 2), round(u + wp / 2) + 1
+            y0, y1 = round(bottom - hp), round(bottom) + 1
+            drawn = True
+        else:
+            tg = world.targets[ti]
+            img = sprite(tg.sprite, tg.mirror)
+            w, h = round(wp), round(hp)
+            x0, y0 = round(u - wp / 2), round(bottom - hp)
+            x1, y1 = x0 + w, y0 + h
+            drawn = 2 <= w <= 8 * spec.width and 2 <= h <= 8 * spec.height
+        cx0, cy0 = max(x0, 0), max(y0, 0)
+        cx1, cy1 = min(x1, spec.width), min(y1, spec.height)
+        rect = (cx0, cy0, cx1, cy1) if drawn and cx1 > cx0 and cy1 > cy0 else None
+        out.append(Placed(ti, oi, z, lateral, radius, h_m, rect, (x0, y0, x1, y1), img))
+    return out
 
 
 def render(world: World, spec: CameraSpec) -> Image:
     """The image of ``world`` from a camera on the robot (its pose, plus the mounting yaw)."""
     canvas = background(spec).copy()
-    r = world.robot
-    heading = r.theta + math.radians(spec.mount_yaw_deg)  # where the camera looks, world frame
-    c, s = math.cos(heading), math.sin(heading)
-    f, cx, cy = spec.focal_px, spec.width / 2, spec.height / 2
-    items: list[tuple[float, float, Image | None, float, float]] = []  # z, lateral, img, h, w
-    for tg, (tx, ty) in zip(world.targets, world.target_positions(), strict=True):
-        cut = sprite(tg.sprite, tg.mirror)
-        z, lateral = _to_camera(tx - r.x, ty - r.y, c, s)
-        items.append((z, lateral, cut, tg.height_m, tg.height_m * cut.shape[1] / cut.shape[0]))
-    for ob in world.obstacles:
-        z, lateral = _to_camera(ob.x - r.x, ob.y - r.y, c, s)
-        items.append((z, lateral, None, OBSTACLE_HEIGHT_M, 2 * ob.radius))
-    for z, lateral, img, h_m, w_m in sorted(items, key=lambda it: -it[0]):
-        if z < 0.3:
-            continue  # behind the camera or too close to render
-        u = cx - f * lateral / z
-        bottom = cy + f * spec.height_m / z
-        hp, wp = f * h_m / z, f * w_m / z
-        if img is None:
-            x0, x1 = round(u - wp / 2), round(u + wp / 2)
-            cv2.rectangle(canvas, (x0, round(bottom - hp)), (x1, round(bottom)), (90, 90, 95), -1)
-        else:
-            _paste(canvas, img, u - wp / 2, bottom - hp, wp, hp)
+    for p in layout(world, spec):
+        if p.rect is None:
+            continue
+        cx0, cy0, cx1, cy1 = p.rect
+        if p.img is None:
+            canvas[cy0:cy1, cx0:cx1] = OBSTACLE_BGR
+            continue
+        x0, y0, x1, y1 = p.full
+        w, h = x1 - x0, y1 - y0
+        scaled = cv2.resize(
+            p.img, (w, h), interpolation=cv2.INTER_AREA if w < p.img.shape[1] else cv2.INTER_LINEAR
+        )
+        canvas[cy0:cy1, cx0:cx1] = scaled[cy0 - y0 : cy1 - y0, cx0 - x0 : cx1 - x0]
     return canvas
 
 

@@ -1,7 +1,9 @@
 """The simulator service: the robot's cameras, laser and base, driven by cmd_vel over Zenoh.
 
 Every configured camera is rendered from the same world, each on its own key
-(services/sim/cameras.py says at what size and rate).
+(services/sim/cameras.py says at what size and rate). With ``sim.depth`` each camera is an
+RGB-D camera: every colour frame comes with a depth image of the same instant, under the same
+header (services/sim/depth.py). With ``sim.laser`` false the robot has no laser: no scan.
 
 The robot talks either way a robot may: the stack's own messages (``StackRobot``), or ROS 2 over
 rmw_zenoh (``RosRobot``: sensor_msgs Image and LaserScan, geometry_msgs Twist or TwistStamped,
@@ -27,7 +29,7 @@ from common.counters import per_camera
 from common.errors import ConfigError, DecodeError
 from common.frames import image_to_frame
 from common.lifecycle import Closing
-from common.messages import Frame, GroundTruth, LaserScan, Twist
+from common.messages import DepthFrame, Frame, GroundTruth, LaserScan, Twist
 from common.node import Node, Tally
 from services.ros2 import (
     IMAGE,
@@ -43,6 +45,7 @@ from services.ros2 import (
 )
 from services.sim import contract
 from services.sim.cameras import SimCamera, sim_cameras
+from services.sim.depth import DepthNoise, apply, depth_frame, render_depth
 from services.sim.laser import LaserSpec, cast
 from services.sim.render import render
 from services.sim.scenarios import SCENARIOS
@@ -99,19 +102,26 @@ class SimHandlers:
 
 class SensorOutput(Protocol):
     def frame(self, camera: str, frame: Frame) -> None: ...
+    def depth(self, camera: str, frame: DepthFrame) -> None: ...
     def scan(self, scan: LaserScan) -> None: ...
 
 
 class StackRobot:
-    """Sensors on the stack's keys (each camera's frames on its own); commands from the
-    controller's cmd_vel key."""
+    """Sensors on the stack's keys (each camera's frames and depth images on its own);
+    commands from the controller's cmd_vel key."""
 
     def __init__(self, config: Config, node: Node, handlers: SimHandlers) -> None:
         keys = node.keys
+        cameras = config.all_cameras
         self._frames = {
-            camera: node.publisher(keys.frame(camera), QoS.SENSOR) for camera in config.all_cameras
+            camera: node.publisher(keys.frame(camera), QoS.SENSOR) for camera in cameras
         }
-        self._scan = node.publisher(keys.scan(), QoS.SENSOR)
+        self._depths = (
+            {camera: node.publisher(keys.depth(camera), QoS.SENSOR) for camera in cameras}
+            if config.sim.depth
+            else {}
+        )
+        self._scan = node.publisher(keys.scan(), QoS.SENSOR) if config.sim.laser else None
         self._sub = node.bus.subscribe(
             keys.cmd_vel(), lambda sample: handlers.on_cmd_vel(sample.payload, sample.source)
         )
@@ -119,8 +129,12 @@ class StackRobot:
     def frame(self, camera: str, frame: Frame) -> None:
         self._frames[camera].put(frame.encode())
 
+    def depth(self, camera: str, frame: DepthFrame) -> None:
+        self._depths[camera].put(frame.encode())
+
     def scan(self, scan: LaserScan) -> None:
-        self._scan.put(scan.encode())
+        if self._scan is not None:
+            self._scan.put(scan.encode())
 
     def close(self) -> None:
         self._sub.undeclare()
@@ -129,7 +143,8 @@ class StackRobot:
 class RosRobot(Closing):
     """Sensors as ROS 2 messages on the rmw_zenoh keys of ``config.ros2``'s topics; commands
     taken from its cmd_vel topic. Hosts the graph's router on ``ros2.router``. One image topic:
-    the first camera's frames alone (``run`` renders no other camera for it)."""
+    the first camera's frames alone (``run`` renders no other camera for it), and no depth
+    topic (``run`` renders no depth for it)."""
 
     def __init__(self, config: Config, handlers: SimHandlers) -> None:
         s = config.ros2
@@ -141,6 +156,9 @@ class RosRobot(Closing):
 
     def frame(self, camera: str, frame: Frame) -> None:
         self._image.put(frame_to_image(self._distro, frame))
+
+    def depth(self, camera: str, frame: DepthFrame) -> None:
+        raise NotImplementedError("the simulated ROS 2 robot has no depth topic")
 
     def scan(self, scan: LaserScan) -> None:
         self._scan.put(scan_to_ros(self._distro, scan))
@@ -157,10 +175,14 @@ def build_world(config: Config) -> World:
 
 
 def announce_cameras(
-    announcements: CameraAnnouncements, cameras: list[SimCamera], physics_hz: float
+    announcements: CameraAnnouncements,
+    cameras: list[SimCamera],
+    physics_hz: float,
+    depth: bool = False,
 ) -> None:
     """Announce each camera the simulator renders on the stack's keys, as it renders it (no
-    faster than the physics: frames are rendered on its ticks)."""
+    faster than the physics: frames are rendered on its ticks); with ``depth``, as an RGB-D
+    camera at its height above the floor."""
     for c in cameras:
         announcements.announce(
             c.name,
@@ -170,6 +192,8 @@ def announce_cameras(
             frame_id=c.frame_id,
             width=c.spec.width,
             height=c.spec.height,
+            depth=depth,
+            mount_height_m=c.spec.height_m if depth else 0.0,
         )
 
 
@@ -187,6 +211,9 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
         cameras = cameras[:1]  # one image topic (the supervisor warns of the others)
     laser = LaserSpec(s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m)
     rng = np.random.default_rng(s.seed)
+    depth = depth_noise(s) if s.depth and not s.ros2_robot else None
+    # Its own stream, so that the laser's noise is the same with depth or without.
+    depth_rng = np.random.default_rng([s.seed, 1])
     sources = CommandSources(s.command_sources_window_s)
     with Node("sim", config, bus=bus) as node, ExitStack() as closing:
         keys = node.keys
@@ -224,12 +251,12 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
             announcements = closing.enter_context(
                 CameraAnnouncements(node.bus, keys, ANNOUNCED_SOURCE)
             )
-            announce_cameras(announcements, cameras, s.physics_hz)
+            announce_cameras(announcements, cameras, s.physics_hz, depth=depth is not None)
 
         def new_clocks() -> dict[str, Clock]:
             return {
                 **{f"frame:{c.name}": Clock(c.rate_hz) for c in cameras},
-                "scan": Clock(s.scan_rate_hz),
+                **({"scan": Clock(s.scan_rate_hz)} if s.laser else {}),
                 "truth": Clock(s.truth_rate_hz),
             }
 
@@ -241,6 +268,10 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
                 c.name, c.spec.width, c.spec.height, c.rate_hz, c.spec.hfov_deg,
                 c.spec.mount_yaw_deg,
             )  # fmt: skip
+        if s.depth and s.ros2_robot:
+            node.log.warning("sim.depth: no depth images as a ROS 2 robot (no depth topic)")
+        if not s.laser:
+            node.log.info("sim.laser = false: a robot with no laser, no scan")
         missing = [c for c in SCENARIOS[s.scenario].cameras if c not in config.all_cameras]
         if missing:
             node.log.warning(
@@ -268,7 +299,10 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
                     if started:
                         world.advance(dt)
                     t = world.t if started else now - boot
-                    _publish_due(node, world, t, clocks, out, truth_pub, cameras, laser, rng)
+                    _publish_due(
+                        node, world, t, clocks, out, truth_pub, cameras, laser, rng,
+                        depth, depth_rng,
+                    )  # fmt: skip
                 node.publish_counters()
                 next_tick = max(next_tick + dt, mono_s() - dt)
                 stop.wait(max(0.0, next_tick - mono_s()))
@@ -294,7 +328,12 @@ def _publish_due(
     cameras: list[SimCamera],
     laser: LaserSpec,
     rng: np.random.Generator,
+    depth: DepthNoise | None = None,
+    depth_rng: np.random.Generator | None = None,
 ) -> None:
+    """Put what is due at scenario time ``t``: each camera's frame (and, with ``depth``, its
+    depth image under the same header), the scan (when it has a clock: a laser) and the
+    truth."""
     r = world.robot
     pose = (r.x, r.y, r.theta)
     for camera in cameras:
@@ -302,10 +341,13 @@ def _publish_due(
             header = node.header(frame_id=camera.frame_id)
             image = render(world, camera.spec)
             out.frame(camera.name, image_to_frame(image, header, jpeg_quality=camera.jpeg_quality))
-            node.counters.add(contract.FRAMES_OUT)
-            if len(cameras) > 1:  # the total above, and each camera's (common/counters.py)
-                node.counters.add(per_camera(contract.FRAMES_OUT, camera.name))
-    if clocks["scan"].due(t):
+            _count(node, contract.FRAMES_OUT, camera.name, len(cameras))
+            if depth is not None:
+                rng_d = depth_rng if depth_rng is not None else rng
+                noisy = apply(render_depth(world, camera.spec), image, depth, rng_d)
+                out.depth(camera.name, depth_frame(noisy, camera.spec, header, depth))
+                _count(node, contract.DEPTH_OUT, camera.name, len(cameras))
+    if "scan" in clocks and clocks["scan"].due(t):
         scan = LaserScan(
             header=node.header(frame_id="laser"),
             angle_min=laser.angle_min,
@@ -327,3 +369,23 @@ def _publish_due(
             obstacles=world.obstacle_circles(),
         )
         truth_pub.put(truth.encode())
+
+
+def _count(node: Node, counter: str, camera: str, cameras: int) -> None:
+    node.counters.add(counter)
+    if cameras > 1:  # the total above, and each camera's (common/counters.py)
+        node.counters.add(per_camera(counter, camera))
+
+
+def depth_noise(s: contract.SimSettings) -> DepthNoise:
+    """The depth camera's faults, from the ``sim.depth_*`` settings."""
+    return DepthNoise(
+        range_min_m=s.depth_range_min_m,
+        range_max_m=s.depth_range_max_m,
+        noise_k=s.depth_noise_k,
+        edge_px=s.depth_edge_px,
+        edge_jump=s.depth_edge_jump,
+        dark_level=s.depth_dark_level,
+        dark_dropout=s.depth_dark_dropout,
+        dropout=s.depth_dropout,
+    )

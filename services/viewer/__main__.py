@@ -3,8 +3,8 @@
 serve (the default) runs the live view: a Foxglove WebSocket server on viewer.host:viewer.port
 showing each camera with its detections, the laser scan, the simulator's world, the command, the
 controller's state and the metrics (docs/viewer.md). layout writes the Foxglove layout that
-arranges them (deploy/foxglove/layout.json by default), an image panel for each camera of the
-config.
+arranges them (deploy/foxglove/layout.json by default), an image panel and a depth panel for
+each camera of the config.
 """
 
 from __future__ import annotations
@@ -29,6 +29,9 @@ def serve(args: argparse.Namespace) -> int:
 
 def _layout_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, help="where to write it (default the shipped file)")
+    p.add_argument(
+        "--no-depth", action="store_true", help="no depth panels (cameras without depth)"
+    )
     add_config(p)
 
 
@@ -36,7 +39,7 @@ def layout(args: argparse.Namespace) -> int:
     from services.viewer import layout
 
     cameras = list(load_config(args.config).all_cameras)  # an image panel for each
-    print(layout.write(args.out or layout.LAYOUT_FILE, cameras))
+    print(layout.write(args.out or layout.LAYOUT_FILE, cameras, depth=not args.no_depth))
     return 0
 
 

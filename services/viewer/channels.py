@@ -1,7 +1,9 @@
 """The live view's Foxglove channels: their topics, and the JSON schemas of the plottable ones.
 
 Typed channels (protobuf, Foxglove's own schemas) carry each camera's image and its
-annotations, the scan, the transforms and the 3D scene; the command, the controller's state and
+annotations, the depth image of each camera announced with depth (made when it is first
+announced so), the 3D boxes of the detections with depth, the scan, the transforms and the 3D
+scene; the command, the controller's state and
 the metrics are JSON with a JSON schema, so that Foxglove's Plot panel can plot any number in
 them. The layout (layout.py) names the same topics.
 """
@@ -17,6 +19,7 @@ from foxglove.channels import (
     FrameTransformsChannel,
     ImageAnnotationsChannel,
     LaserScanChannel,
+    RawImageChannel,
     SceneUpdateChannel,
 )
 
@@ -26,6 +29,7 @@ ANNOTATIONS = "/camera/annotations"
 SCAN = "/scan"
 TF = "/tf"
 SCENE = "/world/scene"
+BOXES_3D = "/detections/boxes3d"  # every camera's 3D boxes, an entity per camera
 CMD_VEL = "/cmd_vel"
 CONTROLLER = "/controller/status"
 METRICS = "/metrics"
@@ -38,6 +42,12 @@ def camera_topics(first: str, camera: str) -> tuple[str, str]:
     if camera == first:
         return IMAGE, ANNOTATIONS
     return f"/camera/{camera}/image", f"/camera/{camera}/annotations"
+
+
+def depth_topic(first: str, camera: str) -> str:
+    """The depth image topic of ``camera``: ``/camera/depth`` for the first camera (``first``),
+    ``/camera/<name>/depth`` for each further one, beside its image."""
+    return "/camera/depth" if camera == first else f"/camera/{camera}/depth"
 
 
 _NUMBER = {"type": "number"}
@@ -77,6 +87,11 @@ METRICS_SCHEMA: dict[str, Any] = {
         "dropped_frames": {"type": "integer"},
         "drop_rate": _NUMBER,
         "bad_input": {"type": "integer", "description": "bad messages, all services"},
+        "depth_frames": {"type": "integer", "description": "depth images the detector took"},
+        "depth_unpaired": {
+            "type": "integer",
+            "description": "colour frames of a depth camera with no depth image in time",
+        },
         "latency_ms": {
             "type": "object",
             "description": "per stage (inference, end_to_end, ...): percentiles in ms",
@@ -101,14 +116,27 @@ class CameraChannels:
 
 class Channels:
     """Every channel of the view, in one Foxglove context (one server): ``cameras`` by name,
-    the first camera (stack.camera) first."""
+    the first camera (stack.camera) first; a camera's depth channel once asked for
+    (:meth:`depth`)."""
 
     def __init__(self, context: foxglove.Context, cameras: Sequence[str]) -> None:
-        first = cameras[0]
+        first = self.first = cameras[0]
+        self.context = context
         self.cameras = {c: CameraChannels(context, *camera_topics(first, c)) for c in cameras}
         self.scan = LaserScanChannel(SCAN, context=context)
         self.tf = FrameTransformsChannel(TF, context=context)
         self.scene = SceneUpdateChannel(SCENE, context=context)
+        self.boxes = SceneUpdateChannel(BOXES_3D, context=context)
+        self._depth: dict[str, RawImageChannel] = {}
         self.cmd_vel = foxglove.Channel(CMD_VEL, schema=CMD_VEL_SCHEMA, context=context)
         self.controller = foxglove.Channel(CONTROLLER, schema=CONTROLLER_SCHEMA, context=context)
         self.metrics = foxglove.Channel(METRICS, schema=METRICS_SCHEMA, context=context)
+
+    def depth(self, camera: str) -> RawImageChannel:
+        """``camera``'s depth image channel, made (advertised) on the first call: only the
+        cameras announced with depth have one."""
+        channel = self._depth.get(camera)
+        if channel is None:
+            topic = depth_topic(self.first, camera)
+            channel = self._depth[camera] = RawImageChannel(topic, context=self.context)
+        return channel

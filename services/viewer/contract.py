@@ -19,9 +19,20 @@ DETECTIONS_UNPAIRED = "detections_unpaired"
 IMAGES_OUT = "images_out"
 IMAGES_DROPPED = "images_dropped"
 UNSHOWABLE = "unshowable"
+DEPTH_IN = "depth_in"  # depth images heard (only while a client watches the camera's depth)
+DEPTH_OUT = "depth_out"  # ... and sent
 
 COUNTERS = frozenset(
-    {*COMMON, FRAMES_IN, DETECTIONS_UNPAIRED, IMAGES_OUT, IMAGES_DROPPED, UNSHOWABLE}
+    {
+        *COMMON,
+        FRAMES_IN,
+        DETECTIONS_UNPAIRED,
+        IMAGES_OUT,
+        IMAGES_DROPPED,
+        UNSHOWABLE,
+        DEPTH_IN,
+        DEPTH_OUT,
+    }
 )
 PER_CAMERA: frozenset[str] = frozenset()
 
@@ -36,12 +47,15 @@ def access(shape: Shape) -> dict[str, Access]:
             SERVICE,
             read=(
                 keys.all_frames(),
+                keys.all_depths(),
                 keys.all_detections(),
                 keys.scan(),
                 keys.cmd_vel(),
                 keys.controller_status(),
                 keys.sim_truth(),
             ),
+            # Which cameras have depth, and where each stands on the robot.
+            watch=(keys.all_camera_announcements(),),
         )
     }
 
@@ -59,6 +73,11 @@ class ViewerSettings:
     frames that arrive faster are dropped and counted. The metrics service is asked
     ``metrics_rate_hz`` times a second; the 3D scene (simulator only) is sent ``scene_rate_hz``
     times a second with the robot's last ``path_points`` positions as its path.
+    A camera announced with depth has its depth image (16UC1, mm) sent as its colour images
+    are, while a client watches it; detections with depth are drawn as 3D boxes at most
+    ``image_rate_hz`` times a second per camera, each camera's lasting ``boxes_lifetime_s``
+    from their capture stamp (they vanish when its detections stop; shorter than the
+    detector's latency plus its period, they blink).
 
     Who may connect (docs/security.md, "The live view"): a client whose request carries an
     ``Origin`` header (every browser page) only if that origin is in ``allowed_origins``
@@ -78,6 +97,7 @@ class ViewerSettings:
     path_points: int = 1000
     allowed_origins: tuple[str, ...] = ("https://app.foxglove.dev",)
     request_timeout_s: float = 5.0
+    boxes_lifetime_s: float = 2.0
 
     BOUNDS: ClassVar[Bounds] = {
         "port": (1, 65535),
@@ -88,6 +108,7 @@ class ViewerSettings:
         "scene_rate_hz": (0.1, 50),
         "path_points": (2, 100_000),
         "request_timeout_s": (0.1, 60),
+        "boxes_lifetime_s": (0.05, 60),
     }
     LENGTHS: ClassVar[Bounds] = {"allowed_origins": (0, 100)}  # () lets in native clients only
 

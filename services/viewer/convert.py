@@ -189,7 +189,8 @@ def status_json(status: ControllerStatus) -> dict[str, Any]:
 
 def metrics_json(answer: MetricsAnswer) -> dict[str, Any]:
     """The metrics service's answer without its timeline (plotted live instead): FPS, drops,
-    bad input and each stage's latency percentiles in ms."""
+    bad input, the depth images taken and missed, and each stage's latency percentiles in
+    ms."""
     counters = answer["counters"]
     return {
         "fps": answer["fps"],
@@ -197,5 +198,7 @@ def metrics_json(answer: MetricsAnswer) -> dict[str, Any]:
         "dropped_frames": answer["dropped_frames"],
         "drop_rate": answer["drop_rate"],
         "bad_input": sum(v for k, v in counters.items() if k.endswith(f".{BAD_INPUT}")),
+        "depth_frames": answer.get("depth_frames", 0),
+        "depth_unpaired": answer.get("depth_unpaired", 0),
         "latency_ms": answer["latency_ms"],
     }

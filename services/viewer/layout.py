@@ -4,16 +4,19 @@ Built with the SDK's own layout types, so that it matches the channels by constr
 ``python -m services.viewer layout`` writes it, and a unit test checks that the file shipped is
 what this module builds.
 
-    +----------------------------+------------------------+
-    | Image: /camera/image with  | 3D: /world/scene, /scan |
-    | /camera/annotations        | and /tf, following the  |
-    |                            | robot                   |
-    +--------------+-------------+------------+-----------+
+    +-------------------+-------------+-------------------------+
+    | Image:            | Image:      | 3D: /world/scene, /scan, |
+    | /camera/image with| /camera/    | /detections/boxes3d and  |
+    | /camera/annotations| depth      | /tf, following the robot |
+    +--------------+----+-------------+-------+-----------------+
     | Plot: speeds | Plot: latency per stage  | Plot: FPS | Raw: controller state
     +--------------+--------------------------+-----------+
 
-With several cameras the image panel becomes a column of them, one per camera (the first camera
-on top), each with its own image and annotations topics (channels.camera_topics).
+With several cameras the image panels become a column of rows, one per camera (the first
+camera on top), each with its own image, annotations and depth topics (channels.camera_topics,
+channels.depth_topic). The depth panel stays empty for a camera with no depth; ``depth=False``
+leaves it out. The depth image is 16UC1 millimetres, drawn through the turbo colour map from 0
+to :data:`DEPTH_SHOWN_MAX_MM` (change it in the panel's settings for a longer range).
 """
 
 from __future__ import annotations
@@ -31,12 +34,14 @@ from services.viewer.scene import WORLD_FRAME
 
 LAYOUT_FILE = REPO_ROOT / "deploy" / "foxglove" / "layout.json"
 ONE_CAMERA = (StackSettings().camera,)  # the shipped layout's: one camera
-# The stages the metrics service times (services/metrics/aggregate.py), in pipeline order.
+DEPTH_SHOWN_MAX_MM = 10_000.0  # the depth panel's colour map spans 0..10 m
+# The stages the metrics service times (services/metrics/figures.py), in pipeline order.
 LATENCY_STAGES = (
     "capture_to_detector",
     "preprocess",
     "inference",
     "postprocess",
+    "depth",
     "capture_to_detections",
     "detections_to_command",
     "end_to_end",
@@ -72,25 +77,62 @@ def _image(image_topic: str, annotations_topic: str, title: str) -> fl.ImagePane
     )
 
 
-def _images(cameras: Sequence[str]) -> fl.ImagePanel | fl.SplitContainer:
-    """One image panel per camera: the one-camera view's panel alone, or a column of them."""
+DEPTH_TITLE = "depth (mm, if the camera has depth)"
+
+
+def _depth(topic: str, title: str) -> fl.ImagePanel:
+    return fl.ImagePanel(
+        title=title,
+        config=fl.ImageConfig(
+            image_mode=fl.ImageModeConfig(
+                image_topic=topic,
+                color_mode="colormap",
+                color_map="turbo",
+                min_value=0.0,
+                max_value=DEPTH_SHOWN_MAX_MM,
+            ),
+        ),
+    )
+
+
+Panel = fl.ImagePanel | fl.SplitContainer
+
+
+def _camera(cameras: Sequence[str], camera: str, depth: bool) -> Panel:
+    """One camera's image panel, beside its depth panel (``depth``)."""
+    first = cameras[0]
+    named = "" if len(cameras) == 1 else f"{camera}: "
+    image = _image(*ch.camera_topics(first, camera), named + IMAGE_TITLE)
+    if not depth:
+        return image
+    beside = _depth(ch.depth_topic(first, camera), named + DEPTH_TITLE)
+    return fl.SplitContainer(
+        direction="row",
+        items=[fl.SplitItem(proportion=2, content=image), fl.SplitItem(content=beside)],
+    )
+
+
+def _images(cameras: Sequence[str], depth: bool) -> Panel:
+    """Each camera's panels: the one-camera view's alone, or a column of them."""
     if len(cameras) == 1:
-        return _image(ch.IMAGE, ch.ANNOTATIONS, IMAGE_TITLE)
-    panels = [_image(*ch.camera_topics(cameras[0], c), f"{c}: {IMAGE_TITLE}") for c in cameras]
+        return _camera(cameras, cameras[0], depth)
+    panels = [_camera(cameras, c, depth) for c in cameras]
     return fl.SplitContainer(direction="column", items=[fl.SplitItem(content=p) for p in panels])
 
 
-def build(cameras: Sequence[str] = ONE_CAMERA) -> fl.Layout:
-    """The layout of a stack with ``cameras`` (the first camera, stack.camera, first)."""
-    image = _images(cameras)
+def build(cameras: Sequence[str] = ONE_CAMERA, depth: bool = True) -> fl.Layout:
+    """The layout of a stack with ``cameras`` (the first camera, stack.camera, first), with a
+    depth panel beside each camera's image (``depth``)."""
+    image = _images(cameras, depth)
     world = fl.ThreeDeePanel(
-        title="world (simulator), laser scan, robot path",
+        title="world (simulator), laser scan, 3D detections, robot path",
         config=fl.ThreeDeeConfig(
             follow_tf="base_link",
             follow_mode="follow-position",
             fixed_frame=WORLD_FRAME,
             topics={
                 ch.SCENE: fl.BaseRendererSceneUpdateTopicSettings(visible=True),
+                ch.BOXES_3D: fl.BaseRendererSceneUpdateTopicSettings(visible=True),
                 ch.SCAN: fl.BaseRendererLaserScanTopicSettings(
                     visible=True, point_size=4.0, color_mode="flat", flat_color="#ff4040"
                 ),
@@ -115,7 +157,12 @@ def build(cameras: Sequence[str] = ONE_CAMERA) -> fl.Layout:
     state = fl.RawMessagesPanel(
         title="controller", config=fl.RawMessagesConfig(topic_path=ch.CONTROLLER)
     )
-    top = fl.SplitContainer(items=[fl.SplitItem(content=p) for p in (image, world)])
+    top = fl.SplitContainer(
+        items=[
+            fl.SplitItem(proportion=2 if depth else 1, content=image),
+            fl.SplitItem(content=world),
+        ]
+    )
     bottom = fl.SplitContainer(
         direction="row",
         items=[fl.SplitItem(content=p) for p in (speeds, latency, fps, state)],
@@ -131,12 +178,14 @@ def build(cameras: Sequence[str] = ONE_CAMERA) -> fl.Layout:
     )
 
 
-def layout_json(cameras: Sequence[str] = ONE_CAMERA) -> str:
+def layout_json(cameras: Sequence[str] = ONE_CAMERA, depth: bool = True) -> str:
     """The layout as the file holds it: indented JSON, one trailing newline."""
-    return json.dumps(json.loads(build(cameras).to_json()), indent=2) + "\n"
+    return json.dumps(json.loads(build(cameras, depth).to_json()), indent=2) + "\n"
 
 
-def write(path: Path = LAYOUT_FILE, cameras: Sequence[str] = ONE_CAMERA) -> Path:
+def write(
+    path: Path = LAYOUT_FILE, cameras: Sequence[str] = ONE_CAMERA, depth: bool = True
+) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(path, layout_json(cameras).encode("utf-8"))
+    atomic_write_bytes(path, layout_json(cameras, depth).encode("utf-8"))
     return path

@@ -3,29 +3,42 @@
 Zenoh's callbacks convert the small messages (scan, command, controller status, truth) at
 once; each camera's frames and detections only go into that camera's ``Pairing``, and the
 viewer's own encoder thread turns each camera's newest pair into a JPEG and its annotations on
-the camera's own channels at ``image_rate_hz``, and only while a client watches them. Nothing
-here publishes on the stack's keys but the viewer's counters.
+the camera's own channels at ``image_rate_hz``, and only while a client watches them. The
+cameras' announcements say which have depth (their depth images: depth_feed.py) and where each
+stands on the robot (the transforms under the 3D boxes: depth.py). Nothing here publishes on
+the stack's keys but the viewer's counters.
 """
 
 from __future__ import annotations
 
 import errno
 import threading
+from collections.abc import Mapping
 
 import foxglove
 from foxglove.websocket import WebSocketServer
 
-from common.clock import mono_s
+from common.announce import Announced, announced_cameras
+from common.clock import SYSTEM_CLOCK, Clock, mono_s
 from common.contracts import MetricsAnswer
 from common.credential_modes import check_folder, check_secret
 from common.errors import ConfigError, ImageError
-from common.messages import ControllerStatus, Detections, Frame, GroundTruth, LaserScan, Twist
+from common.messages import (
+    CameraAnnouncement,
+    ControllerStatus,
+    Detections,
+    Frame,
+    GroundTruth,
+    LaserScan,
+    Twist,
+)
 from common.node import Node, Tally
 from common.ports import holder_words
 from common.queries import query_metrics
 from common.security import viewer_token_file
-from services.viewer import contract, convert, scene
+from services.viewer import contract, convert, depth, scene
 from services.viewer.channels import CameraChannels, Channels
+from services.viewer.depth_feed import DepthFeed, Subscribe
 from services.viewer.front import Front, make_check
 from services.viewer.pairing import Pairing
 from stack.config import Config
@@ -100,8 +113,11 @@ class CameraView:
     def on_detections(self, payload: bytes) -> None:
         tally = self.viewer.tally
         dets = tally.decode(self._detections_key, Detections.decode, payload)
-        if dets is not None and not self.pairing.add_detections(dets, mono_s()):
+        if dets is None:
+            return
+        if not self.pairing.add_detections(dets, mono_s()):
             tally.counters.add(contract.DETECTIONS_UNPAIRED)
+        self.viewer.on_boxes(self.camera, dets)
 
     def send(self, frame: Frame, dets: Detections | None) -> None:
         """Send ``frame`` as a JPEG, and ``dets`` as its annotations; a frame whose pixels
@@ -131,12 +147,22 @@ class Viewer:
     """The viewer's handlers and what they and the threads share: the channels, each camera's
     view (``cameras``, the first camera first), the latest status and the robot's path. Each
     ``on_*`` takes a payload as it came off the bus; garbage is counted as bad input on its
-    key."""
+    key. ``subscribe`` is how it hears the depth images it shows (``Node.subscribe``; None:
+    none)."""
 
-    def __init__(self, tally: Tally, channels: Channels, config: Config) -> None:
+    def __init__(
+        self,
+        tally: Tally,
+        channels: Channels,
+        config: Config,
+        subscribe: Subscribe | None = None,
+        *,
+        clock: Clock = SYSTEM_CLOCK,
+    ) -> None:
         self.tally = tally
         self.channels = channels
         self.settings = config.viewer
+        self.clock = clock
         self.locked_track = -1
         self.locked_camera = ""  # the camera that sees the target: track ids are per camera
         self.trail = scene.PathTrail(self.settings.path_points)
@@ -145,6 +171,39 @@ class Viewer:
         self.cameras = {
             name: CameraView(self, name, channels.cameras[name]) for name in config.all_cameras
         }
+        #: The viewer's cameras as their sources announce them now (depth, mounting).
+        self.announced: dict[str, CameraAnnouncement] = {}
+        self._announced_lock = threading.Lock()
+        self.depth = (
+            None if subscribe is None else DepthFeed(tally, channels, subscribe, self.cameras)
+        )
+        self._next_boxes = dict.fromkeys(self.cameras, -float("inf"))
+
+    def set_announced(self, announced: Mapping[str, CameraAnnouncement]) -> None:
+        """The cameras announced now; only the viewer's own are kept (a made-up name on the
+        bus grows nothing)."""
+        with self._announced_lock:
+            self.announced = {c: a for c, a in announced.items() if c in self.cameras}
+
+    def on_boxes(self, camera: str, dets: Detections) -> None:
+        """``camera``'s detections as 3D boxes, if they carry depth and a client watches the
+        boxes, at most ``image_rate_hz`` times a second per camera."""
+        if not depth.has_depth(dets) or not self.channels.boxes.has_sinks():
+            return
+        now = self.clock.mono_s()
+        if now < self._next_boxes[camera]:
+            return
+        self._next_boxes[camera] = now + 1.0 / self.settings.image_rate_hz
+        with self._announced_lock:
+            frame_id = depth.optical_frames(self.announced).get(camera, f"{camera}_optical")
+        try:
+            boxes = depth.boxes_scene(
+                dets, camera, frame_id, self.locked_on(camera), self.settings.boxes_lifetime_s
+            )
+        except ValueError as exc:
+            self.unshowable("3D boxes", exc)
+            return
+        self.channels.boxes.log(boxes, log_time=dets.header.stamp_ns)
 
     def unshowable(self, what: str, error: ValueError) -> None:
         """A message that decoded but that Foxglove cannot carry (a stamp past 2106)."""
@@ -202,8 +261,8 @@ class Viewer:
             self.channels.scene.log(scene.scene(truth, self.trail.points()), log_time=at)
 
     def encode_loop(self, stop: threading.Event) -> None:
-        """Send each camera's newest image and its annotations, at most ``image_rate_hz`` a
-        second per camera."""
+        """Send each camera's newest image and its annotations, its depth image and where it
+        stands, at most ``image_rate_hz`` a second per camera."""
         period = 1.0 / self.settings.image_rate_hz
         dropped = dict.fromkeys(self.cameras, 0)
         while not stop.wait(period):
@@ -216,6 +275,20 @@ class Viewer:
                     dropped[name] = view.pairing.dropped
                 if item is not None and view.channels.watched():
                     view.send(*item)
+            self.send_depth()
+
+    def send_depth(self) -> None:
+        """One turn of the encoder for depth: hear the depth a client watches, send each
+        camera's newest depth image, and the transforms from the robot to each camera announced
+        (the 3D boxes are drawn in them), resent each turn for clients that join later."""
+        with self._announced_lock:
+            announced = dict(self.announced)
+        if self.depth is not None:
+            self.depth.update(announced)
+            self.depth.send(self.settings.max_image_width, self.unshowable)
+        if announced and self.channels.tf.has_sinks():
+            at = self.clock.wall_ns()
+            self.channels.tf.log(depth.camera_transforms(announced, at), log_time=at)
 
     def on_metrics(self, answer: MetricsAnswer) -> None:
         """The metrics service's answer to the metrics loop's question, shown."""
@@ -238,8 +311,18 @@ def run(config: Config, stop: threading.Event) -> int:
     with Node("viewer", config) as node:
         server = start_server(context)
         front = start_front(config, server.port)
-        viewer = Viewer(node, channels, config)
+        viewer = Viewer(node, channels, config, node.subscribe, clock=node.clock)
         keys = node.keys
+        heard: Announced[CameraAnnouncement] | None = None
+
+        def on_cameras() -> None:
+            if heard is not None:  # else called back while it is being declared
+                viewer.set_announced(heard.current())
+
+        heard = announced_cameras(
+            node.bus, keys, on_cameras, lambda k, e: node.bad_input(k, e, topic="announcement")
+        )
+        on_cameras()
         subs = [
             sub
             for camera, view in viewer.cameras.items()
@@ -271,8 +354,11 @@ def run(config: Config, stop: threading.Event) -> int:
             node.log.info("stopping")
             for sub in subs:
                 sub.undeclare()
+            heard.close()
             for t in threads:
                 t.join(timeout=2.0)
+            if viewer.depth is not None:
+                viewer.depth.close()
             front.stop()
             server.stop()
     return 0

@@ -1,7 +1,8 @@
 """Detections that come too late for the dead-man, on real processes (the metrics service under
 the supervisor; the test's own session stands in for a slow detector): the metrics answer says
 so with the figures and the fixes (``zstack query``), and the supervisor says it once, as a
-WARNING, however many status lines name it.
+WARNING, however many status lines name it. The camera has depth (issue 32): the query's lines
+and JSON carry the depth figures (the detector's depth counters, the depth stage's time) too.
 
 The controller's side (it flips between stale and moving on each detection, and summarises the
 flip-flop instead of logging each change) and the warning's text for each case are in-process:
@@ -19,6 +20,7 @@ import sys
 import pytest
 
 from common.clock import now
+from common.messages import ServiceCounters
 from tests.integration.conftest import REPO, Stack, wait_for
 from tests.integration.feeder import Feeder, header
 from tests.integration.test_safety import person
@@ -31,19 +33,32 @@ pytestmark = pytest.mark.integration
 LATE_S = 0.9
 
 
+DEPTH_COUNTERS = {"depth_in": 40, "depth_unpaired": 3, "depth_in.front": 40,
+                  "depth_unpaired.front": 3, "frames_in.front": 43}  # fmt: skip
+
+
 def late_person() -> bytes:
     dets = person(header(LATE_S))
-    return dataclasses.replace(dets, published_ns=now().wall_ns).encode()
+    timing = {"depth": 4.0}  # the depth stage of a depth camera's frame
+    return dataclasses.replace(dets, published_ns=now().wall_ns, timing_ms=timing).encode()
+
+
+def depth_counters() -> bytes:
+    """The detector's counters, as a worker serving a depth camera counts them."""
+    return ServiceCounters(header=header(), service="detector", counters=DEPTH_COUNTERS).encode()
 
 
 def test_late_detections_are_said_once_with_the_fixes(make_stack) -> None:  # type: ignore[no-untyped-def]
     stack: Stack = make_stack(supervisor={"services": ["metrics"]})
     stack.wait_ready({"metrics"})
-    stack.announce()  # the test stands in for the camera and the detector
+    stack.announce(depth=True, mount_height_m=0.5)  # the test: the camera and the detector
     front = stack.keys.detections("front")
+    counters = stack.keys.counters("detector")
     feeder = Feeder(stack)
     rounds = itertools.count()  # the feeder's rounds are 50 ms apart: one in four, 5 Hz
-    feeder.feed(lambda: {front: late_person()} if next(rounds) % 4 == 0 else {})
+    feeder.feed(
+        lambda: {front: late_person(), counters: depth_counters()} if next(rounds) % 4 == 0 else {}
+    )
     try:
         wait_for(
             lambda: stack.log().count("WARNING detections_late") >= 3, 60, "three status lines"
@@ -59,6 +74,16 @@ def test_late_detections_are_said_once_with_the_fixes(make_stack) -> None:  # ty
         prefix = stack.config.stack.prefix
         assert f"cameras announced under {prefix}: 1\n  front " in query.stderr, query.stderr
         assert f"WARNING detections_late: {told}" in query.stderr, query.stderr
+        answer = json.loads(query.stdout)
+        assert (answer["depth_frames"], answer["depth_unpaired"]) == (40, 3)
+        assert answer["cameras"]["front"]["depth_frames"] == 40
+        assert answer["latency_ms"]["depth"]["p50"] == 4.0
+        assert answer["cameras_announced"]["front"]["depth"] is True
+        assert "  depth  at x +0.00 y +0.00 height 0.50 m\n" in query.stderr, query.stderr
+        assert (
+            "depth: 40 depth images, 3 colour frames without depth in time, "
+            "depth stage p50 4.0 ms p95 4.0 ms\n  front: 40 depth images, 3 without depth"
+        ) in query.stderr, query.stderr
     finally:
         feeder.close()
     assert stack.stop() == 0, stack.log()

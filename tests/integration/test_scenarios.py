@@ -119,3 +119,20 @@ def test_ahead_with_the_simulator_playing_a_ros2_robot() -> None:
     assert result["success"], result
     log = Path(result["log"]).read_text()
     assert "ros2 INFO in the ROS 2 graph" in log and "ros2: exited" not in log
+
+
+@pytest.mark.parametrize("name", ["ahead", "obstacle"])
+def test_a_robot_with_a_depth_camera_and_no_laser(name: str) -> None:
+    # deploy/depth.toml: the simulator renders depth and has no laser; the controller follows
+    # by the target's depth (ahead) and stops for the obstacle its virtual scan shows.
+    result = run(name, "--config", str(REPO / "deploy" / "depth.toml"))
+    log = Path(result["log"]).read_text()
+    assert "sim.laser = false: a robot with no laser, no scan" in log, log
+    assert "forward motion needs fresh depth;" in log, log
+    if name == "ahead":
+        assert "distance to the target from depth" in log, log
+        assert reached(result), result
+    else:
+        assert "(depth)" in log, "never stopped for the obstacle the depth showed"
+        assert result["min_clearance_m"] >= DEFAULTS.safety_distance_m, result
+    assert result["success"], result

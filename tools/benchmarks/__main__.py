@@ -1,4 +1,4 @@
-"""python -m tools.benchmarks recorder|ros2|scale|pool|batch|attention|estop [options]
+"""python -m tools.benchmarks recorder|ros2|scale|pool|batch|attention|estop|depth [options]
 
 recorder runs the default stack with and without the recorder, side by side; ros2 measures
 what the ROS 2 bridge adds against the direct path; scale runs 1, 2, 4, 8 cameras on one
@@ -8,7 +8,9 @@ uneven load; batch times one backend per image at batch 1, 2, 4 ... (the whole d
 the model alone) with the choice the detector would make; attention runs three cameras at 640
 on one CPU worker with attention on and off (frames per camera, time to find a person stepping
 into an empty camera); estop times ``zstack estop
-engage``'s start to its first put against another revision. (The detector's own benchmark is
+engage``'s start to its first put against another revision; depth measures the distance to
+detected targets against the simulator's truth (the depth method, a yolo_ros-like one, the
+laser, the box height) and the depth stage's time per frame. (The detector's own benchmark is
 ``python -m tools.detector benchmark``.)
 """
 
@@ -268,6 +270,22 @@ def estop(args: argparse.Namespace) -> int:
     return main(options_from(EstopOptions, args, as_json=args.json))
 
 
+def _depth_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--worlds", type=int, default=150, help="simulated worlds (default 150)")
+    p.add_argument("--seed", type=int, default=1, help="the worlds' and noise's seed (default 1)")
+    p.add_argument("--threads", type=int, default=2, help="the detector's threads (default 2)")
+    p.add_argument("--models-dir", help="where the default model is (default: the stack's)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def depth(args: argparse.Namespace) -> int:
+    # No stop event: Ctrl-C interrupts at once (run_main: exit 130); it writes no file.
+    setup_logging("depth-bench", "WARNING")
+    from tools.benchmarks.depth import DepthBenchOptions, main
+
+    return main(options_from(DepthBenchOptions, args, as_json=args.json))
+
+
 COMMANDS = [
     Command("recorder", "the stack's FPS and latency with and without the recorder",
             _recorder_arguments, recorder),
@@ -284,6 +302,9 @@ COMMANDS = [
             _attention_arguments, attention),
     Command("estop", "how soon zstack estop puts its first EStop, against another revision",
             _estop_arguments, estop),
+    Command("depth", "distance to detected targets against the simulator's truth: the depth "
+            "method, a yolo_ros-like one, the laser and the box height; the depth stage's time",
+            _depth_arguments, depth),
 ]  # fmt: skip
 
 

@@ -22,7 +22,7 @@ from typing import Any
 import zenoh
 
 from common.clock import mono_s, wall_ns
-from common.contracts import ControllerMode, ScenarioResult
+from common.contracts import ControllerMode, DistanceSource, ScenarioResult
 from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, GroundTruth, Twist
@@ -56,11 +56,20 @@ def scenario_config(
         connect=(),
         listen=("tcp/127.0.0.1:0",),
     )
+    changes = dict(scenario.controller)
+    if (
+        base.controller.distance_source is DistanceSource.DEPTH
+        and changes.get("distance_source") == DistanceSource.LASER
+    ):
+        # A robot that measures by depth (deploy/depth.toml: it has no laser) keeps doing so
+        # where the scenario asks for a measured distance; "box" (the obstacle scenario: the
+        # obstacle stop alone) stays as the scenario says.
+        del changes["distance_source"]
     controller = dataclasses.replace(
         base.controller,
         mode=mode,
         target_classes=("person",),
-        **scenario.controller,
+        **changes,
     )
     bridge = ("ros2",) if ros2 else ()
     cameras = tuple(

@@ -14,9 +14,10 @@ import pytest
 from common.errors import ConfigError
 from common.images import Image
 from services.camera.contract import CameraSettings
+from services.camera.depth import DepthImage
 from services.camera.reopen import HEARTBEAT_S, ReopenHooks, ReopeningSource
 from services.camera.service import _reopening
-from services.camera.sources import FrameSource
+from services.camera.sources import FrameSource, depth_capable
 
 DEVICE = "camera device 9"
 
@@ -241,3 +242,43 @@ def test_the_reopen_period_is_a_bounded_setting() -> None:
     assert CameraSettings().reopen_period_s == 1.0
     with pytest.raises(ConfigError, match="reopen_period_s"):
         CameraSettings(reopen_period_s=0.0)
+
+
+class FakeDepthSource(FakeSource):
+    """A live RGB-D camera: each frame's depth is a 1x1 image of the frame's value in mm."""
+
+    has_depth = True
+
+    def __init__(self, *items: Image | Exception) -> None:
+        super().__init__(*items)
+        self._last: Image | None = None
+
+    def read(self) -> Image | None:
+        self._last = super().read()
+        return self._last
+
+    def depth(self) -> DepthImage | None:
+        if self._last is None:
+            return None
+        value = np.full((1, 1), int(self._last[0, 0, 0]), np.uint16)
+        return DepthImage(data=value, scale_m=0.001, fx=1.0, fy=1.0, cx=0.5, cy=0.5)
+
+
+def test_a_reopened_depth_camera_gives_the_depth_of_its_new_frames() -> None:
+    t = FakeTime()
+    rec = HookCalls(t)
+    first, second = FakeDepthSource(_image(1)), FakeDepthSource(_image(2))
+    factory, _ = _factory(t, second)
+    src = ReopeningSource(first, factory, period_s=1.0, stop=t, hooks=rec.hooks, clock=t.clock)
+    assert src.has_depth and depth_capable(src) is src
+    depths = []
+    for _ in range(2):
+        assert src.read() is not None
+        depth = src.depth()
+        assert depth is not None
+        depths.append(int(depth.data[0, 0]))
+    assert depths == [1, 2] and rec.reopened
+    plain = ReopeningSource(
+        FakeSource(_image(1)), factory, period_s=1.0, stop=t, hooks=rec.hooks, clock=t.clock
+    )
+    assert not plain.has_depth and depth_capable(plain) is None and plain.depth() is None

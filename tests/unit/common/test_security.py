@@ -170,9 +170,9 @@ def test_each_camera_principal_puts_only_its_own_frames(names: tuple[str, ...]) 
     everyone = next(s for s in acl["subjects"] if s["id"] == "everyone")
     assert everyone["usernames"] == list(principals)
     for camera, principal in cameras.items():
-        # Its own frames, counters, health token and camera's announcements; nothing else, and
-        # it reads nothing.
-        own = {KEYS.frame(camera), KEYS.counters(principal)}
+        # Its own frames and depth images, counters, health token and camera's announcements;
+        # nothing else, and it reads nothing.
+        own = {KEYS.frame(camera), KEYS.depth(camera), KEYS.counters(principal)}
         assert _allowed(acl, principal, "put") == own
         assert set(may_put(KEYS, cameras, principal)) == own
         assert _allowed(acl, principal, "liveliness_token") == {
@@ -183,6 +183,7 @@ def test_each_camera_principal_puts_only_its_own_frames(names: tuple[str, ...]) 
         assert _allowed(acl, principal, "declare_queryable") == set()
         for other in set(names) - {camera}:
             assert not _may(acl, principal, "put", KEYS.frame(other))
+            assert not _may(acl, principal, "put", KEYS.depth(other))
             assert not _may(acl, principal, "put", KEYS.detections(other))
         # Who else may put this camera's frames: the simulator and the ROS 2 bridge.
         putters = {p for p in principals if _may(acl, p, "put", KEYS.frame(camera))}
@@ -200,10 +201,11 @@ def test_each_camera_principal_puts_only_its_own_frames(names: tuple[str, ...]) 
     # The detector: every camera's detections and its own counters, never a frame.
     detector = {*(KEYS.detections(c) for c in names), KEYS.counters("detector")}
     assert _allowed(acl, "detector", "put") == detector
-    # It reads every camera's frames, and the controller's status (attention: the camera that
-    # sees the target first).
+    # It reads every camera's frames and depth images, and the controller's status
+    # (attention: the camera that sees the target first).
     assert _allowed(acl, "detector", "declare_subscriber") == {
         KEYS.all_frames(),
+        KEYS.all_depths(),
         KEYS.controller_status(),
     }
     # A camera the stack does not have: nobody may put its frames or its detections.

@@ -44,11 +44,13 @@ class CameraSource:
         self.keys = Keys(prefix)
         self.announcers: dict[str, Announcer[CameraAnnouncement]] = {}
 
-    def announce(self, camera: str, rate_hz: float = 5.0) -> None:
+    def announce(self, camera: str, rate_hz: float = 5.0, *, depth: bool = False) -> None:
+        """Announce ``camera`` (again); ``depth``: it has depth images too."""
         if camera not in self.announcers:
             key_of = partial(self.keys.camera_announcement, camera)
             self.announcers[camera] = Announcer(self.bus, key_of)
-        self.announcers[camera].update(CameraAnnouncement(camera=camera, rate_hz=rate_hz))
+        about = CameraAnnouncement(camera=camera, rate_hz=rate_hz, depth=depth)
+        self.announcers[camera].update(about)
 
     def withdraw(self, camera: str) -> None:
         self.announcers.pop(camera).close()

@@ -198,7 +198,8 @@ def test_the_cameras_are_the_announced_ones(rig: Rig) -> None:
     assert list(answer["cameras"]) == ["front", "rear"]  # before any detections
     assert answer["cameras_announced"]["rear"] == {
         "width": 640, "height": 480, "rate_hz": 10.0, "mount_yaw_deg": 180.0,
-        "hfov_deg": 60.0, "frame_id": "camera", "source": "test",
+        "hfov_deg": 60.0, "frame_id": "camera", "source": "test", "depth": False,
+        "mount_x_m": 0.0, "mount_y_m": 0.0, "mount_height_m": 0.0,
     }  # fmt: skip
     # A camera announced at run time gets its figures at once, and its detections count.
     rig.sources.announce("left", mount_yaw_deg=90.0, rate_hz=5.0)

@@ -25,7 +25,19 @@ from tests.unit.ros2.test_images import STAMP_NS, ros_image
 
 CONFIG = Config(
     camera=CameraSettings(rate_hz=15.0, hfov_deg=87.0),
-    cameras=(("rear", CameraSettings(rate_hz=6.0, mount_yaw_deg=180.0, frame_id="rear")),),
+    cameras=(
+        (
+            "rear",
+            CameraSettings(
+                rate_hz=6.0,
+                mount_yaw_deg=180.0,
+                frame_id="rear",
+                mount_height_m=0.4,
+                mount_x_m=-0.2,
+                mount_y_m=0.05,
+            ),
+        ),
+    ),
 )
 KEYS = Keys(CONFIG.stack.prefix)
 FRONT = CONFIG.stack.camera
@@ -34,7 +46,14 @@ FRONT = CONFIG.stack.camera
 def _announced(camera: str, **changes: object) -> CameraAnnouncement:
     fields: dict[str, object] = {
         FRONT: {"rate_hz": 15.0, "hfov_deg": 87.0, "frame_id": "camera"},
-        "rear": {"rate_hz": 6.0, "mount_yaw_deg": 180.0, "frame_id": "rear"},
+        "rear": {
+            "rate_hz": 6.0,
+            "mount_yaw_deg": 180.0,
+            "frame_id": "rear",
+            "mount_height_m": 0.4,
+            "mount_x_m": -0.2,
+            "mount_y_m": 0.05,
+        },
     }[camera] | changes  # type: ignore[operator]
     return CameraAnnouncement(camera=camera, source="ros2", **fields)  # type: ignore[arg-type]
 

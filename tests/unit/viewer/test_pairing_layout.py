@@ -85,7 +85,8 @@ def test_the_shipped_layout_is_the_one_built_here() -> None:
     )
     text = json.dumps(json.loads(layout.layout_json()))
     for topic in (channels.IMAGE, channels.ANNOTATIONS, channels.SCAN, channels.SCENE,
-                  channels.CMD_VEL, channels.CONTROLLER, channels.METRICS):  # fmt: skip
+                  channels.CMD_VEL, channels.CONTROLLER, channels.METRICS, "/camera/depth",
+                  channels.BOXES_3D, f"{channels.METRICS}.latency_ms.depth.p50"):  # fmt: skip
         assert f'"{topic}' in text, topic
 
 
@@ -112,7 +113,7 @@ def test_each_camera_has_its_own_topics_the_first_keeps_the_one_camera_ones() ->
     )
 
 
-def test_the_layout_shows_an_image_panel_per_camera() -> None:
+def test_the_layout_shows_an_image_and_a_depth_panel_per_camera() -> None:
     assert layout.layout_json(["rear"]) == layout.layout_json()  # one camera: the shipped one
     built = json.loads(layout.layout_json(["front", "rear"]))
 
@@ -125,7 +126,18 @@ def test_the_layout_shows_an_image_panel_per_camera() -> None:
         return []
 
     modes = [p["config"]["imageMode"] for p in panels(built)]  # type: ignore[index]
-    assert [(m["imageTopic"], list(m["annotations"])) for m in modes] == [
+    assert [(m["imageTopic"], list(m.get("annotations") or [])) for m in modes] == [
         (channels.IMAGE, [channels.ANNOTATIONS]),
+        ("/camera/depth", []),
         ("/camera/rear/image", ["/camera/rear/annotations"]),
+        ("/camera/rear/depth", []),
+    ]
+    depth = modes[1]
+    assert (depth["colorMode"], depth["colorMap"]) == ("colormap", "turbo")
+    assert (depth["minValue"], depth["maxValue"]) == (0.0, layout.DEPTH_SHOWN_MAX_MM)
+    # Without depth: the image panels alone, as before depth.
+    bare = json.loads(layout.layout_json(["front", "rear"], depth=False))
+    assert [p["config"]["imageMode"]["imageTopic"] for p in panels(bare)] == [  # type: ignore[index]
+        channels.IMAGE,
+        "/camera/rear/image",
     ]

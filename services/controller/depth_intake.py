@@ -1,0 +1,177 @@
+"""The depth cameras' images in, their virtual scans out: the controller's obstacles seen by
+depth (services/controller/depth_scan.py). Used only when the settings need depth
+(``ControllerSettings.needs_depth``).
+
+A depth image is large (600 KB at 640x480) and turning it into a scan takes a few
+milliseconds, so nothing of it happens on a bus thread nor in the control tick. The bus
+callback only leaves the payload in its camera's latest-only slot (:meth:`DepthIntake.offer`:
+a newer image replaces one not yet looked at, counted ``depth_dropped``); a thread of the
+intake's own (:meth:`DepthIntake.serve`) decodes, judges freshness and makes the scan; the
+tick only merges the scans held (:meth:`DepthIntake.obstacles`). A stop (the e-stop, a stale
+input) never waits behind a depth image: the e-stop has its own subscription, and the tick
+reads what the intake holds under a short lock.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping
+
+from common.clock import BOOT_ID, Clock, Stamp
+from common.counters import per_camera
+from common.freshness import FreshnessGate, Verdict, capture_age_s
+from common.messages import CameraAnnouncement, DepthFrame, LaserScan
+from common.node import Tally
+from perception import Intrinsics, Mounting, depth_metres
+from services.controller import contract
+from services.controller.contract import ControllerSettings
+from services.controller.depth_scan import (
+    DepthCamera,
+    DepthObstacles,
+    ScanParams,
+    depth_obstacles,
+    usable,
+    virtual_scan,
+)
+
+
+def mounting(camera: CameraAnnouncement) -> Mounting:
+    """Where an announced camera stands on the robot."""
+    return Mounting(
+        x_m=camera.mount_x_m,
+        y_m=camera.mount_y_m,
+        height_m=camera.mount_height_m,
+        yaw_deg=camera.mount_yaw_deg,
+    )
+
+
+class DepthIntake:
+    """Every announced depth camera's newest virtual scan (thread-safe: a bus thread offers,
+    the intake's thread makes the scans, the control loop reads them)."""
+
+    def __init__(
+        self, s: ControllerSettings, tally: Tally, tolerance_s: float, clock: Clock
+    ) -> None:
+        self.tally = tally
+        self.clock = clock
+        self.timeout_s = s.depth_timeout_s
+        self.sector_width_deg = s.sector_width_deg
+        self.tolerance_s = tolerance_s
+        self.params = ScanParams(
+            floor_margin_m=s.depth_floor_margin_m,
+            max_height_m=s.depth_max_height_m,
+            stride_px=s.depth_scan_stride_px,
+            resolution_deg=s.depth_scan_resolution_deg,
+        )
+        self._cond = threading.Condition()
+        self._waiting: dict[str, bytes] = {}  # camera -> its newest payload not looked at
+        self._lock = threading.Lock()  # the cameras and their scans
+        self._cameras: dict[str, CameraAnnouncement] = {}  # announced with depth
+        self._scans: dict[str, tuple[LaserScan, float]] = {}  # camera -> (scan, arrival mono s)
+        # A gate outlives its camera's withdrawal: a replay is refused after a re-announcement.
+        self._gates: dict[str, FreshnessGate] = {}
+
+    def set_cameras(self, cameras: Mapping[str, CameraAnnouncement]) -> None:
+        """The cameras announced now: those announced with depth are used; the scans of the
+        others (withdrawn, or announced again without depth) are dropped."""
+        with self._lock:
+            self._cameras = {c: a for c, a in cameras.items() if a.depth}
+            for camera in list(self._scans):
+                if camera not in self._cameras:
+                    del self._scans[camera]
+            for camera in self._cameras:
+                self._gates.setdefault(
+                    camera, FreshnessGate(self.timeout_s, self.tolerance_s, BOOT_ID)
+                )
+
+    def offer(self, camera: str, payload: bytes) -> None:
+        """A depth image's payload as it arrives (on a bus thread): left for :meth:`serve`."""
+        with self._cond:
+            if camera in self._waiting:
+                self.tally.counters.add(contract.DEPTH_DROPPED)
+                self.tally.counters.add(per_camera(contract.DEPTH_DROPPED, camera))
+            self._waiting[camera] = payload
+            self._cond.notify()
+
+    def handle_waiting(self, timeout_s: float) -> int:
+        """Make the scans of the images waiting (waiting up to ``timeout_s`` for one);
+        how many were looked at."""
+        with self._cond:
+            waiting = self._cond.wait_for(lambda: bool(self._waiting), timeout_s)
+            if not waiting:
+                return 0
+            taken, self._waiting = self._waiting, {}
+        for camera, payload in taken.items():
+            self._handle(camera, payload)
+        return len(taken)
+
+    def serve(self, stop: threading.Event, poll_s: float) -> None:
+        """The intake's thread: make scans until ``stop`` is set (looked at every ``poll_s``)."""
+        while not stop.is_set():
+            self.handle_waiting(poll_s)
+
+    def _handle(self, camera: str, payload: bytes) -> None:
+        tally = self.tally
+        with self._lock:
+            announced, gate = self._cameras.get(camera), self._gates.get(camera)
+        if announced is None or gate is None:
+            tally.reject(
+                contract.DEPTH_UNANNOUNCED,
+                f"depth from {camera!r:.80}, a camera not announced with depth, ignored",
+            )
+            return
+        key = tally.keys.depth(camera)
+        msg = tally.decode(key, DepthFrame.decode, payload)
+        if msg is None:
+            return
+        verdict, age = gate.check(msg.header, self.clock.now())
+        if verdict is not Verdict.FRESH:
+            counter = contract.input_counter(contract.DEPTH, verdict)
+            tally.reject(counter, f"{verdict} depth from {camera} ({age:.2f} s) ignored")
+            tally.counters.add(per_camera(counter, camera))
+            return
+        mount = mounting(announced)
+        if not usable(mount):
+            tally.reject(
+                contract.DEPTH_NO_MOUNT,
+                f"depth from {camera} cannot show obstacles: its source announces no height "
+                "above the floor (mount_height_m 0), so the floor cannot be taken out",
+                key=key,
+            )
+            tally.counters.add(per_camera(contract.DEPTH_NO_MOUNT, camera))
+            return
+        try:
+            scan = virtual_scan(
+                depth_metres(msg), Intrinsics.of(msg), mount, self.params, msg.header,
+                msg.range_max_m,
+            )  # fmt: skip
+        except ValueError as exc:
+            tally.bad_input(key, exc)
+            return
+        with self._lock:
+            held = self._scans.get(camera)
+            newer = camera in self._cameras and (
+                held is None or held[0].header.stamp_ns <= msg.header.stamp_ns
+            )
+            if newer:
+                self._scans[camera] = (scan, self.clock.mono_s())
+        counter = contract.input_counter(contract.DEPTH, contract.IN if newer else contract.LATE)
+        if newer:
+            tally.counters.add(counter)
+        else:
+            tally.reject(counter, f"depth from {camera} older than the one held ignored")
+        tally.counters.add(per_camera(counter, camera))
+
+    def obstacles(self, at: Stamp) -> DepthObstacles:
+        """The depth cameras' obstacles at the control instant ``at`` (each scan aged as the
+        dead-man ages detections: the later of its capture and its arrival)."""
+        mono = at.mono_ns / 1e9
+        with self._lock:
+            cameras = {}
+            for camera, announced in self._cameras.items():
+                scan, age = None, float("inf")
+                if camera in self._scans:
+                    scan, arrived = self._scans[camera]
+                    age = max(mono - arrived, capture_age_s(scan.header, at, BOOT_ID))
+                cameras[camera] = DepthCamera(mounting(announced), announced.hfov_deg, scan, age)
+        return depth_obstacles(cameras, self.timeout_s, self.sector_width_deg)

@@ -1,0 +1,200 @@
+"""The depth image a camera on the simulated robot sees, aligned to its colour image. Pure.
+
+:func:`render_depth` draws the truth from the same geometry as the colour image
+(services/sim/render.py :func:`~services.sim.render.layout`), pixel for pixel: a reading is
+the z (distance along the optical axis) of what the pixel sees, in metres, NaN where it sees
+nothing.
+
+- The floor, below the horizon: row ``v`` (its centre at ``v + 0.5``) sees the floor at
+  ``z = f * camera_height / (v + 0.5 - cy)``.
+- Above the horizon the wall is at infinity: no reading.
+- A target is a flat billboard facing the camera at its centre's z: its whole drawn rectangle
+  (the cut-out is a rectangle of photo) reads that z.
+- An obstacle is a round thing drawn as a box: its drawn rectangle reads its front face,
+  ``z - radius``, the nearest point of the circle the laser sees (services/sim/laser.py).
+- Things are drawn in the colour image's order (farthest centre first, nearer over farther),
+  so the depth covers exactly the pixels the colour image does, whatever is in front.
+
+:class:`DepthNoise` and :func:`apply` give the truth a stereo depth camera's faults; see each
+field. :func:`targets_in_camera` gives each visible target's centre in the optical frame, the
+truth a depth method is measured against; :func:`depth_frame` makes the message.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from common.images import Image
+from common.messages import DepthFrame, Header
+from services.sim.render import CameraSpec, Placed, layout
+from services.sim.world import World
+
+Depth = npt.NDArray[np.float32]  # (h, w) metres, NaN = no reading
+
+#: The largest reading a 16UC1 image holds (mm).
+MAX_MM = 65535
+
+
+@cache
+def floor_depth(spec: CameraSpec) -> Depth:
+    """The empty world's depth: the floor below the horizon, NaN above it (read-only)."""
+    f, cy = spec.focal_px, spec.height / 2
+    below = np.arange(spec.height, dtype=np.float64) + 0.5 - cy  # pixels under the horizon
+    with np.errstate(divide="ignore"):
+        z = np.where(below > 0, f * spec.height_m / np.where(below > 0, below, 1.0), np.nan)
+    out = np.repeat(z.astype(np.float32)[:, None], spec.width, axis=1)
+    out.setflags(write=False)
+    return out
+
+
+def placed_depth(p: Placed) -> float:
+    """The z one drawn thing reads: a target's billboard its centre's, an obstacle its front
+    face's."""
+    return p.z if p.target is not None else p.z - p.radius
+
+
+def render_depth(world: World, spec: CameraSpec) -> Depth:
+    """The true depth image (``spec.height``, ``spec.width``) float32 metres of ``world`` from
+    the camera ``spec``, aligned pixel for pixel with ``render(world, spec)``; NaN: no reading
+    (the wall at infinity)."""
+    out = floor_depth(spec).copy()
+    for p in layout(world, spec):
+        if p.rect is not None:
+            x0, y0, x1, y1 = p.rect
+            out[y0:y1, x0:x1] = placed_depth(p)
+    return out
+
+
+def targets_in_camera(
+    world: World, spec: CameraSpec, min_visible: float = 0.0
+) -> list[tuple[str, str, float, float, float]]:
+    """Each target the camera sees, as (target id, name, x, y, z): the centre of its billboard
+    at half its height, in the camera's optical frame (metres: x right, y down, z forward).
+
+    A target is seen when more than ``min_visible`` of its whole drawn rectangle (cut by the
+    image's edges or hidden by nearer things counts as not seen) shows in the image."""
+    placed = layout(world, spec)
+    owner = np.full((spec.height, spec.width), -1, np.int32)
+    for k, p in enumerate(placed):
+        if p.rect is not None:
+            x0, y0, x1, y1 = p.rect
+            owner[y0:y1, x0:x1] = k
+    shown = np.bincount(owner[owner >= 0].ravel(), minlength=len(placed))
+    out = []
+    for k, p in enumerate(placed):
+        if p.target is None or p.rect is None:
+            continue
+        x0, y0, x1, y1 = p.full
+        if shown[k] <= min_visible * (x1 - x0) * (y1 - y0):
+            continue
+        tg = world.targets[p.target]
+        x, y = 0.0 - p.lateral, spec.height_m - p.height_m / 2
+        out.append((tg.id, tg.name, float(x), float(y), float(p.z)))
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class DepthNoise:
+    """A stereo depth camera's faults (the ``sim.depth_*`` settings); zeros turn each off.
+
+    ``range_min_m``/``range_max_m``: readings outside are no readings (a D435 sees from about
+    0.3 m; beyond ~10 m its depth is noise).
+
+    ``noise_k``: the reading's noise, sigma = ``noise_k`` * z^2 (metres). A stereo camera
+    measures disparity d = f * b / z with a roughly constant sub-pixel error e, so its depth
+    error is z^2 * e / (f * b). Intel's D435: baseline b = 50 mm, f about 430 px at 848x480,
+    sub-pixel error 0.08..0.1 px: 0.0037..0.0047 per metre; its datasheet allows up to 2 % at
+    2 m. 0.005 gives 1 % at 2 m (2 cm), 2.5 % at 5 m, 5 % at 10 m.
+
+    ``edge_px``: pixels within this many pixels of a depth discontinuity (neighbours whose z
+    differ by more than ``edge_jump`` of the nearer, or a reading next to none) read nothing,
+    as stereo matching fails where one eye sees what the other does not.
+
+    ``dark_level``/``dark_dropout``: colour pixels whose grey level is below ``dark_level``
+    (0..255) read nothing with probability ``dark_dropout`` (little texture, little reflected
+    pattern). ``dropout``: any pixel reads nothing with this probability.
+
+    Readings are quantised to millimetres, as a 16UC1 image carries them.
+    """
+
+    range_min_m: float = 0.3
+    range_max_m: float = 10.0
+    noise_k: float = 0.005
+    edge_px: int = 2
+    edge_jump: float = 0.1
+    dark_level: int = 30
+    dark_dropout: float = 0.5
+    dropout: float = 0.01
+
+
+#: A perfect depth camera (still range-limited and quantised to mm).
+IDEAL = DepthNoise(noise_k=0.0, edge_px=0, dark_dropout=0.0, dropout=0.0)
+
+
+def depth_edges(truth: Depth, jump: float) -> npt.NDArray[np.bool_]:
+    """Pixels on either side of a depth discontinuity: a neighbour (right or below) whose z
+    differs by more than ``jump`` of the nearer of the two, or a reading next to none."""
+    valid = np.isfinite(truth)
+    z = np.where(valid, truth, 0.0)
+    edge = np.zeros(truth.shape, bool)
+    for axis in (0, 1):
+        a = np.swapaxes(z, 0, axis)
+        va = np.swapaxes(valid, 0, axis)
+        near = np.minimum(a[1:], a[:-1])
+        step = (va[1:] != va[:-1]) | (va[1:] & va[:-1] & (np.abs(a[1:] - a[:-1]) > jump * near))
+        e = np.swapaxes(edge, 0, axis)
+        e[1:] |= step
+        e[:-1] |= step
+    return edge
+
+
+def apply(truth: Depth, colour_bgr: Image, noise: DepthNoise, rng: np.random.Generator) -> Depth:
+    """``truth`` as the depth camera reads it: noise, holes at edges, on dark surfaces and at
+    random, millimetre quantisation, and the range limits. float32 metres, NaN = no reading;
+    ``colour_bgr`` is the aligned colour image (same size)."""
+    z = truth.astype(np.float32, copy=True)
+    if noise.noise_k > 0:
+        sigma = noise.noise_k * np.nan_to_num(z, nan=0.0) ** 2
+        z += (rng.standard_normal(z.shape, dtype=np.float32) * sigma).astype(np.float32)
+    z *= 1000.0
+    np.round(z, out=z)
+    z /= 1000.0
+    hole = ~((z >= noise.range_min_m) & (z <= min(noise.range_max_m, MAX_MM / 1000.0)))
+    if noise.edge_px > 0:
+        edges = depth_edges(truth, noise.edge_jump).astype(np.uint8)
+        size = 2 * noise.edge_px + 1
+        hole |= cv2.dilate(edges, np.ones((size, size), np.uint8)).astype(bool)
+    if noise.dark_dropout > 0 and noise.dark_level > 0:
+        grey = cv2.cvtColor(colour_bgr, cv2.COLOR_BGR2GRAY)
+        dark = grey < noise.dark_level
+        hole |= dark & (rng.random(z.shape, dtype=np.float32) < noise.dark_dropout)
+    if noise.dropout > 0:
+        hole |= rng.random(z.shape, dtype=np.float32) < noise.dropout
+    z[hole] = np.nan
+    return z
+
+
+def depth_frame(depth_m: Depth, spec: CameraSpec, header: Header, noise: DepthNoise) -> DepthFrame:
+    """``depth_m`` (metres, NaN = no reading) as a 16UC1 DepthFrame in millimetres (0 = no
+    reading), with ``spec``'s intrinsics (square pixels, the principal point at the centre)
+    and ``noise``'s range."""
+    mm = np.nan_to_num(np.round(depth_m * 1000.0), nan=0.0, posinf=0.0, neginf=0.0)
+    data = np.clip(mm, 0, MAX_MM).astype("<u2").tobytes()
+    return DepthFrame(
+        header=header,
+        encoding="16UC1",
+        width=spec.width,
+        height=spec.height,
+        data=data,
+        fx=spec.focal_px,
+        fy=spec.focal_px,
+        cx=spec.width / 2,
+        cy=spec.height / 2,
+        range_min_m=noise.range_min_m,
+        range_max_m=noise.range_max_m,
+    )

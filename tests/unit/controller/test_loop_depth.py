@@ -1,0 +1,113 @@
+"""The controller's loop with depth, in-process (tests/unit/controller/rig.py): depth images put
+on the bus, turned into the virtual scan by the intake (called here as its thread would), one
+tick. With ``obstacle_sources = ["depth"]`` the way ahead is the depth camera's to show: clear
+depth drives, stale or missing depth and an obstacle in the depth stop forward motion."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common.messages import DepthFrame
+from tests.unit.controller.depth_scenes import HFOV, at_bearing, depth_frame, scene
+from tests.unit.controller.rig import Rig
+
+HEIGHT = 0.6
+
+
+@pytest.fixture
+def rig(tmp_path: Path) -> Iterator[Rig]:
+    r = Rig(tmp_path, announced=False, obstacle_sources=("depth",))
+    r.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
+    yield r
+    r.close()
+
+
+def put_depth(rig: Rig, *faces: object, age_s: float = 0.0, camera: str = "front") -> None:
+    """A depth image of the floor (and ``faces``) from ``camera``, made into its scan."""
+    frame: DepthFrame = depth_frame(scene(HEIGHT, *faces), rig.header(age_s, source="sim"))  # type: ignore[arg-type]
+    rig.put(rig.keys.depth(camera), frame.encode())
+    assert rig.loop.depth is not None
+    rig.loop.depth.handle_waiting(0.0)
+
+
+def test_a_controller_that_needs_no_depth_reads_none(tmp_path: Path) -> None:
+    plain = Rig(tmp_path)
+    try:
+        assert plain.loop.depth is None
+    finally:
+        plain.close()
+
+
+def test_fresh_clear_depth_drives_and_stale_depth_stops(rig: Rig) -> None:
+    timeout = rig.config.controller.depth_timeout_s
+    rig.detections()
+    twist, status = rig.tick()
+    assert status.state == "blocked" and twist.linear[0] == 0.0
+    assert status.reason == "no depth from front yet"
+    rig.clock.advance(0.05)
+    put_depth(rig)
+    rig.detections()
+    twist, status = rig.tick()
+    assert status.state == "tracking" and twist.linear[0] > 0, status
+    assert rig.counters["depth_in"] == 1 and rig.counters["depth_in.front"] == 1
+    rig.clock.advance(timeout + 0.05)  # the depth stream goes quiet; detections still come
+    rig.detections()
+    twist, status = rig.tick()
+    assert status.state == "blocked" and twist.linear[0] == 0.0, status
+    assert status.reason == f"no recent depth from front ({timeout + 0.05:.2f} s)"
+    # Depth that arrives already older than the timeout is refused and counted.
+    rig.clock.advance(0.05)
+    put_depth(rig, age_s=timeout + 0.01)
+    rig.detections()
+    assert rig.tick()[1].state == "blocked"
+    assert rig.counters["depth_stale"] == 1
+
+
+def test_an_obstacle_in_the_depth_stops_forward_motion(rig: Rig) -> None:
+    put_depth(rig, at_bearing(0.4, 0.0))  # within the safety distance
+    rig.detections()
+    twist, status = rig.tick()
+    assert status.state == "blocked" and twist.linear[0] == 0.0, status
+    assert status.reason == "obstacle at 0.40 m (depth)"
+    rig.clock.advance(0.05)
+    put_depth(rig, at_bearing(4.0, 0.0))  # moved away
+    rig.detections()
+    assert rig.tick()[1].state == "tracking"
+
+
+def test_a_camera_of_unknown_height_is_counted_and_said(rig: Rig) -> None:
+    rig.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=0.0)
+    put_depth(rig)
+    rig.detections()
+    twist, status = rig.tick()
+    assert status.state == "blocked" and twist.linear[0] == 0.0
+    assert status.reason == "no depth camera looks ahead (front: height above the floor unknown)"
+    assert rig.counters["depth_no_mount"] == 1 and rig.counters["depth_no_mount.front"] == 1
+
+
+def test_depth_of_a_camera_announced_without_depth_is_ignored(rig: Rig) -> None:
+    rig.announce("side", hfov_deg=HFOV, mount_height_m=HEIGHT)  # no depth
+    put_depth(rig, camera="side")
+    assert rig.counters["depth_unannounced"] == 1
+
+
+def test_a_newer_depth_image_replaces_one_not_looked_at(rig: Rig) -> None:
+    for _ in range(3):
+        frame = depth_frame(scene(HEIGHT), rig.header(source="sim"))
+        rig.put(rig.keys.depth("front"), frame.encode())
+    assert rig.loop.depth is not None
+    assert rig.loop.depth.handle_waiting(0.0) == 1
+    assert rig.counters["depth_dropped"] == 2 and rig.counters["depth_in"] == 1
+
+
+def test_garbage_on_a_depth_key_is_counted_and_dropped(rig: Rig) -> None:
+    rig.put(rig.keys.depth("front"), b"\x93not a depth frame")
+    assert rig.loop.depth is not None
+    rig.loop.depth.handle_waiting(0.0)
+    assert rig.counters["bad_input"] == 1 and rig.counters["bad_input.depth"] == 1
+    rig.detections()
+    twist, status = rig.tick()
+    assert status.state == "blocked" and twist.linear[0] == 0.0
