@@ -2,7 +2,8 @@
 
 serve (the default) records the stack to recorder.output_dir for as long as it runs (list
 "recorder" first in [supervisor].services); record does the same from the command line until
-Ctrl-C or --duration; play publishes a recording's frames and scans onto the stack as if live.
+Ctrl-C or --duration; play publishes a recording's frames, depth images and scans onto the
+stack as if live.
 Comparing runs is ``python -m tools.compare``; the recorder's benchmark is
 ``python -m tools.benchmarks recorder``.
 """
@@ -10,6 +11,8 @@ Comparing runs is ``python -m tools.compare``; the recorder's benchmark is
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -25,7 +28,14 @@ def serve(args: argparse.Namespace) -> int:
     log = setup_logging("recorder")
     from services.recorder import service
 
-    return service.record(config, service.default_path(config), stop, log.info)
+    code = service.record(config, service.default_path(config), stop, log.info)
+    # The file is finished and the session closed: nothing is left to do. The interpreter's
+    # own teardown (its modules, the ROS type store, Zenoh's runtime) took over a second more
+    # at nice 10 on cores kept busy, past the supervisor's stop timeout: the recorder was
+    # killed after finishing its file. Exit at once instead.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 def _record_arguments(p: argparse.ArgumentParser) -> None:
@@ -51,8 +61,9 @@ def _play_arguments(p: argparse.ArgumentParser) -> None:
     add_config(p)
     p.add_argument("--rate", type=replay_rate, default=1.0, help="speed: 2 plays twice as fast")
     p.add_argument("--loop", action="store_true", help="play again from the start at the end")
-    p.add_argument("--topics", nargs="+", help="only these MCAP topics (default: every frame "
-                   "and scan topic)")  # fmt: skip
+    p.add_argument("--topics", nargs="+",
+                   help="only these MCAP topics (default: every frame, depth image and scan "
+                        "topic; a depth image's camera_info goes with it)")  # fmt: skip
     p.add_argument("--wait", action=argparse.BooleanOptionalAction, default=True,
                    help="wait for a detector to be ready before the first frame, up to "
                         "recorder.detector_wait_s (--no-wait plays at once)")  # fmt: skip
@@ -66,7 +77,7 @@ def play(args: argparse.Namespace) -> int:
 
     played = service.play(config, args.file, stop, print_progress, rate=args.rate, loop=args.loop,
                          topics=args.topics, wait=args.wait)  # fmt: skip
-    return 0 if played.frames + played.scans else 1
+    return 0 if played.frames + played.depths + played.scans else 1
 
 
 COMMANDS = [

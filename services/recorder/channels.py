@@ -7,9 +7,16 @@ dependencies), so that Foxglove, rosbags and ``ros2 bag`` read them:
     Frame (raw)        sensor_msgs/msg/Image              on ros2.image_topic
     Frame (jpeg)       sensor_msgs/msg/CompressedImage    on ros2.image_topic + "/compressed"
     LaserScan          sensor_msgs/msg/LaserScan          on ros2.scan_topic
-    Detections         vision_msgs/msg/Detection2DArray   on ros2.detections_topic
+    Detections         vision_msgs/msg/Detection2DArray   on ros2.detections_topic, and
+                       with depth columns vision_msgs/msg/Detection3DArray on
+                       ros2.detections_3d_topic (the camera's optical frame; the boxes of
+                       an unknown distance left out)
     Twist              geometry_msgs/msg/TwistStamped     on ros2.cmd_vel_topic (stamped:
                        a recording needs the command's time)
+    DepthFrame         sensor_msgs/msg/Image (16UC1, 32FC1) on the camera's depth topic
+                       (``/camera/depth/image_raw``), and its sensor_msgs/msg/CameraInfo on
+                       ``camera_info`` beside it (depth_ros.py); the sensor's valid range in
+                       the image channel's metadata (``range_min_m``, ``range_max_m``)
 
 The image and detections topics are the first camera's (stack.camera); a further camera's
 frames and detections go on its own topics, as the bridge maps them (``ros2.camera_namespace``:
@@ -17,12 +24,16 @@ frames and detections go on its own topics, as the bridge maps them (``ros2.came
 
 Everything else, and what the ROS types cannot carry (the detector's timings, the frame's
 sequence, the detections' columns, the command's ``input_stamp_ns``), is JSON on the stack's
-own key: Detections and Twist are written twice, once each way. A JSON channel has no schema
-record: rosbags (0.11) refuses to open a file with a ``jsonschema`` schema, so the JSON schema
-travels in the channel's metadata (``jsonschema``), with the message type (``stack_message``).
+own key: Detections and Twist are written twice, once each way. The camera announcements
+(CameraAnnouncement: a camera's size, rate, whether it has depth, its mounting) are JSON on
+``<prefix>/camera/<camera>/announce``, one message each time a camera is announced anew.
+A JSON channel has no schema record: rosbags (0.11) refuses to open a file with a
+``jsonschema`` schema, so the JSON schema travels in the channel's metadata (``jsonschema``),
+with the message type (``stack_message``).
 
 An MCAP message's ``sequence`` is the stack header's ``seq``, its ``publish_time`` the header's
-stamp and its ``log_time`` when the recorder received it.
+stamp (an announcement, which has no header: when it was heard) and its ``log_time`` when the
+recorder received it.
 """
 
 from __future__ import annotations
@@ -41,15 +52,34 @@ import numpy as np
 from common.codec import Message
 from common.fields import inline_fields
 from common.keys import camera_in_key
-from common.messages import Detections, Frame, Header, LaserScan, Twist
+from common.messages import (
+    CameraAnnouncement,
+    DepthFrame,
+    Detections,
+    Frame,
+    Header,
+    LaserScan,
+    Twist,
+)
+from perception import DEPTH_CENTRE, DEPTH_SIZE
+from services.recorder.depth_ros import (
+    RANGE_MAX,
+    RANGE_MIN,
+    DepthTopics,
+    depth_to_ros,
+    depth_topics,
+)
 from services.ros2 import (
+    CAMERA_INFO,
     COMPRESSED_IMAGE,
     DETECTION_2D_ARRAY,
+    DETECTION_3D_ARRAY,
     IMAGE,
     LASER_SCAN,
     TWIST_STAMPED,
     RosDistro,
     cdr_encode,
+    detections_3d_to_ros,
     detections_to_ros,
     frame_to_compressed_image,
     frame_to_image,
@@ -80,12 +110,13 @@ class Channel:
 
 @dataclass(frozen=True, slots=True)
 class Entry:
-    """One message to write: its channel, payload, and times."""
+    """One message to write: its channel, payload, and times (``publish_ns`` None: the time
+    it was received)."""
 
     channel: Channel
     data: bytes
     sequence: int
-    publish_ns: int
+    publish_ns: int | None
 
 
 @functools.cache
@@ -181,32 +212,41 @@ class Translator:
         self._distro = RosDistro(ros2.distro)
         self._ros2 = ros2
         self._first = first_camera
-        self._channels: dict[tuple[str, str], Channel] = {}
+        self._channels: dict[tuple[object, ...], Channel] = {}
 
     def _topics(self, key: str) -> CameraTopics:
         camera = camera_in_key(key) or self._first
         return camera_topics(self._ros2, self._first, camera)
 
-    def _ros_channel(self, topic: str, ros_type: str, stack_type: str) -> Channel:
-        key = (topic, ros_type)
-        if key not in self._channels:
-            self._channels[key] = Channel(
+    def _depth_topics(self, key: str) -> DepthTopics:
+        return depth_topics(self._ros2, self._first, camera_in_key(key) or self._first)
+
+    def _ros_channel(
+        self, topic: str, ros_type: str, stack_type: str, more: tuple[tuple[str, str], ...] = ()
+    ) -> Channel:
+        key = (topic, ros_type, *more)
+        found = self._channels.get(key)
+        if found is None:
+            found = self._channels[key] = Channel(
                 topic=topic,
                 message_encoding=CDR,
                 schema_name=ros_type,
                 schema_encoding=ROS2MSG,
                 schema_data=ros2msg_schema(self._distro, ros_type),
-                metadata=((STACK_MESSAGE, stack_type),),
+                metadata=((STACK_MESSAGE, stack_type), *more),
             )
-        return self._channels[key]
+        return found
 
     def _json_channel(self, key: str, cls: type[Message]) -> Channel:
         if (key, "") not in self._channels:
             self._channels[(key, "")] = json_channel(key, cls)
         return self._channels[(key, "")]
 
-    def _ros(self, topic: str, ros_type: str, msg: Message, header: Header, ros: Any) -> Entry:
-        channel = self._ros_channel(topic, ros_type, type(msg).__name__)
+    def _ros(
+        self, topic: str, ros_type: str, msg: Message, header: Header, ros: Any,
+        more: tuple[tuple[str, str], ...] = (),
+    ) -> Entry:  # fmt: skip
+        channel = self._ros_channel(topic, ros_type, type(msg).__name__, more)
         data = cdr_encode(self._distro, ros_type, ros)
         return Entry(channel, data, header.seq, header.stamp_ns)
 
@@ -215,7 +255,9 @@ class Translator:
 
     def entries(self, key: str, msg: Message) -> list[Entry]:
         """What to write for ``msg``, received on the stack key ``key``."""
-        header: Header = msg.header  # type: ignore[attr-defined]  # every message has one
+        if isinstance(msg, CameraAnnouncement):  # no header: no sequence, heard when received
+            return [Entry(self._json_channel(key, CameraAnnouncement), to_json(msg), 0, None)]
+        header: Header = msg.header  # type: ignore[attr-defined]  # every other message has one
         d, r = self._distro, self._ros2
         if isinstance(msg, Frame):
             image_topic = self._topics(key).image
@@ -224,14 +266,27 @@ class Translator:
                 return [self._ros(topic, COMPRESSED_IMAGE, msg, header,
                                   frame_to_compressed_image(d, msg))]  # fmt: skip
             return [self._ros(image_topic, IMAGE, msg, header, frame_to_image(d, msg))]
+        if isinstance(msg, DepthFrame):
+            depth = self._depth_topics(key)
+            info, image = depth_to_ros(d, msg)
+            # The range as repr: a float written as text reads back the same float.
+            limits = ((RANGE_MIN, repr(msg.range_min_m)), (RANGE_MAX, repr(msg.range_max_m)))
+            return [  # the intrinsics first: a reader has them when the image comes
+                self._ros(depth.info, CAMERA_INFO, msg, header, info),
+                self._ros(depth.image, IMAGE, msg, header, image, limits),
+            ]
         if isinstance(msg, LaserScan):
             return [self._ros(r.scan_topic, LASER_SCAN, msg, header, scan_to_ros(d, msg))]
         if isinstance(msg, Detections):
-            ros = detections_to_ros(d, msg)
-            return [
-                self._ros(self._topics(key).detections, DETECTION_2D_ARRAY, msg, header, ros),
-                self._json(key, msg, header),
-            ]
+            topics = self._topics(key)
+            out = [self._ros(topics.detections, DETECTION_2D_ARRAY, msg, header,
+                             detections_to_ros(d, msg))]  # fmt: skip
+            if all(name in msg.boxes.columns for name in (*DEPTH_CENTRE, *DEPTH_SIZE)):
+                boxes_3d, _unknown = detections_3d_to_ros(d, msg)
+                out.append(
+                    self._ros(topics.detections_3d, DETECTION_3D_ARRAY, msg, header, boxes_3d)
+                )
+            return [*out, self._json(key, msg, header)]
         if isinstance(msg, Twist):
             ros = twist_to_ros(d, msg, stamped=True)
             return [

@@ -1,9 +1,9 @@
 """The recorder's contract: its counters and what it reads and (playing back) puts. Imports
 only ``common``.
 
-It listens to everything; playing a recording back puts frames and scans (and announces the
-cameras it plays), on a stack that runs no live sensor only: a replay must never reach a live
-robot's keys.
+It listens to everything; playing a recording back puts frames, depth images and scans (and
+announces the cameras it plays), on a stack that runs no live sensor only: a replay must never
+reach a live robot's keys.
 """
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ SERVICE = "recorder"
 
 def access(shape: Shape) -> dict[str, Access]:
     keys = shape.keys
-    replay = () if shape.live_sensors else (*shape.frames(), keys.scan())
+    depths = tuple(map(keys.depth, shape.cameras))
+    replay = () if shape.live_sensors else (*shape.frames(), *depths, keys.scan())
     announced = (
         () if shape.live_sensors else tuple(map(keys.camera_announcements_of, shape.cameras))
     )

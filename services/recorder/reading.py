@@ -7,12 +7,14 @@ readable MCAP raises :class:`common.errors.RecordingError` with one line.
 
 The inputs a replay publishes are decoded here: ``sensor_msgs/msg/Image`` and
 ``CompressedImage`` as Frames, ``sensor_msgs/msg/LaserScan`` as LaserScan (services.ros2's
-translations).
+translations), and an ``Image`` on a depth topic with the ``CameraInfo`` beside it as a
+DepthFrame (depth_ros.py).
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from enum import StrEnum
@@ -25,9 +27,16 @@ from mcap.records import Channel, Message, Schema
 
 from common.errors import DecodeError, RecordingError, one_line
 from common.lifecycle import Closing
-from common.messages import Frame, LaserScan
+from common.messages import DepthFrame, Frame, LaserScan
 from services.recorder.channels import CDR, JSON, STACK_MESSAGE
+from services.recorder.depth_ros import (
+    RANGE_MAX,
+    RANGE_MIN,
+    depth_from_ros,
+    is_depth_topic,
+)
 from services.ros2 import (
+    CAMERA_INFO,
     COMPRESSED_IMAGE,
     IMAGE,
     LASER_SCAN,
@@ -46,6 +55,8 @@ RECORD_SIZE_LIMIT = 1 << 30
 class Input(StrEnum):
     FRAME = "frame"
     SCAN = "scan"
+    DEPTH = "depth"  # an Image on a depth topic (depth_ros.is_depth_topic)
+    DEPTH_INFO = "depth_info"  # a CameraInfo: the intrinsics of the depth image beside it
 
 
 #: The ROS types a replay can publish, and what each becomes.
@@ -148,10 +159,18 @@ class Recording(Closing):
 
 
 def input_kind(record: Record) -> Input | None:
-    """What ``record`` plays as, or None when it is no frame or scan."""
+    """What ``record`` plays as, or None when it is no frame, depth image, scan or
+    CameraInfo."""
     if record.schema is None or record.channel.message_encoding != CDR:
         return None
-    return PLAYABLE.get(record.schema.name)
+    name = record.schema.name
+    if name == CAMERA_INFO:
+        return Input.DEPTH_INFO
+    if name == IMAGE and (
+        record.stack_type == "DepthFrame" or is_depth_topic(record.channel.topic)
+    ):
+        return Input.DEPTH
+    return PLAYABLE.get(name)
 
 
 def check_playable(channels: Iterable[tuple[str, str, str]], topics: Iterable[str] | None) -> None:
@@ -184,8 +203,7 @@ def decode_input(
 
     Its header is the recorded one (the caller restamps it): ``seq`` and ``source`` as given.
     """
-    kind = input_kind(record)
-    if kind is None:
+    if input_kind(record) not in (Input.FRAME, Input.SCAN):
         return None
     assert record.schema is not None
     ros = cdr_decode(distro, record.schema.name, record.message.data)
@@ -194,3 +212,30 @@ def decode_input(
     if record.schema.name == COMPRESSED_IMAGE:
         return frame_from_compressed_image(ros, source=source, seq=seq)
     return scan_from_ros(ros, source=source, seq=seq)
+
+
+def decode_info(record: Record, distro: RosDistro) -> Any:
+    """The CameraInfo in ``record`` (a DEPTH_INFO one); DecodeError for garbage."""
+    return cdr_decode(distro, CAMERA_INFO, record.message.data)
+
+
+def recorded_range(record: Record) -> tuple[float, float]:
+    """The sensor's valid range (min, max) a depth image channel's metadata states; (0, 0),
+    not stated, when it states none or garbage."""
+    meta = record.channel.metadata
+    try:
+        low, high = float(meta.get(RANGE_MIN, 0.0)), float(meta.get(RANGE_MAX, 0.0))
+    except ValueError:
+        return 0.0, 0.0
+    sane = math.isfinite(low + high) and low >= 0 and (high == 0 or low < high)
+    return (low, high) if sane else (0.0, 0.0)
+
+
+def decode_depth(
+    record: Record, info: Any, distro: RosDistro, *, source: str, seq: int
+) -> DepthFrame:
+    """The DepthFrame of a depth image ``record`` (a DEPTH one) with the intrinsics of
+    ``info`` (its CameraInfo, :func:`decode_info`); DecodeError for garbage. Its header is the
+    recorded one (the caller restamps it)."""
+    image = cdr_decode(distro, IMAGE, record.message.data)
+    return depth_from_ros(image, info, source=source, seq=seq, range_m=recorded_range(record))

@@ -19,6 +19,7 @@ from pathlib import Path
 import zenoh
 
 from common import reach
+from common.announce import from_chunk
 from common.bus import Bus, Declared, QoS
 from common.camera_announce import CameraAnnouncements
 from common.clock import local_now, mono_s, wall_ns
@@ -27,7 +28,9 @@ from common.errors import StackError
 from common.keys import Keys
 from common.lifecycle import EXIT_FAILED, EXIT_OK, Closing, Progress
 from common.messages import (
+    CameraAnnouncement,
     ControllerStatus,
+    DepthFrame,
     Detections,
     EStop,
     Frame,
@@ -58,13 +61,22 @@ from stack.access import running_sensors
 from stack.config import Config
 
 SERVICE = "recorder"
+#: The share of the supervisor's stop timeout that a stop spends writing what is queued. The
+#: rest is for what comes around it, all slow at nice 10 on cores kept busy (the recorder then
+#: gets a tenth of a core): seeing the stop (up to 1 s after the SIGTERM, measured with two
+#: CPU burners beside the default stack), the item being written and the file's end (0.5 s
+#: past the budget), the session's close, the exit (__main__.py). With half (2.5 s of 5) the
+#: stack's stop took 4.1 s of its 5 there; with this share 3.5 to 3.9 s (and 1.6 to 4.2 s with
+#: 640x480 colour and depth at 15 Hz, the recorder beside metrics only).
+CLOSE_SHARE = 0.35
 
 
 def subscriptions(keys: Keys, cameras: Sequence[str]) -> dict[str, type[Message]]:
-    """Every key the recorder listens to, and its message type: each of ``cameras``' frames,
-    every camera's detections."""
+    """Every key the recorder listens to, and its message type: each of ``cameras``' frames
+    and depth images, every camera's detections."""
     return {
         **{keys.frame(camera): Frame for camera in cameras},
+        **{keys.depth(camera): DepthFrame for camera in cameras},
         keys.all_detections(): Detections,
         keys.scan(): LaserScan,
         keys.cmd_vel(): Twist,
@@ -73,6 +85,12 @@ def subscriptions(keys: Keys, cameras: Sequence[str]) -> dict[str, type[Message]
         keys.sim_truth(): GroundTruth,
         keys.all_counters(): ServiceCounters,
     }
+
+
+def _announcement(chunk: bytes) -> CameraAnnouncement:
+    """The CameraAnnouncement of a token's key chunk (DecodeError for garbage): decoded on the
+    writer thread, as every payload is."""
+    return from_chunk(CameraAnnouncement.decode, chunk.decode("ascii", "replace"))
 
 
 def default_path(config: Config, at: datetime | None = None) -> Path:
@@ -98,17 +116,33 @@ class Recorder(Closing):
         )  # fmt: skip
         self._cameras = list(config.all_cameras)
         self._subs: list[Declared] = []
-        #: At a stop, what is queued is written for at most this long: half the supervisor's
-        #: stop timeout, so that the file is finished before it would kill the recorder.
-        self._close_budget_s = config.supervisor.stop_timeout_s / 2
+        self._keys = tally.keys
+        #: At a stop, what is queued is written for at most this long (a share of the
+        #: supervisor's stop timeout), so that the file is finished before it would kill the
+        #: recorder: see CLOSE_SHARE.
+        self._close_budget_s = config.supervisor.stop_timeout_s * CLOSE_SHARE
         self._own = tally.keys.counters(SERVICE)
         self.heard = 0  # samples from the stack: every key but the recorder's own counters
 
     def listen(self, node: Node) -> Recorder:
-        """Subscribe to every key of :func:`subscriptions` on ``node``'s session."""
+        """Subscribe to every key of :func:`subscriptions` on ``node``'s session, and watch
+        the camera announcements."""
         for key, cls in subscriptions(node.keys, self._cameras).items():
             self._subs.append(node.subscribe_keyed(key, partial(self.on_sample, decode=cls.decode)))
+        announced = node.keys.all_camera_announcements()
+        self._subs.append(node.bus.watch_tokens(announced, self.on_token))
         return self
+
+    def on_token(self, key: str, alive: bool) -> None:
+        """Zenoh's thread: queue a camera announcement that appeared (on the camera's
+        ``announce`` key, its token's chunk decoded later); one that goes is not recorded."""
+        parts = self._keys.camera_announcement_parts(key)
+        if not alive or parts is None:
+            return
+        camera, chunk = parts
+        self.heard += 1
+        where = self._keys.camera_announcements_of(camera).removesuffix("/*")
+        self._queued.offer(where, chunk.encode("ascii", "replace"), wall_ns(), _announcement)
 
     def on_sample(self, key: str, payload: bytes, decode: Decode) -> None:
         """Zenoh's thread: queue the bytes heard on ``key`` (decoded later, on the writer
@@ -305,7 +339,7 @@ def play(
     topics: Sequence[str] | None = None,
     wait: bool = True,
 ) -> Played:
-    """Publish the recording's frames and scans (play.py) until it ends (or ``stop``;
+    """Publish the recording's frames, depth images and scans (play.py) until it ends (or ``stop``;
     ``loop``: again); with ``wait``, not before a detector is ready to see them. Each camera
     played is announced until then (play.py's announce_played)."""
     chosen = playable_topics(path, topics)
@@ -322,12 +356,15 @@ def play(
         )  # fmt: skip
         pubs = {keys.frame(camera): Publisher(session, keys.frame(camera), QoS.SENSOR)
                 for camera in config.all_cameras}  # fmt: skip
+        pubs |= {keys.depth(camera): Publisher(session, keys.depth(camera), QoS.SENSOR)
+                 for camera in config.all_cameras}  # fmt: skip
         pubs[keys.scan()] = Publisher(session, keys.scan(), QoS.SENSOR)
         played = Played()
         while not stop.is_set():
             one_pass(config, path, chosen, rate, lambda key, b: pubs[key].put(b), stop, played)
             played.passes += 1
-            progress(f"played {path}: {played.frames} frames, {played.scans} scans"
+            depth = f"{played.depths} depth images, " if played.depths else ""
+            progress(f"played {path}: {played.frames} frames, {depth}{played.scans} scans"
                      f" ({played.passes} pass{'es' if played.passes > 1 else ''})")  # fmt: skip
             if not loop:
                 break

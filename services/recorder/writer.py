@@ -94,7 +94,7 @@ class McapFile(Closing):
             self._channel_id(entry.channel),
             log_time=log_ns,
             data=entry.data,
-            publish_time=entry.publish_ns,
+            publish_time=log_ns if entry.publish_ns is None else entry.publish_ns,
             sequence=entry.sequence & 0xFFFFFFFF,  # MCAP's sequence is uint32
         )
         self.messages += 1

@@ -1,5 +1,6 @@
-"""How two runs differ: detections matched per frame by class and IoU, the commands given for
-the same frames, and latency per stage. Pure: runs in, figures and markdown out.
+"""How two runs differ: detections matched per frame by class and IoU, the distances of the
+matched ones (distances.py), the commands given for the same frames, and latency per stage.
+Pure: runs in, figures and markdown out.
 
 Frames are matched by camera and sequence number, which a replay keeps (play.py puts each
 camera's frames back on its own key): recording A of a live run and recording B of A played
@@ -23,6 +24,8 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Detections
+from tools.compare.distances import DistanceFigures
+from tools.compare.distances import report_lines as distance_lines
 from tools.compare.runs import CommandRecord, FrameId, Run
 
 #: Below this share of the smaller run's detected frames in common, the report warns that the
@@ -168,6 +171,7 @@ class Comparison:
     latency_ms: dict[str, tuple[list[float], list[float]]] = field(default_factory=dict)
     detectors: tuple[list[str], list[str]] = field(default_factory=lambda: ([], []))
     per_camera: dict[str, CameraFigures] = field(default_factory=dict)  # by camera name
+    distances: DistanceFigures = field(default_factory=DistanceFigures)  # of the matched
     # The replay rate at which the detector sees every frame of A (None: it does at 1, or
     # unknown).
     suggested_rate: float | None = None
@@ -207,6 +211,7 @@ def compare_runs(a: Run, b: Run, iou_min: float = 0.5) -> Comparison:
         count_a.update(da.class_names)
         count_b.update(db.class_names)
         pairs = match_frame(da, db, iou_min)
+        out.distances.add(da, db, pairs)
         for i, _j, iou in pairs:
             count_m[da.class_names[i]] += 1
             out.ious.append(iou)
@@ -311,6 +316,7 @@ def report_markdown(c: Comparison, name_a: str, name_b: str, plot: str = "") -> 
         "|---|---:|---:|---:|",
         *(f"| {n} | {a} | {b} | {m} |" for n, (a, b, m) in c.per_class.items()),
         "",
+        *distance_lines(c.distances),
         "## Commands",
         "",
         f"First command reacting to the same frame, {c.command_pairs} frames: "

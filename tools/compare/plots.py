@@ -1,4 +1,5 @@
-"""The comparison's PNG: latency per stage of both runs side by side, and the matched boxes' IoU.
+"""The comparison's PNG: latency per stage of both runs side by side, the matched boxes' IoU,
+and (when the runs carried distances) how far apart the matched boxes' distances are.
 
 Drawn with matplotlib's object API and the Agg canvas (as tools/report/plots.py): no
 display, no global state.
@@ -18,8 +19,9 @@ COLOURS = ("#4c72b0", "#dd8452")  # A, B
 
 
 def comparison_plot(c: Comparison, name_a: str, name_b: str, path: Path) -> Path:
-    fig = Figure(figsize=(10.0, 4.5), dpi=DPI, layout="constrained")
-    lat, hist = fig.subplots(1, 2, width_ratios=(2, 1))
+    depth = bool(c.distances.diffs)
+    fig = Figure(figsize=(13.0 if depth else 10.0, 4.5), dpi=DPI, layout="constrained")
+    lat, hist, *rest = fig.subplots(1, 3 if depth else 2, width_ratios=(2, 1, 1)[: 2 + depth])
     stages = list(c.latency_ms)
     x = np.arange(len(stages))
     for k, (name, colour) in enumerate(zip((name_a, name_b), COLOURS, strict=True)):
@@ -40,5 +42,14 @@ def comparison_plot(c: Comparison, name_a: str, name_b: str, path: Path) -> Path
     hist.set_title(f"IoU of matched detections\n({c.matched} of {max(c.detections)})")
     hist.set_xlabel("IoU")
     hist.set_ylabel("detections")
+    if rest:
+        (dist,) = rest
+        diffs = c.distances.abs_diffs
+        # From 0: the axis shows how far apart in metres, never an offset around one value.
+        top = max(0.05, float(diffs.max())) * 1.05
+        dist.hist(diffs, bins=np.linspace(0.0, top, 21).tolist(), color="#8172b3")
+        dist.set_title(f"|distance B - A| of matched\n({len(c.distances.diffs)} with both)")
+        dist.set_xlabel("m")
+        dist.set_ylabel("detections")
     fig.savefig(path, dpi=DPI)
     return path

@@ -220,6 +220,7 @@ def test_a_replay_reaches_every_camera_only_on_a_stack_without_live_sensors() ->
     assert _allowed(live, "recorder", "put") == {KEYS.counters("recorder")}
     assert _allowed(replay, "recorder", "put") == {
         *(KEYS.frame(c) for c in cameras),
+        *(KEYS.depth(c) for c in cameras),  # a recording's depth images (issue 32)
         KEYS.scan(),
         KEYS.counters("recorder"),
     }

@@ -40,3 +40,12 @@ def test_the_freshness_gate_takes_a_replay_as_live_and_each_frame_as_new() -> No
         assert gate.check(header, Stamp(now.wall_ns + 1_000_000, now.mono_ns + 1_000_000))[0] is (
             Verdict.FRESH
         )
+
+
+def test_one_capture_stamp_is_one_new_stamp_whenever_it_was_recorded() -> None:
+    # A depth image and its colour frame: captured together, recorded a few ms apart. The
+    # replay stamps them alike, so that the detector pairs them as it did live.
+    sched = Schedule(3.0, Stamp(100 * S, 5 * S), first_log_ns=40 * S)
+    stamp = 41 * S + 7
+    stamps = {sched.restamp(stamp + lag, stamp) for lag in (1_000_001, 2_000_000, 4_999_999)}
+    assert len(stamps) == 1
