@@ -22,8 +22,8 @@ highest score). Per match:
 - ``box``: box_distance for a ``target_height_m`` person, as the controller uses it (a box
   touching the top or bottom edge gives no distance, counted unknown); truth: its own, the
   distance to the target's centre, where the simulator draws the person's picture (its size
-  in the image is the centre's). Against the front face it reads a target's radius (0.25 m)
-  farther: :func:`truths` gives both.
+  in the image is the centre's). ``box_face``: the same against the front face (it reads a
+  target's radius, 0.25 m, farther).
 
 Bands are by the truth distance to the target's front face (the depth methods'). Times: the
 depth stage per frame (depth_metres + measure for every box) against the detector's own time
@@ -49,8 +49,9 @@ from tools.benchmarks.depth_reference import Depth, measure_reference
 from tools.benchmarks.library_shared import log
 
 METHODS = ("depth", "yolo_ros", "laser", "box")
-#: Ours again, z alone against the truth z (near targets cut by the image edge: see docs).
-EXTRA = ("depth_z",)
+#: Ours again, z alone against the truth z (near targets cut by the image edge: see docs); the
+#: box height against the front face, as a controller following by it would keep its distance.
+EXTRA = ("depth_z", "box_face")
 BANDS = ((0.5, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, 5.0), (5.0, 7.0), (7.0, 10.0))
 
 
@@ -287,6 +288,7 @@ def run(opts: DepthBenchOptions) -> dict[str, Any]:
                     else box_distance(dets, i, spec.hfov_deg, ctl.target_height_m)
                 )
                 errors["box"][band].add(boxd, t.centre)
+                errors["box_face"][band].add(boxd, t.face)
             if (k + 1) % 25 == 0:
                 log(f"    world {k + 1}/{opts.worlds}")
     return {
