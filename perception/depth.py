@@ -1,12 +1,19 @@
 """Distance from an aligned depth image: each box's distance, 3D centre and extent. Pure numpy.
 
 The columns a detection gets (``Boxes.columns``, docs/messages.md), in the camera's optical
-frame (REP 103: x right, y down, z forward), metres, NaN where unknown:
+frame (REP 103: x right, y down, z forward), metres, NaN where unknown. They describe the
+object's VISIBLE SURFACE, what the camera sees of it (the cluster of its box's depths that is
+the object), not its hidden volume:
 
-    distance_m                 the distance from the camera to the object's 3D centre
-    x_m, y_m, z_m              the 3D centre
+    distance_m                 the distance from the camera to that centre, sqrt(x² + y² + z²)
+    x_m, y_m, z_m              the centre of the visible surface: z the median depth of the
+                               object's cluster, x and y the middle of its points
     size_x_m, size_y_m, size_z_m
-                               the extent along x, y and z
+                               the extent along x, y and z of the visible points (size_z_m:
+                               the depth extent of the visible part, not the object's depth)
+
+A person's distance is so to their front, as a laser's is: their middle is some 10-15 cm
+farther, which no camera sees.
 
 "Unknown" (NaN in every column of the row) when the box holds too few valid depth pixels:
 never a made-up number. Depth and colour are aligned: a box in colour pixels is scaled to the

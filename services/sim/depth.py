@@ -8,16 +8,18 @@ nothing.
 - The floor, below the horizon: row ``v`` (its centre at ``v + 0.5``) sees the floor at
   ``z = f * camera_height / (v + 0.5 - cy)``.
 - Above the horizon the wall is at infinity: no reading.
-- A target is a flat billboard facing the camera at its centre's z: its whole drawn rectangle
-  (the cut-out is a rectangle of photo) reads that z.
-- An obstacle is a round thing drawn as a box: its drawn rectangle reads its front face,
-  ``z - radius``, the nearest point of the circle the laser sees (services/sim/laser.py).
+- Every drawn thing reads its front face, ``z - radius``: a target (its whole drawn
+  rectangle: the cut-out is a rectangle of photo) and an obstacle (a round thing drawn as a
+  box) alike. That is the nearest point of the circle the laser sees (services/sim/laser.py),
+  and what a real depth camera sees of a person: their front, not their middle. The colour
+  image still draws a target at its centre's z (its size in the image).
 - Things are drawn in the colour image's order (farthest centre first, nearer over farther),
   so the depth covers exactly the pixels the colour image does, whatever is in front.
 
 :class:`DepthNoise` and :func:`apply` give the truth a stereo depth camera's faults; see each
-field. :func:`targets_in_camera` gives each visible target's centre in the optical frame, the
-truth a depth method is measured against; :func:`depth_frame` makes the message.
+field. :func:`targets_in_camera` gives the point of each visible target's front face a depth
+camera sees (in the optical frame), the truth a depth method is measured against;
+:func:`depth_frame` makes the message.
 """
 
 from __future__ import annotations
@@ -53,9 +55,8 @@ def floor_depth(spec: CameraSpec) -> Depth:
 
 
 def placed_depth(p: Placed) -> float:
-    """The z one drawn thing reads: a target's billboard its centre's, an obstacle its front
-    face's."""
-    return p.z if p.target is not None else p.z - p.radius
+    """The z one drawn thing reads: its front face's, ``z - radius``, target or obstacle."""
+    return p.z - p.radius
 
 
 def render_depth(world: World, spec: CameraSpec) -> Depth:
@@ -73,8 +74,12 @@ def render_depth(world: World, spec: CameraSpec) -> Depth:
 def targets_in_camera(
     world: World, spec: CameraSpec, min_visible: float = 0.0
 ) -> list[tuple[str, str, float, float, float]]:
-    """Each target the camera sees, as (target id, name, x, y, z): the centre of its billboard
-    at half its height, in the camera's optical frame (metres: x right, y down, z forward).
+    """Each target the camera sees, as (target id, name, x, y, z): the point of its front face
+    that a depth camera sees on the ray through its drawn centre, in the camera's optical frame
+    (metres: x right, y down, z forward). That is the target's centre at half its height
+    (x, y, z) back-projected at its front face's depth ``z - radius``: (x, y, z) scaled by
+    ``(z - radius) / z``. Its norm is the distance a depth camera can observe, about the
+    centre's less the radius; the hidden middle of the target is no camera's truth.
 
     A target is seen when more than ``min_visible`` of its whole drawn rectangle (cut by the
     image's edges or hidden by nearer things counts as not seen) shows in the image."""
@@ -93,8 +98,12 @@ def targets_in_camera(
         if shown[k] <= min_visible * (x1 - x0) * (y1 - y0):
             continue
         tg = world.targets[p.target]
+        face = placed_depth(p)
+        if face <= 0:
+            continue  # the camera is inside it: no surface in front to see
         x, y = 0.0 - p.lateral, spec.height_m - p.height_m / 2
-        out.append((tg.id, tg.name, float(x), float(y), float(p.z)))
+        scale = face / p.z
+        out.append((tg.id, tg.name, float(x * scale), float(y * scale), float(face)))
     return out
 
 

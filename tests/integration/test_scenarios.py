@@ -20,6 +20,9 @@ from tools.scenarios.score import REACH_TOLERANCE_M, STOP_MARGIN_S
 pytestmark = pytest.mark.integration
 
 DEFAULTS = ControllerSettings()
+#: Following by depth, the final distance to the target's surface is within this of the stop
+#: distance: depth ranges as well as the laser (REACH_TOLERANCE_M allows for the box height).
+DEPTH_REACH_TOLERANCE_M = 0.15
 
 
 def run(name: str, *extra: str, env: dict[str, str] | None = None) -> dict[str, Any]:
@@ -132,6 +135,11 @@ def test_a_robot_with_a_depth_camera_and_no_laser(name: str) -> None:
     if name == "ahead":
         assert "distance to the target from depth" in log, log
         assert reached(result), result
+        # Depth sees the person's front, as the laser does: the robot keeps follow_distance_m
+        # from their surface (the score's distance), not from their middle, so it ends as near
+        # the stop distance as with the laser (1.04 m), not a radius nearer.
+        final = result["final_distance_m"]
+        assert abs(final - DEFAULTS.follow_distance_m) <= DEPTH_REACH_TOLERANCE_M, result
     else:
         assert "(depth)" in log, "never stopped for the obstacle the depth showed"
         assert result["min_clearance_m"] >= DEFAULTS.safety_distance_m, result

@@ -3,7 +3,8 @@ simulator's truth, by four methods side by side, and what the depth stage costs 
 
 Worlds: the robot at the origin, one to three people (half of the others overlapping the first
 in the image, in front of or behind them; in 40 % of the worlds a low bin hides the first's
-legs) placed so that the range bands up to the depth camera's maximum are evenly filled. Each world
+legs) placed so that the range bands (of the first's front face) up to the depth camera's
+maximum are evenly filled. Each world
 is rendered by the simulator (services/sim): the colour image, and the aligned depth image
 with a stereo camera's faults (``DepthNoise()``: noise sigma 0.005 z^2, holes at edges and on
 dark pixels, dropout, mm quantisation, 0.3..10 m), sent through a 16UC1 DepthFrame as a
@@ -11,18 +12,22 @@ camera would send it. The real default detector runs on the colour image; each d
 matched to the target that owns the pixel at its box's centre (one detection per target: the
 highest score). Per match:
 
-- ``depth``: perception.depth.measure (ours); truth: the distance to the target's centre
-  (services/sim/depth.py targets_in_camera: the billboard's centre, optical frame).
+- ``depth``: perception.depth.measure (ours); truth: the distance to what a depth camera
+  sees of the target, its visible front face on the ray through its centre
+  (services/sim/depth.py targets_in_camera, optical frame).
 - ``yolo_ros``: the yolo_ros-like reference (tools/benchmarks/depth_reference.py); same truth.
 - ``laser``: sector_range over the box's bearing, as the controller uses it (the middle 60 %
-  of the box's width); truth: the target's surface, centre range minus its radius.
-- ``depth_z``: ours again, z alone against the target centre's z.
+  of the box's width); truth: the target's nearest surface, centre range minus its radius.
+- ``depth_z``: ours again, z alone against the front face's z.
 - ``box``: box_distance for a ``target_height_m`` person, as the controller uses it (a box
-  touching the top or bottom edge gives no distance, counted unknown); truth as ``depth``.
+  touching the top or bottom edge gives no distance, counted unknown); truth: its own, the
+  distance to the target's centre, where the simulator draws the person's picture (its size
+  in the image is the centre's). ``box_face``: the same against the front face (it reads a
+  target's radius, 0.25 m, farther).
 
-Bands are by the truth distance to the target's centre. Times: the depth stage per frame
-(depth_metres + measure for every box) against the detector's own time on the frame, and
-both methods on 1, 5 and 20 boxes of a 640x480 frame. Ctrl-C stops it at once.
+Bands are by the truth distance to the target's front face (the depth methods'). Times: the
+depth stage per frame (depth_metres + measure for every box) against the detector's own time
+on the frame, and both methods on 1, 5 and 20 boxes of a 640x480 frame. Ctrl-C stops it at once.
 """
 
 from __future__ import annotations
@@ -44,8 +49,9 @@ from tools.benchmarks.depth_reference import Depth, measure_reference
 from tools.benchmarks.library_shared import log
 
 METHODS = ("depth", "yolo_ros", "laser", "box")
-#: Ours again, z alone against the truth z (near targets cut by the image edge: see docs).
-EXTRA = ("depth_z",)
+#: Ours again, z alone against the truth z (near targets cut by the image edge: see docs); the
+#: box height against the front face, as a controller following by it would keep its distance.
+EXTRA = ("depth_z", "box_face")
 BANDS = ((0.5, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, 5.0), (5.0, 7.0), (7.0, 10.0))
 
 
@@ -96,15 +102,39 @@ def band_of(distance: float) -> int | None:
     return None
 
 
+@dataclass(frozen=True, slots=True)
+class Truth:
+    """One target's truths: ``face`` the distance to its visible front face on the ray through
+    its centre (the depth methods'), ``face_z`` that point's z, ``centre`` the distance to its
+    centre at half its height (the box height's)."""
+
+    face: float
+    face_z: float
+    centre: float
+
+
+def truths(world: Any, spec: Any, min_visible: float) -> dict[str, Truth]:
+    """Each target the camera sees (more than ``min_visible`` of it), by id."""
+    from services.sim.depth import targets_in_camera
+
+    radius = {tg.id: tg.radius for tg in world.targets}
+    out = {}
+    for tid, _name, x, y, z in targets_in_camera(world, spec, min_visible=min_visible):
+        face = math.sqrt(x * x + y * y + z * z)
+        out[tid] = Truth(face, z, face * (z + radius[tid]) / z)
+    return out
+
+
 def make_world(rng: np.random.Generator, band: tuple[float, float], hfov_deg: float) -> Any:
-    """The robot at the origin; a person at a range within ``band`` (of the centre, in the
-    camera's view), up to two more people elsewhere, and sometimes a bin in front."""
+    """The robot at the origin; a person whose front face is at a range within ``band`` (in
+    the camera's view), up to two more people elsewhere, and sometimes a bin in front."""
     from services.sim.scenarios import person
     from services.sim.world import Obstacle, Robot, World
 
     half = math.radians(hfov_deg / 2) * 0.8
     targets = []
-    first = float(rng.uniform(*band))
+    # the centre's range: the front face's plus a person's radius
+    first = float(rng.uniform(*band)) + person("p", (0.0, 0.0, 0.0)).radius
     placed: list[tuple[float, float]] = [(first, float(rng.uniform(-half, half)))]
     for _ in range(int(rng.integers(0, 3))):
         r = float(rng.uniform(1.0, band[1] + 3.0))
@@ -171,7 +201,7 @@ def run(opts: DepthBenchOptions) -> dict[str, Any]:
     from services.controller.geometry import box_clipped, box_distance, sector_range
     from services.detector.contract import DetectorSettings
     from services.sim.contract import SimSettings
-    from services.sim.depth import DepthNoise, apply, depth_frame, render_depth, targets_in_camera
+    from services.sim.depth import DepthNoise, apply, depth_frame, render_depth
     from services.sim.render import CameraSpec, render
     from stack.config_file import load_config
 
@@ -218,7 +248,7 @@ def run(opts: DepthBenchOptions) -> dict[str, Any]:
             )
             scan = laser_scan(world, rng)
             owner, placed = owners(world, spec)
-            truth = {t[0]: t[2:] for t in targets_in_camera(world, spec, min_visible=0.3)}
+            truth = truths(world, spec, min_visible=0.3)
             matched: dict[int, int] = {}  # placed index -> detection row
             for i in np.argsort(-result.boxes.scores):
                 if int(result.boxes.class_ids[i]) != person_id:
@@ -235,17 +265,17 @@ def run(opts: DepthBenchOptions) -> dict[str, Any]:
                 tg = world.targets[p.target]
                 if tg.id not in truth:
                     continue
-                centre = float(np.linalg.norm(truth[tg.id]))
-                band = band_of(centre)
+                t = truth[tg.id]
+                band = band_of(t.face)
                 if band is None:
                     continue
                 i = matched.get(o)
                 if i is None:
                     missed[band] += 1
                     continue
-                errors["depth"][band].add(float(ours["distance_m"][i]), centre)
-                errors["yolo_ros"][band].add(float(ref["distance_m"][i]), centre)
-                errors["depth_z"][band].add(float(ours["z_m"][i]), truth[tg.id][2])
+                errors["depth"][band].add(float(ours["distance_m"][i]), t.face)
+                errors["yolo_ros"][band].add(float(ref["distance_m"][i]), t.face)
+                errors["depth_z"][band].add(float(ours["z_m"][i]), t.face_z)
                 x1, _, x2, _ = xyxy[i]
                 bearing = -math.atan2((x1 + x2) / 2 - spec.width / 2, spec.focal_px)
                 half = math.atan((x2 - x1) / 2 / spec.focal_px)
@@ -257,7 +287,8 @@ def run(opts: DepthBenchOptions) -> dict[str, Any]:
                     if box_clipped(dets, i)
                     else box_distance(dets, i, spec.hfov_deg, ctl.target_height_m)
                 )
-                errors["box"][band].add(boxd, centre)
+                errors["box"][band].add(boxd, t.centre)
+                errors["box_face"][band].add(boxd, t.face)
             if (k + 1) % 25 == 0:
                 log(f"    world {k + 1}/{opts.worlds}")
     return {
@@ -362,7 +393,8 @@ def report(r: dict[str, Any]) -> None:
     print(
         f"depth benchmark: {r['worlds']} simulated worlds, noise sigma "
         f"{r['noise']['noise_k']} z^2, range {r['noise']['range_m']} m; abs error median / "
-        "p95 (m), median % of range, unknown"
+        "p95 (m), median % of range, unknown; truth: the target's visible front face (laser: "
+        "its nearest surface; box: its centre); bands by the front face's distance"
     )
     print(f"  {'band m':>8} {'n':>4} " + " ".join(f"{m:>27}" for m in METHODS + EXTRA))
     for b in r["bands"]:

@@ -1,5 +1,6 @@
 """The simulator's depth camera (services/sim/depth.py): the true depth image drawn from the
-colour image's geometry, the truth of each target's centre, and a stereo camera's faults."""
+colour image's geometry, the truth of each target's visible front face, and a stereo camera's
+faults."""
 
 from __future__ import annotations
 
@@ -45,12 +46,14 @@ def test_the_floor_reads_its_distance_row_by_row_and_above_the_horizon_nothing()
     assert depth[-1, 0] == pytest.approx(1.39, abs=0.01)
 
 
-def test_a_target_reads_its_distance_over_exactly_the_pixels_it_is_drawn_on() -> None:
+def test_a_target_reads_its_front_face_over_exactly_the_pixels_it_is_drawn_on() -> None:
     world = World(Robot(), targets=[person("p", (0.0, 3.0, 0.4))])
     depth = render_depth(world, SPEC)
     drawn = _thing(world)
     assert drawn.sum() > 500
-    assert np.all(depth[drawn] == pytest.approx(3.0))
+    # Its front face (as the laser sees it), not its centre: 3.0 m less its 0.25 m radius.
+    assert world.targets[0].radius == 0.25
+    assert np.all(depth[drawn] == pytest.approx(2.75))
     # Everywhere else: the empty world's depth.
     np.testing.assert_array_equal(depth[~drawn], floor_depth(SPEC)[~drawn])
     # The billboard stands on the floor and reaches above the horizon (1.7 m > 0.6 m).
@@ -71,8 +74,8 @@ def test_an_obstacle_reads_its_front_face_and_nearer_things_hide_farther_ones() 
     col = SPEC.width // 2
     # The obstacle's box (its front face, as the laser sees it) in front of the person.
     assert depth[box_top + 1 : box_bottom, col] == pytest.approx(1.7)
-    # The person above the low box, behind it.
-    assert depth[box_top - 3, col] == pytest.approx(4.0)
+    # The person above the low box, behind it (their front face).
+    assert depth[box_top - 3, col] == pytest.approx(3.75)
     # Swap: the person in front hides the obstacle.
     world = World(
         Robot(),
@@ -105,7 +108,7 @@ def test_depth_covers_the_pixels_the_colour_image_draws_from_any_camera() -> Non
             assert (covered & ~drawn).sum() <= 0.01 * max(covered.sum(), 1)
 
 
-def test_targets_in_camera_are_the_billboards_centres_in_the_optical_frame() -> None:
+def test_targets_in_camera_are_their_front_faces_on_the_centre_ray_in_the_optical_frame() -> None:
     world = World(
         Robot(theta=0.1),
         targets=[
@@ -119,9 +122,12 @@ def test_targets_in_camera_are_the_billboards_centres_in_the_optical_frame() -> 
     c, s = np.cos(0.1), np.sin(0.1)
     _, name, x, y, z = seen["near"]
     assert name == "person"
-    assert z == pytest.approx(3.0 * c + 0.5 * s)
-    assert x == pytest.approx(-(-3.0 * s + 0.5 * c))  # right of the axis is +x
-    assert y == pytest.approx(0.6 - 1.7 / 2)  # half its height, below the lens is +y
+    # The centre at half its height: z ahead, right of the axis +x, below the lens +y ...
+    centre = np.array([-(-3.0 * s + 0.5 * c), 0.6 - 1.7 / 2, 3.0 * c + 0.5 * s])
+    # ... seen at its front face (0.25 m nearer) on the ray through it.
+    face = centre * (centre[2] - 0.25) / centre[2]
+    assert (x, y, z) == pytest.approx(tuple(face))
+    assert np.linalg.norm((x, y, z)) == pytest.approx(np.linalg.norm(centre) - 0.25, abs=0.01)
     # The baseline depth method on a perfect depth image finds that same centre.
     depth = apply(render_depth(world, SPEC), render(world, SPEC), IDEAL, np.random.default_rng(0))
     drawn = np.argwhere(render_depth(world, SPEC) == np.float32(z))

@@ -10,7 +10,10 @@ import numpy as np
 import pytest
 
 from perception.depth import Intrinsics
-from tools.benchmarks.depth import BANDS, Errors, band_of, synthetic_cases
+from services.sim.render import CameraSpec
+from services.sim.scenarios import person
+from services.sim.world import Robot, World
+from tools.benchmarks.depth import BANDS, Errors, band_of, synthetic_cases, truths
 from tools.benchmarks.depth_reference import measure_reference
 
 INTR = Intrinsics.from_hfov(640, 480, 60.0)
@@ -22,6 +25,22 @@ def test_bands_cover_up_to_the_maximum() -> None:
     assert band_of(4.99) == 3
     assert band_of(BANDS[-1][1]) == len(BANDS) - 1
     assert band_of(10.01) is None
+
+
+def test_the_depth_truth_is_the_visible_front_face_and_the_box_s_the_centre() -> None:
+    """A person 3 m ahead (0.25 m radius) and one 4 m ahead off to the left: the depth methods
+    are scored against the face the camera sees, the box height against the drawn centre."""
+    world = World(Robot(), targets=[person("a", (0.0, 3.0, 0.0)), person("b", (0.0, 4.0, 1.0))])
+    spec = CameraSpec(640, 480, 60.0, 0.6)
+    got = truths(world, spec, min_visible=0.3)
+    a = got["a"]
+    centre = math.hypot(3.0, 0.6 - 1.7 / 2)  # half its height, 0.25 m below the lens
+    assert a.centre == pytest.approx(centre)
+    assert a.face_z == pytest.approx(2.75)
+    assert a.face == pytest.approx(centre * 2.75 / 3.0)
+    b = got["b"]
+    assert b.face_z == pytest.approx(3.75)
+    assert b.centre - b.face == pytest.approx(0.25, abs=0.01)
 
 
 def test_errors_count_unknowns_apart() -> None:
