@@ -21,8 +21,9 @@ pytestmark = pytest.mark.integration
 
 DEFAULTS = ControllerSettings()
 #: Following by depth, the final distance to the target's surface is within this of the stop
-#: distance: depth ranges as well as the laser (REACH_TOLERANCE_M allows for the box height).
-DEPTH_REACH_TOLERANCE_M = 0.15
+#: distance: depth ranges as well as the laser (REACH_TOLERANCE_M allows for the box height);
+#: 0.2 still fails a robot that stops a target radius (0.25 m) short.
+DEPTH_REACH_TOLERANCE_M = 0.2
 
 
 def run(name: str, *extra: str, env: dict[str, str] | None = None) -> dict[str, Any]:
