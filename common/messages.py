@@ -66,16 +66,23 @@ class Frame(Message):
     def __post_init__(self) -> None:
         if self.encoding not in FRAME_ENCODINGS:
             raise ValueError(f"unknown encoding {self.encoding!r}")
-        if not (0 < self.width <= MAX_IMAGE_SIDE and 0 < self.height <= MAX_IMAGE_SIDE):
-            raise ValueError(f"absurd image size {self.width}x{self.height}")
         channels = FRAME_ENCODINGS[self.encoding]
-        if channels and len(self.data) != self.width * self.height * channels:
-            raise ValueError(
-                f"{self.encoding} {self.width}x{self.height} needs "
-                f"{self.width * self.height * channels} bytes, got {len(self.data)}"
-            )
+        _check_pixels("image", self.encoding, self.width, self.height, channels, self.data)
         if not channels and not self.data:
             raise ValueError("empty jpeg")
+
+
+def _check_pixels(
+    what: str, encoding: str, width: int, height: int, size: int, data: bytes
+) -> None:
+    """A raw image's size within bounds and its ``data`` exactly ``width*height*size`` bytes
+    (``size`` 0: a compressed image, any length)."""
+    if not (0 < width <= MAX_IMAGE_SIDE and 0 < height <= MAX_IMAGE_SIDE):
+        raise ValueError(f"absurd {what} size {width}x{height}")
+    if size and len(data) != width * height * size:
+        raise ValueError(
+            f"{encoding} {width}x{height} needs {width * height * size} bytes, got {len(data)}"
+        )
 
 
 #: Depth encodings, as ``sensor_msgs/Image``'s: bytes per pixel. ``16UC1`` is millimetres (0: no
@@ -118,14 +125,8 @@ class DepthFrame(Message):
     def __post_init__(self) -> None:
         if self.encoding not in DEPTH_ENCODINGS:
             raise ValueError(f"unknown depth encoding {self.encoding!r} (16UC1 or 32FC1)")
-        if not (0 < self.width <= MAX_IMAGE_SIDE and 0 < self.height <= MAX_IMAGE_SIDE):
-            raise ValueError(f"absurd depth image size {self.width}x{self.height}")
-        need = self.width * self.height * DEPTH_ENCODINGS[self.encoding]
-        if len(self.data) != need:
-            raise ValueError(
-                f"{self.encoding} {self.width}x{self.height} needs {need} bytes, "
-                f"got {len(self.data)}"
-            )
+        pixel_bytes = DEPTH_ENCODINGS[self.encoding]
+        _check_pixels("depth image", self.encoding, self.width, self.height, pixel_bytes, self.data)
         for what, f in (("fx", self.fx), ("fy", self.fy)):
             if not (math.isfinite(f) and 0 < f < 1e6):
                 raise ValueError(f"focal length {what} {f} is outside (0, 1e6) pixels")
