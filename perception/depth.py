@@ -28,13 +28,16 @@ from statistics import NormalDist
 import numpy as np
 import numpy.typing as npt
 
-from common.messages import DepthFrame
+from common.messages import MAX_DEPTH_RANGE_M, DepthFrame
 
 DISTANCE = "distance_m"
 CENTRE = ("x_m", "y_m", "z_m")
 SIZE = ("size_x_m", "size_y_m", "size_z_m")
 #: Every column the depth stage adds, in this order.
 COLUMNS: tuple[str, ...] = (DISTANCE, *CENTRE, *SIZE)
+
+#: A reading under a millimetre (16UC1's unit) is no reading: a 32FC1 source's denormals.
+MIN_READING_M = 0.001
 
 Depth = npt.NDArray[np.float32]  # (h, w) metres, NaN where there is no reading
 
@@ -89,16 +92,16 @@ class DepthParams:
 
 
 def depth_metres(frame: DepthFrame) -> Depth:
-    """The image as (h, w) float32 metres, NaN where there is no reading (0, NaN, inf, or
-    outside the frame's stated range)."""
+    """The image as (h, w) float32 metres, NaN where there is no reading (0, NaN, inf, under
+    a millimetre, or outside the frame's stated range; beyond ``MAX_DEPTH_RANGE_M`` where it
+    states none)."""
     if frame.encoding == "16UC1":
         raw = np.frombuffer(frame.data, "<u2").reshape(frame.height, frame.width)
         z = raw.astype(np.float32) / 1000.0
     else:
         z = np.frombuffer(frame.data, "<f4").reshape(frame.height, frame.width).astype(np.float32)
-    bad = ~np.isfinite(z) | (z <= 0) | (z < frame.range_min_m)
-    if frame.range_max_m > 0:
-        bad |= z > frame.range_max_m
+    bad = ~np.isfinite(z) | (z < max(MIN_READING_M, frame.range_min_m))
+    bad |= z > (frame.range_max_m if frame.range_max_m > 0 else MAX_DEPTH_RANGE_M)
     return np.where(bad, np.float32(np.nan), z).astype(np.float32)
 
 

@@ -59,6 +59,8 @@ TAKEN_SPARE = "taken_spare"  # another camera's, with no priority camera waiting
 DEPTH_IN = "depth_in"
 DEPTH_PAIRED = "depth_paired"
 DEPTH_UNPAIRED = "depth_unpaired"
+#: Frames whose depth stage raised (a defect): published without depth, logged.
+DEPTH_FAILED = "depth_failed"
 
 
 def taken_for(reason: str) -> str:
@@ -103,6 +105,7 @@ PER_CAMERA = frozenset(
         DEPTH_IN,
         DEPTH_PAIRED,
         DEPTH_UNPAIRED,
+        DEPTH_FAILED,
     }
 )
 #: Every counter a worker publishes (plain names; see PER_CAMERA for the per-camera ones).

@@ -34,7 +34,7 @@ from common.node import Tally
 from perception import DepthParams, Intrinsics, depth_metres, measure_depth, to_depth_pixels
 from services.detector import contract
 from services.detector.contract import DetectorSettings
-from services.detector.counting import count_for
+from services.detector.counting import count_for, reject_for
 
 _T = TypeVar("_T")
 
@@ -246,10 +246,21 @@ class DepthStage:
             count_for(self.tally, camera, contract.DEPTH_UNPAIRED)
             return boxes, None
         start = perf_s()
-        intr = Intrinsics.of(paired)
-        xyxy = to_depth_pixels(boxes.xyxy, image_size, intr)
-        columns = measure_depth(depth_metres(paired), intr, xyxy, self.params)
-        out = boxes.with_columns(columns)
+        try:
+            intr = Intrinsics.of(paired)
+            xyxy = to_depth_pixels(boxes.xyxy, image_size, intr)
+            columns = measure_depth(depth_metres(paired), intr, xyxy, self.params)
+            out = boxes.with_columns(columns)
+        except Exception as exc:  # a defect in the method must not stop the detections
+            reject_for(
+                self.tally,
+                camera,
+                contract.DEPTH_FAILED,
+                f"the depth stage failed on frame {header.seq} of {camera} ({exc!r}): "
+                "its detections go out without depth",
+                f"depth-failed/{camera}",
+            )
+            return boxes, None
         ms = ms_since(start)
         count_for(self.tally, camera, contract.DEPTH_PAIRED)
         return out, ms

@@ -9,11 +9,13 @@ import threading
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from common.boxes import Boxes
 from common.messages import Header
 from common.node import Tally
 from perception.depth import COLUMNS
+from services.detector import depth_stage
 from services.detector.depth_stage import DepthStage
 from stack.config import Config
 from tests.polling import wait_for
@@ -94,3 +96,22 @@ def test_a_zero_wait_never_waits() -> None:
     depth(s, at(h, -100))
     assert detections(s, h).columns == {}
     assert s.tally.counters.get("depth_unpaired") == 1
+
+
+def test_a_depth_stage_that_raises_gives_2d_detections_logged_and_counted(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A defect in the method (here: the measure raising) must not stop the detector's round:
+    the frame's detections go out without depth, and the failure is counted."""
+
+    def broken(*_: object) -> None:
+        raise FloatingPointError("a defect")
+
+    monkeypatch.setattr(depth_stage, "measure_depth", broken)
+    s = stage()
+    h = camera_header("front", 1)
+    depth(s, h)
+    boxes = detections(s, h)
+    assert boxes.columns == {} and len(boxes) == 1
+    assert s.tally.counters.get("depth_failed") == 1
+    assert s.tally.counters.get("depth_failed.front") == 1

@@ -235,3 +235,23 @@ def test_depth_metres_reads_16uc1_with_holes_and_range() -> None:
     assert z.dtype == np.float32
     assert np.isnan(z[0, 0]) and np.isnan(z[0, 1]) and np.isnan(z[1, 1]) and np.isnan(z[1, 2])
     assert z[0, 2] == pytest.approx(1.0) and z[1, 0] == pytest.approx(2.0)
+
+
+def test_depth_metres_32fc1_denormals_and_absurd_ranges_are_no_readings() -> None:
+    """A 32FC1 source with no stated range: a reading under a millimetre (a denormal) or beyond
+    any sensor (3e38) is no reading, never a distance of 0 or infinity."""
+    metres = np.array([[1e-30, 0.0005, 1.5], [3e38, -2.0, np.inf]], "<f4")
+    frame = DepthFrame(
+        header=Header(stamp_ns=1, seq=0, frame_id="cam", source="test"),
+        encoding="32FC1",
+        width=3,
+        height=2,
+        data=metres.tobytes(),
+        fx=1.0,
+        fy=1.0,
+        cx=1.0,
+        cy=1.0,
+    )
+    z = depth_metres(frame)
+    assert z[0, 2] == pytest.approx(1.5)
+    assert np.isnan(np.delete(z.ravel(), 2)).all()
