@@ -1,5 +1,7 @@
 """Depth to and from ROS: ``sensor_msgs/Image`` (16UC1, 32FC1) with its ``CameraInfo`` in as a
-DepthFrame, and the detections' depth columns out as ``vision_msgs/Detection3DArray``. No I/O.
+DepthFrame (and a DepthFrame out as the two, as a depth camera's driver sends them: the
+simulator playing a ROS 2 robot), and the detections' depth columns out as
+``vision_msgs/Detection3DArray``. No I/O.
 
 Bad input raises ``DecodeError`` and nothing else; services/ros2/convert.py has the header
 conventions and the CDR helpers.
@@ -16,7 +18,8 @@ from common.errors import DecodeError
 from common.messages import DEPTH_ENCODINGS, DepthFrame, Detections
 from perception import DEPTH_CENTRE, DEPTH_SIZE, Mounting, to_robot
 from services.ros2.contract import RosDistro
-from services.ros2.convert import RosMessage, header_from_ros, ros_header
+from services.ros2.convert import RosMessage, build, header_from_ros, ros_header
+from services.ros2.images import IMAGE
 from services.ros2.typestore import typestore_for
 
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
@@ -104,6 +107,54 @@ def depth_from_image(
         )  # fmt: skip
     except ValueError as exc:
         raise DecodeError(f"depth Image: {exc}") from exc
+
+
+def depth_to_image(distro: RosDistro, frame: DepthFrame) -> RosMessage:
+    """A DepthFrame as the ``sensor_msgs/Image`` a depth camera's driver sends: its encoding
+    (16UC1 mm, 32FC1 m), little-endian rows unpadded, its header's stamp and frame id (those of
+    the colour frame it is aligned to). The pixels are not copied."""
+    return build(
+        distro,
+        IMAGE,
+        header=ros_header(distro, frame.header.stamp_ns, frame.header.frame_id),
+        height=frame.height,
+        width=frame.width,
+        encoding=frame.encoding,
+        is_bigendian=0,
+        step=frame.width * DEPTH_ENCODINGS[frame.encoding],
+        data=np.frombuffer(frame.data, dtype=np.uint8),
+    )
+
+
+def camera_info_of(distro: RosDistro, frame: DepthFrame) -> RosMessage:
+    """The ``sensor_msgs/CameraInfo`` of a DepthFrame's image: its size and pinhole intrinsics
+    (``k``, and ``p`` for a rectified image), no distortion, under the frame's header. What
+    :func:`intrinsics_from_camera_info` reads back."""
+    fx, fy, cx, cy = frame.fx, frame.fy, frame.cx, frame.cy
+    roi = build(
+        distro,
+        "sensor_msgs/msg/RegionOfInterest",
+        x_offset=0,
+        y_offset=0,
+        height=0,
+        width=0,
+        do_rectify=False,
+    )
+    return build(
+        distro,
+        CAMERA_INFO,
+        header=ros_header(distro, frame.header.stamp_ns, frame.header.frame_id),
+        height=frame.height,
+        width=frame.width,
+        distortion_model="plumb_bob",
+        d=np.zeros(5, np.float64),
+        k=np.array([fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0], np.float64),
+        r=np.eye(3, dtype=np.float64).ravel(),
+        p=np.array([fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0], np.float64),
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+    )
 
 
 def has_3d(dets: Detections) -> bool:

@@ -6,9 +6,10 @@ RGB-D camera: every colour frame comes with a depth image of the same instant, u
 header (services/sim/depth.py). With ``sim.laser`` false the robot has no laser: no scan.
 
 The robot talks either way a robot may: the stack's own messages (``StackRobot``), or ROS 2 over
-rmw_zenoh (``RosRobot``: sensor_msgs Image and LaserScan, geometry_msgs Twist or TwistStamped,
-through a router it hosts), so that every frame, scan and command passes through the ``ros2``
-bridge service. Either way its velocity commands go through ``SimHandlers``.
+rmw_zenoh (``RosRobot``: sensor_msgs Image and LaserScan, with depth a depth Image and its
+CameraInfo, geometry_msgs Twist or TwistStamped, through a router it hosts), so that every frame,
+depth image, scan and command passes through the ``ros2`` bridge service. Either way its
+velocity commands go through ``SimHandlers``.
 """
 
 from __future__ import annotations
@@ -38,11 +39,14 @@ from services.ros2 import (
     TWIST,
     TWIST_STAMPED,
     RosGraph,
+    RosPublisher,
     cdr_decode,
     frame_to_image,
     scan_to_ros,
     twist_from_ros,
 )
+from services.ros2.contract import camera_topics
+from services.ros2.depth import CAMERA_INFO, camera_info_of, depth_to_image
 from services.sim import contract
 from services.sim.cameras import SimCamera, sim_cameras
 from services.sim.depth import DepthNoise, apply, depth_frame, render_depth
@@ -143,25 +147,46 @@ class StackRobot:
 class RosRobot(Closing):
     """Sensors as ROS 2 messages on the rmw_zenoh keys of ``config.ros2``'s topics; commands
     taken from its cmd_vel topic. Hosts the graph's router on ``ros2.router``. One image topic:
-    the first camera's frames alone (``run`` renders no other camera for it), and no depth
-    topic (``run`` renders no depth for it)."""
+    the first camera's frames alone (``run`` renders no other camera for it). With
+    ``sim.depth`` that camera is an RGB-D camera as its driver publishes one: each depth image
+    a 16UC1 ``sensor_msgs/Image`` (mm) on ``ros2.depth_topic`` and its ``CameraInfo`` (the
+    intrinsics) on ``ros2.depth_info_topic``, both under the header (stamp, frame id) of the
+    colour image it goes with, so the bridge (``ros2.depth_in``) pairs them. No laser
+    (``sim.laser`` false): no scan topic."""
 
     def __init__(self, config: Config, handlers: SimHandlers) -> None:
         s = config.ros2
         self._distro = s.distro
         self._graph = RosGraph(dataclasses.replace(s, node="sim_robot"), host=True)
         self._image = self._graph.publisher(s.image_topic, IMAGE, SENSOR_DATA_QOS)
-        self._scan = self._graph.publisher(s.scan_topic, LASER_SCAN, SENSOR_DATA_QOS)
+        self._scan = (
+            self._graph.publisher(s.scan_topic, LASER_SCAN, SENSOR_DATA_QOS)
+            if config.sim.laser
+            else None
+        )
+        self._depth: RosPublisher | None = None
+        self._depth_info: RosPublisher | None = None
+        if config.sim.depth:
+            # The first camera's topics: the ros2 table's own (services/ros2/contract.py).
+            topics = camera_topics(s, config.stack.camera, config.stack.camera)
+            publish = self._graph.publisher
+            self._depth = publish(topics.depth, IMAGE, SENSOR_DATA_QOS)
+            self._depth_info = publish(topics.depth_info, CAMERA_INFO, SENSOR_DATA_QOS)
         self._graph.subscribe(s.cmd_vel_topic, handlers.ros_type, handlers.on_ros_cmd_vel)
 
     def frame(self, camera: str, frame: Frame) -> None:
         self._image.put(frame_to_image(self._distro, frame))
 
     def depth(self, camera: str, frame: DepthFrame) -> None:
-        raise NotImplementedError("the simulated ROS 2 robot has no depth topic")
+        if self._depth is None or self._depth_info is None:
+            raise RuntimeError("a depth image from a simulated ROS 2 robot without sim.depth")
+        # The CameraInfo first, as with every image: the bridge takes no depth before one.
+        self._depth_info.put(camera_info_of(self._distro, frame))
+        self._depth.put(depth_to_image(self._distro, frame))
 
     def scan(self, scan: LaserScan) -> None:
-        self._scan.put(scan_to_ros(self._distro, scan))
+        if self._scan is not None:
+            self._scan.put(scan_to_ros(self._distro, scan))
 
     def close(self) -> None:
         self._graph.close()
@@ -211,7 +236,7 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
         cameras = cameras[:1]  # one image topic (the supervisor warns of the others)
     laser = LaserSpec(s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m)
     rng = np.random.default_rng(s.seed)
-    depth = depth_noise(s) if s.depth and not s.ros2_robot else None
+    depth = depth_noise(s) if s.depth else None
     # Its own stream, so that the laser's noise is the same with depth or without.
     depth_rng = np.random.default_rng([s.seed, 1])
     sources = CommandSources(s.command_sources_window_s)
@@ -269,7 +294,10 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
                 c.spec.mount_yaw_deg,
             )  # fmt: skip
         if s.depth and s.ros2_robot:
-            node.log.warning("sim.depth: no depth images as a ROS 2 robot (no depth topic)")
+            node.log.info(
+                "sim.depth: depth images on %s, their CameraInfo on %s",
+                config.ros2.depth_topic, config.ros2.depth_info_topic,
+            )  # fmt: skip
         if not s.laser:
             node.log.info("sim.laser = false: a robot with no laser, no scan")
         missing = [c for c in SCENARIOS[s.scenario].cameras if c not in config.all_cameras]

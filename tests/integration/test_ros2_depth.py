@@ -17,8 +17,9 @@ import pytest
 
 from common.announce import Announced
 from common.boxes import Boxes
-from common.messages import CameraAnnouncement, DepthFrame, Detections, Header
+from common.messages import CameraAnnouncement, DepthFrame, Detections, Frame, Header
 from common.zenoh_bus import ZenohBus
+from services.sim.cameras import sim_cameras
 from tests.integration.conftest import Stack, free_port, wait_for
 from tests.integration.test_ros2 import RobotSide
 
@@ -151,3 +152,46 @@ def test_depth_comes_in_and_3d_detections_go_out(make_stack) -> None:  # type: i
     finally:
         stop.set()
         robot.close()
+
+
+def test_the_simulator_as_a_ros2_robot_with_a_depth_camera(make_stack) -> None:  # type: ignore[no-untyped-def]
+    # The whole path over ROS 2: the simulator's depth image (16UC1) and CameraInfo on the ROS
+    # topics, the bridge (depth_in) making DepthFrames of them with the simulator's intrinsics,
+    # the detector pairing them with the colour frames the bridge brought in: a person 4 m
+    # ahead (the "ahead" world, standing still without a controller) gets a distance.
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    stack: Stack = make_stack(
+        supervisor={"services": ["sim", "ros2", "detector"]},
+        sim={"ros2_robot": True, "depth": True, "laser": False, "scenario": "ahead"},
+        ros2={"router": [endpoint], "scan_in": False, "depth_in": True},
+    )  # fmt: skip
+    camera = stack.config.stack.camera
+    _, depths = stack.subscribe(stack.keys.depth(camera))
+    _, frames = stack.subscribe(stack.keys.frame(camera))
+    _, dets = stack.subscribe(stack.keys.detections(camera))
+    stack.wait_ready({"sim", "ros2", "detector"})
+
+    def with_distance() -> list[float]:
+        found = []
+        for d in map(Detections.decode, list(dets)):
+            names = np.asarray(d.class_names)[d.boxes.class_ids]
+            if "distance_m" in d.boxes.columns:
+                found += d.boxes.columns["distance_m"][names == "person"].tolist()
+        return [x for x in found if math.isfinite(x)]
+
+    wait_for(with_distance, 90, lambda: f"a person with a distance:\n{stack.log()}")
+    # The person's front is 3.75 m away (4 m to their middle, 0.25 m radius).
+    assert 3.4 < float(np.median(with_distance())) < 4.2, with_distance()
+    spec = sim_cameras(stack.config)[0].spec
+    colour = {Frame.decode(p).header.stamp_ns: Frame.decode(p).header for p in list(frames)}
+    paired = 0
+    for frame in map(DepthFrame.decode, list(depths)):
+        assert frame.encoding == "16UC1"
+        assert (frame.width, frame.height) == (spec.width, spec.height)
+        assert (frame.fx, frame.fy) == pytest.approx((spec.focal_px, spec.focal_px))
+        assert (frame.cx, frame.cy) == pytest.approx((spec.width / 2, spec.height / 2))
+        if frame.header.stamp_ns in colour:  # the colour image's stamp and frame id
+            assert frame.header.frame_id == colour[frame.header.stamp_ns].frame_id
+            paired += 1
+    assert paired > 0, "no depth image under its colour image's stamp"
+    assert stack.stop() == 0, stack.log()

@@ -72,6 +72,15 @@ def scenario_config(
         **changes,
     )
     bridge = ("ros2",) if ros2 else ()
+    # A simulated ROS 2 robot with depth: the bridge takes its depth in, and announces its
+    # camera at the height the simulator renders from (the virtual scan takes the floor out
+    # by it), as the simulator does on the stack's keys.
+    depth_over_ros2 = ros2 and base.sim.depth
+    camera = (
+        dataclasses.replace(base.camera, mount_height_m=base.sim.camera_height_m)
+        if depth_over_ros2
+        else base.camera
+    )
     cameras = tuple(
         (name, dataclasses.replace(base.camera, **changes))
         for name, changes in scenario.cameras.items()
@@ -79,6 +88,7 @@ def scenario_config(
     return dataclasses.replace(
         base,
         zenoh=zenoh_s,
+        camera=camera,
         cameras=cameras,
         detector=dataclasses.replace(base.detector, **scenario.detector),
         stack=dataclasses.replace(base.stack, prefix=f"sim/{uuid.uuid4().hex[:8]}"),
@@ -92,6 +102,7 @@ def scenario_config(
         ros2=dataclasses.replace(
             base.ros2,
             router=(f"tcp/127.0.0.1:{free_port()}",) if ros2 else base.ros2.router,
+            depth_in=base.ros2.depth_in or depth_over_ros2,
         ),
         supervisor=dataclasses.replace(
             base.supervisor, services=("sim", *bridge, "detector", "controller", "metrics")
@@ -147,6 +158,17 @@ def config_changes(base: Config, config: Config, scenario: Scenario) -> list[str
     lines += _table_changes(
         "controller", base.controller, config.controller, scenario.controller, own
     )
+    if base.camera.mount_height_m != config.camera.mount_height_m:
+        lines.append(
+            f"camera.mount_height_m: {base.camera.mount_height_m:g} -> "
+            f"{config.camera.mount_height_m:g} (the simulated ROS 2 robot's depth camera: "
+            "sim.camera_height_m)"
+        )
+    if base.ros2.depth_in != config.ros2.depth_in:
+        lines.append(
+            "ros2.depth_in: false -> true (the simulated ROS 2 robot's depth comes through the "
+            "bridge)"
+        )
     if base.supervisor.services != config.supervisor.services:
         lines.append(
             f"supervisor.services: {_shown(base.supervisor.services)} -> "
