@@ -63,7 +63,8 @@ class SimSettings:
     an RGB-D camera: one DepthFrame per colour frame, with the colour frame's header, on
     ``keys.depth(camera)`` (services/sim/depth.py), with a stereo camera's faults: the
     ``depth_*`` settings are the fields of ``DepthNoise`` there (``depth_range_min_m`` below
-    ``depth_range_max_m``).
+    ``depth_range_max_m``); as a ROS 2 robot, a 16UC1 ``sensor_msgs/Image`` and its
+    ``CameraInfo`` on ``ros2.depth_topic`` and ``ros2.depth_info_topic`` instead.
     """
 
     scenario: str = "demo"
