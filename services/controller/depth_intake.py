@@ -144,7 +144,7 @@ class DepthIntake:
         while not stop.is_set():
             try:
                 self.handle_waiting(poll_s)
-            except Exception as exc:  # noqa: BLE001 - the thread must not die silently
+            except Exception as exc:
                 self.tally.reject(
                     contract.DEPTH_ERRORS, f"making a virtual scan failed: {exc!r:.200}"
                 )

@@ -66,7 +66,9 @@ class Samples:
     too_close: npt.NDArray[np.bool_]
 
 
-def _grid(width: int, height: int, stride: int) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+def _grid(
+    width: int, height: int, stride: int
+) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
     """The rows and columns taken: the middle of each stride."""
     return np.arange(stride // 2, height, stride), np.arange(stride // 2, width, stride)
 
