@@ -25,6 +25,12 @@ obstacle nearer than the camera's minimum range hides the floor behind it and re
 A camera whose height above the floor is not known (``mount_height_m`` 0) cannot tell the
 floor from an obstacle: it gives no virtual scan (``depth_no_mount``). A frame whose
 intrinsics or mounting are implausible (:func:`implausible`) gives none either.
+
+No separate check of the floor per frame: a height announced wrong by more than
+``floor_margin_m`` puts the floor seen above the margin (an obstacle) or below it (a
+drop-off), and one above ``max_height_m`` puts everything overhead (no point: blocked), so a
+wrong height blocks wherever the floor is seen, while a check that the lower rows sit on the
+floor would block a normal scene whose lower rows show a box, a ramp or a person.
 """
 
 from __future__ import annotations

@@ -247,3 +247,20 @@ def test_the_blind_zone_is_logged_once_per_camera(
         "depth camera front (0.60 m above the floor) sees the floor from 1.39 m ahead of it; "
         "at the safety distance (0.50 m) an obstacle lower than 0.38 m is unseen"
     ]
+
+
+def test_sampling_the_raw_frame_reads_what_converting_it_all_reads() -> None:
+    from perception.depth import depth_metres
+    from services.controller.depth_scan import sample_frame, sample_metres
+
+    f = depth_frame(scene(HEIGHT, at_bearing(2.0, 5.0)), HEADER)
+    raw, whole = sample_frame(f, 4), sample_metres(depth_metres(f), 4)
+    assert np.array_equal(raw.v, whole.v) and np.array_equal(raw.u, whole.u)
+    assert np.allclose(raw.z, whole.z, equal_nan=True) and not raw.too_close.any()
+    # 32FC1: -inf is "too close" (depth_metres makes it NaN), +inf and NaN no reading.
+    depth = scene(HEIGHT)
+    depth[:8, :8], depth[8:16, :8] = -np.inf, np.inf
+    f32 = dataclasses.replace(f, encoding="32FC1", data=depth.astype("<f4").tobytes())
+    s = sample_frame(f32, 4)
+    assert s.too_close[:2, :2].all() and s.too_close.sum() == 4
+    assert np.isnan(s.z[:4, :2]).all()
