@@ -14,7 +14,9 @@ The scan is in the ROBOT frame (REP 103: angle 0 forward, counter-clockwise posi
 round, so that the controller's obstacle rules (services/controller/geometry.py) read it as
 they read a laser's. "Clear only as far as seen": a bin's value is
 
-    min(nearest obstacle or drop-off, farthest floor point seen)   in that direction
+    min(nearest obstacle or drop-off, farthest floor point seen)   in that direction, and no
+          farther than where any sampled column's floor ends in it (a thin dark pole that
+          stops one column is not made clear by the floor its neighbours see beyond)
     0     a direction in the camera's field of view (a sampled column looks along it) with no
           point at all, or only overhead ones: nothing known there, so blocked
     NaN   outside the field of view: the controller requires the fresh depth cameras together
@@ -224,15 +226,25 @@ def scan_samples(
     floor = np.abs(up) <= margin
     solid = close[seen] | (up < -margin) | ((up > margin) & (up <= params.max_height_m))
     # In view: the directions the sampled columns look along (from the camera's yaw).
-    columns = math.radians(mount.yaw_deg) - np.arctan((u + 0.5 - intr.cx) / intr.fx)
+    looks = bin_of(np.angle(np.exp(1j * (math.radians(mount.yaw_deg) - np.arctan(
+        (u + 0.5 - intr.cx) / intr.fx)))))  # fmt: skip
     ranges = np.full(n, np.nan, np.float64)
-    ranges[bin_of(np.angle(np.exp(1j * columns)))] = 0.0  # no point there: unknown, blocked
+    ranges[looks] = np.inf
     farthest = np.full(n, -np.inf, np.float64)  # the floor seen farthest in each bin
     np.maximum.at(farthest, bins[floor], rng[floor])
-    nearest = np.full(n, np.inf, np.float64)  # the nearest obstacle or drop-off
-    np.minimum.at(nearest, bins[solid], rng[solid])
-    known = np.isfinite(farthest) | np.isfinite(nearest)
-    ranges[known] = np.minimum(np.where(np.isfinite(farthest), farthest, np.inf), nearest)[known]
+    np.fmin.at(ranges, bins[solid], rng[solid])  # the nearest obstacle or drop-off
+    np.fmin.at(ranges, bins, np.where(np.isfinite(farthest[bins]), farthest[bins], np.inf))
+    # Clear only as far as seen along each sampled column too: where a column's floor ends
+    # (a dark pole) its bin reads no farther, whatever a neighbouring column sees past it.
+    column = np.broadcast_to(np.arange(len(u))[None, :], samples.z.shape)[seen]
+    reach = np.full(len(u), -np.inf, np.float64)
+    np.maximum.at(reach, column[floor], rng[floor])
+    end = floor & (rng >= reach[column])
+    np.fmin.at(ranges, bins[end], rng[end])
+    saw = np.zeros(len(u), np.bool_)
+    saw[column[floor | solid]] = True
+    ranges[looks[~saw]] = 0.0  # a column that saw nothing: unknown, blocked
+    ranges[np.isposinf(ranges)] = 0.0  # in view, nothing seen in that direction
     return LaserScan(
         header=header,
         angle_min=-math.pi + increment / 2,  # each ray at its bin's centre

@@ -54,6 +54,14 @@ def test_a_dark_wall_reads_as_near_as_the_floor_seen_before_it() -> None:
     assert ahead(depth) == pytest.approx(2.5, abs=0.1)  # not clear beyond what was seen
 
 
+def test_a_column_stopped_short_is_not_made_clear_by_its_neighbours() -> None:
+    # A dark pole 6 mm wide at 2.5 m: it hides the floor behind it from one sampled column
+    # (u = 322) only, while the columns beside it, in the same 1 deg ray, see the floor far.
+    depth = scene(HEIGHT, Face(2.5, 0.008, 0.014))
+    depth[depth == np.float32(2.5)] = np.nan
+    assert ahead(depth) == pytest.approx(2.5, abs=0.1)
+
+
 def test_a_direction_in_view_with_no_point_at_all_is_blocked() -> None:
     # A dark pole 0.8 m ahead, nearer than the floor the camera sees (from 1.39 m): no point
     # at all in its directions, the floor seen all round it.
