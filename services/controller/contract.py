@@ -28,6 +28,12 @@ DETECTIONS_UNANNOUNCED = "detections_unannounced"
 DEPTH_UNANNOUNCED = "depth_unannounced"
 #: Depth frames of a camera whose height above the floor is unknown: no virtual scan.
 DEPTH_NO_MOUNT = "depth_no_mount"
+#: Depth frames whose intrinsics or camera mounting are implausible: no virtual scan.
+DEPTH_IMPLAUSIBLE = "depth_implausible"
+#: Depth images of more than ``depth_max_pixels``: dropped before they are converted.
+DEPTH_OVERSIZE = "depth_oversize"
+#: Errors while making a virtual scan (the intake's thread logs them and goes on).
+DEPTH_ERRORS = "depth_errors"
 #: Depth frames replaced by a newer one of their camera before they were looked at.
 DEPTH_DROPPED = "depth_dropped"
 ESTOP_RELEASE_REFUSED = "estop_release_refused"
@@ -53,6 +59,8 @@ PER_CAMERA = frozenset(
         *(input_counter(DEPTH, o) for o in OUTCOMES),
         DEPTH_NO_MOUNT,
         DEPTH_DROPPED,
+        DEPTH_IMPLAUSIBLE,
+        DEPTH_OVERSIZE,
     }
 )
 COUNTERS = frozenset(
@@ -62,6 +70,7 @@ COUNTERS = frozenset(
         *(input_counter(SCANS, o) for o in OUTCOMES),
         DETECTIONS_UNANNOUNCED,
         DEPTH_UNANNOUNCED,
+        DEPTH_ERRORS,
         ESTOP_RELEASE_REFUSED,
         ESTOP_ZERO_AT_ONCE,
         COMMANDS_OUT,
@@ -122,8 +131,9 @@ class ControllerSettings:
             measured from the
             box height (``distance_source = "box"``, for a target ``target_height_m`` tall),
             by the laser in the target's bearing (``"laser"``) or by the depth camera (``"depth"``:
-            the detection's ``distance_m`` column; unknown, NaN or absent, means turning
-            only). Forward only while centred and
+            the horizontal distance from the robot base's centre to the detection's 3D centre,
+            its ``x_m``/``z_m`` columns placed by the camera's announced mounting; unknown,
+            NaN or absent, means turning only). Forward only while centred and
             while the laser sector of ``sector_width_deg`` straight ahead, and the corridor
             ``robot_width_m`` wide that the body sweeps, are clear beyond ``safety_distance_m``
             plus the room needed to brake. A box cut by the image edge counts as arrived.
@@ -185,6 +195,9 @@ class ControllerSettings:
     depth_max_height_m: float = 1.5
     depth_scan_stride_px: int = 4
     depth_scan_resolution_deg: float = 1.0
+    depth_hfov_tolerance_deg: float = 5.0
+    depth_max_pixel_aspect: float = 1.25
+    depth_max_pixels: int = 4_194_304
     estop_file: str = ""
     estop_release_max_age_s: float = 2.0
     counters_period_s: float = 1.0
@@ -217,10 +230,13 @@ class ControllerSettings:
         "sector_width_deg": (1, 360),
         "robot_width_m": (0.05, 5),
         "depth_timeout_s": (0.01, 10),
-        "depth_floor_margin_m": (0.01, 1),
+        "depth_floor_margin_m": (0.01, 0.15),
         "depth_max_height_m": (0.05, 5),
-        "depth_scan_stride_px": (1, 64),
+        "depth_scan_stride_px": (1, 8),
         "depth_scan_resolution_deg": (0.1, 10),
+        "depth_hfov_tolerance_deg": (0.1, 30),
+        "depth_max_pixel_aspect": (1, 2),
+        "depth_max_pixels": (1, 100_000_000),
         "estop_release_max_age_s": (0.1, 60),
         "counters_period_s": (0.1, 60),
     }

@@ -10,6 +10,13 @@ intake's own (:meth:`DepthIntake.serve`) decodes, judges freshness and makes the
 tick only merges the scans held (:meth:`DepthIntake.obstacles`). A stop (the e-stop, a stale
 input) never waits behind a depth image: the e-stop has its own subscription, and the tick
 reads what the intake holds under a short lock.
+
+The intake drops, counted, before any conversion: the images of cameras not announced with
+depth (at :meth:`DepthIntake.offer`), images of more than ``depth_max_pixels``, and frames whose
+intrinsics or mounting are implausible (depth_scan.py ``implausible``): with no scan, depth
+reads missing and the robot does not drive forward. Only every ``depth_scan_stride_px``-th row
+and column is converted to metres. A scan is kept only if the announcement it was made with is
+still the camera's. An error while making a scan is logged, counted and the thread goes on.
 """
 
 from __future__ import annotations
@@ -22,17 +29,25 @@ from common.counters import per_camera
 from common.freshness import FreshnessGate, Verdict, capture_age_s
 from common.messages import CameraAnnouncement, DepthFrame, LaserScan
 from common.node import Tally
-from perception import Intrinsics, Mounting, depth_metres
+from perception import Intrinsics, Mounting
 from services.controller import contract
 from services.controller.contract import ControllerSettings
 from services.controller.depth_scan import (
     DepthCamera,
     DepthObstacles,
+    Plausible,
     ScanParams,
+    blind_zone,
     depth_obstacles,
+    implausible,
+    sample_frame,
+    scan_samples,
     usable,
-    virtual_scan,
 )
+
+#: Bytes of a depth payload beyond its pixels' (header, intrinsics, framing): a payload larger
+#: than ``depth_max_pixels`` 4-byte pixels and this is dropped before it is decoded.
+PAYLOAD_OVERHEAD_BYTES = 64 * 1024
 
 
 def mounting(camera: CameraAnnouncement) -> Mounting:
@@ -63,6 +78,13 @@ class DepthIntake:
             stride_px=s.depth_scan_stride_px,
             resolution_deg=s.depth_scan_resolution_deg,
         )
+        self.plausible = Plausible(
+            hfov_tolerance_deg=s.depth_hfov_tolerance_deg,
+            max_pixel_aspect=s.depth_max_pixel_aspect,
+            max_height_m=s.depth_max_height_m,
+        )
+        self.max_pixels = s.depth_max_pixels
+        self.safety_distance_m = s.safety_distance_m
         self._cond = threading.Condition()
         self._waiting: dict[str, bytes] = {}  # camera -> its newest payload not looked at
         self._lock = threading.Lock()  # the cameras and their scans
@@ -70,6 +92,7 @@ class DepthIntake:
         self._scans: dict[str, tuple[LaserScan, float]] = {}  # camera -> (scan, arrival mono s)
         # A gate outlives its camera's withdrawal: a replay is refused after a re-announcement.
         self._gates: dict[str, FreshnessGate] = {}
+        self._told: dict[str, CameraAnnouncement] = {}  # the blind zone logged, per camera
 
     def set_cameras(self, cameras: Mapping[str, CameraAnnouncement]) -> None:
         """The cameras announced now: those announced with depth are used; the scans of the
@@ -85,7 +108,16 @@ class DepthIntake:
                 )
 
     def offer(self, camera: str, payload: bytes) -> None:
-        """A depth image's payload as it arrives (on a bus thread): left for :meth:`serve`."""
+        """A depth image's payload as it arrives (on a bus thread): left for :meth:`serve`,
+        unless its camera is not announced with depth (counted ``depth_unannounced``)."""
+        with self._lock:
+            announced = camera in self._cameras
+        if not announced:
+            self.tally.reject(
+                contract.DEPTH_UNANNOUNCED,
+                f"depth from {camera!r:.80}, a camera not announced with depth, ignored",
+            )
+            return
         with self._cond:
             if camera in self._waiting:
                 self.tally.counters.add(contract.DEPTH_DROPPED)
@@ -106,9 +138,16 @@ class DepthIntake:
         return len(taken)
 
     def serve(self, stop: threading.Event, poll_s: float) -> None:
-        """The intake's thread: make scans until ``stop`` is set (looked at every ``poll_s``)."""
+        """The intake's thread: make scans until ``stop`` is set (looked at every ``poll_s``).
+        An error is logged (rate-limited), counted ``depth_errors``, and the thread goes on:
+        the scans it did not make age, and depth goes missing as a stale stream does."""
         while not stop.is_set():
-            self.handle_waiting(poll_s)
+            try:
+                self.handle_waiting(poll_s)
+            except Exception as exc:
+                self.tally.reject(
+                    contract.DEPTH_ERRORS, f"making a virtual scan failed: {exc!r:.200}"
+                )
 
     def _handle(self, camera: str, payload: bytes) -> None:
         tally = self.tally
@@ -121,8 +160,14 @@ class DepthIntake:
             )
             return
         key = tally.keys.depth(camera)
+        if len(payload) > self.max_pixels * 4 + PAYLOAD_OVERHEAD_BYTES:
+            self._refuse(contract.DEPTH_OVERSIZE, camera, f"a {len(payload)}-byte depth payload")
+            return
         msg = tally.decode(key, DepthFrame.decode, payload)
         if msg is None:
+            return
+        if msg.width * msg.height > self.max_pixels:
+            self._refuse(contract.DEPTH_OVERSIZE, camera, f"a {msg.width}x{msg.height} image")
             return
         verdict, age = gate.check(msg.header, self.clock.now())
         if verdict is not Verdict.FRESH:
@@ -140,27 +185,54 @@ class DepthIntake:
             )
             tally.counters.add(per_camera(contract.DEPTH_NO_MOUNT, camera))
             return
+        intr = Intrinsics.of(msg)
+        why = implausible(intr, announced.hfov_deg, mount, self.plausible)
+        if why:
+            self._refuse(contract.DEPTH_IMPLAUSIBLE, camera, why)
+            return
         try:
-            scan = virtual_scan(
-                depth_metres(msg), Intrinsics.of(msg), mount, self.params, msg.header,
-                msg.range_max_m,
+            scan = scan_samples(
+                sample_frame(msg, self.params.stride_px), intr, mount, self.params, msg.header,
+                msg.range_max_m, msg.range_min_m,
             )  # fmt: skip
         except ValueError as exc:
             tally.bad_input(key, exc)
             return
         with self._lock:
             held = self._scans.get(camera)
-            newer = camera in self._cameras and (
-                held is None or held[0].header.stamp_ns <= msg.header.stamp_ns
-            )
+            # Made with the announcement still current: not a withdrawn or changed camera's.
+            current = self._cameras.get(camera) == announced
+            newer = current and (held is None or held[0].header.stamp_ns <= msg.header.stamp_ns)
             if newer:
                 self._scans[camera] = (scan, self.clock.mono_s())
+            tell = newer and self._told.get(camera) != announced
+            if tell:
+                self._told[camera] = announced
+        if tell:
+            floor_m, below_m = blind_zone(intr, mount, self.safety_distance_m)
+            tally.log.info(
+                "depth camera %s (%.2f m above the floor) sees the floor from %.2f m ahead of "
+                "it; at the safety distance (%.2f m) an obstacle lower than %.2f m is unseen",
+                camera, mount.height_m, floor_m, self.safety_distance_m, below_m,
+            )  # fmt: skip
+        if not current:
+            tally.reject(
+                contract.DEPTH_UNANNOUNCED,
+                f"depth from {camera} made with an announcement no longer current, ignored",
+            )
+            return
         counter = contract.input_counter(contract.DEPTH, contract.IN if newer else contract.LATE)
         if newer:
             tally.counters.add(counter)
         else:
             tally.reject(counter, f"depth from {camera} older than the one held ignored")
         tally.counters.add(per_camera(counter, camera))
+
+    def _refuse(self, counter: str, camera: str, why: str) -> None:
+        """A depth frame of ``camera`` dropped for ``why``: counted (per camera too), logged
+        rate-limited."""
+        self.tally.reject(counter, f"depth from {camera} refused: {why}", key=counter + camera)
+        self.tally.counters.add(per_camera(counter, camera))
 
     def obstacles(self, at: Stamp) -> DepthObstacles:
         """The depth cameras' obstacles at the control instant ``at`` (each scan aged as the

@@ -1,30 +1,38 @@
 """A virtual laser scan from a depth image, for a robot whose obstacles are seen by a depth
 camera rather than a laser. Pure numpy: no bus, no clock.
 
-Each depth pixel (every ``stride_px``-th row and column) is back-projected with the image's
-intrinsics and placed in the robot's base frame by the camera's mounting
-(perception/depth.py ``to_robot``: forward, left, up from the floor under the base's centre).
-A point lower than ``floor_margin_m`` above the floor is the floor, and one higher than
-``max_height_m`` passes over the robot: both are taken out. Every other point is an obstacle,
-and each angular bin of the scan keeps the nearest one's horizontal range from the base's
-centre. The scan is in the ROBOT frame (REP 103: angle 0 forward, counter-clockwise positive),
-360 deg round, so that the controller's obstacle rules (services/controller/geometry.py) read it
-as they read a laser's.
+Every ``stride_px``-th row and column of the depth image is taken (before anything is
+converted: :func:`sample_frame`), back-projected with the image's intrinsics and placed in
+the robot's base frame by the camera's mounting (perception/depth.py ``to_robot``: forward,
+left, up from the floor under the base's centre). Each point is, by its height ``up``:
+    floor      ``|up| <= floor_margin_m``
+    drop-off   ``up < -floor_margin_m``: below the floor (a stairwell, a kerb down): an obstacle
+    obstacle   ``floor_margin_m < up <= max_height_m``; and every pixel that reads "too close"
+               (32FC1 ``-inf``, REP 117), placed at the frame's minimum range along its ray
+    overhead   ``up > max_height_m``: passes over the robot, and shows nothing of the floor
+The scan is in the ROBOT frame (REP 103: angle 0 forward, counter-clockwise positive), 360 deg
+round, so that the controller's obstacle rules (services/controller/geometry.py) read it as
+they read a laser's. "Clear only as far as seen": a bin's value is
 
-A bin's value:
-    a range   the nearest obstacle point in that direction
-    inf       the camera saw that direction (some pixel had a reading there) and nothing in it
-              stands between the floor and ``max_height_m``: clear within the camera's range
-    NaN       unknown: outside the camera's field of view, or no pixel had a reading there
-              (holes, or everything nearer than the camera's minimum range)
+    min(nearest obstacle or drop-off, farthest floor point seen)   in that direction, and no
+          farther than where any sampled column's floor ends in it (a thin dark pole that
+          stops one column is not made clear by the floor its neighbours see beyond)
+    0     a direction in the camera's field of view (a sampled column looks along it) with no
+          point at all, or only overhead ones: nothing known there, so blocked
+    NaN   outside the field of view: the controller requires the fresh depth cameras together
+          to see the whole sector ahead (:func:`depth_obstacles`)
 
-As with a laser's minimum range, what is nearer than the depth camera's minimum range gives no
-reading at all, and a dark obstacle with no readings over the floor it stands on reads as clear:
-a depth camera sees what it can measure.
-
+so a dark wall with no readings reads as near as the floor seen in front of it, and an
+obstacle nearer than the camera's minimum range hides the floor behind it and reads blocked.
 A camera whose height above the floor is not known (``mount_height_m`` 0) cannot tell the
-floor from an obstacle: it gives no virtual scan (the controller counts its depth frames as
-``depth_no_mount`` and says so).
+floor from an obstacle: it gives no virtual scan (``depth_no_mount``). A frame whose
+intrinsics or mounting are implausible (:func:`implausible`) gives none either.
+
+No separate check of the floor per frame: a height announced wrong by more than
+``floor_margin_m`` puts the floor seen above the margin (an obstacle) or below it (a
+drop-off), and one above ``max_height_m`` puts everything overhead (no point: blocked), so a
+wrong height blocks wherever the floor is seen, while a check that the lower rows sit on the
+floor would block a normal scene whose lower rows show a box, a ramp or a person.
 """
 
 from __future__ import annotations
@@ -36,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from common.messages import Header, LaserScan
+from common.messages import DepthFrame, Header, LaserScan
 from perception import Intrinsics, Mounting, to_robot
 from services.controller.geometry import wrap
 
@@ -54,9 +62,112 @@ class ScanParams:
     resolution_deg: float = 1.0
 
 
+@dataclass(frozen=True, slots=True)
+class Samples:
+    """The pixels of a depth image a scan is made from: rows ``v`` and columns ``u`` (pixel
+    indices), their depths ``z`` (len(v), len(u)) in metres (NaN: no reading) and where the
+    camera said "too close" (``too_close``: 32FC1 ``-inf``)."""
+
+    v: npt.NDArray[np.intp]
+    u: npt.NDArray[np.intp]
+    z: npt.NDArray[np.float64]
+    too_close: npt.NDArray[np.bool_]
+
+
+def _grid(
+    width: int, height: int, stride: int
+) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """The rows and columns taken: the middle of each stride."""
+    return np.arange(stride // 2, height, stride), np.arange(stride // 2, width, stride)
+
+
+def sample_metres(depth: npt.NDArray[np.float32], stride: int) -> Samples:
+    """The samples of an image already in metres (perception/depth.py ``depth_metres``: NaN =
+    no reading; ``-inf`` kept as "too close")."""
+    h, w = depth.shape
+    v, u = _grid(w, h, stride)
+    z = depth[np.ix_(v, u)].astype(np.float64)
+    too_close = np.isneginf(z)
+    return Samples(v, u, np.where(np.isfinite(z) & (z > 0), z, np.nan), too_close)
+
+
+def sample_frame(frame: DepthFrame, stride: int) -> Samples:
+    """The samples of a depth frame, taken from its raw image before conversion (a 640x480
+    image at stride 4 converts 19,200 pixels, not 307,200). No reading: 0, NaN, +inf, or
+    outside the stated range; "too close": 32FC1 ``-inf`` (REP 117; 16UC1 cannot say it)."""
+    v, u = _grid(frame.width, frame.height, stride)
+    if frame.encoding == "16UC1":
+        raw = np.frombuffer(frame.data, "<u2").reshape(frame.height, frame.width)
+        z = raw[np.ix_(v, u)].astype(np.float64) / 1000.0
+    else:
+        raw32 = np.frombuffer(frame.data, "<f4").reshape(frame.height, frame.width)
+        z = raw32[np.ix_(v, u)].astype(np.float64)
+    too_close = np.isneginf(z)
+    bad = ~np.isfinite(z) | (z <= 0) | (z < frame.range_min_m)
+    if frame.range_max_m > 0:
+        bad |= z > frame.range_max_m
+    return Samples(v, u, np.where(bad, np.nan, z), too_close)
+
+
 def usable(mount: Mounting) -> bool:
     """Whether a camera mounted so can give a virtual scan: its height must be known."""
     return mount.height_m > 0
+
+
+@dataclass(frozen=True, slots=True)
+class Plausible:
+    """What a depth frame's intrinsics and its camera's mounting must satisfy to be trusted
+    (the controller's settings): the frame's horizontal field of view within
+    ``hfov_tolerance_deg`` of the announced one, fx/fy within 1/``max_pixel_aspect`` ..
+    ``max_pixel_aspect``, the principal point inside the image, the camera lower than
+    ``max_height_m`` (above it, nothing it sees could be an obstacle)."""
+
+    hfov_tolerance_deg: float = 5.0
+    max_pixel_aspect: float = 1.25
+    max_height_m: float = 1.5
+
+
+def frame_hfov_deg(intr: Intrinsics) -> float:
+    """The horizontal field of view of a depth image by its intrinsics, in degrees."""
+    return math.degrees(2.0 * math.atan(intr.width / (2.0 * intr.fx)))
+
+
+def implausible(intr: Intrinsics, hfov_deg: float, mount: Mounting, p: Plausible) -> str:
+    """Why a frame seen through ``intr`` by a camera announced with ``hfov_deg`` and mounted at
+    ``mount`` cannot be trusted to show obstacles ("" when it can)."""
+    values = (intr.fx, intr.fy, intr.cx, intr.cy)
+    if not all(math.isfinite(x) for x in values) or intr.fx <= 0 or intr.fy <= 0:
+        return f"intrinsics fx {intr.fx:g}, fy {intr.fy:g}, cx {intr.cx:g}, cy {intr.cy:g}"
+    aspect = intr.fx / intr.fy
+    if not 1.0 / p.max_pixel_aspect <= aspect <= p.max_pixel_aspect:
+        return f"fx/fy {aspect:.3g} is not within 1/{p.max_pixel_aspect:g}..{p.max_pixel_aspect:g}"
+    if not (0 <= intr.cx <= intr.width and 0 <= intr.cy <= intr.height):
+        return (
+            f"principal point ({intr.cx:g}, {intr.cy:g}) outside the "
+            f"{intr.width}x{intr.height} image"
+        )
+    hfov = frame_hfov_deg(intr)
+    if abs(hfov - hfov_deg) > p.hfov_tolerance_deg:
+        return (
+            f"the image's field of view {hfov:.1f} deg is not the announced {hfov_deg:g} deg "
+            f"(within {p.hfov_tolerance_deg:g})"
+        )
+    if not mount.height_m < p.max_height_m:
+        return (
+            f"announced {mount.height_m:g} m above the floor, not below depth_max_height_m "
+            f"({p.max_height_m:g})"
+        )
+    return ""
+
+
+def blind_zone(intr: Intrinsics, mount: Mounting, distance_m: float) -> tuple[float, float]:
+    """What a level camera cannot see below it: the distance (from the camera, along its axis)
+    from which it sees the floor, and the height below which an obstacle ``distance_m`` ahead
+    of it is unseen (0: none)."""
+    down = (intr.height - intr.cy) / intr.fy  # tan of the lower half of the vertical view
+    if down <= 0:
+        return math.inf, mount.height_m
+    return mount.height_m / down, max(0.0, mount.height_m - distance_m * down)
 
 
 def virtual_scan(
@@ -66,37 +177,74 @@ def virtual_scan(
     params: ScanParams,
     header: Header,
     range_max_m: float = 0.0,
+    range_min_m: float = 0.0,
 ) -> LaserScan:
-    """The virtual scan of ``depth`` ((h, w) metres, NaN = no reading; perception/depth.py
-    ``depth_metres``) seen through ``intr`` by a camera mounted at ``mount``, stamped with
-    ``header`` (the depth frame's: its capture time). ``range_max_m``: the camera's stated
-    maximum (0: not stated).
-
-    ValueError when the mounting's height is unknown (see :func:`usable`) or the image and the
-    intrinsics disagree in size.
-    """
-    if not usable(mount):
-        raise ValueError("the camera's height above the floor is unknown (mount_height_m 0)")
+    """The virtual scan of ``depth`` ((h, w) metres, NaN = no reading, ``-inf`` = too close)
+    seen through ``intr``: :func:`scan_samples` of its samples."""
     h, w = depth.shape
     if (w, h) != (intr.width, intr.height):
         raise ValueError(f"a {w}x{h} depth image with intrinsics for {intr.width}x{intr.height}")
-    step = params.stride_px
-    # Pixel centres of the rows and columns taken, the middle of each stride.
-    v = np.arange(step // 2, h, step)
-    u = np.arange(step // 2, w, step)
-    z = depth[np.ix_(v, u)].astype(np.float64)
-    x = (u[None, :] + 0.5 - intr.cx) / intr.fx * z
-    y = (v[:, None] + 0.5 - intr.cy) / intr.fy * z
+    samples = sample_metres(depth, params.stride_px)
+    return scan_samples(samples, intr, mount, params, header, range_max_m, range_min_m)
+
+
+def scan_samples(
+    samples: Samples,
+    intr: Intrinsics,
+    mount: Mounting,
+    params: ScanParams,
+    header: Header,
+    range_max_m: float = 0.0,
+    range_min_m: float = 0.0,
+) -> LaserScan:
+    """The virtual scan of a depth image's ``samples`` seen through ``intr`` by a camera
+    mounted at ``mount``, stamped with ``header`` (the depth frame's: its capture time).
+    ``range_max_m``, ``range_min_m``: the camera's stated range (0: not stated).
+
+    ValueError when the mounting's height is unknown (see :func:`usable`).
+    """
+    if not usable(mount):
+        raise ValueError("the camera's height above the floor is unknown (mount_height_m 0)")
+    u, v = samples.u, samples.v
+    rx = np.broadcast_to((u[None, :] + 0.5 - intr.cx) / intr.fx, samples.z.shape)
+    ry = np.broadcast_to((v[:, None] + 0.5 - intr.cy) / intr.fy, samples.z.shape)
+    close = samples.too_close
+    z = np.where(close, max(range_min_m, 0.0), samples.z)
     seen = np.isfinite(z)
-    fwd, left, up = to_robot(x[seen], y[seen], z[seen], mount)  # type: ignore[arg-type]
+    zs = z[seen]
+    fwd, left, up = to_robot(rx[seen] * zs, ry[seen] * zs, zs, mount)  # type: ignore[arg-type]
     n = max(1, round(360.0 / params.resolution_deg))
     increment = math.tau / n
-    angles = np.arctan2(left, fwd)  # in [-pi, pi]
-    bins = np.floor((angles + math.pi) / increment).astype(np.intp) % n
+
+    def bin_of(angle: npt.NDArray[np.float64]) -> npt.NDArray[np.intp]:
+        out: npt.NDArray[np.intp] = np.floor((angle + math.pi) / increment).astype(np.intp) % n
+        return out
+
+    bins = bin_of(np.arctan2(left, fwd))
+    rng = np.hypot(fwd, left)
+    margin = params.floor_margin_m
+    floor = np.abs(up) <= margin
+    solid = close[seen] | (up < -margin) | ((up > margin) & (up <= params.max_height_m))
+    # In view: the directions the sampled columns look along (from the camera's yaw).
+    looks = bin_of(np.angle(np.exp(1j * (math.radians(mount.yaw_deg) - np.arctan(
+        (u + 0.5 - intr.cx) / intr.fx)))))  # fmt: skip
     ranges = np.full(n, np.nan, np.float64)
-    ranges[np.unique(bins)] = np.inf  # seen: clear unless an obstacle point says otherwise
-    solid = (up >= params.floor_margin_m) & (up <= params.max_height_m)
-    np.minimum.at(ranges, bins[solid], np.hypot(fwd[solid], left[solid]))
+    ranges[looks] = np.inf
+    farthest = np.full(n, -np.inf, np.float64)  # the floor seen farthest in each bin
+    np.maximum.at(farthest, bins[floor], rng[floor])
+    np.fmin.at(ranges, bins[solid], rng[solid])  # the nearest obstacle or drop-off
+    np.fmin.at(ranges, bins, np.where(np.isfinite(farthest[bins]), farthest[bins], np.inf))
+    # Clear only as far as seen along each sampled column too: where a column's floor ends
+    # (a dark pole) its bin reads no farther, whatever a neighbouring column sees past it.
+    column = np.broadcast_to(np.arange(len(u))[None, :], samples.z.shape)[seen]
+    reach = np.full(len(u), -np.inf, np.float64)
+    np.maximum.at(reach, column[floor], rng[floor])
+    end = floor & (rng >= reach[column])
+    np.fmin.at(ranges, bins[end], rng[end])
+    saw = np.zeros(len(u), np.bool_)
+    saw[column[floor | solid]] = True
+    ranges[looks[~saw]] = 0.0  # a column that saw nothing: unknown, blocked
+    ranges[np.isposinf(ranges)] = 0.0  # in view, nothing seen in that direction
     return LaserScan(
         header=header,
         angle_min=-math.pi + increment / 2,  # each ray at its bin's centre
@@ -109,8 +257,8 @@ def virtual_scan(
 
 def merge(scans: Sequence[LaserScan]) -> LaserScan:
     """Several cameras' virtual scans (made with one resolution) as one: each ray the nearest
-    range any of them reads, inf where one sees clear and none sees an obstacle, NaN where none
-    sees. The header is the oldest scan's (its age is the merged scan's)."""
+    range any of them reads (0, unknown, where one knows nothing there), NaN where none
+    looks. The header is the oldest scan's (its age is the merged scan's)."""
     if not scans:
         raise ValueError("nothing to merge")
     first = scans[0]
@@ -133,6 +281,25 @@ def looks_ahead(mount: Mounting, hfov_deg: float, sector_width_deg: float) -> bo
     """Whether a camera's horizontal field of view overlaps the sector straight ahead."""
     off = abs(math.degrees(wrap(math.radians(mount.yaw_deg))))
     return off - hfov_deg / 2 < sector_width_deg / 2
+
+
+def cover_sector(views: Sequence[tuple[float, float]], sector_width_deg: float) -> bool:
+    """Whether the horizontal fields of view ``views`` ((yaw_deg, hfov_deg) each) together
+    cover the whole sector of ``sector_width_deg`` straight ahead."""
+    half = sector_width_deg / 2
+    spans = []
+    for yaw, hfov in views:
+        if hfov >= 360:
+            return True
+        centre = math.degrees(wrap(math.radians(yaw)))
+        for turn in (-360.0, 0.0, 360.0):  # a view across the rear reaches both ends
+            spans.append((centre + turn - hfov / 2, centre + turn + hfov / 2))
+    reached = -half
+    for lo, hi in sorted(spans):
+        if lo > reached:
+            break
+        reached = max(reached, hi)
+    return reached >= half
 
 
 @dataclass(frozen=True, slots=True)
@@ -163,7 +330,8 @@ def depth_obstacles(
 
     Every camera that can give a virtual scan and looks into the sector ahead must have one
     no older than ``timeout_s``: one of them gone stale leaves part of the way ahead unseen,
-    and forward motion stops as it does on a stale laser scan. Fresh scans of the other
+    and forward motion stops as it does on a stale laser scan. Together their fields of view
+    must cover the whole sector: what no camera sees is not known clear. Fresh scans of the other
     cameras (beside, behind) are merged too: the corridor the body sweeps reaches beyond the
     sector.
     """
@@ -183,6 +351,12 @@ def depth_obstacles(
             return DepthObstacles(None, missing=f"no depth from {c} yet")
         if cam.age_s > timeout_s:
             return DepthObstacles(None, missing=f"no recent depth from {c} ({cam.age_s:.2f} s)")
+    if not cover_sector([(c.mount.yaw_deg, c.hfov_deg) for c in ahead.values()], sector_width_deg):
+        return DepthObstacles(
+            None,
+            missing=f"depth does not see the whole way ahead ({sector_width_deg:g} deg): "
+            + ", ".join(sorted(ahead)),
+        )
     fresh = [
         cam
         for cam in cameras.values()

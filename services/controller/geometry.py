@@ -70,16 +70,32 @@ def box_distance(dets: Detections, i: int, hfov_deg: float, target_height_m: flo
 #: The detections' column with each box's distance from its camera, in metres (NaN: unknown),
 #: as the detector's depth stage writes it (perception/depth.py ``DISTANCE``).
 DISTANCE_COLUMN = "distance_m"
+#: The columns of each box's 3D centre in its camera's optical frame (x right, y down,
+#: z forward; perception/depth.py ``CENTRE``).
+CENTRE_COLUMNS = ("x_m", "y_m", "z_m")
 
 
-def depth_distance(dets: Detections, i: int) -> float:
-    """Box ``i``'s distance from the depth camera (its ``distance_m`` column), or NaN when it
-    is unknown: no column (a frame with no depth paired), NaN, or not a positive number."""
-    column = dets.boxes.columns.get(DISTANCE_COLUMN)
-    if column is None:
+def depth_distance(dets: Detections, i: int, camera: Mount | None = None) -> float:
+    """The horizontal distance from the robot base's centre to box ``i``'s 3D centre (its
+    ``x_m`` and ``z_m`` columns, placed by ``camera``'s announced mounting: ``mount_x_m``,
+    ``mount_y_m``, ``mount_yaw_deg``; none announced: at the base's centre), or NaN when it is
+    unknown: no column (a frame with no depth paired), NaN, or not in front of the camera.
+
+    Horizontal, not the 3D distance from the camera (``distance_m``): a target whose centre
+    is higher or lower than the camera is farther along that line than across the floor, and
+    the robot would stop nearer than ``follow_distance_m``.
+    """
+    columns = dets.boxes.columns
+    if any(c not in columns for c in CENTRE_COLUMNS):
         return math.nan
-    value = float(column[i])
-    return value if math.isfinite(value) and value > 0 else math.nan
+    x, z = float(columns["x_m"][i]), float(columns["z_m"][i])
+    if not (math.isfinite(x) and math.isfinite(z)) or z <= 0:
+        return math.nan
+    yaw = math.radians(getattr(camera, "mount_yaw_deg", 0.0))
+    ahead, left = z, -x  # the camera's own forward and left
+    forward = getattr(camera, "mount_x_m", 0.0) + math.cos(yaw) * ahead - math.sin(yaw) * left
+    side = getattr(camera, "mount_y_m", 0.0) + math.sin(yaw) * ahead + math.cos(yaw) * left
+    return math.hypot(forward, side)
 
 
 def box_clipped(dets: Detections, i: int, margin_px: float = 2.0) -> bool:

@@ -429,7 +429,7 @@ class Controller:
 
         distance = math.inf
         if s.distance_source is DistanceSource.DEPTH:
-            distance = depth_distance(dets, i)
+            distance = depth_distance(dets, i, self.cameras.get(x.camera))
             if not math.isfinite(distance):
                 if not centred:
                     return turn_only(

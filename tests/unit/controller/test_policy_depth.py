@@ -22,9 +22,18 @@ TRACK = ControllerSettings(mode="track", obstacle_sources=("depth",), **FREE)  #
 FOLLOW = dataclasses.replace(TRACK, mode="follow", distance_source="depth")  # type: ignore[arg-type]
 
 
-def person(distance_m: float | None = None, cx: float = W / 2) -> Detections:
-    """One centred person (100x200 px); with ``distance_m``, its depth column."""
-    columns = {} if distance_m is None else {"distance_m": np.array([distance_m], np.float32)}
+def person(
+    distance_m: float | None = None, cx: float = W / 2, *, above_m: float = 0.0
+) -> Detections:
+    """One centred person (100x200 px); with ``distance_m``, its depth columns: its centre
+    ``distance_m`` straight ahead of the camera across the floor and ``above_m`` above it
+    (``distance_m`` the 3D norm)."""
+    columns = {}
+    if distance_m is not None:
+        norm = math.hypot(distance_m, above_m)
+        for name, value in (("distance_m", norm), ("x_m", 0.0), ("y_m", -above_m)):
+            columns[name] = np.array([value], np.float32)
+        columns["z_m"] = np.array([distance_m], np.float32)
     return Detections(
         header=HEADER, image_width=W, image_height=H, class_names=("person",),
         boxes=Boxes(
@@ -154,3 +163,28 @@ def test_depth_is_read_only_when_needed() -> None:
     laser_robot = ControllerSettings(distance_source="depth")  # type: ignore[arg-type]
     assert laser_robot.laser_required
     assert not ControllerSettings(obstacle_sources=("depth",)).laser_required
+
+
+@dataclasses.dataclass(frozen=True)
+class Mounted:
+    """A camera's announced geometry (CameraAnnouncement's mount fields)."""
+
+    hfov_deg: float = 60.0
+    mount_yaw_deg: float = 0.0
+    mount_x_m: float = 0.0
+    mount_y_m: float = 0.0
+
+
+def test_follow_compares_the_horizontal_distance_from_the_base() -> None:
+    # The target's centre 0.95 m ahead across the floor and 0.4 m above the camera: 1.03 m
+    # away in 3D. Followed at 1 m, it is near enough: the 3D distance would drive on.
+    high = step(FOLLOW, person(0.95, above_m=0.4), depth=scan(8.0))
+    assert high.state == "arrived" and high.linear_x == 0.0, high
+    # A camera 0.3 m ahead of the base's centre: the target 0.9 m from it is 1.2 m from the
+    # base, and 0.2 m left of it too: the distance is from the base.
+    ctl = Controller(FOLLOW, {"front": Mounted(mount_x_m=0.3, mount_y_m=0.2)})  # type: ignore[dict-item]
+    inputs = Inputs(
+        {"front": View(person(0.9), 0.0, 0.0)}, depth=scan(8.0), depth_age_s=0.0, depth_missing=""
+    )
+    cmd = ctl.step(inputs, 1.0)
+    assert cmd.state == "following" and cmd.reason == "target at 1.22 m", cmd
