@@ -33,6 +33,7 @@ from common.lifecycle import Closing
 from common.messages import DepthFrame, Frame, GroundTruth, LaserScan, Twist
 from common.node import Node, Tally
 from services.ros2 import (
+    CAMERA_INFO,
     IMAGE,
     LASER_SCAN,
     SENSOR_DATA_QOS,
@@ -40,13 +41,14 @@ from services.ros2 import (
     TWIST_STAMPED,
     RosGraph,
     RosPublisher,
+    camera_info_of,
     cdr_decode,
+    depth_to_image,
     frame_to_image,
     scan_to_ros,
     twist_from_ros,
 )
 from services.ros2.contract import camera_topics
-from services.ros2.depth import CAMERA_INFO, camera_info_of, depth_to_image
 from services.sim import contract
 from services.sim.cameras import SimCamera, sim_cameras
 from services.sim.depth import DepthNoise, apply, depth_frame, render_depth
