@@ -326,11 +326,14 @@ def _synthetic(z: float, rect: tuple[int, int, int, int], back: float) -> Depth:
     return d
 
 
-def synthetic_cases(corr_px: float) -> list[dict[str, Any]]:
+def synthetic_cases(corr_px: float | None = None) -> list[dict[str, Any]]:
     """Both methods on hard synthetic scenes the simulator's worlds seldom make (a flat target
-    before a wall, stereo noise 0.005 z^2 correlated over ``corr_px``): each case's truth z and
-    what each method says."""
-    from services.sim.depth import unit_noise
+    before a wall, stereo noise 0.005 z^2 correlated over ``corr_px``, None: the simulator's
+    default): each case's truth z and what each method says."""
+    from services.sim.depth import DepthNoise, unit_noise
+
+    if corr_px is None:
+        corr_px = DepthNoise().noise_corr_px
 
     intr = Intrinsics.from_hfov(640, 480, 60.0)
     rng = np.random.default_rng(5)
