@@ -88,6 +88,7 @@ class SimSettings:
     depth_range_min_m: float = 0.3
     depth_range_max_m: float = 10.0
     depth_noise_k: float = 0.005
+    depth_noise_corr_px: float = 4.0
     depth_edge_px: int = 2
     depth_edge_jump: float = 0.1
     depth_dark_level: int = 30
@@ -111,6 +112,7 @@ class SimSettings:
         "depth_range_min_m": (0, 10),
         "depth_range_max_m": (0.1, 65),  # a 16UC1 image holds up to 65.535 m
         "depth_noise_k": (0, 1),
+        "depth_noise_corr_px": (0, 50),
         "depth_edge_px": (0, 50),
         "depth_edge_jump": (0.001, 10),
         "depth_dark_level": (0, 255),

@@ -24,6 +24,7 @@ camera sees (in the optical frame), the truth a depth method is measured against
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cache
 
@@ -120,6 +121,16 @@ class DepthNoise:
     sub-pixel error 0.08..0.1 px: 0.0037..0.0047 per metre; its datasheet allows up to 2 % at
     2 m. 0.005 gives 1 % at 2 m (2 cm), 2.5 % at 5 m, 5 % at 10 m.
 
+    ``noise_corr_px``: the noise's correlation length in pixels, 0 = independent pixels. A
+    stereo matcher finds each pixel's disparity by comparing a window of pixels round it (a
+    D4-class camera: about 7x7 to 9x9 at 640x480), and the camera's own spatial filter
+    smooths further, so neighbours share most of their error: a real depth image's noise is
+    blobs several pixels wide, not salt and pepper, and a median over a box averages far
+    fewer independent errors than it has pixels. The noise is white noise blurred by a
+    Gaussian of this sigma, rescaled so that each pixel's sigma is still ``noise_k`` * z^2;
+    pixels d apart then correlate exp(-d^2 / (4 sigma^2)). 4 px: a neighbour 0.98, half at
+    6.7 px (about the matcher's window), 0.37 at 8 px.
+
     ``edge_px``: pixels within this many pixels of a depth discontinuity (neighbours whose z
     differ by more than ``edge_jump`` of the nearer, or a reading next to none) read nothing,
     as stereo matching fails where one eye sees what the other does not.
@@ -134,6 +145,7 @@ class DepthNoise:
     range_min_m: float = 0.3
     range_max_m: float = 10.0
     noise_k: float = 0.005
+    noise_corr_px: float = 4.0
     edge_px: int = 2
     edge_jump: float = 0.1
     dark_level: int = 30
@@ -162,6 +174,32 @@ def depth_edges(truth: Depth, jump: float) -> npt.NDArray[np.bool_]:
     return edge
 
 
+@cache
+def _blur_kernel(corr_px: float) -> tuple[int, float]:
+    """The blur's kernel size (odd, 3 sigmas each side) for ``corr_px``, and the factor that
+    brings the blurred unit white noise back to a sigma of 1: 1 / sqrt(sum of the 2D kernel's
+    squared weights), the kernel being separable: 1 / sum of the 1D kernel's squares."""
+    ksize = 2 * math.ceil(3 * corr_px) + 1
+    g = cv2.getGaussianKernel(ksize, corr_px, cv2.CV_64F)
+    return ksize, float(1.0 / np.sum(g**2))
+
+
+def unit_noise(shape: tuple[int, ...], corr_px: float, rng: np.random.Generator) -> Depth:
+    """Gaussian noise of sigma 1 per pixel (float32, ``shape``), correlated over ``corr_px``
+    pixels (the sigma of the blur of white noise; 0: independent pixels). The white noise is
+    drawn a kernel's half-width larger on every side and cropped, so pixels at the image's
+    edge have the same sigma and correlation as the rest."""
+    if corr_px <= 0:
+        return rng.standard_normal(shape, dtype=np.float32)
+    ksize, scale = _blur_kernel(corr_px)
+    r = ksize // 2
+    h, w = shape
+    white = rng.standard_normal((h + 2 * r, w + 2 * r), dtype=np.float32)
+    blurred = cv2.GaussianBlur(white, (ksize, ksize), corr_px, borderType=cv2.BORDER_CONSTANT)
+    out: Depth = np.asarray(blurred[r : r + h, r : r + w], np.float32) * np.float32(scale)
+    return out
+
+
 def apply(truth: Depth, colour_bgr: Image, noise: DepthNoise, rng: np.random.Generator) -> Depth:
     """``truth`` as the depth camera reads it: noise, holes at edges, on dark surfaces and at
     random, millimetre quantisation, and the range limits. float32 metres, NaN = no reading;
@@ -169,7 +207,7 @@ def apply(truth: Depth, colour_bgr: Image, noise: DepthNoise, rng: np.random.Gen
     z = truth.astype(np.float32, copy=True)
     if noise.noise_k > 0:
         sigma = noise.noise_k * np.nan_to_num(z, nan=0.0) ** 2
-        z += (rng.standard_normal(z.shape, dtype=np.float32) * sigma).astype(np.float32)
+        z += (unit_noise(z.shape, noise.noise_corr_px, rng) * sigma).astype(np.float32)
     z *= 1000.0
     np.round(z, out=z)
     z /= 1000.0

@@ -413,6 +413,7 @@ def depth_noise(s: contract.SimSettings) -> DepthNoise:
         range_min_m=s.depth_range_min_m,
         range_max_m=s.depth_range_max_m,
         noise_k=s.depth_noise_k,
+        noise_corr_px=s.depth_noise_corr_px,
         edge_px=s.depth_edge_px,
         edge_jump=s.depth_edge_jump,
         dark_level=s.depth_dark_level,

@@ -6,11 +6,12 @@ in the image, in front of or behind them; in 40 % of the worlds a low bin hides 
 legs) placed so that the range bands (of the first's front face) up to the depth camera's
 maximum are evenly filled. Each world
 is rendered by the simulator (services/sim): the colour image, and the aligned depth image
-with a stereo camera's faults (``DepthNoise()``: noise sigma 0.005 z^2, holes at edges and on
-dark pixels, dropout, mm quantisation, 0.3..10 m), sent through a 16UC1 DepthFrame as a
-camera would send it. The real default detector runs on the colour image; each detection is
-matched to the target that owns the pixel at its box's centre (one detection per target: the
-highest score). Per match:
+with a stereo camera's faults (``DepthNoise()``: noise sigma 0.005 z^2 correlated over 4 px,
+holes at edges and on dark pixels, dropout, mm quantisation, 0.3..10 m; the noise drawn from a
+random stream of its own, so every noise setting sees the same worlds), sent through a 16UC1
+DepthFrame as a camera would send it. The real default detector runs on the colour image;
+each detection is matched to the target that owns the pixel at its box's centre (one detection
+per target: the highest score). Per match:
 
 - ``depth``: perception.depth.measure (ours); truth: the distance to what a depth camera
   sees of the target, its visible front face on the ray through its centre
@@ -35,7 +36,7 @@ from __future__ import annotations
 import json
 import math
 import statistics
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -192,7 +193,10 @@ def laser_scan(world: Any, rng: np.random.Generator) -> Any:
     )
 
 
-def run(opts: DepthBenchOptions) -> dict[str, Any]:
+def run(opts: DepthBenchOptions, noise_corr_px: float | None = None) -> dict[str, Any]:
+    """The benchmark; ``noise_corr_px`` overrides the depth noise's correlation length (px;
+    None: the simulator's default; 0: independent pixels, for comparison on the same worlds).
+    """
     from common.messages import Detections, Header
     from common.settings import DEFAULT_CONFIG
     from modelprep.files import default_model_path
@@ -211,8 +215,11 @@ def run(opts: DepthBenchOptions) -> dict[str, Any]:
     sim, ctl = SimSettings(), ControllerSettings()
     spec = CameraSpec(sim.width, sim.height, 60.0, sim.camera_height_m)
     noise = DepthNoise()
+    if noise_corr_px is not None:
+        noise = replace(noise, noise_corr_px=noise_corr_px)
     conf = load_config(DEFAULT_CONFIG, environ={}).detector.conf
     rng = np.random.default_rng(opts.seed)
+    noise_rng = np.random.default_rng([opts.seed, 1])
     errors = {m: [Errors() for _ in BANDS] for m in METHODS + EXTRA}
     times: dict[str, list[float]] = {"detector": [], "depth": [], "yolo_ros": []}
     missed = [0] * len(BANDS)
@@ -224,7 +231,7 @@ def run(opts: DepthBenchOptions) -> dict[str, Any]:
         for k in range(opts.worlds):
             world = make_world(rng, BANDS[k % len(BANDS)], spec.hfov_deg)
             colour = render(world, spec)
-            noisy = apply(render_depth(world, spec), colour, noise, rng)
+            noisy = apply(render_depth(world, spec), colour, noise, noise_rng)
             header = Header(stamp_ns=k + 1, seq=k, frame_id="cam", source="bench")
             frame = depth_frame(noisy, spec, header, noise)
             t0 = perf_s()
@@ -293,7 +300,11 @@ def run(opts: DepthBenchOptions) -> dict[str, Any]:
                 log(f"    world {k + 1}/{opts.worlds}")
     return {
         "worlds": opts.worlds,
-        "noise": {"noise_k": noise.noise_k, "range_m": [noise.range_min_m, noise.range_max_m]},
+        "noise": {
+            "noise_k": noise.noise_k,
+            "corr_px": noise.noise_corr_px,
+            "range_m": [noise.range_min_m, noise.range_max_m],
+        },
         "bands": [
             {
                 "band_m": list(b),
@@ -303,8 +314,8 @@ def run(opts: DepthBenchOptions) -> dict[str, Any]:
             for k, b in enumerate(BANDS)
         ],
         "frame_ms": {name: statistics.median(v) for name, v in times.items() if v},
-        "per_boxes_ms": time_per_boxes(spec, noise, rng),
-        "synthetic": synthetic_cases(),
+        "per_boxes_ms": time_per_boxes(spec, noise, noise_rng),
+        "synthetic": synthetic_cases(noise.noise_corr_px),
     }
 
 
@@ -315,16 +326,20 @@ def _synthetic(z: float, rect: tuple[int, int, int, int], back: float) -> Depth:
     return d
 
 
-def synthetic_cases() -> list[dict[str, Any]]:
+def synthetic_cases(corr_px: float | None = None) -> list[dict[str, Any]]:
     """Both methods on hard synthetic scenes the simulator's worlds seldom make (a flat target
-    before a wall, stereo noise 0.005 z^2): each case's truth z and what each method says."""
+    before a wall, stereo noise 0.005 z^2 correlated over ``corr_px``, None: the simulator's
+    default): each case's truth z and what each method says."""
+    from services.sim.depth import DepthNoise, unit_noise
+
+    if corr_px is None:
+        corr_px = DepthNoise().noise_corr_px
+
     intr = Intrinsics.from_hfov(640, 480, 60.0)
     rng = np.random.default_rng(5)
 
     def noisy(d: Depth) -> Depth:
-        return (d + rng.standard_normal(d.shape).astype(np.float32) * 0.005 * d * d).astype(
-            np.float32
-        )
+        return (d + unit_noise(d.shape, corr_px, rng) * 0.005 * d * d).astype(np.float32)
 
     thin = noisy(_synthetic(1.5, (305, 100, 335, 400), 5.0))
     occluded = noisy(_synthetic(4.0, (270, 140, 370, 340), 8.0))
@@ -392,7 +407,8 @@ def _median_ms(fn: Any, runs: int = 30) -> float:
 def report(r: dict[str, Any]) -> None:
     print(
         f"depth benchmark: {r['worlds']} simulated worlds, noise sigma "
-        f"{r['noise']['noise_k']} z^2, range {r['noise']['range_m']} m; abs error median / "
+        f"{r['noise']['noise_k']} z^2 correlated over {r['noise']['corr_px']} px, range "
+        f"{r['noise']['range_m']} m; abs error median / "
         "p95 (m), median % of range, unknown; truth: the target's visible front face (laser: "
         "its nearest surface; box: its centre); bands by the front face's distance"
     )
@@ -430,8 +446,8 @@ def report_synthetic(cases: list[dict[str, Any]]) -> None:
         print(f"    {c['case']:<40} {c['truth_z_m']:6.2f} {c['depth']:6.2f} {c['yolo_ros']:6.2f}")
 
 
-def main(opts: DepthBenchOptions) -> int:
-    r = run(opts)
+def main(opts: DepthBenchOptions, noise_corr_px: float | None = None) -> int:
+    r = run(opts, noise_corr_px)
     if opts.as_json:
         print(json.dumps(r, indent=1))
     else:

@@ -17,6 +17,7 @@ from services.sim.depth import (
     floor_depth,
     render_depth,
     targets_in_camera,
+    unit_noise,
 )
 from services.sim.render import OBSTACLE_HEIGHT_M, CameraSpec, background, render
 from services.sim.scenarios import person
@@ -155,7 +156,7 @@ def _bright(shape: tuple[int, int]) -> np.ndarray:
 
 
 def test_noise_grows_with_the_square_of_the_distance() -> None:
-    noise = DepthNoise(noise_k=0.005, edge_px=0, dark_dropout=0.0, dropout=0.0)
+    noise = DepthNoise(noise_k=0.005, noise_corr_px=0, edge_px=0, dark_dropout=0.0, dropout=0.0)
     rng = np.random.default_rng(1)
     std = {}
     for z in (1.0, 2.0, 4.0):
@@ -167,6 +168,45 @@ def test_noise_grows_with_the_square_of_the_distance() -> None:
     assert std[2.0] / std[1.0] == pytest.approx(4, rel=0.15)
     assert std[4.0] / std[2.0] == pytest.approx(4, rel=0.15)
     assert std[2.0] / 2.0 == pytest.approx(0.01, rel=0.1)  # 1 % at 2 m, as a D435
+
+
+def _correlation(n: np.ndarray, d: int) -> float:
+    """The correlation of pixels ``d`` apart along rows, over a stack of unit noise images."""
+    return float(np.mean(n[..., d:] * n[..., :-d]))
+
+
+def test_correlated_noise_keeps_each_pixel_s_sigma_and_neighbours_share_it() -> None:
+    rng = np.random.default_rng(3)
+    shape = (120, 160)
+    white = np.stack([unit_noise(shape, 0, rng) for _ in range(40)])
+    blobs = np.stack([unit_noise(shape, 4.0, rng) for _ in range(40)])
+    assert blobs.dtype == np.float32 and blobs.shape == (40, *shape)
+    # Each pixel's sigma is still 1, at the image's edges too (the blur's rescaling).
+    assert float(np.std(blobs)) == pytest.approx(1.0, abs=0.03)
+    assert float(np.std(blobs[:, :, :3])) == pytest.approx(1.0, abs=0.08)
+    assert float(np.std(blobs[:, :3, :])) == pytest.approx(1.0, abs=0.08)
+    assert float(np.mean(blobs)) == pytest.approx(0.0, abs=0.05)
+    # Pixels d apart correlate exp(-d^2 / (4 sigma^2)); independent noise not at all.
+    for d in (1, 4, 8):
+        assert _correlation(blobs, d) == pytest.approx(np.exp(-(d**2) / 64), abs=0.05)
+        assert _correlation(white, d) == pytest.approx(0.0, abs=0.02)
+    # So a box's mean keeps far more of the noise: a 40x30 box, 1200 pixels, averages about
+    # 1200 / (4 pi sigma^2) = 6 independent errors rather than 1200.
+    box_white = float(np.std(white[:, 40:80, 60:90].mean(axis=(1, 2))))
+    box_blobs = float(np.std(blobs[:, 40:80, 60:90].mean(axis=(1, 2))))
+    assert box_white == pytest.approx(1 / np.sqrt(1200), rel=0.3)
+    assert box_blobs > 8 * box_white
+
+
+def test_correlated_depth_noise_is_k_z_squared_per_pixel_in_blobs() -> None:
+    noise = DepthNoise(noise_k=0.005, noise_corr_px=4.0, edge_px=0, dark_dropout=0, dropout=0)
+    rng = np.random.default_rng(4)
+    got = np.stack([apply(_flat(3.0), _bright((200, 200)), noise, rng) for _ in range(10)])
+    err = got - 3.0
+    assert float(np.std(err)) == pytest.approx(0.005 * 9, rel=0.05)  # 4.5 cm at 3 m, as before
+    assert _correlation(err / (0.005 * 9), 1) > 0.9  # a neighbour shares its error
+    medians = np.median(err, axis=(1, 2))  # the whole 200x200 image's median, per frame
+    assert float(np.max(np.abs(medians))) > 0.002  # independent noise: within 0.5 mm
 
 
 def test_readings_outside_the_range_are_holes_and_the_rest_millimetres() -> None:
