@@ -19,7 +19,7 @@ from common.messages import DEPTH_ENCODINGS, DepthFrame, Detections
 from perception import DEPTH_CENTRE, DEPTH_SIZE, Mounting, to_robot
 from services.ros2.contract import RosDistro
 from services.ros2.convert import RosMessage, build, header_from_ros, ros_header
-from services.ros2.images import IMAGE
+from services.ros2.images import raw_image
 from services.ros2.typestore import typestore_for
 
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
@@ -113,17 +113,8 @@ def depth_to_image(distro: RosDistro, frame: DepthFrame) -> RosMessage:
     """A DepthFrame as the ``sensor_msgs/Image`` a depth camera's driver sends: its encoding
     (16UC1 mm, 32FC1 m), little-endian rows unpadded, its header's stamp and frame id (those of
     the colour frame it is aligned to). The pixels are not copied."""
-    return build(
-        distro,
-        IMAGE,
-        header=ros_header(distro, frame.header.stamp_ns, frame.header.frame_id),
-        height=frame.height,
-        width=frame.width,
-        encoding=frame.encoding,
-        is_bigendian=0,
-        step=frame.width * DEPTH_ENCODINGS[frame.encoding],
-        data=np.frombuffer(frame.data, dtype=np.uint8),
-    )
+    return raw_image(distro, frame.header, frame.encoding, frame.width, frame.height,
+                     DEPTH_ENCODINGS[frame.encoding], frame.data)  # fmt: skip
 
 
 def camera_info_of(distro: RosDistro, frame: DepthFrame) -> RosMessage:

@@ -10,7 +10,7 @@ import numpy as np
 
 from common.errors import DecodeError
 from common.frames import jpeg_size
-from common.messages import FRAME_ENCODINGS, Frame
+from common.messages import FRAME_ENCODINGS, Frame, Header
 from services.ros2.contract import RosDistro
 from services.ros2.convert import RosMessage, build, header_from_ros, ros_header
 
@@ -74,16 +74,31 @@ def frame_to_image(distro: RosDistro, frame: Frame) -> RosMessage:
     channels = FRAME_ENCODINGS[frame.encoding]
     if not channels:
         raise ValueError("a jpeg Frame is a CompressedImage: use frame_to_compressed_image")
+    return raw_image(distro, frame.header, frame.encoding, frame.width, frame.height,
+                     channels, frame.data)  # fmt: skip
+
+
+def raw_image(
+    distro: RosDistro,
+    header: Header,
+    encoding: str,
+    width: int,
+    height: int,
+    pixel_bytes: int,
+    data: bytes,
+) -> RosMessage:
+    """A ``sensor_msgs/Image`` of raw little-endian rows, unpadded, with ``header``'s stamp and
+    frame id; ``data`` is not copied."""
     return build(
         distro,
         IMAGE,
-        header=ros_header(distro, frame.header.stamp_ns, frame.header.frame_id),
-        height=frame.height,
-        width=frame.width,
-        encoding=frame.encoding,
+        header=ros_header(distro, header.stamp_ns, header.frame_id),
+        height=height,
+        width=width,
+        encoding=encoding,
         is_bigendian=0,
-        step=frame.width * channels,
-        data=np.frombuffer(frame.data, dtype=np.uint8),
+        step=width * pixel_bytes,
+        data=np.frombuffer(data, dtype=np.uint8),
     )
 
 
