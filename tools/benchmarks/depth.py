@@ -20,6 +20,9 @@ per target: the highest score). Per match:
 - ``laser``: sector_range over the box's bearing, as the controller uses it (the middle 60 %
   of the box's width); truth: the target's nearest surface, centre range minus its radius.
 - ``depth_z``: ours again, z alone against the front face's z.
+- ``depth_h``, ``yolo_ros_h``: each depth method's horizontal range, hypot(x, z) in the optical
+  frame, against the same point's: what the controller follows by (the horizontal distance
+  from the robot base, where the simulator's camera stands), which no vertical offset moves.
 - ``box``: box_distance for a ``target_height_m`` person, as the controller uses it (a box
   touching the top or bottom edge gives no distance, counted unknown); truth: its own, the
   distance to the target's centre, where the simulator draws the person's picture (its size
@@ -51,8 +54,9 @@ from tools.benchmarks.library_shared import log
 
 METHODS = ("depth", "yolo_ros", "laser", "box")
 #: Ours again, z alone against the truth z (near targets cut by the image edge: see docs); the
-#: box height against the front face, as a controller following by it would keep its distance.
-EXTRA = ("depth_z", "box_face")
+#: box height against the front face, as a controller following by it would keep its distance;
+#: each depth method's horizontal range hypot(x, z), what the controller follows by.
+EXTRA = ("depth_z", "box_face", "depth_h", "yolo_ros_h")
 BANDS = ((0.5, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, 5.0), (5.0, 7.0), (7.0, 10.0))
 
 
@@ -106,11 +110,12 @@ def band_of(distance: float) -> int | None:
 @dataclass(frozen=True, slots=True)
 class Truth:
     """One target's truths: ``face`` the distance to its visible front face on the ray through
-    its centre (the depth methods'), ``face_z`` that point's z, ``centre`` the distance to its
-    centre at half its height (the box height's)."""
+    its centre (the depth methods'), ``face_z`` that point's z, ``face_h`` its horizontal range
+    hypot(x, z), ``centre`` the distance to its centre at half its height (the box height's)."""
 
     face: float
     face_z: float
+    face_h: float
     centre: float
 
 
@@ -122,8 +127,31 @@ def truths(world: Any, spec: Any, min_visible: float) -> dict[str, Truth]:
     out = {}
     for tid, _name, x, y, z in targets_in_camera(world, spec, min_visible=min_visible):
         face = math.sqrt(x * x + y * y + z * z)
-        out[tid] = Truth(face, z, face * (z + radius[tid]) / z)
+        out[tid] = Truth(face, z, math.hypot(x, z), face * (z + radius[tid]) / z)
     return out
+
+
+def horizontal(measured: dict[str, npt.NDArray[np.float32]], i: int) -> float:
+    """Row ``i``'s horizontal range hypot(x, z) in the optical frame (y is down), NaN where
+    unknown: the distance the controller follows by, with the camera at the base's centre."""
+    return math.hypot(float(measured["x_m"][i]), float(measured["z_m"][i]))
+
+
+def score_depth(
+    errors: dict[str, list[Errors]],
+    band: int,
+    ours: dict[str, npt.NDArray[np.float32]],
+    ref: dict[str, npt.NDArray[np.float32]],
+    i: int,
+    t: Truth,
+) -> None:
+    """Score detection row ``i`` of both depth methods against target truth ``t``: the 3D
+    distance, z alone (ours) and the horizontal range."""
+    errors["depth"][band].add(float(ours["distance_m"][i]), t.face)
+    errors["yolo_ros"][band].add(float(ref["distance_m"][i]), t.face)
+    errors["depth_z"][band].add(float(ours["z_m"][i]), t.face_z)
+    errors["depth_h"][band].add(horizontal(ours, i), t.face_h)
+    errors["yolo_ros_h"][band].add(horizontal(ref, i), t.face_h)
 
 
 def make_world(rng: np.random.Generator, band: tuple[float, float], hfov_deg: float) -> Any:
@@ -280,9 +308,7 @@ def run(opts: DepthBenchOptions, noise_corr_px: float | None = None) -> dict[str
                 if i is None:
                     missed[band] += 1
                     continue
-                errors["depth"][band].add(float(ours["distance_m"][i]), t.face)
-                errors["yolo_ros"][band].add(float(ref["distance_m"][i]), t.face)
-                errors["depth_z"][band].add(float(ours["z_m"][i]), t.face_z)
+                score_depth(errors, band, ours, ref, i, t)
                 x1, _, x2, _ = xyxy[i]
                 bearing = -math.atan2((x1 + x2) / 2 - spec.width / 2, spec.focal_px)
                 half = math.atan((x2 - x1) / 2 / spec.focal_px)
@@ -412,20 +438,23 @@ def report(r: dict[str, Any]) -> None:
         "p95 (m), median % of range, unknown; truth: the target's visible front face (laser: "
         "its nearest surface; box: its centre); bands by the front face's distance"
     )
-    print(f"  {'band m':>8} {'n':>4} " + " ".join(f"{m:>27}" for m in METHODS + EXTRA))
-    for b in r["bands"]:
-        cells = []
-        for m in METHODS + EXTRA:
-            s = b[m]
-            if s["n"] == 0:
-                cells.append(f"{'-':>22} u{s['unknown']:>3}")
-                continue
-            cells.append(
-                f"{s['median_m']:6.3f}/{s['p95_m']:6.3f} {s['median_pct']:5.1f}% u{s['unknown']:>3}"
-            )
-        lo, hi = b["band_m"]
-        n = b["depth"]["n"] + b["depth"]["unknown"]
-        print(f"  {lo:>3g}-{hi:<4g} {n:>4} " + " ".join(f"{c:>27}" for c in cells))
+    print("  _h: horizontal range hypot(x, z), what the controller follows by")
+    for methods in (METHODS, EXTRA):
+        print(f"  {'band m':>8} {'n':>4} " + " ".join(f"{m:>27}" for m in methods))
+        for b in r["bands"]:
+            cells = []
+            for m in methods:
+                s = b[m]
+                if s["n"] == 0:
+                    cells.append(f"{'-':>22} u{s['unknown']:>3}")
+                    continue
+                cells.append(
+                    f"{s['median_m']:6.3f}/{s['p95_m']:6.3f} {s['median_pct']:5.1f}% "
+                    f"u{s['unknown']:>3}"
+                )
+            lo, hi = b["band_m"]
+            n = b["depth"]["n"] + b["depth"]["unknown"]
+            print(f"  {lo:>3g}-{hi:<4g} {n:>4} " + " ".join(f"{c:>27}" for c in cells))
     f = r["frame_ms"]
     print(
         f"  per frame (median): detector {f['detector']:.1f} ms; depth stage (depth_metres + "

@@ -13,7 +13,17 @@ from perception.depth import Intrinsics
 from services.sim.render import CameraSpec
 from services.sim.scenarios import person
 from services.sim.world import Robot, World
-from tools.benchmarks.depth import BANDS, Errors, band_of, synthetic_cases, truths
+from tools.benchmarks.depth import (
+    BANDS,
+    EXTRA,
+    METHODS,
+    Errors,
+    Truth,
+    band_of,
+    score_depth,
+    synthetic_cases,
+    truths,
+)
 from tools.benchmarks.depth_reference import measure_reference
 
 INTR = Intrinsics.from_hfov(640, 480, 60.0)
@@ -38,8 +48,13 @@ def test_the_depth_truth_is_the_visible_front_face_and_the_box_s_the_centre() ->
     assert a.centre == pytest.approx(centre)
     assert a.face_z == pytest.approx(2.75)
     assert a.face == pytest.approx(centre * 2.75 / 3.0)
+    assert a.face_h == pytest.approx(2.75)  # straight ahead: the horizontal range is z
     b = got["b"]
     assert b.face_z == pytest.approx(3.75)
+    # off to the left: more than z, less than the 3D distance by the drop to half its height
+    drop = (0.6 - 1.7 / 2) * b.face_z / 4.0
+    assert b.face_h > b.face_z
+    assert b.face_h == pytest.approx(math.sqrt(b.face**2 - drop**2), rel=1e-4)
     assert b.centre - b.face == pytest.approx(0.25, abs=0.01)
 
 
@@ -76,3 +91,39 @@ def test_hard_cases_where_the_methods_differ() -> None:
     assert thin["yolo_ros"] > 4.0
     sparse = cases["10 valid pixels in the box"]
     assert math.isnan(sparse["depth"]) and sparse["yolo_ros"] == pytest.approx(2.0)
+
+
+def _row(x: float, y: float, z: float) -> dict[str, np.ndarray]:
+    return {
+        "x_m": np.array([x], np.float32),
+        "y_m": np.array([y], np.float32),
+        "z_m": np.array([z], np.float32),
+        "distance_m": np.array([math.sqrt(x * x + y * y + z * z)], np.float32),
+    }
+
+
+def test_the_horizontal_range_ignores_a_vertical_offset() -> None:
+    """A near person cut by the image's top and bottom: the visible part's centre is 0.3 m
+    below the truth's point, x and z exact. The 3D distance is off; the horizontal range
+    hypot(x, z), what the controller follows by, is exact for both methods."""
+    x, y, z = 0.3, -0.4, 0.8
+    truth = Truth(math.sqrt(x * x + y * y + z * z), z, math.hypot(x, z), 1.0)
+    errors = {m: [Errors()] for m in METHODS + EXTRA}
+    measured = _row(x, y + 0.3, z)
+    score_depth(errors, 0, measured, _row(x + 0.02, y + 0.3, z), 0, truth)
+    assert errors["depth"][0].summary()["median_m"] > 0.05
+    assert errors["depth_z"][0].summary()["median_m"] == pytest.approx(0.0, abs=1e-6)
+    ours = errors["depth_h"][0].summary()
+    assert ours["n"] == 1 and ours["median_m"] == pytest.approx(0.0, abs=1e-6)
+    ref = errors["yolo_ros_h"][0].summary()
+    expected = math.hypot(x + 0.02, z) - math.hypot(x, z)
+    assert ref["median_m"] == pytest.approx(expected, abs=1e-6)
+    assert ref["median_pct"] == pytest.approx(expected / math.hypot(x, z) * 100, rel=1e-4)
+
+
+def test_an_unknown_horizontal_range_is_counted_unknown() -> None:
+    errors = {m: [Errors()] for m in METHODS + EXTRA}
+    nan = _row(math.nan, math.nan, math.nan)
+    score_depth(errors, 0, nan, nan, 0, Truth(1.0, 1.0, 1.0, 1.2))
+    assert errors["depth_h"][0].summary() == {"n": 0, "unknown": 1}
+    assert errors["yolo_ros_h"][0].summary() == {"n": 0, "unknown": 1}
