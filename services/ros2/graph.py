@@ -8,6 +8,8 @@ token that ``ros2 node list`` / ``ros2 topic list`` read (services/ros2/wire.py 
 from __future__ import annotations
 
 import itertools
+import logging
+import threading
 from collections.abc import Callable
 from typing import Literal
 
@@ -28,9 +30,15 @@ from services.ros2.wire import (
     node_token,
 )
 
+log = logging.getLogger("ros2")
+
 
 class RosPublisher:
-    """One ROS 2 publisher: CDR payload plus attachment on the rmw_zenoh data key."""
+    """One ROS 2 publisher: CDR payload plus attachment on the rmw_zenoh data key.
+
+    Thread-safe: a put from a callback still running while the bridge stops cannot meet the
+    undeclare (zenoh's publisher refuses concurrent use: "Already borrowed"); once closed, a
+    put is dropped (the bridge is stopping, its robot already sent zero)."""
 
     def __init__(self, graph: RosGraph, topic: str, ros_type: str, qos: RosQoS) -> None:
         self.ros_type = ros_type
@@ -41,17 +49,26 @@ class RosPublisher:
         self._seq = itertools.count(1)
         self._pub = graph.session.declare_publisher(self.key)
         self._token = graph.session.liveliness().declare_token(token)
+        self._lock = threading.Lock()
+        self._closed = False
 
     def put(self, msg: RosMessage) -> None:
         self.put_cdr(cdr_encode(self._distro, self.ros_type, msg))
 
     def put_cdr(self, payload: bytes) -> None:
-        attachment = Attachment(next(self._seq), wall_ns(), self._gid)
-        self._pub.put(payload, attachment=attachment.encode())
+        with self._lock:
+            if self._closed:
+                return
+            attachment = Attachment(next(self._seq), wall_ns(), self._gid)
+            self._pub.put(payload, attachment=attachment.encode())
 
     def close(self) -> None:
-        self._token.undeclare()
-        self._pub.undeclare()
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._token.undeclare()
+            self._pub.undeclare()
 
 
 class RosGraph(Closing):
@@ -113,6 +130,14 @@ class RosGraph(Closing):
         self._closers.append(close)
 
     def close(self) -> None:
-        for close in reversed(self._closers):
-            close()
-        self.session.close()
+        """Undeclare everything, then close the session: always, whatever an undeclare
+        raises (a session left open keeps the process from exiting, and its callbacks
+        running against a closed stack)."""
+        try:
+            for close in reversed(self._closers):
+                try:
+                    close()
+                except Exception:  # logged; the others and the session still close
+                    log.exception("closing the ROS 2 graph: an undeclare failed")
+        finally:
+            self.session.close()
