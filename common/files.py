@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import hashlib
 import os
+import secrets
 import shutil
-import signal
-import tempfile
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -15,7 +13,7 @@ from pathlib import Path
 _CHUNK_BYTES = 1 << 20
 
 #: The signals a stop comes by (common/lifecycle.py takes both as Ctrl-C).
-_STOPS = {signal.SIGINT, signal.SIGTERM}
+_TEMPORARY_TRIES = 100
 
 
 def sha256_file(path: Path, chunk: int = _CHUNK_BYTES) -> str:
@@ -61,17 +59,20 @@ def temporary_folder(parent: Path, prefix: str) -> Iterator[Path]:
     """A fresh folder in ``parent`` for work that ends in an atomic rename, removed on the way
     out, whichever way that is. Unlike ``tempfile.TemporaryDirectory``, an interrupt (Ctrl-C,
     SIGTERM taken as one) that lands while the folder is being made cannot leave it behind:
-    the stop signals wait until the folder is made and owned here (on the main thread, where
-    Python runs their handlers)."""
+    its name is chosen and held here before it is made, so the way out removes it however
+    soon the interrupt lands (a stop signal that arrived just before Python's handler could
+    otherwise run inside ``tempfile.mkdtemp``, after its mkdir and before it returned)."""
     path: Path | None = None
     try:
-        main = threading.current_thread() is threading.main_thread()
-        held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPS) if main else None
-        try:
-            path = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
-        finally:
-            if held is not None:
-                signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        for _ in range(_TEMPORARY_TRIES):
+            path = parent / f"{prefix}{secrets.token_hex(8)}"
+            try:
+                os.mkdir(path, 0o700)
+                break
+            except FileExistsError:
+                path = None  # another's (64 random bits: never in practice)
+        else:
+            raise FileExistsError(f"no free name for a temporary folder in {parent}")
         yield path
     finally:
         if path is not None:
