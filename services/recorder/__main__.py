@@ -11,6 +11,7 @@ Comparing runs is ``python -m tools.compare``; the recorder's benchmark is
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import sys
 from collections.abc import Sequence
@@ -33,6 +34,7 @@ def serve(args: argparse.Namespace) -> int:
     # own teardown (its modules, the ROS type store, Zenoh's runtime) took over a second more
     # at nice 10 on cores kept busy, past the supervisor's stop timeout: the recorder was
     # killed after finishing its file. Exit at once instead.
+    logging.shutdown()  # every handler flushed, a file's too
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
