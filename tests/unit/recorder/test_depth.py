@@ -19,6 +19,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from common.bus import QoS
 from common.camera_announce import CameraAnnouncements
+from common.clock import wall_ns
 from common.errors import RecordingError
 from common.keys import Keys
 from common.memory_bus import MemoryHub
@@ -40,6 +41,7 @@ from services.recorder.reading import Recording
 from services.recorder.service import SERVICE, Recorder
 from services.recorder.writer import McapFile
 from stack.config import Config
+from tests.polling import wait_for
 from tests.unit.heard import heard_cameras
 
 CONFIG = Config(
@@ -99,7 +101,10 @@ def _record(path: Path) -> dict[str, list[tuple[Frame, DepthFrame]]]:
                     puts = [(KEYS.frame(camera), frame), (KEYS.depth(camera), depth)]
                     for key, msg in puts if seq % 2 else puts[::-1]:
                         sim.publisher(key, QoS.SENSOR).put(msg.encode())
-                time.sleep(0.002)  # frames apart in time, as a camera sends them
+                # Frames apart in time, as a camera sends them (the recorder stamps arrival
+                # on the wall clock).
+                sent_at = wall_ns()
+                wait_for(lambda t=sent_at: wall_ns() - t >= 2_000_000, 5, "2 ms to pass")
         recorder.close()
         assert node.counters.get("dropped") == 0 and node.counters.get("bad_input") == 0
     return sent
