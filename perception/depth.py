@@ -28,7 +28,7 @@ from statistics import NormalDist
 import numpy as np
 import numpy.typing as npt
 
-from common.messages import MAX_DEPTH_RANGE_M, DepthFrame
+from common.messages import MAX_DEPTH_RANGE_M, CameraAnnouncement, DepthFrame
 
 DISTANCE = "distance_m"
 CENTRE = ("x_m", "y_m", "z_m")
@@ -258,6 +258,11 @@ class Mounting:
     y_m: float = 0.0
     height_m: float = 0.0
     yaw_deg: float = 0.0
+
+    @classmethod
+    def of(cls, camera: CameraAnnouncement) -> Mounting:
+        """Where an announced camera stands on the robot."""
+        return cls(camera.mount_x_m, camera.mount_y_m, camera.mount_height_m, camera.mount_yaw_deg)
 
 
 def to_robot(

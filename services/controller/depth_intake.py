@@ -50,16 +50,6 @@ from services.controller.depth_scan import (
 PAYLOAD_OVERHEAD_BYTES = 64 * 1024
 
 
-def mounting(camera: CameraAnnouncement) -> Mounting:
-    """Where an announced camera stands on the robot."""
-    return Mounting(
-        x_m=camera.mount_x_m,
-        y_m=camera.mount_y_m,
-        height_m=camera.mount_height_m,
-        yaw_deg=camera.mount_yaw_deg,
-    )
-
-
 class DepthIntake:
     """Every announced depth camera's newest virtual scan (thread-safe: a bus thread offers,
     the intake's thread makes the scans, the control loop reads them)."""
@@ -113,10 +103,7 @@ class DepthIntake:
         with self._lock:
             announced = camera in self._cameras
         if not announced:
-            self.tally.reject(
-                contract.DEPTH_UNANNOUNCED,
-                f"depth from {camera!r:.80}, a camera not announced with depth, ignored",
-            )
+            self._unannounced(camera)
             return
         with self._cond:
             if camera in self._waiting:
@@ -149,15 +136,18 @@ class DepthIntake:
                     contract.DEPTH_ERRORS, f"making a virtual scan failed: {exc!r:.200}"
                 )
 
+    def _unannounced(self, camera: str) -> None:
+        self.tally.reject(
+            contract.DEPTH_UNANNOUNCED,
+            f"depth from {camera!r:.80}, a camera not announced with depth, ignored",
+        )
+
     def _handle(self, camera: str, payload: bytes) -> None:
         tally = self.tally
         with self._lock:
             announced, gate = self._cameras.get(camera), self._gates.get(camera)
         if announced is None or gate is None:
-            tally.reject(
-                contract.DEPTH_UNANNOUNCED,
-                f"depth from {camera!r:.80}, a camera not announced with depth, ignored",
-            )
+            self._unannounced(camera)
             return
         key = tally.keys.depth(camera)
         if len(payload) > self.max_pixels * 4 + PAYLOAD_OVERHEAD_BYTES:
@@ -175,7 +165,7 @@ class DepthIntake:
             tally.reject(counter, f"{verdict} depth from {camera} ({age:.2f} s) ignored")
             tally.counters.add(per_camera(counter, camera))
             return
-        mount = mounting(announced)
+        mount = Mounting.of(announced)
         if not usable(mount):
             tally.reject(
                 contract.DEPTH_NO_MOUNT,
@@ -245,5 +235,5 @@ class DepthIntake:
                 if camera in self._scans:
                     scan, arrived = self._scans[camera]
                     age = max(mono - arrived, capture_age_s(scan.header, at, BOOT_ID))
-                cameras[camera] = DepthCamera(mounting(announced), announced.hfov_deg, scan, age)
+                cameras[camera] = DepthCamera(Mounting.of(announced), announced.hfov_deg, scan, age)
         return depth_obstacles(cameras, self.timeout_s, self.sector_width_deg)

@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Detections, LaserScan
+from perception import DEPTH_CENTRE, DEPTH_DISTANCE, Mounting, to_robot
 
 
 class Mount(Protocol):
@@ -68,11 +69,8 @@ def box_distance(dets: Detections, i: int, hfov_deg: float, target_height_m: flo
 
 
 #: The detections' column with each box's distance from its camera, in metres (NaN: unknown),
-#: as the detector's depth stage writes it (perception/depth.py ``DISTANCE``).
-DISTANCE_COLUMN = "distance_m"
-#: The columns of each box's 3D centre in its camera's optical frame (x right, y down,
-#: z forward; perception/depth.py ``CENTRE``).
-CENTRE_COLUMNS = ("x_m", "y_m", "z_m")
+#: as the detector's depth stage writes it.
+DISTANCE_COLUMN = DEPTH_DISTANCE
 
 
 def depth_distance(dets: Detections, i: int, camera: Mount | None = None) -> float:
@@ -86,16 +84,18 @@ def depth_distance(dets: Detections, i: int, camera: Mount | None = None) -> flo
     the robot would stop nearer than ``follow_distance_m``.
     """
     columns = dets.boxes.columns
-    if any(c not in columns for c in CENTRE_COLUMNS):
+    if any(c not in columns for c in DEPTH_CENTRE):
         return math.nan
-    x, z = float(columns["x_m"][i]), float(columns["z_m"][i])
-    if not (math.isfinite(x) and math.isfinite(z)) or z <= 0:
+    x, _, z = (columns[c][i : i + 1] for c in DEPTH_CENTRE)
+    if not (math.isfinite(x[0]) and math.isfinite(z[0])) or z[0] <= 0:
         return math.nan
-    yaw = math.radians(getattr(camera, "mount_yaw_deg", 0.0))
-    ahead, left = z, -x  # the camera's own forward and left
-    forward = getattr(camera, "mount_x_m", 0.0) + math.cos(yaw) * ahead - math.sin(yaw) * left
-    side = getattr(camera, "mount_y_m", 0.0) + math.sin(yaw) * ahead + math.cos(yaw) * left
-    return math.hypot(forward, side)
+    mount = Mounting(
+        x_m=getattr(camera, "mount_x_m", 0.0),
+        y_m=getattr(camera, "mount_y_m", 0.0),
+        yaw_deg=getattr(camera, "mount_yaw_deg", 0.0),
+    )
+    forward, left, _ = to_robot(x, np.zeros_like(x), z, mount)  # the height plays no part
+    return float(np.hypot(forward[0], left[0]))
 
 
 def box_clipped(dets: Detections, i: int, margin_px: float = 2.0) -> bool:

@@ -94,14 +94,6 @@ class DepthInbound:
         self.tally.counters.add(contract.DEPTH_OUT)
 
 
-def mounting(announcement: CameraAnnouncement) -> Mounting:
-    """Where an announced camera stands on the robot (perception.depth.to_robot's input)."""
-    a = announcement
-    return Mounting(
-        x_m=a.mount_x_m, y_m=a.mount_y_m, height_m=a.mount_height_m, yaw_deg=a.mount_yaw_deg
-    )
-
-
 class Detections3DToRos:
     """The detections of ``camera`` that carry depth columns out as vision_msgs/
     Detection3DArray CDR through ``put``: in the camera's optical frame, or with
@@ -135,7 +127,7 @@ class Detections3DToRos:
                     key=self.key,
                 )
                 return
-            mount = mounting(announcement)
+            mount = Mounting.of(announcement)
         msg, unknown = detections_3d_to_ros(self.distro, dets, frame_id=self.frame_id, mount=mount)
         self.put(cdr_encode(self.distro, DETECTION_3D_ARRAY, msg))
         self.tally.counters.add(contract.DETECTIONS_3D_OUT)
