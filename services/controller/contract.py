@@ -154,7 +154,15 @@ class ControllerSettings:
     services/controller/depth_scan.py, under the same rules), or both. Each one listed must be
     fresh for forward motion (depth older than ``depth_timeout_s`` is missing, as a scan
     older than ``scan_timeout_s`` is), and every fresh one is obeyed, listed or not. The
-    depth images are read only when depth is needed (``needs_depth``).
+    depth images are read only when depth is needed (``needs_depth``). In a depth image, a
+    hole of no readings ``depth_hole_px`` tall or more where the floor should show is
+    unknown, never clear (smaller ones are a stereo camera's speckle). What the depth cameras
+    saw is kept in a rolling map ``depth_memory_size_m`` across, in cells
+    ``depth_memory_resolution_m`` wide, moved by the controller's own commands
+    (services/controller/local_map.py): an obstacle or a drop-off seen stays until its place
+    is seen clear, and with depth required the robot drives no faster than
+    ``depth_creep_speed`` while the corridor ahead within the room it needs to stop has a
+    part never seen (at start-up: the camera's blind zone).
     Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
     acceleration limits. Stale detections (captured or received longer than
     ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the
@@ -198,6 +206,11 @@ class ControllerSettings:
     depth_hfov_tolerance_deg: float = 5.0
     depth_max_pixel_aspect: float = 1.25
     depth_max_pixels: int = 4_194_304
+    # Issue 38: the virtual scan's holes and the depth cameras' short memory.
+    depth_hole_px: int = 12
+    depth_creep_speed: float = 0.1
+    depth_memory_size_m: float = 8.0
+    depth_memory_resolution_m: float = 0.05
     estop_file: str = ""
     estop_release_max_age_s: float = 2.0
     counters_period_s: float = 1.0
@@ -237,6 +250,10 @@ class ControllerSettings:
         "depth_hfov_tolerance_deg": (0.1, 30),
         "depth_max_pixel_aspect": (1, 2),
         "depth_max_pixels": (1, 100_000_000),
+        "depth_hole_px": (1, 100),
+        "depth_creep_speed": (0, 1),
+        "depth_memory_size_m": (2, 40),
+        "depth_memory_resolution_m": (0.01, 0.2),
         "estop_release_max_age_s": (0.1, 60),
         "counters_period_s": (0.1, 60),
     }

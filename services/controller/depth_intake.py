@@ -40,10 +40,12 @@ from services.controller.depth_scan import (
     blind_zone,
     depth_obstacles,
     implausible,
+    merge,
+    observe,
     sample_frame,
-    scan_samples,
     usable,
 )
+from services.controller.local_map import LocalMap, MapParams, Odometry
 
 #: Bytes of a depth payload beyond its pixels' (header, intrinsics, framing): a payload larger
 #: than ``depth_max_pixels`` 4-byte pixels and this is dropped before it is decoded.
@@ -67,7 +69,20 @@ class DepthIntake:
             max_height_m=s.depth_max_height_m,
             stride_px=s.depth_scan_stride_px,
             resolution_deg=s.depth_scan_resolution_deg,
+            hole_px=s.depth_hole_px,
         )
+        # The short memory (services/controller/local_map.py), moved by the commands sent.
+        self.odometry = Odometry()
+        self.map = LocalMap(
+            MapParams(
+                resolution_m=s.depth_memory_resolution_m,
+                size_m=s.depth_memory_size_m,
+                corridor_half_width_m=s.robot_width_m / 2,
+                footprint_half_m=s.robot_width_m / 2,
+            ),
+            s.depth_scan_resolution_deg,
+        )
+        self._map_lock = threading.Lock()
         self.plausible = Plausible(
             hfov_tolerance_deg=s.depth_hfov_tolerance_deg,
             max_pixel_aspect=s.depth_max_pixel_aspect,
@@ -181,13 +196,14 @@ class DepthIntake:
             self._refuse(contract.DEPTH_IMPLAUSIBLE, camera, why)
             return
         try:
-            scan = scan_samples(
+            seen = observe(
                 sample_frame(msg, self.params.stride_px), intr, mount, self.params, msg.header,
                 msg.range_max_m, msg.range_min_m,
             )  # fmt: skip
         except ValueError as exc:
             tally.bad_input(key, exc)
             return
+        scan = seen.scan
         with self._lock:
             held = self._scans.get(camera)
             # Made with the announcement still current: not a withdrawn or changed camera's.
@@ -198,6 +214,12 @@ class DepthIntake:
             tell = newer and self._told.get(camera) != announced
             if tell:
                 self._told[camera] = announced
+        if newer:
+            # Remembered where the robot stood when the frame was captured.
+            captured = self.clock.mono_s() - capture_age_s(msg.header, self.clock.now(), BOOT_ID)
+            pose = self.odometry.pose_at(captured)
+            with self._map_lock:
+                self.map.observe(seen, pose)
         if tell:
             floor_m, below_m = blind_zone(intr, mount, self.safety_distance_m)
             tally.log.info(
@@ -224,9 +246,27 @@ class DepthIntake:
         self.tally.reject(counter, f"depth from {camera} refused: {why}", key=counter + camera)
         self.tally.counters.add(per_camera(counter, camera))
 
+    def moved(self, mono_s: float, linear: float, angular: float) -> None:
+        """The command sent at monotonic ``mono_s``: the robot moves so from then on."""
+        self.odometry.command(mono_s, linear, angular)
+
     def obstacles(self, at: Stamp) -> DepthObstacles:
         """The depth cameras' obstacles at the control instant ``at`` (each scan aged as the
-        dead-man ages detections: the later of its capture and its arrival)."""
+        dead-man ages detections: the later of its capture and its arrival), with what the
+        map remembers round the robot merged in, and how far ahead the floor is known."""
+        now = self._obstacles(at)
+        if now.scan is None:
+            return now
+        pose = self.odometry.pose_at(at.mono_ns / 1e9)
+        with self._map_lock:
+            self.map.stand(pose)
+            held = self.map.read(pose, now.scan.header)
+        return DepthObstacles(
+            merge([now.scan, held.scan]), now.age_s, known_m=held.known_m,
+            remembered=(held.hazards, held.unknown),
+        )  # fmt: skip
+
+    def _obstacles(self, at: Stamp) -> DepthObstacles:
         mono = at.mono_ns / 1e9
         with self._lock:
             cameras = {}

@@ -140,7 +140,9 @@ def corridor_clearance(scan: LaserScan, half_width_m: float) -> float:
     r = np.where(valid, r, 0.0)  # inf * cos(90 deg) would be NaN (and a numpy warning)
     x = r * np.cos(scan.angles)
     y = r * np.sin(scan.angles)
-    hit = valid & (x > 0) & (np.abs(y) <= half_width_m)
+    # A valid zero range (a virtual scan's "blocked here") is a hit at the base, whatever its
+    # angle: skipping it as "not ahead" would drive into what the scan could not see.
+    hit = valid & ((x > 0) | (r == 0)) & (np.abs(y) <= half_width_m)
     return float(x[hit].min()) if hit.any() else math.inf
 
 

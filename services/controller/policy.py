@@ -73,8 +73,9 @@ class VelocityCommand:
 class Inputs:
     """The newest inputs: each camera's :class:`View` by camera name, the scan and its age in
     seconds (inf when none has arrived), and the e-stop; the depth cameras' virtual scan
-    (services/controller/depth_scan.py ``depth_obstacles``), its age, and why there is none
-    (``depth_missing``)."""
+    (services/controller/depth_scan.py ``depth_obstacles``), its age, why there is none
+    (``depth_missing``), and how far ahead the floor is known (``depth_known_m``: the depth
+    map's, services/controller/local_map.py)."""
 
     views: Mapping[str, View]
     scan: LaserScan | None = None
@@ -83,6 +84,7 @@ class Inputs:
     depth: LaserScan | None = None
     depth_age_s: float = math.inf
     depth_missing: str = "no depth camera"
+    depth_known_m: float = math.inf
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,6 +98,7 @@ class Obstacles:
     required: bool
     missing: str
     stopping_m: float
+    known_m: float = math.inf
 
 
 def stop(state: ControllerState, reason: str, input_stamp_ns: int = 0) -> VelocityCommand:
@@ -196,6 +199,7 @@ class Controller:
                 DEPTH_SOURCE in s.obstacle_sources,
                 inp.depth_missing if inp.depth is None else "no recent depth",
                 stopping(inp.depth_age_s if depth is not None else 0.0),
+                inp.depth_known_m,
             ),
         )
         aim = self._aim(fresh, scan, now, dt)
@@ -245,6 +249,22 @@ class Controller:
                 by = "" if source.name == "laser" else f" ({source.name})"
                 return f"obstacle at {clearance:.2f} m{by}"
         return None
+
+    def _creep(self, linear: float, reason: str) -> tuple[float, str]:
+        """``linear`` no faster than ``depth_creep_speed`` while a required obstacle source
+        knows the corridor ahead less far than the robot needs to stop (part of it never
+        seen: the depth camera's blind zone at start-up), with the reason said."""
+        for source in self.obstacles:
+            if not (source.required and source.scan is not None) or linear <= 0:
+                continue
+            if source.known_m <= self.s.safety_distance_m + source.stopping_m:
+                creep = self.s.depth_creep_speed
+                if linear > creep:
+                    return creep, (
+                        f"{reason}; creeping: the floor is known only {source.known_m:.2f} m "
+                        f"ahead ({source.name})"
+                    )
+        return linear, reason
 
     def _known_clear(self) -> bool:
         """Whether some obstacle source is fresh and none shows the way ahead blocked: what
@@ -363,11 +383,15 @@ class Controller:
             state = ControllerState.TURNING
             if centred:
                 state = ControllerState.TRACKING if blocked is None else ControllerState.BLOCKED
-            aim = VelocityCommand(
+            linear, why = self._creep(
                 s.forward_speed if state is ControllerState.TRACKING else 0.0,
+                blocked or f"bearing {math.degrees(err):+.1f} deg",
+            )
+            aim = VelocityCommand(
+                linear,
                 angular,
                 state,
-                blocked or f"bearing {math.degrees(err):+.1f} deg",
+                why,
                 best.name,
                 best.track_id,
                 stamp,
@@ -399,15 +423,18 @@ class Controller:
             # Driving on towards a target not seen needs a scan that shows the way clear,
             # even with no_laser (which lets the robot drive only towards a target in view).
             clear = self._known_clear()
-            linear = held.linear_x if clear and not between else 0.0
+            where = ", between the cameras" if between else ""
+            linear, why = self._creep(
+                held.linear_x if clear and not between else 0.0,
+                f"target unseen for {now - self.last_seen:.1f} s{where}",
+            )
             predicted = self._predicted(now)
             angular = 0.0 if predicted is None else self.pid.update(predicted, dt)
-            where = ", between the cameras" if between else ""
             return VelocityCommand(
                 linear,
                 angular,
                 ControllerState.HOLDING,
-                f"target unseen for {now - self.last_seen:.1f} s{where}",
+                why,
                 held.target,
                 held.track_id,
                 stamp,
@@ -466,12 +493,15 @@ class Controller:
         blocked = self._blocked()
         if blocked is not None:
             return turn_only(ControllerState.BLOCKED, blocked)
-        speed = min(s.max_linear, s.distance_gain * (distance - s.follow_distance_m))
+        speed, why = self._creep(
+            min(s.max_linear, s.distance_gain * (distance - s.follow_distance_m)),
+            f"target at {distance:.2f} m",
+        )
         return VelocityCommand(
             speed,
             angular,
             ControllerState.FOLLOWING,
-            f"target at {distance:.2f} m",
+            why,
             x.name,
             x.track_id,
             stamp,

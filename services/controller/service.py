@@ -369,7 +369,10 @@ class ControlLoop:
     def _halted(self) -> None:
         """The e-stop's status, once the engage is saved (or could not be)."""
         estop = stop_command(ControllerState.ESTOP, self.latch.describe())
-        self.out.send(estop, self.clock.now(), estop_saved=self.latch.saved)
+        at = self.clock.now()
+        self.out.send(estop, at, estop_saved=self.latch.saved)
+        if self.depth is not None:
+            self.depth.moved(at.mono_ns / 1e9, 0.0, 0.0)
 
     def tick(self) -> float:
         """One control tick: judge every input's age at one instant, send the command and
@@ -390,12 +393,18 @@ class ControlLoop:
             if self.depth is not None:
                 seen = self.depth.obstacles(at)
                 inputs = dataclasses.replace(
-                    inputs, depth=seen.scan, depth_age_s=seen.age_s, depth_missing=seen.missing
+                    inputs,
+                    depth=seen.scan,
+                    depth_age_s=seen.age_s,
+                    depth_missing=seen.missing,
+                    depth_known_m=seen.known_m,
                 )
             cmd = self.controller.step(inputs, tick)
             if cmd.state == ControllerState.ESTOP:
                 cmd = dataclasses.replace(cmd, reason=latch.describe())
             out.send(cmd, at, estop_saved=latch.saved)
+            if self.depth is not None:  # the depth map moves as the robot is told to
+                self.depth.moved(tick, cmd.linear_x, cmd.angular_z)
         if cmd.state != self._last_state:
             log_state(self.node.log, self._state_log, cmd)
             self._last_state = cmd.state

@@ -23,7 +23,9 @@ from perception.depth import Intrinsics, Mounting
 from services.controller import depth_intake
 from services.controller.contract import ControllerSettings
 from services.controller.depth_scan import (
+    MIN_NEAR_M,
     DepthCamera,
+    Observation,
     ScanParams,
     blind_zone,
     depth_obstacles,
@@ -67,7 +69,8 @@ def test_a_direction_in_view_with_no_point_at_all_is_blocked() -> None:
     # at all in its directions, the floor seen all round it.
     depth = scene(HEIGHT, at_bearing(0.8, 0.0, 0.05))
     depth[depth == np.float32(0.8)] = np.nan
-    assert ahead(depth) == 0.0
+    # Blocked at the nearest range it could hide a thing.
+    assert ahead(depth) == pytest.approx(MIN_NEAR_M, abs=1e-3)
 
 
 def test_too_close_is_an_obstacle_at_the_minimum_range() -> None:
@@ -206,14 +209,14 @@ def test_depth_of_a_camera_not_announced_with_depth_is_not_kept(rig: Rig) -> Non
 def test_a_scan_made_with_an_announcement_gone_is_not_kept(
     rig: Rig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    made = depth_intake.scan_samples
+    made = depth_intake.observe
 
-    def reannounced(*args: Any, **kw: Any) -> LaserScan:
+    def reannounced(*args: Any, **kw: Any) -> Observation:
         # While the scan is made, the camera is announced again, mounted elsewhere.
         rig.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT + 0.3)
         return made(*args, **kw)
 
-    monkeypatch.setattr(depth_intake, "scan_samples", reannounced)
+    monkeypatch.setattr(depth_intake, "observe", reannounced)
     assert put(rig, frame(rig)) == 1
     assert rig.counters.get("depth_in", 0) == 0
     assert not drives(rig)[0]
@@ -226,7 +229,7 @@ def test_the_intake_thread_survives_an_error(rig: Rig, monkeypatch: pytest.Monke
     def broken(*args: Any, **kw: Any) -> LaserScan:
         raise RuntimeError("a bug")
 
-    monkeypatch.setattr(depth_intake, "scan_samples", broken)
+    monkeypatch.setattr(depth_intake, "observe", broken)
     stop = threading.Event()
     thread = threading.Thread(target=intake.serve, args=(stop, 0.01), daemon=True)
     thread.start()

@@ -1,0 +1,128 @@
+"""Issue 38's per-frame rules of the virtual scan, each on the case that broke it: a drop-off
+is a hazard at its edge (the last floor seen), not where the ray meets the lower floor; floor
+that must be seen and is not is not clear (an all-far image, a column with no floor at all);
+no reading in view is never clear, and a hole between two floor readings is unknown from
+where the floor was last seen."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from common.messages import DepthFrame, Header
+from perception.depth import Mounting
+from services.controller.depth_scan import (
+    Observation,
+    ScanParams,
+    observe,
+    sample_frame,
+    sample_metres,
+    virtual_scan,
+)
+from services.controller.geometry import sector_clearance
+from tests.unit.controller.depth_scenes import INTR, Face, at_bearing, scene
+
+HEADER = Header(stamp_ns=1_000, frame_id="camera", seq=1, source="test")
+PARAMS = ScanParams()
+HEIGHT = 0.6
+LEVEL = Mounting(height_m=HEIGHT)
+SECTOR, HALF_WIDTH = 30.0, 0.3
+RANGE_MIN = 0.3
+
+
+def ahead(depth: np.ndarray, **kw: Any) -> float:
+    s = virtual_scan(depth, INTR, LEVEL, PARAMS, HEADER, 10.0, range_min_m=RANGE_MIN, **kw)
+    return sector_clearance(s, SECTOR, HALF_WIDTH)
+
+
+def seen(depth: np.ndarray) -> Observation:
+    return observe(sample_metres(depth, PARAMS.stride_px), INTR, LEVEL, PARAMS, HEADER, 10.0,
+                   RANGE_MIN)  # fmt: skip
+
+
+def step(edge_m: float, depth_m: float) -> np.ndarray:
+    """The floor, ``depth_m`` lower beyond ``edge_m`` ahead (a kerb, a step down)."""
+    upper, lower = scene(HEIGHT), scene(HEIGHT + depth_m)
+    return np.where(upper < edge_m, upper, lower)
+
+
+@pytest.mark.parametrize("depth_m", [0.15, 0.5])
+def test_a_drop_off_is_a_hazard_at_its_edge(depth_m: float) -> None:
+    # Before the fix the kerb read clear to 2.55 m once its edge was in the blind zone, and
+    # the step to where the ray meets the lower floor.
+    assert ahead(step(3.0, depth_m)) == pytest.approx(3.0, abs=0.12)
+    edges = seen(step(3.0, depth_m)).hazards
+    straight = edges[np.abs(edges[:, 1]) < 0.3]
+    assert straight[:, 0].min() == pytest.approx(3.0, abs=0.12)
+    assert straight[:, 0].max() <= 3.0
+
+
+@pytest.mark.parametrize("depth_m", [0.15, 0.5])
+def test_an_edge_inside_the_blind_zone_blocks_at_the_nearest_range(depth_m: float) -> None:
+    # The camera sees the floor from 1.39 m: an edge at 1.0 m shows only the lower floor.
+    assert ahead(step(1.0, depth_m)) == pytest.approx(RANGE_MIN, abs=0.01)
+    assert len(seen(step(1.0, depth_m)).unknown) > 0
+
+
+def test_an_image_with_no_floor_at_all_is_not_clear() -> None:
+    # "Bottomless": every pixel 65535 mm, no range stated; and every pixel 10 m in 0.3-10 m.
+    for mm, top in ((65535, 0.0), (10000, 10.0)):
+        frame = DepthFrame(
+            header=HEADER, encoding="16UC1", width=INTR.width, height=INTR.height,
+            data=np.full((INTR.height, INTR.width), mm, "<u2").tobytes(), fx=INTR.fx,
+            fy=INTR.fy, cx=INTR.cx, cy=INTR.cy, range_min_m=RANGE_MIN, range_max_m=top,
+        )  # fmt: skip
+        o = observe(sample_frame(frame, PARAMS.stride_px), INTR, LEVEL, PARAMS, HEADER, top,
+                    RANGE_MIN)  # fmt: skip
+        assert sector_clearance(o.scan, SECTOR, HALF_WIDTH) == pytest.approx(RANGE_MIN, abs=0.01)
+
+
+def test_a_black_box_in_the_blind_zone_blocks() -> None:
+    # 0.5 m tall, 1 m ahead, no readings on it: the floor beyond is seen above it.
+    depth = scene(HEIGHT, Face(1.0, -0.3, 0.3, 0.0, 0.5))
+    depth[depth == np.float32(1.0)] = np.nan
+    assert ahead(scene(HEIGHT)) > 9.0
+    assert ahead(depth) == pytest.approx(RANGE_MIN, abs=0.01)  # was 9.9 m: clear
+
+
+def test_a_dark_pole_beside_the_nose_blocks_the_corridor() -> None:
+    # 0.45 m ahead at 25 deg (0.21 m to the side, inside the 0.6 m corridor): no reading on
+    # it. It blocks where a reading would have put it, and with none it blocks too.
+    pole = at_bearing(0.45, 25.0, 0.02)
+    assert ahead(scene(HEIGHT, pole)) < 0.5
+    depth = scene(HEIGHT, pole)
+    depth[depth == np.float32(0.45)] = np.nan
+    clearance = ahead(depth)
+    assert clearance < 0.5, clearance  # was inf: the corridor skipped the zero-range rays
+
+
+def test_a_hole_between_two_floor_readings_is_unknown_from_the_last_floor() -> None:
+    # Rows that see the floor from 2.0 to 2.6 m read nothing (a dark mat, a low dark thing).
+    depth = scene(HEIGHT)
+    z = scene(HEIGHT)
+    depth[(z > 2.0) & (z < 2.6)] = np.nan
+    assert ahead(depth) == pytest.approx(2.0, abs=0.05)  # was 9.9: clear beyond
+    unknown = seen(depth).unknown
+    straight = unknown[np.abs(unknown[:, 1]) < 0.05]
+    assert straight[:, 0].min() == pytest.approx(2.0, abs=0.05)
+    assert straight[:, 0].max() == pytest.approx(2.6, abs=0.05)
+
+
+def test_single_missing_samples_are_not_holes() -> None:
+    # 1 % of pixels read nothing at random (a stereo camera's speckle): still clear far.
+    depth = scene(HEIGHT)
+    rng = np.random.default_rng(1)
+    depth[rng.random(depth.shape) < 0.01] = np.nan
+    assert ahead(depth) > 9.0
+    assert len(seen(depth).unknown) == 0
+
+
+def test_floor_and_hazards_are_where_the_camera_saw_them() -> None:
+    o = seen(scene(HEIGHT, Face(2.5, -0.2, 0.2, 0.0, 0.3)))
+    box = o.hazards[np.abs(o.hazards[:, 1]) < 0.2]
+    assert box[:, 0].min() == pytest.approx(2.5, abs=0.01)
+    assert o.floor[:, 0].min() == pytest.approx(HEIGHT / math.tan(math.radians(23.413)),
+                                                abs=0.05)  # fmt: skip
