@@ -188,3 +188,17 @@ def test_follow_compares_the_horizontal_distance_from_the_base() -> None:
     )
     cmd = ctl.step(inputs, 1.0)
     assert cmd.state == "following" and cmd.reason == "target at 1.22 m", cmd
+
+
+@pytest.mark.parametrize("s", [TRACK, FOLLOW], ids=["track", "follow"])
+def test_the_robot_creeps_while_the_floor_ahead_is_unseen(s: ControllerSettings) -> None:
+    # Issue 38: at start-up the depth camera's blind zone (to 1.39 m) has never been seen.
+    inputs = Inputs(
+        {"front": View(person(5.0), 0.0, 0.0)}, None, math.inf, False, scan(5.0), 0.0, "",
+        depth_known_m=0.3,
+    )  # fmt: skip
+    cmd = Controller(s, FRONT).step(inputs, 1.0)
+    assert 0 < cmd.linear_x <= s.depth_creep_speed, cmd
+    assert "creeping: the floor is known only 0.30 m ahead (depth)" in cmd.reason
+    known = Controller(s, FRONT).step(dataclasses.replace(inputs, depth_known_m=3.0), 1.0)
+    assert known.linear_x > s.depth_creep_speed and "creeping" not in known.reason
