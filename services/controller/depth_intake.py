@@ -21,6 +21,7 @@ still the camera's. An error while making a scan is logged, counted and the thre
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from collections.abc import Mapping
 
@@ -40,7 +41,6 @@ from services.controller.depth_scan import (
     blind_zone,
     depth_obstacles,
     implausible,
-    merge,
     observe,
     sample_frame,
     usable,
@@ -253,7 +253,7 @@ class DepthIntake:
     def obstacles(self, at: Stamp) -> DepthObstacles:
         """The depth cameras' obstacles at the control instant ``at`` (each scan aged as the
         dead-man ages detections: the later of its capture and its arrival), with what the
-        map remembers round the robot merged in, and how far ahead the floor is known."""
+        map remembers round the robot and how far ahead the floor is known."""
         now = self._obstacles(at)
         if now.scan is None:
             return now
@@ -261,10 +261,7 @@ class DepthIntake:
         with self._map_lock:
             self.map.stand(pose)
             held = self.map.read(pose, now.scan.header)
-        return DepthObstacles(
-            merge([now.scan, held.scan]), now.age_s, known_m=held.known_m,
-            remembered=(held.hazards, held.unknown),
-        )  # fmt: skip
+        return dataclasses.replace(now, remembered=held.scan, known_m=held.known_m)
 
     def _obstacles(self, at: Stamp) -> DepthObstacles:
         mono = at.mono_ns / 1e9

@@ -464,16 +464,16 @@ class DepthCamera:
 @dataclass(frozen=True, slots=True)
 class DepthObstacles:
     """What the depth cameras show of the obstacles now: ``scan`` merged from every fresh
-    camera's, its age (the oldest merged), or ``None`` with the reason in ``missing``;
-    ``known_m`` how far ahead the floor is known (``inf`` for no map)."""
+    camera's, its age (the oldest merged), or ``None`` with the reason in ``missing``."""
 
     scan: LaserScan | None
     age_s: float = math.inf
     missing: str = ""
-    #: How far ahead the corridor's floor is known (services/controller/local_map.py).
+    #: What the map remembers round the robot (services/controller/local_map.py): its
+    #: hazard and unknown cells as a scan (None: no map), and how far ahead the corridor's
+    #: floor is known.
+    remembered: LaserScan | None = None
     known_m: float = math.inf
-    #: The map's hazard and unknown cells (for the status).
-    remembered: tuple[int, int] = (0, 0)
 
 
 def depth_obstacles(

@@ -122,7 +122,7 @@ def _to_robot(pose: Pose, pts: npt.NDArray[np.float64]) -> npt.NDArray[np.float6
 @dataclass(frozen=True, slots=True)
 class Remembered:
     """What the map holds round the robot now: ``scan`` of its HAZARD and UNKNOWN cells
-    (each ray the nearest such cell's near side; NaN where none), and ``known_m``: how far
+    (each ray the nearest such cell's near side; +inf where none), and ``known_m``: how far
     ahead the corridor is known (seen at least once), from the base's centre."""
 
     scan: LaserScan
@@ -203,7 +203,7 @@ class LocalMap:
         centres = self.origin + (np.stack([i, j], axis=1) + 0.5) * res
         local = _to_robot(pose, centres)
         increment = math.tau / self.bins
-        ranges = np.full(self.bins, np.nan)
+        ranges = np.full(self.bins, np.inf)  # nothing remembered that way
         if len(local):
             # The near side of each cell: its centre less half its diagonal.
             r = np.maximum(np.hypot(local[:, 0], local[:, 1]) - res * math.sqrt(0.5), 0.0)

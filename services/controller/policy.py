@@ -74,8 +74,9 @@ class Inputs:
     """The newest inputs: each camera's :class:`View` by camera name, the scan and its age in
     seconds (inf when none has arrived), and the e-stop; the depth cameras' virtual scan
     (services/controller/depth_scan.py ``depth_obstacles``), its age, why there is none
-    (``depth_missing``), and how far ahead the floor is known (``depth_known_m``: the depth
-    map's, services/controller/local_map.py)."""
+    (``depth_missing``); what the depth cameras' map remembers round the robot
+    (``depth_remembered``, services/controller/local_map.py: judged with the depth, when the
+    depth is fresh) and how far ahead it knows the floor (``depth_known_m``)."""
 
     views: Mapping[str, View]
     scan: LaserScan | None = None
@@ -84,6 +85,7 @@ class Inputs:
     depth: LaserScan | None = None
     depth_age_s: float = math.inf
     depth_missing: str = "no depth camera"
+    depth_remembered: LaserScan | None = None
     depth_known_m: float = math.inf
 
 
@@ -200,6 +202,13 @@ class Controller:
                 inp.depth_missing if inp.depth is None else "no recent depth",
                 stopping(inp.depth_age_s if depth is not None else 0.0),
                 inp.depth_known_m,
+            ),
+            Obstacles(
+                "remembered",
+                inp.depth_remembered if depth is not None else None,
+                False,
+                "",
+                stopping(inp.depth_age_s if depth is not None else 0.0),
             ),
         )
         aim = self._aim(fresh, scan, now, dt)

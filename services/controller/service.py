@@ -397,6 +397,7 @@ class ControlLoop:
                     depth=seen.scan,
                     depth_age_s=seen.age_s,
                     depth_missing=seen.missing,
+                    depth_remembered=seen.remembered,
                     depth_known_m=seen.known_m,
                 )
             cmd = self.controller.step(inputs, tick)

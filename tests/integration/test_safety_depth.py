@@ -15,7 +15,6 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-
 import pytest
 
 from common.messages import ControllerStatus, Twist
@@ -112,6 +111,7 @@ def test_without_a_laser_the_depth_camera_shows_the_way_or_nothing_moves_forward
         assert forward(cmds, since_cmds) == [], "drove into what slipped into the blind zone"
         said = {x.reason for x in statuses(status_raw, since + TICKS)}
         assert said and all(r.startswith("obstacle at 0.") for r in said), said
+        assert all(r.endswith("(remembered)") for r in said), said
     finally:
         feeder.close()
     assert stack.stop() == 0, stack.log()
