@@ -24,7 +24,8 @@ from common.messages import MAX_ANNOUNCED_RATE_HZ, CameraAnnouncement
 
 class CameraAnnouncements(Closing):
     """The announcements of the cameras one source publishes on ``keys`` (its robot's
-    prefix), each saying it comes from ``source`` (``camera``, ``sim``, ``ros2``, ``play``).
+    prefix), each saying it comes from ``source`` (``camera``, ``sim``, ``ros2``, ``play``)
+    and from ``bus``'s Zenoh session (``zid``), the one that must publish their depth.
     Thread-safe: :meth:`saw` may be called from any thread, for every frame."""
 
     def __init__(self, bus: Bus, keys: Keys, source: str) -> None:
@@ -68,6 +69,7 @@ class CameraAnnouncements(Closing):
                 mount_height_m=mount_height_m,
                 mount_x_m=mount_x_m,
                 mount_y_m=mount_y_m,
+                zid=self._bus.zid,  # the session that publishes its frames and depth
             )
         except ValueError as exc:
             raise ConfigError(f"camera {camera!r} cannot be announced: {exc}") from exc

@@ -374,7 +374,11 @@ class CameraAnnouncement(Message):
     ``mount_height_m``: its optical centre's height above the floor (0: not known; a virtual
     scan from its depth needs it, to take the floor out); ``mount_x_m``/``mount_y_m``: where
     it stands on the robot, forward and left of the base's centre (REP 103). The camera is
-    taken to look level (no pitch or roll)."""
+    taken to look level (no pitch or roll). ``zid``: the Zenoh session id of the announcer,
+    which publishes the camera's depth from that same session: the controller takes depth
+    only from samples whose publisher is in it (docs/security.md, "Depth from the announced
+    source only"); "" from an announcer older than the field, whose depth is then taken from
+    any publisher, as before."""
 
     TAG: ClassVar[str] = "CameraAnnouncement"
     VERSION: ClassVar[int] = 1
@@ -390,9 +394,12 @@ class CameraAnnouncement(Message):
     mount_height_m: float = 0.0
     mount_x_m: float = 0.0
     mount_y_m: float = 0.0
+    zid: str = ""
 
     def __post_init__(self) -> None:
         _check_announced_name("camera", self.camera)
+        if self.zid:
+            _check_announced_name("zid", self.zid)
         if not (math.isfinite(self.mount_height_m) and 0 <= self.mount_height_m <= 10):
             raise ValueError(f"mount_height_m {self.mount_height_m} is outside [0, 10]")
         for what, offset in (("mount_x_m", self.mount_x_m), ("mount_y_m", self.mount_y_m)):

@@ -90,6 +90,12 @@ class Tally:
         self.counters.add(counter)
         self._log_limited(key or counter, counter, "%s (%s)", message, counter)
 
+    def warn(self, reason: str, message: str, *, key: str = "") -> None:
+        """Log ``message`` as a WARNING, limited as :meth:`reject`'s lines are (per ``key``,
+        default ``reason``), counting nothing: a judgement (a second stream on a key ...) whose
+        count, if any, the caller keeps."""
+        self._log_limited(key or reason, reason, "%s (%s)", message, reason)
+
     def _log_limited(self, key: str, reason: str, fmt: str, *args: object) -> None:
         # Per key and counter: a flood of garbage cannot hide the first bombs on the same key.
         admit = self.log_limit.admit(reason if key == reason else f"{key} ({reason})", reason)

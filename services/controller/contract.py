@@ -36,6 +36,16 @@ DEPTH_OVERSIZE = "depth_oversize"
 DEPTH_ERRORS = "depth_errors"
 #: Depth frames replaced by a newer one of their camera before they were looked at.
 DEPTH_DROPPED = "depth_dropped"
+# -- depth from the announced source only (issue 38) --
+#: Depth frames put by a Zenoh session other than the one that announced their camera
+#: (``CameraAnnouncement.zid``): dropped before they are decoded.
+DEPTH_FOREIGN = "depth_foreign"
+#: A gauge, per camera: 1 while its depth frames keep arriving older than the one held (at
+#: least ``depth_late_warn_count`` within ``depth_late_warn_window_s``), the sign of a second
+#: stream on its key; the total is how many cameras are so now. The metrics warn of it.
+DEPTH_SECOND_STREAM = "depth_second_stream"
+DEPTH_TRUST_PER_CAMERA = frozenset({DEPTH_FOREIGN, DEPTH_SECOND_STREAM})
+# --
 ESTOP_RELEASE_REFUSED = "estop_release_refused"
 ESTOP_ZERO_AT_ONCE = "estop_zero_at_once"
 COMMANDS_OUT = "commands_out"
@@ -61,6 +71,7 @@ PER_CAMERA = frozenset(
         DEPTH_DROPPED,
         DEPTH_IMPLAUSIBLE,
         DEPTH_OVERSIZE,
+        *DEPTH_TRUST_PER_CAMERA,
     }
 )
 COUNTERS = frozenset(
@@ -214,6 +225,16 @@ class ControllerSettings:
     estop_file: str = ""
     estop_release_max_age_s: float = 2.0
     counters_period_s: float = 1.0
+    # -- depth from the announced source only (issue 38) --
+    # Depth stamped on this host's boot (its header's boot_id and mono_ns) is read off the
+    # controller's own clocks: more than this ahead of them is forged or broken, never a clock
+    # offset, and is refused (``depth_future``); other depth keeps stack.clock_tolerance_s.
+    depth_future_tolerance_s: float = 0.02
+    # This many depth frames of one camera older than its held one, within the window: the
+    # sign of a second stream on its key (``depth_second_stream``, a WARNING).
+    depth_late_warn_count: int = 3
+    depth_late_warn_window_s: float = 2.0
+    # --
 
     # A real base: up to 5 m/s (warehouse robots run at 2..3), 10 rad/s, about 1 g of braking.
     # Commands go out at least control_rate_hz times a second: below 1 Hz a base's own
@@ -256,6 +277,10 @@ class ControllerSettings:
         "depth_memory_resolution_m": (0.01, 0.2),
         "estop_release_max_age_s": (0.1, 60),
         "counters_period_s": (0.1, 60),
+        # depth from the announced source only (issue 38)
+        "depth_future_tolerance_s": (0.001, 1),
+        "depth_late_warn_count": (1, 1000),
+        "depth_late_warn_window_s": (0.1, 60),
     }
     LENGTHS: ClassVar[Bounds] = {"target_classes": (1, 100), "obstacle_sources": (1, 2)}
 

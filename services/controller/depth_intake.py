@@ -12,11 +12,17 @@ input) never waits behind a depth image: the e-stop has its own subscription, an
 reads what the intake holds under a short lock.
 
 The intake drops, counted, before any conversion: the images of cameras not announced with
-depth (at :meth:`DepthIntake.offer`), images of more than ``depth_max_pixels``, and frames whose
+depth and those put by a Zenoh session other than the one that announced the camera
+(``depth_foreign``, both at :meth:`DepthIntake.offer`, before decoding; depth_trust.py), images
+stamped on this host's boot more than ``depth_future_tolerance_s`` ahead of its clock
+(``depth_future``), images of more than ``depth_max_pixels``, and frames whose
 intrinsics or mounting are implausible (depth_scan.py ``implausible``): with no scan, depth
-reads missing and the robot does not drive forward. Only every ``depth_scan_stride_px``-th row
-and column is converted to metres. A scan is kept only if the announcement it was made with is
-still the camera's. An error while making a scan is logged, counted and the thread goes on.
+reads missing and the robot does not drive forward. A camera whose frames keep arriving older
+than the one held (a second stream on its key) is logged as a WARNING and counted in the gauge
+``depth_second_stream``, which the metrics turn into a warning. Only every
+``depth_scan_stride_px``-th row and column is converted to metres. A scan is kept only if the
+announcement it was made with is still the camera's. An error while making a scan is logged,
+counted and the thread goes on.
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ from services.controller.depth_scan import (
     sample_frame,
     usable,
 )
+from services.controller.depth_trust import LateWatch, ahead_on_same_clock, foreign_source
 from services.controller.local_map import LocalMap, MapParams, Odometry
 
 #: Bytes of a depth payload beyond its pixels' (header, intrinsics, framing): a payload larger
@@ -98,6 +105,10 @@ class DepthIntake:
         # A gate outlives its camera's withdrawal: a replay is refused after a re-announcement.
         self._gates: dict[str, FreshnessGate] = {}
         self._told: dict[str, CameraAnnouncement] = {}  # the blind zone logged, per camera
+        # Whose depth is believed (depth_trust.py).
+        self.future_tolerance_s = s.depth_future_tolerance_s
+        self.late_watch = LateWatch(s.depth_late_warn_count, s.depth_late_warn_window_s)
+        self._unchecked: dict[str, CameraAnnouncement] = {}  # told: no zid to check, per camera
 
     def set_cameras(self, cameras: Mapping[str, CameraAnnouncement]) -> None:
         """The cameras announced now: those announced with depth are used; the scans of the
@@ -112,14 +123,33 @@ class DepthIntake:
                     camera, FreshnessGate(self.timeout_s, self.tolerance_s, BOOT_ID)
                 )
 
-    def offer(self, camera: str, payload: bytes) -> None:
-        """A depth image's payload as it arrives (on a bus thread): left for :meth:`serve`,
-        unless its camera is not announced with depth (counted ``depth_unannounced``)."""
+    def offer(self, camera: str, payload: bytes, source: str) -> None:
+        """A depth image's payload as it arrives (on a bus thread), put by ``source`` (the
+        sample's publisher, "zid/eid"): left for :meth:`serve`, unless its camera is not
+        announced with depth (counted ``depth_unannounced``) or ``source`` is not in the
+        session that announced it (``depth_foreign``)."""
         with self._lock:
-            announced = camera in self._cameras
-        if not announced:
+            announced = self._cameras.get(camera)
+            unchecked = announced is not None and not announced.zid
+            tell = unchecked and self._unchecked.get(camera) != announced
+            if tell and announced is not None:
+                self._unchecked[camera] = announced
+        if announced is None:
             self._unannounced(camera)
             return
+        if foreign_source(announced, source):
+            self._refuse(
+                contract.DEPTH_FOREIGN, camera,
+                f"put by {source!r:.80}, not by the session that announced the camera "
+                f"({announced.zid}): a second stream on its key",
+            )  # fmt: skip
+            return
+        if tell:
+            self.tally.log.warning(
+                "depth camera %s is announced by %s without its session id (an older source): "
+                "its depth is taken from any publisher on its key",
+                camera, announced.source or "?",
+            )  # fmt: skip
         with self._cond:
             if camera in self._waiting:
                 self.tally.counters.add(contract.DEPTH_DROPPED)
@@ -174,12 +204,22 @@ class DepthIntake:
         if msg.width * msg.height > self.max_pixels:
             self._refuse(contract.DEPTH_OVERSIZE, camera, f"a {msg.width}x{msg.height} image")
             return
-        verdict, age = gate.check(msg.header, self.clock.now())
+        now = self.clock.now()
+        ahead = ahead_on_same_clock(msg.header, now, BOOT_ID, self.future_tolerance_s)
+        if ahead:  # before the gate, which would remember its stamp as the source's newest
+            self._refuse(
+                contract.input_counter(contract.DEPTH, Verdict.FUTURE), camera,
+                f"stamped on this host {ahead:.3f} s ahead of its clock (at most "
+                f"{self.future_tolerance_s:g} s, controller.depth_future_tolerance_s)",
+            )  # fmt: skip
+            return
+        verdict, age = gate.check(msg.header, now)
         if verdict is not Verdict.FRESH:
             counter = contract.input_counter(contract.DEPTH, verdict)
             tally.reject(counter, f"{verdict} depth from {camera} ({age:.2f} s) ignored")
             tally.counters.add(per_camera(counter, camera))
             return
+        self._watch_order(camera, msg.header.stamp_ns, key)
         mount = Mounting.of(announced)
         if not usable(mount):
             tally.reject(
@@ -239,6 +279,39 @@ class DepthIntake:
         else:
             tally.reject(counter, f"depth from {camera} older than the one held ignored")
         tally.counters.add(per_camera(counter, camera))
+
+    def _watch_order(self, camera: str, stamp_ns: int, key: str) -> None:
+        """A fresh frame of ``camera`` stamped ``stamp_ns``: is it older than the one held, and
+        have so many been lately that a second stream runs on its key? The gauge
+        ``depth_second_stream`` follows; a WARNING (rate-limited) says so while it lasts."""
+        tally = self.tally
+        with self._lock:
+            held = self._scans.get(camera)
+            late = held is not None and stamp_ns < held[0].header.stamp_ns
+            was = camera in self.late_watch.suspect
+            n, suspect = self.late_watch.saw(camera, late, self.clock.mono_s())
+        if suspect != was:
+            self._second_stream_gauge(camera, 1 if suspect else -1)
+        if late and suspect:
+            tally.warn(
+                contract.DEPTH_SECOND_STREAM,
+                f"depth camera {camera}: {n} frames within {self.late_watch.window_s:g} s "
+                f"arrived older than the one held: a second stream on {key} stamped ahead of "
+                "its source's? Its real frames are being ignored as late (depth_late)",
+                key=contract.DEPTH_SECOND_STREAM + camera,
+            )
+
+    def _second_stream_gauge(self, camera: str, step: int) -> None:
+        self.tally.counters.add(contract.DEPTH_SECOND_STREAM, step)
+        self.tally.counters.add(per_camera(contract.DEPTH_SECOND_STREAM, camera), step)
+
+    def keep_watching(self, cameras: Mapping[str, CameraAnnouncement]) -> None:
+        """The cameras announced now: the second-stream suspicion of the others is dropped
+        (their gauges back to 0)."""
+        with self._lock:
+            gone = self.late_watch.keep(set(cameras))
+        for camera in gone:
+            self._second_stream_gauge(camera, -1)
 
     def _refuse(self, counter: str, camera: str, why: str) -> None:
         """A depth frame of ``camera`` dropped for ``why``: counted (per camera too), logged

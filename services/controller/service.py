@@ -10,7 +10,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Generic, Protocol, TypeVar
 
 from common.announce import Announced, announced_cameras
-from common.bus import Declared
+from common.bus import Declared, Sample
 from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock, Stamp, mono_s
 from common.contracts import ControllerState, DetectorInfo
 from common.counters import per_camera
@@ -304,7 +304,8 @@ class ControlLoop:
             from services.controller.depth_intake import DepthIntake
 
             self.depth = DepthIntake(s, node, config.stack.clock_tolerance_s, node.clock)
-            self._subs.append(node.subscribe_keyed(keys.all_depths(), self._on_depth))
+            # The bus's own subscribe: the intake needs each sample's publisher (Sample.source).
+            self._subs.append(node.bus.subscribe(keys.all_depths(), self._on_depth))
         self._cameras_lock = threading.Lock()  # one change of the camera set at a time
         self.announced: Announced[CameraAnnouncement] | None = None
         self.announced = announced_cameras(
@@ -337,12 +338,12 @@ class ControlLoop:
             return
         self.handlers.on_detections(camera, payload)
 
-    def _on_depth(self, key: str, payload: bytes) -> None:
-        camera = camera_in_key(key)
+    def _on_depth(self, sample: Sample) -> None:
+        camera = camera_in_key(sample.key)
         if camera is None or self.depth is None:  # unreachable: subscribed only with depth
-            self.node.bad_input(key, DecodeError("not a camera's depth key"))
+            self.node.bad_input(sample.key, DecodeError("not a camera's depth key"))
             return
-        self.depth.offer(camera, payload)
+        self.depth.offer(camera, sample.payload, sample.source)
 
     def _on_cameras(self) -> None:
         """The set of announced cameras changed: the handlers take the new one at once."""
@@ -354,6 +355,7 @@ class ControlLoop:
             self.handlers.set_cameras(dict(sorted(now.items())))
             if self.depth is not None:
                 self.depth.set_cameras(now)
+                self.depth.keep_watching(now)
         for camera in sorted(now.keys() - before):
             a = now[camera]
             self.node.log.info(

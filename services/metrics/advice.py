@@ -9,6 +9,11 @@ camera as capture->detections p95 plus the time between detections (1 / its dete
 A camera its worker serves at the attention floor by design (services/detector/attention.py:
 the worker gives other cameras priority and not this one, which sees no target) is not judged:
 the controller ignores its stale detections, and it gains priority once it sees a target.
+
+``depth_second_stream``: the controller's gauge ``depth_second_stream.<camera>`` is up: that
+camera's depth frames keep arriving older than the one it holds, the sign of a second stream on
+its depth key stamped ahead of the real one (issue 38: a forged clear stream won that way over
+the simulator's, which showed a box). Named per camera, with the controller's counts.
 """
 
 from __future__ import annotations
@@ -16,12 +21,14 @@ from __future__ import annotations
 import math
 
 from common.contracts import CameraMetrics, MetricsAnswer
+from services.controller import contract as controller
 from services.detector.contract import ATTENTION_PRIORITY
 from stack.config import Config
 
 #: Detections of a camera in the window before it is judged at all.
 MIN_SAMPLES = 5
 DETECTIONS_LATE = "detections_late"
+DEPTH_SECOND_STREAM = controller.DEPTH_SECOND_STREAM
 
 
 def advise(config: Config, answer: MetricsAnswer) -> dict[str, str]:
@@ -33,7 +40,35 @@ def advise(config: Config, answer: MetricsAnswer) -> dict[str, str]:
     late = late_detections(config, {c: m for c, m in cameras.items() if c not in floor}, count)
     if late:
         out[DETECTIONS_LATE] = late
+    second = second_depth_stream(answer.get("counters", {}))
+    if second:
+        out[DEPTH_SECOND_STREAM] = second
     return out
+
+
+def second_depth_stream(totals: dict[str, int]) -> str:
+    """The ``depth_second_stream`` line, or "" when no camera is suspected: the cameras whose
+    controller gauge ``depth_second_stream.<camera>`` is up, with their late and foreign
+    depth counts."""
+    prefix = f"{controller.SERVICE}.{controller.DEPTH_SECOND_STREAM}."
+    cameras = sorted(k[len(prefix) :] for k, v in totals.items() if k.startswith(prefix) and v > 0)
+    if not cameras:
+        return ""
+    late = controller.input_counter(controller.DEPTH, controller.LATE)
+
+    def count(name: str, camera: str) -> int:
+        return totals.get(f"{controller.SERVICE}.{name}.{camera}", 0)
+
+    figures = "; ".join(
+        f"{c}: {count(late, c)} late, {count(controller.DEPTH_FOREIGN, c)} foreign" for c in cameras
+    )
+    return (
+        f"a second depth stream on the key of camera {', '.join(cameras)}: its depth frames "
+        "keep arriving older than the one the controller holds, so its real frames are "
+        f"ignored as late ({figures}). Something else publishes on it stamped ahead: find it "
+        '(zstack query), and run the secure profile (docs/security.md, "Depth from the '
+        'announced source only")'
+    )
 
 
 def at_floor(totals: dict[str, int], cameras: dict[str, CameraMetrics]) -> frozenset[str]:

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from common.announce import Announced, Announcer, from_chunk, to_chunk
+from common.announce import MAX_CHUNK_CHARS, Announced, Announcer, from_chunk, to_chunk
+from common.camera_announce import CameraAnnouncements
 from common.errors import DecodeError
 from common.keys import Keys
 from common.memory_bus import MemoryHub
@@ -131,3 +132,30 @@ def test_shares_follow_capacity() -> None:
 def test_a_capacity_must_be_positive() -> None:
     with pytest.raises(ValueError):
         assign({"a": 0.0}, {"c": 1.0}, 1.25)
+
+
+def test_the_announcers_session_id_is_bounded_and_the_longest_announcement_still_fits() -> None:
+    zid = "0123456789abcdef0123456789abcdef"  # a Zenoh id: 16 bytes in hex
+    longest = _camera(
+        "c" * 64, frame_id="f" * 128, source="s" * 128, zid="z" * 64, depth=True,
+        mount_yaw_deg=-179.123456789, hfov_deg=87.123456789, rate_hz=999.123456789,
+        mount_height_m=9.123456789, mount_x_m=-9.123456789, mount_y_m=9.123456789,
+    )  # fmt: skip
+    assert len(to_chunk(longest)) <= MAX_CHUNK_CHARS
+    assert from_chunk(CameraAnnouncement.decode, to_chunk(_camera(zid=zid))).zid == zid
+    for bad in ("z" * 65, "a/b", "a b"):
+        with pytest.raises(ValueError, match="zid"):
+            _camera(zid=bad)
+
+
+def test_a_camera_source_names_its_session_in_its_announcements() -> None:
+    hub = MemoryHub()
+    bus = hub.join("sim")
+    with CameraAnnouncements(bus, KEYS, "sim") as announcements:
+        said = announcements.announce(
+            "front", rate_hz=5.0, mount_yaw_deg=0.0, hfov_deg=60.0, frame_id="cam", depth=True
+        )
+        assert said.zid == bus.zid
+        announcements.saw("front", 640, 480)
+        current = announcements.current("front")
+        assert current is not None and current.zid == bus.zid

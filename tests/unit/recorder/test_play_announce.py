@@ -58,18 +58,19 @@ def test_each_played_camera_is_announced_as_recorded_until_the_play_ends(tmp_pat
     assert set(recorded) == {FRONT, "rear"}
     hub = MemoryHub()
     heard = heard_cameras(hub, KEYS)
-    with CameraAnnouncements(hub.join("play"), KEYS, ANNOUNCED_SOURCE) as announcements:
+    bus = hub.join("play")  # the player's session, named in its announcements
+    with CameraAnnouncements(bus, KEYS, ANNOUNCED_SOURCE) as announcements:
         announce_played(CONFIG, announcements, recorded, rate=2.0)
         assert heard.current() == {
             # 5 frames over 0.4 s: 10 Hz, played twice as fast
             FRONT: CameraAnnouncement(
                 camera=FRONT, width=64, height=48, rate_hz=20.0, mount_yaw_deg=0.0,
-                hfov_deg=60.0, frame_id="front_optical", source="play",
+                hfov_deg=60.0, frame_id="front_optical", source="play", zid=bus.zid,
             ),
             # one frame: no recorded rate, so its configured one
             "rear": CameraAnnouncement(
                 camera="rear", width=32, height=24, rate_hz=6.0, mount_yaw_deg=180.0,
-                hfov_deg=90.0, frame_id="rear_optical", source="play",
+                hfov_deg=90.0, frame_id="rear_optical", source="play", zid=bus.zid,
             ),
         }  # fmt: skip
         assert len(hub.tokens(KEYS.all_camera_announcements())) == 2

@@ -64,20 +64,26 @@ def test_each_bridged_camera_is_announced_then_sized_by_its_first_image() -> Non
     node = Node("ros2", CONFIG, bus=hub.join("ros2"))
     with CameraAnnouncements(node.bus, node.keys, ANNOUNCED_SOURCE) as announcements:
         told = announce_bridged(CONFIG, announcements)
-        assert heard.current() == {FRONT: _announced(FRONT), "rear": _announced("rear")}
+        zid = node.bus.zid  # the bridge's session, named in its announcements
+        assert heard.current() == {
+            FRONT: _announced(FRONT, zid=zid),
+            "rear": _announced("rear", zid=zid),
+        }
         put: list[bytes] = []
         rear_in = RosInbound(CONFIG, node, IMAGE, "/rear/camera/rgb/image_raw", put.append,
                              told["rear"])  # fmt: skip
         rear_in.on_payload("k", memoryview(b"\x00\x01garbage"))  # counted, dropped, unsized
-        assert heard.get("rear") == _announced("rear")
+        assert heard.get("rear") == _announced("rear", zid=zid)
         image = ros_image(
             RosDistro.JAZZY, header=ros_header(RosDistro.JAZZY, STAMP_NS, "rear_optical"),
             height=4, width=5, step=15, data=np.zeros(60, np.uint8),
         )  # fmt: skip
         rear_in.on_payload("k", memoryview(image))
         assert len(put) == 1
-        assert heard.get("rear") == _announced("rear", width=5, height=4, frame_id="rear_optical")
-        assert heard.get(FRONT) == _announced(FRONT)  # not its image
+        assert heard.get("rear") == _announced(
+            "rear", width=5, height=4, frame_id="rear_optical", zid=zid
+        )
+        assert heard.get(FRONT) == _announced(FRONT, zid=zid)  # not its image
         assert len(hub.tokens(KEYS.camera_announcements_of("rear"))) == 1
     assert heard.current() == {}  # the bridge stopped: every announcement goes
     node.close()
@@ -96,9 +102,10 @@ def test_with_depth_in_each_bridged_camera_is_announced_as_a_depth_camera() -> N
     hub = MemoryHub()
     heard = heard_cameras(hub, KEYS)
     config = dataclasses.replace(CONFIG, ros2=dataclasses.replace(CONFIG.ros2, depth_in=True))
-    with CameraAnnouncements(hub.join("ros2"), KEYS, ANNOUNCED_SOURCE) as announcements:
+    bus = hub.join("ros2")
+    with CameraAnnouncements(bus, KEYS, ANNOUNCED_SOURCE) as announcements:
         announce_bridged(config, announcements)
         assert heard.current() == {
-            FRONT: _announced(FRONT, depth=True),
-            "rear": _announced("rear", depth=True),
+            FRONT: _announced(FRONT, depth=True, zid=bus.zid),
+            "rear": _announced("rear", depth=True, zid=bus.zid),
         }

@@ -31,20 +31,19 @@ def test_each_simulated_camera_is_announced_while_the_simulator_runs() -> None:
     frames: list[str] = []
     hub.join("watcher").subscribe(KEYS.all_frames(), lambda s: frames.append(s.key))
     stop = threading.Event()
-    sim = threading.Thread(
-        target=run, args=(CONFIG, stop), kwargs={"bus": hub.join("sim")}, daemon=True
-    )
+    bus = hub.join("sim")  # the simulator's session: its announcements name it (zid)
+    sim = threading.Thread(target=run, args=(CONFIG, stop), kwargs={"bus": bus}, daemon=True)
     sim.start()
     wait_for(lambda: len(heard.current()) == 2, 20, "both cameras' announcements")
     front = CONFIG.stack.camera
     assert heard.current() == {
         front: CameraAnnouncement(
             camera=front, width=64, height=48, rate_hz=4.0, mount_yaw_deg=0.0, hfov_deg=80.0,
-            frame_id="front_cam", source="sim",
+            frame_id="front_cam", source="sim", zid=bus.zid,
         ),
         "rear": CameraAnnouncement(
             camera="rear", width=32, height=24, rate_hz=3.0, mount_yaw_deg=180.0, hfov_deg=60.0,
-            frame_id="rear", source="sim",
+            frame_id="rear", source="sim", zid=bus.zid,
         ),
     }  # fmt: skip
     # Announced as their frames come, on the keys announced.
