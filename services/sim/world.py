@@ -111,10 +111,13 @@ class Drop:
     depth_m: float
 
     def distance(self, x: float, y: float) -> float:
-        """From the point (x, y) to the rectangle: 0 inside it."""
-        dx = max(self.x0 - x, 0.0, x - self.x1)
-        dy = max(self.y0 - y, 0.0, y - self.y1)
-        return math.hypot(dx, dy)
+        """From the point (x, y) to the rectangle's edge, signed: negative inside it (how far
+        in from the nearest edge), so a figure over a run says how far over the edge it went."""
+        dx = max(self.x0 - x, x - self.x1)
+        dy = max(self.y0 - y, y - self.y1)
+        if dx <= 0 and dy <= 0:
+            return max(dx, dy)
+        return math.hypot(max(dx, 0.0), max(dy, 0.0))
 
 
 @dataclass(frozen=True, slots=True)
