@@ -83,6 +83,14 @@ def background(spec: CameraSpec) -> Image:
     return img
 
 
+@cache
+def _shaded_background(spec: CameraSpec) -> Image:
+    """The background as the lower floor beyond a drop-off is drawn: :data:`DROP_SHADE` of it."""
+    out = (background(spec) * DROP_SHADE).astype(np.uint8)
+    out.setflags(write=False)
+    return out
+
+
 @dataclass(frozen=True, slots=True)
 class Placed:
     """One thing as a camera draws it: ``target`` its index in ``world.targets`` (None: an
@@ -156,8 +164,8 @@ def render(world: World, spec: CameraSpec) -> Image:
     canvas = background(spec).copy()
     scale = drop_scale(world, spec)
     if scale is not None:
-        lower = scale > 1.0
-        canvas[lower] = (canvas[lower] * DROP_SHADE).astype(np.uint8)
+        # cv2's masked copy: numpy's (copyto with where=, boolean indexing) took ~3 ms here.
+        cv2.copyTo(_shaded_background(spec), (scale > 1.0).view(np.uint8), canvas)
     for p in layout(world, spec):
         if p.rect is None:
             continue
