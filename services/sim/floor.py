@@ -18,21 +18,37 @@ reads farther than a flat floor would, which this gives.
 from __future__ import annotations
 
 import math
+from collections.abc import Hashable
 from functools import cache
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
-if TYPE_CHECKING:  # render.py draws the floor with this module: no import back at run time
-    from services.sim.render import CameraSpec
-    from services.sim.world import World
+from services.sim.world import World
 
 Floats = npt.NDArray[np.float32]
 
 
+class Pinhole(Hashable, Protocol):
+    """What this module needs of a camera: services/sim/render.py's ``CameraSpec`` (named by
+    shape, not imported: render.py draws the floor with this module). Hashable: rays are
+    cached per camera."""
+
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def height_m(self) -> float: ...
+    @property
+    def mount_yaw_deg(self) -> float: ...
+    @property
+    def focal_px(self) -> float: ...
+
+
 @cache
-def _rays(spec: CameraSpec) -> tuple[int, Floats, Floats]:
+def _rays(spec: Pinhole) -> tuple[int, Floats, Floats]:
     """The first row below the horizon, each such row's floor z (rows,), and each column's
     lateral offset per metre of z, ``(cx - u - 0.5) / f`` (width,). Read-only."""
     f, cx, cy = spec.focal_px, spec.width / 2, spec.height / 2
@@ -45,7 +61,7 @@ def _rays(spec: CameraSpec) -> tuple[int, Floats, Floats]:
     return first, z, k
 
 
-def drop_scale(world: World, spec: CameraSpec) -> Floats | None:
+def drop_scale(world: World, spec: Pinhole) -> Floats | None:
     """Per pixel (``spec.height``, ``spec.width``), what a floor reading is multiplied by:
     ``(h + depth_m) / h`` where the pixel looks into a drop (the deepest, where drops
     overlap), 1 elsewhere (the upper floor, and every pixel above the horizon). None when no
