@@ -216,6 +216,7 @@ class ScenarioResult(TypedDict, total=False):
     time_to_reach_s: float | None
     final_distance_m: float | None
     min_clearance_m: float | None
+    min_edge_clearance_m: float | None
     mean_bearing_error_deg: float | None
     stale_commands: int
     commands: int

@@ -59,12 +59,15 @@ class SimSettings:
     carries every frame, scan and command. Commands from more
     than one publisher within ``command_sources_window_s`` are counted and warned about.
 
-    ``laser``: false plays a robot with no laser (no scan at all). ``depth``: every camera is
-    an RGB-D camera: one DepthFrame per colour frame, with the colour frame's header, on
-    ``keys.depth(camera)`` (services/sim/depth.py), with a stereo camera's faults: the
-    ``depth_*`` settings are the fields of ``DepthNoise`` there (``depth_range_min_m`` below
-    ``depth_range_max_m``); as a ROS 2 robot, a 16UC1 ``sensor_msgs/Image`` and its
-    ``CameraInfo`` on ``ros2.depth_topic`` and ``ros2.depth_info_topic`` instead.
+    ``laser``: false plays a robot with no laser (no scan at all). ``laser_height_m``: the
+    height of its scan plane above the floor (0.2 m: a 2D lidar on a small base); it sees only
+    obstacles taller than that, never a glass one and never a drop-off (services/sim/world.py).
+    ``depth``: every camera is an RGB-D camera: one DepthFrame per colour frame, with the
+    colour frame's header, on ``keys.depth(camera)`` (services/sim/depth.py), with a stereo
+    camera's faults: the ``depth_*`` settings are the fields of ``DepthNoise`` there
+    (``depth_range_min_m`` below ``depth_range_max_m``); as a ROS 2 robot, a 16UC1
+    ``sensor_msgs/Image`` and its ``CameraInfo`` on ``ros2.depth_topic`` and
+    ``ros2.depth_info_topic`` instead.
     """
 
     scenario: str = "demo"
@@ -80,6 +83,7 @@ class SimSettings:
     laser_rays: int = 541
     laser_range_max_m: float = 12.0
     laser_noise_m: float = 0.01
+    laser_height_m: float = 0.2
     seed: int = 0
     ros2_robot: bool = False
     command_sources_window_s: float = 1.0
@@ -107,6 +111,7 @@ class SimSettings:
         "laser_rays": (2, 10000),  # real 2D lidars: 360..3200 rays a scan
         "laser_range_max_m": (0.1, 100),
         "laser_noise_m": (0, 1),
+        "laser_height_m": (0.01, 2),  # on the base's deck .. on a mast
         "seed": (0, 2**32 - 1),
         "command_sources_window_s": (0.01, 60),
         "depth_range_min_m": (0, 10),

@@ -8,11 +8,18 @@ nothing.
 - The floor, below the horizon: row ``v`` (its centre at ``v + 0.5``) sees the floor at
   ``z = f * camera_height / (v + 0.5 - cy)``.
 - Above the horizon the wall is at infinity: no reading.
+- Beyond a drop-off's edge the floor is lower: a floor pixel whose ray meets the upper floor
+  inside a :class:`~services.sim.world.Drop` reads ``z * (h + depth_m) / h``, where the same
+  ray meets the lower floor (services/sim/floor.py, which ignores the drop's walls).
 - Every drawn thing reads its front face, ``z - radius``: a target (its whole drawn
   rectangle: the cut-out is a rectangle of photo) and an obstacle (a round thing drawn as a
-  box) alike. That is the nearest point of the circle the laser sees (services/sim/laser.py),
-  and what a real depth camera sees of a person: their front, not their middle. The colour
-  image still draws a target at its centre's z (its size in the image).
+  box) alike, unless its material reads nothing: a dark obstacle (no texture, no pattern
+  returned) and a glass one read NaN over their whole face, whatever the noise settings
+  (what is behind glass is not read either: a real stereo camera's reading there is
+  unreliable, and a hole is the honest worst case). A face is the nearest point of the circle
+  the laser sees (services/sim/laser.py), and what a real depth camera sees of a person: their
+  front, not their middle. The colour image still draws a target at its centre's z (its size
+  in the image).
 - Things are drawn in the colour image's order (farthest centre first, nearer over farther),
   so the depth covers exactly the pixels the colour image does, whatever is in front.
 
@@ -34,8 +41,9 @@ import numpy.typing as npt
 
 from common.images import Image
 from common.messages import DepthFrame, Header
+from services.sim.floor import drop_scale
 from services.sim.render import CameraSpec, Placed, layout
-from services.sim.world import World
+from services.sim.world import Material, World
 
 Depth = npt.NDArray[np.float32]  # (h, w) metres, NaN = no reading
 
@@ -55,16 +63,22 @@ def floor_depth(spec: CameraSpec) -> Depth:
     return out
 
 
+#: Materials whose face a depth camera reads nothing on (world.Material says why).
+UNREAD = frozenset({Material.DARK, Material.GLASS})
+
+
 def placed_depth(p: Placed) -> float:
-    """The z one drawn thing reads: its front face's, ``z - radius``, target or obstacle."""
-    return p.z - p.radius
+    """The z one drawn thing reads: its front face's, ``z - radius``, target or obstacle;
+    NaN for a material a depth camera reads nothing on (:data:`UNREAD`)."""
+    return math.nan if p.material in UNREAD else p.z - p.radius
 
 
 def render_depth(world: World, spec: CameraSpec) -> Depth:
     """The true depth image (``spec.height``, ``spec.width``) float32 metres of ``world`` from
     the camera ``spec``, aligned pixel for pixel with ``render(world, spec)``; NaN: no reading
-    (the wall at infinity)."""
-    out = floor_depth(spec).copy()
+    (the wall at infinity, a dark or glass face)."""
+    scale = drop_scale(world, spec)
+    out = floor_depth(spec).copy() if scale is None else floor_depth(spec) * scale
     for p in layout(world, spec):
         if p.rect is not None:
             x0, y0, x1, y1 = p.rect

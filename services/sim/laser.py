@@ -1,4 +1,9 @@
-"""A planar laser scanner: rays cast against round obstacles, vectorised. Pure."""
+"""A planar laser scanner: rays cast against round obstacles, vectorised. Pure.
+
+The scan is one plane, ``height_m`` above the floor: the caller passes the circles that cut it
+(services/sim/world.py ``World.laser_circles``: nothing lower, no glass). A drop-off in the
+floor is below the plane, and no ray ever sees one.
+"""
 
 from __future__ import annotations
 
@@ -10,13 +15,15 @@ import numpy.typing as npt
 
 @dataclass(frozen=True, slots=True)
 class LaserSpec:
-    """Field of view and resolution; ranges beyond ``range_max`` read as +inf."""
+    """Field of view and resolution; ranges beyond ``range_max`` read as +inf. ``height_m``:
+    the scan plane's height above the floor (0.2 m: a 2D lidar on a small base)."""
 
     fov_deg: float = 270.0
     rays: int = 541
     range_min: float = 0.05
     range_max: float = 12.0
     noise_std_m: float = 0.01
+    height_m: float = 0.2
 
     @property
     def angle_min(self) -> float:

@@ -5,6 +5,14 @@ scenario is run with the controller in ``follow`` mode on ``person``, keeping it
 the laser in the target's bearing unless the scenario says otherwise; ``followed`` names the
 target the robot should end up following (None: it must stay still).
 
+The hazard scenarios (:data:`HAZARDS`) put one hazard about 3 m straight ahead, beyond the
+depth camera's blind zone (a level camera 0.6 m up with a 60 deg field of view at 640x480 sees
+the floor from 1.39 m on), and alice beyond it, so a follower or a tracker wants to drive
+through it: each passes only by stopping short (tools/scenarios/score.py, the hazard rule).
+Each is a hazard that one of a small robot's sensors misses: a box lower than the laser's
+plane, a kerb or a step (no planar laser sees a drop), a black box or pole (no depth reading on
+its face), a glass pane (the laser passes through it, the depth camera reads nothing on it).
+
 A scenario sees the world through the first camera (``stack.camera``, looking ahead) unless it
 names further ``cameras``: each a ``[cameras.<name>]`` table's changes over [camera], which the
 scenario runner (tools/scenarios/runner.py) puts in the config it writes; the simulator renders
@@ -18,7 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from services.sim.world import Obstacle, Robot, Target, World
+from services.sim.world import Drop, Material, Obstacle, Robot, Target, World
 
 
 def person(id: str, *path: tuple[float, float, float], mirror: bool = False) -> Target:
@@ -106,6 +114,76 @@ def _appears() -> World:
     return World(Robot(), targets=[person("alice", (0, 4.0, 0.0)), bob])
 
 
+#: Where a hazard scenario puts its hazard, straight ahead (m), and alice beyond it.
+HAZARD_X_M = 3.0
+HAZARD_PERSON = (0.0, 6.5, 0.0)
+#: A drop-off from the hazard's x on, wide and long enough that no way round or past it is
+#: near: (y0, x1, y1) in metres.
+DROP_Y0_M, DROP_X1_M, DROP_Y1_M = -5.0, 20.0, 5.0
+KERB_M = 0.15
+STEP_M = 0.5
+#: A hazard run: a robot that creeps at 0.1 m/s for about 1.2 m and then drives at 0.3-0.5 m/s
+#: reaches the hazard in about 20 s; then it must stand still before it. The run may end once
+#: every pass condition has held SETTLE_S from HAZARD_SETTLE_FROM_S on.
+HAZARD_DURATION_S = 40.0
+HAZARD_SETTLE_FROM_S = 28.0
+
+
+def _hazard(
+    obstacles: tuple[Obstacle, ...] = (), drops: tuple[Drop, ...] = ()
+) -> Callable[[], World]:
+    return lambda: World(
+        Robot(),
+        obstacles=list(obstacles),
+        drops=list(drops),
+        targets=[person("alice", HAZARD_PERSON)],
+    )
+
+
+def _drop(depth_m: float) -> Drop:
+    return Drop(HAZARD_X_M, DROP_Y0_M, DROP_X1_M, DROP_Y1_M, depth_m)
+
+
+def hazard(name: str, description: str, build: Callable[[], World]) -> Scenario:
+    """A hazard scenario: alice stands beyond it, nothing need be reached, and the distance
+    is kept by box height, so the stop before the hazard is the obstacle rule alone."""
+    return Scenario(
+        name, description, build, HAZARD_DURATION_S, must_reach=False,
+        settle_s=SETTLE_S, settle_from_s=HAZARD_SETTLE_FROM_S,
+        controller={"distance_source": "box"},
+    )  # fmt: skip
+
+
+HAZARDS: tuple[Scenario, ...] = (
+    hazard("low_box",
+           "a solid box 0.15 m tall (r 0.3) 3 m ahead, below the laser's plane (0.2 m): only "
+           "the depth camera sees it; stop short of it",
+           _hazard(obstacles=(Obstacle(HAZARD_X_M, 0.0, 0.3, height_m=0.15),))),
+    hazard("kerb",
+           "the floor drops 0.15 m from 3 m ahead on (a kerb): no laser sees it, the depth "
+           "camera sees the floor beyond read farther; stop before the edge",
+           _hazard(drops=(_drop(KERB_M),))),
+    hazard("step",
+           "the floor drops 0.5 m from 3 m ahead on (a step down, a stairwell): stop before "
+           "the edge",
+           _hazard(drops=(_drop(STEP_M),))),
+    hazard("black_box",
+           "a black box 0.5 m tall (r 0.3) 3 m ahead: the laser sees it, the depth camera "
+           "reads nothing on its face; stop short of it",
+           _hazard(obstacles=(
+               Obstacle(HAZARD_X_M, 0.0, 0.3, height_m=0.5, material=Material.DARK),))),
+    hazard("dark_pole",
+           "a black pole (r 0.03, 1.2 m tall) at (2.5, 0.22): inside the robot's 0.6 m wide "
+           "path, off the camera's centre line, no depth reading on it; stop short of it",
+           _hazard(obstacles=(Obstacle(2.5, 0.22, 0.03, height_m=1.2, material=Material.DARK),))),
+    hazard("glass",
+           "a glass pane (r 0.3, 1.0 m tall) 3 m ahead: the laser passes through it, the "
+           "depth camera reads nothing on it, the colour image shows alice behind it; stop "
+           "short of it",
+           _hazard(obstacles=(
+               Obstacle(HAZARD_X_M, 0.0, 0.3, height_m=1.0, material=Material.GLASS),))),
+)  # fmt: skip
+
 SCENARIOS: dict[str, Scenario] = {
     s.name: s
     for s in (
@@ -155,5 +233,6 @@ SCENARIOS: dict[str, Scenario] = {
                  "detections)",
                  _appears, 32.0, cameras={"left": LEFT_CAMERA, "rear": REAR_CAMERA},
                  settle_s=SETTLE_S, settle_from_s=APPEARS_AT_S[-1] + 3.0),
+        *HAZARDS,
     )
 }  # fmt: skip

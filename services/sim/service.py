@@ -236,7 +236,9 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
     cameras = sim_cameras(config)
     if s.ros2_robot:
         cameras = cameras[:1]  # one image topic (the supervisor warns of the others)
-    laser = LaserSpec(s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m)
+    laser = LaserSpec(
+        s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m, s.laser_height_m
+    )
     rng = np.random.default_rng(s.seed)
     depth = depth_noise(s) if s.depth else None
     # Its own stream, so that the laser's noise is the same with depth or without.
@@ -384,7 +386,7 @@ def _publish_due(
             angle_increment=laser.angle_increment,
             range_min=laser.range_min,
             range_max=laser.range_max,
-            ranges=cast(pose, world.circles(), laser, rng),
+            ranges=cast(pose, world.laser_circles(laser.height_m), laser, rng),
         )
         out.scan(scan)
     if clocks["truth"].due(t):

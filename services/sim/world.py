@@ -1,8 +1,12 @@
-"""The simulated world: a unicycle robot, static obstacles and scripted targets. Pure.
+"""The simulated world: a unicycle robot, static obstacles, drop-offs and scripted targets. Pure.
 
 World frame: x forward at the start, y to the left, theta counter-clockwise (REP 103). The
 robot integrates the latest Twist under its own speed and acceleration limits, like a real
 base, and stops by itself when commands stop arriving (its watchdog).
+
+The hazards are as hard as a real floor's for a robot that sees by depth: an obstacle has a
+height and a material (:class:`Material`: what a laser and a depth camera make of it), and the
+floor may drop away (:class:`Drop`: a kerb, a step), which no planar laser sees.
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 import numpy.typing as npt
@@ -61,13 +66,58 @@ class Robot:
         )
 
 
+class Material(StrEnum):
+    """What an obstacle's surface does to the robot's sensors.
+
+    The two sensors a small robot carries fail on different things, and a world where every
+    obstacle is seen by both proves nothing about either alone.
+    """
+
+    SOLID = "solid"  # the depth camera reads its face; the laser sees it (if tall enough)
+    # Black (a bin, a rubber mat on a post): a stereo or structured-light camera finds no
+    # texture and no reflected pattern on it, so its face reads nothing; a lidar still sees it.
+    DARK = "dark"
+    # A glass pane or door: a lidar's beam passes through, a depth camera reads nothing on it
+    # (or what is behind); the colour image shows what is behind it.
+    GLASS = "glass"
+
+
 @dataclass(frozen=True, slots=True)
 class Obstacle:
-    """A round obstacle (a pillar, a bin): centre and radius in metres."""
+    """A round obstacle (a pillar, a bin, a pane): centre and footprint radius in metres, its
+    height above the floor (metres) and its :class:`Material`."""
 
     x: float
     y: float
     radius: float
+    height_m: float = 0.5
+    material: Material = Material.SOLID
+
+    def __post_init__(self) -> None:
+        # "glass" as well as Material.GLASS; a name that is no material fails here, at build.
+        object.__setattr__(self, "material", Material(self.material))
+
+
+@dataclass(frozen=True, slots=True)
+class Drop:
+    """A drop-off: an axis-aligned rectangle of the world frame (x0 <= x1, y0 <= y1, metres)
+    where the floor is ``depth_m`` lower (a kerb 0.15 m, a step or stairwell 0.5 m). A planar
+    laser never sees one; only a camera looking down at the floor can."""
+
+    x0: float
+    y0: float
+    x1: float
+    y1: float
+    depth_m: float
+
+    def distance(self, x: float, y: float) -> float:
+        """From the point (x, y) to the rectangle's edge, signed: negative inside it (how far
+        in from the nearest edge), so a figure over a run says how far over the edge it went."""
+        dx = max(self.x0 - x, x - self.x1)
+        dy = max(self.y0 - y, y - self.y1)
+        if dx <= 0 and dy <= 0:
+            return max(dx, dy)
+        return math.hypot(max(dx, 0.0), max(dy, 0.0))
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,6 +157,7 @@ class World:
 
     robot: Robot
     obstacles: list[Obstacle] = field(default_factory=list)
+    drops: list[Drop] = field(default_factory=list)
     targets: list[Target] = field(default_factory=list)
     limits: BaseLimits = field(default_factory=BaseLimits)
     t: float = 0.0
@@ -138,8 +189,21 @@ class World:
         return np.array(rows, np.float64).reshape(-1, 3)
 
     def circles(self) -> npt.NDArray[np.float64]:
-        """Every solid thing as (x, y, r) rows: obstacles and targets (the laser sees both)."""
+        """Every solid thing as (x, y, r) rows: obstacles and targets, whatever their height
+        and material (what a laser at floor level that saw through nothing would see)."""
         rows = [(o.x, o.y, o.radius) for o in self.obstacles]
+        rows += [(*tg.position(self.t), tg.radius) for tg in self.targets]
+        return np.array(rows, np.float64).reshape(-1, 3)
+
+    def laser_circles(self, laser_height_m: float) -> npt.NDArray[np.float64]:
+        """What a planar laser ``laser_height_m`` above the floor sees, as (x, y, r) rows: the
+        obstacles taller than its plane and not glass (its beam passes through), and the
+        targets (people and things standing on the floor, taken as tall enough)."""
+        rows = [
+            (o.x, o.y, o.radius)
+            for o in self.obstacles
+            if o.height_m > laser_height_m and o.material != Material.GLASS
+        ]
         rows += [(*tg.position(self.t), tg.radius) for tg in self.targets]
         return np.array(rows, np.float64).reshape(-1, 3)
 

@@ -31,6 +31,7 @@ def _print_text(r: ScenarioResult) -> None:
         "time_to_reach_s",
         "final_distance_m",
         "min_clearance_m",
+        "min_edge_clearance_m",
         "mean_bearing_error_deg",
         "final_bearing_deg",
         "stale_commands",

@@ -8,6 +8,9 @@ Figures:
                             laser reads)
     min_clearance_m         least distance from the robot centre to an obstacle's surface,
                             as the laser measures it (None without obstacles)
+    min_edge_clearance_m    least distance from the robot's circle to a drop-off's rectangle:
+                            centre to rectangle less the robot's radius; negative: over the
+                            edge (None without drop-offs)
     mean_bearing_error_deg  mean |bearing of the followed target| while it was in view
     final_bearing_deg       bearing of the followed target from the robot's forward axis at
                             the end (None without one); a ``must_face`` scenario needs it within
@@ -36,6 +39,10 @@ from services.sim.world import World
 
 REACH_TOLERANCE_M = 0.4  # box-height ranging is coarse: +-0.4 m around the follow distance
 STOP_MARGIN_S = 0.5  # detector_dies: allowed on top of the detection timeout
+#: A hazard scenario (obstacles or drop-offs, no distance to reach): the robot may end this
+#: much nearer an obstacle than the controller's safety distance (its stop from speed, the
+#: sensor's noise) and still pass; nearer is a collision course.
+HAZARD_MARGIN_M = 0.05
 
 
 @dataclass
@@ -93,12 +100,18 @@ def score(
         ),
         default=None,
     )
+    robot_radius = world.robot.radius
+    edge_clearance = min(
+        (d.distance(t.robot[0], t.robot[1]) - robot_radius for t in truths for d in world.drops),
+        default=None,
+    )
     out: ScenarioResult = {
         "scenario": scenario.name,
         "duration_s": truths[-1].sim_time_s,
         "time_to_reach_s": None,
         "final_distance_m": None,
         "min_clearance_m": clearance,
+        "min_edge_clearance_m": edge_clearance,
         "mean_bearing_error_deg": None,
         "stale_commands": stale_commands(rec, s.detection_timeout_s),
         "commands": len(rec.twists),
@@ -148,6 +161,17 @@ def verdict(
     checks = {"no commands while stale": f["stale_commands"] == 0}
     if f["min_clearance_m"] is not None:
         checks["kept the safety distance"] = f["min_clearance_m"] >= s.safety_distance_m
+        if not scenario.must_reach:
+            # The hazard rule. While "kept the safety distance" above stands for every scenario
+            # with obstacles it is the stricter and this one adds nothing; it is the rule a
+            # hazard scenario is meant to be judged by should that one be relaxed.
+            checks["never nearer an obstacle than the safety distance less the margin"] = (
+                f["min_clearance_m"] >= s.safety_distance_m - HAZARD_MARGIN_M
+            )
+    edge = f.get("min_edge_clearance_m")
+    if edge is not None:
+        # Any scenario with a drop-off, whatever else it asks: over an edge is a fall.
+        checks["never over an edge"] = edge > 0
     if scenario.must_reach:
         final = f["final_distance_m"]
         checks["reached the stop distance"] = (
