@@ -167,7 +167,9 @@ class ControllerSettings:
     older than ``scan_timeout_s`` is), and every fresh one is obeyed, listed or not. The
     depth images are read only when depth is needed (``needs_depth``). In a depth image, a
     hole of no readings ``depth_hole_px`` tall or more where the floor should show is
-    unknown, never clear (smaller ones are a stereo camera's speckle). What the depth cameras
+    unknown, never clear (smaller ones are a stereo camera's speckle); one beside a thing
+    that fills the bottom of the image, within ``depth_edge_band_px``, is that thing's edge
+    (a stereo camera's band of no readings beside a near object). What the depth cameras
     saw is kept in a rolling map ``depth_memory_size_m`` across, in cells
     ``depth_memory_resolution_m`` wide, moved by the controller's own commands
     (services/controller/local_map.py): an obstacle or a drop-off seen stays until its place
@@ -219,6 +221,7 @@ class ControllerSettings:
     depth_max_pixels: int = 4_194_304
     # Issue 38: the virtual scan's holes and the depth cameras' short memory.
     depth_hole_px: int = 12
+    depth_edge_band_px: int = 24
     depth_creep_speed: float = 0.1
     depth_memory_size_m: float = 8.0
     depth_memory_resolution_m: float = 0.05
@@ -272,6 +275,7 @@ class ControllerSettings:
         "depth_max_pixel_aspect": (1, 2),
         "depth_max_pixels": (1, 100_000_000),
         "depth_hole_px": (1, 100),
+        "depth_edge_band_px": (0, 200),
         "depth_creep_speed": (0, 1),
         "depth_memory_size_m": (2, 40),
         "depth_memory_resolution_m": (0.01, 0.2),

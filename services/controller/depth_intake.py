@@ -77,6 +77,7 @@ class DepthIntake:
             stride_px=s.depth_scan_stride_px,
             resolution_deg=s.depth_scan_resolution_deg,
             hole_px=s.depth_hole_px,
+            edge_band_px=s.depth_edge_band_px,
         )
         # The short memory (services/controller/local_map.py), moved by the commands sent.
         self.odometry = Odometry()

@@ -64,6 +64,7 @@ class ScanParams:
     stride_px: int = 4
     resolution_deg: float = 1.0
     hole_px: int = 12
+    edge_band_px: int = 24
     unknown_span_m: float = 2.0
     unknown_step_m: float = 0.025
 
@@ -261,6 +262,19 @@ def _runs(
     return last, end, at
 
 
+def _edge_band(
+    filled: npt.NDArray[np.bool_], range_m: npt.NDArray[np.float64], width: int
+) -> npt.NDArray[np.float64]:
+    """For each column, the nearest ``range_m`` of a ``filled`` column within ``width``
+    columns of it (+inf: none)."""
+    near = np.where(filled, range_m, np.inf)
+    out = near.copy()
+    for k in range(1, width + 1):
+        out[k:] = np.minimum(out[k:], near[:-k])
+        out[:-k] = np.minimum(out[:-k], near[k:])
+    return out
+
+
 def observe(
     samples: Samples,
     intr: Intrinsics,
@@ -285,7 +299,10 @@ def observe(
     - a hole of no readings ``hole_px`` tall or more: clear up to the last floor before it;
       the stretch from there to the next floor reading is unknown (a dark thing can stand
       there); no floor at all where the camera's height says it must be seen is unknown from
-      the camera's minimum range on, and blocks there.
+      the camera's minimum range on, and blocks there, unless a column within
+      ``edge_band_px`` shows a thing filling the bottom of the image: the hole is then that
+      thing's edge (a stereo camera's band of no readings beside a near object), blocking at
+      its range.
 
     ValueError when the mounting's height is unknown (see :func:`usable`).
     """
@@ -358,6 +375,14 @@ def observe(
     blind = ~has_floor & ((end == RUN_DROP) | (end == RUN_GAP) | (end == RUN_OPEN))
     if not below.any():
         blind[:] = True
+    # Except beside a thing that fills the bottom of the image: a stereo camera reads nothing
+    # in a band along a near object's edge (what one eye sees and the other does not); there
+    # the hole is taken as that object's edge, at its range.
+    band = _edge_band(~has_floor & (end == RUN_SOLID), rng[np.minimum(at, len(v) - 1), cols],
+                      math.ceil(params.edge_band_px / params.stride_px))  # fmt: skip
+    edged = blind & np.isfinite(band)
+    np.fmin.at(ranges, looks[edged], band[edged])
+    blind &= ~edged
     np.fmin.at(ranges, looks[blind], near_rng[blind])
     ranges[np.isposinf(ranges)] = near_rng.min()  # in view, nothing seen that way
 
@@ -373,7 +398,7 @@ def observe(
     ub = np.flatnonzero(below)
     z_floor = np.where(below, mount.height_m / np.where(below, ry, 1.0), np.inf)  # per row
     unknown = []
-    for c in np.flatnonzero((end == RUN_GAP) | blind):
+    for c in np.flatnonzero(((end == RUN_GAP) & has_floor) | blind):
         z0 = zs[last[c], c] if last[c] >= 0 else near_z
         after = np.flatnonzero(kind[below][at[c]:, c] == FLOOR)
         if after.size:

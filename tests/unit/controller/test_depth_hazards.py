@@ -126,3 +126,16 @@ def test_floor_and_hazards_are_where_the_camera_saw_them() -> None:
     assert box[:, 0].min() == pytest.approx(2.5, abs=0.01)
     assert o.floor[:, 0].min() == pytest.approx(HEIGHT / math.tan(math.radians(23.413)),
                                                 abs=0.05)  # fmt: skip
+
+
+def test_a_hole_along_a_near_things_edge_is_that_things_edge() -> None:
+    # A box 1 m ahead filling the bottom of the image, and a stereo camera's band of no
+    # readings 12 px wide along its left edge: blocked at the box, not at the minimum range.
+    depth = scene(HEIGHT, Face(1.0, -0.3, 0.3, 0.0, 0.5))
+    cols = np.flatnonzero(np.isclose(depth[-1], 1.0))
+    depth[:, cols[0] - 12 : cols[0]] = np.nan
+    assert ahead(depth) == pytest.approx(1.0, abs=0.02)
+    # A dark thing with floor on both sides of it is not taken for an edge.
+    dark = scene(HEIGHT, Face(1.0, -0.3, 0.3, 0.0, 0.5))
+    dark[dark == np.float32(1.0)] = np.nan
+    assert ahead(dark) == pytest.approx(RANGE_MIN, abs=0.01)
