@@ -25,6 +25,10 @@ its certificate): a router lets a linked one do what the principals the other ho
 (``zenoh.remote_principals``) may do, together, and nothing more; each host's own router
 confines each of its own principals on ingress, as on one host (docs/security.md, "Two hosts,
 secured").
+
+Only the principals a stack has a use for get a secret (:func:`running_principals`: the router,
+the processes of ``supervisor.services``, the tools and the other hosts' principals), while the
+rules are built for every principal of the stack: one without a secret cannot log in at all.
 """
 
 from __future__ import annotations
@@ -66,6 +70,10 @@ LIVE_SENSORS = frozenset(
 )
 #: A principal that may watch (subscribe, query) but publishes nothing: status lines, tests.
 OBSERVER_PRINCIPAL = "observer"
+#: The principals of the tools people run against a running stack, whatever services it runs:
+#: ``zstack record`` and ``zstack play`` (as the recorder), ``zstack estop``, and the observer
+#: (status lines, ``zstack query``, reports, scenario runs, tests).
+TOOL_PRINCIPALS = (recorder.SERVICE, controller.ESTOP_PRINCIPAL, OBSERVER_PRINCIPAL)
 
 # Zenoh message kinds that only ask (or announce interest); every principal may send them.
 _ASK_MESSAGES = (
@@ -110,19 +118,69 @@ def _observer(shape: Shape) -> dict[str, Access]:
     return {OBSERVER_PRINCIPAL: Access(read=watching)}
 
 
+def _check_remote(known: Iterable[str], remote: Iterable[str]) -> None:
+    """ValueError, one line, for a name among ``remote`` that is none of ``known`` (or is the
+    router's)."""
+    known = [p for p in known if p != ROUTER_PRINCIPAL]
+    unknown = [p for p in dict.fromkeys(remote) if p not in known]
+    if unknown:
+        raise ValueError(
+            f"zenoh.remote_principals names {', '.join(map(repr, unknown))}: not a principal of "
+            f"this stack (known: {', '.join(known)}; another host's detector worker: "
+            "detector_<worker_id>)"
+        )
+
+
 def linked_router_access(table: Mapping[str, Access], remote: Iterable[str]) -> Access:
     """What a linked router (another host's, admitted as ROUTER_PRINCIPAL) may do: what the
     ``remote`` principals (those the other hosts run) may do, together, in ``table``'s
     order. ValueError, one line, for a name that is no principal of the stack."""
     remote = tuple(dict.fromkeys(remote))
-    unknown = [p for p in remote if p not in table or p == ROUTER_PRINCIPAL]
-    if unknown:
-        known = ", ".join(p for p in table if p != ROUTER_PRINCIPAL)
-        raise ValueError(
-            f"zenoh.remote_principals names {', '.join(map(repr, unknown))}: not a principal of "
-            f"this stack (known: {known}; another host's detector worker: detector_<worker_id>)"
-        )
+    _check_remote(table, remote)
     return merged(table[p] for p in remote)
+
+
+def service_principals(
+    services: Iterable[str],
+    cameras: str | Mapping[str, str],
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+) -> tuple[str, ...]:
+    """The principals of the processes a supervisor that runs ``services``
+    (``supervisor.services``) starts, as deploy/processes.py starts them: each camera's for
+    ``camera``, each of ``workers`` for ``detector``, the service's own name otherwise."""
+    out: list[str] = []
+    for service in services:
+        if service == "camera":
+            out += camera_services(cameras).values()
+        elif service == DETECTOR_PRINCIPAL:
+            out += workers
+        else:
+            out.append(service)
+    return tuple(dict.fromkeys(out))
+
+
+def running_principals(
+    services: Iterable[str],
+    cameras: str | Mapping[str, str],
+    workers: Iterable[str] = (DETECTOR_PRINCIPAL,),
+    remote: Iterable[str] = (),
+) -> tuple[str, ...]:
+    """The principals a stack that runs ``services`` has a use for: the router's, its
+    processes' (:func:`service_principals`), the tools' (TOOL_PRINCIPALS) and those other hosts
+    run (``remote``: ``zenoh.remote_principals``, another host's workers), in the order of
+    :func:`stack_principals`. What ``zstack credentials`` makes; a principal left out (the
+    ``camera`` of a stack that runs the simulator) has no secret, so nobody can log in as it.
+    ValueError, one line, for a ``remote`` name that is no principal of the stack."""
+    remote = tuple(remote)
+    workers = tuple(workers)
+    remote_workers = [p for p in remote if is_detector_service(p)]
+    every = stack_principals(
+        remote_cameras(camera_services(cameras), remote), (*workers, *remote_workers)
+    )
+    _check_remote(every, remote)
+    wanted = {ROUTER_PRINCIPAL, *service_principals(services, cameras, workers)}
+    wanted |= {*TOOL_PRINCIPALS, *remote}
+    return tuple(p for p in every if p in wanted)
 
 
 def access_table(shape: Shape) -> dict[str, Access]:

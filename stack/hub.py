@@ -11,10 +11,16 @@ import zenoh
 
 from common.errors import ConfigError
 from common.keys import Keys
-from common.security import stack_principals, users_file
+from common.security import ROUTER_PRINCIPAL, ca_file, cert_file, key_file, users_file
 from common.settings import is_detector_service
 from common.zenoh_bus import HUB_PRINCIPAL, open_configured, readable, zenoh_config
-from stack.access import access_control, congestion_overwritten, running_sensors
+from stack.access import (
+    access_control,
+    congestion_overwritten,
+    running_principals,
+    running_sensors,
+    service_principals,
+)
 from stack.config import Config
 
 
@@ -52,24 +58,37 @@ def hub_drop_keys(config: Config) -> tuple[str, ...]:
 
 
 def check_credentials(config: Config) -> None:
-    """With passwords, the router's dictionary must name every principal of this stack: one
-    made for fewer cameras or detector workers would refuse a further one's process.
-    ConfigError, one line, naming the command that makes them again."""
+    """The credentials must serve every principal this stack runs, or a process would be
+    refused after the others started: with passwords the router's dictionary must name each
+    principal of stack.access.running_principals (the router, each process of
+    ``supervisor.services``, the tools); with certificates each process the supervisor starts
+    needs its certificate and key (the tools' files may live on another host). ConfigError,
+    one line, naming the command that makes them again for this config."""
     z = config.zenoh
-    if z.auth != "password":
-        return  # certificates: the router needs only the CA; each client checks its own files
-    path = Path(readable(users_file(z.credentials_path), "user dictionary"))
-    try:
-        known = {line.split(":", 1)[0] for line in path.read_text(encoding="utf-8").splitlines()}
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read {path}: {exc}") from exc
-    principals = stack_principals(config.camera_services, config.detector_services)
-    missing = [p for p in principals if p not in known]
+    creds = z.credentials_path
+    services, cameras, workers = (
+        config.supervisor.services, config.camera_services, config.detector_services
+    )  # fmt: skip
+    if z.auth == "password":
+        path = Path(readable(users_file(creds), "user dictionary"))
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"cannot read {path}: {exc}") from exc
+        known = {line.split(":", 1)[0] for line in text.splitlines()}
+        needed = running_principals(services, cameras, workers)
+        missing = [p for p in needed if p not in known]
+    elif z.auth == "certificate" and ca_file(creds).is_file():  # no CA: the router says so
+        needed = (ROUTER_PRINCIPAL, *service_principals(services, cameras, workers))
+        files = {p: (cert_file(creds, p), key_file(creds, p)) for p in needed}
+        missing = [p for p, paths in files.items() if not all(f.is_file() for f in paths)]
+    else:
+        return
     if missing:
         raise ConfigError(
-            f"the credentials in {z.credentials_path} have no principal {', '.join(missing)} "
-            "(made for fewer cameras or detector workers?): make them again with `zstack "
-            f"credentials --config {config.path or 'FILE'} --force` (docs/security.md)"
+            f"the credentials in {creds} have no principal {', '.join(missing)} (made for a "
+            "config that runs fewer services, cameras or detector workers?): make them again "
+            f"with `zstack credentials --config {config.path or 'FILE'} --force` (docs/security.md)"
         )
 
 

@@ -83,3 +83,41 @@ def test_the_secure_stack_refuses_credentials_others_may_read_or_change(tmp_path
     )  # fmt: skip
     line = _one_line(_run("deploy.supervisor", "--config", tls, "--duration", "5"))
     assert f"chmod 600 {key_file(creds, 'supervisor')}" in line, line
+
+
+def test_credentials_are_made_only_for_the_principals_the_stack_runs(tmp_path: Path) -> None:
+    """Issue 38: a stack that runs the simulator had a `camera` secret, enough to put forged
+    frames and depth on the camera's keys. `zstack credentials` now makes none for a service
+    the config does not run, says so, and a stack that runs one later stops in one line."""
+    creds = tmp_path / "credentials"
+    secure = {"mode": "client", "auth": "password", "credentials_dir": str(creds)}
+    (tmp_path / "sim").mkdir()
+    sim = write_config(
+        tmp_path / "sim", zenoh=secure, supervisor={"services": ["sim", "controller"]}
+    )
+    made = _run("deploy.credentials", "--config", sim)
+    assert made.returncode == 0, made.stderr
+    assert "credentials: camera: not made, the config runs no camera service" in made.stderr
+    assert not password_file(creds, "camera").exists()
+    assert not key_file(creds, "camera").exists()
+
+    # The camera's process cannot join: it has no secret.
+    line = _one_line(_run("services.camera", "serve", "--config", sim))
+    assert f"{password_file(creds, 'camera')} is missing" in line, line
+    # The stack it was made for starts on it (and stops by itself after --duration).
+    started = _run("deploy.supervisor", "--config", sim, "--duration", "3")
+    assert started.returncode == 0, started.stderr[-2000:]
+    assert "sim:ready" in started.stderr, started.stderr[-2000:]
+
+    # A config that runs a camera stops before it starts anything, with passwords and with
+    # certificates, in one line naming the command that makes them again.
+    tls = {**secure, "auth": "certificate", "endpoint": f"tls/127.0.0.1:{free_port()}"}
+    for name, table in (("camera", secure), ("camera_tls", tls)):
+        (tmp_path / name).mkdir()
+        camera = write_config(
+            tmp_path / name, zenoh=table, supervisor={"services": ["camera", "controller"]}
+        )
+        line = _one_line(_run("deploy.supervisor", "--config", camera, "--duration", "3"))
+        assert line.startswith("supervisor: error: "), line
+        assert "no principal camera " in line, line
+        assert f"`zstack credentials --config {camera} --force`" in line, line

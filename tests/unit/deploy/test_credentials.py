@@ -28,8 +28,11 @@ from common.security import (
     users_file,
     viewer_token_file,
 )
+from common.settings import REPO_ROOT
+from common.zenoh_bus import zenoh_config
 from deploy import credentials
 from deploy.credentials import generate
+from stack.config_file import load_config
 from tests.unit.common.test_certificates import old_style
 from tools.launch import free_port
 
@@ -228,10 +231,14 @@ def test_cli_makes_a_principal_per_camera_of_the_config(
     with pytest.raises(SystemExit) as done:
         run_main(credentials.main, "credentials")
     assert done.value.code == 0, capsys.readouterr().err
-    assert f"wrote {len(PRINCIPALS) + 2} passwords" in capsys.readouterr().err
+    # The config runs the default services: each camera, the detector, the controller, the
+    # metrics; with the router and the tools, 10 principals; no sim, ros2 or viewer.
+    assert "wrote 10 passwords" in capsys.readouterr().err
     users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
-    assert users == list(stack_principals({"front": "camera", "rear": "camera_rear",
-                                           "left": "camera_left"}))  # fmt: skip
+    assert users == [
+        "supervisor", "recorder", "camera", "camera_rear", "camera_left", "detector",
+        "controller", "metrics", "estop", "observer",
+    ]  # fmt: skip
     ca = _cert(ca_file(creds))
     for p in ("camera_rear", "camera_left"):
         assert _mode(password_file(creds, p)) == 0o600
@@ -264,10 +271,12 @@ def test_cli_makes_a_principal_per_worker_and_for_other_hosts_workers(
     with pytest.raises(SystemExit) as done:
         run_main(credentials.main, "credentials")
     assert done.value.code == 0
-    assert "wrote 13 passwords" in capsys.readouterr().err
+    assert "wrote 10 passwords" in capsys.readouterr().err
     users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
     workers = ("detector_b", "detector_b_2", "detector_a")
-    assert users == list(stack_principals("front", workers))
+    assert users == [
+        p for p in stack_principals("front", workers) if p not in ("sim", "ros2", "viewer")
+    ]
     assert "detector" not in users
     ca = _cert(ca_file(creds))
     for p in workers:
@@ -332,4 +341,111 @@ def test_cli_makes_a_principal_for_the_workers_the_config_links_to(
         run_main(credentials.main, "credentials")
     assert done.value.code == 0, capsys.readouterr().err
     users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
-    assert users == list(stack_principals("front", ("detector_b", "detector_a")))
+    assert users == [
+        p
+        for p in stack_principals("front", ("detector_b", "detector_a"))
+        if p not in ("sim", "ros2", "viewer")
+    ]
+
+
+def _cli(monkeypatch: pytest.MonkeyPatch, *argv: str | Path) -> int:
+    monkeypatch.setattr(sys, "argv", ["credentials", *map(str, argv)])
+    with pytest.raises(SystemExit) as done:
+        run_main(credentials.main, "credentials")
+    return int(done.value.code or 0)
+
+
+def _secure(path: Path, creds: Path, services: list[str], **zenoh_table: str) -> Path:
+    """A secure config of the default stack that runs ``services``."""
+    table = "".join(f'{k} = "{v}"\n' for k, v in zenoh_table.items())
+    path.write_text(
+        f'extends = "{REPO_ROOT / "deploy" / "secure.toml"}"\n'
+        f'[zenoh]\ncredentials_dir = "{creds}"\n{table}'
+        f"[supervisor]\nservices = {json.dumps(services)}\n"
+    )
+    return path
+
+
+def test_a_simulator_stack_gets_no_camera_secret_and_the_command_says_why(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from stack.hub import check_credentials
+
+    creds = tmp_path / "creds"
+    sim = _secure(tmp_path / "sim.toml", creds, ["sim", "detector", "controller", "metrics"])
+    assert _cli(monkeypatch, "--config", sim) == 0
+    err = capsys.readouterr().err
+    assert all(line.startswith("credentials: ") for line in err.splitlines()), err
+    made = ["supervisor", "recorder", "sim", "detector", "controller", "metrics", "estop",
+            "observer"]  # fmt: skip
+    users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
+    assert users == made
+    for p in ("camera", "ros2", "viewer"):
+        for path in (password_file(creds, p), key_file(creds, p), cert_file(creds, p)):
+            assert not path.exists(), path
+        line = f"credentials: {p}: not made, the config runs no {p} service (supervisor.services)"
+        assert f"{line}\n" in err, err
+    assert (
+        "made for supervisor (the router); sim, detector, controller, metrics "
+        "(supervisor.services); recorder, estop, observer (the tools" in err
+    ), err
+    assert f"`zstack credentials --config {sim} --force`" in err, err
+    config = load_config(sim, environ={})
+    check_credentials(config)  # the supervisor accepts them
+    # The attack of issue 38: nobody can join as the camera, which the stack does not run.
+    with pytest.raises(ConfigError, match=r"camera.password is missing"):
+        zenoh_config(config.zenoh, "camera")
+
+
+def test_a_service_added_later_stops_the_stack_in_one_line_naming_the_command(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from stack.hub import check_credentials
+
+    creds = tmp_path / "creds"
+    services = ["sim", "detector", "controller"]
+    assert _cli(monkeypatch, "--config", _secure(tmp_path / "sim.toml", creds, services)) == 0
+    tls = {"auth": "certificate", "endpoint": f"tls/127.0.0.1:{free_port()}"}
+    for name, table in (("camera.toml", {}), ("camera-tls.toml", tls)):
+        path = _secure(tmp_path / name, creds, ["camera", *services[1:], "viewer"], **table)
+        with pytest.raises(ConfigError) as refused:
+            check_credentials(load_config(path, environ={}))
+        line = str(refused.value)
+        assert "\n" not in line and "no principal camera, viewer " in line, line
+        assert f"make them again with `zstack credentials --config {path} --force`" in line
+    # Made again for that config, the stack starts.
+    assert _cli(monkeypatch, "--config", path, "--force") == 0
+    check_credentials(load_config(path, environ={}))
+    assert password_file(creds, "camera").exists() and cert_file(creds, "viewer").exists()
+    capsys.readouterr()
+
+
+def test_force_for_a_config_that_runs_less_removes_the_secrets_it_no_longer_needs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    creds = tmp_path / "creds"
+    camera = _secure(tmp_path / "camera.toml", creds, ["camera", "detector", "controller"])
+    assert _cli(monkeypatch, "--config", camera, "--worker", "detector_a") == 0
+    old_style(creds, "camera")  # as an older version made it: it could serve as the router
+    (creds / "notes.txt").write_text("mine\n")
+    outside = tmp_path / "outside.password"
+    outside.write_text("kept\n")
+    password_file(creds, "detector_a").unlink()
+    password_file(creds, "detector_a").symlink_to(outside)
+    capsys.readouterr()
+
+    sim = _secure(tmp_path / "sim.toml", creds, ["sim", "detector", "controller"])
+    assert _cli(monkeypatch, "--config", sim, "--force") == 0
+    err = capsys.readouterr().err
+    for p in ("camera", "detector_a"):
+        for path in (password_file(creds, p), key_file(creds, p), cert_file(creds, p)):
+            assert not path.is_symlink() and not path.exists(), path
+    assert outside.read_text() == "kept\n"  # a link is removed, never what it points to
+    assert (creds / "notes.txt").exists() and viewer_token_file(creds).exists()
+    assert (
+        "credentials: camera: not made, the config runs no camera service "
+        "(supervisor.services); its earlier secrets removed\n" in err
+    ), err
+    assert "credentials: detector_a: earlier secrets removed, neither the config nor" in err, err
+    assert server_capable(creds) == []  # the old certificate no longer stops TLS sessions
+    assert password_file(creds, "sim").exists()
