@@ -242,8 +242,8 @@ def readable(path: Path, what: str, *, secret: bool = True) -> str:
         fix = "run `zstack credentials`"
         if ca_file(path.parent).is_file():  # a folder made for fewer cameras, or not all copied
             fix = (
-                "make them again for the config's cameras with `zstack credentials --config "
-                "FILE --force`, or copy the file from where they were made"
+                "make them again for the config's services and cameras with `zstack "
+                "credentials --config FILE --force`, or copy the file from where they were made"
             )
         raise ConfigError(f"{what} {path} is missing: {fix} (docs/security.md)")
     check_folder(path.parent)

@@ -252,7 +252,9 @@ def test_the_stack_refuses_credentials_made_for_fewer_cameras(tmp_path: Path) ->
     config = write_config(
         tmp_path,
         zenoh={"mode": "client", "auth": "password", "credentials_dir": str(creds)},
-        supervisor={"services": ["metrics"]},
+        # The camera service runs (the refusal comes before any process starts): a stack
+        # that runs no camera needs no camera secret (zstack credentials makes none).
+        supervisor={"services": ["camera", "metrics"]},
         **{"cameras.rear": {"mount_yaw_deg": 180.0}},
     )
     env = {k: v for k, v in os.environ.items() if not k.startswith("STACK__")}
