@@ -127,6 +127,9 @@ STEP_M = 0.5
 #: every pass condition has held SETTLE_S from HAZARD_SETTLE_FROM_S on.
 HAZARD_DURATION_S = 40.0
 HAZARD_SETTLE_FROM_S = 28.0
+#: A hazard next to the robot from the start: standing still for this long shows it (a robot
+#: that creeps towards it at 0.05 m/s covers 0.6 m, into it, meanwhile).
+NEAR_SETTLE_FROM_S = 12.0
 
 
 def _hazard(
@@ -144,12 +147,17 @@ def _drop(depth_m: float) -> Drop:
     return Drop(HAZARD_X_M, DROP_Y0_M, DROP_X1_M, DROP_Y1_M, depth_m)
 
 
-def hazard(name: str, description: str, build: Callable[[], World]) -> Scenario:
+def hazard(
+    name: str,
+    description: str,
+    build: Callable[[], World],
+    settle_from_s: float = HAZARD_SETTLE_FROM_S,
+) -> Scenario:
     """A hazard scenario: alice stands beyond it, nothing need be reached, and the distance
     is kept by box height, so the stop before the hazard is the obstacle rule alone."""
     return Scenario(
         name, description, build, HAZARD_DURATION_S, must_reach=False,
-        settle_s=SETTLE_S, settle_from_s=HAZARD_SETTLE_FROM_S,
+        settle_s=SETTLE_S, settle_from_s=settle_from_s,
         controller={"distance_source": "box"},
     )  # fmt: skip
 
@@ -176,6 +184,20 @@ HAZARDS: tuple[Scenario, ...] = (
            "a black pole (r 0.03, 1.2 m tall) at (2.5, 0.22): inside the robot's 0.6 m wide "
            "path, off the camera's centre line, no depth reading on it; stop short of it",
            _hazard(obstacles=(Obstacle(2.5, 0.22, 0.03, height_m=1.2, material=Material.DARK),))),
+    hazard("black_box_near",
+           "the black box already in the depth camera's blind zone at the start, its face 1 m "
+           "ahead (centre 1.3 m): the floor beyond is seen above it, nothing on it; never move "
+           "towards it",
+           _hazard(obstacles=(
+               Obstacle(1.3, 0.0, 0.3, height_m=0.5, material=Material.DARK),)),
+           settle_from_s=NEAR_SETTLE_FROM_S),
+    hazard("dark_pole_near",
+           "the black pole beside the robot's nose at the start: (0.55, 0.25), 24 deg off the "
+           "heading (outside the 30 deg sector ahead), inside the 0.6 m wide path; never move "
+           "towards it",
+           _hazard(obstacles=(
+               Obstacle(0.55, 0.25, 0.03, height_m=1.2, material=Material.DARK),)),
+           settle_from_s=NEAR_SETTLE_FROM_S),
     hazard("glass",
            "a glass pane (r 0.3, 1.0 m tall) 3 m ahead: the laser passes through it, the "
            "depth camera reads nothing on it, the colour image shows alice behind it; stop "
