@@ -37,11 +37,11 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Header, LaserScan
+from common.unicycle import Pose, advance
 from services.controller.depth_scan import Observation
 
 UNSEEN, FREE, UNKNOWN, HAZARD = 0, 1, 2, 3
 
-Pose = tuple[float, float, float]  # x, y, heading (rad) in the odometry frame
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,21 +53,6 @@ class MapParams:
     corridor_half_width_m: float = 0.3
     footprint_half_m: float = 0.3
     known_ahead_m: float = 3.0
-
-
-def advance(pose: Pose, v: float, w: float, dt: float) -> Pose:
-    """``pose`` after moving at (``v``, ``w``) for ``dt`` seconds (exact unicycle)."""
-    x, y, th = pose
-    if dt <= 0:
-        return pose
-    if abs(w) > 1e-9:
-        r = v / w
-        return (
-            x + r * (math.sin(th + w * dt) - math.sin(th)),
-            y - r * (math.cos(th + w * dt) - math.cos(th)),
-            th + w * dt,
-        )
-    return x + v * dt * math.cos(th), y + v * dt * math.sin(th), th
 
 
 class Odometry:

@@ -19,6 +19,8 @@ from enum import StrEnum
 import numpy as np
 import numpy.typing as npt
 
+from common.unicycle import advance
+
 
 @dataclass(frozen=True, slots=True)
 class BaseLimits:
@@ -54,16 +56,8 @@ class Robot:
         self.v += dv
         self.w += dw
         # Exact unicycle integration over dt for constant (v, w).
-        if abs(self.w) > 1e-9:
-            r = self.v / self.w
-            self.x += r * (math.sin(self.theta + self.w * dt) - math.sin(self.theta))
-            self.y -= r * (math.cos(self.theta + self.w * dt) - math.cos(self.theta))
-        else:
-            self.x += self.v * dt * math.cos(self.theta)
-            self.y += self.v * dt * math.sin(self.theta)
-        self.theta = math.atan2(
-            math.sin(self.theta + self.w * dt), math.cos(self.theta + self.w * dt)
-        )
+        self.x, self.y, theta = advance((self.x, self.y, self.theta), self.v, self.w, dt)
+        self.theta = math.atan2(math.sin(theta), math.cos(theta))
 
 
 class Material(StrEnum):

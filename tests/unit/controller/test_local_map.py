@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from common.messages import Header, LaserScan
+from common.unicycle import advance
 from perception.depth import Mounting
 from services.controller.depth_scan import ScanParams, observe, sample_metres
 from services.controller.geometry import sector_clearance
@@ -20,7 +21,6 @@ from services.controller.local_map import (
     LocalMap,
     MapParams,
     Odometry,
-    advance,
 )
 from tests.unit.controller.depth_scenes import INTR, Face, scene
 
