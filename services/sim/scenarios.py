@@ -185,11 +185,11 @@ HAZARDS: tuple[Scenario, ...] = (
            "path, off the camera's centre line, no depth reading on it; stop short of it",
            _hazard(obstacles=(Obstacle(2.5, 0.22, 0.03, height_m=1.2, material=Material.DARK),))),
     hazard("black_box_near",
-           "the black box already in the depth camera's blind zone at the start, its face 1 m "
-           "ahead (centre 1.3 m): the floor beyond is seen above it, nothing on it; never move "
-           "towards it",
+           "a black box 0.4 m tall already in the depth camera's blind zone at the start, its "
+           "face 1 m ahead (centre 1.3 m): the floor beyond is seen above it, nothing on it; "
+           "never move towards it",
            _hazard(obstacles=(
-               Obstacle(1.3, 0.0, 0.3, height_m=0.5, material=Material.DARK),)),
+               Obstacle(1.3, 0.0, 0.3, height_m=0.4, material=Material.DARK),)),
            settle_from_s=NEAR_SETTLE_FROM_S),
     hazard("dark_pole_near",
            "the black pole beside the robot's nose at the start: (0.55, 0.25), 24 deg off the "
