@@ -157,6 +157,13 @@ class Config:
         return cameras[name]
 
     @property
+    def depth_memory_path(self) -> Path:
+        """Where the controller keeps its depth map across restarts (one file per prefix)."""
+        default = f"state/depth-memory-{self.stack.prefix.replace('/', '_')}.npz"
+        path = Path(self.controller.depth_memory_file or default).expanduser()
+        return path if path.is_absolute() else REPO_ROOT / path
+
+    @property
     def estop_path(self) -> Path:
         """Where the controller keeps the latched e-stop (one file per stack prefix)."""
         default = f"state/estop-{self.stack.prefix.replace('/', '_')}.json"

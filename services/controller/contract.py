@@ -36,6 +36,8 @@ DEPTH_OVERSIZE = "depth_oversize"
 DEPTH_ERRORS = "depth_errors"
 #: Depth frames replaced by a newer one of their camera before they were looked at.
 DEPTH_DROPPED = "depth_dropped"
+#: The depth map could not be written to, or read from, its file (issue 38).
+DEPTH_MEMORY_ERRORS = "depth_memory_errors"
 # -- depth from the announced source only (issue 38) --
 #: Depth frames put by a Zenoh session other than the one that announced their camera
 #: (``CameraAnnouncement.zid``): dropped before they are decoded.
@@ -82,6 +84,7 @@ COUNTERS = frozenset(
         DETECTIONS_UNANNOUNCED,
         DEPTH_UNANNOUNCED,
         DEPTH_ERRORS,
+        DEPTH_MEMORY_ERRORS,
         ESTOP_RELEASE_REFUSED,
         ESTOP_ZERO_AT_ONCE,
         COMMANDS_OUT,
@@ -175,7 +178,12 @@ class ControllerSettings:
     (services/controller/local_map.py): an obstacle or a drop-off seen stays until its place
     is seen clear, and with depth required the robot drives no faster than
     ``depth_creep_speed`` while the corridor ahead within the room it needs to stop has a
-    part never seen (at start-up: the camera's blind zone).
+    part never seen (at start-up: the camera's blind zone). The map is written every
+    ``depth_memory_save_s`` to ``depth_memory_file`` (relative to the repo root; empty:
+    ``state/depth-memory-<prefix>.npz``) and a controller that starts within
+    ``depth_memory_max_age_s`` of the last write takes back its hazards (a crash, a restart),
+    placed as if the robot had gone on with its last command for ``depth_memory_coast_s`` (a
+    base's own command timeout).
     Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
     acceleration limits. Stale detections (captured or received longer than
     ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the
@@ -225,6 +233,10 @@ class ControllerSettings:
     depth_creep_speed: float = 0.1
     depth_memory_size_m: float = 8.0
     depth_memory_resolution_m: float = 0.05
+    depth_memory_file: str = ""
+    depth_memory_save_s: float = 0.5
+    depth_memory_max_age_s: float = 10.0
+    depth_memory_coast_s: float = 0.5
     estop_file: str = ""
     estop_release_max_age_s: float = 2.0
     counters_period_s: float = 1.0
@@ -279,6 +291,9 @@ class ControllerSettings:
         "depth_creep_speed": (0, 1),
         "depth_memory_size_m": (2, 40),
         "depth_memory_resolution_m": (0.01, 0.2),
+        "depth_memory_save_s": (0.05, 60),
+        "depth_memory_max_age_s": (0, 3600),
+        "depth_memory_coast_s": (0, 10),
         "estop_release_max_age_s": (0.1, 60),
         "counters_period_s": (0.1, 60),
         # depth from the announced source only (issue 38)

@@ -28,11 +28,14 @@ counted and the thread goes on.
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 from collections.abc import Mapping
+from pathlib import Path
 
 from common.clock import BOOT_ID, Clock, Stamp
 from common.counters import per_camera
+from common.files import atomic_write_bytes
 from common.freshness import FreshnessGate, Verdict, capture_age_s
 from common.messages import CameraAnnouncement, DepthFrame, LaserScan
 from common.node import Tally
@@ -64,7 +67,12 @@ class DepthIntake:
     the intake's thread makes the scans, the control loop reads them)."""
 
     def __init__(
-        self, s: ControllerSettings, tally: Tally, tolerance_s: float, clock: Clock
+        self,
+        s: ControllerSettings,
+        tally: Tally,
+        tolerance_s: float,
+        clock: Clock,
+        memory_path: Path | None = None,
     ) -> None:
         self.tally = tally
         self.clock = clock
@@ -91,6 +99,13 @@ class DepthIntake:
             s.depth_scan_resolution_deg,
         )
         self._map_lock = threading.Lock()
+        # The map kept on disk across restarts (None: not kept, as in unit tests).
+        self.memory_path = memory_path
+        self.memory_save_s = s.depth_memory_save_s
+        self.memory_coast_s = s.depth_memory_coast_s
+        self._saved_at = -math.inf  # monotonic s of the last write
+        if memory_path is not None:
+            self._restore(memory_path, s.depth_memory_max_age_s)
         self.plausible = Plausible(
             hfov_tolerance_deg=s.depth_hfov_tolerance_deg,
             max_pixel_aspect=s.depth_max_pixel_aspect,
@@ -177,6 +192,7 @@ class DepthIntake:
         while not stop.is_set():
             try:
                 self.handle_waiting(poll_s)
+                self.save_memory()
             except Exception as exc:
                 self.tally.reject(
                     contract.DEPTH_ERRORS, f"making a virtual scan failed: {exc!r:.200}"
@@ -319,6 +335,59 @@ class DepthIntake:
         rate-limited."""
         self.tally.reject(counter, f"depth from {camera} refused: {why}", key=counter + camera)
         self.tally.counters.add(per_camera(counter, camera))
+
+    def _restore(self, path: Path, max_age_s: float) -> None:
+        """Take back the hazards of the map a controller before this one wrote, if it wrote
+        it within ``max_age_s`` (a crash or a restart: the robot has not gone far)."""
+        log = self.tally.log
+        try:
+            data = path.read_bytes()
+        except FileNotFoundError:
+            return
+        except OSError as exc:
+            self.tally.reject(contract.DEPTH_MEMORY_ERRORS, f"depth map {path} unreadable: {exc}")
+            return
+        try:
+            pose, kept, saved_ns = self.map.restore(data)
+        except ValueError as exc:
+            self.tally.reject(contract.DEPTH_MEMORY_ERRORS, f"depth map {path} not taken: {exc}")
+            return
+        age_s = (self.clock.wall_ns() - saved_ns) / 1e9
+        if not 0 <= age_s <= max_age_s:
+            self.map = LocalMap(self.map.p, self.params.resolution_deg)
+            log.warning(
+                "depth map %s is %.0f s old (over depth_memory_max_age_s %g): not taken; the "
+                "robot creeps until it has seen the floor ahead", path, age_s, max_age_s,
+            )  # fmt: skip
+            return
+        self.odometry = Odometry(start=pose)
+        log.info(
+            "depth map %s taken back (written %.1f s ago): %d remembered hazard or unknown "
+            "cells; the floor it had seen is to be seen again", path, age_s, kept,
+        )  # fmt: skip
+
+    def save_memory(self, force: bool = False) -> None:
+        """Write the map to its file (at most every ``depth_memory_save_s``, or now with
+        ``force``), with the pose the robot would reach if its last command went on for
+        ``depth_memory_coast_s``: what a controller taking it back after a crash must assume.
+        A write that fails is logged and counted; nothing waits on it."""
+        if self.memory_path is None:
+            return
+        mono = self.clock.mono_s()
+        if not force and mono - self._saved_at < self.memory_save_s:
+            return
+        self._saved_at = mono
+        pose = self.odometry.coasted(mono, self.memory_coast_s)
+        with self._map_lock:
+            data = self.map.dump(pose, self.clock.wall_ns())
+        try:
+            self.memory_path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(self.memory_path, data)
+        except OSError as exc:
+            self.tally.reject(
+                contract.DEPTH_MEMORY_ERRORS,
+                f"depth map not written to {self.memory_path}: {exc.strerror or exc}",
+            )
 
     def moved(self, mono_s: float, linear: float, angular: float) -> None:
         """The command sent at monotonic ``mono_s``: the robot moves so from then on."""

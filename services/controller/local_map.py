@@ -28,8 +28,10 @@ robot may only creep (``depth_creep_speed``).
 
 from __future__ import annotations
 
+import io
 import math
 import threading
+import zipfile
 from collections import deque
 from dataclasses import dataclass
 
@@ -57,14 +59,22 @@ class MapParams:
 
 class Odometry:
     """The robot's pose by its own commands (thread-safe): each command holds until the next.
-    ``history_s`` of commands are kept, so a frame captured that long ago is placed."""
+    ``history_s`` of commands are kept, so a frame captured that long ago is placed. It
+    starts at ``start`` (a pose restored with the map: :meth:`LocalMap.restore`)."""
 
-    def __init__(self, history_s: float = 10.0) -> None:
+    def __init__(self, history_s: float = 10.0, start: Pose = (0.0, 0.0, 0.0)) -> None:
         self._lock = threading.Lock()
         self._history_s = history_s
         # (time, pose at that time, v, w from then on); the first holds still from -inf.
         self._log: deque[tuple[float, Pose, float, float]] = deque()
-        self._log.append((-math.inf, (0.0, 0.0, 0.0), 0.0, 0.0))
+        self._log.append((-math.inf, start, 0.0, 0.0))
+
+    def coasted(self, t: float, coast_s: float) -> Pose:
+        """Where the robot would be ``coast_s`` after ``t`` if the command in force at ``t``
+        went on (as a base does until its own command timeout when the controller dies)."""
+        with self._lock:
+            _, _, v, w = self._log[-1]
+        return advance(self.pose_at(t), v, w, coast_s)
 
     def command(self, t: float, v: float, w: float) -> None:
         """From monotonic time ``t`` on the robot moves at (``v``, ``w``)."""
@@ -175,6 +185,42 @@ class LocalMap:
             keep = self.grid[i, j] != HAZARD
             self.grid[i[keep], j[keep]] = UNKNOWN
         self._mark(pose, seen.hazards, HAZARD)
+
+    def dump(self, pose: Pose, saved_ns: int) -> bytes:
+        """The map and the robot's ``pose`` in it at wall-clock ``saved_ns``, as bytes for
+        :meth:`restore` (.npz)."""
+        out = io.BytesIO()
+        np.savez(out, grid=self.grid, origin=self.origin, pose=np.asarray(pose, np.float64),
+                 resolution_m=np.float64(self.p.resolution_m),
+                 saved_ns=np.int64(saved_ns))  # fmt: skip
+        return out.getvalue()
+
+    def restore(self, data: bytes) -> tuple[Pose, int, int]:
+        """Take back a map :meth:`dump` wrote: what it remembered as hazards and unknown,
+        not the floor it had seen (the robot may have moved a little since: a seen floor is
+        seen again before it is driven on). The pose it was written with, the hazard and
+        unknown cells restored, and when it was written (wall-clock ns). ValueError when
+        ``data`` is not a map of this size."""
+        try:
+            with np.load(io.BytesIO(data), allow_pickle=False) as f:
+                grid, origin = f["grid"], f["origin"]
+                pose, res = f["pose"], float(f["resolution_m"])
+                saved_ns = int(f["saved_ns"])
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"not a saved depth map ({exc})") from exc
+        if grid.shape != self.grid.shape or grid.dtype != np.uint8 or res != self.p.resolution_m:
+            raise ValueError(
+                f"a {grid.shape} map of {res:g} m cells, not {self.grid.shape} of "
+                f"{self.p.resolution_m:g} m (depth_memory_size_m or resolution changed)"
+            )
+        if origin.shape != (2,) or pose.shape != (3,) or not (
+            np.isfinite(origin).all() and np.isfinite(pose).all() and (grid <= HAZARD).all()
+        ):
+            raise ValueError("a saved depth map with a bad origin, pose or cell")
+        self.grid = np.where(grid == FREE, UNSEEN, grid).astype(np.uint8)
+        self.origin = origin.astype(np.float64)
+        kept = int(np.count_nonzero(self.grid))
+        return (float(pose[0]), float(pose[1]), float(pose[2])), kept, saved_ns
 
     def stand(self, pose: Pose) -> None:
         """The robot stands at ``pose``: the floor under its footprint is free."""

@@ -303,7 +303,9 @@ class ControlLoop:
             # reads depth needs.
             from services.controller.depth_intake import DepthIntake
 
-            self.depth = DepthIntake(s, node, config.stack.clock_tolerance_s, node.clock)
+            self.depth = DepthIntake(
+                s, node, config.stack.clock_tolerance_s, node.clock, config.depth_memory_path
+            )
             # The bus's own subscribe: the intake needs each sample's publisher (Sample.source).
             self._subs.append(node.bus.subscribe(keys.all_depths(), self._on_depth))
         self._cameras_lock = threading.Lock()  # one change of the camera set at a time
@@ -457,6 +459,8 @@ def run(config: Config, stop: threading.Event) -> int:
                 tick = loop.tick()
                 wait_either(loop.handlers.arrived, stop, period - (node.clock.mono_s() - tick))
             loop.stop()
+            if loop.depth is not None:
+                loop.depth.save_memory(force=True)  # as the robot is left: still
         finally:
             loop.close()
     return 0

@@ -60,7 +60,13 @@ def write_config(tmp: Path, **tables: dict[str, Any]) -> Path:
         # These stacks drive towards the sample photo's cameraman in track mode, and a camera
         # stack has no laser: said on purpose, as on a robot without one (a test of the laser
         # rules sets no_laser = false; a scan that does come, as the simulator's, is obeyed).
-        "controller": {"estop_file": str(tmp / "estop.json"), "mode": "track", "no_laser": True},
+        # The same for the controller's depth map, which a restarted controller takes back.
+        "controller": {
+            "estop_file": str(tmp / "estop.json"),
+            "depth_memory_file": str(tmp / "depth-memory.npz"),
+            "mode": "track",
+            "no_laser": True,
+        },
     }
     for name, values in tables.items():
         base.setdefault(name, {}).update(values)

@@ -12,6 +12,8 @@ the blind zone. Every case with the figures runs in-process too
 
 from __future__ import annotations
 
+import os
+import signal
 from collections.abc import Callable
 
 import numpy as np
@@ -22,6 +24,7 @@ from perception.depth import Intrinsics
 from tests.integration.conftest import Stack, wait_for
 from tests.integration.feeder import Feeder, header, people
 from tests.unit.controller.depth_scenes import Face, at_bearing, depth_frame, scene
+from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration
 
@@ -173,3 +176,60 @@ def test_what_the_depth_camera_cannot_see_is_not_clear(make_stack, case: str) ->
     finally:
         feeder.close()
     assert stack.stop() == 0, stack.log()
+
+
+def test_a_controller_restarted_after_a_crash_remembers_what_it_saw(make_stack) -> None:  # type: ignore[no-untyped-def]
+    # A stop is not lost by a crash: what slipped into the blind zone stays an obstacle for
+    # the controller the supervisor starts in place of a killed one (its depth map on disk).
+    stack: Stack = make_stack(
+        supervisor={"services": ["controller"]},
+        controller={"mode": "track", "no_laser": False, "obstacle_sources": ["depth"]},
+    )
+    stack.wait_ready({"controller"})
+    stack.announce(depth=True, mount_height_m=HEIGHT, hfov_deg=60.0)
+    _, cmds = stack.subscribe(stack.keys.cmd_vel())
+    _, status_raw = stack.subscribe(stack.keys.controller_status())
+    front, depth = stack.keys.detections("front"), stack.keys.depth("front")
+    image = scene(HEIGHT, at_bearing(0.4, 0.0), intr=INTR)  # within the safety distance
+
+    def person_and_depth() -> dict[str, bytes]:
+        return {front: people(1), depth: depth_frame(image, header(), INTR).encode()}
+
+    def said(start: int, end: str) -> list[ControllerStatus]:
+        return [x for x in statuses(status_raw, start) if x.reason.endswith(end)]
+
+    feeder = Feeder(stack)
+    try:
+        feeder.feed(person_and_depth)
+        wait_for(lambda: said(0, "(depth)"), 30, "the obstacle seen in the depth")
+        image = scene(HEIGHT, intr=INTR)  # gone from view into the blind zone
+        since = len(status_raw)
+        wait_for(lambda: said(since, "(remembered)"), 30, "the obstacle remembered")
+        [pid] = service_pids("controller", stack.config_path)
+        os.kill(pid, signal.SIGKILL)
+        killed = len(status_raw)
+        wait_for(
+            lambda: [p for p in service_pids("controller", stack.config_path) if p != pid],
+            30,
+            "the supervisor to restart the controller",
+        )
+
+        def restarted() -> list[ControllerStatus]:
+            """The statuses of the controller started in place of the killed one (its
+            sequence numbers start again)."""
+            after = statuses(status_raw, killed - 1)  # from the killed one's last
+            seqs = [x.header.seq for x in after]
+            new = [i for i in range(1, len(seqs)) if seqs[i] < seqs[i - 1]]
+            return after[new[0] :] if new else []
+
+        wait_for(lambda: len(restarted()) > 2 * TICKS, 60, "ticks of the restarted controller")
+        settled = restarted()[TICKS:]
+        first = settled[0].header.stamp_ns
+        late = [t for t in forward(cmds) if t.header.stamp_ns >= first]
+        assert late == [], f"the restarted controller drove forward {len(late)} times"
+        reasons = {x.reason for x in settled}
+        assert all(r.endswith("(remembered)") for r in reasons), reasons
+    finally:
+        feeder.close()
+    assert stack.stop() == 0, stack.log()
+    assert "depth map" in stack.log() and "taken back" in stack.log(), stack.log()

@@ -243,6 +243,11 @@ def run_scenario(
         for line in config_changes(base, config, scenario):
             log(f"{name}: changed from your config: {line}")
     workdir = Path(tempfile.mkdtemp(prefix=f"scenario-{name}-"))
+    # Each run's world starts afresh: so does the controller's depth map (kept with the run).
+    memory = str(workdir / "depth-memory.npz")
+    config = dataclasses.replace(
+        config, controller=dataclasses.replace(config.controller, depth_memory_file=memory)
+    )
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))
     rec = ScenarioLog() if rec is None else rec

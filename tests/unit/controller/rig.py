@@ -44,7 +44,11 @@ class Rig:
     ) -> None:
         settings = {"mode": "track", "no_laser": False, **controller}
         self.config = Config(
-            controller=ControllerSettings(estop_file=str(tmp_path / "estop.json"), **settings),
+            controller=ControllerSettings(
+                estop_file=str(tmp_path / "estop.json"),
+                depth_memory_file=str(tmp_path / "depth-memory.npz"),
+                **settings,
+            ),
             cameras=tuple((cameras or {}).items()),
         )
         self.clock = clock or FakeClock()

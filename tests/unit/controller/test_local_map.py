@@ -17,6 +17,7 @@ from services.controller.geometry import sector_clearance
 from services.controller.local_map import (
     FREE,
     HAZARD,
+    UNKNOWN,
     UNSEEN,
     LocalMap,
     MapParams,
@@ -127,3 +128,19 @@ def test_odometry_integrates_the_commands() -> None:
     # An arc: a quarter circle of radius 1.
     x, y, th = advance((0.0, 0.0, 0.0), 1.0, 1.0, math.pi / 2)
     assert (x, y, th) == pytest.approx((1.0, 1.0, math.pi / 2))
+
+
+def test_a_map_written_and_taken_back_keeps_its_hazards_not_its_floor() -> None:
+    m = LocalMap(MapParams())
+    look(m, 0.0, box(2.5, 0.4))
+    data = m.dump((0.5, 0.0, 0.1), 123)
+    again = LocalMap(MapParams())
+    pose, kept, saved_ns = again.restore(data)
+    assert pose == (0.5, 0.0, 0.1) and saved_ns == 123
+    assert kept == np.count_nonzero(m.grid == HAZARD) + np.count_nonzero(m.grid == UNKNOWN)
+    assert (again.grid == HAZARD).sum() == (m.grid == HAZARD).sum()
+    assert not (again.grid == FREE).any()  # seen floor is to be seen again
+    with pytest.raises(ValueError, match="not a saved depth map"):
+        again.restore(b"garbage")
+    with pytest.raises(ValueError, match=r"map of 0\.05 m cells, not \(160, 160\) of 0\.1 m"):
+        LocalMap(MapParams(resolution_m=0.1, size_m=16.0)).restore(data)

@@ -117,3 +117,65 @@ def test_garbage_on_a_depth_key_is_counted_and_dropped(rig: Rig) -> None:
     rig.detections()
     twist, status = rig.tick()
     assert status.state == "blocked" and twist.linear[0] == 0.0
+
+
+def _seen_then_gone(rig: Rig) -> None:
+    """An obstacle 0.4 m ahead, then out of view (its place in the blind zone): remembered."""
+    put_depth(rig, at_bearing(0.4, 0.0))
+    rig.detections()
+    rig.tick()
+    rig.clock.advance(0.05)
+    put_depth(rig)
+    rig.detections()
+    assert rig.tick()[1].reason.endswith("(remembered)")
+
+
+def test_a_restarted_controller_takes_its_depth_map_back(tmp_path: Path) -> None:
+    # A crash: the next controller must not forget what slipped into the blind zone.
+    first = Rig(tmp_path, announced=False, obstacle_sources=("depth",))
+    first.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
+    try:
+        _seen_then_gone(first)
+        assert first.loop.depth is not None
+        first.loop.depth.save_memory(force=True)
+        assert first.counters.get("depth_memory_errors", 0) == 0
+    finally:
+        first.close()
+    clock = first.clock
+    clock.advance(2.0)
+    second = Rig(tmp_path, clock=clock, announced=False, obstacle_sources=("depth",))
+    second.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
+    try:
+        put_depth(second)  # only the floor beyond the blind zone: nothing new seen
+        second.detections()
+        twist, status = second.tick()
+        assert twist.linear[0] == 0.0 and status.reason.endswith("(remembered)"), status
+    finally:
+        second.close()
+
+
+def test_a_depth_map_too_old_or_broken_is_not_taken_back(tmp_path: Path) -> None:
+    first = Rig(tmp_path, announced=False, obstacle_sources=("depth",))
+    first.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
+    try:
+        _seen_then_gone(first)
+        assert first.loop.depth is not None
+        first.loop.depth.save_memory(force=True)
+    finally:
+        first.close()
+    clock = first.clock
+    clock.advance(first.config.controller.depth_memory_max_age_s + 1.0)
+    for broken in (False, True):
+        if broken:
+            (tmp_path / "depth-memory.npz").write_bytes(b"not a map")
+        later = Rig(tmp_path, clock=clock, announced=False, obstacle_sources=("depth",))
+        later.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
+        try:
+            put_depth(later)
+            later.detections()
+            twist, status = later.tick()
+            # Nothing remembered: the floor not yet seen ahead makes it creep.
+            assert twist.linear[0] > 0 and "creeping" in status.reason, status
+            assert later.counters.get("depth_memory_errors", 0) == (1 if broken else 0)
+        finally:
+            later.close()
