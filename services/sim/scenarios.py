@@ -159,6 +159,11 @@ def hazard(
         name, description, build, HAZARD_DURATION_S, must_reach=False,
         settle_s=SETTLE_S, settle_from_s=settle_from_s,
         controller={"distance_source": "box"},
+        # alice 6.5 m away is still about 75 px tall at 320; the hazard is the depth
+        # camera's, not the detector's, and half the detector's work leaves the CPU to the
+        # rest (two scenarios run at once in the test suite).
+        detector={"imgsz": 320},
+        why="the hazard is the depth camera's to see; the person is found at 320 as well",
     )  # fmt: skip
 
 
