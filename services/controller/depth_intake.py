@@ -42,6 +42,7 @@ from common.node import Tally
 from perception import Intrinsics, Mounting
 from services.controller import contract
 from services.controller.contract import ControllerSettings
+from services.controller.depth_observe import observe
 from services.controller.depth_scan import (
     DepthCamera,
     DepthObstacles,
@@ -50,7 +51,6 @@ from services.controller.depth_scan import (
     blind_zone,
     depth_obstacles,
     implausible,
-    observe,
     sample_frame,
     usable,
 )

@@ -40,10 +40,9 @@ import numpy.typing as npt
 
 from common.messages import Header, LaserScan
 from common.unicycle import Pose, advance
-from services.controller.depth_scan import Observation
+from services.controller.depth_observe import Observation
 
 UNSEEN, FREE, UNKNOWN, HAZARD = 0, 1, 2, 3
-
 
 
 @dataclass(frozen=True, slots=True)
@@ -144,9 +143,9 @@ class LocalMap:
         fp = np.arange(-params.footprint_half_m, params.footprint_half_m + 1e-9, res / 2)
         self._footprint = np.stack(np.meshgrid(fp, fp, indexing="ij"), axis=-1).reshape(-1, 2)
 
-    def _cells(self, odom: npt.NDArray[np.float64]) -> tuple[
-        npt.NDArray[np.intp], npt.NDArray[np.intp], npt.NDArray[np.bool_]
-    ]:
+    def _cells(
+        self, odom: npt.NDArray[np.float64]
+    ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp], npt.NDArray[np.bool_]]:
         """Row (x) and column (y) indices of odometry points, and which are on the grid."""
         ij = np.floor((odom - self.origin) / self.p.resolution_m).astype(np.intp)
         inside: npt.NDArray[np.bool_] = np.asarray(((ij >= 0) & (ij < self.n)).all(axis=1))
@@ -213,8 +212,12 @@ class LocalMap:
                 f"a {grid.shape} map of {res:g} m cells, not {self.grid.shape} of "
                 f"{self.p.resolution_m:g} m (depth_memory_size_m or resolution changed)"
             )
-        if origin.shape != (2,) or pose.shape != (3,) or not (
-            np.isfinite(origin).all() and np.isfinite(pose).all() and (grid <= HAZARD).all()
+        if (
+            origin.shape != (2,)
+            or pose.shape != (3,)
+            or not (
+                np.isfinite(origin).all() and np.isfinite(pose).all() and (grid <= HAZARD).all()
+            )
         ):
             raise ValueError("a saved depth map with a bad origin, pose or cell")
         self.grid = np.where(grid == FREE, UNSEEN, grid).astype(np.uint8)

@@ -14,14 +14,8 @@ import pytest
 
 from common.messages import DepthFrame, Header
 from perception.depth import Mounting
-from services.controller.depth_scan import (
-    Observation,
-    ScanParams,
-    observe,
-    sample_frame,
-    sample_metres,
-    virtual_scan,
-)
+from services.controller.depth_observe import Observation, observe, virtual_scan
+from services.controller.depth_scan import ScanParams, sample_frame, sample_metres
 from services.controller.geometry import sector_clearance
 from tests.unit.controller.depth_scenes import INTR, Face, at_bearing, scene
 

@@ -22,14 +22,13 @@ from common.messages import DepthFrame, Header, LaserScan
 from perception.depth import Intrinsics, Mounting
 from services.controller import depth_intake
 from services.controller.contract import ControllerSettings
+from services.controller.depth_observe import Observation, virtual_scan
 from services.controller.depth_scan import (
     MIN_NEAR_M,
     DepthCamera,
-    Observation,
     ScanParams,
     blind_zone,
     depth_obstacles,
-    virtual_scan,
 )
 from services.controller.geometry import sector_clearance
 from tests.polling import wait_for

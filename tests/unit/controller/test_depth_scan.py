@@ -13,6 +13,7 @@ import pytest
 
 from common.messages import Header, LaserScan
 from perception.depth import DISTANCE, Mounting
+from services.controller.depth_observe import virtual_scan
 from services.controller.depth_scan import (
     MIN_NEAR_M,
     DepthCamera,
@@ -21,7 +22,6 @@ from services.controller.depth_scan import (
     looks_ahead,
     merge,
     usable,
-    virtual_scan,
 )
 from services.controller.geometry import DISTANCE_COLUMN, sector_clearance
 from tests.unit.controller.depth_scenes import HFOV, INTR, Face, at_bearing, scene

@@ -12,7 +12,8 @@ import pytest
 from common.messages import Header, LaserScan
 from common.unicycle import advance
 from perception.depth import Mounting
-from services.controller.depth_scan import ScanParams, observe, sample_metres
+from services.controller.depth_observe import observe
+from services.controller.depth_scan import ScanParams, sample_metres
 from services.controller.geometry import sector_clearance
 from services.controller.local_map import (
     FREE,
