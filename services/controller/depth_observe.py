@@ -46,24 +46,11 @@ def virtual_scan(
     range_min_m: float = 0.0,
 ) -> LaserScan:
     """The virtual scan of ``depth`` ((h, w) metres, NaN = no reading, ``-inf`` = too close)
-    seen through ``intr``: :func:`scan_samples` of its samples."""
+    seen through ``intr``: :func:`observe`'s scan of its samples."""
     h, w = depth.shape
     if (w, h) != (intr.width, intr.height):
         raise ValueError(f"a {w}x{h} depth image with intrinsics for {intr.width}x{intr.height}")
     samples = sample_metres(depth, params.stride_px)
-    return scan_samples(samples, intr, mount, params, header, range_max_m, range_min_m)
-
-
-def scan_samples(
-    samples: Samples,
-    intr: Intrinsics,
-    mount: Mounting,
-    params: ScanParams,
-    header: Header,
-    range_max_m: float = 0.0,
-    range_min_m: float = 0.0,
-) -> LaserScan:
-    """The virtual scan of a depth image's ``samples``: :func:`observe`'s ``scan``."""
     return observe(samples, intr, mount, params, header, range_max_m, range_min_m).scan
 
 
@@ -237,8 +224,12 @@ def observe(
     # Except beside a thing that fills the bottom of the image: a stereo camera reads nothing
     # in a band along a near object's edge (what one eye sees and the other does not); there
     # the hole is taken as that object's edge, at its range.
-    band = _edge_band(~has_floor & (end == RUN_SOLID), rng[np.minimum(at, len(v) - 1), cols],
-                      math.ceil(params.edge_band_px / params.stride_px))  # fmt: skip
+    # A column filled from the bottom by a thing is clear up to it (its own points may fall in
+    # other rays than the column's, for a camera off the base's centre).
+    filled = ~has_floor & (end == RUN_SOLID)
+    first = rng[np.minimum(at, len(v) - 1), cols]
+    np.fmin.at(ranges, looks[filled], first[filled])
+    band = _edge_band(filled, first, math.ceil(params.edge_band_px / params.stride_px))
     edged = blind & np.isfinite(band)
     np.fmin.at(ranges, looks[edged], band[edged])
     blind &= ~edged

@@ -133,3 +133,12 @@ def test_a_hole_along_a_near_things_edge_is_that_things_edge() -> None:
     dark = scene(HEIGHT, Face(1.0, -0.3, 0.3, 0.0, 0.5))
     dark[dark == np.float32(1.0)] = np.nan
     assert ahead(dark) == pytest.approx(RANGE_MIN, abs=0.01)
+
+
+def test_a_thing_filling_the_bottom_reads_at_its_range_from_a_camera_ahead_of_the_base() -> None:
+    # The camera 0.2 m ahead of the base's centre, a person-like face 1 m ahead of it filling
+    # the bottom of the image: the ray reads 1.2 m from the base, not the minimum range.
+    mount = Mounting(x_m=0.2, height_m=HEIGHT)
+    depth = scene(HEIGHT, Face(1.0, -0.3, 0.3, 0.0, 1.7))
+    s = virtual_scan(depth, INTR, mount, PARAMS, HEADER, 10.0, range_min_m=RANGE_MIN)
+    assert sector_clearance(s, SECTOR, HALF_WIDTH) == pytest.approx(1.2, abs=0.05)
