@@ -104,6 +104,7 @@ class DepthIntake:
         self.memory_save_s = s.depth_memory_save_s
         self.memory_coast_s = s.depth_memory_coast_s
         self._saved_at = -math.inf  # monotonic s of the last write
+        self._unsaved_hazard = False  # a hazard or unknown cell new since the last write
         if memory_path is not None:
             self._restore(memory_path, s.depth_memory_max_age_s)
         self.plausible = Plausible(
@@ -192,7 +193,9 @@ class DepthIntake:
         while not stop.is_set():
             try:
                 self.handle_waiting(poll_s)
-                self.save_memory()
+                # A new hazard is written at once, not at the next period: a crash in
+                # between would forget it.
+                self.save_memory(force=self._unsaved_hazard)
             except Exception as exc:
                 self.tally.reject(
                     contract.DEPTH_ERRORS, f"making a virtual scan failed: {exc!r:.200}"
@@ -276,7 +279,8 @@ class DepthIntake:
             captured = self.clock.mono_s() - capture_age_s(msg.header, self.clock.now(), BOOT_ID)
             pose = self.odometry.pose_at(captured)
             with self._map_lock:
-                self.map.observe(seen, pose)
+                if self.map.observe(seen, pose):
+                    self._unsaved_hazard = True  # written at once: see serve
         if tell:
             floor_m, below_m = blind_zone(intr, mount, self.safety_distance_m)
             tally.log.info(
@@ -380,6 +384,7 @@ class DepthIntake:
         pose = self.odometry.coasted(mono, self.memory_coast_s)
         with self._map_lock:
             data = self.map.dump(pose, self.clock.wall_ns())
+            self._unsaved_hazard = False
         try:
             self.memory_path.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_bytes(self.memory_path, data)

@@ -174,9 +174,11 @@ class LocalMap:
         i, j, inside = self._cells(_to_odom(pose, pts))
         self.grid[i[inside], j[inside]] = state
 
-    def observe(self, seen: Observation, pose: Pose) -> None:
+    def observe(self, seen: Observation, pose: Pose) -> bool:
         """Write a frame captured at ``pose``: its floor, then its unknown stretches, then
-        its hazards (each over the one before)."""
+        its hazards (each over the one before). Whether a cell became a hazard or unknown
+        that was not one before (what a crash must not lose)."""
+        before = self.grid >= UNKNOWN
         self._mark(pose, seen.floor, FREE)
         if len(seen.unknown):
             i, j, inside = self._cells(_to_odom(pose, seen.unknown))
@@ -184,6 +186,7 @@ class LocalMap:
             keep = self.grid[i, j] != HAZARD
             self.grid[i[keep], j[keep]] = UNKNOWN
         self._mark(pose, seen.hazards, HAZARD)
+        return bool(((self.grid >= UNKNOWN) & ~before).any())
 
     def dump(self, pose: Pose, saved_ns: int) -> bytes:
         """The map and the robot's ``pose`` in it at wall-clock ``saved_ns``, as bytes for

@@ -18,6 +18,15 @@ from tests.integration.conftest import REPO
 pytestmark = pytest.mark.integration
 
 
+def _as_in_a_terminal() -> None:
+    """In the child before it runs: Ctrl-C and SIGTERM as a program in a terminal's foreground
+    has them. A test run started in the background by a non-interactive shell inherits
+    SIGINT ignored (POSIX shells do so for background jobs), and so would fetch-model and npm:
+    the Ctrl-C would be lost and the test would fail for its harness's sake."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _interrupt_at(
     models: Path, line_part: str, sig: int, *, group: bool, env: dict[str, str] | None = None
 ) -> tuple[int, str]:
@@ -26,7 +35,7 @@ def _interrupt_at(
     proc = subprocess.Popen(
         [sys.executable, "-m", "tools.detector", "fetch-model", "--models-dir", str(models)],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, process_group=0,
-        env=env,
+        env=env, preexec_fn=_as_in_a_terminal,
     )  # fmt: skip
     assert proc.stderr is not None
     seen = ""
