@@ -41,6 +41,21 @@ def statuses(raw: list[bytes], start: int = 0) -> list[ControllerStatus]:
     return [ControllerStatus.decode(s) for s in list(raw)[start:]]
 
 
+def depth_robot(make_stack) -> tuple[Stack, list[bytes], list[bytes]]:  # type: ignore[no-untyped-def]
+    """A controller alone in track mode whose obstacles are the depth camera's, the camera
+    announced with depth by the test's session (which stands in for the camera, the detector
+    and a robot with no laser); its commands and statuses as they come."""
+    stack: Stack = make_stack(
+        supervisor={"services": ["controller"]},
+        controller={"mode": "track", "no_laser": False, "obstacle_sources": ["depth"]},
+    )
+    stack.wait_ready({"controller"})
+    stack.announce(depth=True, mount_height_m=HEIGHT, hfov_deg=60.0)
+    _, cmds = stack.subscribe(stack.keys.cmd_vel())
+    _, status_raw = stack.subscribe(stack.keys.controller_status())
+    return stack, cmds, status_raw
+
+
 def test_without_a_laser_the_depth_camera_shows_the_way_or_nothing_moves_forward(
     make_stack,
 ) -> None:  # type: ignore[no-untyped-def]
@@ -146,14 +161,7 @@ UNSEEN = {
 @pytest.mark.parametrize("case", sorted(UNSEEN))
 def test_what_the_depth_camera_cannot_see_is_not_clear(make_stack, case: str) -> None:  # type: ignore[no-untyped-def]
     # Issue 38: each of these images read clear before (the robot drove on at 0.05..0.3 m/s).
-    stack: Stack = make_stack(
-        supervisor={"services": ["controller"]},
-        controller={"mode": "track", "no_laser": False, "obstacle_sources": ["depth"]},
-    )
-    stack.wait_ready({"controller"})
-    stack.announce(depth=True, mount_height_m=HEIGHT, hfov_deg=60.0)
-    _, cmds = stack.subscribe(stack.keys.cmd_vel())
-    _, status_raw = stack.subscribe(stack.keys.controller_status())
+    stack, cmds, status_raw = depth_robot(make_stack)
     front, depth = stack.keys.detections("front"), stack.keys.depth("front")
     image = scene(HEIGHT, intr=INTR)
 
@@ -181,14 +189,7 @@ def test_what_the_depth_camera_cannot_see_is_not_clear(make_stack, case: str) ->
 def test_a_controller_restarted_after_a_crash_remembers_what_it_saw(make_stack) -> None:  # type: ignore[no-untyped-def]
     # A stop is not lost by a crash: what slipped into the blind zone stays an obstacle for
     # the controller the supervisor starts in place of a killed one (its depth map on disk).
-    stack: Stack = make_stack(
-        supervisor={"services": ["controller"]},
-        controller={"mode": "track", "no_laser": False, "obstacle_sources": ["depth"]},
-    )
-    stack.wait_ready({"controller"})
-    stack.announce(depth=True, mount_height_m=HEIGHT, hfov_deg=60.0)
-    _, cmds = stack.subscribe(stack.keys.cmd_vel())
-    _, status_raw = stack.subscribe(stack.keys.controller_status())
+    stack, cmds, status_raw = depth_robot(make_stack)
     front, depth = stack.keys.detections("front"), stack.keys.depth("front")
     image = scene(HEIGHT, at_bearing(0.4, 0.0), intr=INTR)  # within the safety distance
 
