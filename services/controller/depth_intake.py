@@ -276,7 +276,7 @@ class DepthIntake:
                 self._told[camera] = announced
         if newer:
             # Remembered where the robot stood when the frame was captured.
-            captured = self.clock.mono_s() - capture_age_s(msg.header, self.clock.now(), BOOT_ID)
+            captured = now.mono_ns / 1e9 - capture_age_s(msg.header, now, BOOT_ID)
             pose = self.odometry.pose_at(captured)
             with self._map_lock:
                 if self.map.observe(seen, pose):

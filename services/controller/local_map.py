@@ -121,8 +121,6 @@ class Remembered:
 
     scan: LaserScan
     known_m: float
-    hazards: int
-    unknown: int
 
 
 class LocalMap:
@@ -259,5 +257,4 @@ class LocalMap:
             range_max=self.p.size_m,
             ranges=ranges.astype(np.float32),
         )
-        hazards = int(np.count_nonzero(self.grid[i, j] == HAZARD))
-        return Remembered(scan, max(known, 0.0), hazards, len(i) - hazards)
+        return Remembered(scan, max(known, 0.0))
