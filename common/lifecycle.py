@@ -86,9 +86,22 @@ class StopEvent(threading.Event):
     timeout that way and be killed. Waiting in short slices bounds that delay.
     """
 
+    def __init__(self) -> None:
+        super().__init__()
+        # Set by the signal handler itself (a plain assignment takes no lock): the stop counts
+        # from the handler's run, not from the relay thread's, which a loaded machine may
+        # schedule late (a worker resumed by the watchdog's SIGCONT rejoined the pool in
+        # that gap, issue 39).
+        self.asked = False
+
+    def is_set(self) -> bool:
+        return self.asked or super().is_set()
+
     def wait(self, timeout: float | None = None) -> bool:
         deadline = None if timeout is None else mono_s() + timeout
         while True:
+            if self.asked:
+                return True
             left = SIGNAL_POLL_S if deadline is None else deadline - mono_s()
             if left <= 0:
                 return self.is_set()
@@ -126,6 +139,7 @@ def stop_event() -> StopEvent:
     def _handler(signum: int, _frame: object) -> None:
         if supervisor_pid is not None and os.getppid() != supervisor_pid:
             _leave_soon(supervisor_pid)
+        event.asked = True
         os.write(wake_write, b"\0")
 
     signal.signal(signal.SIGINT, _handler)

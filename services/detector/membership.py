@@ -118,6 +118,7 @@ class PoolMember:
         max_batch: int = 1,
         on_gained: OnGained | None = None,
         on_lost: OnLost | None = None,
+        stopping: Callable[[], bool] = lambda: False,
     ) -> None:
         config = handlers.config
         s = config.detector
@@ -132,6 +133,9 @@ class PoolMember:
         self._on_lost = on_lost
         self._stall_s = s.pool_stall_s
         self._closed = threading.Event()
+        # The process is asked to stop (its stop event): a worker the watchdog found hung and
+        # stopped must never rejoin the pool on its way out (issue 39).
+        self._stopping = stopping
         self._heard = threading.Event()  # an announcement came or went
         self._stall_watch: threading.Thread | None = None
         self.announcement = WorkerAnnouncement(
@@ -281,9 +285,11 @@ class PoolMember:
         with self._token_lock:
             with self._lock:
                 self._last_beat = self.clock.mono_s()
-                back = self._resigned and not self._closed.is_set()
-                self._resigned = False
+                # Asked to stop (the watchdog's SIGTERM and SIGCONT to a worker frozen for
+                # too long): it stays out of the pool until it exits.
+                back = self._resigned and not self._closed.is_set() and not self._stopping()
                 if back:
+                    self._resigned = False
                     self._dirty = True
             if back:
                 keys = self.pool_keys
@@ -301,7 +307,10 @@ class PoolMember:
                     not self._resigned
                     and not self._closed.is_set()
                     and len(self.view.members) > 1  # alone, there is nobody to hand to
-                    and self.clock.mono_s() - self._last_beat > self._stall_s
+                    and (
+                        self.clock.mono_s() - self._last_beat > self._stall_s
+                        or self._stopping()  # on its way out: hand over now, not at close()
+                    )
                 )
                 if stalled:
                     self._resigned = True

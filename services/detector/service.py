@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 import logging
 import threading
+from collections.abc import Callable
+from typing import ParamSpec, TypeVar
 
 import numpy as np
 
@@ -28,6 +30,9 @@ from services.detector.membership import PoolMember
 from services.detector.pool import PoolCamera
 from services.detector.rounds import CameraOutput, Rounds, camera_outputs, heed_controllers
 from stack.config import Config
+
+P = ParamSpec("P")
+R = TypeVar("R")
 
 _WAIT_S = 0.2  # how often the idle loop looks at the stop flag (and the pool's membership)
 
@@ -52,9 +57,36 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
     principal. Its cameras are those announced on the bus that the pool gives it
     (services/detector/membership.py); each one's detections go on its own robot's keys."""
     s = config.detector
-    with Node(worker, config, counters_period_s=s.counters_period_s) as node:
-        served = served_batch(config)
-        detector, note = open_detector(s, served)
+    try:
+        with Node(worker, config, counters_period_s=s.counters_period_s) as node:
+            return _serve(config, stop, worker, node)
+    except _StoppedEarly:
+        logging.getLogger(worker).info("stopped while starting")
+        return 0
+
+
+class _StoppedEarly(Exception):
+    """A stop asked for while the worker was still measuring (its batch, its capacity)."""
+
+
+def _until_stopped(stop: threading.Event, run: Callable[P, R]) -> Callable[P, R]:
+    """``run``, ended with _StoppedEarly at its next call once ``stop`` is set: start-up's
+    timed runs (batch sizes, capacity) take many seconds on a busy CPU, and a stop must not
+    wait for them (the supervisor kills what has not ended within ``stop_timeout_s``)."""
+
+    def call(*args: P.args, **kwargs: P.kwargs) -> R:
+        if stop.is_set():
+            raise _StoppedEarly
+        return run(*args, **kwargs)
+
+    return call
+
+
+def _serve(config: Config, stop: threading.Event, worker: str, node: Node) -> int:
+    s = config.detector
+    served = served_batch(config)
+    detector, note = open_detector(s, served)
+    try:
         b = detector.backend
         node.log.info(
             "model %s on %s (%s, %s, input %d)%s",
@@ -66,39 +98,53 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
             f": {note}" if note else "",
         )
         per_round = round_size(detector, served, node.log)
-        detector, note, per_round = settle_batch(detector, note, per_round, s, node.log)
-        b = detector.backend  # the one that runs (settle_batch may have opened it again)
-        handlers = DetectorHandlers(config, node, node.clock, frame_keys={})
-        # Attention when short of capacity (services/detector/attention.py): the rounds'
-        # order, fed by the controller's status and each camera's detections.
-        attention = Attention(node.clock, s.attention_floor_hz, s.attention_hold_s, s.attention)
-        status_subs = heed_controllers(node, config, attention)  # each robot's controller
-        info = json.dumps(
-            DetectorInfo(
-                model=detector.model_path.name,
-                classes=list(detector.names),
-                backend=b.name,
-                device=b.device,
-                precision=b.precision,
-                variant=variant_of(detector),
-                note=note,
-            )
+        detector, note, per_round = settle_batch(detector, note, per_round, s, node.log, stop)
+        _loop(config, stop, worker, node, detector, note, per_round)
+    finally:
+        detector.close()
+    return 0
+
+
+def _loop(
+    config: Config,
+    stop: threading.Event,
+    worker: str,
+    node: Node,
+    detector: Detector,
+    note: str,
+    per_round: int,
+) -> None:
+    s = config.detector
+    b = detector.backend  # the one that runs (settle_batch may have opened it again)
+    handlers = DetectorHandlers(config, node, node.clock, frame_keys={})
+    # Attention when short of capacity (services/detector/attention.py): the rounds'
+    # order, fed by the controller's status and each camera's detections.
+    attention = Attention(node.clock, s.attention_floor_hz, s.attention_hold_s, s.attention)
+    status_subs = heed_controllers(node, config, attention)  # each robot's controller
+    info = json.dumps(
+        DetectorInfo(
+            model=detector.model_path.name,
+            classes=list(detector.names),
+            backend=b.name,
+            device=b.device,
+            precision=b.precision,
+            variant=variant_of(detector),
+            note=note,
         )
-        cameras = ServedCameras(config, node, handlers, info)
-        rounds = Rounds(
-            config, node, detector, cameras.outputs, node.clock, attention, handlers.depth
-        )
+    )
+    cameras = ServedCameras(config, node, handlers, info)
+    rounds = Rounds(config, node, detector, cameras.outputs, node.clock, attention, handlers.depth)
+    try:
         # Warm the backend up before announcing readiness: the first run allocates, and each
         # batch size may (a CUDA graph, an OpenVINO shape) on its first run.
         warm = np.full((480, 640, 3), 114, np.uint8)
+        detect = _until_stopped(stop, detector.detect_batch)
         for size in sorted({1, per_round}):
-            detector.detect_batch([warm] * size)
+            detect([warm] * size)
         measured = 0.0
         if s.capacity_hz == 0:
             measured = measure_capacity(
-                lambda: len(detector.detect_batch([warm] * per_round)),
-                s.batch_probe_runs,
-                node.clock,
+                lambda: len(detect([warm] * per_round)), s.batch_probe_runs, node.clock
             )
         capacity = Capacity(measured, s, node.clock.mono_s())
         node.log.info(
@@ -116,11 +162,12 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
             max_batch=per_round,
             on_gained=cameras.gained,
             on_lost=cameras.lost,
+            stopping=stop.is_set,
         )
         pool.join()
-        pool.start_stall_watch()
-        node.ready()
         try:
+            pool.start_stall_watch()
+            node.ready()
             while not stop.is_set():
                 pool.beat()
                 pool.settle()
@@ -134,12 +181,11 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
                         node.counters.get(BATCHED_FRAMES) - before, node.clock.mono_s() - start
                     )
         finally:
-            for sub in status_subs:
-                sub.undeclare()
             pool.close()
-            cameras.close()
-            detector.close()
-    return 0
+    finally:
+        for sub in status_subs:
+            sub.undeclare()
+        cameras.close()
 
 
 class ServedCameras:
@@ -176,7 +222,12 @@ class ServedCameras:
 
 
 def settle_batch(
-    detector: Detector, note: str, per_round: int, s: DetectorSettings, log: logging.Logger
+    detector: Detector,
+    note: str,
+    per_round: int,
+    s: DetectorSettings,
+    log: logging.Logger,
+    stop: threading.Event | None = None,
 ) -> tuple[Detector, str, int]:
     """With ``batch_choice`` "measured" and rounds of several frames on a model of dynamic
     batch: time the batch sizes and keep the one that serves frames fastest
@@ -184,7 +235,8 @@ def settle_batch(
     the fastest batch-1 session, and the buffers the large batches took given back."""
     if per_round == 1 or s.batch_choice != "measured" or detector.info.batch_size is not None:
         return detector, note, per_round
-    choice = measure(detector.detect_batch, per_round, s.batch_probe_runs, s.batch_min_gain)
+    detect = detector.detect_batch if stop is None else _until_stopped(stop, detector.detect_batch)
+    choice = measure(detect, per_round, s.batch_probe_runs, s.batch_min_gain)
     log.info("%s", choice.describe())
     if choice.size == 1:
         detector.close()

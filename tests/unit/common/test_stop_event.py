@@ -66,3 +66,23 @@ def test_a_signal_while_the_main_thread_holds_the_events_lock_is_not_lost() -> N
         raise AssertionError("the stop signal deadlocked the process") from None
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "True"
+
+
+def test_the_stop_counts_from_the_handler_not_from_the_relay_thread() -> None:
+    # A worker frozen by SIGSTOP and sent SIGTERM and SIGCONT by the watchdog runs its loop
+    # again at once; the relay thread that sets the event may come seconds later on a busy
+    # machine, and meanwhile the loop rejoined the pool (issue 39). Here the relay thread cannot
+    # set the event at all (its lock is held): is_set() and wait() must still see the stop.
+    code = (
+        "import os, signal\n"
+        "from common.lifecycle import stop_event\n"
+        "stop = stop_event()\n"
+        "with stop._cond:\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "    for _ in range(10000):\n"
+        "        pass\n"
+        "    print(stop.is_set(), stop.wait(0.5))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True True"

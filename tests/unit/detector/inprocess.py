@@ -6,6 +6,7 @@ process does."""
 
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 from functools import partial
 
@@ -64,11 +65,14 @@ class Worker:
         self, hub: MemoryHub, clock: FakeClock, config: Config, name: str, capacity_hz: float = 0
     ) -> None:
         self.name = name
+        self.stop = threading.Event()  # the process's stop event (common/lifecycle.py)
         self.bus: MemoryBus = hub.join(name)
         self.node = Node(name, config, bus=self.bus, clock=clock)
         self.handlers = DetectorHandlers(config, self.node, clock, frame_keys={})
         capacity = Capacity(capacity_hz or 1.0, config.detector, clock.mono_s())
-        self.pool = PoolMember(self.node, name, self.handlers, capacity=capacity)
+        self.pool = PoolMember(
+            self.node, name, self.handlers, capacity=capacity, stopping=self.stop.is_set
+        )
 
     def loop_pass(self) -> frozenset[str]:
         """What the detection loop does on each pass (beat, settle, audit); what it serves."""

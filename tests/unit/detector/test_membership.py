@@ -178,6 +178,32 @@ def test_a_stalled_worker_resigns_the_others_take_over_and_its_next_beat_brings_
     assert_each_camera_served_once([a, b], hub)
 
 
+def test_a_worker_asked_to_stop_hands_its_cameras_over_and_never_rejoins(
+    hub: MemoryHub, clock: FakeClock, config: Config
+) -> None:
+    # The watchdog found a worker frozen (SIGSTOP) and sent it SIGTERM and SIGCONT: its loop
+    # runs again on its way out, and must not take cameras back before it exits (issue 39).
+    a, b = start(hub, clock, config, "detector", "detector_2")
+    clock.advance(config.detector.pool_stall_s + 0.01)
+    assert a.pool.check_stall()
+    a.stop.set()
+    assert a.loop_pass() == frozenset()
+    assert a.pool.resigned
+    assert hub.tokens(a.node.keys.all_pool_members()) == [a.node.keys.pool_member("detector_2")]
+    assert b.loop_pass() == frozenset(CAMERAS)
+    # Asked to stop before it resigned (its loop resumed first): the stall watch hands its
+    # cameras over at its next check, however recent the loop's last pass.
+    c = Worker(hub, clock, config, "detector_3")
+    c.pool.join()
+    c.loop_pass()
+    b.loop_pass()
+    assert c.handlers.serving
+    c.stop.set()
+    assert c.pool.check_stall()
+    assert c.loop_pass() == frozenset()
+    assert b.loop_pass() == frozenset(CAMERAS)
+
+
 def test_a_settle_while_resigned_never_serves_again_until_the_next_beat(
     hub: MemoryHub, clock: FakeClock, config: Config
 ) -> None:
