@@ -6,9 +6,12 @@ import hashlib
 import os
 import secrets
 import shutil
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+from common.errors import ConfigError
 
 _CHUNK_BYTES = 1 << 20
 
@@ -52,6 +55,24 @@ def atomic_write_bytes(path: Path, payload: bytes, *, durable: bool = False) -> 
             os.fsync(fd)  # the rename itself
         finally:
             os.close(fd)
+
+
+def temp_root() -> Path:
+    """The folder the stack's and its tools' temporary files go in: ``$TMPDIR`` when it is set,
+    else the system's (``tempfile.gettempdir()``: ``/tmp`` on Linux).
+
+    A ``TMPDIR`` that is not a folder this process may write in is a ConfigError naming it:
+    Python's ``tempfile`` would fall back to ``/tmp`` without a word, and a person who set it
+    to keep a run's files (or a lock) elsewhere would not know they went there."""
+    chosen = os.environ.get("TMPDIR", "")
+    if not chosen:
+        return Path(tempfile.gettempdir())
+    path = Path(chosen)
+    if not path.is_dir():
+        raise ConfigError(f"TMPDIR={chosen} is not a folder: make it, or unset TMPDIR")
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise ConfigError(f"TMPDIR={chosen} is not writable by this user: choose another")
+    return path
 
 
 @contextmanager

@@ -9,16 +9,19 @@ from __future__ import annotations
 import fcntl
 import hashlib
 import os
-import tempfile
 from pathlib import Path
 from typing import IO
 
 from common.errors import ConfigError
+from common.files import temp_root
 
 
 def lock_path(lock_dir: str, endpoint: str, prefix: str) -> Path:
+    """The stack's lock file: in ``lock_dir`` (``supervisor.lock_dir``) when set, else in the
+    temporary folder (``$TMPDIR``, else ``/tmp``: common/files.py ``temp_root``)."""
     digest = hashlib.sha256(f"{endpoint}\n{prefix}".encode()).hexdigest()[:16]
-    return Path(lock_dir or tempfile.gettempdir()) / f"zenoh-yolo-stack-{digest}.lock"
+    folder = Path(lock_dir) if lock_dir else temp_root()
+    return folder / f"zenoh-yolo-stack-{digest}.lock"
 
 
 def acquire(lock_dir: str, endpoint: str, prefix: str) -> IO[str]:

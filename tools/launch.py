@@ -1,6 +1,12 @@
 """Running a stack from outside it: a private port, the supervisor as a child, readiness, a
 clean stop, and the PIDs of the services it started.
 
+Where a tool's private stacks listen: each on a port the system picks free, or, once a
+command's ``--port N`` has called ``use_ports``, on N, N+1, ... in the order the tool
+asks (tools/ports.py). Where their files go: a folder of the run's own in the
+temporary folder (``$TMPDIR``, else ``/tmp``: :func:`run_folder`), which also holds their
+controller's state files (:func:`private_state`), never the robot's own in ``state/``.
+
 Every tool here writes the whole config it wants (the user's, with the user's environment
 overrides already applied, plus its private port) and the supervisor reads only that file.
 
@@ -14,11 +20,12 @@ as its services stay in its own: CPU priorities rank processes within a session 
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
-import socket
 import subprocess
 import sys
+import tempfile
 import threading
 from collections.abc import Mapping
 from pathlib import Path
@@ -29,19 +36,35 @@ import zenoh
 from common.bus import Bus
 from common.clock import mono_s
 from common.errors import ConfigError, StackError
+from common.files import temp_root
 from common.keys import Keys
 from common.queries import ready_services
 from common.settings import REPO_ROOT, service_package
 from common.spawn import spawn, stop_child
 from stack.config import Config
 from stack.config_file import ENV_PREFIX, load_config, to_toml
+from tools.ports import free_port as free_port  # the port plan's home is tools/ports.py
 
 
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago (for a private Zenoh endpoint)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+def run_folder(prefix: str) -> Path:
+    """A fresh folder for one run's files (its configs, logs, state), kept after the run, in
+    the temporary folder: ``$TMPDIR``, else ``/tmp`` (common/files.py ``temp_root``)."""
+    return Path(tempfile.mkdtemp(prefix=prefix, dir=temp_root()))
+
+
+def private_state(config: Config, folder: Path, name: str = "") -> Config:
+    """``config`` with its controller's state files (the latched e-stop, the depth map) in
+    ``folder`` (named ``<name>-...`` when given): a private stack starts afresh, and never
+    reads, writes or leaves one beside a robot's own (``state/`` in the repo)."""
+    lead = f"{name}-" if name else ""
+    return dataclasses.replace(
+        config,
+        controller=dataclasses.replace(
+            config.controller,
+            estop_file=str(folder / f"{lead}estop.json"),
+            depth_memory_file=str(folder / f"{lead}depth-memory.npz"),
+        ),
+    )
 
 
 def start_supervisor(

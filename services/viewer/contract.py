@@ -68,6 +68,8 @@ class ViewerSettings:
     It listens on ``host``:``port``; loopback by default, because the view carries the camera's
     images: to watch from a laptop, tunnel the port over SSH, or set ``host = "0.0.0.0"`` on a
     network you trust (the view is read-only, but anyone who reaches it sees the camera).
+    Behind that port, the Foxglove server itself listens on 127.0.0.1:``relay_port``, which only
+    the viewer's front relays admitted clients to (0: a port the system picks free).
     Images are JPEG-encoded on the viewer's own thread at most ``image_rate_hz`` times a second
     at ``jpeg_quality``, scaled down to ``max_image_width`` pixels (0 keeps the frame's width);
     frames that arrive faster are dropped and counted. The metrics service is asked
@@ -89,6 +91,7 @@ class ViewerSettings:
 
     host: str = "127.0.0.1"
     port: int = 8766  # not 8765: foxglove_bridge's default on a ROS 2 robot
+    relay_port: int = 0  # the Foxglove server's own, on 127.0.0.1; 0: any free one
     image_rate_hz: float = 5.0
     jpeg_quality: int = 70
     max_image_width: int = 640
@@ -101,6 +104,7 @@ class ViewerSettings:
 
     BOUNDS: ClassVar[Bounds] = {
         "port": (1, 65535),
+        "relay_port": (0, 65535),  # 0 = any free port
         "image_rate_hz": (0.1, 60),
         "jpeg_quality": (1, 100),
         "max_image_width": (0, 8192),  # 0 keeps the frame's width; else at least 64
@@ -123,6 +127,11 @@ class ViewerSettings:
                     f"viewer.allowed_origins: {origin!r} is not an origin "
                     "(scheme://host[:port]; wildcards are not accepted)"
                 )
+        if self.relay_port == self.port:
+            raise ConfigError(
+                f"viewer.relay_port must differ from viewer.port ({self.port}): the front "
+                "listens on one and relays to the other (0: any free port)"
+            )
         if self.max_image_width != 0 and self.max_image_width < 64:
             raise ConfigError(
                 f"viewer.max_image_width must be 0 (keep) or 64..8192, got {self.max_image_width}"

@@ -46,11 +46,18 @@ from stack.config import Config
 SERVER_NAME = "zenoh-yolo-stack"
 
 
-def start_server(context: foxglove.Context) -> WebSocketServer:
-    """The Foxglove server, on a private loopback port that only the front relays to."""
+def start_server(context: foxglove.Context, port: int = 0) -> WebSocketServer:
+    """The Foxglove server, on a private loopback port that only the front relays to:
+    ``port`` (``viewer.relay_port``), or one the system picks free (0)."""
     try:
-        return foxglove.start_server(name=SERVER_NAME, host="127.0.0.1", port=0, context=context)
+        return foxglove.start_server(name=SERVER_NAME, host="127.0.0.1", port=port, context=context)
     except RuntimeError as exc:  # the SDK's error for an address it cannot bind
+        if port:
+            raise ConfigError(
+                f"viewer.relay_port: cannot start the Foxglove server on 127.0.0.1:{port} "
+                f"({exc}; {holder_words(port)}): set viewer.relay_port to a free port, or 0 "
+                "for any"
+            ) from exc
         raise ConfigError(f"viewer: cannot start the Foxglove server ({exc})") from exc
 
 
@@ -309,7 +316,7 @@ def run(config: Config, stop: threading.Event) -> int:
     context = foxglove.Context()
     channels = Channels(context, list(config.all_cameras))
     with Node("viewer", config) as node:
-        server = start_server(context)
+        server = start_server(context, config.viewer.relay_port)
         front = start_front(config, server.port)
         viewer = Viewer(node, channels, config, node.subscribe, clock=node.clock)
         keys = node.keys

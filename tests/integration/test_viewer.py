@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import websockets
 
+from common.ports import holders
 from services.viewer import channels as ch
 from tests.foxglove_client import SUBPROTOCOL, decode_channel_message, split_message_frame
 from tests.integration.conftest import Stack, wait_for
@@ -73,10 +74,13 @@ async def _watch(port: int, deadline: float) -> dict[str, Any]:
 
 
 def test_foxglove_client_sees_the_camera_and_a_person(make_stack) -> None:  # type: ignore[no-untyped-def]
-    port = free_port()
+    port, relay = free_port(), free_port()
+    while relay == port:  # two asks a moment apart may be handed the same free port
+        relay = free_port()
     stack: Stack = make_stack(
         supervisor={"services": SERVICES},
-        viewer={"port": port, "image_rate_hz": 10.0},
+        # The Foxglove server behind the front on the relay port the config names.
+        viewer={"port": port, "relay_port": relay, "image_rate_hz": 10.0},
         sim={"wait_for": ["detector", "controller"]},
         controller={"mode": "follow"},  # as the default stack: it locks onto the person
     )
@@ -88,6 +92,7 @@ def test_foxglove_client_sees_the_camera_and_a_person(make_stack) -> None:  # ty
     except TimeoutError:
         pytest.fail(f"no person seen through the live view in {WATCH_S:.0f} s:\n{stack.log()}")
     assert got["server"] == "zenoh-yolo-stack"
+    assert any("services.viewer" in command for _, command in holders(relay)), holders(relay)
     adv = got["advertised"]
     assert adv[ch.IMAGE]["schemaName"] == "foxglove.CompressedImage"
     assert adv[ch.ANNOTATIONS]["schemaName"] == "foxglove.ImageAnnotations"

@@ -23,12 +23,14 @@ from collections.abc import Callable
 
 from common.cli import Command, options_from, service_main
 from common.lifecycle import run_main, setup_logging, stop_event
+from tools.ports import add_port, use_ports
 
 
 def _recorder_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", help="the stack to run (default deploy/stack.toml)")
     p.add_argument("--rounds", type=int, default=3, help="phases of each condition (default 3)")
     p.add_argument("--phase", type=float, default=20.0, help="seconds per phase (default 20)")
+    add_port(p)
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
@@ -37,17 +39,22 @@ def recorder(args: argparse.Namespace) -> int:
     logging.getLogger().setLevel(logging.WARNING)
     from tools.benchmarks import recorder as bench
 
+    use_ports(args.port)
+
     return bench.main(args.config, args.rounds, args.phase, args.json, stop)
 
 
 def _ros2_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=200, help="messages per path (default 200)")
+    add_port(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def ros2(args: argparse.Namespace) -> int:
     setup_logging("ros2-bench", "WARNING")
     from tools.benchmarks import ros2 as bench
+
+    use_ports(args.port)
 
     return bench.main(args.runs, args.json)
 
@@ -105,6 +112,7 @@ def _scale_arguments(p: argparse.ArgumentParser) -> None:
         help="sim: the simulator renders every camera in one process (default); processes: "
         "one camera process per camera, each with --source",
     )
+    add_port(p)
     p.add_argument("--json", action="store_true", help="print the figures as JSON")  # fmt: skip
 
 
@@ -112,6 +120,8 @@ def scale(args: argparse.Namespace) -> int:
     stop = stop_event()
     logging.getLogger().setLevel(logging.WARNING)
     from tools.benchmarks import scale as bench
+
+    use_ports(args.port)
 
     return bench.main(options_from(bench.ScaleOptions, args, as_json=args.json), stop)
 
@@ -180,6 +190,7 @@ def _pool_arguments(p: argparse.ArgumentParser) -> None:
         help="N simulated robots (2..8) on one pool of 2 workers vs one robot with as many "
         "cameras (default 0: skipped)",
     )
+    add_port(p)
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
@@ -188,6 +199,8 @@ def pool(args: argparse.Namespace) -> int:
     logging.getLogger().setLevel(logging.WARNING)
     from tools.benchmarks.pool import PoolOptions
     from tools.benchmarks.pool_runs import main as run
+
+    use_ports(args.port)
 
     return run(options_from(PoolOptions, args, as_json=args.json), stop)
 
@@ -243,6 +256,7 @@ def _attention_arguments(p: argparse.ArgumentParser) -> None:
         default=10.0,
         help="frames a second the simulator renders of each camera (default 10)",
     )
+    add_port(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -250,6 +264,8 @@ def attention(args: argparse.Namespace) -> int:
     setup_logging("attention-bench", "WARNING")
     from stack.config_file import load_config
     from tools.benchmarks.attention import main
+
+    use_ports(args.port)
 
     return main(load_config(args.config), tuple(args.scenarios), args.json, args.camera_rate)
 
@@ -261,11 +277,14 @@ def _estop_arguments(p: argparse.ArgumentParser) -> None:
         default="main",
         help="the git revision to compare with (default main; name the one before a change)",
     )
+    add_port(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def estop(args: argparse.Namespace) -> int:
     from tools.benchmarks.estop import EstopOptions, main
+
+    use_ports(args.port)
 
     return main(options_from(EstopOptions, args, as_json=args.json))
 

@@ -29,13 +29,14 @@ from typing import Any
 import zenoh
 
 from common.clock import mono_s
+from common.files import temp_root
 from common.keys import Keys
 from common.machine import machine_info
 from common.settings import REPO_ROOT, StackSettings, ZenohSettings
 from common.spawn import spawn
 from stack.config import Config
 from stack.hub import open_hub
-from tools.launch import free_port
+from tools.ports import private_endpoint
 
 #: The longest a run waits for the first put before counting it lost.
 FIRST_PUT_TIMEOUT_S = 30.0
@@ -84,13 +85,13 @@ def _summary(values: list[float]) -> dict[str, float]:
 
 
 def run(options: EstopOptions) -> dict[str, Any]:
-    with tempfile.TemporaryDirectory(prefix="estop-bench-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="estop-bench-", dir=temp_root()) as tmp:
         folder = Path(tmp)
         old = folder / "old"
         commit = _export(options.against, old)
         if not _runs_from(old):
             raise SystemExit(f"estop benchmark: {options.against} would not run from {old}")
-        endpoint, prefix = f"tcp/127.0.0.1:{free_port()}", "estopbench"
+        endpoint, prefix = private_endpoint(), "estopbench"
         config = Config(
             zenoh=ZenohSettings(endpoint=endpoint),
             stack=StackSettings(prefix=prefix),

@@ -15,6 +15,7 @@ from typing import TypeVar
 
 from common.clock import mono_s, wall_ns
 from common.errors import StackError
+from common.files import temp_root
 from common.machine import machine_info
 from common.pool_rule import camera_rates
 from stack.config import Config
@@ -188,7 +189,7 @@ def main(options: PoolOptions, stop: threading.Event) -> int:
     plan = [(n, w) for n in options.cameras for w in options.workers]
     kill_in = (min(n for n in options.cameras if n >= 2), 2) if options.kills else None
     started = mono_s()
-    with tempfile.TemporaryDirectory(prefix="pool-bench-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="pool-bench-", dir=temp_root()) as tmp:
         for i, (n, w) in enumerate(plan, 1):
             progress(
                 f"[{i}/{len(plan)}] {n} cameras on {w} worker(s) "

@@ -24,6 +24,7 @@ import numpy as np
 
 from common.clock import mono_s
 from common.errors import StackError
+from common.files import temp_root
 from common.keys import Keys
 from common.machine import machine_info
 from common.messages import Detections, Twist
@@ -33,6 +34,7 @@ from common.zenoh_bus import open_session
 from stack.config import Config
 from stack.config_file import load_config, to_toml
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
+from tools.ports import private_endpoint
 
 STARTUP_S = 180.0
 WARMUP_S = 10.0
@@ -82,7 +84,7 @@ class _Phase:
 def _config(base: Config, workdir: Path) -> Config:
     return dataclasses.replace(
         base,
-        zenoh=ZenohSettings(endpoint=f"tcp/127.0.0.1:{free_port()}"),
+        zenoh=ZenohSettings(endpoint=private_endpoint()),
         stack=dataclasses.replace(base.stack, prefix=f"bench/{free_port()}"),
         supervisor=dataclasses.replace(base.supervisor, services=STACK),
         recorder=dataclasses.replace(base.recorder, output_dir=str(workdir)),
@@ -122,7 +124,7 @@ def main(
     ``phase_s`` seconds in each condition, and print the figures (as JSON with ``as_json``)."""
     if rounds < 1 or phase_s <= 0:
         raise StackError("--rounds must be >= 1 and --phase > 0")
-    with tempfile.TemporaryDirectory(prefix="recorder-bench-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="recorder-bench-", dir=temp_root()) as tmp:
         workdir = Path(tmp)
         config = _config(load_config(config_path), workdir)
         path = workdir / "stack.toml"

@@ -19,9 +19,7 @@ import dataclasses
 import json
 import statistics
 import sys
-import tempfile
 import threading
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -38,7 +36,8 @@ from services.ros2.graph import RosGraph
 from services.ros2.images import IMAGE, frame_to_image
 from stack.config import Config
 from stack.config_file import to_toml
-from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
+from tools.launch import free_port, run_folder, start_supervisor, stop_supervisor, wait_ready
+from tools.ports import private_endpoint
 
 _TIMEOUT_S = 2.0  # a message not received by then counts as lost
 
@@ -47,7 +46,7 @@ def _config(ros_endpoint: str) -> Config:
     base = Config()
     return dataclasses.replace(
         base,
-        zenoh=ZenohSettings(endpoint=f"tcp/127.0.0.1:{free_port()}"),
+        zenoh=ZenohSettings(endpoint=private_endpoint()),
         stack=dataclasses.replace(base.stack, prefix=f"bench/{free_port()}"),
         ros2=dataclasses.replace(base.ros2, router=(ros_endpoint,), node="bridge_bench"),
         supervisor=dataclasses.replace(base.supervisor, services=("ros2",)),
@@ -100,11 +99,11 @@ def _summary(samples: list[float]) -> dict[str, float]:
 
 
 def run(runs: int, progress: Any = print) -> dict[str, Any]:
-    ros_endpoint = f"tcp/127.0.0.1:{free_port()}"
+    ros_endpoint = private_endpoint()
     config = _config(ros_endpoint)
     keys = Keys(config.stack.prefix)
     robot = RosGraph(dataclasses.replace(config.ros2, node="bench_robot"), host=True)
-    workdir = Path(tempfile.mkdtemp(prefix="ros2-bench-"))
+    workdir = run_folder("ros2-bench-")
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(dataclasses.replace(config, path=str(config_path))))
     with (workdir / "stack.log").open("wb") as log:

@@ -43,6 +43,7 @@ from typing import Any
 
 from common.clock import mono_s
 from common.errors import StackError
+from common.files import temp_root
 from common.machine import machine_info
 from services.detector import contract as detector
 from stack.config import Config
@@ -284,7 +285,7 @@ def main(options: ScaleOptions, stop: threading.Event) -> int:
     plan = [(n, s) for n in options.cameras for s in
             (("one",) if n == 1 else ("measured", "shared", "batch1", "stacks"))]  # fmt: skip
     started = mono_s()
-    with tempfile.TemporaryDirectory(prefix="scale-bench-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="scale-bench-", dir=temp_root()) as tmp:
         for i, (n, setup) in enumerate(plan, 1):
             if setup == "stacks":
                 per_stack = next((r.pss_mb for r in results if r.setup == "one"), 0.0)

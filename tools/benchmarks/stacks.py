@@ -30,6 +30,7 @@ from services.metrics.pool import Duplicates
 from stack.config import Config
 from stack.config_file import to_toml
 from tools.launch import free_port, start_supervisor, stop_supervisor, wait_ready
+from tools.ports import private_endpoint
 
 STARTUP_S = 240.0
 STOP_S = 30.0
@@ -164,7 +165,7 @@ def stack_config(
     return dataclasses.replace(
         base,
         path=str(path),
-        zenoh=ZenohSettings(endpoint=f"tcp/127.0.0.1:{free_port()}"),
+        zenoh=ZenohSettings(endpoint=private_endpoint()),
         stack=dataclasses.replace(base.stack, prefix=f"{tag}/{free_port()}"),
         supervisor=dataclasses.replace(
             base.supervisor, services=(*SOURCES[cameras_from], "detector"), optional=()

@@ -1,10 +1,12 @@
 """python -m tools.scenarios scenario NAME [--json] [--ros2] [--mode follow|track] [--config FILE]
+                                         [--port N]
 python -m tools.scenarios list
-python -m tools.scenarios soak [--duration S] [--flood-hz HZ] [--json] [--config FILE]
+python -m tools.scenarios soak [--duration S] [--flood-hz HZ] [--json] [--config FILE] [--port N]
 
 scenario runs the real stack (every service over Zenoh) against a scripted world and prints its
 figures; list names the scenarios; soak runs the whole stack for a long time under a garbage
-flood.
+flood. Each run's stack listens on a free port (--port N: on N, and N+1 ... for its further
+routers) and keeps its config, log and state in a folder of its own in $TMPDIR (else /tmp).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from common.cli import Command, add_config, service_main
 from common.contracts import ControllerMode, ScenarioResult
 from common.lifecycle import run_main, setup_logging
 from stack.config_file import load_config
+from tools.ports import add_port, use_ports
 
 
 def _print_text(r: ScenarioResult) -> None:
@@ -58,6 +61,7 @@ def _interrupt(signum: int, _frame: object) -> None:
 def _scenario_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("name", help="scenario name (zstack scenarios lists them)")
     add_config(p)
+    add_port(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument(
         "--ros2",
@@ -93,6 +97,7 @@ def scenario(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, _interrupt)
     config = load_config(args.config)
     setup_logging("scenario", "WARNING")
+    use_ports(args.port)
     from tools.scenarios.runner import run_scenario
 
     if args.robots > 1:
@@ -134,6 +139,7 @@ def list_scenarios(args: argparse.Namespace) -> int:
 
 def _soak_arguments(p: argparse.ArgumentParser) -> None:
     add_config(p)
+    add_port(p)
     p.add_argument("--duration", type=float, default=600.0, help="seconds (default 600)")
     p.add_argument(
         "--flood-hz",
@@ -149,6 +155,7 @@ def soak(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, _interrupt)
     config = load_config(args.config)
     setup_logging("soak", "WARNING")
+    use_ports(args.port)
     from tools.scenarios.soak import run_soak, soak_table
 
     result = run_soak(

@@ -13,11 +13,9 @@ from __future__ import annotations
 
 import dataclasses
 import subprocess
-import tempfile
 import threading
 import uuid
 from contextlib import ExitStack
-from pathlib import Path
 from typing import Any, TypedDict
 
 from common.clock import mono_s
@@ -28,7 +26,13 @@ from common.zenoh_bus import open_session
 from services.sim.scenarios import SCENARIOS
 from stack.config import Config
 from stack.config_file import to_toml
-from tools.launch import free_port, start_supervisor, stop_supervisor
+from tools.launch import (
+    private_state,
+    run_folder,
+    start_supervisor,
+    stop_supervisor,
+)
+from tools.ports import private_endpoint
 from tools.scenarios.runner import (
     SETTLE_CHECK_S,
     STARTUP_TIMEOUT_S,
@@ -68,10 +72,10 @@ def robots_plan(
     scenario = SCENARIOS[name]
     run = uuid.uuid4().hex[:6]
     prefixes = tuple(f"r{i}-{run}" for i in range(1, robots + 1))
-    pool_endpoint = f"tcp/127.0.0.1:{free_port()}"
+    pool_endpoint = private_endpoint()
 
     def stack(prefix: str, services: tuple[str, ...], endpoint: str) -> Config:
-        one = scenario_config(base, scenario, mode=mode)
+        one = scenario_config(base, scenario, mode=mode, endpoint=endpoint)
         return dataclasses.replace(
             one,
             stack=dataclasses.replace(one.stack, prefix=prefix),
@@ -91,7 +95,7 @@ def robots_plan(
         pool, detector=dataclasses.replace(pool.detector, workers=workers, prefixes=prefixes)
     )
     robot_stacks = tuple(
-        stack(p, ("sim", "controller", "metrics"), f"tcp/127.0.0.1:{free_port()}") for p in prefixes
+        stack(p, ("sim", "controller", "metrics"), private_endpoint()) for p in prefixes
     )
     return RobotsPlan(robot_stacks, pool)
 
@@ -123,7 +127,10 @@ def run_robots(
         raise StackError(f"unknown scenario {name!r}")
     scenario = SCENARIOS[name]
     plan = robots_plan(base, name, robots, workers, mode)
-    workdir = Path(tempfile.mkdtemp(prefix=f"robots-{name}-"))
+    workdir = run_folder(f"robots-{name}-")
+    if log:
+        where = ", ".join(c.zenoh.endpoint for c in (plan.pool, *plan.robots))
+        log(f"{name}: the pool and the robots on {where}, their files in {workdir}")
     recs = [ScenarioLog() for _ in plan.robots]
     procs: list[subprocess.Popen[bytes]] = []
     pause = threading.Event()
@@ -131,7 +138,7 @@ def run_robots(
 
         def start(config: Config, tag: str) -> subprocess.Popen[bytes]:
             path = workdir / f"{tag}.toml"
-            path.write_text(to_toml(config))
+            path.write_text(to_toml(private_state(config, workdir, tag)))
             out = stack.enter_context((workdir / f"{tag}.log").open("wb"))
             proc = start_supervisor(path, out)
             procs.append(proc)

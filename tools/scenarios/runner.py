@@ -1,10 +1,11 @@
 """``python -m tools.scenarios scenario NAME``: run the real stack against a scripted world.
 
-The runner writes a private stack config (a free port, a unique key prefix, the simulator in
-place of the camera, the controller in follow mode (or the mode asked for), the scenario's own
-further cameras and
-detector changes), starts it under the supervisor, records the truth, the commands, and every
-camera's frames and detections, stops it, and scores the run (tools/scenarios/score.py).
+The runner writes a private stack config (a free port or ``--port``'s, a unique key prefix,
+the simulator in place of the camera, the controller in follow mode (or the mode asked for),
+the scenario's own further cameras and detector changes, the controller's state files in the
+run's own folder in ``$TMPDIR``), starts it under the supervisor, records the truth, the
+commands, and every camera's frames and detections, stops it, and scores the run
+(tools/scenarios/score.py).
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ import dataclasses
 import os
 import signal
 import subprocess
-import tempfile
 import threading
 import uuid
 from pathlib import Path
@@ -30,7 +30,14 @@ from common.zenoh_bus import open_session
 from services.sim.scenarios import SCENARIOS, Scenario
 from stack.config import Config
 from stack.config_file import to_toml
-from tools.launch import free_port, service_pids, start_supervisor, stop_supervisor
+from tools.launch import (
+    private_state,
+    run_folder,
+    service_pids,
+    start_supervisor,
+    stop_supervisor,
+)
+from tools.ports import private_endpoint
 from tools.scenarios.score import ScenarioLog, score
 
 STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
@@ -43,8 +50,10 @@ def scenario_config(
     scenario: Scenario,
     ros2: bool = False,
     mode: ControllerMode = ControllerMode.FOLLOW,
+    endpoint: str | None = None,
 ) -> Config:
-    """``base`` made private to one run of ``scenario``, the controller in ``mode``. With
+    """``base`` made private to one run of ``scenario``, the controller in ``mode``, its
+    router on ``endpoint`` (default: the next private one, tools/launch.py). With
     ``ros2`` the simulator plays a ROS 2 robot on a private router, and the ``ros2`` bridge
     carries its sensors and commands.
     The cameras are ``base``'s first camera and the scenario's further ones (each laid over
@@ -52,7 +61,7 @@ def scenario_config(
     scenario is seen by the same cameras on every machine."""
     zenoh_s = dataclasses.replace(
         base.zenoh,
-        endpoint=f"tcp/127.0.0.1:{free_port()}",
+        endpoint=endpoint or private_endpoint(),
         connect=(),
         listen=("tcp/127.0.0.1:0",),
     )
@@ -101,7 +110,7 @@ def scenario_config(
         ),
         ros2=dataclasses.replace(
             base.ros2,
-            router=(f"tcp/127.0.0.1:{free_port()}",) if ros2 else base.ros2.router,
+            router=(private_endpoint(),) if ros2 else base.ros2.router,
             depth_in=base.ros2.depth_in or depth_over_ros2,
         ),
         supervisor=dataclasses.replace(
@@ -242,12 +251,12 @@ def run_scenario(
     if log is not None:
         for line in config_changes(base, config, scenario):
             log(f"{name}: changed from your config: {line}")
-    workdir = Path(tempfile.mkdtemp(prefix=f"scenario-{name}-"))
-    # Each run's world starts afresh: so does the controller's depth map (kept with the run).
-    memory = str(workdir / "depth-memory.npz")
-    config = dataclasses.replace(
-        config, controller=dataclasses.replace(config.controller, depth_memory_file=memory)
-    )
+    workdir = run_folder(f"scenario-{name}-")
+    # Each run's world starts afresh: so do the controller's e-stop and depth map (kept with
+    # the run, never beside the robot's own).
+    config = private_state(config, workdir)
+    if log is not None:
+        log(f"{name}: the stack on {config.zenoh.endpoint}, its files in {workdir}")
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))
     rec = ScenarioLog() if rec is None else rec

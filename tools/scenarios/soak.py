@@ -13,10 +13,8 @@ from __future__ import annotations
 
 import math
 import random
-import tempfile
 import threading
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import msgpack
@@ -29,7 +27,15 @@ from common.zenoh_bus import open_session
 from services.sim.scenarios import SCENARIOS
 from stack.config import Config
 from stack.config_file import to_toml
-from tools.launch import rss_kb, service_pids, start_supervisor, stop_supervisor, wait_ready
+from tools.launch import (
+    private_state,
+    rss_kb,
+    run_folder,
+    service_pids,
+    start_supervisor,
+    stop_supervisor,
+    wait_ready,
+)
 from tools.scenarios.runner import STOP_TIMEOUT_S, record_into, scenario_config
 from tools.scenarios.score import ScenarioLog
 
@@ -175,8 +181,9 @@ def run_soak(
     base: Config, duration_s: float, flood_hz: float, sample_s: float, log: Any
 ) -> dict[str, Any]:
     """Run the demo world under a flood for ``duration_s``; returns ``summarise``'s figures."""
-    config = scenario_config(base, SCENARIOS["demo"])
-    workdir = Path(tempfile.mkdtemp(prefix="soak-"))
+    workdir = run_folder("soak-")
+    config = private_state(scenario_config(base, SCENARIOS["demo"]), workdir)
+    log(f"soak: the stack on {config.zenoh.endpoint}, its files in {workdir}")
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))
     log_path = workdir / "stack.log"

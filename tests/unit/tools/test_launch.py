@@ -12,10 +12,19 @@ from typing import Any
 
 import pytest
 
-from common.errors import StackError
+from common.errors import ConfigError, StackError
 from common.keys import Keys
 from common.memory_bus import MemoryBus, MemoryHub
-from tools.launch import free_port, service_pids, stop_supervisor, wait_ready
+from services.controller.contract import ControllerSettings
+from stack.config import Config
+from tools.launch import (
+    free_port,
+    private_state,
+    run_folder,
+    service_pids,
+    stop_supervisor,
+    wait_ready,
+)
 
 KEYS = Keys("test")
 
@@ -145,3 +154,23 @@ def test_pss_kb_is_at_most_rss_and_none_once_gone() -> None:
     assert pss is not None and rss is not None
     assert 1000 < pss <= rss * 1.05  # shared pages count in part; allow pages mapped between reads
     assert pss_kb(0) is None
+
+
+def test_a_run_folder_is_made_in_tmpdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    folder = run_folder("scenario-ahead-")
+    assert folder.parent == tmp_path and folder.name.startswith("scenario-ahead-")
+    # A TMPDIR that cannot hold it is named, not passed over for /tmp without a word.
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "missing"))
+    with pytest.raises(ConfigError, match=r"TMPDIR=.*missing is not a folder"):
+        run_folder("scenario-ahead-")
+
+
+def test_a_private_stack_keeps_its_controller_state_in_its_own_folder(tmp_path: Path) -> None:
+    # Never the robot's own state/estop-<prefix>.json in the repo, nor a path of the user's
+    # config (a scenario run must not read, or release, a real robot's latched e-stop).
+    mine = Config(controller=ControllerSettings(estop_file="/var/lib/robot/estop.json"))
+    config = private_state(mine, tmp_path, "robot1")
+    assert config.estop_path == tmp_path / "robot1-estop.json"
+    assert config.depth_memory_path == tmp_path / "robot1-depth-memory.npz"
+    assert private_state(Config(), tmp_path).estop_path == tmp_path / "estop.json"
