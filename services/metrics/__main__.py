@@ -51,14 +51,9 @@ def pool(args: argparse.Namespace) -> int:
     """The whole pool from its tokens (services/metrics/pool_view.py), as JSON on stdout."""
     config = load_config(args.config)
     setup_logging("metrics", "WARNING")
-    from common.zenoh_bus import ZenohBus, open_session
-    from services.metrics.pool_view import pool_view
+    from services.metrics import service
 
-    bus = ZenohBus(open_session(config.zenoh, "observer"))
-    try:
-        view = pool_view(config, bus)
-    finally:
-        bus.close()
+    view = service.pool(config)
     for name in view["unserved"]:
         print(
             f"WARNING pool: camera {name} is announced and no live worker serves it",
