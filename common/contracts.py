@@ -95,7 +95,9 @@ class WorkerMetrics(TypedDict):
     its pool token is live (``false`` once it has gone: exited, killed, or hung past Zenoh's
     lease) and the cameras its serving tokens name; from its counters, their share of every
     camera's frame rate (``load``, 0..1), the live workers it counts, its hand-overs since it
-    started, and how long ago its counters came (a gone worker's last word stays)."""
+    started, and how long ago its counters came (a gone worker's last word stays). A pool
+    worker serving this robot whose counters it does not hear (a shared GPU box's) is listed
+    too, from its tokens and announcement."""
 
     live: bool
     cameras: list[str]
@@ -104,6 +106,16 @@ class WorkerMetrics(TypedDict):
     cameras_gained: int
     cameras_lost: int
     reported_s_ago: float
+    #: As it announces itself to the pool (absent while no announcement is heard): the frames
+    #: per second it detects, and the robots (key prefixes) it serves.
+    capacity_hz: NotRequired[float]
+    robots: NotRequired[list[str]]
+    #: Where ``load`` comes from: "counters" (its own, as this robot hears them), or
+    #: "cameras" for a worker whose counters this robot does not hear (another host's, under
+    #: its own prefix: a shared GPU box): this robot's cameras it serves, their announced
+    #: frame rate over its capacity; ``members`` and the hand-overs are then 0 and
+    #: ``reported_s_ago`` -1.
+    load_from: NotRequired[str]
 
 
 class AnnouncedCamera(TypedDict):

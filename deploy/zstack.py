@@ -37,6 +37,7 @@ COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
         "measure the CPU variants once; the fast profile starts from the cached choice",
     ),
     "query": ("services.metrics", ("query",), "print a running stack's metrics as JSON"),
+    "pool": ("services.metrics", ("pool",), "print the detector pool (workers, cameras) as JSON"),
     "evaluate": ("tools.evaluation", ("evaluate",), "accuracy on a labelled dataset"),
     "report": ("tools.report", ("report",), "record a run and write report.md with plots"),
     "scenario": ("tools.scenarios", ("scenario",), "run the real stack against a scripted world"),

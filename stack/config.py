@@ -50,7 +50,7 @@ class SupervisorSettings:
     watch the bus, and no other service reads anything from them.
     """
 
-    services: tuple[str, ...] = ("camera", "detector", "controller", "metrics")
+    services: tuple[str, ...] = ("sim", "detector", "controller", "metrics", "viewer")
     optional: tuple[str, ...] = ("viewer", "recorder")
     restart_backoff_s: float = 0.5
     restart_backoff_max_s: float = 10.0

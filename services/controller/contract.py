@@ -210,7 +210,7 @@ class ControllerSettings:
     max_linear_accel: float = 1.0
     forward_speed: float = 0.3
     center_tolerance: float = 0.1
-    distance_source: DistanceSource = DistanceSource.BOX
+    distance_source: DistanceSource = DistanceSource.LASER
     follow_distance_m: float = 1.0
     distance_gain: float = 0.6
     target_height_m: float = 1.7

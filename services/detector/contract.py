@@ -229,8 +229,8 @@ class DetectorSettings:
     Post-processing, which the Detector (perception/pipeline.py) reads from here:
     ``conf`` is the least score kept (objectness x class score for YOLOv5-style models);
     ``iou`` the overlap above which a lower-scored box of the same class is suppressed;
-    ``max_det`` caps detections per image (300 as in Ultralytics; the stack's config sets its
-    own); ``classes`` keeps only those class names, and empty keeps every class.
+    ``max_det`` caps detections per image (100; ``zstack evaluate`` asks for Ultralytics' 300);
+    ``classes`` keeps only those class names, and empty keeps every class.
 
     The pool (docs/detector.md, "A pool of workers"): ``workers`` detector processes on this
     host divide the cameras between them, with those on other hosts in the same pool (its
@@ -282,7 +282,7 @@ class DetectorSettings:
     batch_probe_runs: int = 3
     conf: float = 0.25
     iou: float = 0.45
-    max_det: int = 300
+    max_det: int = 100
     classes: tuple[str, ...] = ()
     max_frame_age_s: float = 1.0
     counters_period_s: float = 1.0

@@ -1,7 +1,8 @@
-"""python -m services.metrics [serve|query] ...
+"""python -m services.metrics [serve|query|pool] ...
 
 serve (the default) runs the metrics service; query asks a running one and prints its JSON
-(on stdout), after the cameras announced and every warning as a WARNING line (on stderr).
+(on stdout), after the cameras announced and every warning as a WARNING line (on stderr);
+pool prints the whole detector pool from its tokens, from any host (a GPU box included).
 Accuracy on a labelled dataset is ``python -m tools.evaluation``; a report of a run,
 ``python -m tools.report``.
 """
@@ -46,9 +47,28 @@ def query(args: argparse.Namespace) -> int:
     return 0
 
 
+def pool(args: argparse.Namespace) -> int:
+    """The whole pool from its tokens (services/metrics/pool_view.py), as JSON on stdout."""
+    config = load_config(args.config)
+    setup_logging("metrics", "WARNING")
+    from services.metrics import service
+
+    view = service.pool(config)
+    for name in view["unserved"]:
+        print(
+            f"WARNING pool: camera {name} is announced and no live worker serves it",
+            file=sys.stderr,
+        )
+    print(json.dumps(view, indent=2))
+    return 0
+
+
 COMMANDS = [
     Command("serve", "run the metrics service", add_config, serve),
     Command("query", "ask a running metrics service and print its JSON", _query_arguments, query),
+    Command(
+        "pool", "print the detector pool's workers and cameras (from any host)", add_config, pool
+    ),
 ]
 DESCRIPTION = (__doc__ or "").split("\n\n", 1)[-1]
 

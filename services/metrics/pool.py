@@ -169,5 +169,31 @@ def workers(
             cameras_gained=counters.get(f"{service}.{detector.CAMERAS_GAINED}", 0),
             cameras_lost=counters.get(f"{service}.{detector.CAMERAS_LOST}", 0),
             reported_s_ago=max(0.0, now - reported_at[service]),
+            load_from="counters",
         )
+    if pool is not None:
+        _remote_workers(out, cams, pool)
     return out
+
+
+def _remote_workers(out: dict[str, WorkerMetrics], cams: list[str], pool: LivePool) -> None:
+    """Add to ``out`` the live pool members serving this robot whose counters it does not
+    hear (another host's worker, counting under its own prefix: a shared GPU box), from
+    their tokens and announcements; and each listed worker's announced capacity and robots."""
+    rates = pool.cameras or {}
+    for worker in sorted(pool.members):
+        announced = pool.announced.get(worker)
+        served = pool.cameras_of(worker)
+        mine = [c for c in cams if c in served] + sorted(served - set(cams))
+        if worker not in out and (served or (announced and pool.robot in announced.prefixes)):
+            capacity = announced.capacity_hz if announced else 0.0
+            load = sum(rates.get(c, 0.0) for c in mine) / capacity if capacity > 0 else 0.0
+            out[worker] = WorkerMetrics(
+                live=True, cameras=mine, load=round(load, 3), members=0, cameras_gained=0,
+                cameras_lost=0, reported_s_ago=-1.0, load_from="cameras",
+            )  # fmt: skip
+    for worker, metrics in out.items():
+        announced = pool.announced.get(worker)
+        if announced is not None:
+            metrics["capacity_hz"] = round(announced.capacity_hz, 1)
+            metrics["robots"] = sorted(announced.prefixes)

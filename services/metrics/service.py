@@ -10,7 +10,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Mapping
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from common import reach
 from common.announce import Announced, announced_cameras, announced_workers
@@ -32,11 +32,12 @@ from common.pool_audit import MAX_LINES, PoolAudit, lines
 from common.pool_rule import PoolWorker, camera_rates
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES
-from common.zenoh_bus import open_session
+from common.zenoh_bus import ZenohBus, open_session
 from services.metrics import contract
 from services.metrics.advice import advise
 from services.metrics.aggregate import Aggregator, LatencyListener, report_line
 from services.metrics.pool import LivePool
+from services.metrics.pool_view import pool_view
 from services.metrics.trust import (
     PoolWorkers,
     refuse_counters,
@@ -378,3 +379,13 @@ def query(config: Config, timeout_s: float) -> MetricsAnswer:
         )
     finally:
         session.close()
+
+
+def pool(config: Config) -> dict[str, Any]:
+    """The whole detector pool as its tokens say now, asked as ``observer`` from any host (a
+    GPU box, which runs no metrics service, included): services/metrics/pool_view.py."""
+    bus = ZenohBus(open_session(config.zenoh, OBSERVER))
+    try:
+        return pool_view(config, bus)
+    finally:
+        bus.close()

@@ -52,7 +52,9 @@ class SimSettings:
     """The simulated robot and world (services/sim), standing in for a camera and a base.
 
     ``scenario`` names a world in services/sim/scenarios.py. The scenario clock starts once
-    every service in ``wait_for`` is ready, so start-up time does not eat into the scenario.
+    what ``wait_for`` names has come, so start-up time does not eat into the scenario:
+    ``detector`` as the detections of every camera it renders (from any worker, a pool's on
+    another host too), any other service by its health token (services/sim/waiting.py).
     The camera uses camera.hfov_deg; the image is ``width`` x ``height``. With ``ros2_robot``
     the simulator plays a ROS 2 robot: it hosts the graph's router on ``ros2.router`` and
     speaks ROS 2 messages on the topics of ``[ros2]``, so that the ``ros2`` bridge service

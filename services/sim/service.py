@@ -55,6 +55,7 @@ from services.sim.depth import DepthNoise, apply, depth_frame, render_depth
 from services.sim.laser import LaserSpec, cast
 from services.sim.render import render
 from services.sim.scenarios import SCENARIOS
+from services.sim.waiting import WARN_PERIOD_S, Waiting, waiting_line
 from services.sim.world import World
 from stack.config import Config
 
@@ -311,22 +312,36 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
                 "(the scenario runner adds them: python -m tools.scenarios scenario %s)",
                 s.scenario, missing, s.scenario,
             )  # fmt: skip
+        waiting = Waiting(
+            node.bus,
+            keys,
+            s.wait_for,
+            [c.name for c in cameras],
+            lambda key: bool(node.bus.live_tokens(key, timeout_s=0.2)),
+        )
+        closing.callback(waiting.close)
         node.ready()
         dt = 1.0 / s.physics_hz
         started = False
         boot = next_tick = next_check = mono_s()
+        next_warning = boot + WARN_PERIOD_S
         try:
             while not stop.is_set():
                 now = mono_s()
                 if not started and now >= next_check:
-                    # Until the detector and controller are ready the world stands still at
-                    # t=0 but its sensors publish on the wall clock, so the detector warms up
-                    # on real frames; then the scenario clock starts from 0.
+                    # Until what sim.wait_for names has come (the detections of every camera,
+                    # the controller ready) the world stands still at t=0 but its sensors
+                    # publish on the wall clock, so the detector warms up on real frames;
+                    # then the scenario clock starts from 0.
                     next_check = now + 0.5
-                    started = _ready(node, s.wait_for)
+                    missing = waiting.missing()
+                    started = not missing
                     if started:
                         clocks = new_clocks()
                         node.log.info("scenario clock started")
+                    elif now >= next_warning:
+                        next_warning = now + WARN_PERIOD_S
+                        node.log.warning("%s", waiting_line(missing, now - boot))
                 with lock:
                     if started:
                         world.advance(dt)
@@ -341,13 +356,6 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
         finally:
             node.log.info("stopping")
     return 0
-
-
-def _ready(node: Node, services: tuple[str, ...]) -> bool:
-    for service in services:
-        if not node.bus.live_tokens(node.keys.health(service), timeout_s=0.2):
-            return False
-    return True
 
 
 def _publish_due(

@@ -55,7 +55,13 @@ def write_config(tmp: Path, **tables: dict[str, Any]) -> Path:
         "zenoh": {"endpoint": f"tcp/127.0.0.1:{free_port()}", "multicast_scouting": False},
         "stack": {"prefix": f"test/{uuid.uuid4().hex[:8]}", "camera": "front"},
         "camera": {"source": "sample:cameraman", "rate_hz": 5.0},
-        "supervisor": {"status_period_s": 1.0, "restart_backoff_s": 0.2},
+        # A camera robot's services (the code's default, as deploy/stack.toml's, is the
+        # simulator's stack); a test names its own.
+        "supervisor": {
+            "services": ["camera", "detector", "controller", "metrics"],
+            "status_period_s": 1.0,
+            "restart_backoff_s": 0.2,
+        },
         # Each test's e-stop state of its own: a latched stop must not leak into the next test.
         # These stacks drive towards the sample photo's cameraman in track mode, and a camera
         # stack has no laser: said on purpose, as on a robot without one (a test of the laser

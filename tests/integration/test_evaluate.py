@@ -14,7 +14,7 @@ from perception.pipeline import Detector
 from services.detector.contract import DetectorSettings
 from tools.evaluation.data.write_images import ANNOTATIONS, write_images
 from tools.evaluation.datasets import load_dataset
-from tools.evaluation.evaluate import DEFAULT_EVAL_CONF, detect_dataset, score
+from tools.evaluation.evaluate import DEFAULT_EVAL_CONF, EVAL_MAX_DET, detect_dataset, score
 
 pytestmark = pytest.mark.integration
 
@@ -58,7 +58,7 @@ def test_evaluate_agrees_with_the_evaluator_on_the_same_detections(
     images: Path, default_model: Path
 ) -> None:
     dataset = load_dataset(ANNOTATIONS, images)
-    settings = DetectorSettings(conf=DEFAULT_EVAL_CONF)  # as the command: max_det 300
+    settings = DetectorSettings(conf=DEFAULT_EVAL_CONF, max_det=EVAL_MAX_DET)  # as the command
     with Detector.open(default_model, settings=settings) as detector:
         detections = detect_dataset(detector, dataset)
         names = detector.names

@@ -82,7 +82,9 @@ def test_foxglove_client_sees_the_camera_and_a_person(make_stack) -> None:  # ty
         # The Foxglove server behind the front on the relay port the config names.
         viewer={"port": port, "relay_port": relay, "image_rate_hz": 10.0},
         sim={"wait_for": ["detector", "controller"]},
-        controller={"mode": "follow"},  # as the default stack: it locks onto the person
+        # As the default stack: it locks onto the person (by box height: no_laser, as every
+        # test stack says, needs it in follow mode).
+        controller={"mode": "follow", "distance_source": "box"},
     )
     stack.wait_ready(set(SERVICES))
     # Garbage on a key the viewer reads is counted, and the view goes on.

@@ -30,6 +30,10 @@ from tools.evaluation.labelled import DatasetError, LabelledSet
 DEFAULT_EVAL_CONF = 0.001
 
 
+#: Detections kept per image when scoring, as Ultralytics evaluates (300).
+EVAL_MAX_DET = 300
+
+
 def detect_dataset(
     detector: Any, dataset: LabelledSet, progress: Progress | None = None
 ) -> dict[int, Boxes]:
@@ -136,9 +140,9 @@ def run(options: EvaluateOptions) -> int:
         _check_fraction(name, value)
     dataset = load_dataset(options.dataset, options.images)
     model = Path(options.model) if options.model else ensure_default_model(progress=print_progress)
-    # max_det keeps its one default, 300 (Ultralytics' own): COCO then keeps the best 100 per
-    # image and class.
-    settings = DetectorSettings(conf=options.conf, iou=options.iou)
+    # Ultralytics' own max_det for evaluation (the stack's default keeps 100): COCO then keeps
+    # the best 100 per image and class.
+    settings = DetectorSettings(conf=options.conf, iou=options.iou, max_det=EVAL_MAX_DET)
     with Detector.open(model, backend=options.backend, settings=settings) as detector:
         names = detector.names
         ground_truth_for(dataset, names)  # before the run: nothing to score is an error now

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from common.boxes import Boxes
+from common.contracts import ControllerMode, DistanceSource
 from common.errors import ConfigError
 from common.messages import Detections, Header, LaserScan
 from services.camera.contract import CameraSettings
@@ -32,7 +33,13 @@ W, H, HFOV = 640, 480, 60.0
 # The highest accelerations the settings allow and a pure P term: a single tick shows the
 # policy's intent.
 FREE = dict(max_linear_accel=20.0, max_angular_accel=100.0, bearing_kd=0.0)
-TRACK = ControllerSettings(mode="track", target_classes=("person",), **FREE)  # type: ignore[arg-type]
+# Following by box height (the code's default, as deploy/stack.toml's, is the laser).
+TRACK = ControllerSettings(
+    mode=ControllerMode.TRACK,
+    target_classes=("person",),
+    distance_source=DistanceSource.BOX,
+    **FREE,  # type: ignore[arg-type]
+)
 FOLLOW = dataclasses.replace(TRACK, mode="follow")
 # Today's stack: one camera, looking forward.
 FRONT = {"front": CameraSettings(hfov_deg=HFOV)}

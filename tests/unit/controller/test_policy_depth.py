@@ -140,8 +140,14 @@ def test_a_target_out_of_view_is_driven_on_to_only_with_the_way_known_clear() ->
 @pytest.mark.parametrize(
     "settings, says",
     [
-        ({"no_laser": True, "obstacle_sources": ("depth",)}, "contradicts"),
-        ({"no_laser": True, "obstacle_sources": ("laser", "depth")}, "contradicts"),
+        (
+            {"no_laser": True, "distance_source": "box", "obstacle_sources": ("depth",)},
+            "contradicts",
+        ),
+        (
+            {"no_laser": True, "distance_source": "box", "obstacle_sources": ("laser", "depth")},
+            "contradicts",
+        ),
         ({"no_laser": True, "distance_source": "depth"}, 'distance_source = "depth"'),
         ({"obstacle_sources": ("sonar",)}, "must name each of"),
         ({"obstacle_sources": ("depth", "depth")}, "must name each of"),

@@ -218,6 +218,10 @@ def test_cli_refuses_existing_with_one_line_and_exit_2(
     assert err.count("\n") == 1 and err.startswith("credentials: error: ")
 
 
+#: A camera robot's services (the default, as deploy/stack.toml, is the simulator's stack).
+CAMERA_ROBOT = '[supervisor]\nservices = ["camera", "detector", "controller", "metrics"]\n'
+
+
 def test_cli_makes_a_principal_per_camera_of_the_config(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -226,13 +230,14 @@ def test_cli_makes_a_principal_per_camera_of_the_config(
     config.write_text(
         f'[zenoh]\ncredentials_dir = "{creds}"\n[stack]\ncamera = "front"\n'
         "[cameras.rear]\nmount_yaw_deg = 180.0\n[cameras.left]\nmount_yaw_deg = 90.0\n"
+        + CAMERA_ROBOT
     )
     monkeypatch.setattr(sys, "argv", ["credentials", "--config", str(config)])
     with pytest.raises(SystemExit) as done:
         run_main(credentials.main, "credentials")
     assert done.value.code == 0, capsys.readouterr().err
-    # The config runs the default services: each camera, the detector, the controller, the
-    # metrics; with the router and the tools, 10 principals; no sim, ros2 or viewer.
+    # The config runs a camera robot's services: each camera, the detector, the controller,
+    # the metrics; with the router and the tools, 10 principals; no sim, ros2 or viewer.
     assert "wrote 10 passwords" in capsys.readouterr().err
     users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
     assert users == [
@@ -265,6 +270,7 @@ def test_cli_makes_a_principal_per_worker_and_for_other_hosts_workers(
     config = tmp_path / "robot.toml"
     config.write_text(
         f'[zenoh]\ncredentials_dir = "{creds}"\n[detector]\nworkers = 2\nworker_id = "b"\n'
+        + CAMERA_ROBOT
     )
     argv = ["credentials", "--config", str(config), "--worker", "detector_a"]
     monkeypatch.setattr(sys, "argv", argv)
@@ -334,7 +340,7 @@ def test_cli_makes_a_principal_for_the_workers_the_config_links_to(
     config.write_text(
         f'[zenoh]\nmode = "client"\nauth = "certificate"\nendpoint = "tls/10.0.0.2:7448"\n'
         f'credentials_dir = "{creds}"\nremote_principals = ["detector_a"]\n'
-        '[detector]\nworker_id = "b"\n'
+        '[detector]\nworker_id = "b"\n' + CAMERA_ROBOT
     )
     monkeypatch.setattr(sys, "argv", ["credentials", "--config", str(config)])
     with pytest.raises(SystemExit) as done:

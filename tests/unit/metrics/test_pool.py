@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from common.messages import Header, ServiceCounters
 from common.pool_audit import PoolAudit
+from common.pool_rule import PoolWorker
 from services.metrics.aggregate import Aggregator
 from services.metrics.pool import LivePool
 from tests.unit.metrics.samples import detections
@@ -49,7 +50,7 @@ def test_workers_show_cameras_load_and_hand_overs() -> None:
     assert workers == {
         "detector": {
             "live": True, "cameras": ["front"], "load": 0.5, "members": 2, "cameras_gained": 0,
-            "cameras_lost": 1, "reported_s_ago": 2.0,
+            "cameras_lost": 1, "reported_s_ago": 2.0, "load_from": "counters",
         }
     }  # fmt: skip
 
@@ -103,3 +104,27 @@ def test_the_live_pool_names_who_serves_and_marks_a_gone_worker() -> None:
     )
     assert (workers["detector_2"]["live"], workers["detector_2"]["cameras"]) == (False, [])
     assert answer["pool_warnings"] == []
+
+
+def test_a_shared_boxs_worker_is_listed_on_the_robot_it_serves() -> None:
+    """Issue 39, item 7: the GPU box's worker counts under the box's own prefix, so the
+    robot hears none of its counters; its tokens and announcement still list it, with its
+    capacity, robots and the share of it this robot's cameras take."""
+    pool = LivePool(PoolAudit({"front": 1.0}, 1.0, 10.0), robot="site/r1", pool_prefix="site")
+    pool.cameras = {"front": 5.0, "rear": 5.0}
+    agg = Aggregator(10.0, cameras=["front", "rear"], pool=pool)
+    box = PoolWorker(20.0, frozenset({"site/r1", "site/r2"}))
+    pool.announced = {"detector_gpu": box, "detector_other": PoolWorker(9.0, frozenset({"x"}))}
+    for worker in ("detector_gpu", "detector_other"):
+        pool.member(worker, live=True)
+    pool.serving(("detector_gpu", "z1", "site/r1/front"), live=True)
+    pool.serving(("detector_gpu", "z1", "site/r2/front"), live=True)  # robot 2's: not shown
+    pool.check(2.0)
+    workers = agg.answer(HDR, 2.0)["workers"]
+    assert workers == {
+        "detector_gpu": {
+            "live": True, "cameras": ["front"], "load": 0.25, "members": 0, "cameras_gained": 0,
+            "cameras_lost": 0, "reported_s_ago": -1.0, "load_from": "cameras",
+            "capacity_hz": 20.0, "robots": ["site/r1", "site/r2"],
+        }
+    }  # fmt: skip

@@ -138,7 +138,7 @@ def test_detector_settings_validation(kwargs: dict[str, object], message: str) -
 
 def test_detector_settings_have_one_default_per_threshold() -> None:
     s = DetectorSettings()
-    assert (s.conf, s.iou, s.max_det, s.classes) == (0.25, 0.45, 300, ())  # () keeps all
+    assert (s.conf, s.iou, s.max_det, s.classes) == (0.25, 0.45, 100, ())  # () keeps all
 
 
 def test_a_non_finite_or_inverted_box_does_not_wipe_out_the_frame() -> None:

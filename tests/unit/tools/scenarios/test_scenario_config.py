@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+from common.contracts import DistanceSource
+from common.settings import REPO_ROOT
 from services.camera.contract import CameraSettings
+from services.controller.contract import ControllerSettings
 from services.detector.contract import DetectorSettings
 from services.sim.cameras import sim_cameras
 from services.sim.scenarios import SCENARIOS
 from stack.config import Config
+from stack.config_file import load_config
 from tools.scenarios.runner import config_changes, scenario_config
 
 BASE = Config(
     camera=CameraSettings(hfov_deg=70.0, rate_hz=8.0),
+    # By box height (the default is the laser, as deploy/stack.toml): "behind" changes it.
+    controller=ControllerSettings(distance_source=DistanceSource.BOX),
     cameras=(("left", CameraSettings(mount_yaw_deg=90.0)),),
     detector=DetectorSettings(conf=0.3),
 )
@@ -52,3 +58,21 @@ def test_what_a_scenario_changes_of_the_users_config_is_said_with_why() -> None:
     plain = Config(supervisor=BASE.supervisor, controller=followed)
     lines = config_changes(plain, scenario_config(plain, ahead), ahead)
     assert [line.split(":")[0] for line in lines] == ["supervisor.services"], lines
+
+
+def test_a_depth_config_keeps_following_by_depth_in_every_scenario() -> None:
+    """deploy/depth.toml in the obstacle scenario (which names "box") and in ahead (which
+    names "laser"): the run tests depth, and nothing says the distance source changed."""
+    depth = load_config(REPO_ROOT / "deploy" / "depth.toml", environ={})
+    assert depth.controller.distance_source is DistanceSource.DEPTH
+    for name in ("obstacle", "ahead"):
+        scenario = SCENARIOS[name]
+        assert "distance_source" in scenario.controller
+        config = scenario_config(depth, scenario)
+        assert config.controller.distance_source is DistanceSource.DEPTH, name
+        lines = config_changes(depth, config, scenario)
+        assert not any(line.startswith("controller.distance_source") for line in lines), lines
+    # A config by box or laser still takes the scenario's own source.
+    assert scenario_config(Config(), SCENARIOS["obstacle"]).controller.distance_source is (
+        DistanceSource.BOX
+    )
