@@ -249,6 +249,7 @@ def test_the_hub_refuses_credentials_made_for_fewer_cameras(tmp_path: Path) -> N
     config_path.write_text(
         f'[zenoh]\nmode = "client"\nauth = "password"\ncredentials_dir = "{creds}"\n'
         '[stack]\ncamera = "front"\n[cameras.rear]\nmount_yaw_deg = 180.0\n'
+        '[supervisor]\nservices = ["camera", "detector", "controller", "metrics"]\n'
     )
     config = load_config(config_path, environ={})
     with pytest.raises(ConfigError) as refused:
