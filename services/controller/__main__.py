@@ -14,6 +14,7 @@ from common.cli import Command, add_config, service_main
 from common.contracts import ControllerMode
 from common.errors import StackError
 from common.lifecycle import exit_code, run_main, setup_logging, stop_event
+from common.priority import own_session
 
 
 def _serve_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,7 +45,11 @@ def _estop_arguments(p: argparse.ArgumentParser) -> None:
 def estop(args: argparse.Namespace) -> int:
     """The operator's e-stop command: its errors are its own ("estop: error: ..."), not the
     controller service's. It reads only the config's [zenoh] and [stack] tables: a mistake
-    elsewhere in the file does not hold up a stop."""
+    elsewhere in the file does not hold up a stop. It runs in a session of its own (through
+    ``zstack estop`` already), with a share of the CPU of its own."""
+    code = own_session()
+    if code is not None:
+        return code
     try:
         from stack.config_read import load_bus_settings
 
