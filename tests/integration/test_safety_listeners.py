@@ -168,8 +168,10 @@ def test_a_frozen_listener_delays_no_stop(secure: Stack) -> None:
         listener.wait(20)
         probe.close()
         blocked, err = blocking.communicate(timeout=60)
-    print(f"e-stop round trips: engage {spread(engages)}; release {spread(releases)}; longest "
-          f"cmd_vel gap {max(gaps, default=0):.3f} s; BLOCK publisher: {blocked.strip()}")  # fmt: skip
+    print(
+        f"e-stop round trips: engage {spread(engages)}; release {spread(releases)}; longest "
+        f"cmd_vel gap {max(gaps, default=0):.3f} s; BLOCK publisher: {blocked.strip()}"
+    )
     assert blocking.returncode == 0 and int(blocked.split()[1]) > 0, err
     assert "NO ACCESS CONTROL" not in stack.log()  # the secure profile has it
     slow = [round(t, 3) for t in trips if t > ROUND_TRIP_LIMIT_S]
