@@ -1,4 +1,5 @@
-"""Lowering a process's CPU priority, so that it takes only the time perception leaves over.
+"""A process's share of the CPU: lowering it, so that it takes only the time perception leaves
+over; and giving a short command a share of its own (:func:`own_session`).
 
 Two ways (Linux): ``nice`` (a smaller share of the CPU, still taken in the middle of an
 inference) and ``SCHED_IDLE`` (runs only on a core that would otherwise be idle, and gives it up
@@ -16,6 +17,7 @@ as it wanted, and slowed the detector by 5 to 10 % (docs/benchmarks.md).
 from __future__ import annotations
 
 import os
+import signal
 
 
 def lower_priority(nice: int, idle: bool) -> str:
@@ -60,3 +62,39 @@ def leave_idle(*threads: int) -> str:
     if failed:  # the others are back all the same
         return f"still SCHED_IDLE ({'; '.join(failed)[:200]})"
     return "back in the normal class to finish"
+
+
+#: What the parent passes on to a command moved to a session of its own (:func:`own_session`):
+#: the terminal's Ctrl-C and the stops a caller sends.
+PASSED_ON = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def own_session() -> int | None:
+    """Go on in a session of its own, so that the kernel's autogroup scheduling gives this
+    command a share of the CPU of its own instead of a slice of its caller's session (the e-stop
+    command, started beside a busy stack or CPU burners in one session, waited behind all of
+    their threads: docs/benchmarks.md, "E-stop: from the command to the first zero").
+
+    Forks: the child returns None and goes on, leader of a new session; the parent stays in
+    the caller's session (and its terminal's foreground, so that Ctrl-C still reaches it),
+    passes on SIGINT, SIGTERM and SIGHUP, and returns the child's exit code (128 + the signal
+    that ended it). None at once, in the same process, where there is nothing to gain or no
+    way: already a session leader, or no fork (not POSIX)."""
+    if not hasattr(os, "fork") or os.getsid(0) == os.getpid():
+        return None
+    child = os.fork()
+    if child == 0:
+        os.setsid()
+        return None
+    for sig in PASSED_ON:
+        signal.signal(sig, lambda s, _frame: _pass_on(child, s))
+    _, status = os.waitpid(child, 0)  # a signal handled meanwhile does not end the wait
+    code = os.waitstatus_to_exitcode(status)
+    return code if code >= 0 else 128 - code
+
+
+def _pass_on(child: int, sig: int) -> None:
+    try:
+        os.kill(child, sig)
+    except ProcessLookupError:
+        return  # it has just ended: its exit status is what the parent waits for

@@ -12,6 +12,7 @@ import sys
 from collections.abc import Sequence
 
 from common.cli import invoked_as
+from common.priority import own_session
 from common.settings import SERVICES
 
 # command -> (module, the argv it starts with, help)
@@ -99,6 +100,11 @@ def resolve(argv: Sequence[str]) -> tuple[str, list[str]]:
 
 def main(argv: Sequence[str] | None = None) -> None:
     words = list(sys.argv[1:] if argv is None else argv)
+    if words[:1] == ["estop"]:
+        # Before anything else (imports, threads): the stop gets its own share of the CPU.
+        code = own_session()
+        if code is not None:
+            raise SystemExit(code)
     module, args = resolve(words)
     lead = COMMANDS[words[0]][1] if words[0] != "serve" else ("serve",)
     typed = f"zstack {words[0]}" if words[0] != "serve" else f"zstack serve {words[1]}"

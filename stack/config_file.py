@@ -17,64 +17,39 @@ whole.
 from __future__ import annotations
 
 import dataclasses
-import enum
 import math
 import os
 import re
-import tomllib
-import types
 import typing
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 from common.errors import ConfigError
 from common.settings import DEFAULT_CONFIG
 from services.camera.contract import CameraSettings
 from stack.config import Config
-
-ENV_PREFIX = "STACK__"
-EXTENDS = "extends"  # top-level key: the config file this one changes
-
-_T = TypeVar("_T")
-
-
-def _coerce(where: str, value: Any, hint: Any) -> Any:
-    """Check ``value`` against a field's type hint, converting TOML lists to tuples."""
-    origin = typing.get_origin(hint)
-    if origin is tuple:
-        args = typing.get_args(hint)
-        if not isinstance(value, list | tuple):
-            raise ConfigError(f"{where} must be a list, got {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_coerce(where, v, args[0]) for v in value)
-        if len(value) != len(args):
-            raise ConfigError(f"{where} must have {len(args)} items, got {value!r}")
-        return tuple(_coerce(where, v, a) for v, a in zip(value, args, strict=True))
-    if origin in (types.UnionType, typing.Union):
-        raise ConfigError(f"{where}: unions are not supported in settings")
-    if isinstance(hint, type) and issubclass(hint, enum.Enum):
-        choices = [m.value for m in hint]
-        if value not in choices:
-            raise ConfigError(
-                f"{where} must be one of {', '.join(map(str, choices))}, got {value!r}"
-            )
-        return hint(value)
-    if hint is float and isinstance(value, int | float) and not isinstance(value, bool):
-        return float(value)
-    if hint in (int, str, bool) and type(value) is hint:
-        return value
-    raise ConfigError(f"{where} must be {getattr(hint, '__name__', hint)}, got {value!r}")
-
-
-def _build(cls: type[_T], table: str, values: Mapping[str, Any]) -> _T:
-    hints = typing.get_type_hints(cls)
-    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(values) - names)
-    if unknown:
-        raise ConfigError(f"[{table}] has unknown setting(s) {unknown}; known: {sorted(names)}")
-    kwargs = {k: _coerce(f"{table}.{k}", v, hints[k]) for k, v in values.items()}
-    return cls(**kwargs)
+from stack.config_read import (
+    ENV_PREFIX,
+)
+from stack.config_read import (
+    blame as _blame,
+)
+from stack.config_read import (
+    build as _build,
+)
+from stack.config_read import (
+    check_tables as _check_tables,
+)
+from stack.config_read import (
+    env_value as _env_value,
+)
+from stack.config_read import (
+    merge as _merge,
+)
+from stack.config_read import (
+    read as _read,
+)
 
 
 def _env_overrides(
@@ -110,13 +85,6 @@ def _env_overrides(
     return out
 
 
-def _env_value(raw: str) -> Any:
-    try:
-        return tomllib.loads(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
-        return raw
-
-
 def _camera_override(
     name: str, parts: list[str], further_cameras: Iterable[str]
 ) -> tuple[str, str]:
@@ -138,64 +106,6 @@ def _camera_override(
     if field not in fields:
         raise ConfigError(f"{name}: [{CAMERAS}.{camera}] has no setting {field!r}; known: {fields}")
     return camera, field
-
-
-def _blame(error: ConfigError, table: str, fields: Mapping[str, Any]) -> ConfigError:
-    """``error`` about a setting of ``table`` prefixed with the variable that set it, when an
-    environment override did (``STACK__SIM__LASER_RAYS: sim.laser_rays must be ...``)."""
-    text = str(error)
-    variable = ENV_PREFIX + "__".join(table.split(".")).upper()  # cameras.rear: CAMERAS__REAR
-    for name in fields:
-        if re.search(rf"(?<![\w.]){re.escape(table)}\.{re.escape(name)}(?!\w)", text):
-            return ConfigError(f"{variable}__{name.upper()}: {text}")
-    return error
-
-
-def _read(cfg_path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
-    """The TOML tables of ``cfg_path``, laid over those of the file its ``extends`` names
-    (relative to it), field by field: a profile states only what it changes."""
-    try:
-        data = tomllib.loads(cfg_path.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise ConfigError(f"{cfg_path}: config file not found") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{cfg_path}: cannot read config ({exc})") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{cfg_path}: not valid TOML ({exc})") from exc
-    base = data.pop(EXTENDS, None)
-    if base is None:
-        return data
-    if not isinstance(base, str):
-        raise ConfigError(f"{cfg_path}: {EXTENDS} must be a file name")
-    base_path = (cfg_path.parent / base).resolve()
-    if base_path in seen or len(seen) > 8:
-        raise ConfigError(f"{cfg_path}: {EXTENDS} loops back to {base_path}")
-    merged = _read(base_path, (*seen, base_path))
-    _check_tables(cfg_path, data)
-    _merge(merged, data, cfg_path)
-    return merged
-
-
-def _check_tables(cfg_path: Path, data: Mapping[str, Any]) -> None:
-    for table, values in data.items():
-        if not isinstance(values, dict):
-            raise ConfigError(f"{cfg_path}: [{table}] must be a table")
-
-
-def _merge(base: dict[str, Any], changes: Mapping[str, Any], where: Path, path: str = "") -> None:
-    """Lay ``changes`` (from the file ``where``) over ``base``, in place: a table field by
-    field, at every depth; any other value, a list included, replaces the base's whole."""
-    for key, value in changes.items():
-        dotted = f"{path}.{key}" if path else key
-        current = base.get(key)
-        if isinstance(current, dict) and isinstance(value, dict):
-            _merge(current, value, where, dotted)
-        elif isinstance(current, dict):
-            raise ConfigError(
-                f"{where}: {dotted} must be a table, [{dotted}], as in the file it extends"
-            )
-        else:
-            base[key] = value
 
 
 def load_config(path: str | Path | None = None, environ: Mapping[str, str] | None = None) -> Config:

@@ -14,7 +14,7 @@ from common.cli import Command, add_config, service_main
 from common.contracts import ControllerMode
 from common.errors import StackError
 from common.lifecycle import exit_code, run_main, setup_logging, stop_event
-from stack.config_file import load_config
+from common.priority import own_session
 
 
 def _serve_arguments(p: argparse.ArgumentParser) -> None:
@@ -23,6 +23,8 @@ def _serve_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def serve(args: argparse.Namespace) -> int:
+    from stack.config_file import load_config  # every service's settings: not the e-stop's
+
     stop = stop_event()
     config = load_config(args.config)
     if args.mode:
@@ -42,13 +44,20 @@ def _estop_arguments(p: argparse.ArgumentParser) -> None:
 
 def estop(args: argparse.Namespace) -> int:
     """The operator's e-stop command: its errors are its own ("estop: error: ..."), not the
-    controller service's."""
+    controller service's. It reads only the config's [zenoh] and [stack] tables: a mistake
+    elsewhere in the file does not hold up a stop. It runs in a session of its own (through
+    ``zstack estop`` already), with a share of the CPU of its own."""
+    code = own_session()
+    if code is not None:
+        return code
     try:
-        config = load_config(args.config)
+        from stack.config_read import load_bus_settings
+
+        settings, stack = load_bus_settings(args.config)
         setup_logging("estop", "WARNING")
         from services.controller.estop_command import send_estop
 
-        return send_estop(config, args.action == "engage", args.reason)
+        return send_estop(settings, stack.prefix, args.action == "engage", args.reason)
     except StackError as exc:
         print(f"estop: error: {exc}", file=sys.stderr)
         return exit_code(exc)

@@ -143,7 +143,8 @@ class ControllerHandlers:
         self.estop_release_max_age_s = s.estop_release_max_age_s
         self.latch = EStopLatch(config.estop_path, clock.wall_ns() + int(self.tolerance_s * 1e9))
         self.detection_timeout_s = s.detection_timeout_s
-        self.arrived = threading.Event()  # new detections from any camera, or a camera's change
+        # New detections from any camera, a camera's change, or an e-stop released: the loop ticks.
+        self.arrived = threading.Event()
         # The cameras announced now and each one's newest detections, both by camera name in
         # the order they were announced; the cameras withdrawn since the loop last took them.
         self._cameras_lock = threading.Lock()
@@ -260,6 +261,9 @@ class ControllerHandlers:
                 contract.ESTOP_RELEASE_REFUSED, f"e-stop release refused: {latch.last_refusal}"
             )
         else:
+            # The loop ticks at once: the release is acknowledged (its status) and acted on now,
+            # not up to a control period later.
+            self.arrived.set()
             tally.log.warning("e-stop released by %s: %s", msg.header.source, msg.reason or "-")
 
 

@@ -163,3 +163,33 @@ def test_an_engage_stops_at_once_not_at_the_next_control_tick(make_stack) -> Non
     )
     assert stopped.header.stamp_ns < soon, "the e-stop's status waited for the next tick"
     assert stack.stop() == 0, stack.log()
+
+
+def test_a_release_is_acknowledged_at_once_not_at_the_next_control_tick(make_stack) -> None:  # type: ignore[no-untyped-def]
+    # As above, one tick a second: the release's status (what the e-stop command waits for)
+    # must not wait for the next tick either.
+    stack: Stack = make_stack(
+        supervisor={"services": ["controller"]}, controller={"control_rate_hz": 1.0}
+    )
+    stack.wait_ready({"controller"})
+    _, statuses = stack.subscribe(stack.keys.controller_status())
+    at = now()
+    engage = EStop(header=header(at.wall_ns, "test", at.mono_ns), engaged=True, reason="test")
+    stack.session.put(stack.keys.estop(), engage.encode())
+    wait_for(lambda: any(s.state == "estop" for s in statuses_of(statuses)), 30, "the e-stop")
+    ticked = len(statuses)
+    wait_for(lambda: len(statuses) > ticked, 30, "a control tick")
+    at = now()  # just after a tick: the next is about a second away
+    release = EStop(header=header(at.wall_ns, "test", at.mono_ns), engaged=False, reason="test")
+    stack.session.put(stack.keys.estop(), release.encode())
+    [released, *_] = wait_for(
+        lambda: [s for s in statuses_of(statuses)[ticked:] if s.state != "estop"], 30, "release"
+    )
+    last_tick = max(
+        s.header.stamp_ns for s in statuses_of(statuses) if s.header.stamp_ns <= at.wall_ns
+    )
+    assert released.header.stamp_ns < last_tick + 10**9 // 2, (
+        f"the release's status came {(released.header.stamp_ns - at.wall_ns) / 1e9:.2f} s after "
+        "the release: it waited for the next tick"
+    )
+    assert stack.stop() == 0, stack.log()

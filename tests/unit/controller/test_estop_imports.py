@@ -19,6 +19,8 @@ REPO = Path(__file__).resolve().parents[3]
 #: Libraries the e-stop never needs: numpy (and what needs it), the camera's and the
 #: detector's runtimes, and the controller's service (its policy, tracker and loop).
 HEAVY = ("numpy", "cv2", "onnxruntime", "msgspec", "services.controller.service")
+#: Every service's settings (the whole Config): the e-stop reads [zenoh] and [stack] alone.
+SETTINGS = ("stack.config", "stack.config_file", "services.detector.contract")
 
 
 def imported_by(argv: list[str], tmp_path: Path) -> tuple[set[str], str]:
@@ -47,4 +49,6 @@ def test_the_estop_imports_nothing_heavy(tmp_path: Path) -> None:
     assert "zenoh" in modules  # and reached the bus: the put's own imports were made
     heavy = sorted(m for m in modules if m.split(".")[0] in HEAVY or m in HEAVY)
     assert heavy == [], f"the e-stop imported {heavy}"
+    settings = sorted(m for m in modules if m in SETTINGS)
+    assert settings == [], f"the e-stop imported every service's settings: {settings}"
     assert "estop: error: cannot engage the e-stop: no link to the stack" in errors, errors
