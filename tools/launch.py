@@ -42,7 +42,8 @@ from common.queries import ready_services
 from common.settings import REPO_ROOT, service_package
 from common.spawn import spawn, stop_child
 from stack.config import Config
-from stack.config_file import ENV_PREFIX, load_config, to_toml
+from stack.config_file import load_config, to_toml
+from stack.config_read import ENV_PREFIX
 from tools.ports import free_port as free_port  # the port plan's home is tools/ports.py
 
 
