@@ -36,7 +36,7 @@ def send_estop(config: Config, engaged: bool, reason: str) -> int:
     happened. An engage the controller could not save, a release it refused, no link to the
     stack and no controller at all are each one StackError line."""
     keys = Keys(config.stack.prefix)
-    session = open_session(config.zenoh, "estop")
+    session = open_session(config.zenoh, config.principal("estop"))
     lock = threading.Lock()
     heard: list[tuple[float, ControllerStatus]] = []  # the latest status and when it came
 

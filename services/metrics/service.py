@@ -355,7 +355,7 @@ def run(config: Config, stop: threading.Event) -> int:
 def query(config: Config, timeout_s: float) -> MetricsAnswer:
     """Ask the metrics service for its snapshot. Nobody answering within the timeout is a
     StackError naming where it looked and the likely fix (common/reach.py)."""
-    session = open_session(config.zenoh, OBSERVER)
+    session = open_session(config.zenoh, config.principal(OBSERVER))
     keys = Keys(config.stack.prefix)
     try:
         deadline = mono_s() + timeout_s

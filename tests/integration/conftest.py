@@ -94,14 +94,14 @@ class Stack:
         self.tokens: list[zenoh.LivelinessToken] = []  # the cameras the test announces
 
     def open(self, principal: str) -> zenoh.Session:
-        """A session of the stack as ``principal``. In client mode the supervisor's router may
+        """A session of the stack as its role ``principal`` (``config.principal``). In client mode the supervisor's router may
         not listen yet, so opening is retried until it does."""
         if self.config.zenoh.mode == "peer":
-            return open_session(self.config.zenoh, principal)
+            return open_session(self.config.zenoh, self.config.principal(principal))
 
         def attempt() -> zenoh.Session | None:
             try:
-                return open_session(self.config.zenoh, principal)
+                return open_session(self.config.zenoh, self.config.principal(principal))
             except ConfigError:
                 return None
 
