@@ -10,6 +10,7 @@ ConfigError with one line for an out-of-range value.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
@@ -68,6 +69,11 @@ def principal_name(prefix: str, role: str, pool_prefix: str = "") -> str:
     may serve several robots; every other role's its robot's, ``<prefix>/<role>``."""
     scope = (pool_prefix or prefix) if is_detector_service(role) else prefix
     return qualified(scope, role)
+
+
+def principal_names(prefix: str, pool_prefix: str = "") -> Callable[[str], str]:
+    """:func:`principal_name` for each role of the stack of ``prefix``."""
+    return lambda role: principal_name(prefix, role, pool_prefix)
 
 
 def service_package(service: str) -> str:
