@@ -120,7 +120,9 @@ def test_credentials_are_made_only_for_the_principals_the_stack_runs(tmp_path: P
     for name, table in (("camera", secure), ("camera_tls", tls)):
         (tmp_path / name).mkdir()
         camera = write_config(
-            tmp_path / name, zenoh=table, supervisor={"services": ["camera", "controller"]},
+            tmp_path / name,
+            zenoh=table,
+            supervisor={"services": ["camera", "controller"]},
             stack={"prefix": prefix},
         )
         line = _one_line(_run("deploy.supervisor", "--config", camera, "--duration", "3"))
