@@ -141,7 +141,9 @@ def test_old_server_capable_credentials_are_named_and_replaced_with_force(tmp_pa
     generate(tmp_path)
     old_style(tmp_path, "stack/viewer")
     old_style(tmp_path, "stack/camera")
-    with pytest.raises(ConfigError, match=r"certificates of stack/camera, stack/viewer could.*--force"):
+    with pytest.raises(
+        ConfigError, match=r"certificates of stack/camera, stack/viewer could.*--force"
+    ):
         generate(tmp_path)
     generate(tmp_path, force=True)
     assert server_capable(tmp_path) == []
@@ -428,7 +430,9 @@ def test_a_service_added_later_stops_the_stack_in_one_line_naming_the_command(
     # Made again for that config, the stack starts.
     assert _cli(monkeypatch, "--config", path, "--force") == 0
     check_credentials(load_config(path, environ={}))
-    assert password_file(creds, "stack/camera").exists() and cert_file(creds, "stack/viewer").exists()
+    assert (
+        password_file(creds, "stack/camera").exists() and cert_file(creds, "stack/viewer").exists()
+    )
     capsys.readouterr()
 
 
@@ -458,6 +462,8 @@ def test_force_for_a_config_that_runs_less_removes_the_secrets_it_no_longer_need
         "credentials: stack/camera: not made, the config runs no camera service "
         "(supervisor.services); its earlier secrets removed\n" in err
     ), err
-    assert "credentials: stack/detector_a: earlier secrets removed, neither the config nor" in err, err
+    assert (
+        "credentials: stack/detector_a: earlier secrets removed, neither the config nor" in err
+    ), err
     assert server_capable(creds) == []  # the old certificate no longer stops TLS sessions
     assert password_file(creds, "stack/sim").exists()

@@ -19,9 +19,9 @@ from common.frames import image_to_frame
 from common.images import load_sample
 from common.keys import Keys
 from common.memory_bus import MemoryHub
-from common.settings import principal_names
 from common.messages import CameraAnnouncement, ControllerStatus
 from common.node import Node
+from common.settings import principal_names
 from perception.pipeline import Detector
 from services.detector import contract
 from services.detector.attention import Attention

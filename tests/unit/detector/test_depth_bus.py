@@ -23,9 +23,9 @@ from common.counters import per_camera
 from common.frames import image_to_frame
 from common.keys import Keys
 from common.memory_bus import MemoryHub
-from common.settings import principal_names
 from common.messages import DepthFrame, Detections, Frame, Header
 from common.node import Node
+from common.settings import principal_names
 from perception.depth import COLUMNS
 from perception.pipeline import Detector
 from services.detector.handlers import DetectorHandlers

@@ -13,8 +13,8 @@ from common.bus import QoS, Sample
 from common.camera_announce import CameraAnnouncements
 from common.keys import Keys
 from common.memory_bus import MemoryHub
-from common.settings import principal_names
 from common.security import stack_principals
+from common.settings import principal_names
 from stack.access import access_control, access_table
 from tests.unit.heard import heard_cameras
 
