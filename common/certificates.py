@@ -35,9 +35,10 @@ def server_capable(directory: Path) -> list[str]:
     as the router's (credentials made by an older version); unreadable files are skipped."""
     found = []
     # Every principal's certificate there, a further camera's (``camera_<name>``) too.
-    paths = sorted(directory.glob("*.pem")) if directory.is_dir() else []
+    # Each robot's in its subfolder (``site/robot1/camera.pem``): named by its path there.
+    paths = sorted(directory.rglob("*.pem")) if directory.is_dir() else []
     for path in paths:
-        p = path.stem
+        p = path.relative_to(directory).with_suffix("").as_posix()
         if path in (ca_file(directory), cert_file(directory, ROUTER_PRINCIPAL)):
             continue
         if not path.is_file():

@@ -8,7 +8,8 @@ file and the ``chmod`` that fixes it (ConfigError, exit code 2).
 
 The rules, by mode bits alone (they hold for root too, who reads any file whatever its mode):
 
-- the folder: no write for group or others (``zstack credentials`` makes it 0700);
+- the folder and each subfolder (a robot's): no write for group or others (``zstack
+  credentials`` makes them 0700);
 - a secret (``*.password``, ``*.key``, ``users.txt``, ``viewer-token``): no write for group or
   others, no read for others (made 0600; a group may read, to share it with a service's group);
 - a certificate (``*.pem``): no write for group or others (made 0644: it is public).
@@ -87,12 +88,16 @@ def is_secret(path: Path) -> bool | None:
 
 
 def check_credentials_folder(directory: Path) -> None:
-    """The folder and every credential file in it, in name order: what the supervisor checks
-    before it starts a secure stack (each process checks the files it reads too)."""
+    """The folder, its subfolders (one per robot prefix, common/security.py) and every
+    credential file in them, in name order: what the supervisor checks before it starts a
+    secure stack (each process checks the files it reads too)."""
     check_folder(directory)
     if not directory.is_dir():
         return  # missing: said, with its fix, where the files are read
     for path in sorted(directory.iterdir()):
+        if path.is_dir():
+            check_credentials_folder(path)
+            continue
         secret = is_secret(path)
         if secret is True:
             check_secret(path)

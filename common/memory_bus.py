@@ -100,8 +100,13 @@ class MemoryHub:
     """The in-process bus: every participant's subscriptions, tokens and queryables; with
     ``access`` (the router's ``access_control`` section), its access rules too."""
 
-    def __init__(self, access: Mapping[str, Any] | None = None) -> None:
+    def __init__(
+        self, access: Mapping[str, Any] | None = None, names: Callable[[str], str] | None = None
+    ) -> None:
         self.rules = AccessRules(access) if access else None
+        #: The name each participant's principal authenticates as (a role's, as
+        #: ``Config.principal`` names it: ``<prefix>/<role>``); None: as given.
+        self.names = names
         #: What the rules denied: ``(principal, kind, key expression)``, in order.
         self.denied: list[tuple[str, str, str]] = []
         self._lock = threading.RLock()
@@ -114,8 +119,8 @@ class MemoryHub:
 
     def join(self, name: str = "", *, principal: str | None = None) -> MemoryBus:
         """A new participant (``name`` only for reading its id in a failure), authenticated
-        as ``principal``: a hub with access rules needs one, as the router admits no
-        anonymous link."""
+        as ``principal`` (through the hub's ``names``: a role, qualified as its robot's): a
+        hub with access rules needs one, as the router admits no anonymous link."""
         if self.rules is not None and principal is None:
             raise ValueError("a hub with access rules needs each participant's principal")
         zid = f"mem{next(self._buses)}{'-' + name if name else ''}"
@@ -125,7 +130,8 @@ class MemoryHub:
         if self.rules is None:
             return True
         assert principal is not None  # join() asks for one
-        if self.rules.allows(principal, kind, key):
+        name = self.names(principal) if self.names else principal
+        if self.rules.allows(name, kind, key):
             return True
         with self._lock:
             self.denied.append((principal, kind, key))

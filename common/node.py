@@ -34,6 +34,8 @@ class NodeConfig(Protocol):
     @property
     def zenoh(self) -> ZenohSettings: ...
 
+    def principal(self, role: str) -> str: ...
+
 
 #: Samples that may wait for a bounded subscription's handler (``Node.subscribe_bounded``):
 #: one waits while one is handled, so that the handler never waits on the bus for the next.
@@ -128,7 +130,7 @@ class Node(Tally, Closing):
         if bus is None:
             from common.zenoh_bus import ZenohBus, open_session
 
-            bus = ZenohBus(open_session(config.zenoh, service), self.log)
+            bus = ZenohBus(open_session(config.zenoh, config.principal(service)), self.log)
         self.bus = bus
         self.clock = clock
         self._token: Declared | None = None

@@ -15,12 +15,25 @@ Each process has its own principal: each camera process (``camera`` for the firs
 and each other service by its name. What each may put, announce, serve and read is declared by
 its service's contract (``services/<name>/contract.py``); stack/access.py builds the router's
 rules from them.
+
+Those are *roles*. The name a process authenticates as (its certificate's common name, its
+password's user name) is its role qualified by whose it is (:func:`qualified`,
+common.settings.principal_name): ``<stack.prefix>/<role>`` for a robot's own processes and
+tools (``stack/controller``, ``site/robot1/estop``), ``<pool>/<worker>`` for a detector worker
+(the pool's prefix, ``detector.pool_prefix`` or the stack's: one worker may serve several
+robots), and the routers' ``supervisor`` alone, shared by linked routers. So one site CA can
+sign every robot's principals while each robot's router admits only its own robot's (and its
+pool's workers): robot 1's ``estop`` is ``site/robot1/estop``, a name robot 2's rules never
+match. Each principal's files live at its name under the credentials folder
+(``secrets/site/robot1/estop.password``): one subfolder per robot, easy to copy.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+
+from common.errors import ConfigError
 
 # Every principal the credentials command creates. "estop" is the operator's e-stop tool,
 # "observer" may watch (subscribe, query) but publishes nothing: status lines, queries, tests.
@@ -79,6 +92,53 @@ def stack_principals(
     return tuple(out)
 
 
+def qualified(scope: str, role: str) -> str:
+    """The name ``role`` authenticates as, within ``scope`` (a robot's prefix, or its pool's
+    for a detector worker): ``<scope>/<role>``; the router's is ``supervisor`` everywhere."""
+    return role if role == ROUTER_PRINCIPAL else f"{scope}/{role}"
+
+
+def role_of(principal: str) -> str:
+    """The role of a principal's name: ``controller`` for ``site/robot1/controller``."""
+    return principal.rsplit("/", 1)[-1]
+
+
+def _at(directory: Path, principal: str, suffix: str) -> Path:
+    """``principal``'s file: its name is its path under ``directory`` (``site/robot1/estop``:
+    ``site/robot1/estop<suffix>``). ConfigError, one line, for a name that could leave the
+    folder (an empty, ``.`` or ``..`` chunk)."""
+    chunks = principal.split("/")
+    if any(c in ("", ".", "..") for c in chunks):
+        raise ConfigError(
+            f"principal {principal!r} cannot name a credentials file: a stack.prefix or "
+            "detector.pool_prefix with an empty, '.' or '..' chunk"
+        )
+    return directory.joinpath(*chunks[:-1], f"{chunks[-1]}{suffix}")
+
+
+def made_by_role(directory: Path, principal: str) -> bool:
+    """Whether ``directory`` holds ``principal``'s files under its role alone
+    (``controller.pem`` for ``stack/controller``), as versions before per-robot principals
+    made them, and not under its name: credentials to make again (:func:`remake_by_role`)."""
+    role = role_of(principal)
+    if role == principal:
+        return False
+    made = (password_file, cert_file, key_file)
+    return not any(f(directory, principal).exists() for f in made) and any(
+        f(directory, role).exists() for f in made
+    )
+
+
+def remake_by_role(directory: Path, config_path: str = "") -> str:
+    """The one line that says credentials named by role alone must be made again."""
+    return (
+        f"the credentials in {directory} were made by an older version that named principals "
+        "by role alone (controller, estop ...: one robot's then worked on every robot's "
+        "router); principals are now per robot (<stack.prefix>/<role>): make them again with "
+        f"`zstack credentials --config {config_path or 'FILE'} --force` (docs/security.md)"
+    )
+
+
 def users_file(directory: Path) -> Path:
     """The router's dictionary of ``user:password`` lines."""
     return directory / "users.txt"
@@ -86,7 +146,7 @@ def users_file(directory: Path) -> Path:
 
 def password_file(directory: Path, principal: str) -> Path:
     """One principal's own password, one line."""
-    return directory / f"{principal}.password"
+    return _at(directory, principal, ".password")
 
 
 def ca_file(directory: Path) -> Path:
@@ -99,12 +159,12 @@ def ca_key_file(directory: Path) -> Path:
 
 
 def cert_file(directory: Path, principal: str) -> Path:
-    """A principal's certificate (PEM), signed by the private CA, common name = principal."""
-    return directory / f"{principal}.pem"
+    """A principal's certificate (PEM), signed by the private CA, common name = its name."""
+    return _at(directory, principal, ".pem")
 
 
 def key_file(directory: Path, principal: str) -> Path:
-    return directory / f"{principal}.key"
+    return _at(directory, principal, ".key")
 
 
 def viewer_token_file(directory: Path) -> Path:

@@ -10,12 +10,13 @@ ConfigError with one line for an out-of-range value.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
 from common.errors import ConfigError
-from common.security import AUTH_MODES
+from common.security import AUTH_MODES, qualified
 from common.setting_checks import Bounds, check_bounds, check_lengths
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -60,6 +61,19 @@ _DETECTOR_SERVICE = re.compile(r"detector(_[a-z0-9_]{1,40})?")
 def is_detector_service(name: str) -> bool:
     """Whether ``name`` can be a detector worker's name (``detector``, ``detector_<chunk>``)."""
     return _DETECTOR_SERVICE.fullmatch(name) is not None
+
+
+def principal_name(prefix: str, role: str, pool_prefix: str = "") -> str:
+    """The name ``role`` authenticates as on the stack of ``prefix`` (common/security.py): a
+    detector worker's is its pool's (``pool_prefix``, or the stack's prefix), since one worker
+    may serve several robots; every other role's its robot's, ``<prefix>/<role>``."""
+    scope = (pool_prefix or prefix) if is_detector_service(role) else prefix
+    return qualified(scope, role)
+
+
+def principal_names(prefix: str, pool_prefix: str = "") -> Callable[[str], str]:
+    """:func:`principal_name` for each role of the stack of ``prefix``."""
+    return lambda role: principal_name(prefix, role, pool_prefix)
 
 
 def service_package(service: str) -> str:

@@ -42,7 +42,9 @@ from common.security import (
     ca_file,
     cert_file,
     key_file,
+    made_by_role,
     password_file,
+    remake_by_role,
     users_file,
 )
 from common.settings import ZenohSettings
@@ -235,24 +237,41 @@ def _sample(sample: zenoh.Sample) -> Sample:
     return Sample(str(sample.key_expr), sample.payload.to_bytes(), source_of(sample))
 
 
-def readable(path: Path, what: str, *, secret: bool = True) -> str:
+def readable(path: Path, what: str, *, secret: bool = True, root: Path | None = None) -> str:
     """``path`` as Zenoh reads it, once it is there and no one else may change it (nor, for a
-    ``secret``, read it): ConfigError, one line, otherwise (common/credential_modes.py)."""
+    ``secret``, read it): ConfigError, one line, otherwise (common/credential_modes.py).
+    ``root``: the credentials folder, when ``path`` lies in a subfolder of it (a robot's:
+    each folder from the root down is checked)."""
+    root = root or path.parent
     if not path.is_file():
         fix = "run `zstack credentials`"
-        if ca_file(path.parent).is_file():  # a folder made for fewer cameras, or not all copied
+        if ca_file(root).is_file():  # a folder made for fewer cameras, or not all copied
             fix = (
                 "make them again for the config's services and cameras with `zstack "
                 "credentials --config FILE --force`, or copy the file from where they were made"
             )
         raise ConfigError(f"{what} {path} is missing: {fix} (docs/security.md)")
-    check_folder(path.parent)
+    folders = [path.parent]
+    if root in path.parent.parents:
+        folders += [f for f in path.parent.parents if f == root or root in f.parents]
+    for folder in folders:
+        check_folder(folder)
     (check_secret if secret else check_public)(path)
     return str(path)
 
 
+def _own(settings: ZenohSettings, principal: str, file: Callable[[Path, str], Path]) -> Path:
+    """``principal``'s own file; ConfigError, one line, when the folder holds it under its
+    role alone (made by an older version: common.security.made_by_role)."""
+    creds = settings.credentials_path
+    if made_by_role(creds, principal):
+        raise ConfigError(remake_by_role(creds))
+    return file(creds, principal)
+
+
 def _password(settings: ZenohSettings, principal: str) -> str:
-    path = Path(readable(password_file(settings.credentials_path, principal), "password file"))
+    creds = settings.credentials_path
+    path = Path(readable(_own(settings, principal, password_file), "password file", root=creds))
     try:
         password = path.read_text(encoding="utf-8").strip()
     except (OSError, UnicodeDecodeError) as exc:
@@ -295,10 +314,10 @@ def _security(settings: ZenohSettings, principal: str, hub: bool) -> dict[str, A
                 tls["connect_certificate"] = tls["listen_certificate"]
                 tls["connect_private_key"] = tls["listen_private_key"]
         elif settings.auth == "certificate":
-            tls["connect_certificate"] = readable(
-                cert_file(creds, principal), "certificate", secret=False
-            )
-            tls["connect_private_key"] = readable(key_file(creds, principal), "private key")
+            cert = _own(settings, principal, cert_file)
+            tls["connect_certificate"] = readable(cert, "certificate", secret=False, root=creds)
+            key = key_file(creds, principal)
+            tls["connect_private_key"] = readable(key, "private key", root=creds)
             # A client sends its certificate only with this set too (checked on zenoh 1.10).
             tls["enable_mtls"] = True
         out["transport/link/tls"] = tls

@@ -1,27 +1,34 @@
 """python -m deploy.credentials [--config FILE] [--dir DIR] [--host ADDR ...] [--worker NAME ...]
-                               [--force] [--days N]
+                               [--robot FILE ...] [--force] [--days N]
 
 Creates the credentials of the secure profile in DIR (default: the config's
 ``zenoh.credentials_dir``, ``secrets/``, git-ignored): a private CA, and for each principal the
 config has a use for (stack.access.running_principals) a random password, its line in the
-router's ``user:password`` dictionary, and a key and certificate (common name = principal).
-Those principals are the supervisor's, those of the processes of ``supervisor.services`` (one
-per camera, ``camera`` and ``camera_<name>``, when it runs ``camera``; one per detector worker,
-``detector``, ``detector_2`` ... or ``detector_<worker_id>`` ..., when it runs ``detector``; the
-service's own otherwise), the tools' (``recorder`` for record and play, ``estop``,
-``observer``), and the other hosts' (``zenoh.remote_principals``, and each --worker NAME: a
-detector worker another host runs, ``detector_a``), so that one set of credentials (one CA)
-serves a pool across hosts. A principal of a service the config does not run (the ``camera``
-of a stack that runs the simulator) gets no secret, so nobody can log in as it; the command
-says which it made, and which it left out and why, one line each.
+router's ``user:password`` dictionary, and a key and certificate (common name = the principal's
+name). A principal is named by whose it is (common/security.py): ``<stack.prefix>/<role>``
+for a robot's (``stack/controller``, ``site/robot1/estop``), ``<pool>/<worker>`` for a
+detector worker (``detector.pool_prefix``, or the stack's prefix), ``supervisor`` for the
+routers; its files lie at its name under DIR (``site/robot1/estop.password``), one subfolder
+per robot. Those principals are the supervisor's, those of the processes of
+``supervisor.services`` (one per camera, ``camera`` and ``camera_<name>``, when it runs
+``camera``; one per detector worker, ``detector``, ``detector_2`` ... or
+``detector_<worker_id>`` ..., when it runs ``detector``; the service's own otherwise), the
+tools' (``recorder`` for record and play, ``estop``, ``observer``), and the other hosts'
+(``zenoh.remote_principals``, and each --worker NAME: a detector worker another host runs,
+``detector_a``), so that one set of credentials (one CA) serves a pool across hosts; each
+--robot FILE adds another robot's (its config's) the same way, so that one run serves a site.
+A principal of a service the config does not run (the ``camera`` of a stack that runs the
+simulator) gets no secret, so nobody can log in as it; the command says which it made, and
+which it left out and why, one line each (deploy/credential_names.py).
 Only the supervisor's certificate can serve the TLS listener: it alone names ``localhost``,
 ``127.0.0.1`` and each --host and allows server authentication. Every other certificate names
 no host and allows client authentication only, so a client that checks the router's name
-refuses it. DIR is made 0700 and every secret 0600, whatever their
-modes were. Existing credentials are kept unless --force is given (needed, too, after adding
-a service, a camera or a worker to the config); with --force every principal's password, key
-and certificate not made this time is removed (an earlier config's, now useless: not in the
-new dictionary, signed by the old CA), and said so.
+refuses it. DIR and its subfolders are made 0700 and every secret 0600, whatever their
+modes were; a symbolic link among them is refused. Existing credentials are kept unless
+--force is given (needed, too, after adding a service, a camera or a worker to the config);
+with --force every principal's password, key and certificate not made this time is removed
+(an earlier config's, or an older version's named by role alone, now useless: not in the new
+dictionary, signed by the old CA), and said so.
 """
 
 from __future__ import annotations
@@ -45,6 +52,7 @@ from common.certificates import refuse_server_capable
 from common.cli import Command, add_config, service_main
 from common.clock import utc_now
 from common.errors import ConfigError
+from common.keys import Keys
 from common.lifecycle import run_main
 from common.security import (
     PRINCIPALS,
@@ -54,14 +62,29 @@ from common.security import (
     cert_file,
     key_file,
     password_file,
-    stack_principals,
+    qualified,
     users_file,
     viewer_token_file,
 )
-from common.settings import is_detector_service, service_package
-from stack.access import TOOL_PRINCIPALS, running_principals, service_principals
-from stack.config import Config
+from deploy.credential_names import (
+    chosen_lines,
+    credential_principals,
+    credential_workers,
+    remove_stale,
+)
 from stack.config_file import load_config
+
+__all__ = [
+    "chosen_lines",
+    "credential_principals",
+    "credential_workers",
+    "generate",
+    "remove_stale",
+]
+
+#: The principals :func:`generate` makes by default: a one-camera stack's, under the default
+#: ``stack.prefix``.
+DEFAULT_PRINCIPALS = tuple(qualified(Keys().prefix, p) for p in PRINCIPALS)
 
 DEFAULT_DAYS = 825  # the longest validity that browsers and most TLS stacks still accept
 DEFAULT_HOSTS = ("localhost", "127.0.0.1")
@@ -191,17 +214,33 @@ def _targets(directory: Path, principals: tuple[str, ...]) -> list[Path]:
     return files
 
 
+def _folders(directory: Path, principals: Sequence[str]) -> None:
+    """Make each principal's subfolder (``site/robot1`` for ``site/robot1/estop``) 0700, as
+    ``directory``; ConfigError, one line, for one that is a symbolic link (a link planted
+    there must not carry secrets elsewhere) or no folder."""
+    for p in principals:
+        folder = password_file(directory, p).parent
+        for f in reversed((folder, *folder.parents)):
+            if f != directory and directory not in f.parents:
+                continue
+            if f.is_symlink() or (f.exists() and not f.is_dir()):
+                raise ConfigError(f"{f} is a symbolic link or not a folder: refused")
+            f.mkdir(mode=0o700, exist_ok=True)
+            f.chmod(0o700)
+
+
 def generate(
     directory: Path,
     hosts: tuple[str, ...] = (),
     days: int = DEFAULT_DAYS,
     force: bool = False,
-    principals: tuple[str, ...] = PRINCIPALS,
+    principals: tuple[str, ...] = DEFAULT_PRINCIPALS,
 ) -> list[Path]:
     """Write passwords, the user dictionary, a CA and one certificate per principal into
-    ``directory`` (created 0700; secrets 0600). ``principals``: every principal of a
-    one-camera stack by default; the command passes a config's :func:`credential_principals`.
-    Returns the files written, in order."""
+    ``directory`` (created 0700, each robot's subfolder too; secrets 0600). ``principals``, by
+    name (common/security.py): every principal of a one-camera stack under the default prefix
+    by default; the command passes a config's :func:`credential_principals`. Returns the
+    files written, in order."""
     if ROUTER_PRINCIPAL not in principals:
         raise ValueError(f"the principals must include the router's, {ROUTER_PRINCIPAL!r}")
     if days < 1:
@@ -219,6 +258,7 @@ def generate(
     directory.mkdir(mode=0o700, parents=True, exist_ok=True)
     # mkdir's mode is reduced by the umask, and a folder that existed keeps its own mode.
     directory.chmod(0o700)
+    _folders(directory, principals)
 
     written: list[Path] = []
     passwords = {p: secrets.token_urlsafe(24) for p in principals}
@@ -247,7 +287,7 @@ def say_written(
     directory: Path,
     hosts: tuple[str, ...],
     days: int,
-    principals: tuple[str, ...] = PRINCIPALS,
+    principals: tuple[str, ...] = DEFAULT_PRINCIPALS,
     chosen: Sequence[str] = (),
 ) -> None:
     """What :func:`generate` wrote, for whom (``chosen``: :func:`chosen_lines`), and how to use
@@ -284,127 +324,36 @@ def _credentials_arguments(p: argparse.ArgumentParser) -> None:
         help="a detector worker another host runs, by its name (detector_<worker_id>, "
         "detector_<worker_id>_2 ...): its principal too (repeatable)",
     )
+    p.add_argument(
+        "--robot",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="another robot's config: its principals too, under the same CA, in its own "
+        "subfolder (repeatable: one run for a site's robots)",
+    )
     p.add_argument("--force", action="store_true", help="replace existing credentials")
     p.add_argument("--days", type=int, default=DEFAULT_DAYS, help="certificate validity")
 
 
-def credential_workers(config: Config, others: Sequence[str]) -> tuple[str, ...]:
-    """The detector workers of other hosts to make principals for: ``others`` (by name), then
-    those among the config's ``zenoh.remote_principals``; ConfigError, one line, for a name
-    no worker can have."""
-    for name in others:
-        if not is_detector_service(name):
-            raise ConfigError(
-                f"--worker {name!r} is not a detector worker's name: detector, detector_<n>, "
-                "detector_<worker_id> or detector_<worker_id>_<n> (docs/detector.md)"
-            )
-    remote = [p for p in config.zenoh.remote_principals if is_detector_service(p)]
-    return tuple(dict.fromkeys((*others, *remote)))
-
-
-def credential_principals(
-    config: Config, others: Sequence[str] = ()
-) -> tuple[tuple[str, ...], dict[str, str]]:
-    """(the principals to make secrets for, {each principal of the config's stack left out:
-    why}): those the config has a use for (stack.access.running_principals: the router, the
-    processes of ``supervisor.services``, the tools, ``zenoh.remote_principals``) and the other
-    hosts' workers named in ``others`` (``--worker``). ConfigError, one line, for a bad name."""
-    workers = credential_workers(config, others)
-    remote = (*config.zenoh.remote_principals, *workers)
-    try:
-        made = running_principals(
-            config.supervisor.services, config.camera_services, config.detector_services, remote
-        )
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from exc
-    every = stack_principals(config.camera_services, config.detector_services)
-    left_out = {
-        p: f"the config runs no {service_package(p)} service (supervisor.services)"
-        for p in every
-        if p not in made
-    }
-    return made, left_out
-
-
-def remove_stale(directory: Path, made: tuple[str, ...]) -> list[str]:
-    """Remove the password, key and certificate of every principal in ``directory`` other than
-    ``made`` (left there by an earlier run for a config that ran more): signed by a CA no
-    longer used and absent from the new user dictionary, they could log in nowhere, but an
-    old-style certificate among them would still stop every TLS session (common/certificates.py)
-    and a copy of the folder would spread them. Returns their principals, sorted."""
-    found = {
-        path.stem
-        for pattern in ("*.password", "*.key", "*.pem")
-        for path in directory.glob(pattern)
-        if path.name not in (ca_file(directory).name, ca_key_file(directory).name)
-    }
-    stale = sorted(found - set(made))
-    for p in stale:
-        for path in (password_file(directory, p), key_file(directory, p), cert_file(directory, p)):
-            try:
-                path.unlink(missing_ok=True)  # a link goes, never what it points to
-            except OSError as exc:
-                raise ConfigError(f"cannot remove {path}: {exc.strerror}") from exc
-    return stale
-
-
-def _made_groups(config: Config, made: tuple[str, ...]) -> str:
-    """``made`` in groups, each with what it is for: "supervisor (the router); sim, ...
-    (supervisor.services); ..."."""
-    services = service_principals(
-        config.supervisor.services, config.camera_services, config.detector_services
-    )
-    groups: dict[str, list[str]] = {
-        "the router": [p for p in made if p == ROUTER_PRINCIPAL],
-        "supervisor.services": [p for p in made if p in services],
-        "the tools: zstack record and play, estop, query": [
-            p for p in made if p in TOOL_PRINCIPALS and p not in services
-        ],
-    }
-    grouped = {p for ps in groups.values() for p in ps}
-    groups["other hosts': zenoh.remote_principals, --worker"] = [
-        p for p in made if p not in grouped
-    ]
-    return "; ".join(f"{', '.join(ps)} ({why})" for why, ps in groups.items() if ps)
-
-
-def chosen_lines(
-    config: Config,
-    made: tuple[str, ...],
-    left_out: dict[str, str],
-    removed: list[str],
-    again: str = "",
-) -> list[str]:
-    """Which principals got secrets, which were left out and why, whose earlier secrets were
-    removed, and how to make them again (``again``: the command's options): one line each."""
-    lines = [f"made for {_made_groups(config, made)}"]
-    for p, why in left_out.items():
-        gone = "; its earlier secrets removed" if p in removed else ""
-        lines.append(f"{p}: not made, {why}{gone}")
-    lines += [
-        f"{p}: earlier secrets removed, neither the config nor --worker names it"
-        for p in removed
-        if p not in left_out
-    ]
-    if left_out:
-        lines.append(
-            "after adding a service to supervisor.services, make them again: `zstack "
-            f"credentials --config {config.path}{again} --force`"
-        )
-    return lines
-
-
 def _credentials(args: argparse.Namespace) -> int:
     config = load_config(args.config)
+    robots = [load_config(path) for path in args.robot]
     directory: Path = (args.dir or config.zenoh.credentials_path).resolve()
     hosts = tuple(args.host)
     made, left_out = credential_principals(config, args.worker)
+    for robot in robots:  # each further robot's principals, under the same CA
+        theirs, their_left = credential_principals(robot)
+        made = tuple(dict.fromkeys((*made, *theirs)))
+        left_out.update(their_left)
+    left_out = {p: why for p, why in left_out.items() if p not in made}
     generate(directory, hosts, args.days, args.force, made)
     removed = remove_stale(directory, made) if args.force else []
     options = [f"--dir {args.dir}"] if args.dir else []
     options += [f"--host {h}" for h in hosts] + [f"--worker {w}" for w in args.worker]
+    options += [f"--robot {r}" for r in args.robot]
     again = "".join(f" {o}" for o in options)
-    chosen = chosen_lines(config, made, left_out, removed, again)
+    chosen = chosen_lines(config, made, left_out, removed, again, robots)
     say_written(directory, hosts, args.days, made, chosen)
     return 0
 

@@ -20,6 +20,11 @@ whole, not trimmed. Queries and liveliness subscriptions are open to every princ
 the stack's prefix and the robot prefixes its detector workers serve: nothing of another
 robot's on the same (or a linked) router. Anything not allowed is denied.
 
+The rules name each principal as it authenticates, its role qualified by whose it is
+(common/security.py): ``<prefix>/controller`` for this robot's, ``<pool>/detector_gpu`` for a
+pool's worker. One site CA signs every robot's principals, and another robot's (its
+``controller``, its ``estop``) matches no subject here: denied everything.
+
 Routers linked across hosts admit each other as the router's principal (``supervisor``, by
 its certificate): a router lets a linked one do what the principals the other hosts run
 (``zenoh.remote_principals``) may do, together, and nothing more; each host's own router
@@ -45,9 +50,15 @@ from common.security import (
     DETECTOR_PRINCIPAL,
     ROUTER_PRINCIPAL,
     camera_services,
+    role_of,
     stack_principals,
 )
-from common.settings import check_camera_name, is_detector_service, service_package
+from common.settings import (
+    check_camera_name,
+    is_detector_service,
+    principal_name,
+    service_package,
+)
 from services.camera import contract as camera
 from services.controller import contract as controller
 from services.detector import contract as detector
@@ -120,8 +131,16 @@ def _observer(shape: Shape) -> dict[str, Access]:
 
 def _check_remote(known: Iterable[str], remote: Iterable[str]) -> None:
     """ValueError, one line, for a name among ``remote`` that is none of ``known`` (or is the
-    router's)."""
+    router's), or is written qualified (``site/robot1/camera``: the roles are written, and
+    qualified here as this stack's, docs/security.md)."""
     known = [p for p in known if p != ROUTER_PRINCIPAL]
+    if scoped := [p for p in dict.fromkeys(remote) if "/" in p]:
+        raise ValueError(
+            f"zenoh.remote_principals names {', '.join(map(repr, scoped))}: write the roles "
+            f"({', '.join(repr(role_of(p)) for p in scoped)}); each router qualifies them as its "
+            "own robot's (<stack.prefix>/<role>) or, for a detector worker, its pool's "
+            "(<detector.pool_prefix>/<worker>)"
+        )
     unknown = [p for p in dict.fromkeys(remote) if p not in known]
     if unknown:
         raise ValueError(
@@ -286,7 +305,11 @@ def access_control(
     """Zenoh's ``access_control`` section for the router: deny by default, then allow each
     principal its own keys on ingress (puts, tokens, queryables, subscriptions), queries and
     liveliness for everyone within :func:`ask_scope`, and everything on egress (the router
-    delivers only what it accepted, and only to subscriptions it accepted). ``cameras``: see
+    delivers only what it accepted, and only to subscriptions it accepted). Each rule's subject
+    is a principal's name as it authenticates (common.settings.principal_name): this robot's
+    ``<keys.prefix>/<role>``, a worker's ``<pool_prefix or keys.prefix>/<worker>``, the linked
+    routers' ``supervisor``; another robot's principals match no subject, so the default denies
+    them everything, reads included. The roles are what the arguments name. ``cameras``: see
     common.security.camera_services; ``principals`` (default: stack_principals) limits the
     rules to those named; ``workers``: the detector workers' names (``Config.detector_services``),
     each a principal; ``prefixes``: the robot prefixes they serve (empty: the stack's own);
@@ -302,6 +325,10 @@ def access_control(
         principals = stack_principals(cameras, (*workers, *remote_workers))
     prefixes = tuple(prefixes)
     match = "usernames" if auth == "password" else "cert_common_names"
+
+    def name(role: str) -> str:  # whose it is: this robot's, or a worker its pool's
+        return principal_name(keys.prefix, role, pool_prefix)
+
     rules: list[dict[str, Any]] = [
         {
             "id": "egress",
@@ -318,7 +345,7 @@ def access_control(
             "key_exprs": ask_scope(keys, (pool_prefix,) if pool_prefix else ()),
         },
     ]
-    subjects: list[dict[str, Any]] = [{"id": "everyone", match: list(principals)}]
+    subjects: list[dict[str, Any]] = [{"id": "everyone", match: [name(p) for p in principals]}]
     policies: list[dict[str, Any]] = [{"rules": ["egress", "ask"], "subjects": ["everyone"]}]
     served = [e for e in ask_scope(keys, prefixes) if e not in rules[-1]["key_exprs"]]
     if served:
@@ -326,14 +353,14 @@ def access_control(
         # brings the asks of the other hosts' principals) may ask there.
         askers = [p for p in principals if is_detector_service(p) or p == ROUTER_PRINCIPAL]
         rules.append({**rules[-1], "id": "ask_served", "key_exprs": served})
-        subjects.append({"id": "served_askers", match: askers})
+        subjects.append({"id": "served_askers", match: [name(p) for p in askers]})
         policies.append({"rules": ["ask_served"], "subjects": ["served_askers"]})
     for principal, allowed in _table(
         keys, cameras, live_sensors, workers, prefixes, remote, pool_prefix
     ).items():
         if principal not in principals:
             continue
-        subjects.append({"id": principal, match: [principal]})
+        subjects.append({"id": principal, match: [name(principal)]})
         ids = []
         for kind, key_exprs in allowed.kinds().items():
             rule_id = f"{principal}_{kind}"

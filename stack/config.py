@@ -19,6 +19,7 @@ from common.settings import (
     camera_service,
     check_camera_name,
     detector_service,
+    principal_name,
 )
 from services.camera.contract import CameraSettings
 from services.controller.contract import ControllerSettings
@@ -148,6 +149,12 @@ class Config:
         see :func:`detector_service`): each is its service, pool id and principal."""
         d = self.detector
         return tuple(detector_service(n, d.worker_id) for n in range(1, d.workers + 1))
+
+    def principal(self, role: str) -> str:
+        """The name ``role`` (a service's, ``estop``, ``observer``) authenticates as on this
+        stack: ``<stack.prefix>/<role>``, a detector worker's ``<pool>/<worker>``
+        (common.settings.principal_name, docs/security.md)."""
+        return principal_name(self.stack.prefix, role, self.detector.pool_prefix)
 
     def camera_settings(self, name: str) -> CameraSettings:
         """The settings of camera ``name``; ConfigError naming the known ones otherwise."""

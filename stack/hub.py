@@ -11,7 +11,15 @@ import zenoh
 
 from common.errors import ConfigError
 from common.keys import Keys
-from common.security import ROUTER_PRINCIPAL, ca_file, cert_file, key_file, users_file
+from common.security import (
+    ROUTER_PRINCIPAL,
+    ca_file,
+    cert_file,
+    key_file,
+    made_by_role,
+    remake_by_role,
+    users_file,
+)
 from common.settings import is_detector_service
 from common.zenoh_bus import HUB_PRINCIPAL, open_configured, readable, zenoh_config
 from stack.access import (
@@ -61,14 +69,17 @@ def check_credentials(config: Config) -> None:
     """The credentials must serve every principal this stack runs, or a process would be
     refused after the others started: with passwords the router's dictionary must name each
     principal of stack.access.running_principals (the router, each process of
-    ``supervisor.services``, the tools); with certificates each process the supervisor starts
-    needs its certificate and key (the tools' files may live on another host). ConfigError,
-    one line, naming the command that makes them again for this config."""
+    ``supervisor.services``, the tools), by its name (``<stack.prefix>/<role>``,
+    common/security.py); with certificates each process the supervisor starts needs its
+    certificate and key (the tools' files may live on another host). ConfigError, one line,
+    naming the command that makes them again for this config; a folder made by an older
+    version (principals named by role alone) says so."""
     z = config.zenoh
     creds = z.credentials_path
     services, cameras, workers = (
         config.supervisor.services, config.camera_services, config.detector_services
     )  # fmt: skip
+    again = f"`zstack credentials --config {config.path or 'FILE'} --force`"
     if z.auth == "password":
         path = Path(readable(users_file(creds), "user dictionary"))
         try:
@@ -76,10 +87,17 @@ def check_credentials(config: Config) -> None:
         except (OSError, UnicodeDecodeError) as exc:
             raise ConfigError(f"cannot read {path}: {exc}") from exc
         known = {line.split(":", 1)[0] for line in text.splitlines()}
-        needed = running_principals(services, cameras, workers)
+        needed = [config.principal(p) for p in running_principals(services, cameras, workers)]
         missing = [p for p in needed if p not in known]
+        if missing and not any("/" in p for p in known):  # every user named by role alone
+            raise ConfigError(remake_by_role(creds, config.path))
     elif z.auth == "certificate" and ca_file(creds).is_file():  # no CA: the router says so
-        needed = (ROUTER_PRINCIPAL, *service_principals(services, cameras, workers))
+        needed = [
+            config.principal(p)
+            for p in (ROUTER_PRINCIPAL, *service_principals(services, cameras, workers))
+        ]
+        if any(made_by_role(creds, p) for p in needed):
+            raise ConfigError(remake_by_role(creds, config.path))
         files = {p: (cert_file(creds, p), key_file(creds, p)) for p in needed}
         missing = [p for p, paths in files.items() if not all(f.is_file() for f in paths)]
     else:
@@ -87,8 +105,8 @@ def check_credentials(config: Config) -> None:
     if missing:
         raise ConfigError(
             f"the credentials in {creds} have no principal {', '.join(missing)} (made for a "
-            "config that runs fewer services, cameras or detector workers?): make them again "
-            f"with `zstack credentials --config {config.path or 'FILE'} --force` (docs/security.md)"
+            "config that runs fewer services, cameras or detector workers, or for another "
+            f"robot's stack.prefix?): make them again with {again} (docs/security.md)"
         )
 
 

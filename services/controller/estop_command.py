@@ -21,7 +21,7 @@ from common.contracts import ControllerState
 from common.control_messages import ControllerStatus, EStop, Header
 from common.errors import DecodeError, StackError
 from common.keys import Keys
-from common.settings import ZenohSettings
+from common.settings import ZenohSettings, principal_name
 from common.zenoh_bus import Publisher, QoS, open_session
 
 # The e-stop command line: how long it repeats its message, how long a controller that answers
@@ -45,7 +45,7 @@ def send_estop(settings: ZenohSettings, prefix: str, engaged: bool, reason: str)
     Each status is looked at as it arrives: the command answers as soon as it is
     acknowledged."""
     keys = Keys(prefix)
-    session = open_session(settings, "estop")
+    session = open_session(settings, principal_name(prefix, "estop"))
     lock = threading.Lock()
     heard: list[tuple[float, ControllerStatus]] = []  # the latest status and when it came
     news = threading.Event()  # a status came

@@ -356,7 +356,7 @@ def run(config: Config, stop: threading.Event) -> int:
 def query(config: Config, timeout_s: float) -> MetricsAnswer:
     """Ask the metrics service for its snapshot. Nobody answering within the timeout is a
     StackError naming where it looked and the likely fix (common/reach.py)."""
-    session = open_session(config.zenoh, OBSERVER)
+    session = open_session(config.zenoh, config.principal(OBSERVER))
     keys = Keys(config.stack.prefix)
     try:
         deadline = mono_s() + timeout_s
@@ -384,7 +384,7 @@ def query(config: Config, timeout_s: float) -> MetricsAnswer:
 def pool(config: Config) -> dict[str, Any]:
     """The whole detector pool as its tokens say now, asked as ``observer`` from any host (a
     GPU box, which runs no metrics service, included): services/metrics/pool_view.py."""
-    bus = ZenohBus(open_session(config.zenoh, OBSERVER))
+    bus = ZenohBus(open_session(config.zenoh, config.principal(OBSERVER)))
     try:
         return pool_view(config, bus)
     finally:

@@ -345,7 +345,7 @@ def play(
     chosen = playable_topics(path, topics)
     recorded = recorded_cameras(config, path, chosen)
     keys = Keys(config.stack.prefix)
-    bus = ZenohBus(open_session(config.zenoh, PLAY_PRINCIPAL))
+    bus = ZenohBus(open_session(config.zenoh, config.principal(PLAY_PRINCIPAL)))
     session = bus.session
     announcements = CameraAnnouncements(bus, keys, ANNOUNCED_SOURCE)
     try:

@@ -10,7 +10,7 @@ import sys
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,8 @@ from common.frames import image_to_frame
 from common.keys import Keys
 from common.messages import Detections, Header
 from common.queries import query_metrics, ready_services
+from common.security import PRINCIPALS
+from common.settings import principal_name
 from common.zenoh_bus import open_session
 from stack.config_file import load_config
 from tests.polling import wait_for
@@ -47,6 +49,19 @@ def run_detector_cli(*args: str | Path, timeout: float = 240) -> subprocess.Comp
         timeout=timeout,
         check=False,
     )
+
+
+def credentials_for(
+    creds: Path, roles: Iterable[str] = PRINCIPALS, pool: str = "", **options: Any
+) -> str:
+    """``deploy.credentials.generate`` for the ``roles`` of a new test stack: each named as
+    that stack's (common/security.py: ``<prefix>/<role>``, a worker ``<pool or prefix>/<role>``).
+    Returns the prefix to give the stack (``stack.prefix``)."""
+    from deploy.credentials import generate
+
+    prefix = f"test/{uuid.uuid4().hex[:8]}"
+    generate(creds, principals=tuple(principal_name(prefix, r, pool) for r in roles), **options)
+    return prefix
 
 
 def write_config(tmp: Path, **tables: dict[str, Any]) -> Path:
@@ -100,14 +115,15 @@ class Stack:
         self.tokens: list[zenoh.LivelinessToken] = []  # the cameras the test announces
 
     def open(self, principal: str) -> zenoh.Session:
-        """A session of the stack as ``principal``. In client mode the supervisor's router may
-        not listen yet, so opening is retried until it does."""
+        """A session of the stack as its role ``principal`` (named as this stack's:
+        ``config.principal``). In client mode the supervisor's router may not listen yet, so
+        opening is retried until it does."""
         if self.config.zenoh.mode == "peer":
-            return open_session(self.config.zenoh, principal)
+            return open_session(self.config.zenoh, self.config.principal(principal))
 
         def attempt() -> zenoh.Session | None:
             try:
-                return open_session(self.config.zenoh, principal)
+                return open_session(self.config.zenoh, self.config.principal(principal))
             except ConfigError:
                 return None
 

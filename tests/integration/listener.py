@@ -24,7 +24,7 @@ def main() -> None:
     stop = stop_event()
     config = load_config(args.config, environ={})
     received = [0]
-    with open_session(config.zenoh, args.principal) as session:
+    with open_session(config.zenoh, config.principal(args.principal)) as session:
         for key_expr in args.key_exprs:
             session.declare_subscriber(
                 key_expr, lambda _s: received.__setitem__(0, received[0] + 1)

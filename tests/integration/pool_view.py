@@ -76,7 +76,7 @@ def main() -> int:
     keys = Keys(config.stack.prefix)
     pool = Keys(config.detector.pool_prefix or config.stack.prefix)  # the pool's own tokens
     try:
-        bus = ZenohBus(open_session(config.zenoh, "observer"))
+        bus = ZenohBus(open_session(config.zenoh, config.principal("observer")))
     except ConfigError as exc:
         print(f"pool_view: {exc}", file=sys.stderr)
         return 1

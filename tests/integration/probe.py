@@ -96,7 +96,7 @@ def _open(config: Config, stop: threading.Event) -> zenoh.Session:
     deadline = time.monotonic() + OPEN_TIMEOUT_S
     while True:
         try:
-            return open_session(config.zenoh, "observer")
+            return open_session(config.zenoh, config.principal("observer"))
         except ConfigError:
             if time.monotonic() > deadline or stop.wait(0.5):
                 raise

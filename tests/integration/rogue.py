@@ -1,6 +1,7 @@
 """python -m tests.integration.rogue --config FILE --as PRINCIPAL [--endpoint EP] [--no-cert]
 
-A principal misusing its credentials inside a network namespace (tests/integration/
+A principal (a role of FILE's stack, named as its: ``Config.principal``) misusing its
+credentials inside a network namespace (tests/integration/
 test_two_hosts.py): it joins the stack of FILE as PRINCIPAL (on ``--endpoint`` instead of the
 config's, e.g. another host's router) and, until SIGINT or SIGTERM, puts every 0.1 s what no
 worker may put (garbage on cmd_vel, the e-stop, the controller's counters and every camera's
@@ -46,7 +47,7 @@ def main() -> None:
     if args.no_cert:
         settings = dataclasses.replace(settings, auth="none")  # TLS still, no certificate
         try:
-            open_session(settings, args.principal).close()
+            open_session(settings, config.principal(args.principal)).close()
         except ConfigError as exc:
             print(json.dumps({"kind": "refused", "error": str(exc)}), flush=True)
             sys.exit(0)
@@ -55,7 +56,7 @@ def main() -> None:
     deadline = time.monotonic() + OPEN_TIMEOUT_S
     while True:
         try:
-            session = open_session(settings, args.principal)
+            session = open_session(settings, config.principal(args.principal))
             break
         except ConfigError:
             if time.monotonic() > deadline or stop.wait(0.5):

@@ -40,9 +40,7 @@ def judged(result: dict[str, Any]) -> None:
     assert result["success"], result
 
 
-@pytest.mark.parametrize(
-    "name", ["low_box", "kerb", "step", "black_box_near", "dark_pole_near"]
-)
+@pytest.mark.parametrize("name", ["low_box", "kerb", "step", "black_box_near", "dark_pole_near"])
 def test_a_depth_only_robot_following_never_drives_into_what_it_cannot_see(name: str) -> None:
     judged(run(name, "--config", DEPTH))
 

@@ -16,7 +16,6 @@ from typing import Any
 
 import pytest
 
-from common.security import stack_principals
 from deploy.credentials import generate
 from stack.config_file import load_config
 from tests.integration.conftest import REPO, STARTUP_S, Stack, wait_for, write_config
@@ -71,7 +70,11 @@ def test_two_robots_routers_linked_to_a_gpu_router_read_nothing_of_each_other(
     run = uuid.uuid4().hex[:6]
     prefixes = (f"r1-{run}", f"r2-{run}")
     creds = tmp_path / "credentials"
-    generate(creds, principals=stack_principals("front", ("detector_gpu",)))
+    pool_prefix = f"pool-{run}"
+    # One CA; each robot's principals named as its own, the worker as the pool's.
+    names = {"supervisor", f"{pool_prefix}/detector_gpu", f"{pool_prefix}/observer"}
+    names |= {f"{p}/{r}" for p in prefixes for r in ("camera", "metrics", "observer")}
+    generate(creds, principals=tuple(sorted(names)))
     camera = {"source": "sample:cameraman", "frame_id": "front", "rate_hz": 3.0,
               "resize": [320, 240]}  # fmt: skip
     robots = [
@@ -90,7 +93,7 @@ def test_two_robots_routers_linked_to_a_gpu_router_read_nothing_of_each_other(
     gpu = _secure_stack(
         tmp_path, "gpu", creds,
         zenoh={"connect": endpoints, "remote_principals": ["camera", "metrics", "observer"]},
-        stack={"prefix": f"pool-{run}", "camera": "front"}, camera=camera,
+        stack={"prefix": pool_prefix, "camera": "front"}, camera=camera,
         supervisor={"services": ["detector"]},
         detector={"worker_id": "gpu", "imgsz": 320, "prefixes": list(prefixes)},
     )  # fmt: skip

@@ -176,10 +176,13 @@ def _configs(tmp_path: Path, secure: bool) -> tuple[Path, Path]:
         )  # fmt: skip
         assert done.returncode == 0, done.stderr[-2000:]
         copied.mkdir(mode=0o700)
-        worker = f"detector_{load_config(gpu, environ={}).detector.worker_id}"
+        box = load_config(gpu, environ={})
+        worker = box.principal(f"detector_{box.detector.worker_id}")  # stack/detector_gpu
         for principal in (ROUTER_PRINCIPAL, worker):
             for file in (cert_file(made, principal), key_file(made, principal)):
-                shutil.copy2(file, copied / file.name)
+                copy = copied / file.relative_to(made)  # each at its place: stack/...
+                copy.parent.mkdir(mode=0o700, exist_ok=True)
+                shutil.copy2(file, copy)
         shutil.copy2(ca_file(made), copied / ca_file(made).name)
     for path in (robot, gpu):
         load_config(path, environ={})  # one clear line here if a README block does not load

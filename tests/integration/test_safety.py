@@ -320,15 +320,15 @@ def test_secure_profile_keeps_strangers_out_and_services_to_their_own_keys(
     from common.errors import ConfigError
     from common.zenoh_bus import open_session
     from deploy.credentials import generate
-    from tests.integration.conftest import free_port
+    from tests.integration.conftest import credentials_for, free_port
 
     creds, other = tmp_path / "credentials", tmp_path / "another-install"
-    generate(creds)
+    prefix = credentials_for(creds)
     generate(other)
     table = {"mode": "client", "auth": auth, "credentials_dir": str(creds)}
     if auth == "certificate":  # mutual TLS: every link encrypted, every process its own key
         table["endpoint"] = f"tls/127.0.0.1:{free_port()}"
-    stack: Stack = make_stack(zenoh=table)
+    stack: Stack = make_stack(zenoh=table, stack={"prefix": prefix})
     stack.wait_ready(STACK)
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
     _, statuses = stack.subscribe(stack.keys.controller_status())
@@ -341,7 +341,8 @@ def test_secure_profile_keeps_strangers_out_and_services_to_their_own_keys(
     with pytest.raises(ConfigError):
         open_session(dataclasses.replace(zenoh_s, auth="none"), "observer")
     with pytest.raises(ConfigError):
-        open_session(dataclasses.replace(zenoh_s, credentials_dir=str(other)), "observer")
+        observer = stack.config.principal("observer")
+        open_session(dataclasses.replace(zenoh_s, credentials_dir=str(other)), observer)
     # As a peer with no credentials it opens, alone: it sees no service and no command.
     stranger = open_session(dataclasses.replace(zenoh_s, mode="peer", auth="none"), "observer")
     try:

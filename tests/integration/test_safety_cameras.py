@@ -24,8 +24,14 @@ from common.frames import image_to_frame
 from common.messages import CameraAnnouncement, Detections, Frame, Header
 from common.security import stack_principals
 from common.spawn import spawn, stop_child
-from deploy.credentials import generate
-from tests.integration.conftest import REPO, Stack, free_port, wait_for, write_config
+from tests.integration.conftest import (
+    REPO,
+    Stack,
+    credentials_for,
+    free_port,
+    wait_for,
+    write_config,
+)
 from tests.integration.test_safety import person
 
 pytestmark = pytest.mark.integration
@@ -41,7 +47,7 @@ ALLOWED_PUTS = 10
 
 def secure_two_camera_stack(make_stack: Any, tmp_path: Path, auth: str) -> Stack:
     creds = tmp_path / "credentials"
-    generate(creds, principals=stack_principals(CAMERAS))
+    prefix = credentials_for(creds, stack_principals(CAMERAS))
     table = {"mode": "client", "auth": auth, "credentials_dir": str(creds)}
     if auth == "certificate":  # mutual TLS: each camera proves itself with its own key
         table["endpoint"] = f"tls/127.0.0.1:{free_port()}"
@@ -49,6 +55,7 @@ def secure_two_camera_stack(make_stack: Any, tmp_path: Path, auth: str) -> Stack
     # exactly the two principals below put frames, however a supervisor starts cameras.
     stack: Stack = make_stack(
         zenoh=table,
+        stack={"prefix": prefix},
         supervisor={"services": ["metrics"]},
         camera={"frame_id": FRAME_IDS["front"], "rate_hz": 5.0},
         **{"cameras.rear": {"frame_id": FRAME_IDS["rear"], "mount_yaw_deg": 180.0}},
@@ -248,10 +255,11 @@ def test_each_camera_puts_only_its_own_frames_and_the_detector_only_detections(
 
 def test_the_stack_refuses_credentials_made_for_fewer_cameras(tmp_path: Path) -> None:
     creds = tmp_path / "credentials"
-    generate(creds)  # a one-camera stack's principals: no camera_rear
+    prefix = credentials_for(creds)  # a one-camera stack's principals: no camera_rear
     config = write_config(
         tmp_path,
         zenoh={"mode": "client", "auth": "password", "credentials_dir": str(creds)},
+        stack={"prefix": prefix},
         # The camera service runs (the refusal comes before any process starts): a stack
         # that runs no camera needs no camera secret (zstack credentials makes none).
         supervisor={"services": ["camera", "metrics"]},

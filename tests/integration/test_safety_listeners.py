@@ -25,9 +25,8 @@ import zenoh
 from common.clock import BOOT_ID, now
 from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan
 from common.zenoh_bus import Publisher, QoS
-from deploy.credentials import generate
 from stack.access import may_read
-from tests.integration.conftest import REPO, Stack, wait_for, write_config
+from tests.integration.conftest import REPO, Stack, credentials_for, wait_for, write_config
 from tests.integration.test_safety import STACK, header, moving
 
 pytestmark = pytest.mark.integration
@@ -54,9 +53,11 @@ def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
     checks that leave it as they found it: the e-stop released, no listener left."""
     tmp = tmp_path_factory.mktemp("secure")
     creds = tmp / "credentials"
-    generate(creds)
+    prefix = credentials_for(creds)
     config = write_config(
-        tmp, zenoh={"mode": "client", "auth": "password", "credentials_dir": str(creds)}
+        tmp,
+        zenoh={"mode": "client", "auth": "password", "credentials_dir": str(creds)},
+        stack={"prefix": prefix},
     )
     stack = Stack(config, tmp / "supervisor.log")
     try:
@@ -229,11 +230,12 @@ def test_a_replay_never_reaches_a_live_robots_sensors(make_stack, tmp_path: Path
     from tests.integration.test_recorder import _ros2_bag
 
     creds = tmp_path / "credentials"
-    generate(creds)
+    prefix = credentials_for(creds)
     secure = {"mode": "client", "auth": "password", "credentials_dir": str(creds)}
     live: Stack = make_stack(
-        zenoh=secure, supervisor={"services": ["sim", "detector", "controller", "metrics"]}
-    )
+        zenoh=secure, stack={"prefix": prefix},
+        supervisor={"services": ["sim", "detector", "controller", "metrics"]},
+    )  # fmt: skip
     live.wait_ready({"sim", "detector", "controller", "metrics"})
     bag = _ros2_bag(tmp_path / "bag")
     # The command line refuses, with one line, before it puts anything.

@@ -18,8 +18,7 @@ import zenoh
 from common.clock import mono_s, now
 from common.messages import Detections, Frame, Header, ServiceCounters
 from common.security import stack_principals
-from deploy.credentials import generate
-from tests.integration.conftest import STARTUP_S, Stack, wait_for
+from tests.integration.conftest import STARTUP_S, Stack, credentials_for, wait_for
 from tests.integration.test_safety import person
 from tests.integration.test_safety_cameras import marked_frame, put_until_allowed_arrive
 
@@ -71,9 +70,10 @@ class Heard:
 @pytest.fixture
 def pool(make_stack: Any, tmp_path: Path) -> Iterator[tuple[Stack, Heard]]:
     creds = tmp_path / "credentials"
-    generate(creds, principals=stack_principals(CAMERAS, WORKERS))
+    prefix = credentials_for(creds, stack_principals(CAMERAS, WORKERS))
     stack: Stack = make_stack(
         zenoh={"mode": "client", "auth": "password", "credentials_dir": str(creds)},
+        stack={"prefix": prefix},
         supervisor={"services": ["camera", "detector", "metrics"]},
         camera={
             "source": "sample:cameraman",

@@ -20,10 +20,9 @@ from common.contracts import ControllerState
 from common.keys import Keys
 from common.messages import ControllerStatus, Header
 from common.zenoh_bus import HUB_PRINCIPAL, zenoh_config
-from deploy.credentials import generate
 from stack.config_file import load_config
 from stack.hub import hub_access
-from tests.integration.conftest import REPO, write_config
+from tests.integration.conftest import REPO, credentials_for, write_config
 from tools.launch import free_port
 
 pytestmark = pytest.mark.integration
@@ -60,17 +59,17 @@ def test_estop_cli_refuses_a_router_with_another_principals_certificate(
     tmp_path: Path, auth: str
 ) -> None:
     creds = tmp_path / "credentials"
-    generate(creds)
+    prefix = credentials_for(creds)
     endpoint = f"tls/127.0.0.1:{free_port()}"
     table = {"mode": "client", "auth": auth, "credentials_dir": str(creds), "endpoint": endpoint}
-    config_path = write_config(tmp_path, zenoh=table)
+    config_path = write_config(tmp_path, zenoh=table, stack={"prefix": prefix})
 
-    with _router(config_path, "viewer"):
+    with _router(config_path, f"{prefix}/viewer"):
         done = _engage(config_path)
     assert "e-stop engaged" not in done.stdout + done.stderr, "accepted the viewer as the router"
     assert done.returncode != 0
     assert done.stderr.count("\n") == 1, done.stderr
-    for word in (endpoint, "'estop'", f"{auth} auth"):
+    for word in (endpoint, f"'{prefix}/estop'", f"{auth} auth"):
         assert word in done.stderr, done.stderr
 
     with _router(config_path, HUB_PRINCIPAL):

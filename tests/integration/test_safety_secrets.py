@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from common.security import key_file, password_file, users_file
-from deploy.credentials import generate
-from tests.integration.conftest import REPO, free_port, write_config
+from stack.config_file import load_config
+from tests.integration.conftest import REPO, credentials_for, free_port, write_config
 
 pytestmark = pytest.mark.integration
 
@@ -36,15 +36,17 @@ def _one_line(done: subprocess.CompletedProcess[str]) -> str:
 
 def test_the_secure_stack_refuses_credentials_others_may_read_or_change(tmp_path: Path) -> None:
     creds = tmp_path / "credentials"
-    generate(creds)
+    prefix = credentials_for(creds)
     # What a careless copy leaves: a folder anyone may write, secrets anyone may read.
     creds.chmod(0o777)
-    for path in creds.iterdir():
-        path.chmod(0o666)
+    for path in creds.rglob("*"):
+        if path.is_file():
+            path.chmod(0o666)
     config = write_config(
         tmp_path,
         zenoh={"mode": "client", "auth": "password", "credentials_dir": str(creds)},
         supervisor={"services": ["controller"]},
+        stack={"prefix": prefix},
     )
     # --duration: a supervisor that did start would stop by itself (exit 0), not hang the test.
     supervisor = ("deploy.supervisor", "--config", config, "--duration", "5")
@@ -55,21 +57,22 @@ def test_the_secure_stack_refuses_credentials_others_may_read_or_change(tmp_path
 
     creds.chmod(0o700)  # the folder fixed, its files still 0666
     line = _one_line(_run(*supervisor))
-    named = [p for p in creds.iterdir() if f"chmod 600 {p}" in line]
+    named = [p for p in creds.rglob("*") if f"chmod 600 {p}" in line]
     assert len(named) == 1, line
     assert str(named[0]) in line.split("chmod")[0], line
 
     # A service that reads its own secret refuses it too, started on its own: the operator's
     # e-stop with a password file others may read.
-    for path in creds.iterdir():
-        path.chmod(0o600)
-    password_file(creds, "estop").chmod(0o644)
+    for path in creds.rglob("*"):
+        path.chmod(0o700 if path.is_dir() else 0o600)
+    estop_password = password_file(creds, f"{prefix}/estop")
+    estop_password.chmod(0o644)
     estop = ("services.controller", "estop", "engage", "--config", config, "--reason", "test")
     line = _one_line(_run(*estop))
-    assert f"chmod 600 {password_file(creds, 'estop')}" in line, line
+    assert f"chmod 600 {estop_password}" in line, line
 
     # A key or the router's dictionary that group or others may change is refused as well.
-    password_file(creds, "estop").chmod(0o600)
+    estop_password.chmod(0o600)
     users_file(creds).chmod(0o620)
     line = _one_line(_run(*supervisor))
     assert f"chmod 600 {users_file(creds)}" in line, line
@@ -79,7 +82,7 @@ def test_the_secure_stack_refuses_credentials_others_may_read_or_change(tmp_path
         tmp_path,
         zenoh={"mode": "client", "auth": "certificate", "credentials_dir": str(creds),
                "endpoint": f"tls/127.0.0.1:{free_port()}"},
-        supervisor={"services": ["controller"]},
+        supervisor={"services": ["controller"]}, stack={"prefix": prefix},
     )  # fmt: skip
     line = _one_line(_run("deploy.supervisor", "--config", tls, "--duration", "5"))
     assert f"chmod 600 {key_file(creds, 'supervisor')}" in line, line
@@ -95,15 +98,17 @@ def test_credentials_are_made_only_for_the_principals_the_stack_runs(tmp_path: P
     sim = write_config(
         tmp_path / "sim", zenoh=secure, supervisor={"services": ["sim", "controller"]}
     )
+    prefix = load_config(sim, environ={}).stack.prefix  # each config below the same robot's
+    camera_p = f"{prefix}/camera"
     made = _run("deploy.credentials", "--config", sim)
     assert made.returncode == 0, made.stderr
-    assert "credentials: camera: not made, the config runs no camera service" in made.stderr
-    assert not password_file(creds, "camera").exists()
-    assert not key_file(creds, "camera").exists()
+    assert f"credentials: {camera_p}: not made, the config runs no camera service" in made.stderr
+    assert not password_file(creds, camera_p).exists()
+    assert not key_file(creds, camera_p).exists()
 
     # The camera's process cannot join: it has no secret.
     line = _one_line(_run("services.camera", "serve", "--config", sim))
-    assert f"{password_file(creds, 'camera')} is missing" in line, line
+    assert f"{password_file(creds, camera_p)} is missing" in line, line
     # The stack it was made for starts on it (and stops by itself after --duration).
     started = _run("deploy.supervisor", "--config", sim, "--duration", "3")
     assert started.returncode == 0, started.stderr[-2000:]
@@ -115,9 +120,12 @@ def test_credentials_are_made_only_for_the_principals_the_stack_runs(tmp_path: P
     for name, table in (("camera", secure), ("camera_tls", tls)):
         (tmp_path / name).mkdir()
         camera = write_config(
-            tmp_path / name, zenoh=table, supervisor={"services": ["camera", "controller"]}
+            tmp_path / name,
+            zenoh=table,
+            supervisor={"services": ["camera", "controller"]},
+            stack={"prefix": prefix},
         )
         line = _one_line(_run("deploy.supervisor", "--config", camera, "--duration", "3"))
         assert line.startswith("supervisor: error: "), line
-        assert "no principal camera " in line, line
+        assert f"no principal {camera_p} " in line, line
         assert f"`zstack credentials --config {camera} --force`" in line, line

@@ -41,6 +41,7 @@ from typing import IO, Any
 import pytest
 
 from common.security import ROUTER_PRINCIPAL, ca_file, cert_file, key_file, stack_principals
+from common.settings import principal_name
 from deploy.credentials import generate
 from tests.integration.conftest import REPO, STARTUP_S, wait_for, write_config
 from tests.integration.netns import ip
@@ -391,14 +392,17 @@ CAMERA_PRINCIPALS = {"front": "camera", "rear": "camera_rear"}  # POOL_CAMERAS' 
 ROGUE_ROUNDS = 20
 
 
-def _host_credentials(made: Path, host: Path, principals: tuple[str, ...]) -> Path:
+def _host_credentials(made: Path, host: Path, prefix: str, roles: tuple[str, ...]) -> Path:
     """A host's own credentials folder: the CA, the router's certificate and key (both
-    routers serve and link with it) and those of the principals it runs, copied from the one
-    set ``made`` for every host (docs/security.md, "Two hosts, secured")."""
+    routers serve and link with it) and those of the principals it runs (``roles`` of the
+    stack of ``prefix``), copied from the one set ``made`` for every host, each at its place
+    (docs/security.md, "Two hosts, secured")."""
     host.mkdir(mode=0o700)
-    for principal in (ROUTER_PRINCIPAL, *principals):
+    for principal in (ROUTER_PRINCIPAL, *(principal_name(prefix, r) for r in roles)):
         for path in (cert_file(made, principal), key_file(made, principal)):
-            shutil.copy2(path, host / path.name)
+            copy = host / path.relative_to(made)
+            copy.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+            shutil.copy2(path, copy)
     shutil.copy2(ca_file(made), host / ca_file(made).name)
     return host
 
@@ -434,9 +438,10 @@ def test_the_secure_profile_across_two_linked_routers_confines_every_principal(
     (tmp_path / "b").mkdir()
     made = tmp_path / "made"
     workers = ("detector_b", *GPU_PRINCIPALS)
-    generate(made, hosts=(ADDR_B,), principals=stack_principals(CAMERA_PRINCIPALS, workers))
-    creds_b = _host_credentials(made, tmp_path / "creds_b", ROBOT_PRINCIPALS)
-    creds_a = _host_credentials(made, tmp_path / "creds_a", GPU_PRINCIPALS)
+    names = tuple(principal_name(prefix, p) for p in stack_principals(CAMERA_PRINCIPALS, workers))
+    generate(made, hosts=(ADDR_B,), principals=names)
+    creds_b = _host_credentials(made, tmp_path / "creds_b", prefix, ROBOT_PRINCIPALS)
+    creds_a = _host_credentials(made, tmp_path / "creds_a", prefix, GPU_PRINCIPALS)
     secure = {"mode": MODE, "auth": "certificate"}
     robot = write_config(
         tmp_path / "b",

@@ -17,10 +17,9 @@ import websockets
 from websockets.exceptions import InvalidStatus
 from websockets.typing import Origin, Subprotocol
 
-from deploy.credentials import generate
 from services.viewer import channels as ch
 from tests.foxglove_client import SUBPROTOCOL, split_message_frame
-from tests.integration.conftest import Stack
+from tests.integration.conftest import Stack, credentials_for
 from tools.launch import free_port
 
 pytestmark = pytest.mark.integration
@@ -60,13 +59,10 @@ def _refused(url: str, origin: str | None) -> int:
     return refused.value.response.status_code
 
 
-def _start(make_stack: Callable[..., Stack], **zenoh: str) -> tuple[Stack, int]:
+def _start(make_stack: Callable[..., Stack], **tables: dict[str, str]) -> tuple[Stack, int]:
     port = free_port()
     stack: Stack = make_stack(
-        supervisor={"services": SERVICES},
-        viewer={"port": port},
-        sim={"wait_for": []},
-        **({"zenoh": zenoh} if zenoh else {}),
+        supervisor={"services": SERVICES}, viewer={"port": port}, sim={"wait_for": []}, **tables
     )
     stack.wait_ready(set(SERVICES))
     return stack, port
@@ -90,9 +86,10 @@ def test_the_secure_profile_lets_in_only_a_client_with_the_viewer_token(
     make_stack: Callable[..., Stack], tmp_path: Path
 ) -> None:
     creds = tmp_path / "credentials"
-    generate(creds)
+    prefix = credentials_for(creds)
     token = (creds / "viewer-token").read_text().strip()
-    stack, port = _start(make_stack, mode="client", auth="password", credentials_dir=str(creds))
+    secure = {"mode": "client", "auth": "password", "credentials_dir": str(creds)}
+    stack, port = _start(make_stack, stack={"prefix": prefix}, zenoh=secure)
     base = f"ws://127.0.0.1:{port}/"
     assert _refused(base, None) == 403, stack.log()
     assert _refused(f"{base}?token=wrong", None) == 403, stack.log()

@@ -81,7 +81,7 @@ def main() -> None:
     config = load_config(args.config, environ={})
     camera = args.camera or next(iter(config.all_cameras))
     width, height = (int(n) for n in args.size.split("x"))
-    with open_session(config.zenoh, args.principal) as session:
+    with open_session(config.zenoh, config.principal(args.principal)) as session:
         print("flooding", flush=True)
         started = mono_s()
         put = flood(

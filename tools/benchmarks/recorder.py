@@ -168,7 +168,7 @@ def _run(
 ) -> dict[str, Any]:  # fmt: skip
     keys = Keys(config.stack.prefix)
     phase = _Phase()
-    session = open_session(config.zenoh, "observer")
+    session = open_session(config.zenoh, config.principal("observer"))
     subs = [
         session.declare_subscriber(
             keys.detections(config.stack.camera),

@@ -110,8 +110,9 @@ def run(runs: int, progress: Any = print) -> dict[str, Any]:
         proc = start_supervisor(config_path, log)
     session = sender = None
     try:
-        session = open_session(config.zenoh, "observer")
-        sender = open_session(config.zenoh, "observer")  # the direct path crosses a link too
+        session = open_session(config.zenoh, config.principal("observer"))
+        # The direct path crosses a link too.
+        sender = open_session(config.zenoh, config.principal("observer"))
         wait_ready(session, keys, {"ros2"}, proc, 60.0)
         frames, dets_stack, dets_ros = _Arrivals(), _Arrivals(), _Arrivals()
         session.declare_subscriber(

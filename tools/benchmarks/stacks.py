@@ -240,7 +240,7 @@ class Watch:
         self._lock = threading.Lock()
         self._counters: dict[str, tuple[float, dict[str, int]]] = {}
         self._arrivals: dict[str, list[tuple[float, int]]] = {c: [] for c in self.cameras}
-        self.session = open_session(stack.config.zenoh, "observer")
+        self.session = open_session(stack.config.zenoh, stack.config.principal("observer"))
         self._subs = [
             self.session.declare_subscriber(self.keys.detections(cam), self._handler(cam))
             for cam in self.cameras

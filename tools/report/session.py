@@ -141,7 +141,7 @@ def record(
         path = write_config(config, log_path.with_suffix(".toml"))
         proc = start_supervisor(path, log)  # its own session: our Ctrl-C is sent once
     try:
-        session = open_session(config.zenoh, "observer")
+        session = open_session(config.zenoh, config.principal("observer"))
         try:
             progress(f"report: starting the stack ({config.path}); log in {log_path}")
             services = set(config.supervisor.services)

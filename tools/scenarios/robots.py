@@ -102,7 +102,7 @@ def robots_plan(
 
 def _workers_announced(pool: Config) -> int:
     keys = Keys(pool.detector.pool_prefix or pool.stack.prefix)
-    session = open_session(pool.zenoh, "observer")
+    session = open_session(pool.zenoh, pool.principal("observer"))
     try:
         replies = session.liveliness().get(
             keys.all_worker_announcements(), timeout=POOL_ASK_TIMEOUT_S
@@ -159,7 +159,7 @@ def run_robots(
             log(f"{name}: {workers} workers announced; starting {robots} robots")
         for i, (config, rec) in enumerate(zip(plan.robots, recs, strict=True), 1):
             start(config, f"robot{i}")
-            session = open_session(config.zenoh, "observer")
+            session = open_session(config.zenoh, config.principal("observer"))
             stack.callback(session.close)
             record_into(session, Keys(config.stack.prefix), list(config.all_cameras), rec,
                         frames=True)  # fmt: skip

@@ -261,7 +261,7 @@ def run_scenario(
     with (workdir / "stack.log").open("wb") as stack_log:
         proc = start_supervisor(config_path, stack_log)
         try:
-            session = open_session(config.zenoh, "observer")
+            session = open_session(config.zenoh, config.principal("observer"))
             try:
                 cameras = list(config.all_cameras)
                 subs = record_into(session, Keys(config.stack.prefix), cameras, rec, frames=True)

@@ -164,7 +164,7 @@ def summarise(
 def _flood(config: Config, rate_hz: float, stop: threading.Event, figures: SoakFigures) -> None:
     rng = random.Random(13)
     targets = flooded_keys(Keys(config.stack.prefix), config.stack.camera)
-    session = open_session(config.zenoh, "observer")
+    session = open_session(config.zenoh, config.principal("observer"))
     try:
         period = 1.0 / rate_hz
         next_at = mono_s()
@@ -190,7 +190,7 @@ def run_soak(
     figures, rec, stop = SoakFigures(), ScenarioLog(), threading.Event()
     with log_path.open("wb") as stack_log:
         proc = start_supervisor(config_path, stack_log)
-        session = open_session(config.zenoh, "observer")
+        session = open_session(config.zenoh, config.principal("observer"))
         flooder = threading.Thread(target=_flood, args=(config, flood_hz, stop, figures))
         try:
             keys = Keys(config.stack.prefix)

@@ -41,22 +41,22 @@ def old_style(directory: Path, principal: str) -> None:
 def test_older_credentials_are_named_in_principal_order(tmp_path: Path) -> None:
     generate(tmp_path)
     assert server_capable(tmp_path) == []
-    old_style(tmp_path, "viewer")
-    old_style(tmp_path, "camera")
-    assert server_capable(tmp_path) == ["camera", "viewer"]
+    old_style(tmp_path, "stack/viewer")
+    old_style(tmp_path, "stack/camera")
+    assert server_capable(tmp_path) == ["stack/camera", "stack/viewer"]
 
 
 def test_a_missing_or_unreadable_certificate_is_not_counted(tmp_path: Path) -> None:
     generate(tmp_path)
-    cert_file(tmp_path, "camera").unlink()
-    cert_file(tmp_path, "viewer").write_text("not a certificate")
+    cert_file(tmp_path, "stack/camera").unlink()
+    cert_file(tmp_path, "stack/viewer").write_text("not a certificate")
     assert server_capable(tmp_path) == []
 
 
-@pytest.mark.parametrize("principal", ["estop", ROUTER_PRINCIPAL])
+@pytest.mark.parametrize("principal", ["stack/estop", ROUTER_PRINCIPAL])
 def test_no_session_over_tls_with_older_credentials(tmp_path: Path, principal: str) -> None:
     generate(tmp_path)
-    old_style(tmp_path, "viewer")
+    old_style(tmp_path, "stack/viewer")
     tls = dataclasses.replace(
         ZenohSettings(),
         mode="client",
@@ -65,7 +65,7 @@ def test_no_session_over_tls_with_older_credentials(tmp_path: Path, principal: s
         endpoint="tls/127.0.0.1:7447",
     )
     access = {} if principal == ROUTER_PRINCIPAL else None
-    with pytest.raises(ConfigError, match=r"certificates of viewer could.*--force"):
+    with pytest.raises(ConfigError, match=r"certificates of stack/viewer could.*--force"):
         zenoh_config(tls, principal, access=access)
     # Without TLS no certificate is used, so nothing is checked.
     zenoh_config(dataclasses.replace(tls, endpoint="tcp/127.0.0.1:7447"), principal, access=access)

@@ -11,7 +11,7 @@ import zenoh
 
 from common.errors import ConfigError
 from common.keys import Keys
-from common.security import PRINCIPALS, stack_principals
+from common.security import PRINCIPALS, qualified, role_of, stack_principals
 from common.settings import REPO_ROOT, ZenohSettings, camera_service
 from common.zenoh_bus import QoS, open_session, zenoh_config
 from deploy.credentials import generate
@@ -27,7 +27,8 @@ def _allowed(acl: dict, principal: str, message: str) -> set[str]:
     subjects = {
         s["id"]
         for s in acl["subjects"]
-        if principal in next(iter(v for k, v in s.items() if k != "id"))
+        # each subject by its role: the rules name one robot's principals, <prefix>/<role>
+        if principal in {role_of(n) for n in next(iter(v for k, v in s.items() if k != "id"))}
     }
     rules = {r["id"]: r for r in acl["rules"]}
     out: set[str] = set()
@@ -113,9 +114,9 @@ def test_hub_config_carries_the_rules_and_the_dictionary(tmp_path: Path) -> None
     assert hub["mode"] == "router"
     assert hub["transport"]["auth"]["usrpwd"]["dictionary_file"].endswith("users.txt")
     assert hub["access_control"]["enabled"] is True
-    client = json.loads(str(zenoh_config(s, "controller")))
+    client = json.loads(str(zenoh_config(s, "stack/controller")))
     assert client["mode"] == "client" and client["listen"]["endpoints"] == []
-    assert client["transport"]["auth"]["usrpwd"]["user"] == "controller"
+    assert client["transport"]["auth"]["usrpwd"]["user"] == "stack/controller"
     assert client["transport"]["auth"]["usrpwd"]["dictionary_file"] is None
 
 
@@ -168,7 +169,7 @@ def test_each_camera_principal_puts_only_its_own_frames(names: tuple[str, ...]) 
     assert set(principals) == set(PRINCIPALS) | {f"camera_{n}" for n in names[1:]}
     acl = access_control(KEYS, cameras, "password")
     everyone = next(s for s in acl["subjects"] if s["id"] == "everyone")
-    assert everyone["usernames"] == list(principals)
+    assert everyone["usernames"] == [qualified(KEYS.prefix, p) for p in principals]
     for camera, principal in cameras.items():
         # Its own frames and depth images, counters, health token and camera's announcements;
         # nothing else, and it reads nothing.
@@ -261,8 +262,9 @@ def test_the_hub_refuses_credentials_made_for_fewer_cameras(tmp_path: Path) -> N
     with pytest.raises(
         ConfigError, match=r"camera_rear.password is missing.*--config FILE --force"
     ):
-        open_session(config.zenoh, "camera_rear")
-    generate(creds, force=True, principals=stack_principals(config.camera_services))
+        open_session(config.zenoh, config.principal("camera_rear"))
+    names = tuple(config.principal(p) for p in stack_principals(config.camera_services))
+    generate(creds, force=True, principals=names)
     check_credentials(config)
     # With certificates the router needs only the CA: nothing to check there.
     tls = dataclasses.replace(config.zenoh, auth="certificate", endpoint="tls/127.0.0.1:7448")

@@ -17,7 +17,6 @@ from common.certificates import server_capable, serves_tls
 from common.errors import ConfigError
 from common.lifecycle import run_main
 from common.security import (
-    PRINCIPALS,
     ROUTER_PRINCIPAL,
     ca_file,
     ca_key_file,
@@ -31,6 +30,7 @@ from common.security import (
 from common.settings import REPO_ROOT
 from common.zenoh_bus import zenoh_config
 from deploy import credentials
+from deploy.credentials import DEFAULT_PRINCIPALS as PRINCIPALS  # the default stack's names
 from deploy.credentials import generate
 from stack.config_file import load_config
 from tests.unit.common.test_certificates import old_style
@@ -62,7 +62,8 @@ def test_writes_every_file_with_private_modes(creds: tuple[Path, list[Path]]) ->
         secret += [password_file(directory, p), key_file(directory, p)]
         public.append(cert_file(directory, p))
     assert sorted(written) == sorted(secret + public)
-    assert sorted(directory.iterdir()) == sorted(written)
+    assert sorted(p for p in directory.rglob("*") if p.is_file()) == sorted(written)
+    assert _mode(directory / "stack") == 0o700  # the default robot's subfolder
     assert {path.name: _mode(path) for path in secret} == {path.name: 0o600 for path in secret}
     assert all(_mode(path) & 0o022 == 0 for path in public)  # readable, never writable by others
 
@@ -124,15 +125,25 @@ def test_only_the_supervisors_certificate_names_hosts_and_serves(
     assert server_capable(directory) == []
 
 
+def _roles(creds: Path) -> list[str]:
+    """The users of ``creds``' dictionary by role: each of the default stack's, ``stack/<role>``
+    (common/security.py), or the routers' ``supervisor``."""
+    users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
+    assert all(u == ROUTER_PRINCIPAL or u.startswith("stack/") for u in users), users
+    return [u.removeprefix("stack/") for u in users]
+
+
 def _purposes(cert: x509.Certificate) -> list[x509.ObjectIdentifier]:
     return list(cert.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value)
 
 
 def test_old_server_capable_credentials_are_named_and_replaced_with_force(tmp_path: Path) -> None:
     generate(tmp_path)
-    old_style(tmp_path, "viewer")
-    old_style(tmp_path, "camera")
-    with pytest.raises(ConfigError, match=r"certificates of camera, viewer could.*--force"):
+    old_style(tmp_path, "stack/viewer")
+    old_style(tmp_path, "stack/camera")
+    with pytest.raises(
+        ConfigError, match=r"certificates of stack/camera, stack/viewer could.*--force"
+    ):
         generate(tmp_path)
     generate(tmp_path, force=True)
     assert server_capable(tmp_path) == []
@@ -142,11 +153,12 @@ def test_an_existing_open_folder_and_files_become_private(tmp_path: Path) -> Non
     directory = tmp_path / "secrets"
     directory.mkdir()
     directory.chmod(0o777)
-    password_file(directory, "camera").write_text("old\n")
-    password_file(directory, "camera").chmod(0o666)
+    (directory / "stack").mkdir(mode=0o777)
+    password_file(directory, "stack/camera").write_text("old\n")
+    password_file(directory, "stack/camera").chmod(0o666)
     generate(directory, force=True)
-    assert _mode(directory) == 0o700
-    assert _mode(password_file(directory, "camera")) == 0o600
+    assert _mode(directory) == 0o700 and _mode(directory / "stack") == 0o700
+    assert _mode(password_file(directory, "stack/camera")) == 0o600
     assert _mode(users_file(directory)) == 0o600
 
 
@@ -181,7 +193,7 @@ def test_another_ca_does_not_verify(creds: tuple[Path, list[Path]], tmp_path: Pa
     generate(tmp_path)
     other_ca = _cert(ca_file(tmp_path))
     with pytest.raises(InvalidSignature):  # same issuer name, a different key
-        _cert(cert_file(directory, "controller")).verify_directly_issued_by(other_ca)
+        _cert(cert_file(directory, "stack/controller")).verify_directly_issued_by(other_ca)
 
 
 def test_refuses_to_overwrite_without_force(tmp_path: Path) -> None:
@@ -190,10 +202,10 @@ def test_refuses_to_overwrite_without_force(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"already exist.*--force"):
         generate(tmp_path)
     assert users_file(tmp_path).read_text() == before
-    password_file(tmp_path, "camera").chmod(0o644)
+    password_file(tmp_path, "stack/camera").chmod(0o644)
     generate(tmp_path, force=True)
     assert users_file(tmp_path).read_text() != before
-    assert _mode(password_file(tmp_path, "camera")) == 0o600
+    assert _mode(password_file(tmp_path, "stack/camera")) == 0o600
 
 
 @pytest.mark.parametrize(("hosts", "days"), [(("bad host",), 30), (("tcp/x:1",), 30), ((), 0)])
@@ -239,13 +251,13 @@ def test_cli_makes_a_principal_per_camera_of_the_config(
     # The config runs a camera robot's services: each camera, the detector, the controller,
     # the metrics; with the router and the tools, 10 principals; no sim, ros2 or viewer.
     assert "wrote 10 passwords" in capsys.readouterr().err
-    users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
+    users = _roles(creds)
     assert users == [
         "supervisor", "recorder", "camera", "camera_rear", "camera_left", "detector",
         "controller", "metrics", "estop", "observer",
     ]  # fmt: skip
     ca = _cert(ca_file(creds))
-    for p in ("camera_rear", "camera_left"):
+    for p in ("stack/camera_rear", "stack/camera_left"):
         assert _mode(password_file(creds, p)) == 0o600
         cert = _cert(cert_file(creds, p))
         cert.verify_directly_issued_by(ca)
@@ -259,8 +271,8 @@ def test_cli_makes_a_principal_per_camera_of_the_config(
     assert again.value.code == 2
     assert capsys.readouterr().err.count("\n") == 1
     # An old-style further camera's certificate is found like any other.
-    old_style(creds, "camera_rear")
-    assert server_capable(creds) == ["camera_rear"]
+    old_style(creds, "stack/camera_rear")
+    assert server_capable(creds) == ["stack/camera_rear"]
 
 
 def test_cli_makes_a_principal_per_worker_and_for_other_hosts_workers(
@@ -278,7 +290,7 @@ def test_cli_makes_a_principal_per_worker_and_for_other_hosts_workers(
         run_main(credentials.main, "credentials")
     assert done.value.code == 0
     assert "wrote 10 passwords" in capsys.readouterr().err
-    users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
+    users = _roles(creds)
     workers = ("detector_b", "detector_b_2", "detector_a")
     assert users == [
         p for p in stack_principals("front", workers) if p not in ("sim", "ros2", "viewer")
@@ -286,7 +298,7 @@ def test_cli_makes_a_principal_per_worker_and_for_other_hosts_workers(
     assert "detector" not in users
     ca = _cert(ca_file(creds))
     for p in workers:
-        cert = _cert(cert_file(creds, p))
+        cert = _cert(cert_file(creds, f"stack/{p}"))
         cert.verify_directly_issued_by(ca)
         assert _purposes(cert) == [ExtendedKeyUsageOID.CLIENT_AUTH]
     # A name no worker can have: one line, exit 2.
@@ -321,8 +333,8 @@ def test_mtls_router_admits_only_clients_with_a_certificate(
         "enable_mtls": True,
     }
     client_tls = {
-        "connect_private_key": str(key_file(directory, "controller")),
-        "connect_certificate": str(cert_file(directory, "controller")),
+        "connect_private_key": str(key_file(directory, "stack/controller")),
+        "connect_certificate": str(cert_file(directory, "stack/controller")),
         "enable_mtls": True,  # without it the client never presents its certificate
     }
     with zenoh.open(config("router", router_tls, listen=[endpoint])):
@@ -346,7 +358,7 @@ def test_cli_makes_a_principal_for_the_workers_the_config_links_to(
     with pytest.raises(SystemExit) as done:
         run_main(credentials.main, "credentials")
     assert done.value.code == 0, capsys.readouterr().err
-    users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
+    users = _roles(creds)
     assert users == [
         p
         for p in stack_principals("front", ("detector_b", "detector_a"))
@@ -384,23 +396,25 @@ def test_a_simulator_stack_gets_no_camera_secret_and_the_command_says_why(
     assert all(line.startswith("credentials: ") for line in err.splitlines()), err
     made = ["supervisor", "recorder", "sim", "detector", "controller", "metrics", "estop",
             "observer"]  # fmt: skip
-    users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
+    users = _roles(creds)
     assert users == made
     for p in ("camera", "ros2", "viewer"):
-        for path in (password_file(creds, p), key_file(creds, p), cert_file(creds, p)):
+        n = f"stack/{p}"
+        for path in (password_file(creds, n), key_file(creds, n), cert_file(creds, n)):
             assert not path.exists(), path
-        line = f"credentials: {p}: not made, the config runs no {p} service (supervisor.services)"
+        line = f"credentials: {n}: not made, the config runs no {p} service (supervisor.services)"
         assert f"{line}\n" in err, err
     assert (
-        "made for supervisor (the router); sim, detector, controller, metrics "
-        "(supervisor.services); recorder, estop, observer (the tools" in err
+        "made for supervisor (the router); stack/sim, stack/detector, stack/controller, "
+        "stack/metrics (supervisor.services); stack/recorder, stack/estop, stack/observer "
+        "(the tools" in err
     ), err
     assert f"`zstack credentials --config {sim} --force`" in err, err
     config = load_config(sim, environ={})
     check_credentials(config)  # the supervisor accepts them
     # The attack of issue 38: nobody can join as the camera, which the stack does not run.
-    with pytest.raises(ConfigError, match=r"camera.password is missing"):
-        zenoh_config(config.zenoh, "camera")
+    with pytest.raises(ConfigError, match=r"stack/camera.password is missing"):
+        zenoh_config(config.zenoh, config.principal("camera"))
 
 
 def test_a_service_added_later_stops_the_stack_in_one_line_naming_the_command(
@@ -417,12 +431,14 @@ def test_a_service_added_later_stops_the_stack_in_one_line_naming_the_command(
         with pytest.raises(ConfigError) as refused:
             check_credentials(load_config(path, environ={}))
         line = str(refused.value)
-        assert "\n" not in line and "no principal camera, viewer " in line, line
+        assert "\n" not in line and "no principal stack/camera, stack/viewer " in line, line
         assert f"make them again with `zstack credentials --config {path} --force`" in line
     # Made again for that config, the stack starts.
     assert _cli(monkeypatch, "--config", path, "--force") == 0
     check_credentials(load_config(path, environ={}))
-    assert password_file(creds, "camera").exists() and cert_file(creds, "viewer").exists()
+    assert (
+        password_file(creds, "stack/camera").exists() and cert_file(creds, "stack/viewer").exists()
+    )
     capsys.readouterr()
 
 
@@ -432,26 +448,28 @@ def test_force_for_a_config_that_runs_less_removes_the_secrets_it_no_longer_need
     creds = tmp_path / "creds"
     camera = _secure(tmp_path / "camera.toml", creds, ["camera", "detector", "controller"])
     assert _cli(monkeypatch, "--config", camera, "--worker", "detector_a") == 0
-    old_style(creds, "camera")  # as an older version made it: it could serve as the router
+    old_style(creds, "stack/camera")  # as an older version made it: it could serve as the router
     (creds / "notes.txt").write_text("mine\n")
     outside = tmp_path / "outside.password"
     outside.write_text("kept\n")
-    password_file(creds, "detector_a").unlink()
-    password_file(creds, "detector_a").symlink_to(outside)
+    password_file(creds, "stack/detector_a").unlink()
+    password_file(creds, "stack/detector_a").symlink_to(outside)
     capsys.readouterr()
 
     sim = _secure(tmp_path / "sim.toml", creds, ["sim", "detector", "controller"])
     assert _cli(monkeypatch, "--config", sim, "--force") == 0
     err = capsys.readouterr().err
-    for p in ("camera", "detector_a"):
+    for p in ("stack/camera", "stack/detector_a"):
         for path in (password_file(creds, p), key_file(creds, p), cert_file(creds, p)):
             assert not path.is_symlink() and not path.exists(), path
     assert outside.read_text() == "kept\n"  # a link is removed, never what it points to
     assert (creds / "notes.txt").exists() and viewer_token_file(creds).exists()
     assert (
-        "credentials: camera: not made, the config runs no camera service "
+        "credentials: stack/camera: not made, the config runs no camera service "
         "(supervisor.services); its earlier secrets removed\n" in err
     ), err
-    assert "credentials: detector_a: earlier secrets removed, neither the config nor" in err, err
+    assert (
+        "credentials: stack/detector_a: earlier secrets removed, neither the config nor" in err
+    ), err
     assert server_capable(creds) == []  # the old certificate no longer stops TLS sessions
-    assert password_file(creds, "sim").exists()
+    assert password_file(creds, "stack/sim").exists()

@@ -99,7 +99,7 @@ def test_each_worker_is_a_principal_that_announces_only_itself() -> None:
     assert principals[principals.index("ros2") + 1 :][:2] == workers  # in detector's place
     acl = access_control(keys, cameras, "password", workers=workers)
     everyone = next(s for s in acl["subjects"] if s["id"] == "everyone")
-    assert set(workers) <= set(everyone["usernames"])
+    assert {f"stack/{w}" for w in workers} <= set(everyone["usernames"])
     for w in workers:
         rule = next(r for r in acl["rules"] if r["id"] == f"{w}_token")
         assert set(rule["key_exprs"]) == {

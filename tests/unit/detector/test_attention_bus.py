@@ -21,6 +21,7 @@ from common.keys import Keys
 from common.memory_bus import MemoryHub
 from common.messages import CameraAnnouncement, ControllerStatus
 from common.node import Node
+from common.settings import principal_names
 from perception.pipeline import Detector
 from services.detector import contract
 from services.detector.attention import Attention
@@ -51,7 +52,8 @@ class Station:
         # The secure profile's rules: the detector may read the controller's status.
         principals = {cam: f"camera_{cam}" for cam in CAMERAS} | {"front": "camera"}
         keys = Keys(config.stack.prefix)
-        self.hub = MemoryHub(access_control(keys, principals, "password"))
+        acl = access_control(keys, principals, "password")
+        self.hub = MemoryHub(acl, names=principal_names(keys.prefix))
         bus = self.hub.join("detector", principal="detector")
         self.node = node = Node("detector", config, bus=bus, clock=self.clock)
         self.handlers = DetectorHandlers(config, node, self.clock)

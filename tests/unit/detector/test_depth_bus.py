@@ -25,6 +25,7 @@ from common.keys import Keys
 from common.memory_bus import MemoryHub
 from common.messages import DepthFrame, Detections, Frame, Header
 from common.node import Node
+from common.settings import principal_names
 from perception.depth import COLUMNS
 from perception.pipeline import Detector
 from services.detector.handlers import DetectorHandlers
@@ -294,7 +295,7 @@ def test_a_worker_serving_two_robots_may_read_their_depth_and_put_none() -> None
         Keys("pool"), {"front": "camera"}, "certificate", workers=("detector_gpu",),
         prefixes=(robot1.prefix, robot2.prefix),
     )  # fmt: skip
-    hub = MemoryHub(acl)
+    hub = MemoryHub(acl, names=principal_names("pool"))
     worker = hub.join("detector_gpu", principal="detector_gpu")
     for robot in (robot1, robot2, robot3):
         worker.subscribe(robot.all_depths(), lambda _: None)

@@ -13,6 +13,7 @@ from common.bus import QoS, Sample
 from common.keys import Keys
 from common.memory_bus import MemoryBus, MemoryHub
 from common.security import ROUTER_PRINCIPAL, stack_principals
+from common.settings import principal_names
 from stack.access import access_control
 
 ROBOT1, ROBOT2 = Keys("robot1"), Keys("robot2")
@@ -31,7 +32,8 @@ def _robot_router(remote: tuple[str, ...]) -> MemoryHub:
     """Robot 1's router: its cameras, its worker ``detector_b``, linked to a GPU box's router
     whose principals are ``remote``."""
     return MemoryHub(
-        access_control(ROBOT1, CAMERAS, "certificate", workers=("detector_b",), remote=remote)
+        access_control(ROBOT1, CAMERAS, "certificate", workers=("detector_b",), remote=remote),
+        names=principal_names(ROBOT1.prefix),
     )
 
 
@@ -108,7 +110,8 @@ def test_a_gpu_boxs_router_admits_the_robots_further_cameras_named_only_in_remot
         access_control(
             ROBOT1, "front", "certificate", workers=(GPU_WORKER,),
             remote=("camera", "camera_rear", "detector_b", "controller", "metrics"),
-        )
+        ),
+        names=principal_names(ROBOT1.prefix),
     )  # fmt: skip
     worker = gpu.join(GPU_WORKER, principal=GPU_WORKER)
     heard: list[Sample] = []
@@ -146,7 +149,7 @@ def test_on_a_pool_router_serving_two_robots_robot1s_principals_read_nothing_of_
     acl = access_control(
         ROBOT1, CAMERAS, "certificate", workers=workers, prefixes=(ROBOT1.prefix, ROBOT2.prefix)
     )
-    hub = MemoryHub(acl)
+    hub = MemoryHub(acl, names=principal_names(ROBOT1.prefix))
     # Robot 2's data on this router: a worker's detections, and what a linked router (robot
     # 2's, were it linked) may bring here: nothing of robot 2's, so its frames stay out.
     worker = hub.join("detector_2", principal="detector_2")
@@ -209,7 +212,7 @@ def test_a_gpu_boxs_router_serving_two_robots_confines_its_worker_to_frames_and_
         Keys("pool"), CAMERAS, "certificate", workers=(GPU_WORKER,),
         prefixes=(ROBOT1.prefix, ROBOT2.prefix), remote=robot_principals,
     )  # fmt: skip
-    hub = MemoryHub(acl)
+    hub = MemoryHub(acl, names=principal_names("pool"))
     worker = hub.join(GPU_WORKER, principal=GPU_WORKER)
     link = hub.join("robot routers", principal=ROUTER_PRINCIPAL)
     frames: list[Sample] = []
@@ -241,7 +244,7 @@ def test_a_pool_under_its_own_prefix_announces_there_and_every_principal_may_wat
     acl = access_control(
         ROBOT1, CAMERAS, "certificate", workers=("detector",), pool_prefix=pool.prefix
     )
-    hub = MemoryHub(acl)
+    hub = MemoryHub(acl, names=principal_names(ROBOT1.prefix, pool.prefix))
     worker = hub.join("detector", principal="detector")
     for key in (pool.pool_member("detector"), pool.pool_member("detector_9"),
                 ROBOT1.pool_member("detector")):  # fmt: skip

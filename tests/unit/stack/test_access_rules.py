@@ -14,6 +14,7 @@ from common.camera_announce import CameraAnnouncements
 from common.keys import Keys
 from common.memory_bus import MemoryHub
 from common.security import stack_principals
+from common.settings import principal_names
 from stack.access import access_control, access_table
 from tests.unit.heard import heard_cameras
 
@@ -25,7 +26,7 @@ PRINCIPALS = stack_principals(CAMERAS, WORKERS)
 
 def _hub(*, live_sensors: bool = True) -> MemoryHub:
     acl = access_control(KEYS, CAMERAS, "password", live_sensors=live_sensors, workers=WORKERS)
-    return MemoryHub(acl)
+    return MemoryHub(acl, names=principal_names(KEYS.prefix))
 
 
 def _table(*, live_sensors: bool = True) -> dict[str, tuple[tuple[str, ...], ...]]:

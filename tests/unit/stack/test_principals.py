@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from common.keys import Keys
-from common.security import stack_principals
+from common.security import qualified, stack_principals
 from deploy.processes import stack_processes
 from stack.access import TOOL_PRINCIPALS, access_control, running_principals, service_principals
 from stack.config_file import load_config
@@ -28,7 +28,7 @@ def test_a_simulator_stack_has_no_camera_principal() -> None:
     # The rules are still built for every principal: one without a secret cannot log in.
     acl = access_control(Keys("stack"), CAMERAS, "password")
     everyone = next(s for s in acl["subjects"] if s["id"] == "everyone")
-    assert everyone["usernames"] == list(stack_principals(CAMERAS))
+    assert everyone["usernames"] == [qualified("stack", p) for p in stack_principals(CAMERAS)]
 
 
 def test_a_camera_stack_has_each_cameras_and_each_workers_principal() -> None:
