@@ -61,6 +61,10 @@ class PoolView:
         self.announced: dict[str, PoolWorker] = {}
         self.cameras: dict[str, PoolCamera] = {}
         self.serving: frozenset[str] = frozenset()
+        #: (robot prefix, worker) dropped from that robot's assignment for not delivering
+        #: (common/pool_delivery.py); the rule places no camera of the robot on them.
+        self.excluded: frozenset[tuple[str, str]] = frozenset()
+        self.owners: dict[str, str] = {}  # the whole assignment, as the last settle made it
 
     @property
     def members(self) -> dict[str, PoolWorker]:
@@ -82,7 +86,8 @@ class PoolView:
 
     def settle(self) -> Change:
         """Recompute the assignment; what changed for this worker."""
-        owners = assign_pool(self.members, self.cameras, self.balance)
+        owners = assign_pool(self.members, self.cameras, self.balance, self.excluded)
+        self.owners = owners
         serving = frozenset(c for c, w in owners.items() if w == self.me)
         total = sum(c.rate_hz for c in self.cameras.values())
         change = Change(
