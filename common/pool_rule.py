@@ -216,13 +216,13 @@ def admit_cameras(
         if key in taken:
             refused[name] = f"its counter label {key} is camera {taken[key]}'s too"
             continue
-        taken[key] = name
         if per_robot.get(cam.prefix, 0) >= max_per_robot:
             refused[name] = (
                 f"robot {cam.prefix} announces over {max_per_robot} cameras "
                 "(detector.max_robot_cameras)"
             )
             continue
+        taken[key] = name
         per_robot[cam.prefix] = per_robot.get(cam.prefix, 0) + 1
         kept[name] = cam
     return kept, refused

@@ -23,6 +23,7 @@ from services.detector.attention import Attention
 from services.detector.capacity import Capacity
 from services.detector.capacity import measure as measure_capacity
 from services.detector.contract import BATCHED_FRAMES, DetectorSettings
+from services.detector.fairness import RobotFair
 from services.detector.handlers import DetectorHandlers
 from services.detector.membership import PoolMember
 from services.detector.pool import PoolCamera
@@ -73,6 +74,9 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
         # order, fed by the controller's status and each camera's detections.
         attention = Attention(node.clock, s.attention_floor_hz, s.attention_hold_s, s.attention)
         status_subs = heed_controllers(node, config, attention)  # each robot's controller
+        # Between robots first, then each robot's cameras in attention's order
+        # (services/detector/fairness.py).
+        order = RobotFair(attention)
         info = json.dumps(
             DetectorInfo(
                 model=detector.model_path.name,
@@ -126,7 +130,7 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
                 pool.settle()
                 pool.audit()
                 node.publish_counters()
-                waiting = handlers.slots.take(per_round, _WAIT_S, attention)
+                waiting = handlers.slots.take(per_round, _WAIT_S, order)
                 if waiting:
                     before, start = node.counters.get(BATCHED_FRAMES), node.clock.mono_s()
                     rounds.run(waiting)
