@@ -59,6 +59,9 @@ ATTENTION_PRIORITY = "attention_priority"
 TAKEN_PRIORITY = "taken_priority"  # a priority camera's frame
 TAKEN_FLOOR = "taken_floor"  # a camera due for its floor rate, ahead of the priority ones
 TAKEN_SPARE = "taken_spare"  # another camera's, with no priority camera waiting
+#: Rounds in which the cameras due for their floor went after the priority ones: the floors
+#: over ``attention_floor_share`` of the frames (their bound then no longer holds).
+ATTENTION_FLOOR_HELD = "attention_floor_held"
 # Depth (services/detector/depth_stage.py): depth frames heard on a depth camera this worker
 # serves, and the colour frames of such a camera whose detections got depth columns (paired)
 # or went out 2D only (no depth frame within detector.depth_pair_tolerance_ms). Bad depth
@@ -141,6 +144,7 @@ COUNTERS = frozenset(
         POOL_DROPPED,
         POOL_DROPS,
         CAMERAS_REFUSED,
+        ATTENTION_FLOOR_HELD,
     }
 )
 
@@ -292,8 +296,9 @@ class DetectorSettings:
     ``attention`` on, when the cameras send more than the worker detects, the camera holding
     the controller's lock and those that saw one of its target classes within
     ``attention_hold_s`` go first, and every other camera is still detected on at least
-    ``attention_floor_hz`` times a second (within a round or two). Off, or with no camera
-    prioritised, the rounds are the fair rotation.
+    ``attention_floor_hz`` times a second (within a round or two), as long as the floors take
+    at most ``attention_floor_share`` of the frames (beyond, the priority cameras go first).
+    Off, or with no camera prioritised, the rounds are the fair rotation.
 
     Depth (docs/detector.md, "Depth"; services/detector/depth_stage.py): for a camera announced
     with depth, each colour frame is paired with the depth frame of its camera whose stamp is
@@ -339,7 +344,8 @@ class DetectorSettings:
     capacity_period_s: float = 10.0
     capacity_smoothing: float = 0.05
     attention: bool = True
-    attention_floor_hz: float = 0.5
+    attention_floor_hz: float = 1.5
+    attention_floor_share: float = 0.5
     attention_hold_s: float = 2.0
     depth_pair_tolerance_ms: float = 20.0
     depth_buffer: int = 4
@@ -369,6 +375,7 @@ class DetectorSettings:
         "max_robot_cameras": (1, 1024),
         "attention_floor_hz": (0.05, 100),
         "attention_hold_s": (0, 60),
+        "attention_floor_share": (0.05, 1),
         "capacity_hz": (0, MAX_CAPACITY_HZ),
         "capacity_step": (0.01, 10),
         "capacity_period_s": (0.5, 3600),

@@ -72,7 +72,13 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
         handlers = DetectorHandlers(config, node, node.clock, frame_keys={})
         # Attention when short of capacity (services/detector/attention.py): the rounds'
         # order, fed by the controller's status and each camera's detections.
-        attention = Attention(node.clock, s.attention_floor_hz, s.attention_hold_s, s.attention)
+        attention = Attention(
+            node.clock,
+            s.attention_floor_hz,
+            s.attention_hold_s,
+            s.attention,
+            floor_share=s.attention_floor_share,
+        )
         status_subs = heed_controllers(node, config, attention)  # each robot's controller
         # Between robots first, then each robot's cameras in attention's order
         # (services/detector/fairness.py).
