@@ -24,6 +24,12 @@ load (a whole share for each robot would make it take a full share of each, twic
 its cost: a worker that lists a robot with no cameras keeps that robot's part of its capacity
 unused, as far as the bound goes (``balance`` and the fallback below still place every camera).
 
+Only how many cameras of each weight each worker takes comes from the capacities; the cameras
+are then placed by rank within those numbers, so a capacity that moves without changing them
+moves no camera (issue 39). A member dropped from a robot for delivering nothing
+(common/pool_delivery.py) is left out of that robot's placement (``assign_pool``'s
+``excluded``). Which announced cameras are placed at all is :func:`admit_cameras`'s.
+
 A camera's name in the pool (:func:`pool_name`) is its bare name when it is announced under the
 pool's own prefix (one robot: the names of its config), else ``<prefix>/<camera>``; in counter
 names (``serving.<camera>``) that reads ``<prefix>:<camera>`` (:func:`label`).

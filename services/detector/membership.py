@@ -83,6 +83,13 @@ class PoolMember:
     nothing, a camera nobody or two serve, a name held twice), and a line when it clears.
     Counted: ``pool_warnings`` (how many hold now).
 
+    A member earns its cameras by delivering (services/detector/pool_checks.py,
+    common/pool_delivery.py): the worker hears every camera's detections of the robots it
+    serves and drops from a robot's assignment a member none of whose cameras of it has had a
+    detection for ``detector.pool_deliver_s`` (counted: ``pool_dropped``, ``pool_drops``).
+    Announced cameras over ``detector.max_robot_cameras`` of a robot, or whose counter label
+    another's has, are refused (``cameras_refused``).
+
     Time is the node's clock's (``node.clock.mono_s()``): a test moves it and calls
     :meth:`check_stall` and :meth:`audit` itself.
 
