@@ -17,6 +17,12 @@ split evenly among the robots it lists (so that one serving two robots takes its
 pool, not a share of each; and each robot's owners follow from that robot's cameras alone,
 all that a worker listing only that robot hears).
 
+A member earns its cameras (common/pool_delivery.py): one none of whose cameras of a robot
+gets detections within ``detector.pool_deliver_s`` is left out of that robot's placement
+(``excluded``) for a while, whatever capacity it announces. Only how many cameras of each
+weight each worker takes comes from the capacities, so a capacity change that keeps those
+numbers moves no camera.
+
 What follows (tests/unit/detector/test_pool.py): every camera has exactly one owner; a
 worker that joins takes about its share and no more; a worker that leaves hands on only its
 own cameras while the others' loads allow (a camera whose first choice is full goes to the

@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import pytest
 
+from common.errors import ConfigError
 from common.pool_audit import PoolAudit
 from common.pool_delivery import MAX_READMIT_DOUBLINGS, Delivery
 from common.pool_rule import PoolCamera, PoolWorker, assign_pool
+from services.detector.contract import DetectorSettings
 
 DELIVER_S = 4.0
 READMIT_S = 30.0
@@ -124,3 +126,9 @@ def test_the_audit_warns_from_what_arrives_not_from_tokens() -> None:
     check(DELIVER_S + 2)
     found = check(DELIVER_S + 2 + alarm_s)
     assert ("undelivering", f"{R1}/liar") in found
+
+
+def test_the_bound_must_exceed_the_attention_floors_period() -> None:
+    with pytest.raises(ConfigError, match="pool_deliver_s"):
+        DetectorSettings(pool_deliver_s=1.0, attention_floor_hz=0.5)
+    DetectorSettings(pool_deliver_s=1.0, attention_floor_hz=0.5, attention=False)
