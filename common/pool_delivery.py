@@ -13,6 +13,9 @@ robot's cameras without it (common/pool_rule.py), for
 ``detector.pool_readmit_s`` the first time, twice as long each further time (at most
 :data:`MAX_READMIT_DOUBLINGS` doublings), after which it is given cameras again and must
 deliver on one of them within the bound. A member that delivers again is forgiven its strikes.
+A member whose pool token goes (a process that exits, is killed or restarted) has its drops
+lifted: the process that comes back under its name is judged afresh, as a worker that joins
+later, which knows nothing of past drops, would judge it.
 
 Every judge decides from what it hears on the bus alike (the detections of each camera, the
 members and their announcements), so the workers agree on who is dropped up to the moment
@@ -78,6 +81,14 @@ class Delivery:
         for known in (self._last, self._asked):
             for camera in [c for c in known if c not in keep]:
                 del known[camera]
+
+    def left(self, worker: str) -> None:
+        """``worker``'s pool token went (it exited, was killed, resigned or its lease ran
+        out): a token that comes back is a new process, which a worker that joins then knows
+        nothing against: its drops are lifted, so that every view agrees (its strikes stay)."""
+        for judged in [j for j in self.dropped if j[1] == worker]:
+            del self.dropped[judged]
+        self._given = {pair: at for pair, at in self._given.items() if pair[1] != worker}
 
     def excluded(self, now: float) -> frozenset[Judged]:
         """The (robot, member) pairs dropped at ``now`` (those whose time is over are

@@ -395,6 +395,8 @@ class PoolMember:
                 self.view.joined(worker)
             else:
                 self.view.left(worker)
+                if worker != self.view.me:
+                    self._checks.delivery.left(worker)
             self._dirty = True
 
     def settle(self) -> None:
@@ -431,8 +433,9 @@ class PoolMember:
         has had a detection for ``detector.pool_deliver_s`` is dropped from that robot's
         assignment; one whose time is over is given cameras again."""
         with self._lock:
+            before = self.view.excluded
             dropped, readmitted = self._checks.judge(self.clock.mono_s(), self.view)
-            if dropped or readmitted:
+            if self.view.excluded != before:
                 self._dirty = True
                 self._gauge(contract.POOL_DROPPED, len(self.view.excluded))
         tell_drops(self.node, dropped, readmitted, self._checks.delivery.deliver_s)

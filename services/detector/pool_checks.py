@@ -64,7 +64,7 @@ class PoolChecks:
     def judge(self, now: float, view: PoolView) -> tuple[list[Dropped], list[Judged]]:
         """Drop from ``view`` the members that deliver nothing, give back those whose time
         is over: those dropped now and those readmitted now (``view.excluded`` follows)."""
-        before = view.excluded
+        before = view.excluded & frozenset(self.delivery.dropped)  # lifted: no readmission
         self.delivery.excluded(now)
         dropped = self.delivery.judge(now, view.owners, view.cameras, view.members)
         view.excluded = frozenset(self.delivery.dropped)

@@ -113,6 +113,8 @@ class LivePool:
             self.members.add(worker)
         else:
             self.members.discard(worker)
+            if self.delivery is not None:
+                self.delivery.left(worker)  # a process that comes back is judged afresh
 
     def serving(self, token: Serving, *, live: bool) -> None:
         self.heard = True

@@ -113,3 +113,33 @@ def test_cameras_of_no_detections_are_unserved_whatever_the_tokens_say() -> None
     assert {(f.kind, f.subject) for f in report.current} == {("unserved", "rear")}
     assert "no detections of it arrive" in report.current[0].detail
     assert worker.count(contract.POOL_DROPS) == 0
+
+
+def test_a_dropped_worker_that_restarts_is_judged_afresh_by_everyone() -> None:
+    # A worker frozen (its cameras' detections stop) is dropped by the other; killed and
+    # restarted (its token goes and comes back) it knows nothing of the drop, so the other
+    # lifts it too: both views agree, no camera served twice or by nobody.
+    hub, clock = MemoryHub(), FakeClock()
+    source = CameraSource(hub)
+    for cam in CAMERAS:
+        source.announce(cam)
+    config = cameras_config(CAMERAS, pool_deliver_s=DELIVER_S, pool_readmit_s=READMIT_S)
+    a, b = (Worker(hub, clock, config, name) for name in ("detector", "detector_2"))
+    a.pool.join()
+    b.pool.join()
+    a.loop_pass()
+    b.loop_pass()
+    share = a.handlers.serving
+    assert share and b.handlers.serving == frozenset(CAMERAS) - share
+    for _ in range(int(DELIVER_S / 0.5) + 2):  # a frozen: only b's cameras deliver
+        clock.advance(0.5)
+        detections(hub, b.handlers.serving)
+        b.loop_pass()
+    assert b.handlers.serving == frozenset(CAMERAS) and b.count(contract.POOL_DROPPED) == 1
+    a.bus.close()  # killed
+    b.loop_pass()
+    assert b.count(contract.POOL_DROPPED) == 0
+    again = Worker(hub, clock, config, "detector")  # restarted
+    again.pool.join()
+    served = again.loop_pass(), b.loop_pass()
+    assert served[0] == share and served[1] == frozenset(CAMERAS) - share
