@@ -99,7 +99,13 @@ class Announced(Generic[_A]):
     another camera under its own key). ``on_change()`` is called (on the bus's thread, no lock
     held) whenever the set of current announcements changed; ``on_bad(key, error)`` for an
     announcement that does not decode, which is then ignored. While two tokens of one name are
-    alive (a re-announcement's overlap), the one that came last is current. Thread-safe.
+    alive (a re-announcement's overlap), the one that came last is current, unless
+    ``conflict(current, new)`` gives a reason to refuse the new one (a second announcer of a
+    camera with another mounting, issue 39): it is then refused, reported to ``on_bad``
+    (:class:`ConflictError`), and held aside while the current one lives; once every token
+    believed of the name has gone, the oldest refused one still alive is believed instead (so
+    a source that changes its own camera's mounting, declaring the new token before it
+    withdraws the old, is believed after a moment's warning). Thread-safe.
     """
 
     def __init__(
@@ -112,8 +118,12 @@ class Announced(Generic[_A]):
         *,
         on_change: Callable[[], None] | None = None,
         on_bad: Callable[[str, Exception], None] | None = None,
+        conflict: Callable[[_A, _A], str | None] | None = None,
     ) -> None:
         self._parse, self._decode, self._name_of = parse, decode, name_of
+        self._conflict = conflict
+        # Per name, the live tokens refused for a conflict, in the order they came.
+        self._refused: dict[str, dict[str, _A]] = {}
         self._on_change = on_change
         self._on_bad = on_bad
         self._lock = threading.Lock()
@@ -138,10 +148,12 @@ class Announced(Generic[_A]):
         name, chunk = parts
         if not alive:
             with self._lock:
+                self._refused.get(name, {}).pop(key, None)
                 keys = self._live.get(name, {})
                 changed = keys.pop(key, None) is not None
                 if not keys:
                     self._live.pop(name, None)
+                    changed = self._promote(name) or changed
             if changed and self._on_change is not None:
                 self._on_change()
             return
@@ -157,12 +169,58 @@ class Announced(Generic[_A]):
                 self._on_bad(key, exc)
             return
         with self._lock:
-            self._live.setdefault(name, {})[key] = message
+            why = self._refusal(name, message)
+            if why is None:
+                self._live.setdefault(name, {})[key] = message
+            else:
+                self._refused.setdefault(name, {})[key] = message
+        if why is not None:
+            if self._on_bad is not None:
+                self._on_bad(
+                    key, ConflictError(f"a second announcement of {name!r} refused: {why}")
+                )
+            return
         if self._on_change is not None:
             self._on_change()
 
+    def _refusal(self, name: str, message: _A) -> str | None:
+        """Why ``message`` may not replace the current announcement of ``name`` (the caller
+        holds the lock); None when it may."""
+        keys = self._live.get(name)
+        if not keys or self._conflict is None:
+            return None
+        return self._conflict(list(keys.values())[-1], message)
+
+    def _promote(self, name: str) -> bool:
+        """Every believed token of ``name`` has gone: believe the refused ones still alive,
+        oldest first, as far as they agree with each other (the caller holds the lock)."""
+        refused = self._refused.pop(name, {})
+        for key, message in refused.items():
+            if self._refusal(name, message) is None:
+                self._live.setdefault(name, {})[key] = message
+            else:
+                self._refused.setdefault(name, {})[key] = message
+        return name in self._live
+
     def close(self) -> None:
         self._watch.undeclare()
+
+
+class ConflictError(DecodeError):
+    """An announcement refused for contradicting the one believed of its name."""
+
+
+def camera_conflict(current: CameraAnnouncement, new: CameraAnnouncement) -> str | None:
+    """Why ``new`` may not replace the ``current`` announcement of one camera: another
+    mounting (where it looks, its field of view, where it stands), which would turn every
+    bearing the controller computes from it; None when they agree (a size or a frame id
+    learnt from the first frame, a rate, depth)."""
+    fields = ("mount_yaw_deg", "hfov_deg", "mount_x_m", "mount_y_m", "mount_height_m")
+    differ = [f for f in fields if getattr(current, f) != getattr(new, f)]
+    if not differ:
+        return None
+    said = ", ".join(f"{f} {getattr(current, f):g} -> {getattr(new, f):g}" for f in differ)
+    return f"another mounting ({said}) while the first announcement lives"
 
 
 def announced_cameras(
@@ -180,6 +238,7 @@ def announced_cameras(
         lambda a: a.camera,
         on_change=on_change,
         on_bad=on_bad,
+        conflict=camera_conflict,
     )
 
 

@@ -7,6 +7,8 @@
     │   └── NotPrepared          a model file serving needs that `zstack prepare` has not
     │                            made yet (perception/variants.py)
     ├── DecodeError              bytes on a Zenoh key that are not a valid message
+    │   └── ConflictError        an announcement that contradicts the one believed of its name
+    │                            (common/announce.py)
     ├── ImageError               a missing, unreadable or corrupt image
     │   └── ImageTooLarge        an image over the pixel budget, refused before decoding
     ├── ModelError               a file that is not a usable model

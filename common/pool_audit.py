@@ -11,7 +11,11 @@ than ``detector.pool_alarm_s``:
 
 - ``idle_member``: a member serves none of the cameras the rule gives it (a hung worker, one
   that has not yet heard a camera's announcement);
-- ``unserved``: a camera of this table has no worker serving it;
+- ``unserved``: a camera of this table has no worker serving it (none live at all, too), or
+  no detections of it arrived for ``detector.pool_deliver_s`` whatever the serving tokens say
+  (common/pool_delivery.py: a camera is served when its detections arrive);
+- ``undelivering``: a member was dropped from the pool for delivering no detections on the
+  cameras the rule gave it (common/pool_delivery.py);
 - ``served_twice``: a camera is served by two workers (or two processes of one name);
 - ``name_twice``: one worker name is held by two processes (two hosts with one ``worker_id``).
 
@@ -24,11 +28,12 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
+from common.pool_delivery import Dropped, Judged
 from common.pool_rule import PoolCamera, PoolWorker, assign_pool
 
 #: A serving token's parts: (worker, zenoh id of its session, camera).
 Serving = tuple[str, str, str]
-KINDS = ("idle_member", "unserved", "served_twice", "name_twice")
+KINDS = ("idle_member", "unserved", "served_twice", "name_twice", "undelivering")
 #: The most findings said one by one (in a log at once, or in an answer): a raw session can
 #: declare thousands of tokens, and the rest is one line that counts them.
 MAX_LINES = 20
@@ -90,16 +95,23 @@ class PoolAudit:
         serving: Iterable[Serving],
         *,
         cameras: Mapping[str, PoolCamera] | None = None,
+        dropped: Mapping[Judged, Dropped] | None = None,
+        undelivered: Mapping[str, float] | None = None,
     ) -> Report:
         """The findings at ``now`` for the live ``members`` (names, or each one's capacity
         and prefixes as announced) and ``serving`` tokens, over ``cameras`` (by pool name; by
-        default ``weights``)."""
+        default ``weights``); ``dropped``: the members dropped for not delivering, which the
+        rule places no camera on; ``undelivered``: the cameras whose detections have not
+        come for the delivery bound, with how long (common/pool_delivery.py)."""
         if cameras is None:
             cameras = {c: PoolCamera("", c, w) for c, w in self.weights.items()}
         if not isinstance(members, Mapping):
             robots = frozenset(c.prefix for c in cameras.values())
             members = {m: PoolWorker(1.0, robots) for m in members}
-        findings = _findings(members, serving, cameras, self.balance)
+        found_list = _findings(members, serving, cameras, self.balance, dropped or {})
+        findings = found_list + _undelivered(
+            now, members, serving, cameras, dropped or {}, undelivered or {}
+        )
         found = {(f.kind, f.subject): f.detail for f in findings}
         self._since = {k: self._since.get(k, now) for k in found}
         report = Report()
@@ -128,6 +140,7 @@ def _findings(
     serving: Iterable[Serving],
     cameras: Mapping[str, PoolCamera],
     balance: float,
+    dropped: Mapping[Judged, Dropped],
 ) -> list[_Found]:
     live = sorted(members)
     by_camera: dict[str, set[tuple[str, str]]] = {}
@@ -135,7 +148,7 @@ def _findings(
     for worker, zid, camera in set(serving):
         by_camera.setdefault(camera, set()).add((worker, zid))
         by_worker.setdefault(worker, set()).add(zid)
-    owners = assign_pool(members, cameras, balance)
+    owners = assign_pool(members, cameras, balance, dropped.keys())
     out: list[_Found] = []
     for worker in live:
         given = sorted(c for c, w in owners.items() if w == worker)
@@ -144,13 +157,17 @@ def _findings(
                 f"pool member {worker} serves none of the cameras the pool gives it "
                 f"({', '.join(given)}): a hung worker, or one that does not hear them"
             )))  # fmt: skip
-    for camera in cameras if live else ():  # no pool at all is no pool's fault
+    for camera in cameras:  # no live worker at all: every camera unserved, said so
         if camera not in by_camera:
             owner = owners.get(camera)
-            out.append(_Found("unserved", camera, (
-                f"camera {camera} is served by no detector worker"
-                + (f" (the pool gives it to {owner})" if owner else " (no worker serves its robot)")
-            )))  # fmt: skip
+            why = (
+                f" (the pool gives it to {owner})" if owner
+                else " (no live detector worker)" if not live
+                else " (no worker serves its robot)"
+            )  # fmt: skip
+            out.append(
+                _Found("unserved", camera, f"camera {camera} is served by no detector worker{why}")
+            )
     for camera, servers in sorted(by_camera.items()):
         if len(servers) > 1 and camera in cameras:  # another table's camera is not ours
             names = ", ".join(f"{w} ({z})" for w, z in sorted(servers))
@@ -163,5 +180,36 @@ def _findings(
             out.append(_Found("name_twice", worker, (
                 f"worker name {worker} is held by {len(zids)} processes (zenoh ids "
                 f"{', '.join(sorted(zids))}): give each host its own detector.worker_id"
+            )))  # fmt: skip
+    return out
+
+
+def _undelivered(
+    now: float,
+    members: Mapping[str, PoolWorker],
+    serving: Iterable[Serving],
+    cameras: Mapping[str, PoolCamera],
+    dropped: Mapping[Judged, Dropped],
+    undelivered: Mapping[str, float],
+) -> list[_Found]:
+    """What the detections that arrive (not the tokens) say: the members dropped for
+    delivering nothing, and the cameras with a serving token whose detections do not come."""
+    out: list[_Found] = []
+    robots = {c.prefix for c in cameras.values()}
+    for (robot, worker), drop in sorted(dropped.items()):
+        if worker in members and robot in robots:
+            out.append(_Found("undelivering", f"{robot}/{worker}", (
+                f"pool member {worker}, dropped from the pool ({drop.until - now:.0f} s more), "
+                "whatever capacity it announces, delivered no detections on the cameras the "
+                f"pool gave it ({', '.join(drop.cameras[:MAX_LINES])})"
+            )))  # fmt: skip
+    tokens: dict[str, set[str]] = {}
+    for worker, _, camera in set(serving):
+        tokens.setdefault(camera, set()).add(worker)
+    for camera in sorted(undelivered):
+        if camera in cameras and camera in tokens:  # none at all: said above
+            out.append(_Found("unserved", camera, (
+                f"camera {camera} is served by no detector worker (no detections of it arrive, "
+                f"though {', '.join(sorted(tokens[camera]))} holds its serving token)"
             )))  # fmt: skip
     return out

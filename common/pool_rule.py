@@ -24,6 +24,12 @@ load (a whole share for each robot would make it take a full share of each, twic
 its cost: a worker that lists a robot with no cameras keeps that robot's part of its capacity
 unused, as far as the bound goes (``balance`` and the fallback below still place every camera).
 
+Only how many cameras of each weight each worker takes comes from the capacities; the cameras
+are then placed by rank within those numbers, so a capacity that moves without changing them
+moves no camera (issue 39). A member dropped from a robot for delivering nothing
+(common/pool_delivery.py) is left out of that robot's placement (``assign_pool``'s
+``excluded``). Which announced cameras are placed at all is :func:`admit_cameras`'s.
+
 A camera's name in the pool (:func:`pool_name`) is its bare name when it is announced under the
 pool's own prefix (one robot: the names of its config), else ``<prefix>/<camera>``; in counter
 names (``serving.<camera>``) that reads ``<prefix>:<camera>`` (:func:`label`).
@@ -32,7 +38,7 @@ names (``serving.<camera>``) that reads ``<prefix>:<camera>`` (:func:`label`).
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -112,7 +118,10 @@ def assign(
     capacity}`` (common/messages.py's ``WorkerAnnouncement.capacity_hz``; > 0): each worker's
     bound is ``balance`` x total weight x its capacity / the total capacity, so a worker twice
     as fast takes about twice the load. A camera none has room for goes to the worker whose
-    load after it, against its capacity, is least (ties: the better-ranked)."""
+    load after it, against its capacity, is least (ties: the better-ranked). That pass fixes
+    only how many cameras of each weight each worker takes; the cameras are then placed by
+    rank within those numbers (:func:`_place`), so that a capacity that moves without
+    changing them moves no camera."""
     capacity = (
         {w: float(c) for w, c in workers.items()}
         if isinstance(workers, Mapping)
@@ -129,7 +138,8 @@ def assign(
     total = sum(weights.values())
     bound = {w: balance * total * capacity[w] / total_cap + _EPS for w in live}
     load = dict.fromkeys(live, 0.0)
-    out: dict[str, str] = {}
+    # How many cameras of each weight each worker takes: the capacities' only say.
+    quota: dict[tuple[str, float], int] = {}
     for camera in sorted(weights, key=lambda c: (-weights[c], c)):
         weight = weights[camera]
         ranked = sorted(live, key=lambda w: (-rank(camera, w), w))
@@ -137,6 +147,23 @@ def assign(
         if chosen is None:
             chosen = min(ranked, key=lambda w: (load[w] + weight) / capacity[w])
         load[chosen] += weight
+        quota[chosen, weight] = quota.get((chosen, weight), 0) + 1
+    return _place(live, weights, quota)
+
+
+def _place(
+    live: list[str], weights: Mapping[str, float], quota: dict[tuple[str, float], int]
+) -> dict[str, str]:
+    """Each camera to its best-ranked worker with room left in its ``quota`` of that weight
+    (every camera finds one: the quotas of a weight sum to its cameras). The capacities reach
+    the placement only through the quotas, so a capacity that moves without changing how many
+    cameras of each weight each worker takes moves no camera (issue 39)."""
+    out: dict[str, str] = {}
+    for camera in sorted(weights, key=lambda c: (-weights[c], c)):
+        weight = weights[camera]
+        ranked = sorted(live, key=lambda w: (-rank(camera, w), w))
+        chosen = next(w for w in ranked if quota.get((w, weight), 0) > 0)
+        quota[chosen, weight] -= 1
         out[camera] = chosen
     return out
 
@@ -148,15 +175,60 @@ def robot_capacity(worker: PoolWorker) -> float:
 
 
 def assign_pool(
-    workers: Mapping[str, PoolWorker], cameras: Mapping[str, PoolCamera], balance: float
+    workers: Mapping[str, PoolWorker],
+    cameras: Mapping[str, PoolCamera],
+    balance: float,
+    excluded: Collection[tuple[str, str]] = (),
 ) -> dict[str, str]:
     """``{pool name: worker}`` for the ``cameras`` (by pool name) of every robot prefix that
     a live worker lists: each robot's cameras by :func:`assign` among the workers that list
-    its prefix, each with its :func:`robot_capacity`. A camera of a robot no worker lists has
-    no owner. With one robot this is :func:`assign` over the workers' capacities."""
+    its prefix, each with its :func:`robot_capacity`, but those ``(prefix, worker)`` of
+    ``excluded`` (dropped from that robot for not delivering: common/pool_delivery.py). A
+    camera of a robot no worker lists has no owner. With one robot this is :func:`assign`
+    over the workers' capacities."""
     out: dict[str, str] = {}
     for prefix in sorted({c.prefix for c in cameras.values()}):
-        eligible = {w: robot_capacity(p) for w, p in workers.items() if prefix in p.prefixes}
+        eligible = {
+            w: robot_capacity(p)
+            for w, p in workers.items()
+            if prefix in p.prefixes and (prefix, w) not in excluded
+        }
         rates = {n: c.rate_hz for n, c in cameras.items() if c.prefix == prefix}
         out.update(assign(eligible, rates, balance))
     return out
+
+
+def counter_key(name: str) -> str:
+    """What a camera's pool name reads as in counter names once a ``.`` (where a counter's
+    name is split, common/counters.py) and a ``_`` are told apart no more: two cameras with
+    one such key (``cam.x`` and ``cam_x``) would share their counters and slot."""
+    return label(name).replace(".", "_")
+
+
+def admit_cameras(
+    cameras: Mapping[str, PoolCamera], max_per_robot: int
+) -> tuple[dict[str, PoolCamera], dict[str, str]]:
+    """The announced ``cameras`` (by pool name) the pool serves, and those it refuses with
+    why: of names whose :func:`counter_key` collides, the first by name is kept; of one
+    robot's cameras, the first ``max_per_robot`` by name. Pure and by name only, so every
+    worker and auditor admits the same."""
+    kept: dict[str, PoolCamera] = {}
+    refused: dict[str, str] = {}
+    taken: dict[str, str] = {}
+    per_robot: dict[str, int] = {}
+    for name in sorted(cameras):
+        cam = cameras[name]
+        key = counter_key(name)
+        if key in taken:
+            refused[name] = f"its counter label {key} is camera {taken[key]}'s too"
+            continue
+        if per_robot.get(cam.prefix, 0) >= max_per_robot:
+            refused[name] = (
+                f"robot {cam.prefix} announces over {max_per_robot} cameras "
+                "(detector.max_robot_cameras)"
+            )
+            continue
+        taken[key] = name
+        per_robot[cam.prefix] = per_robot.get(cam.prefix, 0) + 1
+        kept[name] = cam
+    return kept, refused

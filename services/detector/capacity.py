@@ -4,9 +4,12 @@
 Measured at start (:func:`measure`: a few timed rounds after the warm-up) unless the user set
 ``detector.capacity_hz``, and kept current from the busy rounds' throughput (frames detected /
 seconds the round took): a moving average with weight ``detector.capacity_smoothing`` per
-round. Announcing a new capacity moves cameras between workers, so :class:`Capacity` says it
-is due only when it moved by more than ``detector.capacity_step`` (a fraction of the one
-announced) and ``detector.capacity_period_s`` has passed since the last announcement.
+round. Announcing a new capacity may move cameras between workers, so :class:`Capacity` says
+it is due only when it has stayed more than ``detector.capacity_step`` (a fraction of the one
+announced) away from it for ``detector.capacity_period_s`` on end (a hysteresis: a swing of a
+busy CPU that comes back within the period is never announced), and that long after the last
+announcement. What a new figure may move is bounded too: only a change in how many cameras
+each worker takes moves any (common/pool_rule.py).
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ class Capacity:
         self._period_s = s.capacity_period_s
         self._weight = s.capacity_smoothing
         self._announced_at = now_s
+        self._away_since: float | None = None  # since when it has been past the step
 
     def observe(self, frames: int, seconds: float) -> None:
         """A busy round: ``frames`` detected in ``seconds``."""
@@ -53,11 +57,18 @@ class Capacity:
         self.current += self._weight * (rate - self.current)
 
     def due(self, now_s: float) -> float | None:
-        """The capacity to announce now, when it moved by more than the step and the period
-        has passed since the last; else None. Taken as announced."""
+        """The capacity to announce now, when it has stayed more than the step away from the
+        one announced for the whole period (a swing that comes back sooner is not announced)
+        and the period has passed since the last; else None. Taken as announced."""
         moved = abs(self.current - self.announced) / self.announced
-        if moved <= self._step or now_s - self._announced_at < self._period_s:
+        if moved <= self._step:
+            self._away_since = None
             return None
+        if self._away_since is None:
+            self._away_since = now_s
+        if now_s - self._away_since < self._period_s or now_s - self._announced_at < self._period_s:
+            return None
+        self._away_since = None
         self.announced = self.current
         self._announced_at = now_s
         return self.announced

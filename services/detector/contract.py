@@ -45,6 +45,13 @@ POOL_RESIGNED = "pool_resigned"  # left the pool on a stalled detection loop
 CAPACITY_HZ = "capacity_hz"  # the capacity it announces (frames/s, rounded)
 POOL_STRAYS = "pool_strays"  # pool tokens with no worker announcement: ignored
 CAPACITY_ANNOUNCED = "capacity_announced"  # re-announcements of a moved capacity
+#: Members dropped now for delivering no detections (common/pool_delivery.py), and how many
+#: times one was dropped.
+POOL_DROPPED = "pool_dropped"
+POOL_DROPS = "pool_drops"
+#: Announced cameras refused now (over ``max_robot_cameras`` of one robot, or a name whose
+#: counter label another camera's already has: common/pool_rule.py's ``admit_cameras``).
+CAMERAS_REFUSED = "cameras_refused"
 # Attention (services/detector/attention.py): a gauge, per camera 1 while it has priority (in
 # all: the cameras with priority), and the frames rounds took for each reason, counted only
 # while some camera has priority (the fair rounds count none).
@@ -52,6 +59,9 @@ ATTENTION_PRIORITY = "attention_priority"
 TAKEN_PRIORITY = "taken_priority"  # a priority camera's frame
 TAKEN_FLOOR = "taken_floor"  # a camera due for its floor rate, ahead of the priority ones
 TAKEN_SPARE = "taken_spare"  # another camera's, with no priority camera waiting
+#: Rounds in which the cameras due for their floor went after the priority ones: the floors
+#: over ``attention_floor_share`` of the frames (their bound then no longer holds).
+ATTENTION_FLOOR_HELD = "attention_floor_held"
 # Depth (services/detector/depth_stage.py): depth frames heard on a depth camera this worker
 # serves, and the colour frames of such a camera whose detections got depth columns (paired)
 # or went out 2D only (no depth frame within detector.depth_pair_tolerance_ms). Bad depth
@@ -69,7 +79,16 @@ def taken_for(reason: str) -> str:
 
 
 #: The pool's gauges (set, not counted up).
-POOL_GAUGES = (SERVING, POOL_MEMBERS, POOL_LOAD_PERMILLE, POOL_WARNINGS, CAPACITY_HZ, POOL_STRAYS)
+POOL_GAUGES = (
+    SERVING,
+    POOL_MEMBERS,
+    POOL_LOAD_PERMILLE,
+    POOL_WARNINGS,
+    CAPACITY_HZ,
+    POOL_STRAYS,
+    POOL_DROPPED,
+    CAMERAS_REFUSED,
+)
 
 
 def frames_judged(verdict: str) -> str:
@@ -122,6 +141,10 @@ COUNTERS = frozenset(
         CAPACITY_HZ,
         POOL_STRAYS,
         CAPACITY_ANNOUNCED,
+        POOL_DROPPED,
+        POOL_DROPS,
+        CAMERAS_REFUSED,
+        ATTENTION_FLOOR_HELD,
     }
 )
 
@@ -131,14 +154,16 @@ def access(shape: Shape) -> dict[str, Access]:
     """Each worker reads frames and depth images and puts detections, never frames: every
     camera's, as any worker may come to serve any camera (services/detector/pool.py); it reads
     the controller's status too, for the camera that sees the target and the target classes
-    (services/detector/attention.py). Its tokens are its own only: its health, its pool
+    (services/detector/attention.py), and every camera's detections, whoever puts them: a
+    pool member earns its cameras by their detections arriving (common/pool_delivery.py). Its
+    tokens are its own only: its health, its pool
     membership, its announcement and its serving tokens under its own name (those of the pool
     under ``detector.pool_prefix``), so that no worker can pose as another, or as many, and
     skew the assignment or its audit. It serves the model's description on each camera's info
-    key. A pool serving further robots (``shape.prefixes``) reads each one's frames and depth
-    images and puts its detections, and serves its info, on every camera under its prefix
-    (their cameras come and go with their announcements), and reads its controller's status
-    (attention), and nothing else of theirs: no command."""
+    key. A pool serving further robots (``shape.prefixes``) reads each one's frames, depth
+    images and detections and puts its detections, and serves its info, on every camera under
+    its prefix (their cameras come and go with their announcements), and reads its
+    controller's status (attention), and nothing else of theirs: no command."""
     keys, pool = shape.keys, shape.pool_keys()
     robots = shape.other_robots()
     return {
@@ -150,11 +175,17 @@ def access(shape: Shape) -> dict[str, Access]:
             read=(
                 keys.all_frames(),
                 keys.all_depths(),
+                keys.all_detections(),
                 keys.controller_status(),
                 *(
                     k
                     for r in robots
-                    for k in (r.all_frames(), r.all_depths(), r.controller_status())
+                    for k in (
+                        r.all_frames(),
+                        r.all_depths(),
+                        r.all_detections(),
+                        r.controller_status(),
+                    )
                 ),
             ),
             token=(
@@ -251,16 +282,23 @@ class DetectorSettings:
     before a camera goes to its next choice (services/detector/pool.py). A worker whose
     detection loop has not passed for ``pool_stall_s`` leaves the pool (its cameras go to
     the others) until it runs again.
-    What is wrong with the pool (a member that serves nothing, a camera nobody or two serve, a
-    name held twice) is a warning once it has lasted ``pool_alarm_s`` (common/pool_audit.py).
+    A member earns its cameras by delivering (common/pool_delivery.py): one whose cameras all
+    get no detections for ``pool_deliver_s`` after it was given them is dropped from the
+    assignment for ``pool_readmit_s`` (doubled at each further drop), whatever capacity it
+    claims. One robot may have at most ``max_robot_cameras`` cameras served; the rest are
+    refused, as is a camera whose counter label another's has (common/pool_rule.py).
+    What is wrong with the pool (a member that serves nothing or delivers nothing, a camera
+    nobody or two serve or whose detections do not come, a name held twice) is a warning once
+    it has lasted ``pool_alarm_s`` (common/pool_audit.py).
     A pool token with no announcement is no member (ignored; counted as ``pool_strays``).
 
     Attention (docs/detector.md, "Attention"; services/detector/attention.py): with
     ``attention`` on, when the cameras send more than the worker detects, the camera holding
     the controller's lock and those that saw one of its target classes within
     ``attention_hold_s`` go first, and every other camera is still detected on at least
-    ``attention_floor_hz`` times a second (within a round or two). Off, or with no camera
-    prioritised, the rounds are the fair rotation.
+    ``attention_floor_hz`` times a second (within a round or two), as long as the floors take
+    at most ``attention_floor_share`` of the frames (beyond, the priority cameras go first).
+    Off, or with no camera prioritised, the rounds are the fair rotation.
 
     Depth (docs/detector.md, "Depth"; services/detector/depth_stage.py): for a camera announced
     with depth, each colour frame is paired with the depth frame of its camera whose stamp is
@@ -296,6 +334,9 @@ class DetectorSettings:
     pool_balance: float = 1.0
     pool_stall_s: float = 5.0
     pool_alarm_s: float = 10.0
+    pool_deliver_s: float = 4.0
+    pool_readmit_s: float = 30.0
+    max_robot_cameras: int = 16
     pool_prefix: str = ""
     prefixes: tuple[str, ...] = ()
     capacity_hz: float = 0.0
@@ -303,7 +344,8 @@ class DetectorSettings:
     capacity_period_s: float = 10.0
     capacity_smoothing: float = 0.05
     attention: bool = True
-    attention_floor_hz: float = 0.5
+    attention_floor_hz: float = 1.5
+    attention_floor_share: float = 0.5
     attention_hold_s: float = 2.0
     depth_pair_tolerance_ms: float = 20.0
     depth_buffer: int = 4
@@ -328,8 +370,12 @@ class DetectorSettings:
         "pool_balance": (1, 4),
         "pool_stall_s": (1, 60),
         "pool_alarm_s": (1, 600),
+        "pool_deliver_s": (0.5, 600),
+        "pool_readmit_s": (1, 3600),
+        "max_robot_cameras": (1, 1024),
         "attention_floor_hz": (0.05, 100),
         "attention_hold_s": (0, 60),
+        "attention_floor_share": (0.05, 1),
         "capacity_hz": (0, MAX_CAPACITY_HZ),
         "capacity_step": (0.01, 10),
         "capacity_period_s": (0.5, 3600),
@@ -393,6 +439,13 @@ class DetectorSettings:
                 )
         if len(set(self.prefixes)) != len(self.prefixes):
             raise ConfigError(f"detector.prefixes names one twice: {list(self.prefixes)}")
+        if self.attention and self.pool_deliver_s <= 1 / self.attention_floor_hz:
+            raise ConfigError(
+                f"detector.pool_deliver_s ({self.pool_deliver_s} s) must be above the attention "
+                f"floor's period (1 / detector.attention_floor_hz = "
+                f"{1 / self.attention_floor_hz:.2f} s): an empty camera's worker would be "
+                "dropped from the pool for delivering between its floor's detections"
+            )
         if not all(self.classes):
             raise ConfigError(
                 f"detector.classes must be non-empty class names, got {list(self.classes)}"

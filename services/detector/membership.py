@@ -14,21 +14,22 @@ from common.announce import Announced, Announcer, announced_cameras, announced_w
 from common.bus import Declared
 from common.counters import per_camera
 from common.errors import StackError
-from common.keys import Keys
+from common.keys import Keys, camera_in_key
 from common.messages import CameraAnnouncement, WorkerAnnouncement
 from common.node import Node
-from common.pool_audit import MAX_LINES, PoolAudit, Report, Serving, lines
+from common.pool_audit import MAX_LINES, Report, lines
 from common.pool_rule import label, pool_name
 from services.detector import contract
 from services.detector.capacity import Capacity
 from services.detector.counting import count_for
 from services.detector.handlers import DetectorHandlers
 from services.detector.pool import Change, PoolCamera, PoolView, PoolWorker
+from services.detector.pool_checks import PoolChecks, tell_drops, tell_refused
+from services.detector.pool_depth import PoolDepth
 
 #: How long a joining worker asks who is already in the pool before it takes its cameras: the
 #: query ends as soon as every peer answered; this bounds it on a slow link.
 POOL_ASK_TIMEOUT_S = 1.0
-AUDIT_PERIOD_S = 0.5  # how often the loop audits the pool's tokens (common/pool_audit.py)
 #: The stall watch looks this many times per ``detector.pool_stall_s`` (and at most every
 #: :data:`STALL_CHECK_MIN_S`): a stall is noticed within a quarter of the limit after it.
 STALL_CHECKS = 4
@@ -82,6 +83,13 @@ class PoolMember:
     nothing, a camera nobody or two serve, a name held twice), and a line when it clears.
     Counted: ``pool_warnings`` (how many hold now).
 
+    A member earns its cameras by delivering (services/detector/pool_checks.py,
+    common/pool_delivery.py): the worker hears every camera's detections of the robots it
+    serves and drops from a robot's assignment a member none of whose cameras of it has had a
+    detection for ``detector.pool_deliver_s`` (counted: ``pool_dropped``, ``pool_drops``).
+    Announced cameras over ``detector.max_robot_cameras`` of a robot, or whose counter label
+    another's has, are refused (``cameras_refused``).
+
     Time is the node's clock's (``node.clock.mono_s()``): a test moves it and calls
     :meth:`check_stall` and :meth:`audit` itself.
 
@@ -94,11 +102,10 @@ class PoolMember:
       ``_serving_tokens``, and is held over their declaring and undeclaring, so that a
       resignation and a settle's serving tokens never interleave. No bus callback takes it.
     - ``_lock`` covers every other attribute written after construction (``_last_beat``,
-      ``_resigned``, ``_dirty``, ``view``, ``_servers``, ``_subs``, ``_depth_subs``,
-      ``_depth_keys``, ``_watches``, ``_gauges``,
-      ``_handed_over``, ``_audit``, ``_audit_next``, ``_strays``) and the handlers'
-      ``serving``. It is never held over a bus call: a bus may deliver this worker's own token
-      change to a callback at once, in the calling thread, and the callbacks take ``_lock``.
+      ``_resigned``, ``_dirty``, ``view``, ``_checks``, ``_subs``, ``_watches``,
+      ``_gauges``, ``_handed_over``, ``_strays``) and the handlers' ``serving``. It is never
+      held over a bus call: a bus may deliver this worker's own token change to a callback at
+      once, in the calling thread, and the callbacks take ``_lock``.
 
     Subscriptions are declared and undeclared by the loop alone, outside both locks (a slow
     declaration must not keep the stall watch from resigning); only the ``_subs`` dict that
@@ -162,15 +169,13 @@ class PoolMember:
         self._resigned = False
         self._dirty = True
         self._subs: dict[str, Declared] = {}
-        self._depth_subs: dict[str, tuple[str, Declared]] = {}  # label -> (depth key, sub)
-        self._depth_keys: dict[str, str] = {}  # pool name -> depth key, of depth cameras
+        self._depth = PoolDepth(node, handlers)  # the loop's (services/detector/pool_depth.py)
         self._watches: list[Declared] = []
         self._gauges: dict[str, int] = {}
         self._handed_over = False
-        self._servers: set[Serving] = set()  # everyone's serving tokens, as heard
-        self._audit = PoolAudit({}, s.pool_balance, s.pool_alarm_s)
-        self._audit_next = 0.0
+        self._checks = PoolChecks(s)  # services/detector/pool_checks.py
         self._strays: list[str] = []
+        self._told_refused: dict[str, str] = {}  # the loop's: those it has logged
         with self._lock:
             for cam in handlers.frame_keys:
                 self._gauge(per_camera(contract.SERVING, cam), 0)
@@ -182,6 +187,7 @@ class PoolMember:
             contract.CAMERAS_LOST,
             contract.POOL_RESIGNED,
             contract.CAPACITY_ANNOUNCED,
+            contract.POOL_DROPS,
         ):
             node.counters.add(name, 0)
 
@@ -224,6 +230,11 @@ class PoolMember:
         for key in members:
             self._member(key, joined=True)
         watches.append(bus.watch_tokens(keys.all_pool_serving(), self._on_serving))
+        # Every camera's detections, whoever puts them: a camera is served when they arrive
+        # (common/pool_delivery.py). Not decoded: their arrival is all that is noted.
+        for prefix in self.prefixes:
+            on_detections = partial(self._on_detections, prefix)
+            watches.append(self.node.subscribe_keyed(Keys(prefix).all_detections(), on_detections))
         with self._lock:
             self._watches.extend(watches)
         self.settle()
@@ -331,30 +342,33 @@ class PoolMember:
             )
         return stalled
 
+    def _on_detections(self, prefix: str, key: str, _payload: bytes) -> None:
+        camera = camera_in_key(key)
+        if camera is None:
+            return
+        name = pool_name(prefix, camera, self.pool_keys.prefix)
+        with self._lock:
+            if name in self.view.cameras:  # a made-up name grows nothing
+                self._checks.delivery.saw(name, self.clock.mono_s())
+
     def _on_serving(self, key: str, alive: bool) -> None:
         parts = self.pool_keys.pool_serving_parts(key)
         if parts is None:
             return
         with self._lock:
-            if alive:
-                self._servers.add(parts)
-            else:
-                self._servers.discard(parts)
+            self._checks.serving(parts, alive=alive)
 
     def audit(self) -> Report | None:
         """Check the pool's tokens (at most every :data:`AUDIT_PERIOD_S`): log what became
         wrong, and what stopped being so; None when it is not yet time."""
         now = self.clock.mono_s()
         with self._lock:
-            if now < self._audit_next:
+            if not self._checks.audit_due(now):
                 return None
-            self._audit_next = now + AUDIT_PERIOD_S
         with self._token_lock:
             mine = {(self.view.me, self.zid, cam) for cam in self._serving_tokens}
         with self._lock:
-            report = self._audit.check(
-                now, self.view.members, self._servers | mine, cameras=self.view.cameras
-            )
+            report = self._checks.check(now, self.view, mine)
             self._gauge(contract.POOL_WARNINGS, len(report.current))
         for line in lines(report.raised, now):
             self.node.log.warning("pool: %s", line)
@@ -390,12 +404,16 @@ class PoolMember:
                 self.view.joined(worker)
             else:
                 self.view.left(worker)
+                if worker != self.view.me:
+                    self._checks.delivery.left(worker)
             self._dirty = True
 
     def settle(self) -> None:
         """Announce a capacity that moved enough; apply a change of the pool (members,
-        announcements, cameras), if any, to this worker's subscriptions and counters."""
+        announcements, cameras), if any, to this worker's subscriptions and counters; drop
+        the members that deliver nothing, take back those whose time is over."""
         self._announce_capacity()
+        self._judge_delivery()
         with self._lock:
             if not self._dirty:
                 return
@@ -406,12 +424,30 @@ class PoolMember:
             self._strays = strays
             self._gauge(contract.POOL_STRAYS, len(strays))
             change = self.view.settle()
+            self._checks.delivery.note(self.clock.mono_s(), self.view.owners, self.view.cameras)
+            refused = dict(self._checks.refused)
+            if refused.keys() != self._told_refused.keys():
+                self._gauge(contract.CAMERAS_REFUSED, len(refused))
+        tell_refused(self.node, refused, self._told_refused)
+        self._told_refused = refused
         if fresh:
             self.node.log.warning(
                 "pool token(s) with no worker announcement ignored (no member): %s",
                 ", ".join(fresh[:MAX_LINES]),
             )
         self._apply(change)
+
+    def _judge_delivery(self) -> None:
+        """Who delivers (common/pool_delivery.py): a member none of whose cameras of a robot
+        has had a detection for ``detector.pool_deliver_s`` is dropped from that robot's
+        assignment; one whose time is over is given cameras again."""
+        with self._lock:
+            before = self.view.excluded
+            dropped, readmitted = self._checks.judge(self.clock.mono_s(), self.view)
+            if self.view.excluded != before:
+                self._dirty = True
+                self._gauge(contract.POOL_DROPPED, len(self.view.excluded))
+        tell_drops(self.node, dropped, readmitted, self._checks.delivery.deliver_s)
 
     def _announce_capacity(self) -> None:
         capacity = self.capacity.due(self.clock.mono_s())
@@ -443,11 +479,12 @@ class PoolMember:
             for prefix, announced in self._cameras.items()
             for cam, a in announced.current().items()
         ]
-        self.view.cameras = {
+        announced = {
             pool_name(prefix, cam, pool): PoolCamera(prefix, cam, a.rate_hz)
             for prefix, cam, a in heard
         }
-        self._depth_keys = {
+        self._checks.admit(self.view, announced)
+        self._depth.keys = {
             pool_name(prefix, cam, pool): Keys(prefix).depth(cam)
             for prefix, cam, a in heard
             if a.depth
@@ -490,7 +527,7 @@ class PoolMember:
             self._gauge(contract.POOL_MEMBERS, change.members)
             self._gauge(contract.POOL_LOAD_PERMILLE, round(change.load * 1000))
         self._sync_serving(change.serving)
-        self._sync_depth(change.serving)
+        self._depth.sync(change.serving)
         if handed_over:
             for cam in gained:
                 count_for(node, cam, contract.CAMERAS_GAINED)
@@ -505,36 +542,6 @@ class PoolMember:
                 list(change.lost),
             )
 
-    def _sync_depth(self, serving: frozenset[str]) -> None:
-        """A depth subscription for each camera of ``serving`` announced with depth, and none
-        for another (a camera lost, or no longer announcing depth: its depth let go). The
-        loop's, outside the locks, as the frames' subscriptions."""
-        with self._lock:
-            wanted = {label(c): k for c, k in self._depth_keys.items() if c in serving}
-            gone = [
-                (cam, self._depth_subs.pop(cam)[1])
-                for cam, (key, _) in list(self._depth_subs.items())
-                if wanted.get(cam) != key
-            ]
-            new = {cam: key for cam, key in wanted.items() if cam not in self._depth_subs}
-        depth = self.handlers.depth
-        for cam, sub in gone:
-            sub.undeclare()
-            depth.drop_camera(cam)
-        added: dict[str, tuple[str, Declared]] = {}
-        for cam, key in new.items():
-            depth.add_camera(cam, key)
-            on_depth = partial(self.handlers.on_depth, cam)
-            added[cam] = (key, self.node.subscribe_bounded(key, on_depth))
-        with self._lock:
-            self._depth_subs.update(added)
-        if gone or added:
-            self.node.log.info(
-                "depth paired on %s (stopped on %s)",
-                sorted(wanted) or "no camera",
-                sorted(cam for cam, _ in gone) or "none",
-            )
-
     def _gauge(self, name: str, value: int) -> None:
         """Set gauge ``name`` to ``value`` (the caller holds _lock). Counters only add: a
         gauge moves by its difference."""
@@ -546,11 +553,10 @@ class PoolMember:
         if self._stall_watch is not None:
             self._stall_watch.join()
         with self._lock:
-            depth_subs = [sub for _, sub in self._depth_subs.values()]
-            declared = [*self._subs.values(), *depth_subs, *self._watches]
+            declared = [*self._subs.values(), *self._watches]
             self._subs.clear()
-            self._depth_subs.clear()
             self._watches.clear()
+        self._depth.close()
         for d in declared:
             d.undeclare()
         for heard in self._cameras.values():

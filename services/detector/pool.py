@@ -17,6 +17,12 @@ split evenly among the robots it lists (so that one serving two robots takes its
 pool, not a share of each; and each robot's owners follow from that robot's cameras alone,
 all that a worker listing only that robot hears).
 
+A member earns its cameras (common/pool_delivery.py): one none of whose cameras of a robot
+gets detections within ``detector.pool_deliver_s`` is left out of that robot's placement
+(``excluded``) for a while, whatever capacity it announces. Only how many cameras of each
+weight each worker takes comes from the capacities, so a capacity change that keeps those
+numbers moves no camera.
+
 What follows (tests/unit/detector/test_pool.py): every camera has exactly one owner; a
 worker that joins takes about its share and no more; a worker that leaves hands on only its
 own cameras while the others' loads allow (a camera whose first choice is full goes to the
@@ -61,6 +67,10 @@ class PoolView:
         self.announced: dict[str, PoolWorker] = {}
         self.cameras: dict[str, PoolCamera] = {}
         self.serving: frozenset[str] = frozenset()
+        #: (robot prefix, worker) dropped from that robot's assignment for not delivering
+        #: (common/pool_delivery.py); the rule places no camera of the robot on them.
+        self.excluded: frozenset[tuple[str, str]] = frozenset()
+        self.owners: dict[str, str] = {}  # the whole assignment, as the last settle made it
 
     @property
     def members(self) -> dict[str, PoolWorker]:
@@ -82,7 +92,8 @@ class PoolView:
 
     def settle(self) -> Change:
         """Recompute the assignment; what changed for this worker."""
-        owners = assign_pool(self.members, self.cameras, self.balance)
+        owners = assign_pool(self.members, self.cameras, self.balance, self.excluded)
+        self.owners = owners
         serving = frozenset(c for c, w in owners.items() if w == self.me)
         total = sum(c.rate_hz for c in self.cameras.values())
         change = Change(

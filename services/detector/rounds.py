@@ -123,11 +123,16 @@ class Rounds:
         self.attention = attention
         self.depth = depth
         self._priority: frozenset[str] = frozenset()
+        self._floor_held = 0  # attention's floor_held, as counted
 
     def run(self, waiting: list[Waiting[Frame]]) -> None:
         self._run(waiting)
         if self.attention is not None:
             self._gauge_priority(self.attention.priority())
+            held = self.attention.floor_held
+            if held != self._floor_held:
+                self.tally.counters.add(contract.ATTENTION_FLOOR_HELD, held - self._floor_held)
+                self._floor_held = held
 
     def _gauge_priority(self, now: frozenset[str]) -> None:
         """``attention_priority`` (per camera: 1 while it has priority) moved to ``now``."""

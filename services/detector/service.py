@@ -25,6 +25,7 @@ from services.detector.attention import Attention
 from services.detector.capacity import Capacity
 from services.detector.capacity import measure as measure_capacity
 from services.detector.contract import BATCHED_FRAMES, DetectorSettings
+from services.detector.fairness import RobotFair
 from services.detector.handlers import DetectorHandlers
 from services.detector.membership import PoolMember
 from services.detector.pool import PoolCamera
@@ -119,8 +120,17 @@ def _loop(
     handlers = DetectorHandlers(config, node, node.clock, frame_keys={})
     # Attention when short of capacity (services/detector/attention.py): the rounds'
     # order, fed by the controller's status and each camera's detections.
-    attention = Attention(node.clock, s.attention_floor_hz, s.attention_hold_s, s.attention)
+    attention = Attention(
+        node.clock,
+        s.attention_floor_hz,
+        s.attention_hold_s,
+        s.attention,
+        floor_share=s.attention_floor_share,
+    )
     status_subs = heed_controllers(node, config, attention)  # each robot's controller
+    # Between robots first, then each robot's cameras in attention's order
+    # (services/detector/fairness.py).
+    order = RobotFair(attention)
     info = json.dumps(
         DetectorInfo(
             model=detector.model_path.name,
@@ -173,7 +183,7 @@ def _loop(
                 pool.settle()
                 pool.audit()
                 node.publish_counters()
-                waiting = handlers.slots.take(per_round, _WAIT_S, attention)
+                waiting = handlers.slots.take(per_round, _WAIT_S, order)
                 if waiting:
                     before, start = node.counters.get(BATCHED_FRAMES), node.clock.mono_s()
                     rounds.run(waiting)

@@ -25,7 +25,8 @@ from common.contracts import WorkerMetrics
 from common.counters import per_camera
 from common.messages import Header
 from common.pool_audit import PoolAudit, Report, Serving
-from common.pool_rule import PoolCamera, PoolWorker, pool_name
+from common.pool_delivery import Delivery
+from common.pool_rule import PoolCamera, PoolWorker, admit_cameras, assign_pool, pool_name
 from common.settings import service_package
 from services.detector import contract as detector
 
@@ -67,10 +68,24 @@ class LivePool:
     the members as they announce themselves (``announced``: capacity and robots; a pool token
     without an announcement is no member, as the workers count). The serving tokens name
     cameras by their pool name; what the answer shows is this robot's cameras only, by their
-    own names."""
+    own names.
 
-    def __init__(self, audit: PoolAudit, robot: str = "", pool_prefix: str = "") -> None:
+    With ``delivery`` (common/pool_delivery.py; :meth:`saw` notes each camera's detections),
+    it judges who delivers as the workers do (the cameras admitted as they admit them, at most
+    ``max_robot_cameras``), and the audit warns of a member dropped for delivering nothing and
+    of a camera whose detections do not come, whatever the tokens say."""
+
+    def __init__(
+        self,
+        audit: PoolAudit,
+        robot: str = "",
+        pool_prefix: str = "",
+        delivery: Delivery | None = None,
+        max_robot_cameras: int = 1024,
+    ) -> None:
         self.audit = audit
+        self.delivery = delivery
+        self.max_robot_cameras = max_robot_cameras
         self.robot = robot
         self.pool_prefix = pool_prefix
         self.members: set[str] = set()
@@ -98,6 +113,8 @@ class LivePool:
             self.members.add(worker)
         else:
             self.members.discard(worker)
+            if self.delivery is not None:
+                self.delivery.left(worker)  # a process that comes back is judged afresh
 
     def serving(self, token: Serving, *, live: bool) -> None:
         self.heard = True
@@ -113,12 +130,33 @@ class LivePool:
             members = {m: self.announced[m] for m in self.members if m in self.announced}
             if not self.announced:  # none readable (an access rule without them): as before,
                 members = {m: PoolWorker(1.0, frozenset({self.robot})) for m in self.members}
-            cameras = {
+            announced = {
                 self.pool_name(c): PoolCamera(self.robot, c, rate)
                 for c, rate in self.cameras.items()
             }
-            self.report = self.audit.check(now, members, self.servers, cameras=cameras)
+            cameras, _ = admit_cameras(announced, self.max_robot_cameras)
+            delivery = self.delivery
+            if delivery is None:
+                self.report = self.audit.check(now, members, self.servers, cameras=cameras)
+                return self.report
+            delivery.forget(cameras)
+            excluded = delivery.excluded(now)
+            owners = assign_pool(members, cameras, self.audit.balance, excluded)
+            delivery.judge(now, owners, cameras, members)
+            self.report = self.audit.check(
+                now,
+                members,
+                self.servers,
+                cameras=cameras,
+                dropped=delivery.dropped,
+                undelivered=delivery.undelivered(now, cameras),
+            )
         return self.report
+
+    def saw(self, camera: str, now: float) -> None:
+        """A detection of this robot's ``camera`` arrived at ``now``."""
+        if self.delivery is not None and self.cameras is not None and camera in self.cameras:
+            self.delivery.saw(self.pool_name(camera), now)
 
     def served_by(self, camera: str) -> str:
         """The live workers serving ``camera`` (", "-joined when two do: a warning)."""

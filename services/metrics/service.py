@@ -29,6 +29,7 @@ from common.messages import (
 )
 from common.node import Node, Tally
 from common.pool_audit import MAX_LINES, PoolAudit, lines
+from common.pool_delivery import Delivery
 from common.pool_rule import PoolWorker, camera_rates
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES
@@ -76,6 +77,8 @@ class MetricsHandlers:
             PoolAudit(camera_rates(config.all_cameras), d.pool_balance, d.pool_alarm_s),
             robot=config.stack.prefix,
             pool_prefix=self.pool_keys.prefix,
+            delivery=Delivery(d.pool_deliver_s, d.pool_readmit_s),
+            max_robot_cameras=d.max_robot_cameras,
         )
         # The cameras' figures are shown as they are announced (set_cameras), not from config.
         self.agg = Aggregator(
@@ -132,9 +135,15 @@ class MetricsHandlers:
         max_timing_ms = self.settings.max_timing_ms
         self._take(
             "detections", Detections.decode, key, payload,
-            lambda m: self.agg.on_detections(m, self.clock.mono_s(), camera=camera),
+            lambda m: self._on_detections(m, camera),
             lambda m, _k: refuse_detections(m, max_timing_ms),
         )  # fmt: skip
+
+    def _on_detections(self, message: Detections, camera: str) -> None:
+        """An accepted Detections of ``camera`` (the caller holds ``lock``)."""
+        now = self.clock.mono_s()
+        self.agg.on_detections(message, now, camera=camera)
+        self.pool.saw(camera, now)
 
     def on_pool_member(self, key: str, live: bool) -> None:
         """A detector worker's pool token came (``live``) or went."""
@@ -156,8 +165,8 @@ class MetricsHandlers:
         for ``detector.pool_alarm_s``, a line when it clears; the answer shows what holds."""
         now = self.clock.mono_s()
         with self.lock:
-            if not self.pool.heard:
-                return
+            if not self.pool.heard and not self.pool.cameras:
+                return  # no worker ever, no camera announced: nothing to audit
             report = self.pool.check(now)
         for line in lines(report.raised, now):
             self.tally.log.warning("pool: %s", line)

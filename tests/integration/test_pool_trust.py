@@ -45,7 +45,9 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
         supervisor={"services": ["camera", "detector", "metrics"], "status_period_s": 1.0},
         camera={"source": "sample:cameraman", "rate_hz": 2.0, "resize": [320, 240]},
         **{"cameras.rear": {"source": "sample:coffee", "frame_id": "rear"}},
-        detector={"imgsz": 320, "pool_alarm_s": ALARM_S},
+        # A member that never delivers is dropped after pool_deliver_s (test_pool_earned.py);
+        # here it must stay long enough for its warnings to be read.
+        detector={"imgsz": 320, "pool_alarm_s": ALARM_S, "pool_deliver_s": 600.0},
     )
     stack = Stack(config, tmp / "supervisor.log")
     try:

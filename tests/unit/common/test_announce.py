@@ -5,7 +5,15 @@ from __future__ import annotations
 
 import pytest
 
-from common.announce import MAX_CHUNK_CHARS, Announced, Announcer, from_chunk, to_chunk
+from common.announce import (
+    MAX_CHUNK_CHARS,
+    Announced,
+    Announcer,
+    ConflictError,
+    announced_cameras,
+    from_chunk,
+    to_chunk,
+)
 from common.camera_announce import CameraAnnouncements
 from common.errors import DecodeError
 from common.keys import Keys
@@ -159,3 +167,43 @@ def test_a_camera_source_names_its_session_in_its_announcements() -> None:
         announcements.saw("front", 640, 480)
         current = announcements.current("front")
         assert current is not None and current.zid == bus.zid
+
+
+def test_a_second_announcer_with_another_mounting_is_refused_while_the_first_lives() -> None:
+    # Issue 39: a second announcer of "front" looking backwards was believed (newest wins):
+    # the robot turned 259 degrees and lost the person. Now refused, and said, while the
+    # first lives; believed once the first has gone.
+    hub = MemoryHub()
+    bad: list[tuple[str, Exception]] = []
+    changes: list[int] = []
+    heard = announced_cameras(
+        hub.join("listener"), KEYS, lambda: changes.append(1), lambda k, e: bad.append((k, e))
+    )
+    real = Announcer(hub.join("camera"), lambda c: KEYS.camera_announcement("front", c))
+    real.update(_camera(mount_yaw_deg=0.0))
+    rogue = Announcer(hub.join("rogue"), lambda c: KEYS.camera_announcement("front", c))
+    rogue.update(_camera(mount_yaw_deg=180.0, hfov_deg=90.0))
+    assert heard.current()["front"].mount_yaw_deg == 0.0
+    [(_, error)] = bad
+    assert isinstance(error, ConflictError)
+    assert "mount_yaw_deg 0 -> 180" in str(error) and "hfov_deg 60 -> 90" in str(error)
+    # The real source learns its size: the same mounting, believed.
+    real.update(_camera(mount_yaw_deg=0.0, width=1280, height=720))
+    assert heard.current()["front"].width == 1280
+    assert len(bad) == 1
+    # A rogue with the same mounting is no conflict (nothing it says turns the robot).
+    real.close()
+    assert heard.current()["front"].mount_yaw_deg == 180.0  # the first gone: the other's
+    rogue.close()
+    assert "front" not in heard.current()
+
+
+def test_a_source_that_moves_its_own_camera_is_believed_after_a_moment() -> None:
+    hub = MemoryHub()
+    bad: list[tuple[str, Exception]] = []
+    heard = announced_cameras(hub.join("listener"), KEYS, None, lambda k, e: bad.append((k, e)))
+    source = Announcer(hub.join("camera"), lambda c: KEYS.camera_announcement("front", c))
+    source.update(_camera(mount_yaw_deg=0.0))
+    source.update(_camera(mount_yaw_deg=90.0))  # new token first, then the old withdrawn
+    assert heard.current()["front"].mount_yaw_deg == 90.0
+    assert len(bad) == 1  # said once, as it overlapped

@@ -59,11 +59,14 @@ def test_two_tables_two_servers_and_one_name_twice() -> None:
     assert ("unserved", "front") not in found
 
 
-def test_no_pool_at_all_is_no_warning() -> None:
-    # The metrics service of a stack with no detector hears no token: nothing to say.
+def test_no_live_worker_leaves_every_camera_unserved() -> None:
+    # Issue 39: a robot whose pool is on a shared box that is down hears no worker at all;
+    # its cameras are unserved, and the audit says so (before, no live worker was no word).
     audit = PoolAudit(EVEN, 1.0, ALARM_S)
     audit.check(0.0, set(), set())
-    assert audit.check(ALARM_S * 2, set(), set()).current == []
+    report = audit.check(ALARM_S * 2, set(), set())
+    assert kinds(report) == {("unserved", "front"), ("unserved", "rear")}
+    assert "(no live detector worker)" in report.current[0].detail
 
 
 def test_a_condition_that_stops_and_returns_starts_its_time_again() -> None:

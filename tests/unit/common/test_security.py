@@ -192,21 +192,25 @@ def test_each_camera_principal_puts_only_its_own_frames(names: tuple[str, ...]) 
         readers = {p for p in principals if _may(acl, p, "declare_subscriber", KEYS.frame(camera))}
         assert readers == {"detector", "viewer", "ros2", "recorder"}
         # Detections: the detector alone puts them; the controller, metrics, viewer, recorder
-        # and ROS 2 bridge read them (and the observer: status lines and tests).
+        # and ROS 2 bridge read them (and the observer: status lines and tests), and the
+        # detector, which judges who delivers them (common/pool_delivery.py).
         dets = KEYS.detections(camera)
         assert {p for p in principals if _may(acl, p, "put", dets)} == {"detector"}
         readers = {p for p in principals if _may(acl, p, "declare_subscriber", dets)}
-        assert readers == {"controller", "metrics", "viewer", "recorder", "ros2", "observer"}
+        assert readers == {
+            "controller", "metrics", "viewer", "recorder", "ros2", "observer", "detector",
+        }  # fmt: skip
         info = KEYS.detector_info(camera)
         assert {p for p in principals if _may(acl, p, "declare_queryable", info)} == {"detector"}
     # The detector: every camera's detections and its own counters, never a frame.
     detector = {*(KEYS.detections(c) for c in names), KEYS.counters("detector")}
     assert _allowed(acl, "detector", "put") == detector
-    # It reads every camera's frames and depth images, and the controller's status
-    # (attention: the camera that sees the target first).
+    # It reads every camera's frames and depth images, the controller's status (attention: the
+    # camera that sees the target first) and every camera's detections (who delivers).
     assert _allowed(acl, "detector", "declare_subscriber") == {
         KEYS.all_frames(),
         KEYS.all_depths(),
+        KEYS.all_detections(),
         KEYS.controller_status(),
     }
     # A camera the stack does not have: nobody may put its frames or its detections.

@@ -24,7 +24,9 @@ from stack.config import Config
 
 def cameras_config(names: tuple[str, ...], **detector: object) -> Config:
     """A config with cameras ``names`` (the first the [camera] table), each its own frame id,
-    and ``detector`` settings changed as given."""
+    and ``detector`` settings changed as given. Delivery (common/pool_delivery.py) is judged
+    only where a test sets ``pool_deliver_s``: these tests put no detections on the bus."""
+    detector.setdefault("pool_deliver_s", 600.0)
     base = Config()
     first, *others = names
     return replace(

@@ -33,9 +33,26 @@ def test_a_moved_capacity_is_announced_past_the_step_and_the_period_only() -> No
         cap.observe(4, 0.1)  # 40 frames/s
     assert cap.current > 12.5
     assert cap.due(5.0) is None  # within the period of the first announcement
-    got = cap.due(10.0)
+    assert cap.due(10.0) is None  # past the step for 5 s only (since 5.0)
+    got = cap.due(15.0)
     assert got == cap.announced == pytest.approx(cap.current)
-    assert cap.due(15.0) is None  # announced: no move since
+    assert cap.due(30.0) is None  # announced: no move since
+
+
+def test_a_swing_that_comes_back_within_the_period_is_never_announced() -> None:
+    # Issue 39: on a busy CPU the measure swings 22.8 -> 45 -> 59 -> back. Announced only
+    # once it has stayed past the step for a whole period, each time.
+    cap = Capacity(22.8, replace(S, capacity_smoothing=1.0), now_s=0.0)
+    t = 0.0
+    for hz in (45.0, 59.0, 24.0, 45.0, 23.0, 59.0, 22.0):  # 4 s each: never 10 s on end
+        cap.observe(round(hz * 10), 10.0)
+        for _ in range(4):
+            t += 1.0
+            assert cap.due(t) is None, (hz, t)
+    assert cap.announced == 22.8
+    cap.observe(450, 10.0)  # 45 Hz, and it stays
+    announced = [got for t in range(int(t) + 1, int(t) + 12) if (got := cap.due(float(t)))]
+    assert announced == [pytest.approx(45.0)]
 
 
 def test_a_fixed_capacity_is_the_users_and_never_moves() -> None:

@@ -20,8 +20,8 @@ from common.frames import image_to_frame
 from common.memory_bus import MemoryHub
 from common.messages import Header, WorkerAnnouncement
 from common.node import Node
-from services.detector.membership import AUDIT_PERIOD_S
 from services.detector.pool import assign
+from services.detector.pool_checks import AUDIT_PERIOD_S
 from stack.config import Config
 from tests.unit.detector.inprocess import CameraSource, Worker, cameras_config
 

@@ -20,7 +20,8 @@ from common.keys import Keys
 from common.memory_bus import MemoryHub
 from common.node import Node
 from services.detector.handlers import DetectorHandlers
-from services.detector.membership import AUDIT_PERIOD_S, PoolMember
+from services.detector.membership import PoolMember
+from services.detector.pool_checks import AUDIT_PERIOD_S
 from services.detector.service import ServedCameras
 from stack.config import Config
 from tests.unit.detector.inprocess import CameraSource, Worker, cameras_config

@@ -14,7 +14,9 @@ from dataclasses import dataclass, field
 import pytest
 
 from common.clock import FakeClock
+from services.controller.contract import ControllerSettings
 from services.detector.attention import FLOOR, PRIORITY, SPARE, Attention
+from services.detector.contract import DetectorSettings
 from services.detector.schedule import CameraSlots
 
 
@@ -147,3 +149,39 @@ def test_a_bad_order_is_refused() -> None:
     slots.put("b", 2)
     with pytest.raises(ValueError, match="rearrangement"):
         slots.take(1, 0, order=Drops())
+
+
+def _defaults(clock: FakeClock) -> Attention:
+    s = DetectorSettings()
+    return Attention(
+        clock, s.attention_floor_hz, s.attention_hold_s, floor_share=s.attention_floor_share
+    )
+
+
+def test_with_the_defaults_empty_cameras_stay_under_the_controllers_dead_man() -> None:
+    """Issue 39: the floor let empty cameras' detections come 1.51 s apart (over the
+    controller's 1 s dead-man: stale between two). With the defaults and three cameras at 0.1 s
+    a round (10 detections a second), no gap of theirs reaches detection_timeout_s, and the
+    target's camera still has most of the rounds."""
+    timeout_s = ControllerSettings().detection_timeout_s
+    rates = {"front": 10.0, "left": 10.0, "rear": 10.0}
+    clock = FakeClock()
+    attention = _defaults(clock)
+    run = _simulate(rates, 1, 0.1, 60.0, attention, clock, locked="rear")
+    for cam in ("front", "left"):
+        assert max(_gaps(run.times(cam))) < timeout_s, cam
+    assert run.count("rear") >= 0.6 * len(run.taken)
+    assert attention.floor_held == 0  # the floors fit: their bound holds
+
+
+def test_floors_that_do_not_fit_leave_the_target_its_share() -> None:
+    """A slow worker (0.3 s a round, 3.3 detections a second): the floors of two empty
+    cameras would take 3 of them. They are held to attention_floor_share of the frames, and
+    said (floor_held): the target's camera keeps half of the rounds."""
+    rates = {"front": 10.0, "left": 10.0, "rear": 10.0}
+    clock = FakeClock()
+    attention = _defaults(clock)
+    run = _simulate(rates, 1, 0.3, 60.0, attention, clock, locked="rear")
+    assert run.count("rear") >= 0.45 * len(run.taken)
+    assert attention.floor_held > 0
+    assert min(run.count("front"), run.count("left")) >= 0.2 * len(run.taken)

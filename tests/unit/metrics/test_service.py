@@ -353,3 +353,37 @@ def test_the_report_line_comes_once_a_period(rig: Rig, caplog: pytest.LogCapture
         rig.service.report()
         rig.service.report()  # once per period
     assert caplog.text.count("fps ") == 1
+
+
+def test_no_live_worker_at_all_leaves_every_camera_unserved(rig: Rig) -> None:
+    # Issue 39: a robot whose detector pool is on a shared box that is down hears no pool
+    # token at all; before, its metrics said nothing of it.
+    rig.query()
+    rig.clock.advance(POOL_ALARM_S + 0.5)
+    warnings = rig.query()["pool_warnings"]
+    for camera in ("front", "rear"):
+        assert any(
+            f"camera {camera} is served by no detector worker (no live detector worker)" in w
+            for w in warnings
+        ), warnings
+
+
+def test_a_member_that_claims_every_camera_and_delivers_nothing_is_warned_of(rig: Rig) -> None:
+    # Issue 39: a liar at the highest capacity there is, with serving tokens for both cameras
+    # (forged: it detects nothing), beside a worker that delivers. Before, with the forged
+    # tokens, no warning at all. Now the metrics judge it as the workers do.
+    deliver_s = rig.config.detector.pool_deliver_s
+    honest = _worker(rig, "detector", [])
+    liar = _worker(rig, "zz", ["front", "rear"], capacity_hz=100_000.0)
+    rig.query()
+    for _ in range(int((deliver_s + POOL_ALARM_S) / 0.5) + 4):
+        rig.clock.advance(0.5)
+        rig.query()
+    warnings = rig.query()["pool_warnings"]
+    assert any("pool member zz, dropped from the pool" in w for w in warnings), warnings
+    assert any(
+        "camera front is served by no detector worker (no detections of it arrive" in w
+        for w in warnings
+    ), warnings
+    honest.close()
+    liar.close()
