@@ -116,17 +116,19 @@ def laser_covers(scan: LaserScan, bearing_rad: float) -> bool:
     return bool(np.min(np.abs(_offsets(scan, bearing_rad))) <= abs(scan.angle_increment))
 
 
-def sector_range(scan: LaserScan, center_rad: float, width_deg: float) -> float:
+def sector_range(
+    scan: LaserScan, center_rad: float, width_deg: float, unseen: float = 0.0
+) -> float:
     """The nearest valid range within +-width/2 of ``center_rad``, in metres.
 
     NaN rays and rays below ``range_min`` are invalid and ignored; +inf (nothing within range)
-    counts as clear. A sector with no valid ray returns 0.0: what cannot be seen is treated as
-    blocked.
+    counts as clear. A sector with no valid ray returns ``unseen``, 0.0 by default: what cannot
+    be seen is treated as blocked.
     """
     half = math.radians(width_deg) / 2.0
     ranges = scan.ranges[np.abs(_offsets(scan, center_rad)) <= half].astype(np.float64)
     valid = ranges[~np.isnan(ranges) & (ranges >= scan.range_min)]
-    return float(valid.min()) if valid.size else 0.0
+    return float(valid.min()) if valid.size else unseen
 
 
 def corridor_clearance(scan: LaserScan, half_width_m: float) -> float:

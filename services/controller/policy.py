@@ -253,9 +253,13 @@ class Controller:
                 if source.required:
                     return source.missing
                 continue
+            by = "" if source.name == "laser" else f" ({source.name})"
+            if math.isnan(sector_range(source.scan, 0.0, self.s.sector_width_deg, unseen=math.nan)):
+                # No ray of the sector ahead holds a reading: blocked, and said so, not as an
+                # obstacle at 0.00 m that nobody can find (issue 39).
+                return f"nothing seen straight ahead{by}"
             clearance = self._clearance(source.scan)
             if clearance <= self.s.safety_distance_m + source.stopping_m:
-                by = "" if source.name == "laser" else f" ({source.name})"
                 return f"obstacle at {clearance:.2f} m{by}"
         return None
 

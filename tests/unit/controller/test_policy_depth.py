@@ -208,3 +208,17 @@ def test_the_robot_creeps_while_the_floor_ahead_is_unseen(s: ControllerSettings)
     assert "creeping: the floor is known only 0.30 m ahead (depth)" in cmd.reason
     known = Controller(s, FRONT).step(dataclasses.replace(inputs, depth_known_m=3.0), 1.0)
     assert known.linear_x > s.depth_creep_speed and "creeping" not in known.reason
+
+
+def test_a_sector_with_no_reading_is_said_so_not_an_obstacle_at_zero() -> None:
+    # Issue 39: "blocked: obstacle at 0.00 m (depth)" with nothing within 0.8 m. A virtual
+    # scan whose rays straight ahead hold no reading (out of view, or every pixel a hole)
+    # blocks, and its status says what is really happening.
+    blind = scan(5.0)
+    ahead = np.abs(blind.angles) <= math.radians(TRACK.sector_width_deg) / 2
+    ranges = blind.ranges.copy()
+    ranges[ahead] = np.nan
+    blind = dataclasses.replace(blind, ranges=ranges)
+    cmd = step(TRACK, person(), depth=blind)
+    assert cmd.state == "blocked" and cmd.linear_x == 0.0, cmd
+    assert cmd.reason == "nothing seen straight ahead (depth)", cmd.reason
