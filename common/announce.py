@@ -136,6 +136,13 @@ class Announced(Generic[_A]):
         with self._lock:
             return {name: list(keys.values())[-1] for name, keys in self._live.items() if keys}
 
+    def every(self) -> dict[str, list[_A]]:
+        """Every live announcement believed of each name (oldest first): more than one while
+        two tokens of a name are alive (a re-announcement's overlap, or two announcers of
+        one name: common/pool_rule.py's ``one_worker`` says how the pool counts those)."""
+        with self._lock:
+            return {name: list(keys.values()) for name, keys in self._live.items() if keys}
+
     def get(self, name: str) -> _A | None:
         with self._lock:
             keys = self._live.get(name)

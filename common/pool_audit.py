@@ -17,7 +17,10 @@ than ``detector.pool_alarm_s``:
 - ``undelivering``: a member was dropped from the pool for delivering no detections on the
   cameras the rule gave it (common/pool_delivery.py);
 - ``served_twice``: a camera is served by two workers (or two processes of one name);
-- ``name_twice``: one worker name is held by two processes (two hosts with one ``worker_id``).
+- ``name_twice``: one worker name is held by two processes (two hosts with one ``worker_id``),
+  as their serving tokens show, or announced by two sessions at once (a second process with
+  the name's credentials: the pool counts the name with the lowest capacity claimed,
+  common/pool_rule.py's ``one_worker``).
 
 A hand-over makes some of these true for a moment (the old and the new owner settle apart):
 only what lasts past the alarm time is reported.
@@ -97,18 +100,23 @@ class PoolAudit:
         cameras: Mapping[str, PoolCamera] | None = None,
         dropped: Mapping[Judged, Dropped] | None = None,
         undelivered: Mapping[str, float] | None = None,
+        announcements: Mapping[str, int] | None = None,
     ) -> Report:
         """The findings at ``now`` for the live ``members`` (names, or each one's capacity
         and prefixes as announced) and ``serving`` tokens, over ``cameras`` (by pool name; by
         default ``weights``); ``dropped``: the members dropped for not delivering, which the
         rule places no camera on; ``undelivered``: the cameras whose detections have not
-        come for the delivery bound, with how long (common/pool_delivery.py)."""
+        come for the delivery bound, with how long (common/pool_delivery.py);
+        ``announcements``: how many live announcements of each worker name are heard (two
+        sessions announcing one name: ``name_twice``)."""
+        serving = set(serving)
         if cameras is None:
             cameras = {c: PoolCamera("", c, w) for c, w in self.weights.items()}
         if not isinstance(members, Mapping):
             robots = frozenset(c.prefix for c in cameras.values())
             members = {m: PoolWorker(1.0, robots) for m in members}
         found_list = _findings(members, serving, cameras, self.balance, dropped or {})
+        found_list += _announced_twice(members, set(serving), announcements or {})
         findings = found_list + _undelivered(
             now, members, serving, cameras, dropped or {}, undelivered or {}
         )
@@ -180,6 +188,26 @@ def _findings(
             out.append(_Found("name_twice", worker, (
                 f"worker name {worker} is held by {len(zids)} processes (zenoh ids "
                 f"{', '.join(sorted(zids))}): give each host its own detector.worker_id"
+            )))  # fmt: skip
+    return out
+
+
+def _announced_twice(
+    members: Mapping[str, PoolWorker], serving: Iterable[Serving], announcements: Mapping[str, int]
+) -> list[_Found]:
+    """A member's name announced by several sessions at once (said once: by the serving
+    tokens' zenoh ids when those show it already)."""
+    zids: dict[str, set[str]] = {}
+    for worker, zid, _ in serving:
+        zids.setdefault(worker, set()).add(zid)
+    twice_by_tokens = {w for w, z in zids.items() if len(z) > 1}
+    out = []
+    for worker, n in sorted(announcements.items()):
+        if n > 1 and worker in members and worker not in twice_by_tokens:
+            out.append(_Found("name_twice", worker, (
+                f"worker name {worker} is announced by {n} sessions at once (another process "
+                "with its name or credentials?): the pool counts it with the lowest capacity "
+                "announced"
             )))  # fmt: skip
     return out
 

@@ -28,7 +28,9 @@ Only how many cameras of each weight each worker takes comes from the capacities
 are then placed by rank within those numbers, so a capacity that moves without changing them
 moves no camera (issue 39). A member dropped from a robot for delivering nothing
 (common/pool_delivery.py) is left out of that robot's placement (``assign_pool``'s
-``excluded``). Which announced cameras are placed at all is :func:`admit_cameras`'s.
+``excluded``). Which announced cameras are placed at all is :func:`admit_cameras`'s. A worker
+name announced by two sessions at once counts with the lowest capacity claimed
+(:func:`one_worker`).
 
 A camera's name in the pool (:func:`pool_name`) is its bare name when it is announced under the
 pool's own prefix (one robot: the names of its config), else ``<prefix>/<camera>``; in counter
@@ -166,6 +168,24 @@ def _place(
         quota[chosen, weight] -= 1
         out[camera] = chosen
     return out
+
+
+def one_worker(claims: Iterable[PoolWorker]) -> PoolWorker:
+    """What a worker name counts as when several live announcements of it are heard at once
+    (two sessions announcing one name: a second process with the name's credentials, a raw
+    session; a moment's overlap of a re-announcement too): the **lowest** capacity any of them
+    claims, and the robots **any** of them lists. Both from the set of live announcements,
+    never from the order they came in (which differs from one listener to another), so every
+    worker, the name's own included, and every metrics service reach one assignment. A claim
+    under a held name can thus never win cameras the name's first holder would not serve
+    (issue 39): it can only lower the name's share, which the others take; a robot it adds is
+    judged by delivery (common/pool_delivery.py). ``claims`` must not be empty."""
+    claims = list(claims)
+    if not claims:
+        raise ValueError("one_worker needs at least one announcement")
+    return PoolWorker(
+        min(c.capacity_hz for c in claims), frozenset().union(*(c.prefixes for c in claims))
+    )
 
 
 def robot_capacity(worker: PoolWorker) -> float:

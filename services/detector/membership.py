@@ -18,7 +18,7 @@ from common.keys import Keys, camera_in_key
 from common.messages import CameraAnnouncement, WorkerAnnouncement
 from common.node import Node
 from common.pool_audit import MAX_LINES, Report, lines
-from common.pool_rule import label, pool_name
+from common.pool_rule import label, one_worker, pool_name
 from services.detector import contract
 from services.detector.capacity import Capacity
 from services.detector.counting import count_for
@@ -469,11 +469,16 @@ class PoolMember:
         _lock; the listeners take only their own)."""
         pool = self.pool_keys.prefix
         if self._workers is not None:
-            self.view.announced = {
-                w: PoolWorker(a.capacity_hz, frozenset(a.prefixes or (pool,)))
-                for w, a in self._workers.current().items()
-                if w != self.view.me
+            # A name announced by two sessions counts as the lowest capacity claimed, its
+            # own included (common/pool_rule.py's one_worker): everyone counts it alike.
+            every = {
+                w: [PoolWorker(a.capacity_hz, frozenset(a.prefixes or (pool,))) for a in heard]
+                for w, heard in self._workers.every().items()
             }
+            me = self.view.me
+            self.view.announced = {w: one_worker(c) for w, c in every.items() if w != me}
+            self.view.mine = one_worker([self._mine(), *every.get(me, ())])
+            self.view.announcements = {w: len(c) for w, c in every.items()}
         heard = [
             (prefix, cam, a)
             for prefix, announced in self._cameras.items()

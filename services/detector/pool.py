@@ -21,7 +21,9 @@ A member earns its cameras (common/pool_delivery.py): one none of whose cameras 
 gets detections within ``detector.pool_deliver_s`` is left out of that robot's placement
 (``excluded``) for a while, whatever capacity it announces. Only how many cameras of each
 weight each worker takes comes from the capacities, so a capacity change that keeps those
-numbers moves no camera.
+numbers moves no camera. A name announced by two sessions at once (a second process with its
+credentials) counts with the lowest capacity claimed (common/pool_rule.py's ``one_worker``), so
+a claim under another's name wins no camera the name's holder would not serve.
 
 What follows (tests/unit/detector/test_pool.py): every camera has exactly one owner; a
 worker that joins takes about its share and no more; a worker that leaves hands on only its
@@ -71,6 +73,8 @@ class PoolView:
         #: (common/pool_delivery.py); the rule places no camera of the robot on them.
         self.excluded: frozenset[tuple[str, str]] = frozenset()
         self.owners: dict[str, str] = {}  # the whole assignment, as the last settle made it
+        #: How many live announcements of each name are heard (two: a name held twice).
+        self.announcements: dict[str, int] = {}
 
     @property
     def members(self) -> dict[str, PoolWorker]:

@@ -54,6 +54,7 @@ class PoolChecks:
             cameras=view.cameras,
             dropped=self.delivery.dropped,
             undelivered=self.delivery.undelivered(now, view.cameras),
+            announcements=view.announcements,
         )
 
     def admit(self, view: PoolView, announced: Mapping[str, PoolCamera]) -> None:

@@ -91,6 +91,7 @@ class LivePool:
         self.members: set[str] = set()
         self.servers: set[Serving] = set()
         self.announced: dict[str, PoolWorker] = {}
+        self.announcements: dict[str, int] = {}  # live announcements per name (2: twice)
         self.cameras: dict[str, float] | None = None
         self.heard = False  # a pool token was ever heard: the tokens, not counters, decide
         self.report = Report()
@@ -137,7 +138,9 @@ class LivePool:
             cameras, _ = admit_cameras(announced, self.max_robot_cameras)
             delivery = self.delivery
             if delivery is None:
-                self.report = self.audit.check(now, members, self.servers, cameras=cameras)
+                self.report = self.audit.check(
+                    now, members, self.servers, cameras=cameras, announcements=self.announcements
+                )
                 return self.report
             delivery.forget(cameras)
             excluded = delivery.excluded(now)
@@ -150,6 +153,7 @@ class LivePool:
                 cameras=cameras,
                 dropped=delivery.dropped,
                 undelivered=delivery.undelivered(now, cameras),
+                announcements=self.announcements,
             )
         return self.report
 

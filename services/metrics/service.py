@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar
 
 from common import reach
@@ -30,7 +30,7 @@ from common.messages import (
 from common.node import Node, Tally
 from common.pool_audit import MAX_LINES, PoolAudit, lines
 from common.pool_delivery import Delivery
-from common.pool_rule import PoolWorker, camera_rates
+from common.pool_rule import PoolWorker, camera_rates, one_worker
 from common.queries import query_metrics, ready_services
 from common.settings import SERVICES
 from common.zenoh_bus import ZenohBus, open_session
@@ -107,15 +107,19 @@ class MetricsHandlers:
             for camera in cameras:
                 self.agg.add_camera(camera)
 
-    def set_workers(self, workers: Mapping[str, WorkerAnnouncement]) -> None:
-        """The pool's workers as announced now (their capacity and robots): the audit weighs
-        them as the workers do (common/pool_rule.py)."""
+    def set_workers(self, workers: Mapping[str, Sequence[WorkerAnnouncement]]) -> None:
+        """The pool's workers as announced now (every live announcement of each name: their
+        capacity and robots): the audit weighs them as the workers do (common/pool_rule.py,
+        a name announced twice counting with the lowest capacity, ``one_worker``)."""
         pool = self.pool_keys.prefix
         with self.lock:
-            self.pool.announced = {
-                w: PoolWorker(a.capacity_hz, frozenset(a.prefixes or (pool,)))
-                for w, a in workers.items()
+            claims = {
+                w: [PoolWorker(a.capacity_hz, frozenset(a.prefixes or (pool,))) for a in c]
+                for w, c in workers.items()
+                if c
             }
+            self.pool.announced = {w: one_worker(c) for w, c in claims.items()}
+            self.pool.announcements = {w: len(c) for w, c in workers.items()}
         self.audit_pool()
 
     def on_detections(self, camera: str, key: str, payload: bytes) -> None:
@@ -284,7 +288,7 @@ class MetricsService:
 
     def _on_workers(self) -> None:
         if self.workers is not None:  # else called back while it is being declared
-            self.handlers.set_workers(self.workers.current())
+            self.handlers.set_workers(self.workers.every())
 
     def _on_detections(self, key: str, payload: bytes) -> None:
         camera = camera_in_key(key)

@@ -3,11 +3,19 @@ worker's figures, and frames detected twice (services/metrics/pool.py)."""
 
 from __future__ import annotations
 
-from common.messages import Header, ServiceCounters
+from dataclasses import replace
+
+from common.clock import FakeClock
+from common.messages import Header, ServiceCounters, WorkerAnnouncement
+from common.node import Tally
 from common.pool_audit import PoolAudit
-from common.pool_rule import PoolWorker
+from common.pool_rule import PoolWorker, assign
+from services.detector.contract import MAX_CAPACITY_HZ
 from services.metrics.aggregate import Aggregator
 from services.metrics.pool import LivePool
+from services.metrics.service import MetricsHandlers
+from stack.config import Config
+from tests.unit.announced import announcement
 from tests.unit.metrics.samples import detections
 
 HDR = Header(stamp_ns=0, frame_id="", seq=0, source="metrics")
@@ -128,3 +136,36 @@ def test_a_shared_boxs_worker_is_listed_on_the_robot_it_serves() -> None:
             "capacity_hz": 20.0, "robots": ["site/r1", "site/r2"],
         }
     }  # fmt: skip
+
+
+def test_the_metrics_count_a_name_announced_twice_as_the_workers_do() -> None:
+    # Issue 39: a second session re-announcing detector_2 at the highest capacity. The metrics
+    # audit weighs the name with the lowest capacity claimed, as every worker does
+    # (common/pool_rule.py's one_worker), so the workers' real split is what it expects, and
+    # it says the name is announced twice (before: the newest claim, and no word).
+    config = Config()
+    config = replace(
+        config, detector=replace(config.detector, pool_alarm_s=1.0, pool_deliver_s=600.0)
+    )
+    clock = FakeClock()
+    handlers = MetricsHandlers(config, Tally("metrics", config), clock=clock)
+    cams = ("front", "rear", "left", "right")
+    handlers.set_cameras({c: announcement(c, config.camera) for c in cams})
+    keys = handlers.pool_keys
+    prefixes = (keys.prefix,)
+    real = {w: WorkerAnnouncement(worker=w, capacity_hz=20.0, prefixes=prefixes)
+            for w in ("detector", "detector_2")}  # fmt: skip
+    claim = WorkerAnnouncement(worker="detector_2", capacity_hz=MAX_CAPACITY_HZ, prefixes=prefixes)
+    handlers.set_workers(
+        {"detector": [real["detector"]], "detector_2": [real["detector_2"], claim]}
+    )
+    assert handlers.pool.announced["detector_2"].capacity_hz == 20.0
+    rates = {c: config.camera.rate_hz for c in cams}
+    for cam, worker in assign({w: 20.0 for w in real}, rates, config.detector.pool_balance).items():
+        handlers.on_pool_serving(keys.pool_serving(worker, f"zid{worker[-1]}", cam), True)
+    for worker in real:
+        handlers.on_pool_member(keys.pool_member(worker), True)
+    clock.advance(1.5)
+    handlers.audit_pool()
+    found = {(f.kind, f.subject) for f in handlers.pool.report.current}
+    assert found == {("name_twice", "detector_2")}, handlers.pool.report.current
