@@ -40,7 +40,9 @@ def access(shape: Shape) -> dict[str, Access]:
             *map(keys.depth, shape.cameras),
             keys.scan(),
             keys.sim_truth(),
-            read=(keys.cmd_vel(),),
+            # cmd_vel drives the base; each camera's detections start the scenario's clock
+            # (sim.wait_for's "detector", services/sim/waiting.py).
+            read=(keys.cmd_vel(), *map(keys.detections, shape.cameras)),
             token=(keys.health(SERVICE), *map(keys.camera_announcements_of, shape.cameras)),
         )
     }

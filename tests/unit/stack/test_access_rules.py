@@ -228,3 +228,21 @@ def test_the_controller_and_the_metrics_may_watch_the_camera_announcements() -> 
     [rule] = [r for r in acl["rules"] if r["id"] == "controller_watch"]
     assert rule["messages"] == ["declare_liveliness_subscriber", "liveliness_query"]
     assert rule["key_exprs"] == [KEYS.all_camera_announcements()]
+
+
+def test_the_simulator_may_hear_the_detections_its_clock_waits_for() -> None:
+    # Issue 39: sim.wait_for's "detector" is each camera's detections (services/sim/waiting.py);
+    # under the secure profile the simulator's subscription was denied, and its world stood
+    # still for good while its status said it waited.
+    from services.sim.waiting import Waiting
+
+    hub = _hub()
+    waiting = Waiting(
+        hub.join("sim", principal="sim"), KEYS, ["detector"], list(CAMERAS), lambda _: True
+    )
+    assert len(waiting.missing()) == 1
+    worker = hub.join("detector", principal="detector")
+    for camera in CAMERAS:
+        worker.publisher(KEYS.detections(camera), QoS.PERCEPTION).put(b"d")
+    assert waiting.missing() == []
+    waiting.close()
