@@ -120,6 +120,7 @@ def load_config(path: str | Path | None = None, environ: Mapping[str, str] | Non
     unknown = sorted(set(data) - tables)
     if unknown:
         raise ConfigError(f"{cfg_path}: unknown table(s) {unknown}; known: {sorted(tables)}")
+    _check_services_named(cfg_path, data)
     built: dict[str, Any] = {}
     for table in sorted(tables - {CAMERAS}):  # [camera] before the cameras laid over it
         try:
@@ -134,6 +135,19 @@ def load_config(path: str | Path | None = None, environ: Mapping[str, str] | Non
 
 
 CAMERAS = "cameras"  # [cameras.<name>]: the further cameras, each [camera] with its changes
+
+
+def _check_services_named(cfg_path: Path, data: Mapping[str, Any]) -> None:
+    """A config that names a camera source (a real robot's camera) must say which services
+    run: the default ones are the profile's simulated robot, whose frames and scans would
+    stand in for the robot's own (issue 39)."""
+    if "services" in data.get("supervisor", {}) or "source" not in data.get("camera", {}):
+        return
+    raise ConfigError(
+        f"{cfg_path}: sets camera.source but not supervisor.services, whose default runs the "
+        "simulated robot (deploy/stack.toml): name the services, e.g. [supervisor] services = "
+        '["camera", "detector", "controller", "metrics"]'
+    )
 
 
 def _cameras(

@@ -143,7 +143,7 @@ def load_bus_settings(
     :func:`stack.config_file.load_config` gives them. No other table or variable is read."""
     cfg_path = Path(path) if path else DEFAULT_CONFIG
     data = read(cfg_path, (cfg_path.resolve(),))
-    check_tables(cfg_path, data)
+    check_tables(cfg_path, {t: v for t, v in data.items() if t in ("zenoh", "stack")})
     env = os.environ if environ is None else environ
     built: list[Any] = []
     for table, cls in (("zenoh", ZenohSettings), ("stack", StackSettings)):

@@ -128,3 +128,17 @@ def test_a_bad_override_of_a_further_camera_names_the_variable_and_the_table(
     assert str(err.value) == (
         "STACK__CAMERAS__LEFT__RATE_HZ: cameras.left.rate_hz must be within 0.1..1000 Hz, got 0.0"
     )
+
+
+def test_a_camera_source_without_services_is_refused_in_one_line(tmp_path: Path) -> None:
+    # The default services are the profile's simulated robot (issue 39, item 6): a real
+    # robot's config that names its camera and not its services would run the simulator,
+    # whose frames and clear scans stand in for the robot's own.
+    path = tmp_path / "robot.toml"
+    path.write_text('[camera]\nsource = "device:0"\n')
+    with pytest.raises(ConfigError) as refused:
+        load_config(path, environ={})
+    line = str(refused.value)
+    assert "\n" not in line and "camera.source" in line and "supervisor.services" in line, line
+    path.write_text('[camera]\nsource = "device:0"\n[supervisor]\nservices = ["camera"]\n')
+    assert load_config(path, environ={}).supervisor.services == ("camera",)

@@ -65,7 +65,10 @@ def test_its_own_tables_are_checked_alike(
 def test_a_mistake_in_another_table_does_not_stop_it(tmp_path: Path) -> None:
     # A stop must reach the stack whatever else the file says: the whole config refuses these.
     path = tmp_path / "stack.toml"
-    path.write_text('[zenoh]\nendpoint = "tcp/10.0.0.3:7448"\n[detector]\nbakend = "cuda"\n')
+    # (``camera = 5``: a key where a table must be.)
+    path.write_text(
+        'camera = 5\n[zenoh]\nendpoint = "tcp/10.0.0.3:7448"\n[detector]\nbakend = "cuda"\n'
+    )
     environ = {"STACK__TRACKR__IOU": "0.3"}
     with pytest.raises(ConfigError):
         load_config(path, environ=environ)

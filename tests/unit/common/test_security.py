@@ -193,12 +193,13 @@ def test_each_camera_principal_puts_only_its_own_frames(names: tuple[str, ...]) 
         assert readers == {"detector", "viewer", "ros2", "recorder"}
         # Detections: the detector alone puts them; the controller, metrics, viewer, recorder
         # and ROS 2 bridge read them (and the observer: status lines and tests), and the
-        # detector, which judges who delivers them (common/pool_delivery.py).
+        # detector, which judges who delivers them (common/pool_delivery.py), and the
+        # simulator, whose scenario clock waits for them (services/sim/waiting.py).
         dets = KEYS.detections(camera)
         assert {p for p in principals if _may(acl, p, "put", dets)} == {"detector"}
         readers = {p for p in principals if _may(acl, p, "declare_subscriber", dets)}
         assert readers == {
-            "controller", "metrics", "viewer", "recorder", "ros2", "observer", "detector",
+            "controller", "metrics", "viewer", "recorder", "ros2", "observer", "detector", "sim",
         }  # fmt: skip
         info = KEYS.detector_info(camera)
         assert {p for p in principals if _may(acl, p, "declare_queryable", info)} == {"detector"}
