@@ -82,12 +82,17 @@ def own_session() -> int | None:
     way: already a session leader, or no fork (not POSIX)."""
     if not hasattr(os, "fork") or os.getsid(0) == os.getpid():
         return None
+    # Held from before the fork until the parent passes them on: one that came in between
+    # would end the parent and leave the child's command unwatched.
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, PASSED_ON)
     child = os.fork()
     if child == 0:
         os.setsid()
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)  # one held meanwhile is acted on now
         return None
     for sig in PASSED_ON:
         signal.signal(sig, lambda s, _frame: _pass_on(child, s))
+    signal.pthread_sigmask(signal.SIG_SETMASK, held)  # one held meanwhile is passed on now
     _, status = os.waitpid(child, 0)  # a signal handled meanwhile does not end the wait
     code = os.waitstatus_to_exitcode(status)
     return code if code >= 0 else 128 - code
