@@ -85,9 +85,12 @@ class Delivery:
     def left(self, worker: str) -> None:
         """``worker``'s pool token went (it exited, was killed, resigned or its lease ran
         out): a token that comes back is a new process, which a worker that joins then knows
-        nothing against: its drops are lifted, so that every view agrees (its strikes stay)."""
+        nothing against: its drops and its strikes are lifted, so that every view agrees (a
+        judge that joins later would otherwise readmit it sooner after its next drop)."""
         for judged in [j for j in self.dropped if j[1] == worker]:
             del self.dropped[judged]
+        for judged in [j for j in self._strikes if j[1] == worker]:
+            del self._strikes[judged]
         self._given = {pair: at for pair, at in self._given.items() if pair[1] != worker}
 
     def excluded(self, now: float) -> frozenset[Judged]:

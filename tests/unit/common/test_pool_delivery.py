@@ -132,3 +132,26 @@ def test_the_bound_must_exceed_the_attention_floors_period() -> None:
     with pytest.raises(ConfigError, match="pool_deliver_s"):
         DetectorSettings(pool_deliver_s=1.0, attention_floor_hz=0.5)
     DetectorSettings(pool_deliver_s=1.0, attention_floor_hz=0.5, attention=False)
+
+
+def test_a_member_whose_token_goes_is_judged_afresh_as_a_later_judge_would() -> None:
+    # A judge that joins after a member's drops knows none of its strikes; an older judge must
+    # forget them too once the member's token goes, or the two readmit it at different times
+    # after its next drop and place the cameras differently meanwhile.
+    old, late = Delivery(DELIVER_S, READMIT_S), Delivery(DELIVER_S, READMIT_S)
+    members = {"detector": HONEST, "liar": LIAR}
+    t = 0.0
+    for _ in range(2):  # two drops seen by the old judge alone
+        given = owners(old, t, members)
+        old.judge(t, given, CAMERAS, members)
+        t += DELIVER_S + 0.1
+        [drop] = old.judge(t, given, CAMERAS, members)
+        t = drop.until
+    old.left("liar")  # its process went and came back
+    waits = []
+    for judge in (old, late):
+        given = owners(judge, t, members)
+        judge.judge(t, given, CAMERAS, members)
+        [drop] = judge.judge(t + DELIVER_S + 0.1, given, CAMERAS, members)
+        waits.append(drop.until - drop.since)
+    assert waits == pytest.approx([READMIT_S, READMIT_S])
