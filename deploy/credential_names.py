@@ -12,10 +12,10 @@ from pathlib import Path
 
 from common.errors import ConfigError
 from common.security import (
-    ROUTER_PRINCIPAL,
     ca_file,
     ca_key_file,
     cert_file,
+    is_router,
     key_file,
     password_file,
     role_of,
@@ -117,7 +117,7 @@ def made_groups(config: Config, made: Sequence[str], robots: Sequence[Config] = 
     }
     tools = {config.principal(p) for p in TOOL_PRINCIPALS}
     groups: dict[str, list[str]] = {
-        "the router": [p for p in made if p == ROUTER_PRINCIPAL],
+        "the routers": [p for p in made if is_router(p)],
         "supervisor.services": [p for p in made if p in services],
         "the tools: zstack record and play, estop, query": [
             p for p in made if p in tools and p not in services
