@@ -111,7 +111,8 @@ class ZenohSettings:
 
     Routers linked across hosts (``connect`` on a host whose supervisor is a router): each
     router admits the other's traffic as the principal of the router's certificate
-    (``supervisor``), and lets it do what ``remote_principals`` may do together: the
+    (``<its stack.prefix>/supervisor``, one of ``linked_routers``), and lets it do what
+    ``remote_principals`` may do together: the
     principals the other hosts run (``detector_a`` on the robot; the robot's cameras, worker,
     controller, metrics ... on the GPU box). Empty: a linked router may only ask (queries,
     liveliness). Under access control that needs ``auth = "certificate"``: with passwords

@@ -1,6 +1,7 @@
 """Whose credentials ``zstack credentials`` makes (deploy/credentials.py writes them): each
 principal by its name (common/security.py: ``<stack.prefix>/<role>``, a detector worker's
-``<pool>/<worker>``, the routers' ``supervisor``), for one config or several (``--robot``: each
+``<pool>/<worker>``, each router's ``<prefix>/supervisor``), for one config or several
+(``--robot``: each
 further robot's config, so that one run and one CA serve a site), which it leaves out and why,
 and which earlier files it removes with ``--force``.
 """

@@ -7,8 +7,8 @@ config has a use for (stack.access.running_principals) a random password, its li
 router's ``user:password`` dictionary, and a key and certificate (common name = the principal's
 name). A principal is named by whose it is (common/security.py): ``<stack.prefix>/<role>``
 for a robot's (``stack/controller``, ``site/robot1/estop``), ``<pool>/<worker>`` for a
-detector worker (``detector.pool_prefix``, or the stack's prefix), ``supervisor`` for the
-routers; its files lie at its name under DIR (``site/robot1/estop.password``), one subfolder
+detector worker (``detector.pool_prefix``, or the stack's prefix), ``<stack.prefix>/supervisor``
+for routers; its files lie at its name under DIR (``site/robot1/estop.password``), one subfolder
 per robot. Those principals are the supervisor's, those of the processes of
 ``supervisor.services`` (one per camera, ``camera`` and ``camera_<name>``, when it runs
 ``camera``; one per detector worker, ``detector``, ``detector_2`` ... or
