@@ -76,8 +76,9 @@ def test_one_robots_principals_do_nothing_on_another_robots_router(tmp_path: Pat
     assert made.returncode == 0, made.stderr
     r1 = load_config(one, environ={})
     users = [line.split(":", 1)[0] for line in (creds / "users.txt").read_text().splitlines()]
+    # Its router's key (site/robot1/supervisor) too.
     roles = ["estop", "controller", "observer", "recorder", "sim", "metrics", "viewer",
-             "detector_robot1", "supervisor"]  # fmt: skip  (its router's key too)
+             "detector_robot1", "supervisor"]  # fmt: skip
     mine = [r1.principal(r) for r in roles]
     assert set(mine) <= set(users), users  # one run made both robots' principals
 
