@@ -13,7 +13,7 @@ from cryptography import x509
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from common.errors import ConfigError
-from common.security import ROUTER_PRINCIPAL, ca_file, cert_file
+from common.security import ca_file, is_router
 
 
 def serves_tls(cert: x509.Certificate) -> bool:
@@ -31,15 +31,16 @@ def serves_tls(cert: x509.Certificate) -> bool:
 
 
 def server_capable(directory: Path) -> list[str]:
-    """The principals other than the supervisor whose certificate in ``directory`` could serve
-    as the router's (credentials made by an older version); unreadable files are skipped."""
+    """The principals other than a router (``<prefix>/supervisor``, each stack's) whose
+    certificate in ``directory`` could serve as the router's (credentials made by an older
+    version); unreadable files are skipped."""
     found = []
     # Every principal's certificate there, a further camera's (``camera_<name>``) too.
     # Each robot's in its subfolder (``site/robot1/camera.pem``): named by its path there.
     paths = sorted(directory.rglob("*.pem")) if directory.is_dir() else []
     for path in paths:
         p = path.relative_to(directory).with_suffix("").as_posix()
-        if path in (ca_file(directory), cert_file(directory, ROUTER_PRINCIPAL)):
+        if path == ca_file(directory) or is_router(p):  # a stack's router: <prefix>/supervisor
             continue
         if not path.is_file():
             continue

@@ -21,9 +21,11 @@ password's user name) is its role qualified by whose it is (:func:`qualified`,
 common.settings.principal_name): ``<stack.prefix>/<role>`` for a robot's own processes and
 tools (``stack/controller``, ``site/robot1/estop``), ``<pool>/<worker>`` for a detector worker
 (the pool's prefix, ``detector.pool_prefix`` or the stack's: one worker may serve several
-robots), and the routers' ``supervisor`` alone, shared by linked routers. So one site CA can
-sign every robot's principals while each robot's router admits only its own robot's (and its
-pool's workers): robot 1's ``estop`` is ``site/robot1/estop``, a name robot 2's rules never
+robots), and each router's ``<stack.prefix>/supervisor`` (its robot's, or its host's stack:
+robot 1's router is ``site/robot1/supervisor``). So one site CA can sign every robot's
+principals while each robot's router admits only its own robot's (and its pool's workers, and
+the routers it is configured to link with, ``zenoh.linked_routers``): robot 1's ``estop`` is
+``site/robot1/estop``, and its router ``site/robot1/supervisor``, names robot 2's rules never
 match. Each principal's files live at its name under the credentials folder
 (``secrets/site/robot1/estop.password``): one subfolder per robot, easy to copy.
 """
@@ -47,7 +49,8 @@ SERVICE_PRINCIPALS = (
     "metrics",
     "viewer",
 )
-# The router's principal: the only one whose certificate may serve the TLS listener.
+# The router's role: the only one whose certificates (one per stack, ``<prefix>/supervisor``)
+# may serve the TLS listener.
 ROUTER_PRINCIPAL = "supervisor"
 #: The principals of a one-camera, one-detector stack; :func:`stack_principals` adds one per
 #: further camera and names each detector worker.
@@ -94,8 +97,14 @@ def stack_principals(
 
 def qualified(scope: str, role: str) -> str:
     """The name ``role`` authenticates as, within ``scope`` (a robot's prefix, or its pool's
-    for a detector worker): ``<scope>/<role>``; the router's is ``supervisor`` everywhere."""
-    return role if role == ROUTER_PRINCIPAL else f"{scope}/{role}"
+    for a detector worker): ``<scope>/<role>``, the router's (``<prefix>/supervisor``) too."""
+    return f"{scope}/{role}"
+
+
+def is_router(principal: str) -> bool:
+    """Whether ``principal`` (a name or a role) is a router's: ``supervisor`` or
+    ``<prefix>/supervisor``."""
+    return role_of(principal) == ROUTER_PRINCIPAL
 
 
 def role_of(principal: str) -> str:

@@ -55,6 +55,7 @@ def detector_service(n: int, worker_id: str = "") -> str:
 
 #: Any detector worker's name, on any host (``detector_service``'s names): what the metrics
 #: service believes counters from without knowing the other hosts' configs.
+_PREFIX = re.compile(r"[A-Za-z0-9_.\-]{1,64}(/[A-Za-z0-9_.\-]{1,64})*")
 _DETECTOR_SERVICE = re.compile(r"detector(_[a-z0-9_]{1,40})?")
 
 
@@ -110,11 +111,18 @@ class ZenohSettings:
 
     Routers linked across hosts (``connect`` on a host whose supervisor is a router): each
     router admits the other's traffic as the principal of the router's certificate
-    (``supervisor``), and lets it do what ``remote_principals`` may do together: the
+    (``<its stack.prefix>/supervisor``, one of ``linked_routers``), and lets it do what
+    ``remote_principals`` may do together: the
     principals the other hosts run (``detector_a`` on the robot; the robot's cameras, worker,
     controller, metrics ... on the GPU box). Empty: a linked router may only ask (queries,
     liveliness). Under access control that needs ``auth = "certificate"``: with passwords
     the router that dials cannot tell which router answered, and its rules deny it all.
+
+    ``linked_routers``: the ``stack.prefix`` of each other host's router this router links
+    with (dials or is dialled by). Each router authenticates as ``<stack.prefix>/supervisor``
+    (its own certificate), and only those named here get a linked router's rights (empty: this
+    stack's own prefix, two hosts of one robot): robot 1's router key opens nothing on robot
+    2's router, whose rules name neither it nor robot 1's other principals.
 
     ``max_payload_bytes`` is the largest payload a service sends; a larger one is counted
     (``payload_too_large``) and not sent, because Zenoh silently loses big payloads under
@@ -132,12 +140,14 @@ class ZenohSettings:
     credentials_dir: str = "secrets"
     max_payload_bytes: int = 32 * 1024 * 1024
     remote_principals: tuple[str, ...] = ()
+    linked_routers: tuple[str, ...] = ()
 
     BOUNDS: ClassVar[Bounds] = {"max_payload_bytes": (MIN_PAYLOAD_LIMIT, MAX_PAYLOAD_LIMIT)}
     LENGTHS: ClassVar[Bounds] = {
         "connect": (0, 16),
         "listen": (0, 16),
         "remote_principals": (0, 64),
+        "linked_routers": (0, 16),
     }
 
     def __post_init__(self) -> None:
@@ -167,6 +177,15 @@ class ZenohSettings:
             )
         if not self.credentials_dir:
             raise ConfigError("zenoh.credentials_dir must not be empty")
+        for prefix in self.linked_routers:
+            if not _PREFIX.fullmatch(prefix) or any(c in (".", "..") for c in prefix.split("/")):
+                raise ConfigError(
+                    f"zenoh.linked_routers names {prefix!r}: write the stack.prefix of a "
+                    "linked host's router ('/'-separated words of letters, digits, '_', '-', "
+                    "'.'; its router is <prefix>/supervisor)"
+                )
+        if len(set(self.linked_routers)) != len(self.linked_routers):
+            raise ConfigError(f"zenoh.linked_routers names one twice: {list(self.linked_routers)}")
 
     @property
     def uses_tls(self) -> bool:

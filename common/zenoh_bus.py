@@ -41,6 +41,7 @@ from common.security import (
     ROUTER_PRINCIPAL,
     ca_file,
     cert_file,
+    is_router,
     key_file,
     made_by_role,
     password_file,
@@ -387,9 +388,9 @@ def open_configured(
         auth = f" as {principal!r} ({settings.auth} auth)" if settings.auth != "none" else ""
         # A refused router certificate reads as "unable to connect": say what is accepted.
         tls = (
-            f" (over TLS only a router with the {ROUTER_PRINCIPAL}'s certificate signed by "
+            f" (over TLS only a router with a {ROUTER_PRINCIPAL}'s certificate signed by "
             f"{ca_file(settings.credentials_path)} is accepted)"
-            if settings.uses_tls and principal != ROUTER_PRINCIPAL
+            if settings.uses_tls and not is_router(principal)
             else ""
         )
         raise ConfigError(

@@ -1,6 +1,7 @@
 """Whose credentials ``zstack credentials`` makes (deploy/credentials.py writes them): each
 principal by its name (common/security.py: ``<stack.prefix>/<role>``, a detector worker's
-``<pool>/<worker>``, the routers' ``supervisor``), for one config or several (``--robot``: each
+``<pool>/<worker>``, each router's ``<prefix>/supervisor``), for one config or several
+(``--robot``: each
 further robot's config, so that one run and one CA serve a site), which it leaves out and why,
 and which earlier files it removes with ``--force``.
 """
@@ -12,10 +13,10 @@ from pathlib import Path
 
 from common.errors import ConfigError
 from common.security import (
-    ROUTER_PRINCIPAL,
     ca_file,
     ca_key_file,
     cert_file,
+    is_router,
     key_file,
     password_file,
     role_of,
@@ -117,7 +118,7 @@ def made_groups(config: Config, made: Sequence[str], robots: Sequence[Config] = 
     }
     tools = {config.principal(p) for p in TOOL_PRINCIPALS}
     groups: dict[str, list[str]] = {
-        "the router": [p for p in made if p == ROUTER_PRINCIPAL],
+        "the routers": [p for p in made if is_router(p)],
         "supervisor.services": [p for p in made if p in services],
         "the tools: zstack record and play, estop, query": [
             p for p in made if p in tools and p not in services

@@ -7,8 +7,8 @@ config has a use for (stack.access.running_principals) a random password, its li
 router's ``user:password`` dictionary, and a key and certificate (common name = the principal's
 name). A principal is named by whose it is (common/security.py): ``<stack.prefix>/<role>``
 for a robot's (``stack/controller``, ``site/robot1/estop``), ``<pool>/<worker>`` for a
-detector worker (``detector.pool_prefix``, or the stack's prefix), ``supervisor`` for the
-routers; its files lie at its name under DIR (``site/robot1/estop.password``), one subfolder
+detector worker (``detector.pool_prefix``, or the stack's prefix), ``<stack.prefix>/supervisor``
+for routers; its files lie at its name under DIR (``site/robot1/estop.password``), one subfolder
 per robot. Those principals are the supervisor's, those of the processes of
 ``supervisor.services`` (one per camera, ``camera`` and ``camera_<name>``, when it runs
 ``camera``; one per detector worker, ``detector``, ``detector_2`` ... or
@@ -60,6 +60,7 @@ from common.security import (
     ca_file,
     ca_key_file,
     cert_file,
+    is_router,
     key_file,
     password_file,
     qualified,
@@ -186,7 +187,7 @@ def _leaf_certificate(
         .add_extension(authority, critical=False)
     )
     purposes = [ExtendedKeyUsageOID.CLIENT_AUTH]
-    if principal == ROUTER_PRINCIPAL:
+    if is_router(principal):
         purposes.insert(0, ExtendedKeyUsageOID.SERVER_AUTH)
         builder = builder.add_extension(x509.SubjectAlternativeName(names), critical=False)
     return builder.add_extension(x509.ExtendedKeyUsage(purposes), critical=False).sign(
@@ -241,8 +242,8 @@ def generate(
     name (common/security.py): every principal of a one-camera stack under the default prefix
     by default; the command passes a config's :func:`credential_principals`. Returns the
     files written, in order."""
-    if ROUTER_PRINCIPAL not in principals:
-        raise ValueError(f"the principals must include the router's, {ROUTER_PRINCIPAL!r}")
+    if not any(is_router(p) for p in principals):
+        raise ValueError(f"the principals must include a router's, <prefix>/{ROUTER_PRINCIPAL}")
     if days < 1:
         raise ConfigError(f"--days must be at least 1, got {days}")
     names = _subject_names(hosts)

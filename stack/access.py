@@ -25,11 +25,13 @@ The rules name each principal as it authenticates, its role qualified by whose i
 pool's worker. One site CA signs every robot's principals, and another robot's (its
 ``controller``, its ``estop``) matches no subject here: denied everything.
 
-Routers linked across hosts admit each other as the router's principal (``supervisor``, by
-its certificate): a router lets a linked one do what the principals the other hosts run
-(``zenoh.remote_principals``) may do, together, and nothing more; each host's own router
-confines each of its own principals on ingress, as on one host (docs/security.md, "Two hosts,
-secured").
+Routers linked across hosts admit each other by the router's principal, per stack
+(``<stack.prefix>/supervisor``, by its certificate): a router lets the routers of
+``zenoh.linked_routers`` (their stacks' prefixes; none named: its own stack's, two hosts of one
+robot) do what the principals the other hosts run (``zenoh.remote_principals``) may do,
+together, and nothing more. Another robot's router (``site/robot1/supervisor`` on robot 2's)
+matches no subject: denied everything. Each host's own router confines each of its own
+principals on ingress, as on one host (docs/security.md, "Two hosts, secured").
 
 Only the principals a stack has a use for get a secret (:func:`running_principals`: the router,
 the processes of ``supervisor.services``, the tools and the other hosts' principals), while the
@@ -301,6 +303,7 @@ def access_control(
     prefixes: Iterable[str] = (),
     remote: Iterable[str] = (),
     pool_prefix: str = "",
+    linked: Iterable[str] = (),
 ) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for the router: deny by default, then allow each
     principal its own keys on ingress (puts, tokens, queryables, subscriptions), queries and
@@ -308,8 +311,10 @@ def access_control(
     delivers only what it accepted, and only to subscriptions it accepted). Each rule's subject
     is a principal's name as it authenticates (common.settings.principal_name): this robot's
     ``<keys.prefix>/<role>``, a worker's ``<pool_prefix or keys.prefix>/<worker>``, the linked
-    routers' ``supervisor``; another robot's principals match no subject, so the default denies
-    them everything, reads included. The roles are what the arguments name. ``cameras``: see
+    routers' ``<prefix>/supervisor`` for each prefix of ``linked`` (``zenoh.linked_routers``;
+    empty: ``keys.prefix``); another robot's principals, its router's included, match no
+    subject, so the default denies them everything, reads included. The roles are what the
+    arguments name. ``cameras``: see
     common.security.camera_services; ``principals`` (default: stack_principals) limits the
     rules to those named; ``workers``: the detector workers' names (``Config.detector_services``),
     each a principal; ``prefixes``: the robot prefixes they serve (empty: the stack's own);
@@ -326,8 +331,13 @@ def access_control(
     prefixes = tuple(prefixes)
     match = "usernames" if auth == "password" else "cert_common_names"
 
-    def name(role: str) -> str:  # whose it is: this robot's, or a worker its pool's
-        return principal_name(keys.prefix, role, pool_prefix)
+    linked = tuple(linked) or (keys.prefix,)
+    routers = [principal_name(p, ROUTER_PRINCIPAL) for p in dict.fromkeys(linked)]
+
+    def names(role: str) -> list[str]:  # whose it is: this robot's, a worker its pool's,
+        if role == ROUTER_PRINCIPAL:  # the router the linked routers'
+            return routers
+        return [principal_name(keys.prefix, role, pool_prefix)]
 
     rules: list[dict[str, Any]] = [
         {
@@ -345,7 +355,9 @@ def access_control(
             "key_exprs": ask_scope(keys, (pool_prefix,) if pool_prefix else ()),
         },
     ]
-    subjects: list[dict[str, Any]] = [{"id": "everyone", match: [name(p) for p in principals]}]
+    subjects: list[dict[str, Any]] = [
+        {"id": "everyone", match: [n for p in principals for n in names(p)]}
+    ]
     policies: list[dict[str, Any]] = [{"rules": ["egress", "ask"], "subjects": ["everyone"]}]
     served = [e for e in ask_scope(keys, prefixes) if e not in rules[-1]["key_exprs"]]
     if served:
@@ -353,14 +365,14 @@ def access_control(
         # brings the asks of the other hosts' principals) may ask there.
         askers = [p for p in principals if is_detector_service(p) or p == ROUTER_PRINCIPAL]
         rules.append({**rules[-1], "id": "ask_served", "key_exprs": served})
-        subjects.append({"id": "served_askers", match: [name(p) for p in askers]})
+        subjects.append({"id": "served_askers", match: [n for p in askers for n in names(p)]})
         policies.append({"rules": ["ask_served"], "subjects": ["served_askers"]})
     for principal, allowed in _table(
         keys, cameras, live_sensors, workers, prefixes, remote, pool_prefix
     ).items():
         if principal not in principals:
             continue
-        subjects.append({"id": principal, match: [name(principal)]})
+        subjects.append({"id": principal, match: names(principal)})
         ids = []
         for kind, key_exprs in allowed.kinds().items():
             rule_id = f"{principal}_{kind}"

@@ -49,6 +49,7 @@ def hub_access(config: Config) -> dict[str, Any]:
             prefixes=config.detector.prefixes,
             remote=z.remote_principals,
             pool_prefix=config.detector.pool_prefix,
+            linked=z.linked_routers,
         )
     except ValueError as exc:
         raise ConfigError(str(exc)) from exc
@@ -113,7 +114,8 @@ def check_credentials(config: Config) -> None:
 def open_hub(config: Config) -> zenoh.Session:
     """The supervisor's session: the endpoint every service joins, enforcing access control."""
     check_credentials(config)
+    router = config.principal(HUB_PRINCIPAL)  # <stack.prefix>/supervisor: this stack's router
     conf = zenoh_config(
-        config.zenoh, HUB_PRINCIPAL, access=hub_access(config), drop_keys=hub_drop_keys(config)
+        config.zenoh, router, access=hub_access(config), drop_keys=hub_drop_keys(config)
     )
-    return open_configured(conf, config.zenoh, config.zenoh.endpoint, HUB_PRINCIPAL)
+    return open_configured(conf, config.zenoh, config.zenoh.endpoint, router)

@@ -71,9 +71,10 @@ def test_two_robots_routers_linked_to_a_gpu_router_read_nothing_of_each_other(
     prefixes = (f"r1-{run}", f"r2-{run}")
     creds = tmp_path / "credentials"
     pool_prefix = f"pool-{run}"
-    # One CA; each robot's principals named as its own, the worker as the pool's.
-    names = {"supervisor", f"{pool_prefix}/detector_gpu", f"{pool_prefix}/observer"}
-    names |= {f"{p}/{r}" for p in prefixes for r in ("camera", "metrics", "observer")}
+    # One CA; each robot's principals named as its own (its router's too), the worker as the
+    # pool's, the GPU box's router as its stack's.
+    names = {f"{pool_prefix}/{r}" for r in ("supervisor", "detector_gpu", "observer")}
+    names |= {f"{p}/{r}" for p in prefixes for r in ("supervisor", "camera", "metrics", "observer")}
     generate(creds, principals=tuple(sorted(names)))
     camera = {"source": "sample:cameraman", "frame_id": "front", "rate_hz": 3.0,
               "resize": [320, 240]}  # fmt: skip
@@ -82,7 +83,7 @@ def test_two_robots_routers_linked_to_a_gpu_router_read_nothing_of_each_other(
             tmp_path,
             p,
             creds,
-            zenoh={"remote_principals": ["detector_gpu"]},
+            zenoh={"remote_principals": ["detector_gpu"], "linked_routers": [pool_prefix]},
             stack={"prefix": p, "camera": "front"},
             camera=camera,
             supervisor={"services": ["camera", "metrics"]},
@@ -92,7 +93,8 @@ def test_two_robots_routers_linked_to_a_gpu_router_read_nothing_of_each_other(
     endpoints = [load_config(r, environ={}).zenoh.endpoint for r in robots]
     gpu = _secure_stack(
         tmp_path, "gpu", creds,
-        zenoh={"connect": endpoints, "remote_principals": ["camera", "metrics", "observer"]},
+        zenoh={"connect": endpoints, "remote_principals": ["camera", "metrics", "observer"],
+               "linked_routers": list(prefixes)},
         stack={"prefix": pool_prefix, "camera": "front"}, camera=camera,
         supervisor={"services": ["detector"]},
         detector={"worker_id": "gpu", "imgsz": 320, "prefixes": list(prefixes)},

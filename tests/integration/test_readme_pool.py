@@ -178,7 +178,7 @@ def _configs(tmp_path: Path, secure: bool) -> tuple[Path, Path]:
         copied.mkdir(mode=0o700)
         box = load_config(gpu, environ={})
         worker = box.principal(f"detector_{box.detector.worker_id}")  # stack/detector_gpu
-        for principal in (ROUTER_PRINCIPAL, worker):
+        for principal in (box.principal(ROUTER_PRINCIPAL), worker):  # stack/supervisor
             for file in (cert_file(made, principal), key_file(made, principal)):
                 copy = copied / file.relative_to(made)  # each at its place: stack/...
                 copy.parent.mkdir(mode=0o700, exist_ok=True)

@@ -5,13 +5,15 @@ Two robots of one site, ``<site>/robot1`` and ``<site>/robot2``, secured with ce
 made by ONE ``zstack credentials`` run (``--robot``: one CA for the site), as the README's
 several robots would be. Robot 2's router runs (its controller, e-stop engaged by its own
 ``estop``). Each principal robot 1 has a secret for (its estop, controller, observer,
-recorder, simulator, metrics, viewer, its local worker) connects straight to robot 2's
+recorder, simulator, metrics, viewer, its local worker, and its router's key,
+``<site>/robot1/supervisor``) connects straight to robot 2's
 router, subscribes to all of robot 2's keys, asks for its tokens and metrics, and puts a
 release of the e-stop, a command and garbage on robot 2's keys. Robot 2's e-stop stays
 engaged, its readers hear none of it, and robot 1's principals hear and learn nothing of
 robot 2's; robot 2's own principals still work (its observer hears its controller, its
 estop releases). On the code before per-robot principals, robot 1's ``estop`` was robot 2's
-``estop``: its release went through.
+``estop``: its release went through; before per-stack routers, robot 1's router key was robot
+2's ``supervisor``, in robot 2's "everyone" group: it read robot 2's health tokens.
 """
 
 from __future__ import annotations
@@ -74,8 +76,9 @@ def test_one_robots_principals_do_nothing_on_another_robots_router(tmp_path: Pat
     assert made.returncode == 0, made.stderr
     r1 = load_config(one, environ={})
     users = [line.split(":", 1)[0] for line in (creds / "users.txt").read_text().splitlines()]
+    # Its router's key (site/robot1/supervisor) too.
     roles = ["estop", "controller", "observer", "recorder", "sim", "metrics", "viewer",
-             "detector_robot1"]  # fmt: skip
+             "detector_robot1", "supervisor"]  # fmt: skip
     mine = [r1.principal(r) for r in roles]
     assert set(mine) <= set(users), users  # one run made both robots' principals
 

@@ -72,7 +72,7 @@ def test_estop_cli_refuses_a_router_with_another_principals_certificate(
     for word in (endpoint, f"'{prefix}/estop'", f"{auth} auth"):
         assert word in done.stderr, done.stderr
 
-    with _router(config_path, HUB_PRINCIPAL):
+    with _router(config_path, load_config(config_path, environ={}).principal(HUB_PRINCIPAL)):
         done = _engage(config_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout == "e-stop engaged\n"

@@ -77,7 +77,7 @@ def test_the_secure_stack_refuses_credentials_others_may_read_or_change(tmp_path
     line = _one_line(_run(*supervisor))
     assert f"chmod 600 {users_file(creds)}" in line, line
     users_file(creds).chmod(0o600)
-    key_file(creds, "supervisor").chmod(0o604)
+    key_file(creds, f"{prefix}/supervisor").chmod(0o604)
     tls = write_config(
         tmp_path,
         zenoh={"mode": "client", "auth": "certificate", "credentials_dir": str(creds),
@@ -85,7 +85,7 @@ def test_the_secure_stack_refuses_credentials_others_may_read_or_change(tmp_path
         supervisor={"services": ["controller"]}, stack={"prefix": prefix},
     )  # fmt: skip
     line = _one_line(_run("deploy.supervisor", "--config", tls, "--duration", "5"))
-    assert f"chmod 600 {key_file(creds, 'supervisor')}" in line, line
+    assert f"chmod 600 {key_file(creds, f'{prefix}/supervisor')}" in line, line
 
 
 def test_credentials_are_made_only_for_the_principals_the_stack_runs(tmp_path: Path) -> None:

@@ -393,12 +393,13 @@ ROGUE_ROUNDS = 20
 
 
 def _host_credentials(made: Path, host: Path, prefix: str, roles: tuple[str, ...]) -> Path:
-    """A host's own credentials folder: the CA, the router's certificate and key (both
-    routers serve and link with it) and those of the principals it runs (``roles`` of the
+    """A host's own credentials folder: the CA, the router's certificate and key
+    (``<prefix>/supervisor``: both hosts are the one robot's stack, both routers serve and link
+    with it) and those of the principals it runs (``roles`` of the
     stack of ``prefix``), copied from the one set ``made`` for every host, each at its place
     (docs/security.md, "Two hosts, secured")."""
     host.mkdir(mode=0o700)
-    for principal in (ROUTER_PRINCIPAL, *(principal_name(prefix, r) for r in roles)):
+    for principal in (principal_name(prefix, r) for r in (ROUTER_PRINCIPAL, *roles)):
         for path in (cert_file(made, principal), key_file(made, principal)):
             copy = host / path.relative_to(made)
             copy.parent.mkdir(mode=0o700, parents=True, exist_ok=True)

@@ -9,10 +9,13 @@ from cryptography.hazmat.primitives import hashes, serialization
 
 from common.certificates import server_capable
 from common.errors import ConfigError
-from common.security import ROUTER_PRINCIPAL, ca_key_file, cert_file, key_file
+from common.security import ROUTER_PRINCIPAL, ca_key_file, cert_file, key_file, qualified
 from common.settings import ZenohSettings
 from common.zenoh_bus import zenoh_config
 from deploy.credentials import generate
+
+#: The router of the default stack: each stack's router is <stack.prefix>/supervisor.
+ROUTER = qualified("stack", ROUTER_PRINCIPAL)
 
 
 def old_style(directory: Path, principal: str) -> None:
@@ -20,7 +23,7 @@ def old_style(directory: Path, principal: str) -> None:
     server authentication, like the supervisor's."""
     ca_key = serialization.load_pem_private_key(ca_key_file(directory).read_bytes(), None)
     key = serialization.load_pem_private_key(key_file(directory, principal).read_bytes(), None)
-    router = x509.load_pem_x509_certificate(cert_file(directory, ROUTER_PRINCIPAL).read_bytes())
+    router = x509.load_pem_x509_certificate(cert_file(directory, ROUTER).read_bytes())
     purposes = router.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value
     names = router.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
     builder = (
@@ -53,7 +56,7 @@ def test_a_missing_or_unreadable_certificate_is_not_counted(tmp_path: Path) -> N
     assert server_capable(tmp_path) == []
 
 
-@pytest.mark.parametrize("principal", ["stack/estop", ROUTER_PRINCIPAL])
+@pytest.mark.parametrize("principal", ["stack/estop", ROUTER])
 def test_no_session_over_tls_with_older_credentials(tmp_path: Path, principal: str) -> None:
     generate(tmp_path)
     old_style(tmp_path, "stack/viewer")
@@ -64,7 +67,7 @@ def test_no_session_over_tls_with_older_credentials(tmp_path: Path, principal: s
         credentials_dir=str(tmp_path),
         endpoint="tls/127.0.0.1:7447",
     )
-    access = {} if principal == ROUTER_PRINCIPAL else None
+    access = {} if principal == ROUTER else None
     with pytest.raises(ConfigError, match=r"certificates of stack/viewer could.*--force"):
         zenoh_config(tls, principal, access=access)
     # Without TLS no certificate is used, so nothing is checked.

@@ -110,7 +110,7 @@ def test_hub_config_carries_the_rules_and_the_dictionary(tmp_path: Path) -> None
 
     generate(tmp_path)
     s = ZenohSettings(mode="client", auth="password", credentials_dir=str(tmp_path))
-    hub = json.loads(str(zenoh_config(s, "supervisor", access={"enabled": True})))
+    hub = json.loads(str(zenoh_config(s, "stack/supervisor", access={"enabled": True})))
     assert hub["mode"] == "router"
     assert hub["transport"]["auth"]["usrpwd"]["dictionary_file"].endswith("users.txt")
     assert hub["access_control"]["enabled"] is True
@@ -292,12 +292,14 @@ def test_the_router_drops_under_congestion_on_every_key_but_the_estop() -> None:
     ):
         assert key in drop, key
     s = ZenohSettings(mode="client", endpoint="tcp/127.0.0.1:7447")
-    hub = json.loads(str(zenoh_config(s, "supervisor", access={}, drop_keys=drop)))
+    hub = json.loads(str(zenoh_config(s, "stack/supervisor", access={}, drop_keys=drop)))
     (item,) = hub["qos"]["network"]
     assert item["overwrite"]["congestion_control"] == "drop" and item["flows"] == ["ingress"]
     assert item["key_exprs"] == list(drop)
     # A peer-mode hub routes nothing: no overwrite there.
-    peer = json.loads(str(zenoh_config(ZenohSettings(), "supervisor", access={}, drop_keys=drop)))
+    peer = json.loads(
+        str(zenoh_config(ZenohSettings(), "stack/supervisor", access={}, drop_keys=drop))
+    )
     assert peer["qos"]["network"] == []
 
 
@@ -309,16 +311,16 @@ def test_linked_routers_need_certificates_and_link_with_the_routers_own(tmp_path
         mode="client", auth="certificate", endpoint="tls/127.0.0.1:7448",
         connect=("tls/10.0.0.2:7448",), credentials_dir=str(tmp_path / "c"),
     )  # fmt: skip
-    tls = json.loads(str(zenoh_config(linked, "supervisor", access={"enabled": True})))[
+    tls = json.loads(str(zenoh_config(linked, "stack/supervisor", access={"enabled": True})))[
         "transport"
     ]["link"]["tls"]
     assert tls["connect_certificate"] == tls["listen_certificate"]
     assert tls["connect_certificate"].endswith("supervisor.pem")
     assert tls["connect_private_key"].endswith("supervisor.key")
     alone = dataclasses.replace(linked, connect=())
-    tls = json.loads(str(zenoh_config(alone, "supervisor", access={"enabled": True})))["transport"][
-        "link"
-    ]["tls"]
+    tls = json.loads(str(zenoh_config(alone, "stack/supervisor", access={"enabled": True})))[
+        "transport"
+    ]["link"]["tls"]
     assert tls["connect_certificate"] is None
 
 

@@ -36,6 +36,8 @@ from stack.config_file import load_config
 from tests.unit.common.test_certificates import old_style
 from tools.launch import free_port
 
+#: The default stack's router: each stack's is <stack.prefix>/supervisor.
+ROUTER = f"stack/{ROUTER_PRINCIPAL}"
 HOSTS = ("robot.local", "10.0.0.5")
 
 
@@ -104,7 +106,7 @@ def test_only_the_supervisors_certificate_names_hosts_and_serves(
     creds: tuple[Path, list[Path]],
 ) -> None:
     directory, _ = creds
-    router = _cert(cert_file(directory, ROUTER_PRINCIPAL))
+    router = _cert(cert_file(directory, ROUTER))
     san = router.extensions.get_extension_for_class(x509.SubjectAlternativeName)
     assert san.value.get_values_for_type(x509.DNSName) == ["localhost", "robot.local"]
     assert san.value.get_values_for_type(x509.IPAddress) == [
@@ -115,7 +117,7 @@ def test_only_the_supervisors_certificate_names_hosts_and_serves(
     assert _purposes(router) == [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]
     assert serves_tls(router)
     for p in PRINCIPALS:
-        if p == ROUTER_PRINCIPAL:
+        if p == ROUTER:
             continue
         cert = _cert(cert_file(directory, p))
         with pytest.raises(x509.ExtensionNotFound):
@@ -127,9 +129,9 @@ def test_only_the_supervisors_certificate_names_hosts_and_serves(
 
 def _roles(creds: Path) -> list[str]:
     """The users of ``creds``' dictionary by role: each of the default stack's, ``stack/<role>``
-    (common/security.py), or the routers' ``supervisor``."""
+    (common/security.py), the router's ``stack/supervisor`` too."""
     users = [line.split(":", 1)[0] for line in users_file(creds).read_text().splitlines()]
-    assert all(u == ROUTER_PRINCIPAL or u.startswith("stack/") for u in users), users
+    assert all(u.startswith("stack/") for u in users), users
     return [u.removeprefix("stack/") for u in users]
 
 
@@ -181,8 +183,8 @@ def test_modes_do_not_depend_on_the_umask_and_pass_the_start_up_check(tmp_path: 
 
 def test_a_link_in_the_folder_is_not_followed(tmp_path: Path) -> None:
     directory, elsewhere = tmp_path / "secrets", tmp_path / "elsewhere"
-    directory.mkdir()
-    password_file(directory, "supervisor").symlink_to(elsewhere)
+    (directory / "stack").mkdir(parents=True)
+    password_file(directory, ROUTER).symlink_to(elsewhere)
     with pytest.raises(ConfigError, match=r"cannot write .*supervisor.password"):
         generate(directory, force=True)
     assert not elsewhere.exists()
@@ -328,8 +330,8 @@ def test_mtls_router_admits_only_clients_with_a_certificate(
         return conf
 
     router_tls = {
-        "listen_private_key": str(key_file(directory, "supervisor")),
-        "listen_certificate": str(cert_file(directory, "supervisor")),
+        "listen_private_key": str(key_file(directory, ROUTER)),
+        "listen_certificate": str(cert_file(directory, ROUTER)),
         "enable_mtls": True,
     }
     client_tls = {
@@ -405,7 +407,7 @@ def test_a_simulator_stack_gets_no_camera_secret_and_the_command_says_why(
         line = f"credentials: {n}: not made, the config runs no {p} service (supervisor.services)"
         assert f"{line}\n" in err, err
     assert (
-        "made for supervisor (the router); stack/sim, stack/detector, stack/controller, "
+        "made for stack/supervisor (the routers); stack/sim, stack/detector, stack/controller, "
         "stack/metrics (supervisor.services); stack/recorder, stack/estop, stack/observer "
         "(the tools" in err
     ), err

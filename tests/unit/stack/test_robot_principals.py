@@ -78,6 +78,50 @@ def test_the_pools_worker_is_admitted_by_each_robot_it_serves_on_that_robots_key
         assert {who for who, _, _ in hub.denied} == {"detector_gpu"}
 
 
+def test_only_the_linked_routers_named_get_a_linked_routers_rights() -> None:
+    """Robot 1's router key (``site/robot1/supervisor``, on robot 1's disk) connects straight to
+    robot 2's router as a linked router would: it gets nothing, neither what robot 2's
+    ``remote_principals`` may put (detections, cmd_vel) nor the asks; the GPU box's router
+    (``site/gpu/supervisor``, named in robot 2's ``zenoh.linked_routers``) may put detections.
+    Before per-stack routers every router was ``supervisor``: robot 1's put robot 2's
+    detections and commands."""
+    rules = access_control(
+        ROBOT2, CAMERAS, "certificate", workers=("detector",),
+        remote=("detector_gpu", "controller"), pool_prefix=SITE, linked=(f"{SITE}/gpu",),
+    )  # fmt: skip
+    hub = MemoryHub(rules)
+    heard: list[Sample] = []
+    two = principal_names(ROBOT2.prefix, SITE)
+    hub.join("robot 2's recorder", principal=two("recorder")).subscribe(
+        f"{ROBOT2.prefix}/**", heard.append
+    )
+    for router in (principal_names(ROBOT1.prefix, SITE)("supervisor"), "supervisor"):
+        rogue = hub.join("robot 1's router", principal=router)
+        got: list[Sample] = []
+        rogue.subscribe(ROBOT2.cmd_vel(), got.append)
+        for key in (ROBOT2.detections("front"), ROBOT2.cmd_vel(), ROBOT2.estop()):
+            rogue.publisher(key, QoS.CONTROL).put(b"rogue")
+        assert rogue.live_tokens(f"{ROBOT2.prefix}/**", 0.1) == []
+        assert got == [] and heard == [], router
+    box = hub.join("the GPU box's router", principal=f"{SITE}/gpu/supervisor")
+    box.publisher(ROBOT2.detections("front"), QoS.PERCEPTION).put(b"d")
+    box.publisher(ROBOT2.estop(), QoS.CONTROL).put(b"x")  # no remote principal may
+    assert [s.key for s in heard] == [ROBOT2.detections("front")]
+    # Robot 2's own router name has no linked rights once linked_routers names others.
+    assert f"{ROBOT2.prefix}/supervisor" not in str(rules["subjects"])
+
+
+def test_a_bad_linked_router_is_one_clear_line() -> None:
+    from common.settings import ZenohSettings
+
+    for bad in ("site//robot1", "site/../x", "site robot"):
+        with pytest.raises(ConfigError, match=r"zenoh\.linked_routers names") as err:
+            ZenohSettings(linked_routers=(bad,))
+        assert "\n" not in str(err.value)
+    with pytest.raises(ConfigError, match="twice"):
+        ZenohSettings(linked_routers=("site/gpu", "site/gpu"))
+
+
 def test_remote_principals_are_roles_and_a_qualified_one_is_one_clear_line() -> None:
     with pytest.raises(ValueError, match=r"write the roles \('camera'\)") as bad:
         access_control(ROBOT1, CAMERAS, "certificate", remote=("site/robot1/camera",))
