@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ctypes
+import faulthandler
 import logging
 import os
 import signal
@@ -73,6 +74,10 @@ def setup_logging(service: str, level: str | None = None) -> logging.Logger:
 SUPERVISOR_PID_ENV = "STACK_SUPERVISOR_PID"
 ORPHAN_POLL_S = 0.1  # how often a service checks that its supervisor is still its parent
 ORPHAN_GRACE_S = 1.0  # time to stop cleanly (the controller: command zero) before a hard exit
+#: A service still running this long after it was asked to stop writes every thread's stack
+#: to stderr (the supervisor's log), once: what holds a stop up is then on record, before the
+#: supervisor's stop_timeout_s (5 s) kills it.
+STOP_STACKS_AFTER_S = 3.0
 SIGNAL_POLL_S = 0.2  # the longest a StopEvent wait holds off a signal that hit another thread
 
 
@@ -133,7 +138,10 @@ def stop_event() -> StopEvent:
     # a pipe, which takes no lock, and a thread of its own reads it and sets the event.
     wake_read, wake_write = os.pipe()
     threading.Thread(
-        target=_relay_stops, args=(wake_read, event), name="stop-relay", daemon=True
+        target=_relay_stops,
+        args=(wake_read, event, supervisor_pid is not None),  # stacks: a supervised service's
+        name="stop-relay",
+        daemon=True,
     ).start()
 
     def _handler(signum: int, _frame: object) -> None:
@@ -149,10 +157,14 @@ def stop_event() -> StopEvent:
     return event
 
 
-def _relay_stops(wake_read: int, event: threading.Event) -> None:
+def _relay_stops(wake_read: int, event: threading.Event, stacks: bool = False) -> None:
     """Set ``event`` for each byte a stop signal's handler writes (see :func:`stop_event`);
     draining every byte, so that no number of signals can fill the pipe."""
+    armed = not stacks
     while os.read(wake_read, 1):
+        if not armed:  # the first stop; a process that exits in time never writes them
+            faulthandler.dump_traceback_later(STOP_STACKS_AFTER_S, exit=False)
+            armed = True
         event.set()
 
 

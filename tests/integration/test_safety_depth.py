@@ -125,9 +125,20 @@ def test_without_a_laser_the_depth_camera_shows_the_way_or_nothing_moves_forward
         # Before the memory, the robot drove on at once.
         since_cmds, since = len(cmds), len(status_raw)
         feeder.feed(person_and_depth(clear))
-        wait_for(lambda: len(status_raw) > since + 2 * TICKS, 30, "ticks with the floor seen")
+
+        def seen() -> list[str]:
+            # Ticks on fresh depth: on a loaded machine this test's feeder may fall behind,
+            # and a tick then blocks on the depth's age instead ("no recent depth": no motion
+            # either), which says nothing of the memory.
+            return [
+                x.reason
+                for x in statuses(status_raw, since + TICKS)
+                if not x.reason.startswith("no recent depth")
+            ]
+
+        wait_for(lambda: len(seen()) >= TICKS, 60, "ticks with the floor seen")
         assert forward(cmds, since_cmds) == [], "drove into what slipped into the blind zone"
-        said = {x.reason for x in statuses(status_raw, since + TICKS)}
+        said = set(seen())
         assert said and all(r.startswith("obstacle at 0.") for r in said), said
         assert all(r.endswith("(remembered)") for r in said), said
     finally:

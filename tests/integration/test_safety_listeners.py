@@ -269,8 +269,10 @@ def test_a_replay_never_reaches_a_live_robots_sensors(make_stack, tmp_path: Path
     assert live.stop() == 0, live.log()
 
     # The control: a stack with no live sensor takes the same recording, played back.
-    replay: Stack = make_stack(
-        zenoh=secure, supervisor={"services": ["detector", "controller", "metrics"]}
+    replay: Stack = make_stack(  # the credentials are the robot's: its prefix
+        zenoh=secure,
+        stack={"prefix": prefix},
+        supervisor={"services": ["detector", "controller", "metrics"]},
     )
     replay.wait_ready({"detector", "controller", "metrics"})
     _, dets = replay.subscribe(replay.keys.detections("front"))
