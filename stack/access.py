@@ -255,7 +255,15 @@ def _table(
         )
         tables = [table, *(access_table(r) for r in robots[1:])]
         table[ROUTER_PRINCIPAL] = merged(linked_router_access(t, remote) for t in tables)
+        for robot, t in zip(robots, tables, strict=True):
+            table[_linked(robot.keys.prefix)] = linked_router_access(t, remote)
     return table
+
+
+def _linked(prefix: str) -> str:
+    """The table's entry for the router of the robot of ``prefix``, linked to this one: what
+    that robot's principals among the remote ones may do on that robot's keys alone."""
+    return f"{ROUTER_PRINCIPAL}@{prefix}"
 
 
 def remote_cameras(cameras: Mapping[str, str], remote: Iterable[str]) -> dict[str, str]:
@@ -361,16 +369,19 @@ def access_control(
     policies: list[dict[str, Any]] = [{"rules": ["egress", "ask"], "subjects": ["everyone"]}]
     served = [e for e in ask_scope(keys, prefixes) if e not in rules[-1]["key_exprs"]]
     if served:
-        # The other robots a pool serves: only its workers (and a linked router, which
-        # brings the asks of the other hosts' principals) may ask there.
-        askers = [p for p in principals if is_detector_service(p) or p == ROUTER_PRINCIPAL]
+        # The other robots a pool serves: only its workers may ask there (and each robot's
+        # linked router in its own robot's prefix: _linked_rules).
+        askers = [n for p in principals if is_detector_service(p) for n in names(p)]
         rules.append({**rules[-1], "id": "ask_served", "key_exprs": served})
-        subjects.append({"id": "served_askers", match: [n for p in askers for n in names(p)]})
-        policies.append({"rules": ["ask_served"], "subjects": ["served_askers"]})
-    for principal, allowed in _table(
-        keys, cameras, live_sensors, workers, prefixes, remote, pool_prefix
-    ).items():
+        if askers:
+            subjects.append({"id": "served_askers", match: askers})
+            policies.append({"rules": ["ask_served"], "subjects": ["served_askers"]})
+    table = _table(keys, cameras, live_sensors, workers, prefixes, remote, pool_prefix)
+    for principal, allowed in table.items():
         if principal not in principals:
+            continue
+        if principal == ROUTER_PRINCIPAL and _linked(keys.prefix) in table:
+            _linked_rules(table, keys, linked, match, rules, subjects, policies)
             continue
         subjects.append({"id": principal, match: names(principal)})
         ids = []
@@ -395,6 +406,56 @@ def access_control(
         "subjects": subjects,
         "policies": policies,
     }
+
+
+def _linked_rules(
+    table: Mapping[str, Access],
+    keys: Keys,
+    linked: tuple[str, ...],
+    match: str,
+    rules: list[dict[str, Any]],
+    subjects: list[dict[str, Any]],
+    policies: list[dict[str, Any]],
+) -> None:
+    """A subject and rules per linked router (``<prefix>/supervisor`` for each prefix of
+    ``linked``): what its own robot's principals among the remote ones may do, on that robot's
+    keys alone, and asks in that robot's prefix; a pool's router linked to several robots so
+    gives robot 1's router nothing of robot 2's. A linked router of no robot this stack serves
+    (a GPU box's, on the robot it serves): what the remote principals may on this stack's keys.
+    """
+    own = table[_linked(keys.prefix)]
+    for i, prefix in enumerate(dict.fromkeys(linked)):
+        subject = f"linked_router_{i}"
+        subjects.append({"id": subject, match: [principal_name(prefix, ROUTER_PRINCIPAL)]})
+        ids = []
+        allowed = table.get(_linked(prefix), own)
+        kinds = dict(allowed.kinds())
+        for kind, key_exprs in kinds.items():
+            rule_id = f"{subject}_{kind}"
+            rules.append(
+                {
+                    "id": rule_id,
+                    "messages": KIND_MESSAGES[kind],
+                    "flows": ["ingress"],
+                    "permission": "allow",
+                    "key_exprs": list(key_exprs),
+                }
+            )
+            ids.append(rule_id)
+        if _linked(prefix) in table and prefix != keys.prefix:
+            ask_id = f"{subject}_ask"
+            rules.append(
+                {
+                    "id": ask_id,
+                    "messages": list(_ASK_MESSAGES),
+                    "flows": ["ingress"],
+                    "permission": "allow",
+                    "key_exprs": [f"{prefix}/**"],
+                }
+            )
+            ids.append(ask_id)
+        if ids:
+            policies.append({"rules": ids, "subjects": [subject]})
 
 
 def may_put(

@@ -206,22 +206,41 @@ def test_a_gpu_boxs_router_serving_two_robots_confines_its_worker_to_frames_and_
 ):
     """A GPU box's router (its own prefix ``pool``) whose worker serves robot 1 and robot 2,
     linked to each robot's router: the worker reads both robots' frames and puts both robots'
-    detections, and nothing else of theirs; the links bring each robot's frames."""
+    detections, and nothing else of theirs; each link brings its own robot's frames, and
+    nothing of the other robot's (issue 39: robot 1's router key acts on robot 1 alone)."""
     robot_principals = ("camera", "camera_rear", "controller", "metrics")
     acl = access_control(
         Keys("pool"), CAMERAS, "certificate", workers=(GPU_WORKER,),
         prefixes=(ROBOT1.prefix, ROBOT2.prefix), remote=robot_principals,
+        linked=(ROBOT1.prefix, ROBOT2.prefix),
     )  # fmt: skip
-    hub = MemoryHub(acl, names=principal_names("pool"))
+    role = principal_names("pool")
+    hub = MemoryHub(acl, names=lambda p: p if "/" in p else role(p))
     worker = hub.join(GPU_WORKER, principal=GPU_WORKER)
-    link = hub.join("robot routers", principal=ROUTER_PRINCIPAL)
+    links = {
+        robot: hub.join(f"{robot.prefix}'s router", principal=f"{robot.prefix}/supervisor")
+        for robot in (ROBOT1, ROBOT2)
+    }
     frames: list[Sample] = []
-    for robot in (ROBOT1, ROBOT2):
+    for robot, link in links.items():
         worker.subscribe(robot.all_frames(), frames.append)
         _put(link, robot.frame("front"))
     assert [s.key for s in frames] == [ROBOT1.frame("front"), ROBOT2.frame("front")]
+    # Robot 1's router puts nothing on robot 2's keys, hears nothing of robot 2 and asks
+    # nothing there.
+    _put(links[ROBOT1], ROBOT2.frame("front"))
+    assert len(frames) == 2
+    stolen: list[Sample] = []
+    links[ROBOT1].subscribe(ROBOT2.all_detections(), stolen.append)
+    _put(worker, ROBOT2.detections("front"))
+    assert stolen == []
+    assert _asks(links[ROBOT1]) == []
+    robot1_router = f"{ROBOT1.prefix}/supervisor"
+    refused = {kind for who, kind, key in hub.denied
+               if who == robot1_router and key.startswith(ROBOT2.prefix)}  # fmt: skip
+    assert {"put", "declare_subscriber", "query", "liveliness_query"} <= refused, refused
     heard: list[Sample] = []
-    for robot in (ROBOT1, ROBOT2):
+    for robot, link in links.items():
         link.subscribe(robot.all_detections(), heard.append)  # each controller's, via its router
         link.subscribe(robot.cmd_vel(), heard.append)  # nobody here may put it anyway
         for key in (robot.detections("rear"), robot.frame("rear"), robot.cmd_vel(), robot.estop(),
