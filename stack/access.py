@@ -384,19 +384,7 @@ def access_control(
             _linked_rules(table, keys, linked, match, rules, subjects, policies)
             continue
         subjects.append({"id": principal, match: names(principal)})
-        ids = []
-        for kind, key_exprs in allowed.kinds().items():
-            rule_id = f"{principal}_{kind}"
-            rules.append(
-                {
-                    "id": rule_id,
-                    "messages": KIND_MESSAGES[kind],
-                    "flows": ["ingress"],
-                    "permission": "allow",
-                    "key_exprs": list(key_exprs),
-                }
-            )
-            ids.append(rule_id)
+        ids = _kind_rules(principal, allowed, rules)
         if ids:
             policies.append({"rules": ids, "subjects": [principal]})
     return {
@@ -406,6 +394,25 @@ def access_control(
         "subjects": subjects,
         "policies": policies,
     }
+
+
+def _kind_rules(subject: str, allowed: Access, rules: list[dict[str, Any]]) -> list[str]:
+    """Append an ingress rule per kind of message ``allowed`` names, for ``subject``; their
+    ids."""
+    ids = []
+    for kind, key_exprs in allowed.kinds().items():
+        rule_id = f"{subject}_{kind}"
+        rules.append(
+            {
+                "id": rule_id,
+                "messages": KIND_MESSAGES[kind],
+                "flows": ["ingress"],
+                "permission": "allow",
+                "key_exprs": list(key_exprs),
+            }
+        )
+        ids.append(rule_id)
+    return ids
 
 
 def _linked_rules(
@@ -427,21 +434,7 @@ def _linked_rules(
     for i, prefix in enumerate(dict.fromkeys(linked)):
         subject = f"linked_router_{i}"
         subjects.append({"id": subject, match: [principal_name(prefix, ROUTER_PRINCIPAL)]})
-        ids = []
-        allowed = table.get(_linked(prefix), own)
-        kinds = dict(allowed.kinds())
-        for kind, key_exprs in kinds.items():
-            rule_id = f"{subject}_{kind}"
-            rules.append(
-                {
-                    "id": rule_id,
-                    "messages": KIND_MESSAGES[kind],
-                    "flows": ["ingress"],
-                    "permission": "allow",
-                    "key_exprs": list(key_exprs),
-                }
-            )
-            ids.append(rule_id)
+        ids = _kind_rules(subject, table.get(_linked(prefix), own), rules)
         if _linked(prefix) in table and prefix != keys.prefix:
             ask_id = f"{subject}_ask"
             rules.append(
