@@ -204,15 +204,14 @@ def assign_pool(
     a live worker lists: each robot's cameras by :func:`assign` among the workers that list
     its prefix, each with its :func:`robot_capacity`, but those ``(prefix, worker)`` of
     ``excluded`` (dropped from that robot for not delivering: common/pool_delivery.py). A
-    camera of a robot no worker lists has no owner. With one robot this is :func:`assign`
-    over the workers' capacities."""
+    camera of a robot no worker lists has no owner. Never every worker of a robot: when the
+    only ones left that list it are excluded (the others left the pool since), they all serve
+    it, as a worker alone is never dropped. With one robot this is :func:`assign` over the
+    workers' capacities."""
     out: dict[str, str] = {}
     for prefix in sorted({c.prefix for c in cameras.values()}):
-        eligible = {
-            w: robot_capacity(p)
-            for w, p in workers.items()
-            if prefix in p.prefixes and (prefix, w) not in excluded
-        }
+        listing = {w: robot_capacity(p) for w, p in workers.items() if prefix in p.prefixes}
+        eligible = {w: c for w, c in listing.items() if (prefix, w) not in excluded} or listing
         rates = {n: c.rate_hz for n, c in cameras.items() if c.prefix == prefix}
         out.update(assign(eligible, rates, balance))
     return out

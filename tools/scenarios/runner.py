@@ -42,6 +42,8 @@ from tools.scenarios.score import ScenarioLog, score
 
 STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
 STOP_TIMEOUT_S = 30.0  # then the whole stack is killed
+#: The longest a scripted detector kill waits past its time for the robot to move.
+KILL_WAIT_MOVING_S = 5.0
 SETTLE_CHECK_S = 0.5  # how often a run that may end early is scored so far
 
 
@@ -309,6 +311,16 @@ class Settle:
         return sim_time_s - self._since >= self.hold_s
 
 
+def _kill_now(rec: ScenarioLog, kill_at: float) -> bool:
+    """Whether to kill the detector now: from ``kill_at`` (scenario time) on, once the robot
+    moves (what the scenario shows is a stop from motion: on a loaded machine the robot may be
+    stopped for a stale detection at ``kill_at`` itself), and at ``kill_at`` +
+    :data:`KILL_WAIT_MOVING_S` whatever it does (the score then says it was not moving)."""
+    now = _sim_time(rec)
+    moving = bool(rec.twists) and not rec.twists[-1].is_zero
+    return now >= kill_at and (moving or now >= kill_at + KILL_WAIT_MOVING_S)
+
+
 def _drive(
     proc: subprocess.Popen[bytes],
     scenario: Scenario,
@@ -336,7 +348,7 @@ def _drive(
         if proc.poll() is not None:
             raise StackError("the stack exited during the scenario")
         kill_at = scenario.kill_detector_at_s
-        if kill_at is not None and rec.kill_ns is None and _sim_time(rec) >= kill_at:
+        if kill_at is not None and rec.kill_ns is None and _kill_now(rec, kill_at):
             for pid in service_pids("detector", config_path):
                 os.kill(pid, signal.SIGKILL)
             rec.kill_ns = wall_ns()

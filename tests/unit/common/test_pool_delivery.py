@@ -155,3 +155,19 @@ def test_a_member_whose_token_goes_is_judged_afresh_as_a_later_judge_would() -> 
         [drop] = judge.judge(t + DELIVER_S + 0.1, given, CAMERAS, members)
         waits.append(drop.until - drop.since)
     assert waits == pytest.approx([READMIT_S, READMIT_S])
+
+
+def test_a_dropped_member_left_alone_serves_every_camera() -> None:
+    # Issue 39, a CI run: a member dropped for not delivering (its link cut) stayed dropped
+    # once the others left the pool, and nobody served the robot's cameras until its
+    # readmission, up to pool_readmit_s x 32 later. Never every worker of a robot.
+    d = Delivery(DELIVER_S, READMIT_S)
+    members = {"detector": HONEST, "liar": LIAR}
+    given = owners(d, 0.0, members)
+    d.judge(0.0, given, CAMERAS, members)
+    [drop] = d.judge(DELIVER_S + 0.1, given, CAMERAS, members)
+    assert drop.worker == "liar"
+    alone = {"liar": LIAR}  # the honest member's token went
+    d.left("detector")
+    assert set(owners(d, DELIVER_S + 1.0, alone).values()) == {"liar"}
+    assert set(owners(d, DELIVER_S + 1.0, alone)) == set(CAMERAS)
