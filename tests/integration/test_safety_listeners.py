@@ -61,6 +61,10 @@ def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
         tmp,
         zenoh={"mode": "client", "auth": "password", "credentials_dir": str(creds)},
         stack={"prefix": prefix},
+        # What is measured is the router's and the controller's; the detector at 320 leaves
+        # them more of a loaded CI machine's cores (at 640, with two CPU burners and another
+        # test's stack beside, 13 of 786 round trips took over 0.2 s).
+        detector={"imgsz": 320},
     )
     stack = Stack(config, tmp / "supervisor.log")
     try:
