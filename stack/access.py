@@ -300,6 +300,16 @@ def ask_scope(keys: Keys, prefixes: Iterable[str] = ()) -> list[str]:
     return [f"{p}/**" for p in dict.fromkeys((keys.prefix, *prefixes))]
 
 
+def pool_scope(keys: Keys, pool_prefix: str) -> list[str]:
+    """Where every principal may ask in a pool of its own prefix (``detector.pool_prefix``):
+    its tokens and announcements (``<pool>/detector/...``), not all of ``<pool>/**``, which
+    holds the robots' prefixes too in a site's layout (``site`` and ``site/robot1``): robot 1's
+    principals would ask robot 2's metrics through the links."""
+    if not pool_prefix or pool_prefix == keys.prefix:
+        return []
+    return [f"{pool_prefix}/detector/**"]
+
+
 def access_control(
     keys: Keys,
     cameras: str | Mapping[str, str],
@@ -360,7 +370,7 @@ def access_control(
             "messages": list(_ASK_MESSAGES),
             "flows": ["ingress"],
             "permission": "allow",
-            "key_exprs": ask_scope(keys, (pool_prefix,) if pool_prefix else ()),
+            "key_exprs": [*ask_scope(keys), *pool_scope(keys, pool_prefix)],
         },
     ]
     subjects: list[dict[str, Any]] = [

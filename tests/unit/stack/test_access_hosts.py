@@ -274,3 +274,20 @@ def test_a_pool_under_its_own_prefix_announces_there_and_every_principal_may_wat
         pool.all_pool_members(), lambda k, alive: seen.append(k)
     )
     assert seen == [pool.pool_member("detector")]
+
+
+def test_in_a_sites_layout_the_pools_scope_holds_no_other_robot() -> None:
+    """The README's layout: robots ``site/robot1`` and ``site/robot2``, their pool ``site``.
+    Every principal may ask in the pool (its tokens and announcements), and that must not
+    open ``site/**``, the other robot's prefix with it: robot 1's observer asked robot 2's
+    metrics through the links (issue 39)."""
+    robot1, robot2, site = Keys("site/robot1"), Keys("site/robot2"), Keys("site")
+    acl = access_control(robot1, CAMERAS, "password", pool_prefix=site.prefix)
+    role = principal_names(robot1.prefix, site.prefix)
+    hub = MemoryHub(acl, names=role)
+    observer = hub.join("observer", principal="observer")
+    observer.live_tokens(site.all_pool_members(), 1.0)
+    observer.query(robot2.metrics(), 1.0)
+    observer.live_tokens(robot2.all_health(), 1.0)
+    asked = {(kind, key) for who, kind, key in hub.denied if who == "observer"}
+    assert asked == {("query", robot2.metrics()), ("liveliness_query", robot2.all_health())}
