@@ -198,13 +198,19 @@ def _interrupt(_signum: int, _frame: object) -> None:
     raise KeyboardInterrupt
 
 
-def run_main(main: Callable[[], int], prog: str) -> None:
+def run_main(main: Callable[[], int], prog: str, *, skip_finalizing: bool = False) -> None:
     """Run ``main`` and exit with its code; a StackError becomes one line on stderr.
 
     SIGTERM is taken as Ctrl-C (KeyboardInterrupt, exit 130) unless something already handles
     it: Python's default would end a command mid-step without running its cleanup (a
     half-converted model, a temporary folder left in models/). A service's own handler
     (stop_event) replaces this one when the service starts.
+
+    ``skip_finalizing``: once ``main`` has returned (it closes what it opened: its session, its
+    model), flush the logs and standard streams and end the process at once, without the
+    interpreter's finalization. The detector, its Python done, was seen to hang there for
+    more than the supervisor's stop_timeout_s on a loaded machine (its stacks, dumped after
+    3 s: one thread, no Python frame: native runtimes' teardown) and be killed (issue 39).
     """
     if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _interrupt)
@@ -221,4 +227,9 @@ def run_main(main: Callable[[], int], prog: str) -> None:
         # /dev/null so that the interpreter's own final flush cannot fail again.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         code = EXIT_OK
+    if skip_finalizing:
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
     raise SystemExit(code)

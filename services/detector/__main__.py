@@ -72,4 +72,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    run_main(main, "detector")
+    run_main(main, "detector", skip_finalizing=True)

@@ -35,6 +35,9 @@ from tools.launch import service_pids
 pytestmark = pytest.mark.integration
 
 DEFAULT = ["recorder", "sim", "detector", "controller", "metrics"]
+#: Both detectors' input, the recording's and the replay's (they must match): at 640 a loaded
+#: CI machine's fresh detector made 5 detections in 90 s, too few frames to compare.
+REPLAY_IMGSZ = 320
 TOPICS = {"/camera/rgb/image_raw", "/detections", "/cmd_vel", "/scan"}
 
 
@@ -141,6 +144,7 @@ def test_record_read_replay_and_bad_files(make_stack, tmp_path: Path) -> None:  
         supervisor={"services": DEFAULT},
         recorder={"output_dir": str(tmp_path / "rec"), "flush_period_s": 0.5},
         sim={"camera_rate_hz": 2.0},
+        detector={"imgsz": REPLAY_IMGSZ},
     )
     stack.wait_ready(set(DEFAULT))
     _check_priority(stack)
@@ -167,7 +171,9 @@ def test_record_read_replay_and_bad_files(make_stack, tmp_path: Path) -> None:  
 
     # 2. Replay it into a fresh detector: the frames both detectors saw give the same detections.
     recorded = load_run(recording).detections
-    fresh: Stack = make_stack(supervisor={"services": ["detector"]})
+    fresh: Stack = make_stack(
+        supervisor={"services": ["detector"]}, detector={"imgsz": REPLAY_IMGSZ}
+    )
     fresh.wait_ready({"detector"})
     _, replayed = fresh.subscribe(fresh.keys.detections("front"))
     player = _recorder(fresh, "play", str(recording), "--loop")
