@@ -143,6 +143,7 @@ class PoolMember:
         # The process is asked to stop (its stop event): a worker the watchdog found hung and
         # stopped must never rejoin the pool on its way out (issue 39).
         self._stopping = stopping
+        self._told_members = -1  # the pool's size last said in the log
         self._heard = threading.Event()  # an announcement came or went
         self._stall_watch: threading.Thread | None = None
         self.announcement = WorkerAnnouncement(
@@ -538,7 +539,8 @@ class PoolMember:
                 count_for(node, cam, contract.CAMERAS_GAINED)
             for cam in lost:
                 count_for(node, cam, contract.CAMERAS_LOST)
-        if change.gained or change.lost:
+        told, self._told_members = self._told_members, change.members
+        if change.gained or change.lost or change.members != told:
             node.log.info(
                 "pool of %d: serving %s (gained %s, lost %s)",
                 change.members,
