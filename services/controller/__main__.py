@@ -74,4 +74,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    run_main(main, "controller")
+    run_main(main, "controller", skip_finalizing=True)
