@@ -41,6 +41,13 @@ def statuses(raw: list[bytes], start: int = 0) -> list[ControllerStatus]:
     return [ControllerStatus.decode(s) for s in list(raw)[start:]]
 
 
+def on_fresh_depth(raw: list[bytes], start: int = 0) -> list[str]:
+    """The reasons of the statuses from ``start`` on whose tick had fresh depth: on a loaded
+    machine a test's feeder may fall behind, and a tick then blocks on the depth's age ("no
+    recent depth": no motion either), which says nothing of what the depth shows."""
+    return [x.reason for x in statuses(raw, start) if not x.reason.startswith("no recent depth")]
+
+
 def depth_robot(make_stack) -> tuple[Stack, list[bytes], list[bytes]]:  # type: ignore[no-untyped-def]
     """A controller alone in track mode whose obstacles are the depth camera's, the camera
     announced with depth by the test's session (which stands in for the camera, the detector
@@ -125,17 +132,7 @@ def test_without_a_laser_the_depth_camera_shows_the_way_or_nothing_moves_forward
         # Before the memory, the robot drove on at once.
         since_cmds, since = len(cmds), len(status_raw)
         feeder.feed(person_and_depth(clear))
-
-        def seen() -> list[str]:
-            # Ticks on fresh depth: on a loaded machine this test's feeder may fall behind,
-            # and a tick then blocks on the depth's age instead ("no recent depth": no motion
-            # either), which says nothing of the memory.
-            return [
-                x.reason
-                for x in statuses(status_raw, since + TICKS)
-                if not x.reason.startswith("no recent depth")
-            ]
-
+        seen = lambda: on_fresh_depth(status_raw, since + TICKS)  # noqa: E731
         wait_for(lambda: len(seen()) >= TICKS, 60, "ticks with the floor seen")
         assert forward(cmds, since_cmds) == [], "drove into what slipped into the blind zone"
         said = set(seen())
@@ -185,22 +182,13 @@ def test_what_the_depth_camera_cannot_see_is_not_clear(make_stack, case: str) ->
         wait_for(lambda: forward(cmds), 30, "forward motion with the floor seen clear")
         image = UNSEEN[case]()
         since_cmds, since = len(cmds), len(status_raw)
-
-        def on_fresh_depth() -> list[str]:
-            # A tick on depth gone stale (the feeder behind on a loaded machine) blocks for
-            # its age ("no recent depth": no motion either), which says nothing of the image.
-            return [
-                x.reason
-                for x in statuses(status_raw, since + TICKS)
-                if not x.reason.startswith("no recent depth")
-            ]
-
-        wait_for(lambda: len(on_fresh_depth()) >= TICKS, 60, "ticks with the image")
+        seen = lambda: on_fresh_depth(status_raw, since + TICKS)  # noqa: E731
+        wait_for(lambda: len(seen()) >= TICKS, 60, "ticks with the image")
         settled = statuses(status_raw, since + TICKS)
         first = settled[0].header.stamp_ns
         late = [t for t in forward(cmds, since_cmds) if t.header.stamp_ns >= first]
         assert late == [], f"{case}: drove forward {len(late)} times"
-        said = set(on_fresh_depth())
+        said = set(seen())
         assert said and all(r.endswith("(depth)") for r in said), said
     finally:
         feeder.close()
