@@ -1,10 +1,14 @@
 """The bus protocol (common/bus.py) in one process: the in-process tests' bus.
 
 A :class:`MemoryHub` is the bus; each :meth:`MemoryHub.join` is one participant (a service, a
-test's probe), a :class:`MemoryBus`. Delivery happens in the putting thread, before ``put``
-returns, in the order subscribers were declared: a test puts a message and reads what came of
-it on the next line, with no wait. A participant's ``close()`` is its process ending: its
-tokens go, and every watcher hears it.
+test's probe), a :class:`MemoryBus`. By default delivery happens in the putting thread, before
+``put`` returns, in the order subscribers were declared: a test puts a message and reads what
+came of it on the next line, with no wait. With ``threads`` (``MemoryHub(threads=2, seed=7)``)
+it happens on threads of the hub's own, as on Zenoh: each subscription's and each token
+watch's calls in order, the declarations interleaved in an order shuffled by ``seed``
+(common/memory_delivery.py); a test then calls ``hub.drain()`` before it reads what came of a
+put. A participant's ``close()`` is its process ending: its tokens go, and every watcher hears
+it.
 
 Access control as the supervisor's router enforces it: a hub made with the router's
 ``access_control`` section (stack/access.py) takes each participant's principal
@@ -14,10 +18,11 @@ denied token is not seen, a denied queryable answers nothing, a denied query or 
 hears nothing. Each denial is noted in ``hub.denied`` as ``(principal, kind, key)``; as on the
 router, the participant is not told.
 
-What it leaves out of Zenoh on purpose: no network (nothing is lost, delayed or reordered),
-and a bounded subscription's depth (a sample is handled as it is put). Those are the
-real-process tests' to check. A handler's exception is not swallowed as Zenoh's thread would
-(it logs it): it reaches the test that put the sample.
+What it leaves out of Zenoh on purpose: no network (nothing is lost, and one publisher's
+samples are never reordered), a bounded subscription's depth (every sample is handled), and a
+queryable's answer runs in the querier's thread. Those are the real-process tests' to check. A
+handler's exception is not swallowed as Zenoh's thread would (it logs it): it reaches the test
+that put the sample (or, delivered on the hub's threads, its next ``drain()``).
 """
 
 from __future__ import annotations
@@ -26,10 +31,12 @@ import itertools
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 from common.acl import AccessRules
 from common.bus import Answer, OnSample, OnToken, QoS, Reply, Sample
+from common.memory_delivery import DRAIN_TIMEOUT_S, Delivery, Inline, Threaded
 
 
 def intersects(a: str, b: str) -> bool:
@@ -65,6 +72,12 @@ class _Entry:
         self.owner.hub._undeclare(self)
 
 
+def _call(entry: _Entry, *args: object) -> None:
+    """``entry``'s callback with ``args``, unless it was undeclared meanwhile."""
+    if entry.alive and entry.call is not None:
+        entry.call(*args)
+
+
 class MemoryPublisher:
     def __init__(
         self,
@@ -98,10 +111,17 @@ class MemoryPublisher:
 
 class MemoryHub:
     """The in-process bus: every participant's subscriptions, tokens and queryables; with
-    ``access`` (the router's ``access_control`` section), its access rules too."""
+    ``access`` (the router's ``access_control`` section), its access rules too. ``threads``:
+    deliver on that many threads of the hub's own (0: in the putting thread), the order of
+    the declarations shuffled by ``seed``; :meth:`close` ends them."""
 
     def __init__(
-        self, access: Mapping[str, Any] | None = None, names: Callable[[str], str] | None = None
+        self,
+        access: Mapping[str, Any] | None = None,
+        names: Callable[[str], str] | None = None,
+        *,
+        threads: int = 0,
+        seed: int | None = None,
     ) -> None:
         self.rules = AccessRules(access) if access else None
         #: The name each participant's principal authenticates as (a role's, as
@@ -116,6 +136,17 @@ class MemoryHub:
         self._queryables: list[_Entry] = []
         self._ids = itertools.count(1)
         self._buses = itertools.count(1)
+        self._delivery: Delivery = Threaded(threads, seed) if threads else Inline()
+
+    def drain(self, timeout_s: float = DRAIN_TIMEOUT_S) -> None:
+        """Return once every sample put and every token's event so far (and what their
+        handlers put in turn) has been handled: at once when delivery is in the putting
+        thread. A handler's exception since the last drain is raised here."""
+        self._delivery.drain(timeout_s)
+
+    def close(self) -> None:
+        """End the delivery threads (nothing more is delivered)."""
+        self._delivery.close()
 
     def join(self, name: str = "", *, principal: str | None = None) -> MemoryBus:
         """A new participant (``name`` only for reading its id in a failure), authenticated
@@ -151,15 +182,18 @@ class MemoryHub:
         with self._lock:
             subs = [s for s in self._subs if intersects(s.key, sample.key)]
         for sub in subs:
-            if sub.alive and sub.call is not None:
-                sub.call(sample)
+            self._delivery.submit(sub, partial(_call, sub, sample))
 
     def _token_event(self, key: str, alive: bool) -> None:
         with self._lock:
             watches = [w for w in self._watches if intersects(w.key, key)]
         for watch in watches:
-            if watch.alive and watch.call is not None:
-                watch.call(key, alive)
+            self._delivery.submit(watch, partial(_call, watch, key, alive))
+
+    def _history(self, watch: _Entry, keys: list[str]) -> None:
+        """A new watch hears the tokens alive now first, as its first calls."""
+        for key in keys:
+            self._delivery.submit(watch, partial(_call, watch, key, True))
 
     def _undeclare(self, entry: _Entry) -> None:
         with self._lock:
@@ -235,9 +269,11 @@ class MemoryBus:
     def watch_tokens(self, key: str, handle: OnToken) -> _Entry:
         if not self.admitted("declare_liveliness_subscriber", key):
             return self._denied(key)
-        entry = self.hub._add(self.hub._watches, _Entry(self, key, handle))
-        for token in self.hub.tokens(key):  # history: the ones alive now first
-            handle(token, True)
+        entry = _Entry(self, key, handle)
+        with self.hub._lock:  # no token comes or goes between its history and its watch
+            history = self.hub.tokens(key)
+            self.hub._add(self.hub._watches, entry)
+        self.hub._history(entry, history)
         return entry
 
     def live_tokens(self, key: str, timeout_s: float) -> list[str]:

@@ -1,7 +1,8 @@
 """The bus protocol's contract (common/bus.py), checked on both implementations: two Zenoh
-sessions linked over loopback, and two participants of a MemoryHub. What the in-process tests
-rely on the in-memory bus for is what Zenoh does; where Zenoh takes time, the check waits for
-it (the memory bus has it done before the call returns)."""
+sessions linked over loopback, and two participants of a MemoryHub, delivering in the putting
+thread or on threads of its own. What the in-process tests rely on the in-memory bus for is
+what Zenoh does; where Zenoh takes time, the check waits for it (the memory bus has it done
+before the call returns, or once ``drain()`` returns)."""
 
 from __future__ import annotations
 
@@ -44,14 +45,25 @@ def _poll(check: Callable[[], bool]) -> bool:
     return bool(wait_for(check, 10.0, "the Zenoh sessions to agree", poll=0.02))
 
 
-@pytest.fixture(params=["memory", "zenoh"])
+@pytest.fixture(params=["memory", "memory-threaded", "zenoh"])
 def pair(request: pytest.FixtureRequest) -> Iterator[Pair]:
-    if request.param == "memory":
-        hub = MemoryHub()
+    if request.param.startswith("memory"):
+        hub = MemoryHub(threads=3 if request.param == "memory-threaded" else 0, seed=1)
+
+        def drained(check: Callable[[], bool]) -> bool:
+            """``check()`` once what was put has been handled: a check that puts (and then
+            looks at what was heard) is asked twice, the second time after its put's drain."""
+            hub.drain()
+            if check():
+                return True
+            hub.drain()
+            return check()
+
         a, b = hub.join("a"), hub.join("b")
-        yield Pair(a, b, lambda check: check())
+        yield Pair(a, b, drained)
         b.close()
         a.close()
+        hub.close()
         return
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     za = ZenohBus(_session([endpoint], []))
