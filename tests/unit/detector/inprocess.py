@@ -67,6 +67,7 @@ class Worker:
         self, hub: MemoryHub, clock: FakeClock, config: Config, name: str, capacity_hz: float = 0
     ) -> None:
         self.name = name
+        self.hub = hub
         self.stop = threading.Event()  # the process's stop event (common/lifecycle.py)
         self.bus: MemoryBus = hub.join(name)
         self.node = Node(name, config, bus=self.bus, clock=clock)
@@ -77,10 +78,13 @@ class Worker:
         )
 
     def loop_pass(self) -> frozenset[str]:
-        """What the detection loop does on each pass (beat, settle, audit); what it serves."""
+        """What the detection loop does on each pass (beat, settle, audit), once what was put
+        before has been delivered; what it serves once what the pass put has been too."""
+        self.hub.drain()
         self.pool.beat()
         self.pool.settle()
         self.pool.audit()
+        self.hub.drain()
         return self.handlers.serving
 
     def count(self, name: str) -> int:

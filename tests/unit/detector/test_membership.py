@@ -1,12 +1,14 @@
 """The pool's membership and hand-over (services/detector/membership.py) in one process: workers
 on a MemoryHub (common/memory_bus.py) with a FakeClock, each pass of their detection loop run by
 the test. Deterministic and instant: a worker's death is its bus closing, a stall is the clock
-moved past ``detector.pool_stall_s`` with no beat and the stall check called."""
+moved past ``detector.pool_stall_s`` with no beat and the stall check called. Each test runs
+twice: with delivery in the putting thread, and on the hub's threads in a shuffled order (as
+Zenoh's callbacks come), where a pass waits for what was put before (``hub.drain()``)."""
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
@@ -23,19 +25,22 @@ from common.node import Node
 from services.detector.pool import assign
 from services.detector.pool_checks import AUDIT_PERIOD_S
 from stack.config import Config
+from tests.unit.conftest import MEMORY_BUS_SEED
 from tests.unit.detector.inprocess import CameraSource, Worker, cameras_config
 
 CAMERAS = ("front", "rear", "left", "right", "top", "back")
 
 
 @pytest.fixture
-def hub() -> MemoryHub:
+def hub(delivery_threads: int) -> Iterator[MemoryHub]:
     """The bus, with CAMERAS announced on it (equal rates) by their source."""
-    hub = MemoryHub()
+    hub = MemoryHub(threads=delivery_threads, seed=MEMORY_BUS_SEED)
     source = CameraSource(hub)
     for cam in CAMERAS:
         source.announce(cam)
-    return hub
+    hub.drain()
+    yield hub
+    hub.close()
 
 
 @pytest.fixture
@@ -91,6 +96,7 @@ def put_frame(hub: MemoryHub, config: Config, camera: str, clock: FakeClock) -> 
     header: Header = cam.header(frame_id=camera)
     frame = image_to_frame(np.zeros((8, 8, 3), np.uint8), header)
     cam.publisher(cam.keys.frame(camera), QoS.SENSOR).put(frame.encode())
+    hub.drain()
 
 
 @pytest.mark.parametrize("names", [("detector", "detector_2"), ("a", "b", "c")])
@@ -118,6 +124,7 @@ def test_a_dead_worker_hands_its_cameras_to_the_others_at_their_next_settle(
     a, b, c = start(hub, clock, config, "a", "b", "c")
     before = split([a, b, c])
     c.bus.close()  # the process is gone: its tokens with it
+    hub.drain()  # and every watcher heard it
     assert hub.tokens(c.node.keys.pool_member("c")) == []
     assert split([a, b]) == {n: before[n] for n in "ab"}  # not inside the bus's callback
     a.loop_pass()
@@ -215,6 +222,7 @@ def test_a_settle_while_resigned_never_serves_again_until_the_next_beat(
     # stalled between beat and settle); that must not switch serving back on.
     c = Worker(hub, clock, config, "detector_3")
     c.pool.join()
+    hub.drain()  # a has heard of c
     a.pool.settle()
     assert a.handlers.serving == frozenset(), "a resigned worker serves again"
     assert hub.tokens(a.node.keys.pool_serving_of("detector")) == []
@@ -257,6 +265,7 @@ def test_a_stall_inside_a_settle_does_not_switch_serving_back_on(
     assert a.loop_pass() == frozenset(CAMERAS)
     b = Worker(hub, clock, config, "detector_2")
     b.pool.join()  # a loses some cameras at its next settle
+    hub.drain()
     stall["armed"] = True
     a.pool.settle()
     assert not stall["armed"], "the settle undeclared nothing: the test tests nothing"

@@ -6,6 +6,7 @@ refused with a warning and counted, by every worker alike."""
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 
 import pytest
 
@@ -13,7 +14,16 @@ from common.clock import FakeClock
 from common.memory_bus import MemoryHub
 from common.pool_rule import PoolCamera, admit_cameras, counter_key
 from services.detector import contract
+from tests.unit.conftest import MEMORY_BUS_SEED
 from tests.unit.detector.inprocess import CameraSource, Worker, cameras_config
+
+
+@pytest.fixture
+def hub(delivery_threads: int) -> Iterator[MemoryHub]:
+    """The bus: delivering in the putting thread, or on threads of its own (conftest.py)."""
+    hub = MemoryHub(threads=delivery_threads, seed=MEMORY_BUS_SEED)
+    yield hub
+    hub.close()
 
 
 def test_admitted_by_name_alike_everywhere() -> None:
@@ -34,9 +44,9 @@ def test_admitted_by_name_alike_everywhere() -> None:
 
 
 def test_a_worker_refuses_a_robots_cameras_over_the_cap_and_colliding_labels(
-    caplog: pytest.LogCaptureFixture,
+    hub: MemoryHub, caplog: pytest.LogCaptureFixture
 ) -> None:
-    hub, clock = MemoryHub(), FakeClock()
+    clock = FakeClock()
     CameraSource(hub).announce("front")
     robot2 = CameraSource(hub, "robot2")
     for cam in ("c0", "c1", "c2", "cam.x", "cam_x", "zz"):

@@ -1,11 +1,13 @@
 """The pool over announcements (issue 31, items 1-3 and 5's worker side), in one process on a
 MemoryHub with a FakeClock: the cameras come from their sources' announcements, not from a
 worker's config; the members are the workers that announce themselves (a bare pool token is
-ignored); shares follow the announced capacities; one worker serves several robots."""
+ignored); shares follow the announced capacities; one worker serves several robots. Each test
+runs with delivery in the putting thread and on the hub's threads (tests/unit/conftest.py)."""
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -24,12 +26,15 @@ from services.detector.membership import PoolMember
 from services.detector.pool_checks import AUDIT_PERIOD_S
 from services.detector.service import ServedCameras
 from stack.config import Config
+from tests.unit.conftest import MEMORY_BUS_SEED
 from tests.unit.detector.inprocess import CameraSource, Worker, cameras_config
 
 
 @pytest.fixture
-def hub() -> MemoryHub:
-    return MemoryHub()
+def hub(delivery_threads: int) -> Iterator[MemoryHub]:
+    hub = MemoryHub(threads=delivery_threads, seed=MEMORY_BUS_SEED)
+    yield hub
+    hub.close()
 
 
 @pytest.fixture
@@ -63,6 +68,7 @@ def frame_to(hub: MemoryHub, clock: FakeClock, prefix: str, camera: str) -> None
     node = Node("camera", config, bus=hub.join(f"cam_{prefix}_{camera}"), clock=clock)
     frame = image_to_frame(np.zeros((8, 8, 3), np.uint8), node.header(frame_id=camera))
     node.publisher(node.keys.frame(camera), QoS.SENSOR).put(frame.encode())
+    hub.drain()
 
 
 def test_workers_whose_configs_disagree_serve_every_announced_camera_once(
@@ -93,6 +99,7 @@ def test_a_camera_announced_at_run_time_is_served_and_one_withdrawn_is_dropped(
     (w,) = joined(hub, clock, (cameras_config(("x", "y")), "detector", 0))
     assert w.handlers.serving == {"front"}
     source.announce("side")  # a camera that appears while the worker runs
+    hub.drain()
     assert w.handlers.serving == {"front"}  # not inside the bus's callback
     assert w.loop_pass() == {"side", "front"}
     frame_to(hub, clock, "stack", "side")
@@ -225,10 +232,12 @@ def test_each_robots_detections_and_info_go_on_its_own_keys(
     hub.join("probe").subscribe("**/detections", lambda s: heard.append(s.key))
     assert handlers.serving == {"robot2:front"}
     cameras.outputs["robot2:front"].put(b"detections")
+    hub.drain()
     assert heard == [Keys("robot2").detections("front")]
     asker = hub.join("asker")
     info = Keys("robot2").detector_info("front")
     assert [r.payload for r in asker.query(info, 1.0)] == [b'{"model": "m"}']
     source.withdraw("front")  # dropped: its info is no longer answered here
+    hub.drain()
     pool.settle()
     assert handlers.serving == frozenset() and asker.query(info, 1.0) == []

@@ -7,6 +7,7 @@ the real worker, which sees no detections of them come, takes them back within
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 
 import pytest
 
@@ -19,6 +20,7 @@ from common.messages import WorkerAnnouncement
 from services.detector import contract
 from services.detector.contract import MAX_CAPACITY_HZ
 from services.detector.pool_checks import AUDIT_PERIOD_S
+from tests.unit.conftest import MEMORY_BUS_SEED
 from tests.unit.detector.inprocess import CameraSource, Worker, cameras_config
 
 CAMERAS = ("front", "rear", "left", "right")
@@ -27,19 +29,28 @@ READMIT_S = 30.0
 ALARM_S = 1.0
 
 
+@pytest.fixture
+def hub(delivery_threads: int) -> Iterator[MemoryHub]:
+    """The bus: delivering in the putting thread, or on threads of its own (conftest.py)."""
+    hub = MemoryHub(threads=delivery_threads, seed=MEMORY_BUS_SEED)
+    yield hub
+    hub.close()
+
+
 def detections(hub: MemoryHub, cameras: frozenset[str]) -> None:
     """One (empty) Detections on each of ``cameras``' keys, as their worker puts them."""
     bus = hub.join("worker_output")
     keys = Keys("stack")
     for cam in sorted(cameras):
         bus.publisher(keys.detections(cam), QoS.SENSOR).put(b"detections of " + cam.encode())
+    hub.drain()  # heard before the bus goes
     bus.close()
 
 
 def test_a_liar_claiming_every_camera_loses_them_to_the_worker_that_delivers(
-    caplog: pytest.LogCaptureFixture,
+    hub: MemoryHub, caplog: pytest.LogCaptureFixture
 ) -> None:
-    hub, clock = MemoryHub(), FakeClock()
+    clock = FakeClock()
     source = CameraSource(hub)
     for cam in CAMERAS:
         source.announce(cam)
@@ -88,10 +99,10 @@ def test_a_liar_claiming_every_camera_loses_them_to_the_worker_that_delivers(
     assert any("for 60 s" in r.message for r in caplog.records if "zz" in r.message)
 
 
-def test_cameras_of_no_detections_are_unserved_whatever_the_tokens_say() -> None:
+def test_cameras_of_no_detections_are_unserved_whatever_the_tokens_say(hub: MemoryHub) -> None:
     # The worker alone (never dropped: nobody could take over) serves the cameras; their
     # detections stop (a hung model that still beats): its own audit says unserved.
-    hub, clock = MemoryHub(), FakeClock()
+    clock = FakeClock()
     source = CameraSource(hub)
     for cam in CAMERAS:
         source.announce(cam)
@@ -115,11 +126,11 @@ def test_cameras_of_no_detections_are_unserved_whatever_the_tokens_say() -> None
     assert worker.count(contract.POOL_DROPS) == 0
 
 
-def test_a_dropped_worker_that_restarts_is_judged_afresh_by_everyone() -> None:
+def test_a_dropped_worker_that_restarts_is_judged_afresh_by_everyone(hub: MemoryHub) -> None:
     # A worker frozen (its cameras' detections stop) is dropped by the other; killed and
     # restarted (its token goes and comes back) it knows nothing of the drop, so the other
     # lifts it too: both views agree, no camera served twice or by nobody.
-    hub, clock = MemoryHub(), FakeClock()
+    clock = FakeClock()
     source = CameraSource(hub)
     for cam in CAMERAS:
         source.announce(cam)

@@ -10,6 +10,8 @@ says the name is announced twice."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import pytest
 
 from common.announce import to_chunk
@@ -19,14 +21,23 @@ from common.messages import WorkerAnnouncement
 from common.pool_rule import PoolWorker, one_worker
 from services.detector.contract import MAX_CAPACITY_HZ
 from services.detector.pool_checks import AUDIT_PERIOD_S
+from tests.unit.conftest import MEMORY_BUS_SEED
 from tests.unit.detector.inprocess import CameraSource, Worker, cameras_config
 
 CAMERAS = ("front", "rear", "left", "right")
 ALARM_S = 1.0
 
 
-def two_workers() -> tuple[MemoryHub, FakeClock, Worker, Worker]:
-    hub, clock = MemoryHub(), FakeClock()
+@pytest.fixture
+def hub(delivery_threads: int) -> Iterator[MemoryHub]:
+    """The bus: delivering in the putting thread, or on threads of its own (conftest.py)."""
+    hub = MemoryHub(threads=delivery_threads, seed=MEMORY_BUS_SEED)
+    yield hub
+    hub.close()
+
+
+def two_workers(hub: MemoryHub) -> tuple[MemoryHub, FakeClock, Worker, Worker]:
+    clock = FakeClock()
     source = CameraSource(hub)
     for cam in CAMERAS:
         source.announce(cam)
@@ -46,8 +57,8 @@ def passes(clock: FakeClock, *workers: Worker) -> tuple[frozenset[str], ...]:
     return tuple(w.loop_pass() for w in workers)
 
 
-def test_a_second_session_claiming_a_live_workers_name_moves_no_camera() -> None:
-    hub, clock, a, b = two_workers()
+def test_a_second_session_claiming_a_live_workers_name_moves_no_camera(hub: MemoryHub) -> None:
+    hub, clock, a, b = two_workers(hub)
     share_a, share_b = a.handlers.serving, b.handlers.serving
     assert share_a and share_b and share_a | share_b == frozenset(CAMERAS)
     keys = a.node.keys
@@ -70,6 +81,7 @@ def test_a_second_session_claiming_a_live_workers_name_moves_no_camera() -> None
         [twice] = report.current
         assert "announced by 2 sessions" in twice.detail
     token.undeclare()  # the claim goes: the warning clears, nothing moves
+    hub.drain()
     a.pool.settle()
     clock.advance(AUDIT_PERIOD_S)
     report = a.pool.audit()
@@ -78,10 +90,12 @@ def test_a_second_session_claiming_a_live_workers_name_moves_no_camera() -> None
     assert passes(clock, a, b) == (share_a, share_b)
 
 
-def test_a_lower_claim_under_a_live_name_gives_the_others_more_never_nobody() -> None:
+def test_a_lower_claim_under_a_live_name_gives_the_others_more_never_nobody(
+    hub: MemoryHub,
+) -> None:
     # A claim can only lower the name's share: what it loses the others take, every camera
     # served once, and every worker computes the same owners.
-    hub, clock, a, b = two_workers()
+    hub, clock, a, b = two_workers(hub)
     keys = a.node.keys
     rogue = hub.join("rogue")
     claim = WorkerAnnouncement(worker="detector_2", capacity_hz=0.5, prefixes=("stack",))
