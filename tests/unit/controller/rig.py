@@ -1,6 +1,8 @@
 """The controller's loop in-process: a ControlLoop on a MemoryHub with a FakeClock, and a test
-participant on the same hub that puts the inputs and hears cmd_vel and the status. Delivery is
-synchronous and the clock moves only when told: a put, a tick, and the command is on the list.
+participant on the same hub that puts the inputs and hears cmd_vel and the status. The clock
+moves only when told, and a put, a tick, an announcement return once what they put has been
+delivered (in the putting thread, or with ``threads`` on the hub's own, shuffled, then waited
+for with ``hub.drain()``): the command is on the list.
 Each camera of the config is announced (as its source would: common/announce.py) on a
 participant of its own, from before the controller starts; ``announce`` and ``withdraw`` change
 that at run time.
@@ -26,6 +28,7 @@ from services.controller.contract import ControllerSettings
 from services.controller.service import ControlLoop
 from stack.config import Config
 from tests.unit.announced import Sources
+from tests.unit.conftest import MEMORY_BUS_SEED
 
 W, H = 640, 480
 
@@ -40,6 +43,7 @@ class Rig:
         clock: FakeClock | None = None,
         *,
         announced: bool = True,
+        threads: int = 0,
         **controller: Any,
     ) -> None:
         settings = {"mode": "track", "no_laser": False, **controller}
@@ -52,7 +56,7 @@ class Rig:
             cameras=tuple((cameras or {}).items()),
         )
         self.clock = clock or FakeClock()
-        self.hub = MemoryHub()
+        self.hub = MemoryHub(threads=threads, seed=MEMORY_BUS_SEED)
         self.keys = Keys(self.config.stack.prefix)
         self.sources = Sources(self.hub, self.keys)
         if announced:
@@ -77,15 +81,22 @@ class Rig:
             lambda s: self.statuses.append(ControllerStatus.decode(s.payload)),
         )
         self._seq = 0
+        self.drain()
+
+    def drain(self) -> None:
+        """Return once what was put so far has been handled (a no-op unless ``threads``)."""
+        self.hub.drain()
 
     def announce(self, name: str, camera: CameraSettings | None = None, **fields: Any) -> None:
         """Announce camera ``name`` as a source would (``camera``'s geometry, then ``fields``),
         or announce it anew (a new token before the old one goes)."""
         self.sources.announce(name, camera, **fields)
+        self.drain()
 
     def withdraw(self, name: str) -> None:
         """Camera ``name``'s source is gone: its session closes, its announcement with it."""
         self.sources.withdraw(name)
+        self.drain()
 
     @property
     def counters(self) -> dict[str, int]:
@@ -93,6 +104,7 @@ class Rig:
 
     def put(self, key: str, payload: bytes) -> None:
         self.probe.publisher(key, QoS.SENSOR).put(payload)
+        self.drain()
 
     def header(self, age_s: float = 0.0, source: str = "detector", ahead_s: float = 0.0) -> Header:
         """Stamped ``age_s`` ago (or ``ahead_s`` ahead) on both clocks of the fake clock."""
@@ -120,6 +132,7 @@ class Rig:
         """One control tick; the command and the status it sent."""
         before = len(self.cmds)
         self.loop.tick()
+        self.drain()
         assert len(self.cmds) == before + 1, "a tick sends exactly one command"
         return self.cmds[-1], self.statuses[-1]
 
@@ -128,6 +141,7 @@ class Rig:
         self.sources.close()
         self.probe.close()
         self.node.close()
+        self.hub.close()
 
 
 def people(header: Header, cx: float = W / 2, n: int = 1, h: float = 200.0) -> bytes:

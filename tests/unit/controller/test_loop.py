@@ -29,8 +29,8 @@ LEFT_20 = W / 2 - focal_px(W, CameraSettings().hfov_deg) * math.tan(math.radians
 
 
 @pytest.fixture
-def rig(tmp_path: Path) -> Iterator[Rig]:
-    r = Rig(tmp_path)
+def rig(tmp_path: Path, delivery_threads: int) -> Iterator[Rig]:
+    r = Rig(tmp_path, threads=delivery_threads)
     yield r
     r.close()
 
@@ -114,10 +114,10 @@ def test_no_forward_motion_unless_the_way_ahead_is_known_clear(rig: Rig, case: s
 
 
 def test_without_a_laser_only_the_setting_drives_and_every_status_says_so(
-    tmp_path: Path, caplog: pytest.LogCaptureFixture
+    tmp_path: Path, delivery_threads: int, caplog: pytest.LogCaptureFixture
 ) -> None:
     with caplog.at_level(logging.WARNING, "controller"):
-        rig = Rig(tmp_path, no_laser=True)
+        rig = Rig(tmp_path, threads=delivery_threads, no_laser=True)
     try:
         assert NO_LASER_WARNING in caplog.text
         rig.detections()
@@ -170,14 +170,18 @@ def test_an_engage_stops_at_once_latches_and_persists(rig: Rig, tmp_path: Path) 
     assert json.loads((tmp_path / "estop.json").read_text())["engaged"] is False
 
 
-def test_a_new_loop_reads_the_latch_and_garbage_on_the_key_is_a_press(tmp_path: Path) -> None:
+def test_a_new_loop_reads_the_latch_and_garbage_on_the_key_is_a_press(
+    tmp_path: Path, delivery_threads: int
+) -> None:
     clock = FakeClock()
-    first = Rig(tmp_path, clock=clock)
+    first = Rig(tmp_path, threads=delivery_threads, clock=clock)
     first.put(first.keys.estop(), b"\x00not an e-stop")  # fails safe: a press
     assert first.cmds[-1].is_zero and first.statuses[-1].state == "estop"
     assert first.counters["bad_input"] == 1
     first.close()
-    second = Rig(tmp_path, clock=clock)  # the restarted controller, on the same file
+    second = Rig(
+        tmp_path, threads=delivery_threads, clock=clock
+    )  # the restarted controller, on the same file
     try:
         second.scan()
         second.detections()
@@ -188,9 +192,11 @@ def test_a_new_loop_reads_the_latch_and_garbage_on_the_key_is_a_press(tmp_path: 
         second.close()
 
 
-def test_an_engage_stamped_a_century_ahead_can_still_be_released(tmp_path: Path) -> None:
+def test_an_engage_stamped_a_century_ahead_can_still_be_released(
+    tmp_path: Path, delivery_threads: int
+) -> None:
     clock = FakeClock()
-    rig = Rig(tmp_path, clock=clock)
+    rig = Rig(tmp_path, threads=delivery_threads, clock=clock)
     try:
         rig.estop(True, ahead_s=100 * 365 * 86400.0)
         # Past the clock tolerance, the most a latch's stamp may be ahead of this clock.
@@ -206,11 +212,11 @@ def test_an_engage_stamped_a_century_ahead_can_still_be_released(tmp_path: Path)
     assert not latch.engaged
 
 
-def test_a_corrupt_state_file_starts_engaged(tmp_path: Path) -> None:
+def test_a_corrupt_state_file_starts_engaged(tmp_path: Path, delivery_threads: int) -> None:
     (tmp_path / "estop.json").write_text(
         '{"engaged": false, "since_ns": 1e400, "by": "x", "reason": "y"}'
     )
-    rig = Rig(tmp_path)
+    rig = Rig(tmp_path, threads=delivery_threads)
     try:
         rig.scan()
         rig.detections()
@@ -223,8 +229,11 @@ def test_a_corrupt_state_file_starts_engaged(tmp_path: Path) -> None:
 
 def test_stale_future_and_replayed_detections_are_counted_and_never_acted_on(
     tmp_path: Path,
+    delivery_threads: int,
 ) -> None:
-    rig = Rig(tmp_path, target_lost_timeout_s=0.1)  # a target gone is let go of at once
+    rig = Rig(
+        tmp_path, threads=delivery_threads, target_lost_timeout_s=0.1
+    )  # a target gone is let go of at once
     try:
         rig.scan()
         for name, kw in (("stale", {"age_s": HOUR_S}), ("future", {"ahead_s": HOUR_S})):
@@ -274,12 +283,15 @@ def test_the_last_word_on_shutdown_is_a_stop(rig: Rig) -> None:
     rig.detections()
     assert not rig.tick()[0].is_zero
     rig.loop.stop()
+    rig.drain()
     assert rig.cmds[-1].is_zero
     assert rig.statuses[-1].state == "stopped" and rig.statuses[-1].reason == "shutdown"
 
 
-def test_a_person_behind_is_turned_to_and_a_stale_camera_is_ignored(tmp_path: Path) -> None:
-    rig = Rig(tmp_path, cameras={"rear": REAR})
+def test_a_person_behind_is_turned_to_and_a_stale_camera_is_ignored(
+    tmp_path: Path, delivery_threads: int
+) -> None:
+    rig = Rig(tmp_path, threads=delivery_threads, cameras={"rear": REAR})
     timeout = rig.config.controller.detection_timeout_s
     try:
         # Centred in the rear camera only (bearing 180 deg): a turn in place; front named stale.

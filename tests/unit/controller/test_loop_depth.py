@@ -18,8 +18,8 @@ HEIGHT = 0.6
 
 
 @pytest.fixture
-def rig(tmp_path: Path) -> Iterator[Rig]:
-    r = Rig(tmp_path, announced=False, obstacle_sources=("depth",))
+def rig(tmp_path: Path, delivery_threads: int) -> Iterator[Rig]:
+    r = Rig(tmp_path, threads=delivery_threads, announced=False, obstacle_sources=("depth",))
     r.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
     yield r
     r.close()
@@ -33,8 +33,8 @@ def put_depth(rig: Rig, *faces: object, age_s: float = 0.0, camera: str = "front
     rig.loop.depth.handle_waiting(0.0)
 
 
-def test_a_controller_that_needs_no_depth_reads_none(tmp_path: Path) -> None:
-    plain = Rig(tmp_path)
+def test_a_controller_that_needs_no_depth_reads_none(tmp_path: Path, delivery_threads: int) -> None:
+    plain = Rig(tmp_path, threads=delivery_threads)
     try:
         assert plain.loop.depth is None
     finally:
@@ -130,9 +130,11 @@ def _seen_then_gone(rig: Rig) -> None:
     assert rig.tick()[1].reason.endswith("(remembered)")
 
 
-def test_a_restarted_controller_takes_its_depth_map_back(tmp_path: Path) -> None:
+def test_a_restarted_controller_takes_its_depth_map_back(
+    tmp_path: Path, delivery_threads: int
+) -> None:
     # A crash: the next controller must not forget what slipped into the blind zone.
-    first = Rig(tmp_path, announced=False, obstacle_sources=("depth",))
+    first = Rig(tmp_path, threads=delivery_threads, announced=False, obstacle_sources=("depth",))
     first.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
     try:
         _seen_then_gone(first)
@@ -143,7 +145,13 @@ def test_a_restarted_controller_takes_its_depth_map_back(tmp_path: Path) -> None
         first.close()
     clock = first.clock
     clock.advance(2.0)
-    second = Rig(tmp_path, clock=clock, announced=False, obstacle_sources=("depth",))
+    second = Rig(
+        tmp_path,
+        threads=delivery_threads,
+        clock=clock,
+        announced=False,
+        obstacle_sources=("depth",),
+    )
     second.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
     try:
         put_depth(second)  # only the floor beyond the blind zone: nothing new seen
@@ -154,8 +162,10 @@ def test_a_restarted_controller_takes_its_depth_map_back(tmp_path: Path) -> None
         second.close()
 
 
-def test_a_depth_map_too_old_or_broken_is_not_taken_back(tmp_path: Path) -> None:
-    first = Rig(tmp_path, announced=False, obstacle_sources=("depth",))
+def test_a_depth_map_too_old_or_broken_is_not_taken_back(
+    tmp_path: Path, delivery_threads: int
+) -> None:
+    first = Rig(tmp_path, threads=delivery_threads, announced=False, obstacle_sources=("depth",))
     first.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
     try:
         _seen_then_gone(first)
@@ -168,7 +178,13 @@ def test_a_depth_map_too_old_or_broken_is_not_taken_back(tmp_path: Path) -> None
     for broken in (False, True):
         if broken:
             (tmp_path / "depth-memory.npz").write_bytes(b"not a map")
-        later = Rig(tmp_path, clock=clock, announced=False, obstacle_sources=("depth",))
+        later = Rig(
+            tmp_path,
+            threads=delivery_threads,
+            clock=clock,
+            announced=False,
+            obstacle_sources=("depth",),
+        )
         later.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
         try:
             put_depth(later)
