@@ -122,6 +122,12 @@ class Bus(Protocol):
         """Ask ``key``; every reply that came within ``timeout_s``."""
         ...
 
+    def linked(self, timeout_s: float = 0.0) -> bool:
+        """Whether this participant reaches anyone (a router or a peer is linked to it),
+        waiting up to ``timeout_s`` for a first link: a client that heard nothing says
+        whether it reached no stack or a stack that said nothing (common/reach.py)."""
+        ...
+
     def close(self) -> None:
         """Leave the bus: every declaration of this participant is gone."""
         ...

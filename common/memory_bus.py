@@ -299,6 +299,10 @@ class MemoryBus:
                 out.append(Reply(q.key, answer))
         return out
 
+    def linked(self, timeout_s: float = 0.0) -> bool:
+        """Always: the hub links every participant, as a router would."""
+        return True
+
     def close(self) -> None:
         self.closed = True
         self.hub._close(self)

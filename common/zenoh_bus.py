@@ -37,6 +37,7 @@ from common.bus import Answer, Declared, OnSample, OnToken, Reply, Sample
 from common.bus import QoS as QoS
 from common.credential_modes import check_folder, check_public, check_secret
 from common.errors import ConfigError, StackError
+from common.reach import connected
 from common.security import (
     ROUTER_PRINCIPAL,
     ca_file,
@@ -177,6 +178,9 @@ class ZenohBus:
         return [
             Reply(str(r.ok.key_expr), r.ok.payload.to_bytes()) for r in replies if r.ok is not None
         ]
+
+    def linked(self, timeout_s: float = 0.0) -> bool:
+        return connected(self.session, timeout_s)
 
     def close(self) -> None:
         self.session.close()

@@ -11,18 +11,17 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Sequence
+from contextlib import ExitStack
 from datetime import datetime
 from functools import partial
 from math import inf
 from pathlib import Path
 
-import zenoh
-
 from common import reach
 from common.announce import from_chunk
 from common.bus import Bus, Declared, QoS
 from common.camera_announce import CameraAnnouncements
-from common.clock import local_now, mono_s, wall_ns
+from common.clock import SYSTEM_CLOCK, Clock, local_now, mono_s
 from common.codec import Message
 from common.errors import StackError
 from common.keys import Keys
@@ -44,7 +43,7 @@ from common.pool_rule import pool_name
 from common.priority import leave_idle, lower_priority, process_threads
 from common.queries import ready_services
 from common.settings import REPO_ROOT, is_detector_service
-from common.zenoh_bus import Publisher, ZenohBus, open_session
+from common.zenoh_bus import ZenohBus, open_session
 from services.recorder import contract
 from services.recorder.channels import Translator
 from services.recorder.contract import TIME_FIELD
@@ -107,9 +106,12 @@ class Recorder(Closing):
     thread (writer.py), :meth:`listen` subscribes it to every key on a node's session, and
     :meth:`close` finishes the file."""
 
-    def __init__(self, tally: Tally, path: Path, config: Config) -> None:
+    def __init__(
+        self, tally: Tally, path: Path, config: Config, *, clock: Clock = SYSTEM_CLOCK
+    ) -> None:
         self.tally = tally
         self.path = path
+        self._clock = clock  # each message's log time: its wall time as it is heard
         self._queued = QueuedRecorder(
             McapFile(path, config.recorder), Translator(config.ros2, config.stack.camera),
             config.recorder, tally.counters,
@@ -142,14 +144,15 @@ class Recorder(Closing):
         camera, chunk = parts
         self.heard += 1
         where = self._keys.camera_announcements_of(camera).removesuffix("/*")
-        self._queued.offer(where, chunk.encode("ascii", "replace"), wall_ns(), _announcement)
+        chunk_bytes = chunk.encode("ascii", "replace")
+        self._queued.offer(where, chunk_bytes, self._clock.wall_ns(), _announcement)
 
     def on_sample(self, key: str, payload: bytes, decode: Decode) -> None:
         """Zenoh's thread: queue the bytes heard on ``key`` (decoded later, on the writer
         thread, by ``decode``), nothing else."""
         if key != self._own:
             self.heard += 1  # one writer per subscriber thread; a count, never a decision
-        self._queued.offer(key, payload, wall_ns(), decode)
+        self._queued.offer(key, payload, self._clock.wall_ns(), decode)
 
     @property
     def failed(self) -> Exception | None:
@@ -187,43 +190,26 @@ def record(
     duration_s: float = 0.0,
     *,
     require_stack: bool = False,
+    bus: Bus | None = None,
+    clock: Clock = SYSTEM_CLOCK,
 ) -> int:
-    """Record until ``stop`` is set or ``duration_s`` (0: no limit) has passed.
+    """Record until ``stop`` is set or ``duration_s`` (0: no limit) has passed, on ``bus`` (a
+    Zenoh session of the recorder's own unless given: an in-process test's) by ``clock``.
 
     ``require_stack`` (the command line): warn once when nothing of the stack has been heard
     after ``recorder.silence_warning_s``, and fail (exit 1, the file kept) when nothing was
     heard at all: a recording of the recorder's own counters is not a recording of a stack.
     """
     priority = lower_priority(config.recorder.nice, config.recorder.sched_idle)
-    with Node(SERVICE, config) as node:
+    with Node(SERVICE, config, bus=bus, clock=clock) as node:
         node.log.info("CPU priority: %s", priority)
-        recorder = Recorder(node, path, config).listen(node)
-        node.ready()
-        progress(f"recording to {path}")
-        period = config.recorder.progress_period_s
-        end = mono_s() + duration_s if duration_s > 0 else float("inf")
-        next_line = mono_s() + period
-        warn_at = mono_s() + config.recorder.silence_warning_s if require_stack else inf
-        where = reach.describe(config.zenoh, config.stack.prefix, SERVICE)
-        code = EXIT_OK
-        try:
-            while not stop.is_set() and mono_s() < end:
-                stop.wait(min(0.2, max(0.0, end - mono_s())))
-                node.publish_counters()
-                if recorder.failed is not None:
-                    code = EXIT_FAILED
-                    break
-                if mono_s() >= next_line:
-                    next_line += period
-                    progress(recorder.progress())
-                if recorder.heard == 0 and mono_s() >= warn_at:
-                    warn_at = inf
-                    progress(f"warning: nothing heard from the stack yet at {where}")
-        finally:
-            recorder.close()
+        with Recorder(node, path, config, clock=node.clock) as recorder:
+            recorder.listen(node)
+            node.ready()
+            progress(f"recording to {path}")
+            code = _record_until(config, node, recorder, stop, progress, duration_s, require_stack)
         progress(recorder.progress() + (" (stopped by an error)" if code else ", done"))
         if code == EXIT_OK and require_stack and recorder.heard == 0:
-            linked = not isinstance(node.bus, ZenohBus) or reach.connected(node.bus.session)
             raise StackError(
                 reach.unreached(
                     f"recorded nothing from the stack ({path} holds only the recorder's own "
@@ -231,10 +217,40 @@ def record(
                     config.zenoh,
                     config.stack.prefix,
                     SERVICE,
-                    linked=linked,
+                    linked=node.bus.linked(),
                 )
             )
         return code
+
+
+def _record_until(
+    config: Config,
+    node: Node,
+    recorder: Recorder,
+    stop: threading.Event,
+    progress: Progress,
+    duration_s: float,
+    require_stack: bool,
+) -> int:
+    """The recording's loop: counters, progress lines and the silence warning, until ``stop``,
+    the duration's end (0: none) or the writer's failure (EXIT_FAILED)."""
+    s, now = config.recorder, node.clock.mono_s
+    end = now() + duration_s if duration_s > 0 else inf
+    next_line = now() + s.progress_period_s
+    warn_at = now() + s.silence_warning_s if require_stack else inf
+    where = reach.describe(config.zenoh, config.stack.prefix, SERVICE)
+    while not stop.is_set() and now() < end:
+        stop.wait(min(0.2, max(0.0, end - now())))
+        node.publish_counters()
+        if recorder.failed is not None:
+            return EXIT_FAILED
+        if now() >= next_line:
+            next_line += s.progress_period_s
+            progress(recorder.progress())
+        if recorder.heard == 0 and now() >= warn_at:
+            warn_at = inf
+            progress(f"warning: nothing heard from the stack yet at {where}")
+    return EXIT_OK
 
 
 # The player joins as the recorder's principal, which may publish frames and scans.
@@ -248,7 +264,7 @@ READY_POLL_S = 0.5
 
 def _ready_to_play(
     config: Config,
-    session: zenoh.Session,
+    bus: Bus,
     path: Path,
     stop: threading.Event,
     progress: Progress,
@@ -263,7 +279,7 @@ def _ready_to_play(
     before the wait for a detector (the played cameras are announced then: a pool's workers
     serve the cameras announced, each once it has heard its announcement)."""
     keys, prefix = Keys(config.stack.prefix), config.stack.prefix
-    if not reach.connected(session, PLAY_LINK_TIMEOUT_S):
+    if not bus.linked(PLAY_LINK_TIMEOUT_S):
         raise StackError(
             reach.unreached(
                 f"cannot play {path}: no link to the stack",
@@ -273,7 +289,7 @@ def _ready_to_play(
     deadline = mono_s() + (config.recorder.detector_wait_s if wait else 0.0)
     said = cleared = False
     while True:
-        ready = ready_services(session, keys, READY_POLL_S)
+        ready = ready_services(bus, keys, READY_POLL_S)
         live = running_sensors(ready)
         if live:
             # A replay onto a live robot's keys would mix old frames and scans with its own:
@@ -338,27 +354,28 @@ def play(
     loop: bool = False,
     topics: Sequence[str] | None = None,
     wait: bool = True,
+    bus: Bus | None = None,
 ) -> Played:
     """Publish the recording's frames, depth images and scans (play.py) until it ends (or ``stop``;
     ``loop``: again); with ``wait``, not before a detector is ready to see them. Each camera
-    played is announced until then (play.py's announce_played)."""
+    played is announced until then (play.py's announce_played). ``bus``: where to play (a
+    session of the player's own, closed at the end, unless given)."""
     chosen = playable_topics(path, topics)
     recorded = recorded_cameras(config, path, chosen)
     keys = Keys(config.stack.prefix)
-    bus = ZenohBus(open_session(config.zenoh, config.principal(PLAY_PRINCIPAL)))
-    session = bus.session
-    announcements = CameraAnnouncements(bus, keys, ANNOUNCED_SOURCE)
-    try:
+    with ExitStack() as closing:
+        if bus is None:
+            bus = ZenohBus(open_session(config.zenoh, config.principal(PLAY_PRINCIPAL)))
+            closing.callback(bus.close)
+        announcements = closing.enter_context(CameraAnnouncements(bus, keys, ANNOUNCED_SOURCE))
         _ready_to_play(
-            config, session, path, stop, progress, wait,
+            config, bus, path, stop, progress, wait,
             lambda: announce_played(config, announcements, recorded, rate),
             lambda: set(recorded) <= served_cameras(bus, config),
         )  # fmt: skip
-        pubs = {keys.frame(camera): Publisher(session, keys.frame(camera), QoS.SENSOR)
-                for camera in config.all_cameras}  # fmt: skip
-        pubs |= {keys.depth(camera): Publisher(session, keys.depth(camera), QoS.SENSOR)
-                 for camera in config.all_cameras}  # fmt: skip
-        pubs[keys.scan()] = Publisher(session, keys.scan(), QoS.SENSOR)
+        played_keys = [keys.frame(c) for c in config.all_cameras]
+        played_keys += [keys.depth(c) for c in config.all_cameras] + [keys.scan()]
+        pubs = {key: bus.publisher(key, QoS.SENSOR) for key in played_keys}
         played = Played()
         while not stop.is_set():
             one_pass(config, path, chosen, rate, lambda key, b: pubs[key].put(b), stop, played)
@@ -369,6 +386,3 @@ def play(
             if not loop:
                 break
         return played
-    finally:
-        announcements.close()
-        bus.close()

@@ -155,6 +155,18 @@ def test_a_query_gets_the_queryables_answer(pair: Pair) -> None:
     assert pair.b.query("r/nobody", 0.5) == []
 
 
+def test_a_participant_knows_it_is_linked(pair: Pair) -> None:
+    assert pair.a.linked(2.0) and pair.b.linked(2.0)
+
+
+def test_a_lone_zenoh_session_is_not_linked() -> None:
+    alone = ZenohBus(_session([], []))
+    try:
+        assert not alone.linked(0.2)
+    finally:
+        alone.close()
+
+
 def test_key_expressions_meet_as_zenohs_do() -> None:
     assert intersects("a/*/c", "a/b/c")
     assert not intersects("a/*/c", "a/b/d/c")
