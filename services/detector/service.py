@@ -11,6 +11,8 @@ import json
 import logging
 import threading
 from collections.abc import Callable
+from contextlib import ExitStack
+from dataclasses import dataclass
 from typing import ParamSpec, TypeVar
 
 import numpy as np
@@ -56,14 +58,22 @@ def run(config: Config, stop: threading.Event, worker: str = "detector") -> int:
     """Detect on the newest frame of every camera this worker serves until ``stop`` is set;
     ``worker``: its one name (one of ``Config.detector_services``), its service, pool id and
     principal. Its cameras are those announced on the bus that the pool gives it
-    (services/detector/membership.py); each one's detections go on its own robot's keys."""
+    (services/detector/membership.py); each one's detections go on its own robot's keys.
+
+    What start-up opens is closed in the reverse order, however it ends (a stop while
+    measuring included): the pool's membership, the controllers' status subscriptions, the
+    info queryables, the model, the node."""
     s = config.detector
     try:
-        with Node(worker, config, counters_period_s=s.counters_period_s) as node:
-            return _serve(config, stop, worker, node)
+        with ExitStack() as closing:
+            node = closing.enter_context(
+                Node(worker, config, counters_period_s=s.counters_period_s)
+            )
+            model = open_model(closing, s, served_batch(config), node.log, stop)
+            _serve(closing, config, stop, worker, node, model)
     except _StoppedEarly:
         logging.getLogger(worker).info("stopped while starting")
-        return 0
+    return 0
 
 
 class _StoppedEarly(Exception):
@@ -83,41 +93,69 @@ def _until_stopped(stop: threading.Event, run: Callable[P, R]) -> Callable[P, R]
     return call
 
 
-def _serve(config: Config, stop: threading.Event, worker: str, node: Node) -> int:
-    s = config.detector
-    served = served_batch(config)
+@dataclass
+class OpenModel:
+    """The model a worker serves with: the detector, the note on what was chosen, and the
+    frames a round takes."""
+
+    detector: Detector
+    note: str
+    per_round: int
+
+    def close(self) -> None:
+        self.detector.close()
+
+
+def open_model(
+    closing: ExitStack,
+    s: DetectorSettings,
+    served: int,
+    log: logging.Logger,
+    stop: threading.Event,
+) -> OpenModel:
+    """Load what ``zstack prepare`` made for ``s``, for rounds of up to ``served`` frames, and
+    settle its batch (:func:`settle_batch`, which may open it again); said in the log, and
+    closed by ``closing`` (the one open then, should the batch's settling fail)."""
     detector, note = open_detector(s, served)
-    try:
-        b = detector.backend
-        node.log.info(
-            "model %s on %s (%s, %s, input %d)%s",
-            detector.model_path,
-            b.name,
-            b.device,
-            b.precision,
-            detector.info.input_height,
-            f": {note}" if note else "",
-        )
-        per_round = round_size(detector, served, node.log)
-        detector, note, per_round = settle_batch(detector, note, per_round, s, node.log, stop)
-        _loop(config, stop, worker, node, detector, note, per_round)
-    finally:
-        detector.close()
-    return 0
+    model = OpenModel(detector, note, served)
+    closing.callback(model.close)  # whichever detector is open then
+    b = detector.backend
+    log.info(
+        "model %s on %s (%s, %s, input %d)%s",
+        detector.model_path, b.name, b.device, b.precision, detector.info.input_height,
+        f": {note}" if note else "",
+    )  # fmt: skip
+    per_round = round_size(detector, served, log)
+    model.detector, model.note, model.per_round = settle_batch(
+        detector, note, per_round, s, log, stop
+    )
+    return model
 
 
-def _loop(
+def _serve(
+    closing: ExitStack,
     config: Config,
     stop: threading.Event,
     worker: str,
     node: Node,
-    detector: Detector,
-    note: str,
-    per_round: int,
+    model: OpenModel,
 ) -> None:
-    s = config.detector
+    s, detector, per_round = config.detector, model.detector, model.per_round
     b = detector.backend  # the one that runs (settle_batch may have opened it again)
     handlers = DetectorHandlers(config, node, node.clock, frame_keys={})
+    info = json.dumps(
+        DetectorInfo(
+            model=detector.model_path.name,
+            classes=list(detector.names),
+            backend=b.name,
+            device=b.device,
+            precision=b.precision,
+            variant=variant_of(detector),
+            note=model.note,
+        )
+    )
+    cameras = ServedCameras(config, node, handlers, info)
+    closing.callback(cameras.close)
     # Attention when short of capacity (services/detector/attention.py): the rounds'
     # order, fed by the controller's status and each camera's detections.
     attention = Attention(
@@ -128,74 +166,69 @@ def _loop(
         floor_share=s.attention_floor_share,
     )
     status_subs = heed_controllers(node, config, attention)  # each robot's controller
+    closing.callback(_undeclare, status_subs)
+    rounds = Rounds(config, node, detector, cameras.outputs, node.clock, attention, handlers.depth)
+    capacity = _warm_up(detector, per_round, s, node, stop)
+    pool = PoolMember(
+        node,
+        worker,
+        handlers,
+        capacity=capacity,
+        input_size=detector.info.input_height,
+        backend=f"{b.name}/{b.device}/{b.precision}",
+        max_batch=per_round,
+        on_gained=cameras.gained,
+        on_lost=cameras.lost,
+        stopping=stop.is_set,
+    )
+    pool.join()
+    closing.callback(pool.close)
+    pool.start_stall_watch()
+    node.ready()
     # Between robots first, then each robot's cameras in attention's order
     # (services/detector/fairness.py).
     order = RobotFair(attention)
-    info = json.dumps(
-        DetectorInfo(
-            model=detector.model_path.name,
-            classes=list(detector.names),
-            backend=b.name,
-            device=b.device,
-            precision=b.precision,
-            variant=variant_of(detector),
-            note=note,
-        )
-    )
-    cameras = ServedCameras(config, node, handlers, info)
-    rounds = Rounds(config, node, detector, cameras.outputs, node.clock, attention, handlers.depth)
-    try:
-        # Warm the backend up before announcing readiness: the first run allocates, and each
-        # batch size may (a CUDA graph, an OpenVINO shape) on its first run.
-        warm = np.full((480, 640, 3), 114, np.uint8)
-        detect = _until_stopped(stop, detector.detect_batch)
-        for size in sorted({1, per_round}):
-            detect([warm] * size)
-        measured = 0.0
-        if s.capacity_hz == 0:
-            measured = measure_capacity(
-                lambda: len(detect([warm] * per_round)), s.batch_probe_runs, node.clock
+    while not stop.is_set():
+        pool.beat()
+        pool.settle()
+        pool.audit()
+        node.publish_counters()
+        waiting = handlers.slots.take(per_round, _WAIT_S, order)
+        if waiting:
+            before, start = node.counters.get(BATCHED_FRAMES), node.clock.mono_s()
+            rounds.run(waiting)
+            pool.observe_round(
+                node.counters.get(BATCHED_FRAMES) - before, node.clock.mono_s() - start
             )
-        capacity = Capacity(measured, s, node.clock.mono_s())
-        node.log.info(
-            "capacity %.1f frames/s (%s)",
-            capacity.announced,
-            "detector.capacity_hz" if capacity.fixed else "measured",
+
+
+def _warm_up(
+    detector: Detector, per_round: int, s: DetectorSettings, node: Node, stop: threading.Event
+) -> Capacity:
+    """Warm the backend up before announcing readiness (the first run allocates, and each
+    batch size may: a CUDA graph, an OpenVINO shape), then measure the capacity unless
+    ``detector.capacity_hz`` fixes it; _StoppedEarly once ``stop`` is set."""
+    warm = np.full((480, 640, 3), 114, np.uint8)
+    detect = _until_stopped(stop, detector.detect_batch)
+    for size in sorted({1, per_round}):
+        detect([warm] * size)
+    measured = 0.0
+    if s.capacity_hz == 0:
+        measured = measure_capacity(
+            lambda: len(detect([warm] * per_round)), s.batch_probe_runs, node.clock
         )
-        pool = PoolMember(
-            node,
-            worker,
-            handlers,
-            capacity=capacity,
-            input_size=detector.info.input_height,
-            backend=f"{b.name}/{b.device}/{b.precision}",
-            max_batch=per_round,
-            on_gained=cameras.gained,
-            on_lost=cameras.lost,
-            stopping=stop.is_set,
-        )
-        pool.join()
-        try:
-            pool.start_stall_watch()
-            node.ready()
-            while not stop.is_set():
-                pool.beat()
-                pool.settle()
-                pool.audit()
-                node.publish_counters()
-                waiting = handlers.slots.take(per_round, _WAIT_S, order)
-                if waiting:
-                    before, start = node.counters.get(BATCHED_FRAMES), node.clock.mono_s()
-                    rounds.run(waiting)
-                    pool.observe_round(
-                        node.counters.get(BATCHED_FRAMES) - before, node.clock.mono_s() - start
-                    )
-        finally:
-            pool.close()
-    finally:
-        for sub in status_subs:
-            sub.undeclare()
-        cameras.close()
+    capacity = Capacity(measured, s, node.clock.mono_s())
+    node.log.info(
+        "capacity %.1f frames/s (%s)",
+        capacity.announced,
+        "detector.capacity_hz" if capacity.fixed else "measured",
+    )
+    return capacity
+
+
+def _undeclare(declared: list[Declared]) -> None:
+    for d in declared:
+        d.undeclare()
 
 
 class ServedCameras:

@@ -4,7 +4,9 @@ the rule that keeps a batch only where it serves frames faster per image."""
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Sequence
+from contextlib import ExitStack
 from pathlib import Path
 
 import pytest
@@ -124,3 +126,38 @@ def test_a_fixed_batch_model_is_not_measured(tmp_path: Path) -> None:
     with detector:
         settled, _, per_round = settle_batch(detector, "", 2, s, logging.getLogger("test"))
         assert (settled, per_round) == (detector, 2)
+
+
+def test_a_stop_while_the_batch_is_measured_closes_the_model_opened(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Start-up's ExitStack (services/detector/service.py, open_model): a stop during the
+    # batch's measurement ends the start-up, and the model opened is closed on the way out.
+    detector, s = _opened(halves_model(tmp_path), batch_min_gain=0.9)
+    monkeypatch.setattr(detector_service, "open_detector", lambda *_: (detector, ""))
+    stop = threading.Event()
+    stop.set()
+    with pytest.raises(detector_service._StoppedEarly), ExitStack() as closing:
+        detector_service.open_model(closing, s, 3, logging.getLogger("test"), stop)
+    with pytest.raises(ModelError, match="closed"):
+        detector.detect(image(True, False))
+
+
+def test_the_model_closed_at_the_end_is_the_one_the_batch_choice_opened(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def chooses_one(detect_batch: object, largest: int, runs: int, min_gain: float) -> BatchChoice:
+        return BatchChoice(1, {1: 1.0, 2: 0.9}, min_gain)
+
+    first, s = _opened(halves_model(tmp_path), batch_min_gain=0.9)
+    opened = iter([first, Detector.open(s.model, settings=s, max_batch=1)])
+    monkeypatch.setattr(detector_service, "measure", chooses_one)
+    monkeypatch.setattr(detector_service, "open_detector", lambda *_: (next(opened), ""))
+    with ExitStack() as closing:
+        model = detector_service.open_model(
+            closing, s, 3, logging.getLogger("test"), threading.Event()
+        )
+        assert model.per_round == 1 and model.detector is not first
+        assert len(model.detector.detect(image(True, False)).boxes) == 1
+    with pytest.raises(ModelError, match="closed"):
+        model.detector.detect(image(True, False))
