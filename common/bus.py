@@ -12,7 +12,7 @@ number of them (common/keys.py builds every one).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from enum import Enum
 from typing import Protocol
@@ -54,6 +54,12 @@ class Declared(Protocol):
     """Something declared on the bus (a subscription, a token, a queryable, a publisher)."""
 
     def undeclare(self) -> None: ...
+
+
+def undeclare_all(declared: Iterable[Declared]) -> None:
+    """Undeclare each of ``declared``, in order (a start-up's ExitStack callback)."""
+    for d in declared:
+        d.undeclare()
 
 
 class Publisher(Declared, Protocol):

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from contextlib import ExitStack
 
-from common.bus import Bus, QoS
+from common.bus import Bus, Publisher, QoS
 from common.camera_announce import CameraAnnouncements
 from common.clock import mono_s
 from common.errors import ImageError
@@ -62,11 +63,15 @@ def run(
     A source with depth (``realsense:``, ``oak:``, ``camera.depth_source``) also publishes
     each frame's aligned depth on ``keys.depth(camera)`` with the frame's header (DepthOut),
     and announces the camera with ``depth`` and its ``mount_*`` settings.
+
+    What it opens (its node, the announcement, the source) is closed in the reverse order,
+    however it ends.
     """
-    with (
-        Node(config.camera_services[camera], config, bus=bus) as node,
-        CameraAnnouncements(node.bus, node.keys, ANNOUNCED_SOURCE) as announcements,
-    ):
+    with ExitStack() as closing:
+        node = closing.enter_context(Node(config.camera_services[camera], config, bus=bus))
+        announcements = closing.enter_context(
+            CameraAnnouncements(node.bus, node.keys, ANNOUNCED_SOURCE)
+        )
 
         def on_bad(exc: ImageError) -> None:
             node.reject(contract.BAD_IMAGES, str(exc))  # a looped folder repeats it: rate-limited
@@ -78,62 +83,82 @@ def run(
             stop,
             opener,
         )
+        closing.callback(source.close)
         key = node.keys.frame(camera)
         publisher = node.publisher(key, QoS.SENSOR)
         node.log.info("publishing %s on %s at %.1f Hz", source.description, key, settings.rate_hz)
         depth = depth_capable(source)
         depth_out = None if depth is None else DepthOut(node, camera, depth, settings)
-        width, height = settings.resize
-        announcements.announce(
-            camera,
-            rate_hz=settings.rate_hz,
-            mount_yaw_deg=settings.mount_yaw_deg,
-            hfov_deg=settings.hfov_deg,
-            frame_id=settings.frame_id,
-            width=width,
-            height=height,
-            depth=depth is not None,
-            mount_height_m=settings.mount_height_m,
-            mount_x_m=settings.mount_x_m,
-            mount_y_m=settings.mount_y_m,
-        )
+        _announce(announcements, camera, settings, depth=depth is not None)
         node.ready()
-        period = 1.0 / settings.rate_hz
-        next_t = mono_s()
-        try:
-            while not stop.is_set():
-                try:
-                    image = source.read()
-                    if image is None:
-                        if not stop.is_set():  # else stopped while a lost device was awaited
-                            node.log.info("source ended")
-                        break
-                    # The header's stamp is the capture stamp every later latency is measured
-                    # from: taken as the image is read, before resizing and encoding.
-                    header = node.header(frame_id=settings.frame_id)
-                    if depth_out is not None:
-                        # Before its colour frame: a detector that takes the colour frame as
-                        # it comes finds its depth already there.
-                        depth_out.publish(header)
-                    frame = image_to_frame(
-                        resize(image, settings.resize),
-                        header,
-                        jpeg_quality=settings.jpeg_quality,
-                    )
-                    publisher.put(frame.encode())
-                    announcements.saw(camera, frame.width, frame.height)
-                    node.counters.add(contract.FRAMES_OUT)
-                except (ImageError, ValueError) as exc:
-                    # An unreadable file, or an image larger than a Frame may carry: skip it.
-                    on_bad(ImageError(f"{source.description}: {exc}"))
-                node.publish_counters()
-                next_t += period
-                # Never burst to catch up after a stall: a late frame is better than a flood.
-                next_t = max(next_t, mono_s())
-                stop.wait(next_t - mono_s())
-        finally:
-            source.close()
+        _publish(camera, settings, node, source, publisher, depth_out, announcements, stop, on_bad)
     return 0
+
+
+def _announce(
+    announcements: CameraAnnouncements, camera: str, settings: CameraSettings, *, depth: bool
+) -> None:
+    width, height = settings.resize
+    announcements.announce(
+        camera,
+        rate_hz=settings.rate_hz,
+        mount_yaw_deg=settings.mount_yaw_deg,
+        hfov_deg=settings.hfov_deg,
+        frame_id=settings.frame_id,
+        width=width,
+        height=height,
+        depth=depth,
+        mount_height_m=settings.mount_height_m,
+        mount_x_m=settings.mount_x_m,
+        mount_y_m=settings.mount_y_m,
+    )
+
+
+def _publish(
+    camera: str,
+    settings: CameraSettings,
+    node: Node,
+    source: FrameSource,
+    publisher: Publisher,
+    depth_out: DepthOut | None,
+    announcements: CameraAnnouncements,
+    stop: threading.Event,
+    on_bad: Callable[[ImageError], None],
+) -> None:
+    """Read and publish a frame (its depth first) every ``1 / rate_hz`` until ``stop`` or the
+    source's end."""
+    period = 1.0 / settings.rate_hz
+    next_t = mono_s()
+    while not stop.is_set():
+        try:
+            image = source.read()
+            if image is None:
+                if not stop.is_set():  # else stopped while a lost device was awaited
+                    node.log.info("source ended")
+                break
+            # The header's stamp is the capture stamp every later latency is measured
+            # from: taken as the image is read, before resizing and encoding.
+            header = node.header(frame_id=settings.frame_id)
+            if depth_out is not None:
+                # Before its colour frame: a detector that takes the colour frame as
+                # it comes finds its depth already there.
+                depth_out.publish(header)
+            frame = image_to_frame(
+                resize(image, settings.resize),
+                header,
+                jpeg_quality=settings.jpeg_quality,
+            )
+            publisher.put(frame.encode())
+            announcements.saw(camera, frame.width, frame.height)
+            node.counters.add(contract.FRAMES_OUT)
+        except (ImageError, ValueError) as exc:
+            # An unreadable file, or an image larger than a Frame may carry: skip it.
+            on_bad(ImageError(f"{source.description}: {exc}"))
+        node.publish_counters()
+        next_t += period
+        # Never burst to catch up after a stall: a late frame is better than a flood.
+        next_t = max(next_t, mono_s())
+        stop.wait(next_t - mono_s())
 
 
 class DepthOut:

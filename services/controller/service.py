@@ -7,6 +7,7 @@ import dataclasses
 import json
 import threading
 from collections.abc import Callable, Mapping
+from contextlib import ExitStack
 from typing import TYPE_CHECKING, Generic, Protocol, TypeVar
 
 from common.announce import Announced, announced_cameras
@@ -445,28 +446,29 @@ def run(config: Config, stop: threading.Event) -> int:
     ignored; none fresh is the dead-man stop).
     """
     s = config.controller
-    with Node("controller", config, counters_period_s=s.counters_period_s) as node:
+    with ExitStack() as closing:
+        node = closing.enter_context(
+            Node("controller", config, counters_period_s=s.counters_period_s)
+        )
         loop = ControlLoop(config, node)
-        try:
-            checker = threading.Thread(
-                target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
-            )
-            checker.start()
-            if loop.depth is not None:
-                threading.Thread(
-                    target=loop.depth.serve, args=(stop, STOP_POLL_S), name="depth-scan",
-                    daemon=True,
-                ).start()  # fmt: skip
-            node.ready()
-            period = 1.0 / s.control_rate_hz
-            while not stop.is_set():
-                tick = loop.tick()
-                wait_either(loop.handlers.arrived, stop, period - (node.clock.mono_s() - tick))
-            loop.stop()
-            if loop.depth is not None:
-                loop.depth.save_memory(force=True)  # as the robot is left: still
-        finally:
-            loop.close()
+        closing.callback(loop.close)
+        checker = threading.Thread(
+            target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
+        )
+        checker.start()
+        if loop.depth is not None:
+            threading.Thread(
+                target=loop.depth.serve, args=(stop, STOP_POLL_S), name="depth-scan",
+                daemon=True,
+            ).start()  # fmt: skip
+        node.ready()
+        period = 1.0 / s.control_rate_hz
+        while not stop.is_set():
+            tick = loop.tick()
+            wait_either(loop.handlers.arrived, stop, period - (node.clock.mono_s() - tick))
+        loop.stop()  # the last word on cmd_vel: zero, before the loop and the node close
+        if loop.depth is not None:
+            loop.depth.save_memory(force=True)  # as the robot is left: still
     return 0
 
 

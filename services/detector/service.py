@@ -17,7 +17,7 @@ from typing import ParamSpec, TypeVar
 
 import numpy as np
 
-from common.bus import Declared, QoS
+from common.bus import Declared, QoS, undeclare_all
 from common.contracts import DetectorInfo
 from common.keys import Keys
 from common.node import Node
@@ -166,7 +166,7 @@ def _serve(
         floor_share=s.attention_floor_share,
     )
     status_subs = heed_controllers(node, config, attention)  # each robot's controller
-    closing.callback(_undeclare, status_subs)
+    closing.callback(undeclare_all, status_subs)
     rounds = Rounds(config, node, detector, cameras.outputs, node.clock, attention, handlers.depth)
     capacity = _warm_up(detector, per_round, s, node, stop)
     pool = PoolMember(
@@ -224,11 +224,6 @@ def _warm_up(
         "detector.capacity_hz" if capacity.fixed else "measured",
     )
     return capacity
-
-
-def _undeclare(declared: list[Declared]) -> None:
-    for d in declared:
-        d.undeclare()
 
 
 class ServedCameras:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
+from contextlib import ExitStack
 from typing import Any, TypeVar
 
 from common import reach
@@ -350,19 +351,17 @@ def run(config: Config, stop: threading.Event) -> int:
 
         exporter = PrometheusExporter()
         listener = exporter.observe
-    with Node("metrics", config) as node:
+    with ExitStack() as closing:
+        node = closing.enter_context(Node("metrics", config))
         service = MetricsService(config, node, listener)
-        try:
-            if exporter is not None:
-                port = exporter.start(service.answer, s.prometheus_host, s.prometheus_port)
-                node.log.info("prometheus metrics on http://%s:%d/metrics", s.prometheus_host, port)
-            node.ready()
-            while not stop.wait(min(s.report_period_s, config.detector.pool_alarm_s / 2)):
-                service.report()
-        finally:
-            if exporter is not None:
-                exporter.close()
-            service.close()
+        closing.callback(service.close)
+        if exporter is not None:
+            closing.callback(exporter.close)  # whatever its start left running
+            port = exporter.start(service.answer, s.prometheus_host, s.prometheus_port)
+            node.log.info("prometheus metrics on http://%s:%d/metrics", s.prometheus_host, port)
+        node.ready()
+        while not stop.wait(min(s.report_period_s, config.detector.pool_alarm_s / 2)):
+            service.report()
     return 0
 
 

@@ -25,9 +25,10 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from contextlib import ExitStack
 
 from common.announce import announced_cameras
-from common.bus import Declared, QoS
+from common.bus import Declared, QoS, undeclare_all
 from common.camera_announce import CameraAnnouncements
 from common.clock import BOOT_ID, mono_s, now
 from common.command_gate import CommandGate, Outcome
@@ -304,13 +305,15 @@ def _nothing_announced(camera: str) -> CameraAnnouncement | None:
 def run(config: Config, stop: threading.Event) -> int:
     """Bridge until ``stop`` is set."""
     s = config.ros2
-    with (
-        Node("ros2", config) as node,
-        CameraAnnouncements(node.bus, node.keys, ANNOUNCED_SOURCE) as announcements,
-        RosGraph(s) as graph,
-    ):
+    with ExitStack() as closing:
+        node = closing.enter_context(Node("ros2", config))
+        announcements = closing.enter_context(
+            CameraAnnouncements(node.bus, node.keys, ANNOUNCED_SOURCE)
+        )
+        graph = closing.enter_context(RosGraph(s))
         keys = node.keys
         subs: list[Declared] = []
+        closing.callback(undeclare_all, subs)  # every one declared, when it ends
         told = announce_bridged(config, announcements)
         announced: AnnouncementOf = _nothing_announced
         if s.detections_3d_out and s.detections_3d_frame:
@@ -341,16 +344,12 @@ def run(config: Config, stop: threading.Event) -> int:
             s.distro, s.domain_id, ", ".join(s.router), s.namespace.rstrip("/"), s.node,
         )  # fmt: skip
         node.ready()
-        try:
-            # At the controller's rate: a silent controller's last command is stopped within
-            # one period of outliving the window.
-            while not stop.wait(1.0 / config.controller.control_rate_hz):
-                if cmds_out is not None:
-                    cmds_out.on_tick()
-                node.publish_counters()
+        # At the controller's rate: a silent controller's last command is stopped within
+        # one period of outliving the window.
+        while not stop.wait(1.0 / config.controller.control_rate_hz):
             if cmds_out is not None:
-                cmds_out.on_close()
-        finally:
-            for sub in subs:
-                sub.undeclare()
+                cmds_out.on_tick()
+            node.publish_counters()
+        if cmds_out is not None:
+            cmds_out.on_close()
     return 0

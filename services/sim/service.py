@@ -233,10 +233,107 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
     none there, and the ``ros2`` bridge that does announces them."""
     s = config.sim
     world = build_world(config)
-    lock = threading.Lock()
     cameras = sim_cameras(config)
     if s.ros2_robot:
         cameras = cameras[:1]  # one image topic (the supervisor warns of the others)
+    with ExitStack() as closing:
+        node = closing.enter_context(Node("sim", config, bus=bus))
+        lock = threading.Lock()
+        truth_pub = node.publisher(node.keys.sim_truth(), QoS.TELEMETRY)
+        handlers = SimHandlers(config, node, _base(world, lock, node, s))
+        out = _robot(closing, config, node, cameras, handlers)
+        _say_setup(node, config, cameras)
+
+        def live(key: str) -> bool:
+            return bool(node.bus.live_tokens(key, timeout_s=0.2))
+
+        waiting = Waiting(node.bus, node.keys, s.wait_for, [c.name for c in cameras], live)
+        closing.callback(waiting.close)
+        node.ready()
+        closing.callback(node.log.info, "stopping")  # first, however it ends
+        _simulate(config, node, world, lock, waiting, out, truth_pub, cameras, stop)
+    return 0
+
+
+def _base(
+    world: World, lock: threading.Lock, node: Node, s: contract.SimSettings
+) -> Callable[[Twist, str], None]:
+    """What drives the base: a velocity command from ``source`` (a publisher's id), counted
+    and refused when out of range, warned of when several publishers command at once."""
+    sources = CommandSources(s.command_sources_window_s)
+
+    def command(twist: Twist, source: str) -> None:
+        with lock:
+            active, new = sources.heard(source, mono_s())
+            sane = world.command(twist.linear[0], twist.angular[2])
+        if not sane:
+            node.reject(
+                contract.COMMANDS_OUT_OF_RANGE,
+                f"cmd_vel v={twist.linear[0]:g} w={twist.angular[2]:g} is beyond what the "
+                f"base takes (from {twist.header.source!r}): refused, the base stops",
+            )
+        if active > 1:
+            node.reject(
+                contract.COMMANDS_FROM_SEVERAL_SOURCES,
+                f"cmd_vel from {active} publishers at once "
+                f"(this one from {twist.header.source!r}, {source})",
+            )
+            if new:
+                node.log.warning("another publisher on cmd_vel: %s", sources.active())
+
+    return command
+
+
+def _robot(
+    closing: ExitStack, config: Config, node: Node, cameras: list[SimCamera], handlers: SimHandlers
+) -> SensorOutput:
+    """Where the sensors go, closed by ``closing``: a ROS 2 robot that hosts the graph's
+    router (as a robot runs rmw_zenohd), or the stack's own keys, each camera announced."""
+    s = config.sim
+    if s.ros2_robot:
+        return closing.enter_context(RosRobot(config, handlers))
+    stack_robot = StackRobot(config, node, handlers)
+    closing.callback(stack_robot.close)
+    announcements = closing.enter_context(
+        CameraAnnouncements(node.bus, node.keys, ANNOUNCED_SOURCE)
+    )
+    announce_cameras(announcements, cameras, s.physics_hz, depth=s.depth)
+    return stack_robot
+
+
+def _say_setup(node: Node, config: Config, cameras: list[SimCamera]) -> None:
+    """The scenario, the cameras and what the robot lacks, in the log."""
+    s = config.sim
+    node.log.info("scenario %r: %s", s.scenario, SCENARIOS[s.scenario].description)
+    for c in cameras:
+        node.log.info(
+            "camera %r: %dx%d at %.1f Hz, hfov %.0f deg, looking %+.0f deg",
+            c.name, c.spec.width, c.spec.height, c.rate_hz, c.spec.hfov_deg,
+            c.spec.mount_yaw_deg,
+        )  # fmt: skip
+    if s.depth and s.ros2_robot:
+        node.log.info(
+            "sim.depth: depth images on %s, their CameraInfo on %s",
+            config.ros2.depth_topic, config.ros2.depth_info_topic,
+        )  # fmt: skip
+    if not s.laser:
+        node.log.info("sim.laser = false: a robot with no laser, no scan")
+    missing = [c for c in SCENARIOS[s.scenario].cameras if c not in config.all_cameras]
+    if missing:
+        node.log.warning(
+            "scenario %r is meant to be seen by cameras %s too, which the config lacks "
+            "(the scenario runner adds them: python -m tools.scenarios scenario %s)",
+            s.scenario, missing, s.scenario,
+        )  # fmt: skip
+
+
+def _simulate(
+    config: Config, node: Node, world: World, lock: threading.Lock, waiting: Waiting,
+    out: SensorOutput, truth_pub: Publisher, cameras: list[SimCamera], stop: threading.Event,
+) -> None:  # fmt: skip
+    """The physics' loop, in real time until ``stop``: the world stands still at t=0 until
+    what ``sim.wait_for`` names has come, its sensors publishing on the wall clock meanwhile."""
+    s = config.sim
     laser = LaserSpec(
         s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m, s.laser_height_m
     )
@@ -244,118 +341,45 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
     depth = depth_noise(s) if s.depth else None
     # Its own stream, so that the laser's noise is the same with depth or without.
     depth_rng = np.random.default_rng([s.seed, 1])
-    sources = CommandSources(s.command_sources_window_s)
-    with Node("sim", config, bus=bus) as node, ExitStack() as closing:
-        keys = node.keys
 
-        def command(twist: Twist, source: str) -> None:
-            """A velocity command reached the base, from ``source`` (a publisher's id)."""
-            with lock:
-                active, new = sources.heard(source, mono_s())
-                sane = world.command(twist.linear[0], twist.angular[2])
-            if not sane:
-                node.reject(
-                    contract.COMMANDS_OUT_OF_RANGE,
-                    f"cmd_vel v={twist.linear[0]:g} w={twist.angular[2]:g} is beyond what the "
-                    f"base takes (from {twist.header.source!r}): refused, the base stops",
-                )
-            if active > 1:
-                node.reject(
-                    contract.COMMANDS_FROM_SEVERAL_SOURCES,
-                    f"cmd_vel from {active} publishers at once "
-                    f"(this one from {twist.header.source!r}, {source})",
-                )
-                if new:
-                    node.log.warning("another publisher on cmd_vel: %s", sources.active())
+    def new_clocks() -> dict[str, Clock]:
+        return {
+            **{f"frame:{c.name}": Clock(c.rate_hz) for c in cameras},
+            **({"scan": Clock(s.scan_rate_hz)} if s.laser else {}),
+            "truth": Clock(s.truth_rate_hz),
+        }
 
-        truth_pub = node.publisher(keys.sim_truth(), QoS.TELEMETRY)
-        handlers = SimHandlers(config, node, command)
-        out: SensorOutput
-        if s.ros2_robot:
-            # The robot speaks ROS 2: it hosts the graph's router, as a robot runs rmw_zenohd.
-            out = closing.enter_context(RosRobot(config, handlers))
-        else:
-            stack_robot = StackRobot(config, node, handlers)
-            closing.callback(stack_robot.close)
-            out = stack_robot
-            announcements = closing.enter_context(
-                CameraAnnouncements(node.bus, keys, ANNOUNCED_SOURCE)
-            )
-            announce_cameras(announcements, cameras, s.physics_hz, depth=depth is not None)
-
-        def new_clocks() -> dict[str, Clock]:
-            return {
-                **{f"frame:{c.name}": Clock(c.rate_hz) for c in cameras},
-                **({"scan": Clock(s.scan_rate_hz)} if s.laser else {}),
-                "truth": Clock(s.truth_rate_hz),
-            }
-
-        clocks = new_clocks()
-        node.log.info("scenario %r: %s", s.scenario, SCENARIOS[s.scenario].description)
-        for c in cameras:
-            node.log.info(
-                "camera %r: %dx%d at %.1f Hz, hfov %.0f deg, looking %+.0f deg",
-                c.name, c.spec.width, c.spec.height, c.rate_hz, c.spec.hfov_deg,
-                c.spec.mount_yaw_deg,
+    clocks = new_clocks()
+    dt = 1.0 / s.physics_hz
+    started = False
+    boot = next_tick = next_check = mono_s()
+    next_warning = boot + WARN_PERIOD_S
+    while not stop.is_set():
+        now = mono_s()
+        if not started and now >= next_check:
+            # Until what sim.wait_for names has come (the detections of every camera, the
+            # controller ready) the world stands still at t=0 but its sensors publish on the
+            # wall clock, so the detector warms up on real frames; then the scenario clock
+            # starts from 0.
+            next_check = now + 0.5
+            missing = waiting.missing()
+            started = not missing
+            if started:
+                clocks = new_clocks()
+                node.log.info("scenario clock started")
+            elif now >= next_warning:
+                next_warning = now + WARN_PERIOD_S
+                node.log.warning("%s", waiting_line(missing, now - boot))
+        with lock:
+            if started:
+                world.advance(dt)
+            t = world.t if started else now - boot
+            _publish_due(
+                node, world, t, clocks, out, truth_pub, cameras, laser, rng, depth, depth_rng,
             )  # fmt: skip
-        if s.depth and s.ros2_robot:
-            node.log.info(
-                "sim.depth: depth images on %s, their CameraInfo on %s",
-                config.ros2.depth_topic, config.ros2.depth_info_topic,
-            )  # fmt: skip
-        if not s.laser:
-            node.log.info("sim.laser = false: a robot with no laser, no scan")
-        missing = [c for c in SCENARIOS[s.scenario].cameras if c not in config.all_cameras]
-        if missing:
-            node.log.warning(
-                "scenario %r is meant to be seen by cameras %s too, which the config lacks "
-                "(the scenario runner adds them: python -m tools.scenarios scenario %s)",
-                s.scenario, missing, s.scenario,
-            )  # fmt: skip
-        waiting = Waiting(
-            node.bus,
-            keys,
-            s.wait_for,
-            [c.name for c in cameras],
-            lambda key: bool(node.bus.live_tokens(key, timeout_s=0.2)),
-        )
-        closing.callback(waiting.close)
-        node.ready()
-        dt = 1.0 / s.physics_hz
-        started = False
-        boot = next_tick = next_check = mono_s()
-        next_warning = boot + WARN_PERIOD_S
-        try:
-            while not stop.is_set():
-                now = mono_s()
-                if not started and now >= next_check:
-                    # Until what sim.wait_for names has come (the detections of every camera,
-                    # the controller ready) the world stands still at t=0 but its sensors
-                    # publish on the wall clock, so the detector warms up on real frames;
-                    # then the scenario clock starts from 0.
-                    next_check = now + 0.5
-                    missing = waiting.missing()
-                    started = not missing
-                    if started:
-                        clocks = new_clocks()
-                        node.log.info("scenario clock started")
-                    elif now >= next_warning:
-                        next_warning = now + WARN_PERIOD_S
-                        node.log.warning("%s", waiting_line(missing, now - boot))
-                with lock:
-                    if started:
-                        world.advance(dt)
-                    t = world.t if started else now - boot
-                    _publish_due(
-                        node, world, t, clocks, out, truth_pub, cameras, laser, rng,
-                        depth, depth_rng,
-                    )  # fmt: skip
-                node.publish_counters()
-                next_tick = max(next_tick + dt, mono_s() - dt)
-                stop.wait(max(0.0, next_tick - mono_s()))
-        finally:
-            node.log.info("stopping")
-    return 0
+        node.publish_counters()
+        next_tick = max(next_tick + dt, mono_s() - dt)
+        stop.wait(max(0.0, next_tick - mono_s()))
 
 
 def _publish_due(

@@ -14,11 +14,13 @@ from __future__ import annotations
 import errno
 import threading
 from collections.abc import Mapping
+from contextlib import ExitStack
 
 import foxglove
 from foxglove.websocket import WebSocketServer
 
 from common.announce import Announced, announced_cameras
+from common.bus import Declared, undeclare_all
 from common.clock import SYSTEM_CLOCK, Clock, mono_s
 from common.contracts import MetricsAnswer
 from common.credential_modes import check_folder, check_secret
@@ -315,57 +317,73 @@ def run(config: Config, stop: threading.Event) -> int:
     """Serve the live view until ``stop`` is set."""
     context = foxglove.Context()
     channels = Channels(context, list(config.all_cameras))
-    with Node("viewer", config) as node:
+    with ExitStack() as closing:
+        node = closing.enter_context(Node("viewer", config))
         server = start_server(context, config.viewer.relay_port)
+        closing.callback(server.stop)
         front = start_front(config, server.port)
+        closing.callback(front.stop)
         viewer = Viewer(node, channels, config, node.subscribe, clock=node.clock)
-        keys = node.keys
-        heard: Announced[CameraAnnouncement] | None = None
-
-        def on_cameras() -> None:
-            if heard is not None:  # else called back while it is being declared
-                viewer.set_announced(heard.current())
-
-        heard = announced_cameras(
-            node.bus, keys, on_cameras, lambda k, e: node.bad_input(k, e, topic="announcement")
-        )
-        on_cameras()
-        subs = [
-            sub
-            for camera, view in viewer.cameras.items()
-            for sub in (
-                node.subscribe(keys.frame(camera), view.on_frame),
-                node.subscribe(keys.detections(camera), view.on_detections),
-            )
-        ]
-        subs += [
-            node.subscribe(keys.scan(), viewer.on_scan),
-            node.subscribe(keys.cmd_vel(), viewer.on_twist),
-            node.subscribe(keys.controller_status(), viewer.on_status),
-            node.subscribe(keys.sim_truth(), viewer.on_truth),
-        ]
+        if viewer.depth is not None:
+            closing.callback(viewer.depth.close)
         threads = [
             threading.Thread(target=viewer.encode_loop, args=(stop,), name="encode", daemon=True),
             threading.Thread(
                 target=metrics_loop, args=(node, viewer, stop), name="metrics", daemon=True
             ),
         ]
+        closing.callback(_join, threads)  # after the subscriptions are gone
+        heard = _watch_cameras(node, viewer)
+        closing.callback(heard.close)
+        subs = _subscribe(node, viewer)
+        closing.callback(undeclare_all, subs)
         for t in threads:
             t.start()
         node.log.info("foxglove live view on ws://%s:%d", config.viewer.host, config.viewer.port)
         node.ready()
-        try:
-            while not stop.wait(0.5):
-                node.publish_counters()
-        finally:
-            node.log.info("stopping")
-            for sub in subs:
-                sub.undeclare()
-            heard.close()
-            for t in threads:
-                t.join(timeout=2.0)
-            if viewer.depth is not None:
-                viewer.depth.close()
-            front.stop()
-            server.stop()
+        closing.callback(node.log.info, "stopping")  # first, however it ends
+        while not stop.wait(0.5):
+            node.publish_counters()
     return 0
+
+
+def _watch_cameras(node: Node, viewer: Viewer) -> Announced[CameraAnnouncement]:
+    """The cameras announced, each change shown."""
+    heard: Announced[CameraAnnouncement] | None = None
+
+    def on_cameras() -> None:
+        if heard is not None:  # else called back while it is being declared
+            viewer.set_announced(heard.current())
+
+    heard = announced_cameras(
+        node.bus, node.keys, on_cameras, lambda k, e: node.bad_input(k, e, topic="announcement")
+    )
+    on_cameras()
+    return heard
+
+
+def _subscribe(node: Node, viewer: Viewer) -> list[Declared]:
+    """Each camera's frames and detections, the scan, the commands, the controller's status
+    and the simulator's truth, to the viewer."""
+    keys = node.keys
+    subs = [
+        sub
+        for camera, view in viewer.cameras.items()
+        for sub in (
+            node.subscribe(keys.frame(camera), view.on_frame),
+            node.subscribe(keys.detections(camera), view.on_detections),
+        )
+    ]
+    subs += [
+        node.subscribe(keys.scan(), viewer.on_scan),
+        node.subscribe(keys.cmd_vel(), viewer.on_twist),
+        node.subscribe(keys.controller_status(), viewer.on_status),
+        node.subscribe(keys.sim_truth(), viewer.on_truth),
+    ]
+    return subs
+
+
+def _join(threads: list[threading.Thread]) -> None:
+    for t in threads:
+        if t.is_alive():
+            t.join(timeout=2.0)
