@@ -4,7 +4,8 @@ their watch, queryables and queries. Pure: no Zenoh here.
 Two implementations: :class:`common.zenoh_bus.ZenohBus` over a Zenoh session (what the
 processes run), and :class:`common.memory_bus.MemoryBus`, every participant in one process
 with delivery in the caller's thread (what the in-process tests run, with a fake clock:
-deterministic and instant) or on threads of the hub's own (to see races). A service's wiring takes a ``Bus``; nothing above it knows which.
+deterministic and instant) or on threads of the hub's own (to see races). A service's wiring
+takes a ``Bus``; nothing above it knows which.
 
 Key expressions are Zenoh's: chunks split by ``/``, ``*`` matching one chunk and ``**`` any
 number of them (common/keys.py builds every one).
