@@ -207,8 +207,7 @@ def test_an_engage_on_the_controllers_host_stops_without_zenoh(make_stack, tmp_p
     wait_for(lambda: moving(cmds), 60, "motion towards the cameraman")
     cut = tmp_path / "cut.toml"
     cut.write_text(
-        f'extends = "{stack.config_path}"\n'
-        f'[zenoh]\nendpoint = "tcp/127.0.0.1:{free_port()}"\n'
+        f'extends = "{stack.config_path}"\n[zenoh]\nendpoint = "tcp/127.0.0.1:{free_port()}"\n'
     )
     done = subprocess.run(
         [sys.executable, "-m", "deploy.zstack", "estop", "engage", "--config", str(cut),
