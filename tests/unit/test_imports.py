@@ -11,11 +11,12 @@ name a project module, absolutely or as a submodule of the table's own module (m
 (``python -m``, ``runpy`` in deploy/zstack.py) is not an import.
 
 Units. For package cycles and layers each module belongs to one unit: ``common``, ``stack``,
-``runtimes``, ``perception`` and ``deploy`` are one unit each; below ``services``, ``tools``
-and ``modelprep`` each second level is one (``services.detector``, ``tools.evaluation``,
-``modelprep.quantize``, and a module directly in the folder is its own: ``tools.launch``,
-``modelprep.files``); a service's contract is a unit of its own (``services.detector.contract``),
-so that what reads it (the stack, other services) does not depend on the service.
+``runtimes``, ``perception``, ``rosmsg``, ``simworld`` and ``deploy`` are one unit each; below
+``services``, ``tools`` and ``modelprep`` each second level is one (``services.detector``,
+``tools.evaluation``, ``modelprep.quantize``, and a module directly in the folder is its own:
+``tools.launch``, ``modelprep.files``); a service's contract is a unit of its own
+(``services.detector.contract``), so that what reads it (the stack, other services) does not
+depend on the service.
 
 Layers: who may import whom (``_allowed`` is exactly this table).
 
@@ -23,17 +24,21 @@ Layers: who may import whom (``_allowed`` is exactly this table).
 importer       may import
 =============  ==========================================================================
 common         common
-a contract     common, another service's contract (what it reads of it); a contract is
-               ``services.X.contract``
+a contract     common, another service's contract (what it reads of it), and of the
+               libraries only ``rosmsg.distro`` (the bridge's ``distro`` setting, a module that
+               imports nothing); a contract is ``services.X.contract``
 stack          common, stack, the services' contracts (it assembles them)
 runtimes       common, runtimes, modelprep, the detector's contract (its settings)
 modelprep.X    common, modelprep
 perception     common, runtimes, modelprep, perception (the detection library), the
                detector's contract (its settings)
-services.X     common, stack, runtimes, modelprep, its own package, ``perception`` (the package
-               root: its public API, never its modules), another service's package root
-               (``services.Y``, its public API) or contract, never its internals; never tools
-               or deploy
+rosmsg         common, rosmsg (the ROS 2 message library), and ``perception``'s package root
+               (a camera's mounting and the depth columns of 3D detections)
+simworld       common, simworld (the simulated world)
+services.X     common, stack, runtimes, modelprep, rosmsg, simworld, its own package,
+               ``perception`` (the package root: its public API, never its modules), and of
+               another service only its contract (``services.Y.contract``): never its package
+               root nor its other modules; never tools or deploy
 tools.X        anything but deploy (a tool starts the supervisor as a process), and of
                perception only its package root (its public API)
 deploy         common, stack, the services' contracts, deploy
@@ -53,9 +58,22 @@ from collections.abc import Container, Iterable, Iterator, Mapping
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGES = ("common", "stack", "runtimes", "modelprep", "perception", "services", "tools", "deploy")
+PACKAGES = (
+    "common",
+    "stack",
+    "runtimes",
+    "modelprep",
+    "perception",
+    "rosmsg",
+    "simworld",
+    "services",
+    "tools",
+    "deploy",
+)
 #: Units that are a whole top-level package (the others are split at the second level).
-WHOLE = ("common", "stack", "runtimes", "perception", "deploy")
+WHOLE = ("common", "stack", "runtimes", "perception", "rosmsg", "simworld", "deploy")
+#: The only library modules a contract may read: the ROS distributions (the bridge's setting).
+CONTRACT_READS = frozenset({"rosmsg.distro"})
 
 #: Module -> the project modules it imports, each with the line of its first import there.
 Graph = dict[str, dict[str, int]]
@@ -261,7 +279,7 @@ def _allowed(module: str, target: str) -> bool:
     if top == "common":
         return target_top == "common"
     if is_contract(module):
-        return target_top == "common" or is_contract(target)
+        return target_top == "common" or is_contract(target) or target in CONTRACT_READS
     if top == "stack":
         return target_top in ("common", "stack") or is_contract(target)
     if top == "runtimes":
@@ -271,15 +289,20 @@ def _allowed(module: str, target: str) -> bool:
     if top == "perception":
         own = ("common", "runtimes", "modelprep", "perception")
         return target_top in own or is_contract(target)
+    if top == "rosmsg":
+        return target_top in ("common", "rosmsg") or target == "perception"
+    if top == "simworld":
+        return target_top in ("common", "simworld")
     if top == "services":
-        if target_top in ("common", "stack", "runtimes", "modelprep") or is_contract(target):
+        below = ("common", "stack", "runtimes", "modelprep", "rosmsg", "simworld")
+        if target_top in below or is_contract(target):
             return True
         if target_top == "perception":
             return target == "perception"  # its public API, never its modules
         if target_top != "services":
             return False  # tools, deploy
-        own = unit(module)
-        return target == own or target.startswith(f"{own}.") or target.count(".") == 1
+        package = unit(module)  # another service: only its contract (above)
+        return target == package or target.startswith(f"{package}.")
     if top == "tools":
         if target_top == "perception":
             return target == "perception"
@@ -356,6 +379,8 @@ def test_units_are_the_whole_package_or_its_second_level() -> None:
     assert unit("modelprep.quantize.nncf_int8") == "modelprep.quantize"
     assert unit("services.detector.contract") == "services.detector.contract"
     assert unit("stack.access") == "stack"
+    assert unit("rosmsg.graph") == "rosmsg"
+    assert unit("simworld.render") == "simworld"
 
 
 def test_a_package_cycle_through_a_function_level_import_is_caught() -> None:
@@ -412,9 +437,34 @@ def test_the_layering_rule_refuses_what_the_table_refuses() -> None:
     assert not _allowed("services.sim.runner", "tools.scenarios.runner")
     assert not _allowed("services.recorder", "deploy.processes")
     assert not _allowed("services.detector.service", "deploy")
-    # nor another service's internals
+    # nor another service's internals, nor its package root: only its contract
     assert not _allowed("services.metrics.service", "services.detector.pool")
-    assert _allowed("services.metrics.service", "services.detector")
+    assert not _allowed("services.metrics.service", "services.detector")
+    assert not _allowed("services.recorder.channels", "services.ros2")
+    assert not _allowed("services.sim.service", "services.ros2.service")
+    assert _allowed("services.sim.service", "services.ros2.contract")
+    # the ROS message library and the simulated world: for the services and the tools
+    assert _allowed("services.recorder.channels", "rosmsg.convert")
+    assert _allowed("services.sim.service", "rosmsg.graph")
+    assert _allowed("services.sim.service", "simworld.render")
+    assert _allowed("tools.benchmarks.ros2", "rosmsg.graph")
+    assert _allowed("tools.scenarios.runner", "simworld.scenarios")
+    # ... themselves libraries: no service, no stack, not each other
+    assert not _allowed("rosmsg.graph", "services.ros2.contract")
+    assert not _allowed("rosmsg.graph", "stack.config")
+    assert _allowed("rosmsg.depth", "perception")
+    assert not _allowed("rosmsg.depth", "perception.depth")
+    assert not _allowed("rosmsg.convert", "simworld.world")
+    assert not _allowed("simworld.world", "services.sim.contract")
+    assert not _allowed("simworld.render", "stack.config")
+    assert not _allowed("simworld.render", "rosmsg.images")
+    assert not _allowed("simworld.depth", "perception")
+    assert not _allowed("perception.depth", "rosmsg.depth")
+    assert not _allowed("common.frames", "simworld.world")
+    # a contract reads of the libraries only the ROS distributions
+    assert _allowed("services.ros2.contract", "rosmsg.distro")
+    assert not _allowed("services.ros2.contract", "rosmsg.typestore")
+    assert not _allowed("services.sim.contract", "simworld.world")
     # the detection library's public API, never its modules
     assert _allowed("services.detector.service", "perception")
     assert not _allowed("services.detector.service", "perception.pipeline")
@@ -426,7 +476,7 @@ def test_the_layering_rule_refuses_what_the_table_refuses() -> None:
     assert not _allowed("perception.pipeline", "services.detector")
     assert not _allowed("perception.loading", "tools.detector.fast_profile")
     # tools anything but deploy
-    assert _allowed("tools.evaluation.evaluate", "services.sim.scenarios")
+    assert _allowed("tools.evaluation.evaluate", "simworld.scenarios")
     assert _allowed("tools.scenarios.runner", "tools.launch")
     assert not _allowed("tools.scenarios.runner", "deploy.processes")
     # the lower floors
@@ -467,6 +517,30 @@ def test_a_service_importing_tools_or_deploy_inside_a_function_is_reported() -> 
     assert sorted(wrong) == [
         ("services.sim.runner", "deploy.lock"),
         ("services.sim.runner", "tools.launch"),
+    ]
+
+
+def test_a_service_reaching_into_another_service_is_reported() -> None:
+    # the recorder and the simulator took the ROS messages from the bridge's package root
+    # (issue 40): editing the bridge silently changed them
+    sources = _sources(
+        {
+            "services/ros2/__init__.py": "",
+            "services/ros2/contract.py": "",
+            "services/ros2/convert.py": "",
+            "services/recorder/__init__.py": "",
+            "services/recorder/channels.py": (
+                "from services.ros2 import convert\nfrom services.ros2.contract import RosDistro\n"
+            ),
+            "services/sim/__init__.py": "",
+            "services/sim/service.py": "def f():\n    import services.ros2\n",
+        }
+    )
+    graph = import_graph(sources)
+    wrong = [(m, t) for m, ts in graph.items() for t in ts if not _allowed(m, t)]
+    assert sorted(wrong) == [
+        ("services.recorder.channels", "services.ros2.convert"),
+        ("services.sim.service", "services.ros2"),
     ]
 
 
