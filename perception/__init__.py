@@ -34,7 +34,7 @@ quantizer) and ``preparing.py`` (building what is missing: modelprep/, acquire/ 
 Importing this package imports none of its modules: each name is imported on first use
 (``_EXPORTS``), so that what needs one name (the detector's contract, its settings; a service,
 ``Mounting``) loads only the module behind it. The ``TYPE_CHECKING`` imports below say the same
-to type checkers (tests/unit/perception/test_exports.py checks that the two agree).
+to type checkers (tests/unit/perception/test_settings.py checks that the two agree).
 """
 
 from __future__ import annotations
