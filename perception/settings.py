@@ -124,8 +124,9 @@ class DecodeOptions:
 
 
 @dataclass(frozen=True, kw_only=True)
-class DetectorSpec(ModelSpec, DecodeOptions):
-    """A model to open and how to read its output: what opening a Detector takes."""
+class DetectorSpec(DecodeOptions, ModelSpec):
+    """A model to open and how to read its output: what opening a Detector takes (its fields
+    in that order: the model's, then the decode options)."""
 
     BOUNDS: ClassVar[Bounds] = {**ModelSpec.BOUNDS, **DecodeOptions.BOUNDS}
     LENGTHS: ClassVar[Bounds] = dict(DecodeOptions.LENGTHS)
