@@ -24,14 +24,14 @@ Layers: who may import whom (``_allowed`` is exactly this table).
 importer       may import
 =============  ==========================================================================
 common         common
-a contract     common, another service's contract (what it reads of it), and of the
-               libraries only ``rosmsg.distro`` (the bridge's ``distro`` setting, a module that
-               imports nothing); a contract is ``services.X.contract``
+a contract     common, another service's contract (what it reads of it), a library's
+               settings (``perception.settings``: the detector's contract composes them), and
+               ``rosmsg.distro`` (the bridge's ``distro`` setting, a module that imports
+               nothing); a contract is ``services.X.contract``
 stack          common, stack, the services' contracts (it assembles them)
-runtimes       common, runtimes, modelprep, the detector's contract (its settings)
+runtimes       common, runtimes, modelprep
 modelprep.X    common, modelprep
-perception     common, runtimes, modelprep, perception (the detection library), the
-               detector's contract (its settings)
+perception     common, runtimes, modelprep, perception (the detection library)
 rosmsg         common, rosmsg (the ROS 2 message library), and ``perception``'s package root
                (a camera's mounting and the depth columns of 3D detections)
 simworld       common, simworld (the simulated world)
@@ -43,6 +43,13 @@ tools.X        anything but deploy (a tool starts the supervisor as a process), 
                perception only its package root (its public API)
 deploy         common, stack, the services' contracts, deploy
 =============  ==========================================================================
+
+So no library (``common``, ``runtimes``, ``modelprep``, ``perception``) imports ``services``:
+each declares its own settings, and takes them, or plain arguments, from its callers.
+
+Serving's load path (``perception.loading``, what the detector service opens its model with)
+reaches nothing under ``modelprep.quantize`` (the INT8 quantizer): preparing a model
+(``perception.preparing``) and loading what was prepared are two modules.
 
 No production module reads anything under tests/: no import of ``tests``, and no string that
 is a path into it (``"tests/..."``, a ``"tests"`` path part); docstrings and comments may
@@ -74,6 +81,14 @@ PACKAGES = (
 WHOLE = ("common", "stack", "runtimes", "perception", "rosmsg", "simworld", "deploy")
 #: The only library modules a contract may read: the ROS distributions (the bridge's setting).
 CONTRACT_READS = frozenset({"rosmsg.distro"})
+
+#: The libraries below the services: none imports anything under ``services``.
+LIBRARIES = ("common", "runtimes", "modelprep", "perception", "rosmsg", "simworld")
+#: The libraries' settings modules a service's contract may import (and compose).
+LIBRARY_SETTINGS = ("perception.settings",)
+#: Serving's load path, and the quantizer it must never reach.
+SERVING_LOAD = "perception.loading"
+QUANTIZER = "modelprep.quantize"
 
 #: Module -> the project modules it imports, each with the line of its first import there.
 Graph = dict[str, dict[str, int]]
@@ -279,16 +294,20 @@ def _allowed(module: str, target: str) -> bool:
     if top == "common":
         return target_top == "common"
     if is_contract(module):
-        return target_top == "common" or is_contract(target) or target in CONTRACT_READS
+        return (
+            target_top == "common"
+            or is_contract(target)
+            or target in CONTRACT_READS
+            or target in LIBRARY_SETTINGS
+        )
     if top == "stack":
         return target_top in ("common", "stack") or is_contract(target)
     if top == "runtimes":
-        return target_top in ("common", "runtimes", "modelprep") or is_contract(target)
+        return target_top in ("common", "runtimes", "modelprep")
     if top == "modelprep":
         return target_top in ("common", "modelprep")
     if top == "perception":
-        own = ("common", "runtimes", "modelprep", "perception")
-        return target_top in own or is_contract(target)
+        return target_top in ("common", "runtimes", "modelprep", "perception")
     if top == "rosmsg":
         return target_top in ("common", "rosmsg") or target == "perception"
     if top == "simworld":
@@ -475,6 +494,14 @@ def test_the_layering_rule_refuses_what_the_table_refuses() -> None:
     assert _allowed("perception.pipeline", "runtimes.base")
     assert not _allowed("perception.pipeline", "services.detector")
     assert not _allowed("perception.loading", "tools.detector.fast_profile")
+    # the libraries own their settings: none reads the detector's contract for them
+    assert not _allowed("perception.variants", "services.detector.contract")
+    assert not _allowed("perception.tracker", "services.detector.contract")
+    assert not _allowed("runtimes.select", "services.detector.contract")
+    assert not _allowed("modelprep.quantize", "services.detector.contract")
+    assert _allowed("services.detector.contract", "perception.settings")
+    assert not _allowed("services.detector.contract", "perception.pipeline")
+    assert not _allowed("services.detector.contract", "perception")
     # tools anything but deploy
     assert _allowed("tools.evaluation.evaluate", "simworld.scenarios")
     assert _allowed("tools.scenarios.runner", "tools.launch")
@@ -565,6 +592,66 @@ def test_layers_and_no_service_imports_another_services_internals() -> None:
         if not _allowed(module, target)
     )
     assert wrong == [], "imports across the layers:\n" + "\n".join(wrong)
+
+
+def test_no_library_imports_services() -> None:
+    wrong = sorted(
+        f"{module} imports {target} (line {line})"
+        for module, targets in GRAPH.items()
+        if module.split(".")[0] in LIBRARIES
+        for target, line in targets.items()
+        if target.split(".")[0] == "services"
+    )
+    assert wrong == [], "libraries importing services:\n" + "\n".join(wrong)
+
+
+def closure(graph: Graph, start: str) -> dict[str, str]:
+    """Every module ``start`` reaches, each with the module that first imports it on the way
+    (breadth first: a shortest path back to ``start``)."""
+    reached = {start: ""}
+    frontier = [start]
+    while frontier:
+        nxt = []
+        for module in frontier:
+            for target in sorted(graph.get(module, ())):
+                if target not in reached:
+                    reached[target] = module
+                    nxt.append(target)
+        frontier = nxt
+    return reached
+
+
+def _path(reached: Mapping[str, str], module: str) -> str:
+    hops = [module]
+    while reached[hops[-1]]:
+        hops.append(reached[hops[-1]])
+    return " <- ".join(hops)
+
+
+def test_the_closure_sees_a_lazy_import_two_hops_away() -> None:
+    sources = _sources(
+        {
+            "lib/__init__.py": "",
+            "lib/load.py": "import lib.files\n",
+            "lib/files.py": "def f():\n    from lib.quant import q\n",
+            "lib/quant.py": "def q(): ...\n",
+        }
+    )
+    reached = closure(import_graph(sources), "lib.load")
+    assert _path(reached, "lib.quant") == "lib.quant <- lib.files <- lib.load"
+
+
+def test_serving_load_path_reaches_no_quantizer() -> None:
+    reached = closure(GRAPH, SERVING_LOAD)
+    assert "perception.pipeline" in reached and "runtimes.onnx" in reached  # it sees the path
+    wrong = [
+        _path(reached, m)
+        for m in sorted(reached)
+        if m == QUANTIZER or m.startswith(QUANTIZER + ".")
+    ]
+    assert wrong == [], "serving's load path reaches the quantizer:\n" + "\n".join(wrong)
+    # preparing does: the check would see it
+    assert QUANTIZER in closure(GRAPH, "perception.preparing")
 
 
 # -- nothing in production reads tests/ ---------------------------------------------------------
