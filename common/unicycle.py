@@ -1,6 +1,6 @@
 """A unicycle's motion (a differential-drive base), exactly integrated. Pure.
 
-Used by the simulator's base (services/sim/world.py) and by the controller's depth memory,
+Used by the simulator's base (simworld/world.py) and by the controller's depth memory,
 which moves what it saw by the commands it sent (services/controller/local_map.py).
 """
 

@@ -1,7 +1,7 @@
 """The one place where a Zenoh configuration is built, a session opened and a publisher
 declared; :class:`ZenohBus` is the bus protocol (common/bus.py) over a Zenoh session.
 
-Only service I/O modules (``services/*/service.py``, and ``services/ros2/graph.py`` for a ROS 2
+Only service I/O modules (``services/*/service.py``, and ``rosmsg/graph.py`` for a ROS 2
 graph's session), the supervisor and the command-line clients import this module; the logic
 modules never touch the bus (tests/unit/test_bus_io.py).
 

@@ -7,13 +7,10 @@ Results meant for programs go to stdout; progress and status go to stderr.
 
 from __future__ import annotations
 
-import runpy
 import sys
 from collections.abc import Sequence
 
-from common.cli import invoked_as
 from common.priority import own_session
-from common.settings import SERVICES
 
 # command -> (module, the argv it starts with, help)
 COMMANDS: dict[str, tuple[str, tuple[str, ...], str]] = {
@@ -90,6 +87,8 @@ def resolve(argv: Sequence[str]) -> tuple[str, list[str]]:
         print(f"zstack: error: unknown command {command!r}\n\n{usage()}", file=sys.stderr)
         raise SystemExit(2)
     if command == "serve":
+        from common.settings import SERVICES
+
         if not rest or rest[0] not in SERVICES:
             print(f"zstack: error: serve needs one of {', '.join(SERVICES)}", file=sys.stderr)
             raise SystemExit(2)
@@ -105,6 +104,17 @@ def main(argv: Sequence[str] | None = None) -> None:
         code = own_session()
         if code is not None:
             raise SystemExit(code)
+        if words[1:2] == ["engage"] and not {"-h", "--help"} & set(words):
+            # The local road first (stack/local_estop.py): a datagram to the controller on
+            # this host, before Zenoh or the command's parser is imported. The command's
+            # Zenoh road follows as always, and reports whether the controller acknowledged.
+            from stack.local_estop import engage_here, option
+
+            engage_here(option(words, "--config"), option(words, "--reason") or "")
+    import runpy
+
+    from common.cli import invoked_as
+
     module, args = resolve(words)
     lead = COMMANDS[words[0]][1] if words[0] != "serve" else ("serve",)
     typed = f"zstack {words[0]}" if words[0] != "serve" else f"zstack serve {words[1]}"

@@ -5,11 +5,15 @@ import only this; tests/unit/test_imports.py checks it). No bus, no service: the
 service (services/detector/) and the tools are built on it.
 
     Detector            a model loaded on one backend: ``Detector.open(path, backend=...,
-                        settings=DetectorSettings(...))`` (services/detector/contract.py)
+                        settings=DecodeOptions(...))``
+    ModelSpec, DecodeOptions, DetectorSpec, TrackerParams
+                        the library's settings (``settings.py``): what model to run and how,
+                        what to keep of its output, the tracker's thresholds; the detector
+                        service's settings (services/detector/contract.py) are these and more
     DetectionResult     what ``Detector.detect`` returns (``StageTiming``: its stage times)
     Tracker             track ids across frames (``tracker_clock``, ``iou_matrix``)
     Variant             ``backend:precision:imgsz``; ``variant_of(detector)`` says what one runs
-    prepare_for         every preparation settings need, ahead of serving (``zstack prepare``)
+    prepare_for         every preparation a spec needs, ahead of serving (``zstack prepare``)
     load                open what was prepared, building nothing; NotPrepared says what to run
     prepare, open_prepared, sized_model    one variant's files, built where missing (tools)
     choose_fast         the fast profile's choice (``Figures``, ``Measure``, ``TIMED_RUNS``)
@@ -23,42 +27,80 @@ service (services/detector/) and the tools are built on it.
 
 The detection path: ``pipeline.py`` (``preprocess``, a runtimes/ backend, ``decode.py``,
 ``postprocess.py``) -> ``tracker.py``; ``model_info.py`` reads what a model says of itself.
-Model files: ``variants.py`` (settings -> the file a backend loads), ``fast_profile.py``,
-``loading.py``; building them is modelprep/ (acquire/, quantize/), imported only to build.
+Model files: ``variants.py`` (a spec -> the file a backend loads, as prepared),
+``fast_profile.py``, ``loading.py`` (serving's load: opens what was prepared, and reaches no
+quantizer) and ``preparing.py`` (building what is missing: modelprep/, acquire/ and quantize/).
+
+Importing this package imports none of its modules: each name is imported on first use
+(``_EXPORTS``), so that what needs one name (the detector's contract, its settings; a service,
+``Mounting``) loads only the module behind it. The ``TYPE_CHECKING`` imports below say the same
+to type checkers (tests/unit/perception/test_settings.py checks that the two agree).
 """
 
-from perception.batching import PROBE_SHAPE, BatchChoice, probe_sizes
-from perception.batching import measure as measure_batch
-from perception.depth import CENTRE as DEPTH_CENTRE
-from perception.depth import COLUMNS as DEPTH_COLUMNS
-from perception.depth import DISTANCE as DEPTH_DISTANCE
-from perception.depth import SIZE as DEPTH_SIZE
-from perception.depth import (
-    DepthParams,
-    Intrinsics,
-    Mounting,
-    depth_metres,
-    to_depth_pixels,
-    to_robot,
-)
-from perception.depth import measure as measure_depth
-from perception.depth import unknown as unknown_depth
-from perception.fast_profile import TIMED_RUNS, Figures, Measure, choose_fast
-from perception.loading import load, prepare_for
-from perception.pipeline import Detector
-from perception.tracker import Tracker, iou_matrix, tracker_clock
-from perception.types import DetectionResult, StageTiming
-from perception.variants import (
-    PREPARE_COMMAND,
-    NotPrepared,
-    Prepared,
-    Variant,
-    open_prepared,
-    prepare,
-    sized_model,
-    variant_of,
-)
+from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from perception.batching import PROBE_SHAPE, BatchChoice, probe_sizes
+    from perception.batching import measure as measure_batch
+    from perception.depth import CENTRE as DEPTH_CENTRE
+    from perception.depth import COLUMNS as DEPTH_COLUMNS
+    from perception.depth import DISTANCE as DEPTH_DISTANCE
+    from perception.depth import SIZE as DEPTH_SIZE
+    from perception.depth import (
+        DepthParams,
+        Intrinsics,
+        Mounting,
+        depth_metres,
+        to_depth_pixels,
+        to_robot,
+    )
+    from perception.depth import measure as measure_depth
+    from perception.depth import unknown as unknown_depth
+    from perception.fast_profile import TIMED_RUNS, Figures, Measure, choose_fast
+    from perception.loading import load
+    from perception.pipeline import Detector
+    from perception.preparing import open_prepared, prepare, prepare_for, sized_model
+    from perception.settings import DecodeOptions, DetectorSpec, ModelSpec, TrackerParams
+    from perception.tracker import Tracker, iou_matrix, tracker_clock
+    from perception.types import DetectionResult, StageTiming
+    from perception.variants import PREPARE_COMMAND, NotPrepared, Prepared, Variant, variant_of
+
+#: Module (of this package) -> the names this package exports from it; ``"a as b"`` exports
+#: ``a`` as ``b``.
+_FROM: dict[str, tuple[str, ...]] = {
+    "batching": ("PROBE_SHAPE", "BatchChoice", "probe_sizes", "measure as measure_batch"),
+    "depth": (
+        "CENTRE as DEPTH_CENTRE",
+        "COLUMNS as DEPTH_COLUMNS",
+        "DISTANCE as DEPTH_DISTANCE",
+        "SIZE as DEPTH_SIZE",
+        "DepthParams",
+        "Intrinsics",
+        "Mounting",
+        "depth_metres",
+        "to_depth_pixels",
+        "to_robot",
+        "measure as measure_depth",
+        "unknown as unknown_depth",
+    ),
+    "fast_profile": ("TIMED_RUNS", "Figures", "Measure", "choose_fast"),
+    "loading": ("load",),
+    "pipeline": ("Detector",),
+    "preparing": ("open_prepared", "prepare", "prepare_for", "sized_model"),
+    "settings": ("DecodeOptions", "DetectorSpec", "ModelSpec", "TrackerParams"),
+    "tracker": ("Tracker", "iou_matrix", "tracker_clock"),
+    "types": ("DetectionResult", "StageTiming"),
+    "variants": ("PREPARE_COMMAND", "NotPrepared", "Prepared", "Variant", "variant_of"),
+}
+#: Exported name -> (module, its name there).
+_EXPORTS: dict[str, tuple[str, str]] = {
+    alias.partition(" as ")[2] or alias: (f"{__name__}.{module}", alias.partition(" as ")[0])
+    for module, names in _FROM.items()
+    for alias in names
+}
 __all__ = [
     "DEPTH_CENTRE",
     "DEPTH_COLUMNS",
@@ -68,17 +110,21 @@ __all__ = [
     "PROBE_SHAPE",
     "TIMED_RUNS",
     "BatchChoice",
+    "DecodeOptions",
     "DepthParams",
     "DetectionResult",
     "Detector",
+    "DetectorSpec",
     "Figures",
     "Intrinsics",
     "Measure",
+    "ModelSpec",
     "Mounting",
     "NotPrepared",
     "Prepared",
     "StageTiming",
     "Tracker",
+    "TrackerParams",
     "Variant",
     "choose_fast",
     "depth_metres",
@@ -97,3 +143,18 @@ __all__ = [
     "unknown_depth",
     "variant_of",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """The exported ``name``, importing its module on first use."""
+    try:
+        module, attribute = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), attribute)
+    globals()[name] = value  # once imported, found without coming here again
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

@@ -27,9 +27,9 @@ from common.files import atomic_write_bytes, sha256_file
 from common.lifecycle import Progress, print_progress
 from common.machine import cpu_model
 from modelprep.files import ensure_default_model
+from perception.settings import DetectorSpec, ModelSpec
 from perception.variants import NotPrepared, Variant, located_model, model_input_hw
 from runtimes.table import BACKENDS, import_backend
-from services.detector.contract import DetectorSettings
 
 log = logging.getLogger("perception.fast_profile")
 
@@ -82,7 +82,7 @@ def candidates(sizes: Sequence[int] = SIZES) -> list[Variant]:
     return [Variant(b, p, size) for b in backends for size in sizes for p in ("fp32", "int8")]
 
 
-def sizes_for(s: DetectorSettings) -> tuple[int, ...]:
+def sizes_for(s: ModelSpec) -> tuple[int, ...]:
     """SIZES for the default model; a named model only runs at its own fixed size."""
     if not s.model:
         return SIZES
@@ -105,7 +105,7 @@ def cpu_flags() -> str:
     return ""
 
 
-def cache_key(s: DetectorSettings, variants: Sequence[Variant], model: Path) -> dict[str, object]:
+def cache_key(s: ModelSpec, variants: Sequence[Variant], model: Path) -> dict[str, object]:
     """What the measured figures for ``model`` (the base model ``s`` names) depend on."""
     return {
         "format": FORMAT,
@@ -122,13 +122,13 @@ def cache_file(model: Path) -> Path:
     return model.with_name(model.stem + ".fast-profile.json")
 
 
-#: Times and scores variants: (settings, variants, progress) -> their figures. The one that
+#: Times and scores variants: (spec, variants, progress) -> their figures. The one that
 #: does it is a tool (tools/detector/fast_profile.py); the detector service never measures.
-Measure = Callable[[DetectorSettings, Sequence[Variant], Progress], list[Figures]]
+Measure = Callable[[DetectorSpec, Sequence[Variant], Progress], list[Figures]]
 
 
 def choose_fast(
-    s: DetectorSettings, progress: Progress = print_progress, *, measure: Measure | None = None
+    s: DetectorSpec, progress: Progress = print_progress, *, measure: Measure | None = None
 ) -> tuple[Variant, str]:
     """The fast profile's variant for ``s`` and why: measured now when ``measure`` is given and
     nothing is cached (the default model fetched first); without ``measure``, from the cache
@@ -139,7 +139,7 @@ def choose_fast(
     elif measure is not None:
         model = ensure_default_model(progress=progress)
     else:
-        model = located_model(DetectorSettings())  # the default model, as prepared
+        model = located_model(ModelSpec())  # the default model, as prepared
     variants = candidates(sizes_for(s))
     reference = variants[0].label
     key = cache_key(s, variants, model)

@@ -16,27 +16,28 @@ from common.lifecycle import Closing
 from perception.decode import Family, decode, sane_outputs
 from perception.model_info import ModelInfo, read_model_info
 from perception.postprocess import class_mask, select
+from perception.settings import DecodeOptions
 from perception.types import DetectionResult, StageTiming
 from runtimes import Backend, open_backend
-from services.detector.contract import DetectorSettings
 
 
 class Detector(Closing):
     """A model loaded on one backend, with its post-processing settings.
 
-    Of its ``DetectorSettings`` the Detector reads ``conf``, ``iou``, ``max_det`` and
-    ``classes``; which model and backend to load are :meth:`open`'s arguments.
+    Its ``settings`` are DecodeOptions (``conf``, ``iou``, ``max_det``, ``classes``; any
+    DetectorSpec, the detector service's settings included, is one); which model and backend
+    to load are :meth:`open`'s arguments.
 
     Not thread-safe: the input buffer is reused between calls. Use one Detector per thread.
     """
 
     def __init__(
-        self, backend: Backend, model_path: Path, settings: DetectorSettings | None = None
+        self, backend: Backend, model_path: Path, settings: DecodeOptions | None = None
     ) -> None:
         """Wrap an open ``backend``; prefer :meth:`open`. Closes it on any error here."""
         try:
             self.info: ModelInfo = read_model_info(backend)
-            self.settings = settings if settings is not None else DetectorSettings()
+            self.settings = settings if settings is not None else DecodeOptions()
             self._class_mask = class_mask(self.info.names, self.settings.classes or None)
         except BaseException:
             backend.close()
@@ -53,7 +54,7 @@ class Detector(Closing):
         model_path: str | Path,
         *,
         backend: str = "onnx",
-        settings: DetectorSettings | None = None,
+        settings: DecodeOptions | None = None,
         **backend_options: Any,
     ) -> Detector:
         """Load ``model_path`` on the named backend.

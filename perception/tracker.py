@@ -5,7 +5,7 @@ weak ones (down to ``low_score``) may only extend existing tracks, never start o
 a person whose score dips for a frame on the same id without spawning tracks from noise. Each
 track predicts its next box from a constant-velocity model of the box corners, so a target
 moving across the image still overlaps its prediction. Matching is greedy on IoU, highest
-first, and only within one class. The thresholds are ``common.settings.TrackerSettings``.
+first, and only within one class. The thresholds are :class:`perception.settings.TrackerParams`.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.boxes import Boxes
-from services.detector.contract import TrackerSettings
+from perception.settings import TrackerParams
 
 
 @dataclass(slots=True)
@@ -89,8 +89,8 @@ def tracker_clock(
 class Tracker:
     """Assigns a track id to each detection of a stream of frames of one camera."""
 
-    def __init__(self, settings: TrackerSettings | None = None) -> None:
-        self.settings = settings if settings is not None else TrackerSettings()
+    def __init__(self, settings: TrackerParams | None = None) -> None:
+        self.settings = settings if settings is not None else TrackerParams()
         self._tracks: list[_Track] = []
         self._next_id = 1
         self._last: tuple[float, float] | None = None  # (stamp, arrival) of the last frame used

@@ -1,34 +1,28 @@
-"""From settings to the model file a backend loads: input size, precision, fast profile.
+"""From a model spec to the model file a backend loads, as prepared: input size, precision.
 
-A *variant* is ``backend:precision:imgsz`` (``onnx:int8:480``). :func:`prepare` turns
-DetectorSettings into one, building what it needs: the model at that input size (the default
-model is rebuilt for it; a named model must already have it), then, for ``int8`` on a runtime we
-quantize for (:data:`QUANT_RUNTIMES`), the INT8 model from :mod:`modelprep.quantize`. An INT8
-model that cannot be built leaves the detector on FP32, with one warning line and a ``note``.
-That runs ahead of serving (``zstack prepare``). :func:`locate` finds the same files and builds
-nothing: what is missing raises :class:`NotPrepared`, one line naming it and what to run.
+A *variant* is ``backend:precision:imgsz`` (``onnx:int8:480``). :func:`locate` finds the files
+a ModelSpec needs, as ``zstack prepare`` made them (preparing.py builds them: the model at that
+input size, the default model rebuilt for it, and, for ``int8`` on a runtime we quantize for
+(:data:`QUANT_RUNTIMES`), the INT8 model), and builds nothing: what is missing raises
+:class:`NotPrepared`, one line naming it and what to run. An INT8 model whose build failed
+leaves the detector on FP32, with one warning line and a ``note``. This module reaches no
+quantizer: it looks the INT8 model up in modelprep/int8_cache.py.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from common.contracts import BackendName
 from common.errors import ConfigError, ModelError
-from common.lifecycle import Progress, print_progress
-from modelprep.files import (
-    NATIVE_IMGSZ,
-    current_default_model,
-    default_model_path,
-    ensure_default_model,
-)
+from modelprep.files import NATIVE_IMGSZ, current_default_model, default_model_path
+from modelprep.int8_cache import QuantizationFailed, cached_model, slot
 from perception.pipeline import Detector
+from perception.settings import DetectorSpec, ModelSpec
 from runtimes.select import backend_options
-from services.detector.contract import DetectorSettings
 
 log = logging.getLogger("perception.variants")
 
@@ -36,6 +30,8 @@ log = logging.getLogger("perception.variants")
 QUANT_RUNTIMES = {"onnx": "onnxruntime", "openvino": "openvino"}
 #: What a user runs to prepare the models a stack config needs, ahead of serving.
 PREPARE_COMMAND = "zstack prepare"
+
+Spec = TypeVar("Spec", bound=ModelSpec)
 
 
 class NotPrepared(ConfigError):
@@ -74,7 +70,7 @@ class Variant:
     def label(self) -> str:
         return f"{self.backend}:{self.precision}:{self.imgsz}"
 
-    def settings(self, base: DetectorSettings) -> DetectorSettings:
+    def settings(self, base: Spec) -> Spec:
         """``base`` running this variant (and no profile: the variant is already chosen)."""
         try:
             backend = BackendName(self.backend)
@@ -114,11 +110,9 @@ def model_input_hw(model: Path) -> tuple[int | None, int | None]:
     return (dims[2], dims[3]) if len(dims) == 4 else (None, None)
 
 
-def sized_model(s: DetectorSettings, progress: Progress = print_progress) -> Path:
-    """The model file at ``s.imgsz``: the default model (rebuilt for that size when needed), or
-    ``s.model``, whose fixed input must then be that size (ConfigError otherwise)."""
-    if not s.model:
-        return ensure_default_model(progress=progress, imgsz=s.imgsz)
+def named_model(s: ModelSpec) -> Path:
+    """``s.model``, whose fixed input must be ``s.imgsz`` when that is set (ConfigError
+    otherwise): a named model is never rebuilt."""
     path = Path(s.model)
     if s.imgsz and path.suffix == ".onnx" and path.is_file():
         height, width = model_input_hw(path)
@@ -131,11 +125,11 @@ def sized_model(s: DetectorSettings, progress: Progress = print_progress) -> Pat
     return path
 
 
-def located_model(s: DetectorSettings) -> Path:
-    """What :func:`sized_model` returns, never building it: the default model at ``s.imgsz``
-    must be there and current (NotPrepared otherwise)."""
+def located_model(s: ModelSpec) -> Path:
+    """The model file at ``s.imgsz``, never building it: ``s.model``, or the default model
+    at that size, which must be there and current (NotPrepared otherwise)."""
     if s.model:
-        return sized_model(s)  # the user's own file: nothing is built for it
+        return named_model(s)  # the user's own file: nothing is built for it
     path = current_default_model(imgsz=s.imgsz)
     if path is None:
         size = f" at input size {s.imgsz}" if s.imgsz not in (0, NATIVE_IMGSZ) else ""
@@ -144,95 +138,55 @@ def located_model(s: DetectorSettings) -> Path:
     return path
 
 
-def finds_objects(reference: Path, backend: str) -> Callable[[Path], str | None]:
-    """A check for an INT8 model: on the calibration photos it must find something wherever
-    the FP32 ``reference`` does (a quantization that wiped the scores finds nothing)."""
-
-    def check(candidate: Path) -> str | None:
-        from modelprep.quantize.calibration import calibration_photos
-
-        photos = [image for label, image in calibration_photos() if label.endswith(":full")]
-        with (
-            Detector.open(reference, backend=backend) as fp32,
-            Detector.open(candidate, backend=backend) as int8,
-        ):
-            expected = sum(1 for p in photos if len(fp32.detect(p)))
-            found = sum(1 for p in photos if len(int8.detect(p)) and len(fp32.detect(p)))
-        if found < expected:
-            return (
-                f"it finds nothing on {expected - found} of {expected} photos FP32 finds objects in"
-            )
-        return None
-
-    return check
-
-
-def prepare(
-    s: DetectorSettings, progress: Progress = print_progress, max_batch: int = 1
-) -> Prepared:
-    """The model, backend and options for settings ``s`` (profile already resolved), for
-    batches of up to ``max_batch`` frames, built now where they are missing."""
-    return _resolve(s, max_batch, progress)
-
-
-def locate(s: DetectorSettings, max_batch: int = 1) -> Prepared:
-    """What :func:`prepare` returns, from the files it made, never building anything:
-    NotPrepared names what is missing."""
-    return _resolve(s, max_batch, None)
-
-
-def _resolve(s: DetectorSettings, max_batch: int, build: Progress | None) -> Prepared:
-    """:func:`prepare` with ``build`` (its progress), :func:`locate` without."""
-    model = sized_model(s, build) if build is not None else located_model(s)
+def load_plan(s: ModelSpec, max_batch: int = 1) -> tuple[dict[str, Any], str | None]:
+    """The backend options for ``s`` (profile already resolved), for batches of up to
+    ``max_batch`` frames, and the runtime whose INT8 model it loads (None: the model as it is).
+    ConfigError for a precision the backend's runtime cannot take."""
     runtime = QUANT_RUNTIMES.get(s.backend)
     if runtime is None:
-        return Prepared(model, s.backend, backend_options(s, max_batch))
+        return backend_options(s.precision, s.batch_profile, max_batch), None
     if s.precision not in ("", "fp32", "int8"):
         raise ConfigError(
             f"detector.precision {s.precision!r} is not for backend {s.backend}: use fp32 or int8"
         )
-    options = backend_options(replace(s, precision=""), max_batch)
-    if s.precision != "int8":
-        return Prepared(model, s.backend, options)
-    from modelprep.quantize import QuantizationFailed, cached_model, quantized_model, slot
+    options = backend_options("", s.batch_profile, max_batch)
+    return options, runtime if s.precision == "int8" else None
 
+
+def on_fp32(model: Path, s: ModelSpec, options: dict[str, Any], exc: Exception) -> Prepared:
+    """What to load when ``s``'s INT8 model could not be built: ``model``, with a note."""
+    note = f"{exc}; the detector stays on FP32"
+    log.warning("%s", note)
+    return Prepared(model, s.backend, options, note)
+
+
+def locate(s: ModelSpec, max_batch: int = 1) -> Prepared:
+    """The model, backend and options for ``s`` (profile already resolved), for batches of up
+    to ``max_batch`` frames, from the files preparation made, never building anything:
+    NotPrepared names what is missing."""
+    model = located_model(s)
+    options, runtime = load_plan(s, max_batch)
+    if runtime is None:
+        return Prepared(model, s.backend, options)
     calibration_dir = Path(s.calibration_dir) if s.calibration_dir else None
     try:
-        if build is not None:
-            quantized = quantized_model(
-                model,
-                runtime=runtime,
-                calibration_dir=calibration_dir,
-                check=finds_objects(model, s.backend),
-                progress=build,
-            )
-        else:
-            found = cached_model(model, runtime=runtime, calibration_dir=calibration_dir)
-            if found is None:
-                where = slot(model, runtime)[0]
-                raise NotPrepared(f"the INT8 model of {model.name} ({where}) is not prepared")
-            quantized = found
+        quantized = cached_model(model, runtime=runtime, calibration_dir=calibration_dir)
     except QuantizationFailed as exc:
-        note = f"{exc}; the detector stays on FP32"
-        log.warning("%s", note)
-        return Prepared(model, s.backend, options, note)
+        return on_fp32(model, s, options, exc)
+    if quantized is None:
+        where = slot(model, runtime)[0]
+        raise NotPrepared(f"the INT8 model of {model.name} ({where}) is not prepared")
     return Prepared(quantized, s.backend, options)
 
 
-def open_prepared(
-    s: DetectorSettings, progress: Progress = print_progress, max_batch: int = 1
-) -> tuple[Detector, str]:
-    """The Detector for settings ``s`` (profile already resolved), for batches of up to
-    ``max_batch`` frames, built first where needed (:func:`prepare`), and its note."""
-    return _open(s, prepare(s, progress, max_batch))
+def open_located(s: DetectorSpec, max_batch: int = 1) -> tuple[Detector, str]:
+    """The Detector for ``s`` (profile already resolved), for batches of up to ``max_batch``
+    frames, from what was prepared ahead (:func:`locate`), and its note: builds nothing."""
+    return open_as(s, locate(s, max_batch))
 
 
-def open_located(s: DetectorSettings, max_batch: int = 1) -> tuple[Detector, str]:
-    """:func:`open_prepared` from what was prepared ahead (:func:`locate`): builds nothing."""
-    return _open(s, locate(s, max_batch))
-
-
-def _open(s: DetectorSettings, prepared: Prepared) -> tuple[Detector, str]:
+def open_as(s: DetectorSpec, prepared: Prepared) -> tuple[Detector, str]:
+    """The Detector for what was ``prepared``, keeping ``s``'s decode options; its note."""
     det = Detector.open(prepared.model, backend=prepared.backend, settings=s, **prepared.options)
     return det, prepared.note
 

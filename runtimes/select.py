@@ -25,7 +25,6 @@ from common.errors import BackendUnavailable, ConfigError
 from runtimes.base import AUTO, Backend
 from runtimes.cudart import cuda_device_count, import_cudart
 from runtimes.table import BACKENDS, load_function, supported_options
-from services.detector.contract import DetectorSettings
 
 log = logging.getLogger(__name__)
 
@@ -213,8 +212,10 @@ def open_auto(
     raise BackendUnavailable("auto: no backend can run here: " + "; ".join(reasons.values()))
 
 
-def backend_options(settings: DetectorSettings, max_batch: int = 1) -> dict[str, Any]:
-    """Backend options from the stack config: only those set away from their defaults.
+def backend_options(
+    precision: str = "", batch_profile: tuple[int, int, int] = (1, 1, 1), max_batch: int = 1
+) -> dict[str, Any]:
+    """Backend options: only those set away from their defaults.
 
     ``precision`` ("" = the backend's own default), ``batch_profile`` ((1, 1, 1) = single
     frames) and ``max_batch`` (the largest batch the caller will send: the detector service's
@@ -222,10 +223,10 @@ def backend_options(settings: DetectorSettings, max_batch: int = 1) -> dict[str,
     the default config loads on every backend.
     """
     options: dict[str, Any] = {}
-    if settings.precision:
-        options["precision"] = settings.precision
-    if settings.batch_profile != (1, 1, 1):
-        options["batch_profile"] = settings.batch_profile
+    if precision:
+        options["precision"] = precision
+    if batch_profile != (1, 1, 1):
+        options["batch_profile"] = batch_profile
     if max_batch != 1:
         options["max_batch"] = max_batch
     return options

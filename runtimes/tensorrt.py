@@ -36,7 +36,7 @@ except ImportError as exc:
     ) from exc
 
 from common.clock import mono_s
-from modelprep.quantize import calibration as calib_data
+from modelprep import calibration as calib_data
 from runtimes import engine_cache
 from runtimes.base import Backend, Dim
 from runtimes.cudart import cuda_device_count, import_cudart

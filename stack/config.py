@@ -29,6 +29,7 @@ from services.recorder.contract import RecorderSettings
 from services.ros2.contract import Ros2Settings, check_camera_topics
 from services.sim.contract import SimSettings
 from services.viewer.contract import ViewerSettings
+from stack.config_read import estop_file_path
 
 __all__ = ["Config", "SupervisorSettings"]
 
@@ -173,7 +174,4 @@ class Config:
     @property
     def estop_path(self) -> Path:
         """Where the controller keeps the latched e-stop (one file per stack prefix)."""
-        default = f"state/estop-{self.stack.prefix.replace('/', '_')}.json"
-        name = self.controller.estop_file or default
-        path = Path(name).expanduser()
-        return path if path.is_absolute() else REPO_ROOT / path
+        return estop_file_path(self.stack.prefix, self.controller.estop_file)

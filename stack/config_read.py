@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from common.errors import ConfigError
-from common.settings import DEFAULT_CONFIG, StackSettings, ZenohSettings
+from common.settings import DEFAULT_CONFIG, REPO_ROOT, StackSettings, ZenohSettings
 
 ENV_PREFIX = "STACK__"
 EXTENDS = "extends"  # top-level key: the config file this one changes
@@ -133,6 +133,39 @@ def merge(base: dict[str, Any], changes: Mapping[str, Any], where: Path, path: s
             )
         else:
             base[key] = value
+
+
+def estop_file_path(prefix: str, estop_file: str) -> Path:
+    """Where the controller of stack ``prefix`` keeps its latched e-stop: ``estop_file``
+    (``controller.estop_file``; relative to the repository) or, empty, one file per prefix."""
+    name = estop_file or f"state/estop-{prefix.replace('/', '_')}.json"
+    path = Path(name).expanduser()
+    return path if path.is_absolute() else REPO_ROOT / path
+
+
+def load_estop_file_path(
+    path: str | Path | None = None, environ: Mapping[str, str] | None = None
+) -> Path:
+    """The controller's e-stop file as the config names it (``stack.prefix`` and
+    ``controller.estop_file``, with ``extends`` and the environment's overrides), read without
+    building any settings: the e-stop command's local road (common/estop_local.py) needs it
+    before anything else. ConfigError when the file cannot be read or the two values are not
+    text; the full check is the Zenoh road's."""
+    cfg_path = Path(path) if path else DEFAULT_CONFIG
+    data = read(cfg_path, (cfg_path.resolve(),))
+    env = os.environ if environ is None else environ
+    values = []
+    prefix = next(f.default for f in dataclasses.fields(StackSettings) if f.name == "prefix")
+    for table, name, default in (
+        ("stack", "prefix", prefix),
+        ("controller", "estop_file", ""),
+    ):
+        raw = env.get(f"{ENV_PREFIX}{table.upper()}__{name.upper()}")
+        value = env_value(raw) if raw is not None else data.get(table, {}).get(name, default)
+        if not isinstance(value, str):
+            raise ConfigError(f"{table}.{name} must be text, got {value!r:.40}")
+        values.append(value)
+    return estop_file_path(values[0], values[1])
 
 
 def load_bus_settings(

@@ -25,15 +25,11 @@ from onnxruntime.quantization import (
     quantize_static,
 )
 
-#: What this module produces; part of the cache key, so a change here re-quantizes.
-SETTINGS = {
-    "format": "QDQ",
-    "activations": "QUInt8",
-    "weights": "QInt8",
-    "per_channel": True,
-    "reduce_range": True,
-    "calibration": "MinMax",
-}
+from modelprep.int8_cache import QUANTIZER_SETTINGS
+
+#: What this module produces (declared with the cache, whose key it is part of: serving looks
+#: the INT8 model up without importing this module); a change there re-quantizes.
+SETTINGS = QUANTIZER_SETTINGS["onnxruntime"]
 
 
 class _Frames(CalibrationDataReader):  # type: ignore[misc]  # onnxruntime is untyped

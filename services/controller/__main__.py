@@ -50,6 +50,13 @@ def estop(args: argparse.Namespace) -> int:
     code = own_session()
     if code is not None:
         return code
+    handed = False  # whether the controller on this host took the engage (its socket)
+    if args.action == "engage":
+        from stack.local_estop import engage_here
+
+        # zstack did this already, first of all; again is harmless (an engage is idempotent)
+        # and tells this command whether the local road took it.
+        handed = not engage_here(args.config, args.reason)
     try:
         from stack.config_read import load_bus_settings
 
@@ -59,7 +66,13 @@ def estop(args: argparse.Namespace) -> int:
 
         return send_estop(settings, stack.prefix, args.action == "engage", args.reason)
     except StackError as exc:
-        print(f"estop: error: {exc}", file=sys.stderr)
+        note = (
+            " (the controller on this host took the engage through its local e-stop socket,"
+            " but no status of it confirmed the stop)"
+            if handed
+            else ""
+        )
+        print(f"estop: error: {exc}{note}", file=sys.stderr)
         return exit_code(exc)
 
 

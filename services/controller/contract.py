@@ -50,6 +50,9 @@ DEPTH_TRUST_PER_CAMERA = frozenset({DEPTH_FOREIGN, DEPTH_SECOND_STREAM})
 # --
 ESTOP_RELEASE_REFUSED = "estop_release_refused"
 ESTOP_ZERO_AT_ONCE = "estop_zero_at_once"
+#: Datagrams on the local e-stop socket that were not an engage (common/estop_local.py): each
+#: is taken as a press, as garbage on the e-stop key is.
+ESTOP_LOCAL_BAD = "estop_local_bad"
 COMMANDS_OUT = "commands_out"
 COMMANDS_NONZERO = "commands_nonzero"
 
@@ -87,6 +90,7 @@ COUNTERS = frozenset(
         DEPTH_MEMORY_ERRORS,
         ESTOP_RELEASE_REFUSED,
         ESTOP_ZERO_AT_ONCE,
+        ESTOP_LOCAL_BAD,
         COMMANDS_OUT,
         COMMANDS_NONZERO,
     }

@@ -16,6 +16,7 @@ from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock, Stamp, mono_s
 from common.contracts import ControllerState, DetectorInfo
 from common.counters import per_camera
 from common.errors import DecodeError
+from common.estop_local import LocalEStop, socket_path
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.keys import camera_in_key
 from common.messages import CameraAnnouncement, Detections, EStop, Header, LaserScan
@@ -48,6 +49,8 @@ NO_LASER_WARNING = (
 
 # The longest the control loop goes without looking at the stop flag, whatever its rate.
 STOP_POLL_S = 0.1
+#: The source an engage handed over on the local socket is latched with (its status says it).
+LOCAL_ESTOP_SOURCE = "estop-local"
 
 
 def wait_either(wake: threading.Event, stop: threading.Event, timeout_s: float) -> None:
@@ -223,6 +226,36 @@ class ControllerHandlers:
         if camera:
             self.tally.counters.add(per_camera(counter, camera))
 
+    def on_local_engage(self, reason: str) -> None:
+        """An engage handed over on this host (common/estop_local.py): as one on the bus,
+        stamped now."""
+        at = self.clock.now()
+        self._engage(at.wall_ns, LOCAL_ESTOP_SOURCE, reason, at.wall_ns)
+
+    def on_local_garbage(self, why: str) -> None:
+        """Anything but an engage on the local socket: counted, and a press, as garbage on
+        the e-stop key is (fail safe)."""
+        self.tally.reject(contract.ESTOP_LOCAL_BAD, f"local e-stop socket: {why}")
+        at = self.clock.now()
+        self._engage(at.wall_ns, "garbage", "not an engage on the local e-stop socket", at.wall_ns)
+
+    def on_local_failed(self, why: str) -> None:
+        self.tally.log.warning(
+            "the local e-stop socket failed (%s): zstack estop reaches this controller over "
+            "Zenoh only from now", why,
+        )  # fmt: skip
+
+    def _engage(self, stamp_ns: int, by: str, reason: str, latest_ns: int) -> None:
+        latch = self.latch
+        was, was_saved = latch.engaged, latch.saved
+        saved = latch.engage(stamp_ns, by, reason, latest_ns, self.halt)
+        if self.halted is not None:
+            self.halted()
+        if not was:
+            self.tally.log.warning("e-stop ENGAGED by %s: %s", by, reason or "-")
+        if not saved and was_saved:
+            self.tally.log.error("the e-stop is engaged but cannot be saved: %s", latch.describe())
+
     def on_estop(self, payload: bytes) -> None:
         """Latch on an engage or on garbage; release only on a fresh release newer than the
         stop that can be saved. A latch that cannot be saved holds in memory and says so
@@ -239,15 +272,8 @@ class ControllerHandlers:
         if msg is None or msg.engaged:
             by = msg.header.source if msg else "garbage"
             reason = msg.reason if msg else "undecodable message on the e-stop key"
-            was, was_saved = latch.engaged, latch.saved
             stamp = msg.header.stamp_ns if msg else at.wall_ns
-            saved = latch.engage(stamp, by, reason, latest_ns, self.halt)
-            if self.halted is not None:
-                self.halted()
-            if not was:
-                tally.log.warning("e-stop ENGAGED by %s: %s", by, reason or "-")
-            if not saved and was_saved:
-                tally.log.error("the e-stop is engaged but cannot be saved: %s", latch.describe())
+            self._engage(stamp, by, reason, latest_ns)
             return
         verdict, age = judge_age(
             msg.header, at, BOOT_ID, self.estop_release_max_age_s, self.tolerance_s
@@ -452,6 +478,9 @@ def run(config: Config, stop: threading.Event) -> int:
         )
         loop = ControlLoop(config, node)
         closing.callback(loop.close)
+        local = _local_estop(config, node, loop.handlers)
+        if local is not None:
+            closing.callback(local.close)  # before the loop's close, as it engages the loop
         checker = threading.Thread(
             target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
         )
@@ -470,6 +499,25 @@ def run(config: Config, stop: threading.Event) -> int:
         if loop.depth is not None:
             loop.depth.save_memory(force=True)  # as the robot is left: still
     return 0
+
+
+def _local_estop(config: Config, node: Node, handlers: ControllerHandlers) -> LocalEStop | None:
+    """The local e-stop socket beside the e-stop file (common/estop_local.py), or None, said
+    in the log, when it cannot be made: ``zstack estop`` then reaches this controller over
+    Zenoh only."""
+    path = socket_path(config.estop_path)
+    try:
+        local = LocalEStop(
+            path, handlers.on_local_engage, handlers.on_local_garbage, handlers.on_local_failed
+        )
+    except OSError as exc:
+        node.log.warning(
+            "no local e-stop socket (%s: %s): zstack estop reaches this controller over "
+            "Zenoh only", exc.strerror or exc, path,
+        )  # fmt: skip
+        return None
+    node.log.info("local e-stop socket %s (engage only)", path)
+    return local
 
 
 def _check_targets(node: Node, config: Config, stop: threading.Event) -> None:

@@ -1,6 +1,7 @@
 """The detector's contract: its counters and what each worker puts, announces, serves and reads.
 
-Imports only ``common``: the config, the access rules (stack/) and the metrics service read it
+Imports only ``common`` and the detection library's settings (perception/settings.py, which
+imports only ``common``): the config, the access rules (stack/) and the metrics service read it
 without the detector's internals. Each worker (``detector``, ``detector_2``,
 ``detector_<worker_id>`` ...) counts totals under the plain names and each camera's under
 ``<name>.<camera>`` (common/counters.py::per_camera) for those in :data:`PER_CAMERA`.
@@ -13,11 +14,11 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from common.access import Access, Shape, service_access
-from common.contracts import BackendName
 from common.counters import BAD_INPUT, COMMON
 from common.errors import ConfigError
-from common.limits import DEFAULT_MAX_FRAME_PIXELS, MAX_DETECTIONS, MAX_IMAGE_SIDE
-from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
+from common.limits import DEFAULT_MAX_FRAME_PIXELS, MAX_IMAGE_SIDE
+from common.setting_checks import Bounds, check_bounds, check_lengths
+from perception.settings import DetectorSpec, TrackerParams
 
 #: As common/messages.py's (the contract loads no messages: a unit test checks they agree).
 MAX_CAPACITY_HZ = 100_000.0
@@ -201,10 +202,6 @@ def access(shape: Shape) -> dict[str, Access]:
 
 
 # -- settings -------------------------------------------------------------------------------------
-#: The most class names a model may have (LVIS has 1203; COCO 80, Open Images 601).
-MAX_CLASSES = 2000
-#: The largest TensorRT batch an engine is built for (``detector.batch_profile``).
-MAX_BATCH = 64
 #: The most frames one detector round may batch (``detector.max_batch``): one per camera.
 MAX_SERVED_BATCH = 32
 #: The most depth frames kept per camera to pair from (``detector.depth_buffer``).
@@ -223,24 +220,17 @@ _NUMBERED = re.compile(r"_[0-9]+$")
 
 _PREFIX_CHUNK = re.compile(r"[A-Za-z0-9_.\-]{1,64}")  # as a WorkerAnnouncement's prefixes
 
-MIN_IMGSZ, MAX_IMGSZ = 160, 1280
-PROFILES = ("default", "fast")
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class DetectorSettings:
-    """The model, its backend and the post-processing thresholds.
+class DetectorSettings(DetectorSpec):
+    """The ``[detector]`` table: the detection library's settings, and serving's own.
 
-    ``model`` empty means the default COCO model (fetched at setup). ``backend`` is onnx,
-    tensorrt, cuda, openvino or auto (auto picks tensorrt, then cuda, then openvino on Intel
-    CPUs with VNNI/AMX, then onnx: docs/detector.md). ``precision`` empty leaves the backend's
-    default (fp32 on the CPU, fp16 on a GPU); GPU backends take fp32 or fp16, TensorRT also
-    int8; onnx and openvino take fp32 or int8 (an INT8 model quantized here, calibrated on real
-    photos plus ``calibration_dir``'s, and cached beside the model: docs/detector.md). ``imgsz``
-    is the input size: 0 keeps the model's own; another multiple of 32 (160..1280) rebuilds the
-    default model at that size, and must equal a named model's own size. ``profile`` "fast"
-    picks the fastest (backend, precision, imgsz) variant whose AP50 on the labelled photos is
-    at most ``fast_max_ap50_drop`` below FP32 at 640, overriding backend, precision and imgsz.
+    Of the library's (perception/settings.py's DetectorSpec, declared and checked there):
+    ``model``, ``backend``, ``precision``, ``imgsz``, ``profile``, ``fast_max_ap50_drop``,
+    ``calibration_dir`` and ``batch_profile`` say which model to open and how (ModelSpec);
+    ``conf``, ``iou``, ``max_det`` and ``classes`` what the Detector keeps of its output
+    (DecodeOptions). The library takes these settings as they are: they are its spec.
+
     ``max_batch`` is the most frames one detection round takes, the newest of each waiting
     camera (docs/detector.md, "Several cameras"): a round never holds more frames than there
     are cameras, so one camera always runs batches of 1. It is 1 by default: on the CPU a batch
@@ -250,18 +240,10 @@ class DetectorSettings:
     (``batch_probe_runs`` runs each) and uses a larger batch only where it saves at least
     ``batch_min_gain`` of the time per image (perception/batching.py); "max" always
     fills rounds up to ``max_batch``.
-    ``batch_profile`` is the (min, opt, max) batch a TensorRT engine is built for; left at
-    (1, 1, 1), the engine is built for 1..the served batch instead.
     A frame captured more than ``max_frame_age_s`` ago, stamped in the future or replayed is
     not detected on (counted, see common/freshness.py). A frame of more than
     ``max_frame_pixels`` (width x height, JPEG or raw) is counted as ``frames_oversize`` and
     dropped before its pixels are decoded.
-
-    Post-processing, which the Detector (perception/pipeline.py) reads from here:
-    ``conf`` is the least score kept (objectness x class score for YOLOv5-style models);
-    ``iou`` the overlap above which a lower-scored box of the same class is suppressed;
-    ``max_det`` caps detections per image (100; ``zstack evaluate`` asks for Ultralytics' 300);
-    ``classes`` keeps only those class names, and empty keeps every class.
 
     The pool (docs/detector.md, "A pool of workers"): ``workers`` detector processes on this
     host divide the cameras between them, with those on other hosts in the same pool (its
@@ -310,25 +292,13 @@ class DetectorSettings:
     (perception/depth.py's DepthParams).
     """
 
-    model: str = ""
-    backend: BackendName = BackendName.ONNX
-    precision: str = ""
-    batch_profile: tuple[int, int, int] = (1, 1, 1)
     max_batch: int = 1
     batch_choice: str = "measured"
     batch_min_gain: float = 0.2
     batch_probe_runs: int = 3
-    conf: float = 0.25
-    iou: float = 0.45
-    max_det: int = 100
-    classes: tuple[str, ...] = ()
     max_frame_age_s: float = 1.0
     counters_period_s: float = 1.0
     max_frame_pixels: int = DEFAULT_MAX_FRAME_PIXELS
-    imgsz: int = 0
-    calibration_dir: str = ""
-    profile: str = "default"
-    fast_max_ap50_drop: float = 0.01
     workers: int = 1
     worker_id: str = ""
     pool_balance: float = 1.0
@@ -353,19 +323,14 @@ class DetectorSettings:
     depth_min_valid_pixels: int = 20
     depth_min_valid_fraction: float = 0.05
 
-    BOUNDS: ClassVar[Bounds] = {
-        "batch_profile": (1, MAX_BATCH),
+    #: Serving's own bounds; BOUNDS adds the library's (checked by DetectorSpec).
+    SERVING_BOUNDS: ClassVar[Bounds] = {
         "max_batch": (1, MAX_SERVED_BATCH),
         "batch_min_gain": (0, 0.9),
         "batch_probe_runs": (1, 20),
-        "conf": (0, 1),
-        "iou": (0, 1),
-        "max_det": (1, MAX_DETECTIONS),
         "max_frame_age_s": (0.01, 60),
         "counters_period_s": (0.1, 60),
         "max_frame_pixels": (1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE),  # JPEG header or raw size
-        "imgsz": (0, MAX_IMGSZ),  # 0 = the model's own; else a multiple of 32, checked below
-        "fast_max_ap50_drop": (0, 1),
         "workers": (1, MAX_WORKERS),
         "pool_balance": (1, 4),
         "pool_stall_s": (1, 60),
@@ -386,39 +351,18 @@ class DetectorSettings:
         "depth_min_valid_pixels": (1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE),
         "depth_min_valid_fraction": (0, 1),
     }
-    LENGTHS: ClassVar[Bounds] = {
-        "classes": (0, MAX_CLASSES),
-        "prefixes": (0, MAX_ANNOUNCED_PREFIXES),
-    }
+    SERVING_LENGTHS: ClassVar[Bounds] = {"prefixes": (0, MAX_ANNOUNCED_PREFIXES)}
+    BOUNDS: ClassVar[Bounds] = {**DetectorSpec.BOUNDS, **SERVING_BOUNDS}
+    LENGTHS: ClassVar[Bounds] = {**DetectorSpec.LENGTHS, **SERVING_LENGTHS}
 
     def __post_init__(self) -> None:
-        check_bounds(self, "detector", self.BOUNDS)
-        check_lengths(self, "detector", self.LENGTHS)
-        if self.imgsz != 0 and (self.imgsz % 32 or not MIN_IMGSZ <= self.imgsz <= MAX_IMGSZ):
-            raise ConfigError(
-                f"detector.imgsz must be 0 (the model's own) or a multiple of 32 within "
-                f"{MIN_IMGSZ}..{MAX_IMGSZ}, got {self.imgsz}"
-            )
-        if self.profile not in PROFILES:
-            raise ConfigError(
-                f"detector.profile must be one of {', '.join(PROFILES)}, got {self.profile!r}"
-            )
-        enum_field(self, "backend", BackendName, "detector.backend")
+        DetectorSpec.__post_init__(self)
+        check_bounds(self, "detector", self.SERVING_BOUNDS)
+        check_lengths(self, "detector", self.SERVING_LENGTHS)
         if self.batch_choice not in BATCH_CHOICES:
             raise ConfigError(
                 f"detector.batch_choice must be one of {', '.join(BATCH_CHOICES)}, "
                 f"got {self.batch_choice!r}"
-            )
-        if self.precision not in ("", "fp32", "fp16", "int8"):
-            raise ConfigError(
-                f"detector.precision must be one of fp32, fp16, int8 (or empty for the "
-                f"backend's default), got {self.precision!r}"
-            )
-        lo, opt, hi = self.batch_profile
-        if not 1 <= lo <= opt <= hi:
-            raise ConfigError(
-                f"detector.batch_profile must be [min, opt, max] with 1 <= min <= opt <= max, "
-                f"got {list(self.batch_profile)}"
             )
         if self.worker_id and (
             not _WORKER_ID.fullmatch(self.worker_id) or _NUMBERED.search(self.worker_id)
@@ -446,44 +390,12 @@ class DetectorSettings:
                 f"{1 / self.attention_floor_hz:.2f} s): an empty camera's worker would be "
                 "dropped from the pool for delivering between its floor's detections"
             )
-        if not all(self.classes):
-            raise ConfigError(
-                f"detector.classes must be non-empty class names, got {list(self.classes)}"
-            )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class TrackerSettings:
-    """The detector's multi-object tracker, which gives Detections their track ids.
-
-    ``high_score`` starts a track, ``low_score`` may only extend one, ``iou`` is the least
-    overlap with a track's predicted box, and a track unseen for ``max_age_s`` is dropped.
-    A frame whose stamp moved by more than ``max_stamp_jump_s`` beyond the time that really
-    passed between arrivals (or went back) is ignored, not allowed to age every track out;
-    after ``jumps_before_reset`` such frames in a row the stamps are believed and the tracks
-    restart (a camera clock that really stepped). Only frames from another host are checked:
-    a frame from this host is tracked on its monotonic stamp, which cannot step
-    (perception/tracker.py). ``enabled`` is the service's to read.
-    """
+class TrackerSettings(TrackerParams):
+    """The ``[tracker]`` table: the detector's multi-object tracker, which gives Detections
+    their track ids. Its thresholds are the library's (perception/settings.py's TrackerParams,
+    declared and checked there); ``enabled`` is the service's to read."""
 
     enabled: bool = True
-    high_score: float = 0.4
-    low_score: float = 0.15
-    iou: float = 0.25
-    max_age_s: float = 1.0
-    max_stamp_jump_s: float = 0.5
-    jumps_before_reset: int = 3
-
-    BOUNDS: ClassVar[Bounds] = {
-        "high_score": (0, 1),
-        "low_score": (0, 1),
-        "iou": (0, 1),
-        "max_age_s": (0.01, 60),
-        "max_stamp_jump_s": (0.01, 60),
-        "jumps_before_reset": (1, 1000),
-    }
-
-    def __post_init__(self) -> None:
-        check_bounds(self, "tracker", self.BOUNDS)
-        if self.low_score > self.high_score:
-            raise ConfigError("tracker.low_score must not be above tracker.high_score")

@@ -62,30 +62,25 @@ from common.messages import (
     Twist,
 )
 from perception import DEPTH_CENTRE, DEPTH_SIZE
+from rosmsg.convert import (
+    DETECTION_2D_ARRAY,
+    LASER_SCAN,
+    TWIST_STAMPED,
+    cdr_encode,
+    detections_to_ros,
+    scan_to_ros,
+    twist_to_ros,
+)
+from rosmsg.depth import CAMERA_INFO, DETECTION_3D_ARRAY, detections_3d_to_ros
+from rosmsg.distro import RosDistro
+from rosmsg.images import COMPRESSED_IMAGE, IMAGE, frame_to_compressed_image, frame_to_image
+from rosmsg.typestore import typestore_for
 from services.recorder.depth_ros import (
     RANGE_MAX,
     RANGE_MIN,
     DepthTopics,
     depth_to_ros,
     depth_topics,
-)
-from services.ros2 import (
-    CAMERA_INFO,
-    COMPRESSED_IMAGE,
-    DETECTION_2D_ARRAY,
-    DETECTION_3D_ARRAY,
-    IMAGE,
-    LASER_SCAN,
-    TWIST_STAMPED,
-    RosDistro,
-    cdr_encode,
-    detections_3d_to_ros,
-    detections_to_ros,
-    frame_to_compressed_image,
-    frame_to_image,
-    scan_to_ros,
-    twist_to_ros,
-    typestore_for,
 )
 from services.ros2.contract import CameraTopics, Ros2Settings, camera_topics
 

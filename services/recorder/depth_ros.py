@@ -1,6 +1,6 @@
 """A camera's depth images in a recording: DepthFrame -> ``sensor_msgs/Image`` (16UC1 or 32FC1,
 as ROS depth drivers publish them) and its ``sensor_msgs/CameraInfo``, and back (the bridge's
-translation, services/ros2/depth.py). No I/O.
+translation, rosmsg/depth.py). No I/O.
 
 Each DepthFrame is two ROS messages, as a ROS depth camera publishes it and the bridge takes it
 in: the image on the camera's ``ros2.depth_topic`` and its intrinsics on
@@ -24,15 +24,11 @@ import numpy as np
 
 from common.errors import DecodeError
 from common.messages import DEPTH_ENCODINGS, DepthFrame
-from services.ros2 import (
-    CAMERA_INFO,
-    IMAGE,
-    RosDistro,
-    RosMessage,
-    depth_from_image,
-    intrinsics_from_camera_info,
-    typestore_for,
-)
+from rosmsg.convert import RosMessage
+from rosmsg.depth import CAMERA_INFO, depth_from_image, intrinsics_from_camera_info
+from rosmsg.distro import RosDistro
+from rosmsg.images import IMAGE
+from rosmsg.typestore import typestore_for
 from services.ros2.contract import Ros2Settings, camera_topics
 
 #: The name of the intrinsics topic beside a depth image topic (ROS's image_transport): a bag's

@@ -44,6 +44,8 @@ from common.clock import BOOT_ID, now
 from common.errors import DecodeError, RecordingError, one_line
 from common.keys import Keys
 from common.messages import CameraAnnouncement, DepthFrame, Frame, Header, LaserScan
+from rosmsg.depth import CAMERA_INFO
+from rosmsg.distro import RosDistro
 from services.recorder.depth_ros import depth_topics, is_depth_topic, sibling_info_topic
 from services.recorder.reading import (
     PLAYABLE,
@@ -57,8 +59,7 @@ from services.recorder.reading import (
     input_kind,
 )
 from services.recorder.timing import Schedule
-from services.ros2 import CAMERA_INFO
-from services.ros2.contract import RosDistro, camera_topics
+from services.ros2.contract import camera_topics
 from stack.config import Config
 
 log = logging.getLogger("recorder")

@@ -28,6 +28,10 @@ from mcap.records import Channel, Message, Schema
 from common.errors import DecodeError, RecordingError, one_line
 from common.lifecycle import Closing
 from common.messages import DepthFrame, Frame, LaserScan
+from rosmsg.convert import LASER_SCAN, cdr_decode, scan_from_ros
+from rosmsg.depth import CAMERA_INFO
+from rosmsg.distro import RosDistro
+from rosmsg.images import COMPRESSED_IMAGE, IMAGE, frame_from_compressed_image, frame_from_image
 from services.recorder.channels import CDR, JSON, STACK_MESSAGE
 from services.recorder.depth_ros import (
     RANGE_MAX,
@@ -35,17 +39,6 @@ from services.recorder.depth_ros import (
     depth_from_ros,
     is_depth_topic,
 )
-from services.ros2 import (
-    CAMERA_INFO,
-    COMPRESSED_IMAGE,
-    IMAGE,
-    LASER_SCAN,
-    cdr_decode,
-    frame_from_compressed_image,
-    frame_from_image,
-    scan_from_ros,
-)
-from services.ros2.contract import RosDistro
 
 MAGIC = b"\x89MCAP0\r\n"
 #: The largest record read; a corrupt length field must not become a huge allocation.

@@ -1,5 +1,5 @@
 """The ROS 2 bridge's contract: its counters and what it puts and reads. Imports only
-``common``.
+``common`` and the distributions of the message library (``rosmsg/distro.py``).
 
 The bridge feeds the robot's cameras (each announced) and laser into the stack, and the stack's
 detections and commands out to the robot (held at zero by the controller's status).
@@ -17,6 +17,7 @@ from common.access import Access, Shape, service_access
 from common.counters import COMMON
 from common.errors import ConfigError
 from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
+from rosmsg.distro import RosDistro
 
 DETECTIONS_OUT = "detections_out"
 COMMANDS_OUT = "commands_out"
@@ -91,13 +92,6 @@ def access(shape: Shape) -> dict[str, Access]:
 
 
 # -- settings -------------------------------------------------------------------------------------
-class RosDistro(StrEnum):
-    HUMBLE = "humble"
-    JAZZY = "jazzy"
-    KILTED = "kilted"
-    ROLLING = "rolling"
-
-
 class ImageFormat(StrEnum):
     RAW = "raw"  # sensor_msgs/msg/Image: bgr8, rgb8 or mono8
     COMPRESSED = "compressed"  # sensor_msgs/msg/CompressedImage: jpeg

@@ -10,9 +10,8 @@ from common.errors import DecodeError
 from common.messages import CameraAnnouncement, Detections
 from common.node import Put, Tally
 from perception import Mounting
-from services.ros2 import contract
-from services.ros2.convert import cdr_decode, cdr_encode
-from services.ros2.depth import (
+from rosmsg.convert import cdr_decode, cdr_encode
+from rosmsg.depth import (
     CAMERA_INFO,
     DETECTION_3D_ARRAY,
     DepthIntrinsics,
@@ -22,7 +21,8 @@ from services.ros2.depth import (
     has_3d,
     intrinsics_from_camera_info,
 )
-from services.ros2.images import IMAGE
+from rosmsg.images import IMAGE
+from services.ros2 import contract
 from stack.config import Config
 
 #: The current announcement of a camera (None: not announced).

@@ -35,9 +35,7 @@ from common.command_gate import CommandGate, Outcome
 from common.errors import DecodeError, ImageError
 from common.messages import CameraAnnouncement, ControllerStatus, Detections, Frame, Twist
 from common.node import Node, Put, Tally
-from services.ros2 import contract
-from services.ros2.contract import ImageFormat, camera_topics
-from services.ros2.convert import (
+from rosmsg.convert import (
     DETECTION_2D_ARRAY,
     LASER_SCAN,
     TWIST,
@@ -48,18 +46,20 @@ from services.ros2.convert import (
     scan_from_ros,
     twist_to_ros,
 )
-from services.ros2.debug_image import FrameCache, debug_image
-from services.ros2.depth import CAMERA_INFO, DETECTION_3D_ARRAY
-from services.ros2.depth_handlers import AnnouncementOf, DepthInbound, Detections3DToRos
-from services.ros2.graph import RosGraph
-from services.ros2.images import (
+from rosmsg.depth import CAMERA_INFO, DETECTION_3D_ARRAY
+from rosmsg.graph import RosGraph
+from rosmsg.images import (
     COMPRESSED_IMAGE,
     IMAGE,
     frame_from_compressed_image,
     frame_from_image,
     frame_to_compressed_image,
 )
-from services.ros2.wire import SENSOR_DATA_QOS
+from rosmsg.wire import SENSOR_DATA_QOS
+from services.ros2 import contract
+from services.ros2.contract import ImageFormat, camera_topics
+from services.ros2.debug_image import FrameCache, debug_image
+from services.ros2.depth_handlers import AnnouncementOf, DepthInbound, Detections3DToRos
 from stack.config import Config
 
 #: What the bridge says it is in the announcements of the cameras it bridges.

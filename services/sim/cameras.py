@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from services.sim.render import CameraSpec
+from simworld.render import CameraSpec
 from stack.config import Config
 
 

@@ -53,7 +53,7 @@ def access(shape: Shape) -> dict[str, Access]:
 class SimSettings:
     """The simulated robot and world (services/sim), standing in for a camera and a base.
 
-    ``scenario`` names a world in services/sim/scenarios.py. The scenario clock starts once
+    ``scenario`` names a world in simworld/scenarios.py. The scenario clock starts once
     what ``wait_for`` names has come, so start-up time does not eat into the scenario:
     ``detector`` as the detections of every camera it renders (from any worker, a pool's on
     another host too), any other service by its health token (services/sim/waiting.py).
@@ -65,9 +65,9 @@ class SimSettings:
 
     ``laser``: false plays a robot with no laser (no scan at all). ``laser_height_m``: the
     height of its scan plane above the floor (0.2 m: a 2D lidar on a small base); it sees only
-    obstacles taller than that, never a glass one and never a drop-off (services/sim/world.py).
+    obstacles taller than that, never a glass one and never a drop-off (simworld/world.py).
     ``depth``: every camera is an RGB-D camera: one DepthFrame per colour frame, with the
-    colour frame's header, on ``keys.depth(camera)`` (services/sim/depth.py), with a stereo
+    colour frame's header, on ``keys.depth(camera)`` (simworld/depth.py), with a stereo
     camera's faults: the ``depth_*`` settings are the fields of ``DepthNoise`` there
     (``depth_range_min_m`` below ``depth_range_max_m``); as a ROS 2 robot, a 16UC1
     ``sensor_msgs/Image`` and its ``CameraInfo`` on ``ros2.depth_topic`` and

@@ -3,7 +3,7 @@
 Every configured camera is rendered from the same world, each on its own key
 (services/sim/cameras.py says at what size and rate). With ``sim.depth`` each camera is an
 RGB-D camera: every colour frame comes with a depth image of the same instant, under the same
-header (services/sim/depth.py). With ``sim.laser`` false the robot has no laser: no scan.
+header (simworld/depth.py). With ``sim.laser`` false the robot has no laser: no scan.
 
 The robot talks either way a robot may: the stack's own messages (``StackRobot``), or ROS 2 over
 rmw_zenoh (``RosRobot``: sensor_msgs Image and LaserScan, with depth a depth Image and its
@@ -32,31 +32,20 @@ from common.frames import image_to_frame
 from common.lifecycle import Closing
 from common.messages import DepthFrame, Frame, GroundTruth, LaserScan, Twist
 from common.node import Node, Tally
-from services.ros2 import (
-    CAMERA_INFO,
-    IMAGE,
-    LASER_SCAN,
-    SENSOR_DATA_QOS,
-    TWIST,
-    TWIST_STAMPED,
-    RosGraph,
-    RosPublisher,
-    camera_info_of,
-    cdr_decode,
-    depth_to_image,
-    frame_to_image,
-    scan_to_ros,
-    twist_from_ros,
-)
+from rosmsg.convert import LASER_SCAN, TWIST, TWIST_STAMPED, cdr_decode, scan_to_ros, twist_from_ros
+from rosmsg.depth import CAMERA_INFO, camera_info_of, depth_to_image
+from rosmsg.graph import RosGraph, RosPublisher
+from rosmsg.images import IMAGE, frame_to_image
+from rosmsg.wire import SENSOR_DATA_QOS
 from services.ros2.contract import camera_topics
 from services.sim import contract
 from services.sim.cameras import SimCamera, sim_cameras
-from services.sim.depth import DepthNoise, apply, depth_frame, render_depth
-from services.sim.laser import LaserSpec, cast
-from services.sim.render import render
-from services.sim.scenarios import SCENARIOS
 from services.sim.waiting import WARN_PERIOD_S, Waiting, waiting_line
-from services.sim.world import World
+from simworld.depth import DepthNoise, apply, depth_frame, render_depth
+from simworld.laser import LaserSpec, cast
+from simworld.render import render
+from simworld.scenarios import SCENARIOS
+from simworld.world import World
 from stack.config import Config
 
 

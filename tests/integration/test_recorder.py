@@ -25,8 +25,11 @@ from common.frames import image_to_frame
 from common.images import load_sample
 from common.messages import Detections, Header, LaserScan
 from common.reach import connected
+from rosmsg.convert import cdr_encode, scan_to_ros
+from rosmsg.distro import RosDistro
+from rosmsg.images import frame_to_image
+from rosmsg.typestore import typestore_for
 from services.recorder.reading import Input, Recording, input_kind
-from services.ros2 import RosDistro, cdr_encode, frame_to_image, scan_to_ros, typestore_for
 from tests.integration.conftest import REPO, STARTUP_S, Stack, wait_for
 from tools.compare.compare import match_frame
 from tools.compare.runs import FrameId, load_run

@@ -37,7 +37,7 @@ ROS_SERVICES = {"ros2", "detector", "controller", "metrics"}
 
 def _typestore() -> Any:
     store = get_typestore(Stores.ROS2_JAZZY)
-    folder = REPO / "services" / "ros2" / "msg" / "vision_msgs"
+    folder = REPO / "rosmsg" / "msg" / "vision_msgs"
     types: dict[str, Any] = {}
     for path in sorted(folder.glob("*.msg")):
         types.update(get_types_from_msg(path.read_text(), f"vision_msgs/msg/{path.stem}"))

@@ -18,6 +18,7 @@ from common.clock import now
 from common.messages import ControllerStatus, EStop, Twist
 from tests.integration.conftest import REPO, Stack, wait_for
 from tests.integration.test_safety import STACK, header, moving, pause, restart_controller
+from tools.launch import free_port
 
 pytestmark = pytest.mark.integration
 
@@ -192,4 +193,37 @@ def test_a_release_is_acknowledged_at_once_not_at_the_next_control_tick(make_sta
         f"the release's status came {(released.header.stamp_ns - at.wall_ns) / 1e9:.2f} s after "
         "the release: it waited for the next tick"
     )
+    assert stack.stop() == 0, stack.log()
+
+
+def test_an_engage_on_the_controllers_host_stops_without_zenoh(make_stack, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    # The operator's command on the robot, with its Zenoh road cut (the config's endpoint
+    # answers nothing): the controller takes the engage through its local socket all the same
+    # (common/estop_local.py), and the command says that nothing confirmed it.
+    stack: Stack = make_stack()
+    stack.wait_ready(STACK)
+    _, cmds = stack.subscribe(stack.keys.cmd_vel())
+    _, statuses = stack.subscribe(stack.keys.controller_status())
+    wait_for(lambda: moving(cmds), 60, "motion towards the cameraman")
+    cut = tmp_path / "cut.toml"
+    cut.write_text(
+        f'extends = "{stack.config_path}"\n[zenoh]\nendpoint = "tcp/127.0.0.1:{free_port()}"\n'
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "deploy.zstack", "estop", "engage", "--config", str(cut),
+         "--reason", "ramp ahead"],
+        cwd=REPO, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "took the engage through its local e-stop socket" in done.stderr, done.stderr
+    [stopped, *_] = wait_for(
+        lambda: [s for s in statuses_of(statuses) if s.state == "estop"], 30, "the e-stop status"
+    )
+    assert "estop-local: ramp ahead" in stopped.reason and stopped.estop_saved, stopped
+    engaged = len(cmds)
+    pause(1.0)
+    assert moving(cmds, engaged) == [], "the robot moved after a local engage"
+    # Only an engage comes this way: the release is the Zenoh road's, and it frees the robot.
+    assert estop_cli(stack, "release").returncode == 0
+    wait_for(lambda: moving(cmds, engaged), 30, "motion after the release")
     assert stack.stop() == 0, stack.log()

@@ -30,7 +30,7 @@ DEPTH_REACH_TOLERANCE_M = 0.2
 #: The detector's input in these runs (a scenario of its own may set another): at 640 a loaded
 #: 2-core CI machine (a CPU burner per core, another test's stack beside) detected about once a
 #: second, late for the controller's 1 s dead-man, and the robot hardly moved; the person is
-#: found at 320 as well at these distances (services/sim/scenarios.py).
+#: found at 320 as well at these distances (simworld/scenarios.py).
 TEST_IMGSZ = 320
 
 

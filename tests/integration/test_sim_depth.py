@@ -12,9 +12,9 @@ import pytest
 from common.messages import DepthFrame, Frame, GroundTruth
 from perception.depth import depth_metres
 from services.sim.cameras import sim_cameras
-from services.sim.depth import targets_in_camera
-from services.sim.render import layout
-from services.sim.scenarios import SCENARIOS
+from simworld.depth import targets_in_camera
+from simworld.render import layout
+from simworld.scenarios import SCENARIOS
 from tests.integration.conftest import Stack
 from tests.polling import wait_for
 

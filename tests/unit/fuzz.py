@@ -44,8 +44,8 @@ from common.messages import (
     WorkerAnnouncement,
 )
 from common.node import Tally
-from services.ros2.convert import LASER_SCAN, TWIST, TWIST_STAMPED, scan_from_ros, twist_from_ros
-from services.ros2.images import (
+from rosmsg.convert import LASER_SCAN, TWIST, TWIST_STAMPED, scan_from_ros, twist_from_ros
+from rosmsg.images import (
     COMPRESSED_IMAGE,
     IMAGE,
     frame_from_compressed_image,

@@ -1,6 +1,6 @@
-"""Who touches Zenoh inside services/ (docs/architecture.md, "Handlers and the bus"), read with
-``ast``: in each service package only ``service.py`` does, and besides it only
-``services/ros2/graph.py``, the session a node holds in a robot's ROS 2 graph, and
+"""Who touches Zenoh inside services/ and the libraries they stand on (docs/architecture.md,
+"Handlers and the bus"), read with ``ast``: in each service package only ``service.py`` does,
+and besides it only ``rosmsg/graph.py``, the session a node holds in a robot's ROS 2 graph, and
 ``services/controller/estop_command.py``, the e-stop command's. Everything else reaches the bus
 through the ``Bus`` protocol (common/bus.py) it is handed, which an in-process test fills with
 the in-memory bus (common/memory_bus.py).
@@ -21,17 +21,19 @@ ROOT = Path(__file__).resolve().parents[2]
 
 #: What opens a Zenoh session, holds one or asks one.
 BUS_MODULES = frozenset(
-    {"zenoh", "common.zenoh_bus", "common.queries", "common.reach", "services.ros2.graph"}
+    {"zenoh", "common.zenoh_bus", "common.queries", "common.reach", "rosmsg.graph"}
 )
 #: A Zenoh session's own declarations (the Bus protocol's ``declare_token`` is not one).
 SESSION_CALLS = frozenset({"declare_subscriber", "declare_publisher", "declare_queryable"})
-#: The ROS 2 graph's I/O, which services.ros2 exports by name (lazily).
+#: The ROS 2 graph's I/O, as a name imported from the message library (``from rosmsg import
+#: graph``).
 GRAPH_NAMES = frozenset({"RosGraph", "RosPublisher", "graph"})
+#: The folders read: the services and the libraries below them.
+SCANNED = ("services", "perception", "rosmsg", "simworld")
 
 #: Beside every services/<name>/service.py.
 ALLOWED = {
-    "services/ros2/graph.py": "the ROS 2 graph's own session, for the bridge and the simulator",
-    "services/ros2/__init__.py": "re-exports RosGraph (imported on first use), touches nothing",
+    "rosmsg/graph.py": "the ROS 2 graph's own session, for the bridge and the simulator",
     "services/controller/estop_command.py": "the e-stop command's own session, apart from the "
     "controller's service so that its first put imports nothing else",
 }
@@ -48,7 +50,7 @@ def _touches(tree: ast.Module) -> Iterator[str]:
             if (
                 node.module.split(".")[0] == "zenoh"
                 or node.module in BUS_MODULES
-                or (node.module == "services.ros2" and names & GRAPH_NAMES)
+                or (node.module == "rosmsg" and names & GRAPH_NAMES)
                 or (node.module == "common" and {"zenoh_bus", "queries", "reach"} & names)
             ):
                 yield f"line {node.lineno}: from {node.module} import {', '.join(sorted(names))}"
@@ -66,11 +68,10 @@ def _touches(tree: ast.Module) -> Iterator[str]:
 
 
 def bus_modules() -> dict[str, list[str]]:
-    """Every module under services/ (and the detection library, perception/) that touches the
-    bus, with where."""
+    """Every module under services/ (and the libraries, ``SCANNED``) that touches the bus, with
+    where."""
     found = {}
-    paths = [*(ROOT / "services").rglob("*.py"), *(ROOT / "perception").rglob("*.py")]
-    for path in sorted(paths):
+    for path in sorted(path for folder in SCANNED for path in (ROOT / folder).rglob("*.py")):
         where = list(_touches(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))))
         if where:
             found[path.relative_to(ROOT).as_posix()] = where
@@ -81,7 +82,8 @@ def test_only_service_modules_and_the_ros2_graph_touch_the_bus() -> None:
     offenders = {
         module: where
         for module, where in bus_modules().items()
-        if Path(module).name != "service.py" and module not in ALLOWED
+        if not (module.startswith("services/") and Path(module).name == "service.py")
+        and module not in ALLOWED
     }
     assert not offenders, (
         "only services/<name>/service.py (and the modules in ALLOWED) may touch the bus; move "
@@ -92,5 +94,5 @@ def test_only_service_modules_and_the_ros2_graph_touch_the_bus() -> None:
 def test_the_rule_sees_the_bus() -> None:
     # The check is not blind: the modules that do touch the bus are found.
     found = bus_modules()
-    assert {"services/ros2/graph.py", "services/recorder/service.py"} <= found.keys()
+    assert {"rosmsg/graph.py", "services/recorder/service.py"} <= found.keys()
     assert set(ALLOWED) <= found.keys(), "an allowed module no longer touches the bus: drop it"

@@ -21,11 +21,12 @@ from common.boxes import Boxes
 from common.messages import Detections, Header
 from perception.postprocess import select
 from perception.tracker import Tracker
+from rosmsg.convert import DETECTION_2D_ARRAY, cdr_decode, detections_to_ros
+from rosmsg.distro import RosDistro
 from services.recorder.channels import JSON_SCHEMA, Translator
 from services.recorder.contract import RecorderSettings
 from services.recorder.writer import McapFile
-from services.ros2.contract import Ros2Settings, RosDistro
-from services.ros2.convert import DETECTION_2D_ARRAY, cdr_decode, detections_to_ros
+from services.ros2.contract import Ros2Settings
 from services.viewer.convert import image_annotations
 from tests.foxglove_client import decode_protobuf
 from tools.compare.runs import load_run

@@ -27,13 +27,7 @@ from common.messages import (
     Twist,
 )
 from common.node import Tally
-from services.controller.contract import ControllerSettings
-from services.controller.service import ControllerHandlers
-from services.detector.handlers import DetectorHandlers
-from services.metrics.service import MetricsHandlers
-from services.ros2 import data_key
-from services.ros2.contract import Ros2Settings
-from services.ros2.convert import (
+from rosmsg.convert import (
     LASER_SCAN,
     TWIST,
     cdr_decode,
@@ -41,7 +35,13 @@ from services.ros2.convert import (
     scan_to_ros,
     twist_to_ros,
 )
-from services.ros2.images import IMAGE, frame_to_image
+from rosmsg.images import IMAGE, frame_to_image
+from rosmsg.wire import data_key
+from services.controller.contract import ControllerSettings
+from services.controller.service import ControllerHandlers
+from services.detector.handlers import DetectorHandlers
+from services.metrics.service import MetricsHandlers
+from services.ros2.contract import Ros2Settings
 from services.ros2.service import CommandsToRos, DebugImages, DetectionsToRos, RosInbound
 from services.sim.contract import SimSettings
 from services.sim.service import SimHandlers

@@ -11,11 +11,12 @@ name a project module, absolutely or as a submodule of the table's own module (m
 (``python -m``, ``runpy`` in deploy/zstack.py) is not an import.
 
 Units. For package cycles and layers each module belongs to one unit: ``common``, ``stack``,
-``runtimes``, ``perception`` and ``deploy`` are one unit each; below ``services``, ``tools``
-and ``modelprep`` each second level is one (``services.detector``, ``tools.evaluation``,
-``modelprep.quantize``, and a module directly in the folder is its own: ``tools.launch``,
-``modelprep.files``); a service's contract is a unit of its own (``services.detector.contract``),
-so that what reads it (the stack, other services) does not depend on the service.
+``runtimes``, ``perception``, ``rosmsg``, ``simworld`` and ``deploy`` are one unit each; below
+``services``, ``tools`` and ``modelprep`` each second level is one (``services.detector``,
+``tools.evaluation``, ``modelprep.quantize``, and a module directly in the folder is its own:
+``tools.launch``, ``modelprep.files``); a service's contract is a unit of its own
+(``services.detector.contract``), so that what reads it (the stack, other services) does not
+depend on the service.
 
 Layers: who may import whom (``_allowed`` is exactly this table).
 
@@ -23,21 +24,32 @@ Layers: who may import whom (``_allowed`` is exactly this table).
 importer       may import
 =============  ==========================================================================
 common         common
-a contract     common, another service's contract (what it reads of it); a contract is
-               ``services.X.contract``
+a contract     common, another service's contract (what it reads of it), a library's
+               settings (``perception.settings``: the detector's contract composes them), and
+               ``rosmsg.distro`` (the bridge's ``distro`` setting, a module that imports
+               nothing); a contract is ``services.X.contract``
 stack          common, stack, the services' contracts (it assembles them)
-runtimes       common, runtimes, modelprep, the detector's contract (its settings)
+runtimes       common, runtimes, modelprep
 modelprep.X    common, modelprep
-perception     common, runtimes, modelprep, perception (the detection library), the
-               detector's contract (its settings)
-services.X     common, stack, runtimes, modelprep, its own package, ``perception`` (the package
-               root: its public API, never its modules), another service's package root
-               (``services.Y``, its public API) or contract, never its internals; never tools
-               or deploy
+perception     common, runtimes, modelprep, perception (the detection library)
+rosmsg         common, rosmsg (the ROS 2 message library), and ``perception``'s package root
+               (a camera's mounting and the depth columns of 3D detections)
+simworld       common, simworld (the simulated world)
+services.X     common, stack, runtimes, modelprep, rosmsg, simworld, its own package,
+               ``perception`` (the package root: its public API, never its modules), and of
+               another service only its contract (``services.Y.contract``): never its package
+               root nor its other modules; never tools or deploy
 tools.X        anything but deploy (a tool starts the supervisor as a process), and of
                perception only its package root (its public API)
 deploy         common, stack, the services' contracts, deploy
 =============  ==========================================================================
+
+So no library (``common``, ``runtimes``, ``modelprep``, ``perception``) imports ``services``:
+each declares its own settings, and takes them, or plain arguments, from its callers.
+
+Serving's load path (``perception.loading``, what the detector service opens its model with)
+reaches nothing under ``modelprep.quantize`` (the INT8 quantizer): preparing a model
+(``perception.preparing``) and loading what was prepared are two modules.
 
 No production module reads anything under tests/: no import of ``tests``, and no string that
 is a path into it (``"tests/..."``, a ``"tests"`` path part); docstrings and comments may
@@ -53,9 +65,30 @@ from collections.abc import Container, Iterable, Iterator, Mapping
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGES = ("common", "stack", "runtimes", "modelprep", "perception", "services", "tools", "deploy")
+PACKAGES = (
+    "common",
+    "stack",
+    "runtimes",
+    "modelprep",
+    "perception",
+    "rosmsg",
+    "simworld",
+    "services",
+    "tools",
+    "deploy",
+)
 #: Units that are a whole top-level package (the others are split at the second level).
-WHOLE = ("common", "stack", "runtimes", "perception", "deploy")
+WHOLE = ("common", "stack", "runtimes", "perception", "rosmsg", "simworld", "deploy")
+#: The only library modules a contract may read: the ROS distributions (the bridge's setting).
+CONTRACT_READS = frozenset({"rosmsg.distro"})
+
+#: The libraries below the services: none imports anything under ``services``.
+LIBRARIES = ("common", "runtimes", "modelprep", "perception", "rosmsg", "simworld")
+#: The libraries' settings modules a service's contract may import (and compose).
+LIBRARY_SETTINGS = ("perception.settings",)
+#: Serving's load path, and the quantizer it must never reach.
+SERVING_LOAD = "perception.loading"
+QUANTIZER = "modelprep.quantize"
 
 #: Module -> the project modules it imports, each with the line of its first import there.
 Graph = dict[str, dict[str, int]]
@@ -261,25 +294,34 @@ def _allowed(module: str, target: str) -> bool:
     if top == "common":
         return target_top == "common"
     if is_contract(module):
-        return target_top == "common" or is_contract(target)
+        return (
+            target_top == "common"
+            or is_contract(target)
+            or target in CONTRACT_READS
+            or target in LIBRARY_SETTINGS
+        )
     if top == "stack":
         return target_top in ("common", "stack") or is_contract(target)
     if top == "runtimes":
-        return target_top in ("common", "runtimes", "modelprep") or is_contract(target)
+        return target_top in ("common", "runtimes", "modelprep")
     if top == "modelprep":
         return target_top in ("common", "modelprep")
     if top == "perception":
-        own = ("common", "runtimes", "modelprep", "perception")
-        return target_top in own or is_contract(target)
+        return target_top in ("common", "runtimes", "modelprep", "perception")
+    if top == "rosmsg":
+        return target_top in ("common", "rosmsg") or target == "perception"
+    if top == "simworld":
+        return target_top in ("common", "simworld")
     if top == "services":
-        if target_top in ("common", "stack", "runtimes", "modelprep") or is_contract(target):
+        below = ("common", "stack", "runtimes", "modelprep", "rosmsg", "simworld")
+        if target_top in below or is_contract(target):
             return True
         if target_top == "perception":
             return target == "perception"  # its public API, never its modules
         if target_top != "services":
             return False  # tools, deploy
-        own = unit(module)
-        return target == own or target.startswith(f"{own}.") or target.count(".") == 1
+        package = unit(module)  # another service: only its contract (above)
+        return target == package or target.startswith(f"{package}.")
     if top == "tools":
         if target_top == "perception":
             return target == "perception"
@@ -356,6 +398,8 @@ def test_units_are_the_whole_package_or_its_second_level() -> None:
     assert unit("modelprep.quantize.nncf_int8") == "modelprep.quantize"
     assert unit("services.detector.contract") == "services.detector.contract"
     assert unit("stack.access") == "stack"
+    assert unit("rosmsg.graph") == "rosmsg"
+    assert unit("simworld.render") == "simworld"
 
 
 def test_a_package_cycle_through_a_function_level_import_is_caught() -> None:
@@ -412,9 +456,34 @@ def test_the_layering_rule_refuses_what_the_table_refuses() -> None:
     assert not _allowed("services.sim.runner", "tools.scenarios.runner")
     assert not _allowed("services.recorder", "deploy.processes")
     assert not _allowed("services.detector.service", "deploy")
-    # nor another service's internals
+    # nor another service's internals, nor its package root: only its contract
     assert not _allowed("services.metrics.service", "services.detector.pool")
-    assert _allowed("services.metrics.service", "services.detector")
+    assert not _allowed("services.metrics.service", "services.detector")
+    assert not _allowed("services.recorder.channels", "services.ros2")
+    assert not _allowed("services.sim.service", "services.ros2.service")
+    assert _allowed("services.sim.service", "services.ros2.contract")
+    # the ROS message library and the simulated world: for the services and the tools
+    assert _allowed("services.recorder.channels", "rosmsg.convert")
+    assert _allowed("services.sim.service", "rosmsg.graph")
+    assert _allowed("services.sim.service", "simworld.render")
+    assert _allowed("tools.benchmarks.ros2", "rosmsg.graph")
+    assert _allowed("tools.scenarios.runner", "simworld.scenarios")
+    # ... themselves libraries: no service, no stack, not each other
+    assert not _allowed("rosmsg.graph", "services.ros2.contract")
+    assert not _allowed("rosmsg.graph", "stack.config")
+    assert _allowed("rosmsg.depth", "perception")
+    assert not _allowed("rosmsg.depth", "perception.depth")
+    assert not _allowed("rosmsg.convert", "simworld.world")
+    assert not _allowed("simworld.world", "services.sim.contract")
+    assert not _allowed("simworld.render", "stack.config")
+    assert not _allowed("simworld.render", "rosmsg.images")
+    assert not _allowed("simworld.depth", "perception")
+    assert not _allowed("perception.depth", "rosmsg.depth")
+    assert not _allowed("common.frames", "simworld.world")
+    # a contract reads of the libraries only the ROS distributions
+    assert _allowed("services.ros2.contract", "rosmsg.distro")
+    assert not _allowed("services.ros2.contract", "rosmsg.typestore")
+    assert not _allowed("services.sim.contract", "simworld.world")
     # the detection library's public API, never its modules
     assert _allowed("services.detector.service", "perception")
     assert not _allowed("services.detector.service", "perception.pipeline")
@@ -425,8 +494,16 @@ def test_the_layering_rule_refuses_what_the_table_refuses() -> None:
     assert _allowed("perception.pipeline", "runtimes.base")
     assert not _allowed("perception.pipeline", "services.detector")
     assert not _allowed("perception.loading", "tools.detector.fast_profile")
+    # the libraries own their settings: none reads the detector's contract for them
+    assert not _allowed("perception.variants", "services.detector.contract")
+    assert not _allowed("perception.tracker", "services.detector.contract")
+    assert not _allowed("runtimes.select", "services.detector.contract")
+    assert not _allowed("modelprep.quantize", "services.detector.contract")
+    assert _allowed("services.detector.contract", "perception.settings")
+    assert not _allowed("services.detector.contract", "perception.pipeline")
+    assert not _allowed("services.detector.contract", "perception")
     # tools anything but deploy
-    assert _allowed("tools.evaluation.evaluate", "services.sim.scenarios")
+    assert _allowed("tools.evaluation.evaluate", "simworld.scenarios")
     assert _allowed("tools.scenarios.runner", "tools.launch")
     assert not _allowed("tools.scenarios.runner", "deploy.processes")
     # the lower floors
@@ -470,6 +547,30 @@ def test_a_service_importing_tools_or_deploy_inside_a_function_is_reported() -> 
     ]
 
 
+def test_a_service_reaching_into_another_service_is_reported() -> None:
+    # the recorder and the simulator took the ROS messages from the bridge's package root
+    # (issue 40): editing the bridge silently changed them
+    sources = _sources(
+        {
+            "services/ros2/__init__.py": "",
+            "services/ros2/contract.py": "",
+            "services/ros2/convert.py": "",
+            "services/recorder/__init__.py": "",
+            "services/recorder/channels.py": (
+                "from services.ros2 import convert\nfrom services.ros2.contract import RosDistro\n"
+            ),
+            "services/sim/__init__.py": "",
+            "services/sim/service.py": "def f():\n    import services.ros2\n",
+        }
+    )
+    graph = import_graph(sources)
+    wrong = [(m, t) for m, ts in graph.items() for t in ts if not _allowed(m, t)]
+    assert sorted(wrong) == [
+        ("services.recorder.channels", "services.ros2.convert"),
+        ("services.sim.service", "services.ros2"),
+    ]
+
+
 # -- the project keeps the rules ----------------------------------------------------------------
 
 
@@ -491,6 +592,66 @@ def test_layers_and_no_service_imports_another_services_internals() -> None:
         if not _allowed(module, target)
     )
     assert wrong == [], "imports across the layers:\n" + "\n".join(wrong)
+
+
+def test_no_library_imports_services() -> None:
+    wrong = sorted(
+        f"{module} imports {target} (line {line})"
+        for module, targets in GRAPH.items()
+        if module.split(".")[0] in LIBRARIES
+        for target, line in targets.items()
+        if target.split(".")[0] == "services"
+    )
+    assert wrong == [], "libraries importing services:\n" + "\n".join(wrong)
+
+
+def closure(graph: Graph, start: str) -> dict[str, str]:
+    """Every module ``start`` reaches, each with the module that first imports it on the way
+    (breadth first: a shortest path back to ``start``)."""
+    reached = {start: ""}
+    frontier = [start]
+    while frontier:
+        nxt = []
+        for module in frontier:
+            for target in sorted(graph.get(module, ())):
+                if target not in reached:
+                    reached[target] = module
+                    nxt.append(target)
+        frontier = nxt
+    return reached
+
+
+def _path(reached: Mapping[str, str], module: str) -> str:
+    hops = [module]
+    while reached[hops[-1]]:
+        hops.append(reached[hops[-1]])
+    return " <- ".join(hops)
+
+
+def test_the_closure_sees_a_lazy_import_two_hops_away() -> None:
+    sources = _sources(
+        {
+            "lib/__init__.py": "",
+            "lib/load.py": "import lib.files\n",
+            "lib/files.py": "def f():\n    from lib.quant import q\n",
+            "lib/quant.py": "def q(): ...\n",
+        }
+    )
+    reached = closure(import_graph(sources), "lib.load")
+    assert _path(reached, "lib.quant") == "lib.quant <- lib.files <- lib.load"
+
+
+def test_serving_load_path_reaches_no_quantizer() -> None:
+    reached = closure(GRAPH, SERVING_LOAD)
+    assert "perception.pipeline" in reached and "runtimes.onnx" in reached  # it sees the path
+    wrong = [
+        _path(reached, m)
+        for m in sorted(reached)
+        if m == QUANTIZER or m.startswith(QUANTIZER + ".")
+    ]
+    assert wrong == [], "serving's load path reaches the quantizer:\n" + "\n".join(wrong)
+    # preparing does: the check would see it
+    assert QUANTIZER in closure(GRAPH, "perception.preparing")
 
 
 # -- nothing in production reads tests/ ---------------------------------------------------------

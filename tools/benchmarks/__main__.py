@@ -277,6 +277,17 @@ def _estop_arguments(p: argparse.ArgumentParser) -> None:
         default="main",
         help="the git revision to compare with (default main; name the one before a change)",
     )
+    p.add_argument(
+        "--to-zero",
+        action="store_true",
+        help="time to a real controller's stop (its e-stop status), not to the first put",
+    )
+    p.add_argument(
+        "--burners",
+        type=int,
+        default=2,
+        help="with --to-zero: busy loops beside the controller (default 2: a 2-core machine busy)",
+    )
     add_port(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -285,8 +296,12 @@ def estop(args: argparse.Namespace) -> int:
     from tools.benchmarks.estop import EstopOptions, main
 
     use_ports(args.port)
+    options = options_from(EstopOptions, args, as_json=args.json)
+    if options.to_zero:
+        from tools.benchmarks.estop_zero import main as to_zero
 
-    return main(options_from(EstopOptions, args, as_json=args.json))
+        return to_zero(options)
+    return main(options)
 
 
 def _depth_arguments(p: argparse.ArgumentParser) -> None:

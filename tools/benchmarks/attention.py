@@ -35,7 +35,7 @@ from typing import Any
 
 from common.contracts import ScenarioResult
 from common.messages import GroundTruth
-from services.sim.scenarios import LEFT_CAMERA, REAR_CAMERA, SCENARIOS
+from simworld.scenarios import LEFT_CAMERA, REAR_CAMERA, SCENARIOS
 from stack.config import Config
 from tools.scenarios.runner import run_scenario
 from tools.scenarios.score import ScenarioLog

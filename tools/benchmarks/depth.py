@@ -15,7 +15,7 @@ per target: the highest score). Per match:
 
 - ``depth``: perception.depth.measure (ours); truth: the distance to what a depth camera
   sees of the target, its visible front face on the ray through its centre
-  (services/sim/depth.py targets_in_camera, optical frame).
+  (simworld/depth.py targets_in_camera, optical frame).
 - ``yolo_ros``: the yolo_ros-like reference (tools/benchmarks/depth_reference.py); same truth.
 - ``laser``: sector_range over the box's bearing, as the controller uses it (the middle 60 %
   of the box's width); truth: the target's nearest surface, centre range minus its radius.
@@ -121,7 +121,7 @@ class Truth:
 
 def truths(world: Any, spec: Any, min_visible: float) -> dict[str, Truth]:
     """Each target the camera sees (more than ``min_visible`` of it), by id."""
-    from services.sim.depth import targets_in_camera
+    from simworld.depth import targets_in_camera
 
     radius = {tg.id: tg.radius for tg in world.targets}
     out = {}
@@ -157,8 +157,8 @@ def score_depth(
 def make_world(rng: np.random.Generator, band: tuple[float, float], hfov_deg: float) -> Any:
     """The robot at the origin; a person whose front face is at a range within ``band`` (in
     the camera's view), up to two more people elsewhere, and sometimes a bin in front."""
-    from services.sim.scenarios import person
-    from services.sim.world import Obstacle, Robot, World
+    from simworld.scenarios import person
+    from simworld.world import Obstacle, Robot, World
 
     half = math.radians(hfov_deg / 2) * 0.8
     targets = []
@@ -193,7 +193,7 @@ def make_world(rng: np.random.Generator, band: tuple[float, float], hfov_deg: fl
 
 def owners(world: Any, spec: Any) -> tuple[npt.NDArray[np.int32], list[Any]]:
     """Which drawn thing owns each pixel (-1: none) and the drawn things, as render draws."""
-    from services.sim.render import layout
+    from simworld.render import layout
 
     placed = layout(world, spec)
     owner = np.full((spec.height, spec.width), -1, np.int32)
@@ -206,7 +206,7 @@ def owners(world: Any, spec: Any) -> tuple[npt.NDArray[np.int32], list[Any]]:
 
 def laser_scan(world: Any, rng: np.random.Generator) -> Any:
     from common.messages import Header, LaserScan
-    from services.sim.laser import LaserSpec, cast
+    from simworld.laser import LaserSpec, cast
 
     spec = LaserSpec()
     r = world.robot
@@ -233,8 +233,8 @@ def run(opts: DepthBenchOptions, noise_corr_px: float | None = None) -> dict[str
     from services.controller.geometry import box_clipped, box_distance, sector_range
     from services.detector.contract import DetectorSettings
     from services.sim.contract import SimSettings
-    from services.sim.depth import DepthNoise, apply, depth_frame, render_depth
-    from services.sim.render import CameraSpec, render
+    from simworld.depth import DepthNoise, apply, depth_frame, render_depth
+    from simworld.render import CameraSpec, render
     from stack.config_file import load_config
 
     model = default_model_path(Path(opts.models_dir) if opts.models_dir else None)
@@ -356,7 +356,7 @@ def synthetic_cases(corr_px: float | None = None) -> list[dict[str, Any]]:
     """Both methods on hard synthetic scenes the simulator's worlds seldom make (a flat target
     before a wall, stereo noise 0.005 z^2 correlated over ``corr_px``, None: the simulator's
     default): each case's truth z and what each method says."""
-    from services.sim.depth import DepthNoise, unit_noise
+    from simworld.depth import DepthNoise, unit_noise
 
     if corr_px is None:
         corr_px = DepthNoise().noise_corr_px
@@ -398,8 +398,8 @@ def synthetic_cases(corr_px: float | None = None) -> list[dict[str, Any]]:
 def time_per_boxes(spec: Any, noise: Any, rng: np.random.Generator) -> dict[str, Any]:
     """ms per 640x480 frame for 1, 5 and 20 person-sized boxes: depth_metres + each method."""
     from common.messages import Header
-    from services.sim.depth import apply, depth_frame, render_depth
-    from services.sim.render import render
+    from simworld.depth import apply, depth_frame, render_depth
+    from simworld.render import render
 
     world = make_world(np.random.default_rng(7), (2.5, 3.0), spec.hfov_deg)
     colour = render(world, spec)

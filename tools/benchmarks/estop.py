@@ -1,5 +1,6 @@
 """python -m tools.benchmarks estop: how soon ``zstack estop engage`` puts its first EStop,
-this checkout against another revision, side by side.
+this checkout against another revision, side by side (with ``--to-zero``, how soon a real
+controller stops: tools/benchmarks/estop_zero.py).
 
 This process plays the stack's hub (``stack.hub.open_hub`` on a private endpoint) and
 subscribes to the e-stop key; each run starts the command as an operator would
@@ -48,6 +49,10 @@ class EstopOptions:
     runs: int = 20
     against: str = "main"
     as_json: bool = False
+    #: Time to the controller's stop on a real controller (tools/benchmarks/estop_zero.py),
+    #: with ``burners`` busy loops beside it, instead of to the first put.
+    to_zero: bool = False
+    burners: int = 2
 
 
 def _export(revision: str, into: Path) -> str:
@@ -156,18 +161,25 @@ def run(options: EstopOptions) -> dict[str, Any]:
 
 
 def main(options: EstopOptions) -> int:
-    result = run(options)
+    return show(run(options), options, "its first EStop put", "first_put")
+
+
+def show(result: dict[str, Any], options: EstopOptions, title: str, table: str) -> int:
+    """Print ``result`` (JSON, or its ``table`` as a table of p50 ... per revision)."""
     if options.as_json:
         print(json.dumps(result, indent=2))
         return 0
     against = result["against"]
-    print(f"time from the command's start to its first EStop put, {options.runs} runs each")
+    print(f"time from the command's start to {title}, {options.runs} runs each")
+    if "burners" in result:
+        print(f"{result['burners']} CPU burners beside; load average {result['load_average']}")
     print(f"{'':22} {'p50 ms':>8} {'p90 ms':>8} {'min ms':>8} {'max ms':>8} {'lost':>5}")
-    for name, row in result["first_put"].items():
+    for name, row in result[table].items():
         label = name if name == THIS else f"{name} ({against['commit'][:9]})"
+        over = f" {row['over_200_ms']:3d} over 0.2 s" if "over_200_ms" in row else ""
         print(
             f"{label:22} {row['p50_ms']:8.1f} {row['p90_ms']:8.1f} {row['min_ms']:8.1f} "
-            f"{row['max_ms']:8.1f} {row['lost']:5d}"
+            f"{row['max_ms']:8.1f} {row['lost']:5d}{over}"
         )
     print(f"p50 ratio (this / {against['revision']}): {result['p50_ratio']}")
     machine = result["machine"]

@@ -166,8 +166,8 @@ def sample_messages() -> dict[str, bytes]:
     """Encoded by our codec: a rendered 640x480 scene as JPEG and raw bgr8, 20 boxes, a Twist."""
     import cv2
 
-    from services.sim.render import CameraSpec, render
-    from services.sim.scenarios import SCENARIOS
+    from simworld.render import CameraSpec, render
+    from simworld.scenarios import SCENARIOS
 
     world = SCENARIOS["two_people"].build()
     world.t = 10.0

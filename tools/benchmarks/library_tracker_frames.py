@@ -43,7 +43,7 @@ class ScenarioFrames:
 
 
 def _to_camera(dx: float, dy: float, c: float, s: float) -> tuple[float, float]:
-    """World offset -> (depth, lateral left), as services/sim/render.py projects."""
+    """World offset -> (depth, lateral left), as simworld/render.py projects."""
     return dx * c + dy * s, -dx * s + dy * c
 
 
@@ -55,7 +55,7 @@ def truth_boxes(world: Any, spec: Any) -> tuple[list[str], npt.NDArray[np.float6
     least half of that clipped box is not covered by a nearer target's or obstacle's billboard
     (the renderer pastes whole rectangles, so this is exact).
     """
-    from services.sim.render import OBSTACLE_HEIGHT_M, sprite
+    from simworld.render import OBSTACLE_HEIGHT_M, sprite
 
     r = world.robot
     c, s = math.cos(r.theta), math.sin(r.theta)
@@ -117,12 +117,12 @@ def run_scenario(
     name: str, robot: str, rate_hz: float, max_frames: int, detector: Any, cache: Path | None
 ) -> ScenarioFrames:
     """Step the scenario's world, render each camera frame, detect on it (or read the cache)."""
-    from services.sim.render import CameraSpec, render
-    from services.sim.scenarios import SCENARIOS
+    from simworld.render import CameraSpec, render
+    from simworld.scenarios import SCENARIOS
 
     if name in STRESS_WORLDS:
-        from services.sim.scenarios import Scenario, person
-        from services.sim.world import Robot, World
+        from simworld.scenarios import Scenario, person
+        from simworld.world import Robot, World
 
         alice, bob, duration = STRESS_WORLDS[name]
         scenario = Scenario(

@@ -31,9 +31,9 @@ from common.machine import machine_info
 from common.messages import Detections, Frame, Header
 from common.settings import ZenohSettings
 from common.zenoh_bus import open_session
-from services.ros2.convert import DETECTION_2D_ARRAY, cdr_decode
-from services.ros2.graph import RosGraph
-from services.ros2.images import IMAGE, frame_to_image
+from rosmsg.convert import DETECTION_2D_ARRAY, cdr_decode
+from rosmsg.graph import RosGraph
+from rosmsg.images import IMAGE, frame_to_image
 from stack.config import Config
 from stack.config_file import to_toml
 from tools.launch import free_port, run_folder, start_supervisor, stop_supervisor, wait_ready

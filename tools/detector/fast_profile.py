@@ -14,13 +14,12 @@ import numpy as np
 from common.clock import ms_since, perf_s
 from common.images import load_sample
 from common.lifecycle import Progress
-from perception import TIMED_RUNS, Figures, Variant, open_prepared
-from services.detector.contract import DetectorSettings
+from perception import TIMED_RUNS, DetectorSpec, Figures, Variant, open_prepared
 from tools.evaluation.labelled_set import labelled_ap50
 
 
 def measure(
-    s: DetectorSettings, variants: Sequence[Variant], progress: Progress, runs: int = TIMED_RUNS
+    s: DetectorSpec, variants: Sequence[Variant], progress: Progress, runs: int = TIMED_RUNS
 ) -> list[Figures]:
     """Time and score every variant; one whose INT8 build fell back to FP32 is left out."""
     image = load_sample("chelsea")

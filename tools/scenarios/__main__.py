@@ -130,7 +130,7 @@ def scenario(args: argparse.Namespace) -> int:
 
 
 def list_scenarios(args: argparse.Namespace) -> int:
-    from services.sim.scenarios import SCENARIOS
+    from simworld.scenarios import SCENARIOS
 
     for name, sc in SCENARIOS.items():
         print(f"{name:14} {sc.description}")

@@ -23,7 +23,7 @@ from common.contracts import ControllerMode, ScenarioResult
 from common.errors import StackError
 from common.keys import Keys
 from common.zenoh_bus import open_session
-from services.sim.scenarios import SCENARIOS
+from simworld.scenarios import SCENARIOS
 from stack.config import Config
 from stack.config_file import to_toml
 from tools.launch import (

@@ -27,7 +27,7 @@ from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, GroundTruth, Twist
 from common.zenoh_bus import open_session
-from services.sim.scenarios import SCENARIOS, Scenario
+from simworld.scenarios import SCENARIOS, Scenario
 from stack.config import Config
 from stack.config_file import to_toml
 from tools.launch import (

@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 from common.contracts import ScenarioResult
 from common.messages import Detections, GroundTruth, Twist
 from services.controller.contract import ControllerSettings
-from services.sim.scenarios import Scenario
-from services.sim.world import World
+from simworld.scenarios import Scenario
+from simworld.world import World
 
 REACH_TOLERANCE_M = 0.4  # box-height ranging is coarse: +-0.4 m around the follow distance
 STOP_MARGIN_S = 0.5  # detector_dies: allowed on top of the detection timeout

@@ -24,7 +24,7 @@ from common.keys import Keys
 from common.messages import GroundTruth
 from common.settings import SERVICES
 from common.zenoh_bus import open_session
-from services.sim.scenarios import SCENARIOS
+from simworld.scenarios import SCENARIOS
 from stack.config import Config
 from stack.config_file import to_toml
 from tools.launch import (

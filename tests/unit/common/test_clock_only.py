@@ -12,7 +12,17 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[3]
-PACKAGES = ("common", "perception", "services", "runtimes", "modelprep", "deploy", "tools")
+PACKAGES = (
+    "common",
+    "perception",
+    "rosmsg",
+    "simworld",
+    "services",
+    "runtimes",
+    "modelprep",
+    "deploy",
+    "tools",
+)
 CLOCK_MODULE = ROOT / "common" / "clock.py"
 
 #: The ``time`` functions that read a clock (the formatting ones read it when given no time).

@@ -1,5 +1,6 @@
 """``load_bus_settings`` (stack/config_read.py): the [zenoh] and [stack] tables as
-``load_config`` gives them, and nothing else read (the e-stop command's config)."""
+``load_config`` gives them, and nothing else read (the e-stop command's config); and
+``load_estop_file_path``, the e-stop file as the whole config names it."""
 
 from __future__ import annotations
 
@@ -10,11 +11,12 @@ import pytest
 from common.errors import ConfigError
 from common.settings import REPO_ROOT
 from stack.config_file import load_config
-from stack.config_read import load_bus_settings
+from stack.config_read import load_bus_settings, load_estop_file_path
 
 PROFILES = sorted((REPO_ROOT / "deploy").glob("*.toml"))
 ENVIRONS = [
     {},
+    {"STACK__CONTROLLER__ESTOP_FILE": "/var/lib/robot/estop.json"},
     {"STACK__ZENOH__ENDPOINT": '"tcp/10.0.0.2:7500"', "STACK__STACK__PREFIX": "robot7"},
     {"STACK__ZENOH__LISTEN": '["tcp/0.0.0.0:0"]', "STACK__STACK__CLOCK_TOLERANCE_S": "0.3"},
 ]
@@ -25,6 +27,8 @@ ENVIRONS = [
 def test_the_same_tables_as_the_whole_config(profile: Path, environ: dict[str, str]) -> None:
     whole = load_config(profile, environ=environ)
     assert load_bus_settings(profile, environ=environ) == (whole.zenoh, whole.stack)
+    # The e-stop command's local road finds the controller's socket beside the same file.
+    assert load_estop_file_path(profile, environ=environ) == whole.estop_path
 
 
 def test_a_profile_that_extends_another(tmp_path: Path) -> None:

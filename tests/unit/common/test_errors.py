@@ -10,7 +10,17 @@ from pathlib import Path
 import common.errors
 
 ROOT = Path(__file__).resolve().parents[3]
-PACKAGES = ("common", "perception", "services", "runtimes", "modelprep", "deploy", "tools")
+PACKAGES = (
+    "common",
+    "perception",
+    "rosmsg",
+    "simworld",
+    "services",
+    "runtimes",
+    "modelprep",
+    "deploy",
+    "tools",
+)
 
 
 def stack_errors() -> dict[str, str]:

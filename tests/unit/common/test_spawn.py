@@ -13,7 +13,17 @@ from pathlib import Path
 from common.spawn import spawn, stop_child, wait_or_kill
 
 ROOT = Path(__file__).resolve().parents[3]
-PACKAGES = ("common", "perception", "services", "runtimes", "modelprep", "deploy", "tools")
+PACKAGES = (
+    "common",
+    "perception",
+    "rosmsg",
+    "simworld",
+    "services",
+    "runtimes",
+    "modelprep",
+    "deploy",
+    "tools",
+)
 
 READY = "import signal, sys\n{setup}\nprint('ready', flush=True)\nsignal.pause()"
 

@@ -11,7 +11,7 @@ from skimage import data
 
 from common.errors import ConfigError, ImageError
 from common.letterbox import Preprocessor
-from modelprep.quantize.calibration import (
+from modelprep.calibration import (
     batch_count,
     calibration_batches,
     calibration_digest,

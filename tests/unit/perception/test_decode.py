@@ -25,9 +25,9 @@ from perception.model_info import (
     read_model_info,
 )
 from perception.pipeline import Detector
+from perception.settings import DecodeOptions
 from runtimes import BACKENDS, Dim, open_backend
 from runtimes.base import input_size, parse_imgsz
-from services.detector.contract import DetectorSettings
 
 # --- family detection ---------------------------------------------------------------------------
 
@@ -234,7 +234,7 @@ def test_detector_maps_end2end_boxes_back_to_image_pixels() -> None:
     # A 1280x720 image in a 640x640 input: scale 0.5, 140 px of padding above and below.
     rows = np.array([[[100, 190, 300, 290, 0.9, 15], [0, 0, 10, 10, 0.1, 0]]], np.float32)
     backend = FakeBackend((1, 3, 640, 640), rows, {"names": str(dict(enumerate(COCO80)))})
-    with Detector(backend, Path("fake.onnx"), DetectorSettings(conf=0.25)) as det:
+    with Detector(backend, Path("fake.onnx"), DecodeOptions(conf=0.25)) as det:
         result = det.detect(np.zeros((720, 1280, 3), np.uint8))
         assert det.names == COCO80
     assert backend.closed
@@ -254,12 +254,12 @@ def test_the_detector_takes_the_stack_detector_settings() -> None:
     backend = FakeBackend((1, 3, 640, 640), rows, {"names": str(dict(enumerate(COCO80)))})
     image = np.zeros((640, 640, 3), np.uint8)
     with Detector(backend, Path("fake.onnx")) as det:
-        assert det.settings == DetectorSettings()  # one default per field: the settings' own
+        assert det.settings == DecodeOptions()  # one default per field: the settings' own
         assert det.detect(image).class_names == ["cat", "person", "person"]
     for settings, names in (
-        (DetectorSettings(conf=0.5), ["cat", "person"]),
-        (DetectorSettings(max_det=1), ["cat"]),
-        (DetectorSettings(classes=("person",)), ["person", "person"]),
+        (DecodeOptions(conf=0.5), ["cat", "person"]),
+        (DecodeOptions(max_det=1), ["cat"]),
+        (DecodeOptions(classes=("person",)), ["person", "person"]),
     ):
         with Detector(FakeBackend((1, 3, 640, 640), rows), Path("fake.onnx"), settings) as det:
             assert det.settings is settings
@@ -269,7 +269,7 @@ def test_the_detector_takes_the_stack_detector_settings() -> None:
 def test_detector_rejects_unknown_class_names_and_closes_the_backend() -> None:
     backend = FakeBackend((1, 3, 640, 640), np.zeros((1, 300, 6), np.float32))
     with pytest.raises(ConfigError, match=r"unknown class name.*'kitten'.*valid names: person"):
-        Detector(backend, Path("fake.onnx"), DetectorSettings(classes=("kitten",)))
+        Detector(backend, Path("fake.onnx"), DecodeOptions(classes=("kitten",)))
     assert backend.closed
 
 

@@ -13,8 +13,9 @@ from common.errors import ConfigError, ModelError
 from modelprep.acquire.tfjs_resize import check_size, grid_offsets
 from modelprep.quantize import QuantizationFailed, head_nodes, quantized_model
 from perception.fast_profile import Figures, choose
-from perception.variants import Variant, prepare, sized_model
-from services.detector.contract import DetectorSettings
+from perception.preparing import prepare, sized_model
+from perception.settings import ModelSpec
+from perception.variants import Variant
 from tests.unit.perception.tiny import tiny_model
 
 
@@ -41,10 +42,10 @@ def test_choice_is_the_fastest_that_keeps_ap50() -> None:
 
 
 def test_input_size_setting_and_converter_sizes() -> None:
-    assert DetectorSettings(imgsz=480).imgsz == 480
+    assert ModelSpec(imgsz=480).imgsz == 480
     for bad in (500, 96, 1312):
         with pytest.raises(ConfigError, match=r"detector\.imgsz must be"):
-            DetectorSettings(imgsz=bad)
+            ModelSpec(imgsz=bad)
     with pytest.raises(ModelError):
         check_size(500)
     grid = grid_offsets(3)[0, 0]
@@ -53,9 +54,9 @@ def test_input_size_setting_and_converter_sizes() -> None:
 
 def test_named_model_of_another_fixed_size_is_one_config_error(tmp_path: Path) -> None:
     model = tiny_model(tmp_path / "tiny.onnx", side=32)
-    assert sized_model(DetectorSettings(model=str(model), imgsz=0)) == model
+    assert sized_model(ModelSpec(model=str(model), imgsz=0)) == model
     with pytest.raises(ConfigError, match=r"imgsz = 480, but tiny.onnx has a 32x32 input"):
-        sized_model(DetectorSettings(model=str(model), imgsz=480))
+        sized_model(ModelSpec(model=str(model), imgsz=480))
 
 
 def test_head_nodes_are_the_last_convs_and_after(tmp_path: Path) -> None:
@@ -94,7 +95,7 @@ def test_a_model_that_cannot_be_quantized_stays_on_fp32(
     model = tiny_model(tmp_path / "dynamic.onnx", side="size")  # no fixed size to calibrate at
     with pytest.raises(QuantizationFailed, match="fixed NCHW input size"):
         quantized_model(model, runtime="onnxruntime")
-    prepared = prepare(DetectorSettings(model=str(model), precision="int8"))
+    prepared = prepare(ModelSpec(model=str(model), precision="int8"))
     assert prepared.model == model and prepared.backend == "onnx"
     assert prepared.note.endswith("the detector stays on FP32")
     warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]

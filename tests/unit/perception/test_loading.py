@@ -4,6 +4,8 @@ FP32 model with a note (perception/variants.py locate, perception/loading.py).""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -11,16 +13,17 @@ import pytest
 from modelprep.files import MODELS_DIR_ENV
 from modelprep.quantize import QuantizationFailed, cached_model, quantized_model
 from perception import NotPrepared, choose_fast
+from perception.settings import DetectorSpec, ModelSpec
 from perception.variants import locate
-from services.detector.contract import DetectorSettings
 from tests.unit.perception.tiny import tiny_model
 
 INT8 = "m.onnxruntime-int8.onnx"
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_an_int8_model_not_prepared_is_one_line_and_not_built(tmp_path: Path) -> None:
     model = tiny_model(tmp_path / "m.onnx")
-    settings = DetectorSettings(model=str(model), precision="int8")
+    settings = ModelSpec(model=str(model), precision="int8")
     with pytest.raises(NotPrepared) as caught:
         locate(settings)
     line = str(caught.value)
@@ -37,7 +40,7 @@ def test_a_failed_int8_build_is_recorded_and_loads_fp32_with_a_note(tmp_path: Pa
         quantized_model(model, runtime="onnxruntime", check=lambda _: "finds nothing")
     with pytest.raises(QuantizationFailed, match="unusable: finds nothing"):
         cached_model(model, runtime="onnxruntime")
-    prepared = locate(DetectorSettings(model=str(model), precision="int8"))
+    prepared = locate(ModelSpec(model=str(model), precision="int8"))
     assert prepared.model == model
     assert "finds nothing" in prepared.note and prepared.note.endswith("stays on FP32")
     # preparing again tries again (the failure may have been the machine's)
@@ -52,14 +55,14 @@ def test_a_default_model_not_prepared_at_its_size_names_the_file(
 ) -> None:
     monkeypatch.setenv(MODELS_DIR_ENV, str(tmp_path))
     with pytest.raises(NotPrepared, match=r"at input size 320 \(.*yolov5s-coco-320\.onnx\)"):
-        locate(DetectorSettings(imgsz=320))
+        locate(ModelSpec(imgsz=320))
     assert list(tmp_path.iterdir()) == []  # no fetch, no rebuild
 
 
 def test_an_unmeasured_fast_profile_is_not_prepared(tmp_path: Path) -> None:
     model = tiny_model(tmp_path / "m.onnx")
     with pytest.raises(NotPrepared, match=r'detector.profile = "fast" has not been measured'):
-        choose_fast(DetectorSettings(model=str(model), profile="fast"))
+        choose_fast(DetectorSpec(model=str(model), profile="fast"))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.onnx"]
 
 
@@ -71,3 +74,28 @@ def test_not_prepared_says_the_command_it_is_given() -> None:
         "run `zstack prepare --config robot.toml`"
     )
     assert told.missing == missing.missing
+
+
+def test_serving_loads_a_prepared_int8_model_without_importing_the_quantizer(
+    tmp_path: Path,
+) -> None:
+    model = tiny_model(tmp_path / "m.onnx")
+    built = quantized_model(model, runtime="onnxruntime", progress=lambda _: None)
+    code = (
+        "import sys\n"
+        "import services.detector.service\n"
+        "from perception import load\n"  # serving's load, and what it finds the model with:
+        "from perception.settings import ModelSpec\n"
+        "from perception.variants import locate\n"
+        f"prepared = locate(ModelSpec(model={str(model)!r}, precision='int8'))\n"
+        "print(prepared.model, repr(prepared.note))\n"
+        "print(' '.join(sorted(sys.modules)))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    loaded, modules = done.stdout.splitlines()
+    assert loaded == f"{built} ''"  # the INT8 model, no note
+    quantizer = [m for m in modules.split() if m.split(".")[:2] == ["modelprep", "quantize"]]
+    assert quantizer == []

@@ -7,8 +7,8 @@ import pytest
 
 from common.boxes import Boxes
 from common.errors import ConfigError
+from perception.settings import TrackerParams
 from perception.tracker import Tracker, iou_matrix, tracker_clock
-from services.detector.contract import TrackerSettings
 
 
 def _frame(
@@ -56,14 +56,14 @@ def test_two_people_crossing_keep_their_ids() -> None:
 
 
 def test_weak_detection_extends_but_never_starts_a_track() -> None:
-    tr = Tracker(TrackerSettings(high_score=0.5, low_score=0.1))
+    tr = Tracker(TrackerParams(high_score=0.5, low_score=0.1))
     first = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0)[0]
     assert _frame(tr, [[2, 0, 52, 100]], [0.2], t=0.1) == [first]  # a dip keeps the id
     assert _frame(tr, [[300, 0, 350, 100]], [0.2], t=0.2) == [-1]  # weak and new: no track
 
 
 def test_lost_track_expires_and_a_new_id_is_given() -> None:
-    tr = Tracker(TrackerSettings(max_age_s=0.5))
+    tr = Tracker(TrackerParams(max_age_s=0.5))
     first = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0)[0]
     assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.4) == [first]
     assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=1.5) != [first]
@@ -76,7 +76,7 @@ def test_classes_never_share_a_track() -> None:
 
 
 def test_a_frame_whose_stamp_jumps_is_ignored_and_tracks_survive() -> None:
-    tr = Tracker(TrackerSettings(max_stamp_jump_s=0.5))
+    tr = Tracker(TrackerParams(max_stamp_jump_s=0.5))
     box = Boxes(
         xyxy=np.array([[100, 100, 200, 300]], np.float32),
         scores=np.array([0.9], np.float32),
@@ -93,7 +93,7 @@ def test_a_frame_whose_stamp_jumps_is_ignored_and_tracks_survive() -> None:
 
 
 def test_a_clock_that_really_stepped_restarts_the_tracks() -> None:
-    tr = Tracker(TrackerSettings(max_stamp_jump_s=0.5, jumps_before_reset=3))
+    tr = Tracker(TrackerParams(max_stamp_jump_s=0.5, jumps_before_reset=3))
     box = Boxes(
         xyxy=np.array([[100, 100, 200, 300]], np.float32),
         scores=np.array([0.9], np.float32),
@@ -107,10 +107,10 @@ def test_a_clock_that_really_stepped_restarts_the_tracks() -> None:
 
 
 def test_the_tracker_takes_the_stack_tracker_settings() -> None:
-    settings = TrackerSettings(max_stamp_jump_s=0.5, jumps_before_reset=1)
+    settings = TrackerParams(max_stamp_jump_s=0.5, jumps_before_reset=1)
     tr = Tracker(settings)
     assert tr.settings is settings
-    assert Tracker().settings == TrackerSettings()  # one default, the settings' own
+    assert Tracker().settings == TrackerParams()  # one default, the settings' own
     box = Boxes(
         xyxy=np.array([[100, 100, 200, 300]], np.float32),
         scores=np.array([0.9], np.float32),
@@ -121,7 +121,7 @@ def test_the_tracker_takes_the_stack_tracker_settings() -> None:
     assert (tr.update(box, now=110.0, arrival=1.1) > 0).all() and tr.resets == 1
     message = r"tracker\.jumps_before_reset must be within 1\.\.1000, got 0"
     with pytest.raises(ConfigError, match=message):
-        TrackerSettings(jumps_before_reset=0)
+        TrackerParams(jumps_before_reset=0)
 
 
 def test_frames_from_this_host_are_tracked_on_their_monotonic_stamp() -> None:
@@ -147,11 +147,11 @@ def test_late_deliveries_at_start_up_restart_nothing_on_one_host() -> None:
     )
     captures = [1.0, 1.8, 2.0, 2.2]
     arrivals = [1.6, 1.81, 2.01, 2.21]  # the first 0.6 s late, then 10 ms
-    on_wall = Tracker(TrackerSettings())
+    on_wall = Tracker(TrackerParams())
     for c, a in zip(captures, arrivals, strict=True):
         on_wall.update(box, now=c, arrival=a)
     assert on_wall.resets == 1  # what the wall-clock check made of it
-    on_mono = Tracker(TrackerSettings())
+    on_mono = Tracker(TrackerParams())
     ids = []
     for c, a in zip(captures, arrivals, strict=True):
         at, arrival = tracker_clock(int(c * 1e9) + 10**18, int(c * 1e9), "b", int(a * 1e9), "b")

@@ -10,6 +10,8 @@ from rosbags.typesys import get_types_from_msg
 
 from common.boxes import Boxes
 from common.messages import ControllerStatus, Detections, Frame, Header, LaserScan, Twist
+from rosmsg.convert import cdr_decode
+from rosmsg.distro import RosDistro
 from services.recorder.channels import (
     JSON_SCHEMA,
     STACK_MESSAGE,
@@ -18,7 +20,6 @@ from services.recorder.channels import (
     ros2msg_schema,
     to_json,
 )
-from services.ros2 import RosDistro, cdr_decode
 from services.ros2.contract import Ros2Settings
 
 HEADER = Header(stamp_ns=1_700_000_000_123_456_789, frame_id="camera", seq=7, source="sim")

@@ -282,7 +282,7 @@ def test_detections_with_depth_are_also_3d_boxes_on_the_bridges_topic() -> None:
     from common.boxes import Boxes
     from common.messages import Detections
     from perception.depth import COLUMNS
-    from services.ros2 import cdr_decode
+    from rosmsg.convert import cdr_decode
 
     columns = {name: np.array([1.0, np.nan], np.float32) for name in COLUMNS}
     columns["z_m"] = np.array([2.5, np.nan], np.float32)
@@ -328,8 +328,10 @@ def test_a_ros2_bag_of_an_rgbd_camera_plays_its_depth(tmp_path: Path) -> None:
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer as BagWriter
 
+    from rosmsg.convert import cdr_encode
+    from rosmsg.images import frame_to_image
+    from rosmsg.typestore import typestore_for
     from services.recorder.depth_ros import depth_to_ros
-    from services.ros2 import cdr_encode, frame_to_image, typestore_for
 
     d = CONFIG.ros2.distro
     store = typestore_for(d)

@@ -15,11 +15,14 @@ from rosbags.rosbag2 import Writer as BagWriter
 from common.counters import Counters
 from common.errors import DecodeError, RecordingError
 from common.messages import Frame, Header, LaserScan, Twist
+from rosmsg.convert import cdr_encode, scan_to_ros
+from rosmsg.distro import RosDistro
+from rosmsg.images import frame_to_image
+from rosmsg.typestore import typestore_for
 from services.recorder.channels import Translator
 from services.recorder.contract import RecorderSettings
 from services.recorder.reading import Recording, check_playable, decode_input
 from services.recorder.writer import McapFile, QueuedRecorder
-from services.ros2 import RosDistro, cdr_encode, frame_to_image, scan_to_ros, typestore_for
 from services.ros2.contract import Ros2Settings
 from tests.polling import wait_for
 

@@ -14,14 +14,14 @@ from common.keys import Keys
 from common.memory_bus import MemoryHub
 from common.messages import CameraAnnouncement
 from common.node import Node
+from rosmsg.convert import ros_header
+from rosmsg.distro import RosDistro
+from rosmsg.images import IMAGE
 from services.camera.contract import CameraSettings
-from services.ros2.contract import RosDistro
-from services.ros2.convert import ros_header
-from services.ros2.images import IMAGE
 from services.ros2.service import ANNOUNCED_SOURCE, RosInbound, announce_bridged
 from stack.config import Config
 from tests.unit.heard import heard_cameras
-from tests.unit.ros2.test_images import STAMP_NS, ros_image
+from tests.unit.rosmsg.test_images import STAMP_NS, ros_image
 
 CONFIG = Config(
     camera=CameraSettings(rate_hz=15.0, hfov_deg=87.0),

@@ -12,14 +12,12 @@ import pytest
 
 from common.errors import BackendUnavailable, ConfigError
 from runtimes import (
-    BACKEND_CHOICES,
     BACKENDS,
     Backend,
     open_backend,
     supported_options,
 )
 from runtimes import select as sel
-from services.detector.contract import DetectorSettings
 
 NO_TRT = "TensorRT not installed"
 NO_TORCH_GPU = "CUDA backend: PyTorch has no CUDA device"
@@ -178,34 +176,9 @@ def test_a_missing_runtime_is_one_clear_backend_unavailable(tmp_path: Path) -> N
         open_backend("tensorrt", tmp_path / "m.onnx")
 
 
-def test_settings_accept_exactly_the_backend_choices() -> None:
-    for name in BACKEND_CHOICES:
-        assert DetectorSettings(backend=name).backend == name
-    with pytest.raises(
-        ConfigError, match=r"detector\.backend must be one of onnx, tensorrt, cuda, openvino, auto"
-    ):
-        DetectorSettings(backend="tpu")
-
-
-@pytest.mark.parametrize(
-    ("fields", "message"),
-    [
-        ({"precision": "int4"}, "detector.precision must be one of"),
-        ({"batch_profile": (2, 1, 4)}, "detector.batch_profile must be"),
-        ({"batch_profile": (0, 1, 1)}, "detector.batch_profile must be"),
-    ],
-)
-def test_settings_validate_precision_and_batch_profile(
-    fields: dict[str, Any], message: str
-) -> None:
-    with pytest.raises(ConfigError, match=message):
-        DetectorSettings(**fields)
-
-
 def test_backend_options_pass_only_what_was_set() -> None:
-    assert sel.backend_options(DetectorSettings()) == {}
-    settings = DetectorSettings(backend="tensorrt", precision="int8", batch_profile=(1, 2, 4))
-    assert sel.backend_options(settings) == {"precision": "int8", "batch_profile": (1, 2, 4)}
+    assert sel.backend_options() == {}
+    options = sel.backend_options("int8", (1, 2, 4))
+    assert options == {"precision": "int8", "batch_profile": (1, 2, 4)}
     # The served batch, not detector.max_batch: one camera loads exactly as before.
-    assert sel.backend_options(DetectorSettings(max_batch=8)) == {}
-    assert sel.backend_options(DetectorSettings(), max_batch=3) == {"max_batch": 3}
+    assert sel.backend_options(max_batch=3) == {"max_batch": 3}

@@ -1,5 +1,5 @@
 """Several cameras in the simulator: each renders the same world from its own mounting yaw, at
-its own size and rate (services/sim/cameras.py, services/sim/render.py)."""
+its own size and rate (services/sim/cameras.py, simworld/render.py)."""
 
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ from services.camera.contract import CameraSettings
 from services.controller.contract import ControllerSettings
 from services.sim.cameras import sim_cameras
 from services.sim.contract import SimSettings
-from services.sim.render import CameraSpec, render
-from services.sim.scenarios import SCENARIOS, person
-from services.sim.world import Robot, World
+from simworld.render import CameraSpec, render
+from simworld.scenarios import SCENARIOS, person
+from simworld.world import Robot, World
 from stack.config import Config
 from tools.scenarios.score import ScenarioLog, score
 

@@ -1,5 +1,5 @@
 """The simulator as a ROS 2 robot with an RGB-D camera: the depth image and its CameraInfo it
-publishes (services/ros2/depth.py's ``depth_to_image`` and ``camera_info_of``) read back by the
+publishes (rosmsg/depth.py's ``depth_to_image`` and ``camera_info_of``) read back by the
 bridge's own depth handler (``DepthInbound``) as the DepthFrame the simulator rendered."""
 
 from __future__ import annotations
@@ -9,14 +9,14 @@ import pytest
 
 from common.messages import DepthFrame, Header
 from common.node import Tally
+from rosmsg.convert import cdr_encode
+from rosmsg.depth import CAMERA_INFO, camera_info_of, depth_to_image
+from rosmsg.distro import RosDistro
+from rosmsg.images import IMAGE
 from services.ros2 import contract
-from services.ros2.contract import RosDistro
-from services.ros2.convert import cdr_encode
-from services.ros2.depth import CAMERA_INFO, camera_info_of, depth_to_image
 from services.ros2.depth_handlers import DepthInbound
-from services.ros2.images import IMAGE
-from services.sim.depth import DepthNoise, depth_frame
-from services.sim.render import CameraSpec
+from simworld.depth import DepthNoise, depth_frame
+from simworld.render import CameraSpec
 from stack.config import Config
 
 STAMP_NS = 1_700_000_000_123_456_789
@@ -81,7 +81,7 @@ def test_the_camera_info_is_a_plain_pinhole_camera() -> None:
 def test_a_ros2_scenario_of_a_depth_robot_takes_its_depth_through_the_bridge() -> None:
     # python -m tools.scenarios scenario ahead --ros2 --config deploy/depth.toml
     from services.sim.contract import SimSettings
-    from services.sim.scenarios import SCENARIOS
+    from simworld.scenarios import SCENARIOS
     from tools.scenarios.runner import config_changes, scenario_config
 
     base = Config(sim=SimSettings(depth=True, laser=False, camera_height_m=0.7))

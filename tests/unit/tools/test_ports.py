@@ -11,7 +11,7 @@ import pytest
 
 from common.contracts import ControllerMode
 from common.errors import ConfigError
-from services.sim.scenarios import SCENARIOS
+from simworld.scenarios import SCENARIOS
 from stack.config import Config
 from tools.ports import add_port, free_port, private_endpoint, use_ports
 from tools.scenarios.robots import robots_plan

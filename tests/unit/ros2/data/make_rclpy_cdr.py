@@ -8,7 +8,8 @@ Run it in a venv of its own (Python 3.11; the wheels are large: keep them out of
     /tmp/rclpy/bin/python tests/unit/ros2/data/make_rclpy_cdr.py
 
 The pictures: a 16 x 12 ramp, 400 mm + 10 mm per pixel (16UC1), the same in metres (32FC1);
-the CameraInfo: fx 300, fy 310, cx 7.5, cy 5.5. tests/unit/ros2/test_depth.py states the same.
+the CameraInfo: fx 300, fy 310, cx 7.5, cy 5.5. tests/unit/ros2/test_depth_handlers.py states
+the same.
 """
 
 from pathlib import Path

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from perception.depth import Intrinsics
-from services.sim.render import CameraSpec
-from services.sim.scenarios import person
-from services.sim.world import Robot, World
+from simworld.render import CameraSpec
+from simworld.scenarios import person
+from simworld.world import Robot, World
 from tools.benchmarks.depth import (
     BANDS,
     EXTRA,

@@ -8,7 +8,7 @@ from services.camera.contract import CameraSettings
 from services.controller.contract import ControllerSettings
 from services.detector.contract import DetectorSettings
 from services.sim.cameras import sim_cameras
-from services.sim.scenarios import SCENARIOS
+from simworld.scenarios import SCENARIOS
 from stack.config import Config
 from stack.config_file import load_config
 from tools.scenarios.runner import config_changes, scenario_config

@@ -1,7 +1,7 @@
 """The depth image a camera on the simulated robot sees, aligned to its colour image. Pure.
 
 :func:`render_depth` draws the truth from the same geometry as the colour image
-(services/sim/render.py :func:`~services.sim.render.layout`), pixel for pixel: a reading is
+(simworld/render.py :func:`~simworld.render.layout`), pixel for pixel: a reading is
 the z (distance along the optical axis) of what the pixel sees, in metres, NaN where it sees
 nothing.
 
@@ -9,15 +9,15 @@ nothing.
   ``z = f * camera_height / (v + 0.5 - cy)``.
 - Above the horizon the wall is at infinity: no reading.
 - Beyond a drop-off's edge the floor is lower: a floor pixel whose ray meets the upper floor
-  inside a :class:`~services.sim.world.Drop` reads ``z * (h + depth_m) / h``, where the same
-  ray meets the lower floor (services/sim/floor.py, which ignores the drop's walls).
+  inside a :class:`~simworld.world.Drop` reads ``z * (h + depth_m) / h``, where the same
+  ray meets the lower floor (simworld/floor.py, which ignores the drop's walls).
 - Every drawn thing reads its front face, ``z - radius``: a target (its whole drawn
   rectangle: the cut-out is a rectangle of photo) and an obstacle (a round thing drawn as a
   box) alike, unless its material reads nothing: a dark obstacle (no texture, no pattern
   returned) and a glass one read NaN over their whole face, whatever the noise settings
   (what is behind glass is not read either: a real stereo camera's reading there is
   unreliable, and a hole is the honest worst case). A face is the nearest point of the circle
-  the laser sees (services/sim/laser.py), and what a real depth camera sees of a person: their
+  the laser sees (simworld/laser.py), and what a real depth camera sees of a person: their
   front, not their middle. The colour image still draws a target at its centre's z (its size
   in the image).
 - Things are drawn in the colour image's order (farthest centre first, nearer over farther),
@@ -41,9 +41,9 @@ import numpy.typing as npt
 
 from common.images import Image
 from common.messages import DepthFrame, Header
-from services.sim.floor import drop_scale
-from services.sim.render import CameraSpec, Placed, layout
-from services.sim.world import Material, World
+from simworld.floor import drop_scale
+from simworld.render import CameraSpec, Placed, layout
+from simworld.world import Material, World
 
 Depth = npt.NDArray[np.float32]  # (h, w) metres, NaN = no reading
 

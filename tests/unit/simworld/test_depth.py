@@ -1,4 +1,4 @@
-"""The simulator's depth camera (services/sim/depth.py): the true depth image drawn from the
+"""The simulator's depth camera (simworld/depth.py): the true depth image drawn from the
 colour image's geometry, the truth of each target's visible front face, and a stereo camera's
 faults."""
 
@@ -9,7 +9,7 @@ import pytest
 
 from common.messages import Header
 from perception.depth import Intrinsics, depth_metres, measure
-from services.sim.depth import (
+from simworld.depth import (
     IDEAL,
     DepthNoise,
     apply,
@@ -19,9 +19,9 @@ from services.sim.depth import (
     targets_in_camera,
     unit_noise,
 )
-from services.sim.render import OBSTACLE_HEIGHT_M, CameraSpec, background, render
-from services.sim.scenarios import person
-from services.sim.world import Obstacle, Robot, Target, World
+from simworld.render import OBSTACLE_HEIGHT_M, CameraSpec, background, render
+from simworld.scenarios import person
+from simworld.world import Obstacle, Robot, Target, World
 
 SPEC = CameraSpec(width=320, height=240, hfov_deg=60.0, height_m=0.6)
 HDR = Header(stamp_ns=123, frame_id="cam", seq=7, source="sim")

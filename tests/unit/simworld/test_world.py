@@ -9,10 +9,10 @@ import pytest
 
 from common.messages import GroundTruth, Header, Twist
 from services.controller.contract import ControllerSettings
-from services.sim.laser import LaserSpec, cast
-from services.sim.render import CameraSpec, render
-from services.sim.scenarios import SCENARIOS, person
-from services.sim.world import BaseLimits, Obstacle, Robot, World
+from simworld.laser import LaserSpec, cast
+from simworld.render import CameraSpec, render
+from simworld.scenarios import SCENARIOS, person
+from simworld.world import BaseLimits, Obstacle, Robot, World
 from tools.scenarios.score import ScenarioLog, score, stale_commands
 
 FREE = BaseLimits(max_linear=9, max_angular=9, max_linear_accel=1e9, max_angular_accel=1e9)
@@ -148,7 +148,7 @@ def test_demo_person_stays_in_view_of_a_follower_for_ten_minutes() -> None:
     leaves a 60 degree field of view and never comes within reach of being passed."""
     import math
 
-    from services.sim.scenarios import SCENARIOS
+    from simworld.scenarios import SCENARIOS
 
     world = SCENARIOS["demo"].build()
     dt, latency_steps = 0.05, 8
@@ -176,7 +176,7 @@ def test_demo_person_stays_in_view_of_a_follower_for_ten_minutes() -> None:
 def test_in_appears_bob_is_in_no_cameras_view_but_the_rears_while_he_steps_in() -> None:
     """Scenario "appears" (the attention benchmark): bob's bearing from each of its cameras,
     the robot anywhere on its way to alice (x from 0 to 3 m, facing her)."""
-    from services.sim.scenarios import APPEARS_AT_S, APPEARS_STAY_S, APPEARS_STEP_S
+    from simworld.scenarios import APPEARS_AT_S, APPEARS_STAY_S, APPEARS_STEP_S
 
     sc = SCENARIOS["appears"]
     bob = next(t for t in sc.build().targets if t.id == "bob")

@@ -10,9 +10,9 @@ import pytest
 
 from common.errors import DecodeError
 from common.messages import Frame, Header
-from services.ros2.contract import RosDistro
-from services.ros2.convert import RosMessage, build, cdr_decode, cdr_encode, ros_header
-from services.ros2.images import (
+from rosmsg.convert import RosMessage, build, cdr_decode, cdr_encode, ros_header
+from rosmsg.distro import RosDistro
+from rosmsg.images import (
     COMPRESSED_IMAGE,
     IMAGE,
     JPEG_FORMAT,
@@ -21,7 +21,7 @@ from services.ros2.images import (
     frame_to_compressed_image,
     frame_to_image,
 )
-from services.ros2.typestore import typestore_for
+from rosmsg.typestore import typestore_for
 
 STAMP_NS = 1_700_000_000_000_000_123
 HEADER = Header(

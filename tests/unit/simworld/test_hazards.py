@@ -10,11 +10,11 @@ import pytest
 
 from common.messages import GroundTruth, Header
 from services.controller.contract import ControllerSettings
-from services.sim.depth import floor_depth, render_depth
-from services.sim.laser import LaserSpec, cast
-from services.sim.render import DARK_BGR, CameraSpec, background, layout, render
-from services.sim.scenarios import HAZARDS, SCENARIOS, person
-from services.sim.world import Drop, Material, Obstacle, Robot, World
+from simworld.depth import floor_depth, render_depth
+from simworld.laser import LaserSpec, cast
+from simworld.render import DARK_BGR, CameraSpec, background, layout, render
+from simworld.scenarios import HAZARDS, SCENARIOS, person
+from simworld.world import Drop, Material, Obstacle, Robot, World
 from tools.scenarios.score import HAZARD_MARGIN_M, ScenarioLog, score, verdict
 
 SPEC = CameraSpec(width=320, height=240, hfov_deg=60.0, height_m=0.6)

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from rosbags.typesys import Stores
 
-from services.ros2.typestore import MSG_DIR, RosDistro, shipped_msg_types, store_name, typestore_for
+from rosmsg.typestore import MSG_DIR, RosDistro, shipped_msg_types, store_name, typestore_for
 
 ROOT = Path(__file__).resolve().parents[3]
 TWIST_HASH = "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
@@ -78,7 +78,7 @@ def test_distro_stores() -> None:
 def test_the_vision_msgs_definitions_are_shipped_as_package_data() -> None:
     assert {Path(name).name for name in shipped_msg_types()} == VISION_MSGS
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
-    patterns = pyproject["tool"]["setuptools"]["package-data"]["services.ros2"]
+    patterns = pyproject["tool"]["setuptools"]["package-data"]["rosmsg"]
     package_dir = MSG_DIR.parent
     matched = {p for pattern in patterns for p in package_dir.glob(pattern)}
     assert matched == set(MSG_DIR.glob("*/*.msg"))
@@ -87,8 +87,8 @@ def test_the_vision_msgs_definitions_are_shipped_as_package_data() -> None:
 
 def test_the_pure_layer_imports_no_zenoh() -> None:
     code = (
-        "import sys, services.ros2.convert, services.ros2.images, services.ros2.wire, "
-        "services.ros2.depth; "
+        "import sys, rosmsg.convert, rosmsg.images, rosmsg.wire, "
+        "rosmsg.depth; "
         "assert 'zenoh' not in sys.modules, 'zenoh imported'"
     )
     subprocess.run([sys.executable, "-c", code], cwd=ROOT, check=True, timeout=60)

@@ -13,7 +13,7 @@ from pathlib import Path
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from services.ros2.contract import RosDistro
+from rosmsg.distro import RosDistro
 
 MSG_DIR = Path(__file__).with_name("msg")
 

@@ -18,8 +18,8 @@ import numpy as np
 
 from common.errors import DecodeError, one_line
 from common.messages import Detections, Header, LaserScan, Twist
-from services.ros2.contract import RosDistro
-from services.ros2.typestore import typestore_for
+from rosmsg.distro import RosDistro
+from rosmsg.typestore import typestore_for
 
 #: A rosbags message instance; its class is generated per type and distribution at run time.
 RosMessage = Any

@@ -3,7 +3,7 @@
 Each target is a billboard: a cut-out of a real photo (scikit-image samples), scaled by its
 distance and placed by its bearing, standing on the floor. Obstacles are drawn as boxes of their
 own height, grey (solid), near-black (dark) or faintly tinted over what is behind them (glass);
-the floor beyond a drop-off is a little darker (services/sim/floor.py finds its pixels).
+the floor beyond a drop-off is a little darker (simworld/floor.py finds its pixels).
 Nearer things are drawn over farther ones. The camera stands at the robot's centre,
 ``height_m`` above the floor, and looks ``mount_yaw_deg`` counter-clockwise from the robot's +x
 (0 the front camera, 180 the rear one), with square pixels and the configured horizontal field
@@ -21,8 +21,8 @@ import cv2
 import numpy as np
 
 from common.images import Image, load_sample
-from services.sim.floor import drop_scale
-from services.sim.world import Material, World
+from simworld.floor import drop_scale
+from simworld.world import Material, World
 
 # Crops (x1, y1, x2, y2) of the scikit-image photos, around the object each one shows.
 SPRITES: dict[str, tuple[str, tuple[int, int, int, int]]] = {
@@ -117,7 +117,7 @@ def layout(world: World, spec: CameraSpec) -> list[Placed]:
     """What ``spec``'s camera draws of ``world``, in drawing order: farthest first, each drawn
     over what came before. Anything nearer than :data:`NEAREST_DRAWN_M` (or behind) is left out.
     The one geometry the colour image (:func:`render`) and the depth image
-    (services/sim/depth.py) are both drawn from."""
+    (simworld/depth.py) are both drawn from."""
     r = world.robot
     heading = r.theta + math.radians(spec.mount_yaw_deg)  # where the camera looks, world frame
     c, s = math.cos(heading), math.sin(heading)

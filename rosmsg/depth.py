@@ -3,7 +3,7 @@ DepthFrame (and a DepthFrame out as the two, as a depth camera's driver sends th
 simulator playing a ROS 2 robot), and the detections' depth columns out as
 ``vision_msgs/Detection3DArray``. No I/O.
 
-Bad input raises ``DecodeError`` and nothing else; services/ros2/convert.py has the header
+Bad input raises ``DecodeError`` and nothing else; rosmsg/convert.py has the header
 conventions and the CDR helpers.
 """
 
@@ -17,10 +17,10 @@ import numpy as np
 from common.errors import DecodeError
 from common.messages import DEPTH_ENCODINGS, DepthFrame, Detections
 from perception import DEPTH_CENTRE, DEPTH_SIZE, Mounting, to_robot
-from services.ros2.contract import RosDistro
-from services.ros2.convert import RosMessage, build, header_from_ros, ros_header
-from services.ros2.images import raw_image
-from services.ros2.typestore import typestore_for
+from rosmsg.convert import RosMessage, build, header_from_ros, ros_header
+from rosmsg.distro import RosDistro
+from rosmsg.images import raw_image
+from rosmsg.typestore import typestore_for
 
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 DETECTION_3D_ARRAY = "vision_msgs/msg/Detection3DArray"
@@ -78,7 +78,7 @@ def depth_from_image(
     msg: RosMessage, intr: DepthIntrinsics, *, source: str, seq: int = 0
 ) -> DepthFrame:
     """A 16UC1 (mm) or 32FC1 (m) ``sensor_msgs/Image`` as a DepthFrame with ``intr``; the
-    header is the image's, as colour frames get theirs (services/ros2/images.py), so the
+    header is the image's, as colour frames get theirs (rosmsg/images.py), so the
     detector pairs the two by stamp. The pixels are copied little-endian without row padding.
 
     The caller has checked the encoding (:func:`depth_encoding`) and that the image is

@@ -1,6 +1,6 @@
 """Translations between camera Frames and ROS ``sensor_msgs/Image`` / ``CompressedImage``.
 
-No I/O. Bad input raises ``DecodeError`` and nothing else; see services/ros2/convert.py for the
+No I/O. Bad input raises ``DecodeError`` and nothing else; see rosmsg/convert.py for the
 header conventions and the CDR helpers.
 """
 
@@ -11,8 +11,8 @@ import numpy as np
 from common.errors import DecodeError
 from common.frames import jpeg_size
 from common.messages import FRAME_ENCODINGS, Frame, Header
-from services.ros2.contract import RosDistro
-from services.ros2.convert import RosMessage, build, header_from_ros, ros_header
+from rosmsg.convert import RosMessage, build, header_from_ros, ros_header
+from rosmsg.distro import RosDistro
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"

@@ -19,8 +19,8 @@ from typing import Literal
 import xxhash
 
 from common.errors import DecodeError
-from services.ros2.contract import RosDistro
-from services.ros2.typestore import typestore_for
+from rosmsg.distro import RosDistro
+from rosmsg.typestore import typestore_for
 
 HUMBLE_TYPE_HASH = "TypeHashNotSupported"
 ADMIN_SPACE = "@ros2_lv"

@@ -26,7 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from services.sim.world import Drop, Material, Obstacle, Robot, Target, World
+from simworld.world import Drop, Material, Obstacle, Robot, Target, World
 
 
 def person(id: str, *path: tuple[float, float, float], mirror: bool = False) -> Target:

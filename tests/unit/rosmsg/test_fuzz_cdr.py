@@ -14,8 +14,7 @@ from hypothesis import strategies as st
 
 from common.errors import DecodeError
 from common.messages import Detections, Frame, LaserScan, Twist
-from services.ros2.contract import RosDistro
-from services.ros2.convert import (
+from rosmsg.convert import (
     DETECTION_2D_ARRAY,
     LASER_SCAN,
     TWIST,
@@ -26,13 +25,14 @@ from services.ros2.convert import (
     scan_to_ros,
     twist_to_ros,
 )
-from services.ros2.images import (
+from rosmsg.distro import RosDistro
+from rosmsg.images import (
     COMPRESSED_IMAGE,
     IMAGE,
     frame_to_compressed_image,
     frame_to_image,
 )
-from services.ros2.wire import ATTACHMENT_SIZE, Attachment, gid_for
+from rosmsg.wire import ATTACHMENT_SIZE, Attachment, gid_for
 from tests.unit.fuzz import byte_mutation, fuzz, payloads, samples, to_stack
 
 DISTRO = RosDistro.JAZZY

@@ -2,11 +2,11 @@
 
 A pixel below the horizon sees the (upper) floor at ``z = f * h / (v + 0.5 - cy)`` ahead of a
 camera ``h`` above it, and ``lateral = (cx - u - 0.5) * z / f`` to its left: the same pinhole
-the colour and depth images are drawn with (services/sim/render.py, depth.py). Turned by the
+the colour and depth images are drawn with (simworld/render.py, depth.py). Turned by the
 camera's heading in the world (the robot's theta plus the camera's mounting yaw) and moved to
 the robot's position, that is the pixel's ground point in the world frame.
 
-Where that ground point lies inside a :class:`~services.sim.world.Drop` the ray goes on down to
+Where that ground point lies inside a :class:`~simworld.world.Drop` the ray goes on down to
 the lower floor, ``depth_m`` further: by similar triangles it meets it at
 ``z' = z * (h + depth_m) / h``. The approximation: the drop's walls are ignored. A ray that
 would hit the far wall of a pit (or pass under the near edge of the rectangle on the lower
@@ -25,13 +25,13 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from services.sim.world import World
+from simworld.world import World
 
 Floats = npt.NDArray[np.float32]
 
 
 class Pinhole(Hashable, Protocol):
-    """What this module needs of a camera: services/sim/render.py's ``CameraSpec`` (named by
+    """What this module needs of a camera: simworld/render.py's ``CameraSpec`` (named by
     shape, not imported: render.py draws the floor with this module). Hashable: rays are
     cached per camera."""
 

@@ -1,4 +1,4 @@
-"""The bridge's ROS 2 graph closes whatever happens at a stop (services/ros2/graph.py), on a real
+"""The bridge's ROS 2 graph closes whatever happens at a stop (rosmsg/graph.py), on a real
 Zenoh session hosting the graph's router: a publisher used by a callback still running while
 the bridge stops, and an undeclare that fails, once left the session open, its callbacks
 putting onto the closed stack and the process stuck until the supervisor killed it."""
@@ -10,7 +10,8 @@ from dataclasses import replace
 
 import pytest
 
-from services.ros2 import TWIST, RosGraph
+from rosmsg.convert import TWIST
+from rosmsg.graph import RosGraph
 from services.ros2.contract import Ros2Settings
 from tools.launch import free_port
 

@@ -2,7 +2,7 @@
 
 I/O: this module owns the Zenoh session to the robot's router. Each publisher puts CDR with the
 33-byte attachment rmw_zenoh subscribers require, and each endpoint declares the liveliness
-token that ``ros2 node list`` / ``ros2 topic list`` read (services/ros2/wire.py has the format).
+token that ``ros2 node list`` / ``ros2 topic list`` read (rosmsg/wire.py has the format).
 """
 
 from __future__ import annotations
@@ -11,16 +11,16 @@ import itertools
 import logging
 import threading
 from collections.abc import Callable
-from typing import Literal
+from typing import Literal, Protocol
 
 import zenoh
 
 from common.clock import wall_ns
 from common.lifecycle import Closing
-from common.zenoh_bus import open_ros_session
-from services.ros2.contract import Ros2Settings
-from services.ros2.convert import RosMessage, cdr_encode
-from services.ros2.wire import (
+from common.zenoh_bus import RosRouter, open_ros_session
+from rosmsg.convert import RosMessage, cdr_encode
+from rosmsg.distro import RosDistro
+from rosmsg.wire import (
     DEFAULT_QOS,
     Attachment,
     RosQoS,
@@ -31,6 +31,23 @@ from services.ros2.wire import (
 )
 
 log = logging.getLogger("ros2")
+
+
+class RosNode(RosRouter, Protocol):
+    """Where a node stands in a ROS 2 graph: its router (``RosRouter``), domain, distribution,
+    name and namespace (the ros2 bridge's settings, services/ros2/contract.py, are one)."""
+
+    @property
+    def domain_id(self) -> int: ...
+
+    @property
+    def distro(self) -> RosDistro: ...
+
+    @property
+    def node(self) -> str: ...
+
+    @property
+    def namespace(self) -> str: ...
 
 
 class RosPublisher:
@@ -74,7 +91,7 @@ class RosPublisher:
 class RosGraph(Closing):
     """A node in the robot's ROS 2 graph (or, with ``host``, the graph's router itself)."""
 
-    def __init__(self, settings: Ros2Settings, *, host: bool = False) -> None:
+    def __init__(self, settings: RosNode, *, host: bool = False) -> None:
         self.settings = settings
         self.session = open_ros_session(settings, host=host)
         self._zid = str(self.session.zid())

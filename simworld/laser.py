@@ -1,7 +1,7 @@
 """A planar laser scanner: rays cast against round obstacles, vectorised. Pure.
 
 The scan is one plane, ``height_m`` above the floor: the caller passes the circles that cut it
-(services/sim/world.py ``World.laser_circles``: nothing lower, no glass). A drop-off in the
+(simworld/world.py ``World.laser_circles``: nothing lower, no glass). A drop-off in the
 floor is below the plane, and no ray ever sees one.
 """
 

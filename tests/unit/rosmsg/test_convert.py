@@ -11,8 +11,7 @@ import pytest
 from common.boxes import Boxes
 from common.errors import DecodeError
 from common.messages import Detections, Frame, Header, LaserScan, Twist
-from services.ros2.contract import RosDistro
-from services.ros2.convert import (
+from rosmsg.convert import (
     DETECTION_2D_ARRAY,
     LASER_SCAN,
     TWIST,
@@ -29,8 +28,9 @@ from services.ros2.convert import (
     twist_from_ros,
     twist_to_ros,
 )
-from services.ros2.images import frame_to_image
-from services.ros2.typestore import typestore_for
+from rosmsg.distro import RosDistro
+from rosmsg.images import frame_to_image
+from rosmsg.typestore import typestore_for
 
 STAMP_NS = 1_700_000_000_123_456_789
 DISTROS = [RosDistro.HUMBLE, RosDistro.JAZZY, RosDistro.KILTED, RosDistro.ROLLING]

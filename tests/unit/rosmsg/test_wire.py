@@ -9,8 +9,8 @@ import pytest
 import xxhash
 
 from common.errors import DecodeError
-from services.ros2.contract import RosDistro
-from services.ros2.wire import (
+from rosmsg.distro import RosDistro
+from rosmsg.wire import (
     ATTACHMENT_SIZE,
     DEFAULT_QOS,
     SENSOR_DATA_QOS,

@@ -1,0 +1,13 @@
+"""The simulated world: a robot, people and obstacles on a floor, stepped in scenario time, and
+what the robot's sensors see of it. Pure (no bus, no clock): the simulator (services/sim, a thin
+node over it) and the tools (tools/scenarios, tools/benchmarks) import its modules directly.
+
+    world.py      ``World``: the robot (a unicycle base), targets, obstacles, drops, stepped
+    scenarios.py  ``SCENARIOS``: the named worlds (``python -m tools.scenarios list``)
+    render.py     a camera's colour image of the world (``CameraSpec``, ``layout``)
+    depth.py      the aligned depth image of the same instant, and its noise (``DepthNoise``)
+    floor.py      where the floor drops away (a drop is seen, never lasered)
+    laser.py      the laser's scan (``LaserSpec``, ``cast``)
+
+It imports only ``common``.
+"""
