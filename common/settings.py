@@ -13,11 +13,11 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import Annotated
 
 from common.errors import ConfigError
 from common.security import AUTH_MODES, qualified
-from common.setting_checks import Bounds, check_bounds, check_lengths
+from common.setting_checks import Length, Range, check_bounds, check_lengths
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 # Runnable by the supervisor, and started in this order: the recorder first, so that it hears
@@ -133,26 +133,18 @@ class ZenohSettings:
     mode: str = "peer"
     # Not Zenoh's usual 7447: on a ROS 2 robot rmw_zenohd holds that one.
     endpoint: str = "tcp/127.0.0.1:7448"
-    connect: tuple[str, ...] = ()
-    listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
+    connect: Annotated[tuple[str, ...], Length(0, 16)] = ()
+    listen: Annotated[tuple[str, ...], Length(0, 16)] = ("tcp/127.0.0.1:0",)
     multicast_scouting: bool = False
     auth: str = "none"
     credentials_dir: str = "secrets"
-    max_payload_bytes: int = 32 * 1024 * 1024
-    remote_principals: tuple[str, ...] = ()
-    linked_routers: tuple[str, ...] = ()
-
-    BOUNDS: ClassVar[Bounds] = {"max_payload_bytes": (MIN_PAYLOAD_LIMIT, MAX_PAYLOAD_LIMIT)}
-    LENGTHS: ClassVar[Bounds] = {
-        "connect": (0, 16),
-        "listen": (0, 16),
-        "remote_principals": (0, 64),
-        "linked_routers": (0, 16),
-    }
+    max_payload_bytes: Annotated[int, Range(MIN_PAYLOAD_LIMIT, MAX_PAYLOAD_LIMIT)] = 32 << 20
+    remote_principals: Annotated[tuple[str, ...], Length(0, 64)] = ()
+    linked_routers: Annotated[tuple[str, ...], Length(0, 16)] = ()
 
     def __post_init__(self) -> None:
-        check_bounds(self, "zenoh", self.BOUNDS)
-        check_lengths(self, "zenoh", self.LENGTHS)
+        check_bounds(self, "zenoh", ZenohSettings)
+        check_lengths(self, "zenoh", ZenohSettings)
         if self.mode not in ("peer", "client"):
             raise ConfigError(f"zenoh.mode must be 'peer' or 'client', got {self.mode!r}")
         for ep in (self.endpoint, *self.connect, *self.listen):
@@ -205,9 +197,7 @@ class StackSettings:
 
     prefix: str = "stack"
     camera: str = "front"
-    clock_tolerance_s: float = 0.1
-
-    BOUNDS: ClassVar[Bounds] = {"clock_tolerance_s": (0, 5)}
+    clock_tolerance_s: Annotated[float, Range(0, 5)] = 0.1
 
     def __post_init__(self) -> None:
-        check_bounds(self, "stack", self.BOUNDS)
+        check_bounds(self, "stack", StackSettings)

@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from common.errors import ConfigError
-from common.setting_checks import range_text
+from common.setting_checks import declared_bounds, declared_lengths, range_text
 from common.settings import DEFAULT_CONFIG, REPO_ROOT
 from services.controller.service import STOP_POLL_S, wait_either
 from stack.config import Config
@@ -82,8 +82,7 @@ def _fields() -> list[tuple[str, str, Any]]:
     out = []
     for table in TABLES:
         for name, hint in typing.get_type_hints(HINTS[table]).items():
-            if name not in ("BOUNDS", "LENGTHS"):
-                out.append((table, name, hint))
+            out.append((table, name, hint))
     return out
 
 
@@ -94,9 +93,9 @@ def test_every_numeric_and_list_setting_has_a_declared_range() -> None:
         kind = _kind(hint)
         if f"{table}.{name}" in OWN_RULE:
             continue
-        if kind in ("number", "numbers") and name not in getattr(cls, "BOUNDS", {}):
+        if kind in ("number", "numbers") and name not in declared_bounds(cls):
             unbounded.append(f"{table}.{name}")
-        if kind == "names" and name not in getattr(cls, "LENGTHS", {}):
+        if kind == "names" and name not in declared_lengths(cls):
             unbounded.append(f"{table}.{name} (length)")
     assert unbounded == []
 
@@ -111,11 +110,11 @@ def _out_of_range(default: Any, lo: float, hi: float) -> list[Any]:
     return [hi + step, lo - max(abs(lo), 1e-3), math.nan, math.inf]
 
 
-@pytest.mark.parametrize("table", sorted(t for t in TABLES if hasattr(HINTS[t], "BOUNDS")))
+@pytest.mark.parametrize("table", sorted(t for t in TABLES if declared_bounds(HINTS[t])))
 def test_each_bound_is_enforced_and_names_the_setting_and_its_range(table: str) -> None:
     cls = HINTS[table]
     default = cls()
-    for name, (lo, hi) in cls.BOUNDS.items():
+    for name, (lo, hi) in declared_bounds(cls).items():
         value = getattr(default, name)
         assert all(lo <= v <= hi for v in (value if isinstance(value, tuple) else (value,)))
         for bad in _out_of_range(getattr(default, name), lo, hi):
@@ -171,10 +170,10 @@ def test_docs_configuration_states_every_range_as_the_code_does() -> None:
     missing = []
     for table in TABLES:
         cls = HINTS[table]
-        for name, (lo, hi) in getattr(cls, "BOUNDS", {}).items():
+        for name, (lo, hi) in declared_bounds(cls).items():
             row = f"| `{table}.{name}` | {range_text(name, lo, hi)} |"
             missing += [] if row in doc else [row]
-        for name, (lo, hi) in getattr(cls, "LENGTHS", {}).items():
+        for name, (lo, hi) in declared_lengths(cls).items():
             row = f"| `{table}.{name}` | {range_text('', lo, hi)} items |"
             missing += [] if row in doc else [row]
     assert missing == []
