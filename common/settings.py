@@ -1,5 +1,6 @@
 """Settings every service shares: how a process joins the bus (``[zenoh]``), the stack's names
-(``[stack]``), and the names of the services, their processes and principals.
+(``[stack]``), and the names of the services (common/service_list.py's one list), their
+processes and principals.
 
 Each service's own settings table is declared in its contract (``services/<name>/contract.py``);
 the whole ``Config`` is assembled from them in stack/config.py, and read from the TOML file with
@@ -17,11 +18,10 @@ from typing import Annotated
 
 from common.errors import ConfigError
 from common.security import AUTH_MODES, qualified
+from common.service_list import SERVICES as SERVICES  # runnable by the supervisor, in order
 from common.setting_checks import Length, Range, check_bounds, check_lengths
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-# Runnable by the supervisor, and started in this order: the recorder first, so that it hears
-# the others from their start; the viewer after what it watches.
 #: The most cameras one stack serves (one detector process serves them all).
 MAX_CAMERAS = 16
 _CAMERA_NAME = re.compile(r"[a-z0-9][a-z0-9_]{0,31}")
@@ -87,7 +87,6 @@ def service_package(service: str) -> str:
     return service
 
 
-SERVICES = ("recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
 # zenoh.max_payload_bytes: a counters message must fit; Zenoh refuses to receive above 1 GiB.
 MIN_PAYLOAD_LIMIT = 64 * 1024

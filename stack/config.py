@@ -30,6 +30,7 @@ from services.ros2.contract import Ros2Settings, check_camera_topics
 from services.sim.contract import SimSettings
 from services.viewer.contract import ViewerSettings
 from stack.config_read import estop_file_path
+from stack.contracts import check_config_tables
 
 __all__ = ["Config", "SupervisorSettings"]
 
@@ -165,3 +166,9 @@ class Config:
     def estop_path(self) -> Path:
         """Where the controller keeps the latched e-stop (one file per stack prefix)."""
         return estop_file_path(self.stack.prefix, self.controller.estop_file)
+
+
+# Each service's tables, as its contract declares them (SETTINGS_TABLES), and no other: typed
+# fields above, so that every reader is type-checked; a listed service's table missing here
+# stops the stack at import with the line to add.
+check_config_tables(Config)

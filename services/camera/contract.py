@@ -44,6 +44,8 @@ PER_CAMERA: frozenset[str] = frozenset()  # each process is one camera's
 
 #: A camera feeds a live robot's sensors into the stack: no recording may be played onto it.
 LIVE_SENSOR = True
+#: Its work loop publishes counters on every pass: its heartbeat (deploy/watchdog.py).
+HEARTBEAT = True
 
 
 def access(shape: Shape) -> dict[str, Access]:
@@ -138,3 +140,7 @@ class CameraSettings:
                 f"camera.depth_min_m ({self.depth_min_m:g}) must be below camera.depth_max_m "
                 f"({self.depth_max_m:g}), or depth_max_m 0 (not stated)"
             )
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"camera": CameraSettings}

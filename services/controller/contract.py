@@ -103,6 +103,8 @@ DEPTH_SOURCE = "depth"
 OBSTACLE_SOURCES = (LASER_SOURCE, DEPTH_SOURCE)
 
 SERVICE = "controller"
+#: Its work loop publishes counters on every pass: its heartbeat (deploy/watchdog.py).
+HEARTBEAT = True
 #: The operator's e-stop tool's principal: it puts the e-stop and reads the controller's status.
 ESTOP_PRINCIPAL = "estop"
 
@@ -318,3 +320,7 @@ class ControllerSettings:
     def laser_required(self) -> bool:
         """Whether forward motion needs a fresh laser scan."""
         return LASER_SOURCE in self.obstacle_sources and not self.no_laser
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"controller": ControllerSettings}

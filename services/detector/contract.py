@@ -151,6 +151,10 @@ COUNTERS = frozenset(
 
 
 # -- the bus ---------------------------------------------------------------------------------
+#: Its work loop publishes counters on every pass: its heartbeat (deploy/watchdog.py).
+HEARTBEAT = True
+
+
 def access(shape: Shape) -> dict[str, Access]:
     """Each worker reads frames and depth images and puts detections, never frames: every
     camera's, as any worker may come to serve any camera (services/detector/pool.py); it reads
@@ -370,3 +374,7 @@ class TrackerSettings(TrackerParams):
     declared and checked there); ``enabled`` is the service's to read."""
 
     enabled: bool = True
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"detector": DetectorSettings, "tracker": TrackerSettings}

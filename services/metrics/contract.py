@@ -124,3 +124,7 @@ class MetricsSettings:
         check_bounds(self, "metrics", MetricsSettings)
         if not self.prometheus_host:
             raise ConfigError("metrics.prometheus_host must not be empty")
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"metrics": MetricsSettings}

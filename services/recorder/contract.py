@@ -104,3 +104,7 @@ class RecorderSettings:
                 f"got {self.file_pattern!r}"
             )
         check_bounds(self, "recorder", RecorderSettings)
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"recorder": RecorderSettings}

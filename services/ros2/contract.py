@@ -67,6 +67,8 @@ PER_CAMERA: frozenset[str] = frozenset()
 SERVICE = "ros2"
 #: It feeds a live robot's sensors into the stack: no recording may be played onto it.
 LIVE_SENSOR = True
+#: Its work loop publishes counters on every pass: its heartbeat (deploy/watchdog.py).
+HEARTBEAT = True
 
 
 def access(shape: Shape) -> dict[str, Access]:
@@ -257,3 +259,7 @@ def check_camera_topics(settings: Ros2Settings, cameras: Sequence[str]) -> None:
                     "camera needs topics of its own (ros2.camera_namespace)"
                 )
             seen[topic] = f"camera {camera!r}'s {what} topic"
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"ros2": Ros2Settings}

@@ -28,6 +28,8 @@ COUNTERS = frozenset(
 SERVICE = "sim"
 #: It feeds a (simulated) robot's sensors into the stack: no recording may be played onto it.
 LIVE_SENSOR = True
+#: Its work loop publishes counters on every pass: its heartbeat (deploy/watchdog.py).
+HEARTBEAT = True
 
 
 def access(shape: Shape) -> dict[str, Access]:
@@ -111,3 +113,7 @@ class SimSettings:
                 f"sim.depth_range_min_m ({self.depth_range_min_m:g}) must be below "
                 f"sim.depth_range_max_m ({self.depth_range_max_m:g})"
             )
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"sim": SimSettings}

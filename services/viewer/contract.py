@@ -126,3 +126,7 @@ class ViewerSettings:
             raise ConfigError(
                 f"viewer.max_image_width must be 0 (keep) or 64..8192, got {self.max_image_width}"
             )
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"viewer": ViewerSettings}
