@@ -285,8 +285,7 @@ def settings_section(args: argparse.Namespace) -> None:
     )
     total = code_lines(cf) + code_lines(sc)
     bounds_lines = sum(
-        len(declared_bounds(cls)) + len(declared_lengths(cls))
-        for cls in _tables().values()
+        len(declared_bounds(cls)) + len(declared_lengths(cls)) for cls in _tables().values()
     )
     print(
         f"  our loader: {total} lines (config_file.py {code_lines(cf)}, setting_checks.py "
