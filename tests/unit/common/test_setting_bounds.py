@@ -13,7 +13,15 @@ from typing import Any
 import pytest
 
 from common.errors import ConfigError
-from common.setting_checks import declared_bounds, declared_lengths, range_text
+from common.setting_checks import (
+    Length,
+    Range,
+    check_bounds,
+    check_lengths,
+    declared_bounds,
+    declared_lengths,
+    range_text,
+)
 from common.settings import DEFAULT_CONFIG, REPO_ROOT
 from services.controller.service import STOP_POLL_S, wait_either
 from stack.config import Config
@@ -177,3 +185,47 @@ def test_docs_configuration_states_every_range_as_the_code_does() -> None:
             row = f"| `{table}.{name}` | {range_text('', lo, hi)} items |"
             missing += [] if row in doc else [row]
     assert missing == []
+
+
+def test_each_range_is_declared_on_its_field_and_no_table_repeats_it() -> None:
+    """Bounds live on the fields (``Annotated[float, Range(lo, hi)]``), once: no settings class
+    keeps a BOUNDS or LENGTHS table beside them."""
+    classes = {HINTS[t] for t in TABLES} | {c for t in TABLES for c in HINTS[t].__mro__}
+    tables = sorted(
+        f"{c.__name__}.{name}"
+        for c in classes
+        for name in vars(c)
+        if name.endswith(("BOUNDS", "LENGTHS"))
+    )
+    assert tables == []
+
+
+def test_a_setting_range_needs_both_ends_and_a_base_checks_its_own_fields() -> None:
+    @dataclasses.dataclass(frozen=True)
+    class Base:
+        rate_hz: typing.Annotated[float, Range(0.1, 10)] = 1.0
+
+        def __post_init__(self) -> None:
+            check_bounds(self, "base", Base)
+
+    @dataclasses.dataclass(frozen=True)
+    class Derived(Base):
+        names: typing.Annotated[tuple[str, ...], Length(1, 2)] = ("a",)
+
+        def __post_init__(self) -> None:
+            Base.__post_init__(self)
+            check_lengths(self, "derived", Derived)
+
+    assert declared_bounds(Derived) == {"rate_hz": (0.1, 10)}
+    assert declared_lengths(Derived) == {"names": (1, 2)}
+    with pytest.raises(ConfigError, match=r"^base\.rate_hz must be within 0\.1\.\.10 Hz, got 20"):
+        Derived(rate_hz=20)
+    with pytest.raises(ConfigError, match=r"^derived\.names must have 1\.\.2 items, got \[\]"):
+        Derived(names=())
+
+    @dataclasses.dataclass(frozen=True)
+    class HalfOpen:
+        n: typing.Annotated[int, Range(lo=0)] = 0
+
+    with pytest.raises(TypeError, match="needs both bounds"):
+        declared_bounds(HalfOpen)
