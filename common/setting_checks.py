@@ -48,7 +48,7 @@ class Length:
     hi: int
 
 
-def _declared(cls: type, kind: type, own: bool) -> dict[str, tuple[float, float]]:
+def _declared(cls: type, kind: type[Range | Length], own: bool) -> dict[str, tuple[float, float]]:
     """``{field: (lo, hi)}`` of each field of ``cls`` annotated with a ``kind`` (Range or
     Length), in the order the fields are declared; ``own``: only those ``cls`` itself declares,
     not those it inherits."""
@@ -67,7 +67,7 @@ def _declared(cls: type, kind: type, own: bool) -> dict[str, tuple[float, float]
 
 
 @functools.cache
-def _own(cls: type, kind: type) -> Bounds:
+def _own(cls: type, kind: type[Range | Length]) -> Bounds:
     return _declared(cls, kind, own=True)
 
 

@@ -69,7 +69,8 @@ def _lists_of_services(tree: ast.AST, exempt: set[int]) -> Iterator[tuple[int, l
     """Each tuple, list or set literal naming three or more services, but those ``exempt``."""
     for node in ast.walk(tree):
         if isinstance(node, ast.Tuple | ast.List | ast.Set) and id(node) not in exempt:
-            names = {e.value for e in node.elts if isinstance(e, ast.Constant)} & set(SERVICES)
+            values = {e.value for e in node.elts if isinstance(e, ast.Constant)}
+            names = {v for v in values if isinstance(v, str) and v in SERVICES}
             if len(names) >= 3:
                 yield node.lineno, sorted(names)
 
