@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from common.messages import DepthFrame
-from tests.unit.controller.depth_scenes import HFOV, at_bearing, depth_frame, scene
+from tests.unit.depthscan.depth_scenes import HFOV, at_bearing, depth_frame, scene
 from tests.unit.controller.rig import Rig
 
 HEIGHT = 0.6
