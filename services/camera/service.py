@@ -85,17 +85,7 @@ def run(
         depth_out = None if depth is None else DepthOut(node, camera, depth, settings)
         width, height = settings.resize
         announcements.announce(
-            camera,
-            rate_hz=settings.rate_hz,
-            mount_yaw_deg=settings.mount_yaw_deg,
-            hfov_deg=settings.hfov_deg,
-            frame_id=settings.frame_id,
-            width=width,
-            height=height,
-            depth=depth is not None,
-            mount_height_m=settings.mount_height_m,
-            mount_x_m=settings.mount_x_m,
-            mount_y_m=settings.mount_y_m,
+            camera, settings, width=width, height=height, depth=depth is not None
         )
         node.ready()
         period = 1.0 / settings.rate_hz
