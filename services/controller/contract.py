@@ -115,6 +115,7 @@ def access(shape: Shape) -> dict[str, Access]:
             SERVICE,
             keys.cmd_vel(),
             keys.controller_status(),
+            keys.all_virtual_scans(),  # each depth camera's, as the depth intake makes it
             # The depth images too: the controller reads them only when its settings need
             # depth, but the rules are the shape's, not one config's.
             read=(keys.all_detections(), keys.scan(), keys.estop(), keys.all_depths()),

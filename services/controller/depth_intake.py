@@ -22,7 +22,9 @@ than the one held (a second stream on its key) is logged as a WARNING and counte
 ``depth_second_stream``, which the metrics turn into a warning. Only every
 ``depth_scan_stride_px``-th row and column is converted to metres. A scan is kept only if the
 announcement it was made with is still the camera's. An error while making a scan is logged,
-counted and the thread goes on.
+counted and the thread goes on. Each scan held is handed on at once (``on_scan``: the
+controller publishes it on ``<prefix>/scan/virtual/<camera>`` for the viewer and the
+recorder).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from common.clock import BOOT_ID, Clock, Stamp
@@ -64,9 +66,12 @@ class DepthIntake:
         tolerance_s: float,
         clock: Clock,
         memory_path: Path | None = None,
+        on_scan: Callable[[str, LaserScan], None] | None = None,
     ) -> None:
         self.tally = tally
         self.clock = clock
+        # Each new virtual scan, as soon as it is held (published: ControlLoop).
+        self.on_scan = on_scan
         self.timeout_s = s.depth_timeout_s
         self.sector_width_deg = s.sector_width_deg
         self.tolerance_s = tolerance_s
@@ -272,6 +277,8 @@ class DepthIntake:
             with self._map_lock:
                 if self.map.observe(seen, pose):
                     self._unsaved_hazard = True  # written at once: see serve
+            if self.on_scan is not None:  # after the map: a failure to publish loses nothing
+                self.on_scan(camera, scan)
         if tell:
             floor_m, below_m = blind_zone(intr, mount, self.safety_distance_m)
             tally.log.info(

@@ -23,6 +23,7 @@ from common.clock import SYSTEM_CLOCK, Clock, mono_s
 from common.contracts import MetricsAnswer
 from common.credential_modes import check_folder, check_secret
 from common.errors import ConfigError, ImageError
+from common.keys import virtual_scan_camera
 from common.messages import (
     CameraAnnouncement,
     ControllerStatus,
@@ -227,6 +228,20 @@ class Viewer:
             return
         self.channels.scan.log(shown, log_time=scan.header.stamp_ns)
 
+    def on_virtual_scan(self, key: str, payload: bytes) -> None:
+        """A depth camera's virtual scan (``<prefix>/scan/virtual/<camera>``), on its own
+        channel beside the laser's."""
+        camera = virtual_scan_camera(key)
+        scan = self.tally.decode(key, LaserScan.decode, payload)
+        if camera is None or scan is None:
+            return
+        try:
+            shown = convert.laser_scan(scan)
+        except ValueError as exc:
+            self.unshowable("virtual scan", exc)
+            return
+        self.channels.virtual_scan(camera).log(shown, log_time=scan.header.stamp_ns)
+
     def on_twist(self, payload: bytes) -> None:
         twist = self.tally.decode(self.tally.keys.cmd_vel(), Twist.decode, payload)
         if twist is None:
@@ -340,6 +355,7 @@ def run(config: Config, stop: threading.Event) -> int:
         ]
         subs += [
             node.subscribe(keys.scan(), viewer.on_scan),
+            node.subscribe_keyed(keys.all_virtual_scans(), viewer.on_virtual_scan),
             node.subscribe(keys.cmd_vel(), viewer.on_twist),
             node.subscribe(keys.controller_status(), viewer.on_status),
             node.subscribe(keys.sim_truth(), viewer.on_truth),
