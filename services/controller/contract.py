@@ -97,7 +97,7 @@ COUNTERS = frozenset(
 )
 
 #: What ``controller.obstacle_sources`` may name: the laser's scan, the depth cameras'
-#: virtual scans (services/controller/depth_scan.py).
+#: virtual scans (depthscan/; services/controller/depth_obstacles.py).
 LASER_SOURCE = "laser"
 DEPTH_SOURCE = "depth"
 OBSTACLE_SOURCES = (LASER_SOURCE, DEPTH_SOURCE)
@@ -117,6 +117,7 @@ def access(shape: Shape) -> dict[str, Access]:
             SERVICE,
             keys.cmd_vel(),
             keys.controller_status(),
+            keys.all_virtual_scans(),  # each depth camera's, as the depth intake makes it
             # The depth images too: the controller reads them only when its settings need
             # depth, but the rules are the shape's, not one config's.
             read=(keys.all_detections(), keys.scan(), keys.estop(), keys.all_depths()),
@@ -171,7 +172,7 @@ class ControllerSettings:
     does come is still obeyed, and a target out of view is never driven on to without one.
     ``obstacle_sources`` names what must show the way clear: ``"laser"`` (the scan, above),
     ``"depth"`` (a virtual scan made from every announced depth camera's images,
-    services/controller/depth_scan.py, under the same rules), or both. Each one listed must be
+    depthscan/, under the same rules), or both. Each one listed must be
     fresh for forward motion (depth older than ``depth_timeout_s`` is missing, as a scan
     older than ``scan_timeout_s`` is), and every fresh one is obeyed, listed or not. The
     depth images are read only when depth is needed (``needs_depth``). In a depth image, a

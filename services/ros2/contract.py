@@ -237,6 +237,12 @@ def camera_topics(settings: Ros2Settings, first: str, camera: str) -> CameraTopi
     return CameraTopics(*map(under, own))
 
 
+def virtual_scan_topic(settings: Ros2Settings, camera: str) -> str:
+    """The topic of ``camera``'s virtual scan (made from its depth images): beside the
+    laser's, ``<ros2.scan_topic>/virtual/<camera>`` (``/scan/virtual/front``)."""
+    return f"{settings.scan_topic.rstrip('/')}/virtual/{camera}"
+
+
 def check_camera_topics(settings: Ros2Settings, cameras: Sequence[str]) -> None:
     """ConfigError unless every camera's topics (``cameras``: the first camera first) are ROS 2
     topic names and no two cameras, nor the scan and cmd_vel, share one."""

@@ -50,6 +50,7 @@ def access(shape: Shape) -> dict[str, Access]:
                 keys.all_depths(),
                 keys.all_detections(),
                 keys.scan(),
+                keys.all_virtual_scans(),
                 keys.cmd_vel(),
                 keys.controller_status(),
                 keys.sim_truth(),
