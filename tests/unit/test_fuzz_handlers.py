@@ -38,7 +38,7 @@ from rosmsg.convert import (
 from rosmsg.images import IMAGE, frame_to_image
 from rosmsg.wire import data_key
 from services.controller.contract import ControllerSettings
-from services.controller.service import ControllerHandlers
+from services.controller.handlers import ControllerHandlers
 from services.detector.handlers import DetectorHandlers
 from services.metrics.service import MetricsHandlers
 from services.ros2.contract import Ros2Settings

@@ -18,8 +18,8 @@ from common.node import Tally
 from services.camera.contract import CameraSettings
 from services.controller.contract import ControllerSettings
 from services.controller.geometry import focal_px, in_view, robot_bearing, wrap
+from services.controller.handlers import ControllerHandlers
 from services.controller.policy import Controller, Inputs, VelocityCommand
-from services.controller.service import ControllerHandlers
 from services.controller.targets import View
 from stack.config import Config
 from tests.unit.announced import announcement

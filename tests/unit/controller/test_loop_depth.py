@@ -32,6 +32,7 @@ def put_depth(rig: Rig, *faces: object, age_s: float = 0.0, camera: str = "front
     rig.put(rig.keys.depth(camera), frame.encode())
     assert rig.loop.depth is not None
     rig.loop.depth.handle_waiting(0.0)
+    rig.drain()  # what the scan's making put (its virtual scan) delivered, on any thread
 
 
 def test_a_controller_that_needs_no_depth_reads_none(tmp_path: Path, delivery_threads: int) -> None:
@@ -114,6 +115,7 @@ def test_garbage_on_a_depth_key_is_counted_and_dropped(rig: Rig) -> None:
     rig.put(rig.keys.depth("front"), b"\x93not a depth frame")
     assert rig.loop.depth is not None
     rig.loop.depth.handle_waiting(0.0)
+    rig.drain()  # what the scan's making put (its virtual scan) delivered, on any thread
     assert rig.counters["bad_input"] == 1 and rig.counters["bad_input.depth"] == 1
     rig.detections()
     twist, status = rig.tick()
