@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+from typing import Protocol
 
 from common.announce import Announcer
 from common.bus import Bus
@@ -20,6 +21,68 @@ from common.errors import ConfigError
 from common.keys import Keys
 from common.lifecycle import Closing
 from common.messages import MAX_ANNOUNCED_RATE_HZ, CameraAnnouncement
+
+
+class Described(Protocol):
+    """What an announcement says of a camera, as its settings hold it: a camera's settings
+    (services/camera/contract.py ``CameraSettings``), or a camera announced before (a
+    recording's)."""
+
+    @property
+    def rate_hz(self) -> float: ...
+
+    @property
+    def mount_yaw_deg(self) -> float: ...
+
+    @property
+    def hfov_deg(self) -> float: ...
+
+    @property
+    def frame_id(self) -> str: ...
+
+    @property
+    def mount_height_m(self) -> float: ...
+
+    @property
+    def mount_x_m(self) -> float: ...
+
+    @property
+    def mount_y_m(self) -> float: ...
+
+
+def announcement_of(
+    camera: str,
+    described: Described,
+    *,
+    source: str,
+    zid: str,
+    rate_hz: float | None = None,
+    frame_id: str | None = None,
+    width: int = 0,
+    height: int = 0,
+    depth: bool = False,
+    mount_height_m: float | None = None,
+) -> CameraAnnouncement:
+    """The announcement of ``camera`` as ``described`` (its settings), put by ``source`` from
+    the Zenoh session ``zid``: the one place an announcement is built. ``rate_hz`` (capped at
+    the highest rate an announcement may carry), ``frame_id`` and ``mount_height_m``, when
+    given, stand for the described ones; ``depth``: the source publishes aligned depth images
+    of it too. ValueError for a description no announcement can carry."""
+    return CameraAnnouncement(
+        camera=camera,
+        width=width,
+        height=height,
+        rate_hz=min(described.rate_hz if rate_hz is None else rate_hz, MAX_ANNOUNCED_RATE_HZ),
+        mount_yaw_deg=described.mount_yaw_deg,
+        hfov_deg=described.hfov_deg,
+        frame_id=described.frame_id if frame_id is None else frame_id,
+        source=source,
+        depth=depth,
+        mount_height_m=described.mount_height_m if mount_height_m is None else mount_height_m,
+        mount_x_m=described.mount_x_m,
+        mount_y_m=described.mount_y_m,
+        zid=zid,
+    )
 
 
 class CameraAnnouncements(Closing):
@@ -38,39 +101,26 @@ class CameraAnnouncements(Closing):
     def announce(
         self,
         camera: str,
+        described: Described,
         *,
-        rate_hz: float,
-        mount_yaw_deg: float,
-        hfov_deg: float,
-        frame_id: str,
+        rate_hz: float | None = None,
+        frame_id: str | None = None,
         width: int = 0,
         height: int = 0,
         depth: bool = False,
-        mount_height_m: float = 0.0,
-        mount_x_m: float = 0.0,
-        mount_y_m: float = 0.0,
+        mount_height_m: float | None = None,
     ) -> CameraAnnouncement:
-        """Announce ``camera`` (instead of what was announced of it before). ``rate_hz`` is
-        capped at the highest rate an announcement may carry. ``depth``: the source publishes
-        aligned depth images of it too; ``mount_*``: where it stands on the robot
-        (CameraAnnouncement). ConfigError (one line) for a
-        description no announcement can carry (a frame id of over 128 characters)."""
+        """Announce ``camera`` as ``described`` (its settings; :func:`announcement_of` says
+        what the keywords change), instead of what was announced of it before.
+        ConfigError (one line) for a description no announcement can carry (a frame id of
+        over 128 characters)."""
         try:
-            message = CameraAnnouncement(
-                camera=camera,
-                width=width,
-                height=height,
-                rate_hz=min(rate_hz, MAX_ANNOUNCED_RATE_HZ),
-                mount_yaw_deg=mount_yaw_deg,
-                hfov_deg=hfov_deg,
-                frame_id=frame_id,
-                source=self._source,
-                depth=depth,
-                mount_height_m=mount_height_m,
-                mount_x_m=mount_x_m,
-                mount_y_m=mount_y_m,
+            message = announcement_of(
+                camera, described, source=self._source,
                 zid=self._bus.zid,  # the session that publishes its frames and depth
-            )
+                rate_hz=rate_hz, frame_id=frame_id, width=width, height=height, depth=depth,
+                mount_height_m=mount_height_m,
+            )  # fmt: skip
         except ValueError as exc:
             raise ConfigError(f"camera {camera!r} cannot be announced: {exc}") from exc
         with self._lock:

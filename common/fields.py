@@ -74,10 +74,12 @@ Decoder = Callable[[Any, Mapping[str, int]], Any]
 
 @dataclass(frozen=True, slots=True)
 class Range:
-    """Bounds of an int field, checked on decode: ``Annotated[int, Range(lo=0)]``."""
+    """Bounds of a number, both allowed: an int field of a message, checked on decode
+    (``Annotated[int, Range(lo=0)]``); a setting, checked when its dataclass is made
+    (``Annotated[float, Range(0.1, 1000)]``, both bounds: common/setting_checks.py)."""
 
-    lo: int | None = None
-    hi: int | None = None
+    lo: float | None = None
+    hi: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

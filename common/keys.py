@@ -8,6 +8,8 @@ runs can share one network without hearing each other:
     <prefix>/detector/<camera>/detections     Detections      detector -> controller, metrics
     <prefix>/detector/<camera>/info           queryable       detector -> JSON: model, classes
     <prefix>/scan                             LaserScan       robot/sim -> controller
+    <prefix>/scan/virtual/<camera>            LaserScan       the depth camera's virtual scan
+                                                              (controller -> viewer, recorder)
     <prefix>/controller/cmd_vel               Twist           controller -> robot/sim, metrics
     <prefix>/controller/status                ControllerStatus
     <prefix>/controller/estop                 EStop           anyone -> controller (latching)
@@ -44,6 +46,15 @@ def _check_chunks(what: str, value: str) -> str:
             f"{what} {value!r} must be '/'-separated words of letters, digits, '_', '-', '.'"
         )
     return value
+
+
+def virtual_scan_camera(key: str) -> str | None:
+    """The depth camera whose virtual scan ``key`` carries, under any prefix; None for any
+    other key."""
+    parts = key.split("/")
+    if len(parts) >= 4 and (parts[-3], parts[-2]) == ("scan", "virtual") and parts[-1]:
+        return parts[-1]
+    return None
 
 
 def camera_in_key(key: str) -> str | None:
@@ -160,6 +171,13 @@ class Keys:
 
     def scan(self) -> str:
         return f"{self.prefix}/scan"
+
+    def virtual_scan(self, camera: str) -> str:
+        """``camera``'s virtual scan (LaserScan, robot frame), made from its depth images."""
+        return f"{self.prefix}/scan/virtual/{_check_chunks('camera name', camera)}"
+
+    def all_virtual_scans(self) -> str:
+        return f"{self.prefix}/scan/virtual/*"
 
     def cmd_vel(self) -> str:
         return f"{self.prefix}/controller/cmd_vel"

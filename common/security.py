@@ -36,19 +36,12 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from common.errors import ConfigError
+from common.service_list import SERVICES
 
-# Every principal the credentials command creates. "estop" is the operator's e-stop tool,
-# "observer" may watch (subscribe, query) but publishes nothing: status lines, queries, tests.
-SERVICE_PRINCIPALS = (
-    "recorder",
-    "camera",
-    "sim",
-    "ros2",
-    "detector",
-    "controller",
-    "metrics",
-    "viewer",
-)
+# Every principal the credentials command creates: each service's (its name, in the one list,
+# common/service_list.py), and the tools'. "estop" is the operator's e-stop tool, "observer"
+# may watch (subscribe, query) but publishes nothing: status lines, queries, tests.
+SERVICE_PRINCIPALS = SERVICES
 # The router's role: the only one whose certificates (one per stack, ``<prefix>/supervisor``)
 # may serve the TLS listener.
 ROUTER_PRINCIPAL = "supervisor"

@@ -1,5 +1,6 @@
 """Settings every service shares: how a process joins the bus (``[zenoh]``), the stack's names
-(``[stack]``), and the names of the services, their processes and principals.
+(``[stack]``), and the names of the services (common/service_list.py's one list), their
+processes and principals.
 
 Each service's own settings table is declared in its contract (``services/<name>/contract.py``);
 the whole ``Config`` is assembled from them in stack/config.py, and read from the TOML file with
@@ -13,15 +14,14 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import Annotated
 
 from common.errors import ConfigError
 from common.security import AUTH_MODES, qualified
-from common.setting_checks import Bounds, check_bounds, check_lengths
+from common.service_list import SERVICES as SERVICES  # runnable by the supervisor, in order
+from common.setting_checks import Length, Range, check_bounds, check_lengths
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-# Runnable by the supervisor, and started in this order: the recorder first, so that it hears
-# the others from their start; the viewer after what it watches.
 #: The most cameras one stack serves (one detector process serves them all).
 MAX_CAMERAS = 16
 _CAMERA_NAME = re.compile(r"[a-z0-9][a-z0-9_]{0,31}")
@@ -87,7 +87,6 @@ def service_package(service: str) -> str:
     return service
 
 
-SERVICES = ("recorder", "camera", "sim", "ros2", "detector", "controller", "metrics", "viewer")
 DEFAULT_CONFIG = REPO_ROOT / "deploy" / "stack.toml"
 # zenoh.max_payload_bytes: a counters message must fit; Zenoh refuses to receive above 1 GiB.
 MIN_PAYLOAD_LIMIT = 64 * 1024
@@ -133,26 +132,18 @@ class ZenohSettings:
     mode: str = "peer"
     # Not Zenoh's usual 7447: on a ROS 2 robot rmw_zenohd holds that one.
     endpoint: str = "tcp/127.0.0.1:7448"
-    connect: tuple[str, ...] = ()
-    listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
+    connect: Annotated[tuple[str, ...], Length(0, 16)] = ()
+    listen: Annotated[tuple[str, ...], Length(0, 16)] = ("tcp/127.0.0.1:0",)
     multicast_scouting: bool = False
     auth: str = "none"
     credentials_dir: str = "secrets"
-    max_payload_bytes: int = 32 * 1024 * 1024
-    remote_principals: tuple[str, ...] = ()
-    linked_routers: tuple[str, ...] = ()
-
-    BOUNDS: ClassVar[Bounds] = {"max_payload_bytes": (MIN_PAYLOAD_LIMIT, MAX_PAYLOAD_LIMIT)}
-    LENGTHS: ClassVar[Bounds] = {
-        "connect": (0, 16),
-        "listen": (0, 16),
-        "remote_principals": (0, 64),
-        "linked_routers": (0, 16),
-    }
+    max_payload_bytes: Annotated[int, Range(MIN_PAYLOAD_LIMIT, MAX_PAYLOAD_LIMIT)] = 32 << 20
+    remote_principals: Annotated[tuple[str, ...], Length(0, 64)] = ()
+    linked_routers: Annotated[tuple[str, ...], Length(0, 16)] = ()
 
     def __post_init__(self) -> None:
-        check_bounds(self, "zenoh", self.BOUNDS)
-        check_lengths(self, "zenoh", self.LENGTHS)
+        check_bounds(self, "zenoh", ZenohSettings)
+        check_lengths(self, "zenoh", ZenohSettings)
         if self.mode not in ("peer", "client"):
             raise ConfigError(f"zenoh.mode must be 'peer' or 'client', got {self.mode!r}")
         for ep in (self.endpoint, *self.connect, *self.listen):
@@ -205,9 +196,7 @@ class StackSettings:
 
     prefix: str = "stack"
     camera: str = "front"
-    clock_tolerance_s: float = 0.1
-
-    BOUNDS: ClassVar[Bounds] = {"clock_tolerance_s": (0, 5)}
+    clock_tolerance_s: Annotated[float, Range(0, 5)] = 0.1
 
     def __post_init__(self) -> None:
-        check_bounds(self, "stack", self.BOUNDS)
+        check_bounds(self, "stack", StackSettings)

@@ -36,8 +36,11 @@ def spawn(
     stdout: Output = None,
     stderr: Output = None,
     stop_signals_blocked: bool = False,
+    new_session: bool = False,
 ) -> subprocess.Popen[bytes]:
-    """Start ``argv`` in a process group of its own, in our session.
+    """Start ``argv`` in a process group of its own, in our session (with ``new_session``,
+    in a session of its own, as from another terminal: its own share of the CPU under the
+    kernel's autogroup scheduling, common/priority.py).
 
     ``env`` is the child's whole environment (ours when None), with ``PYTHONUNBUFFERED=1``.
     With ``stop_signals_blocked`` it starts with SIGINT and SIGTERM blocked (a child inherits
@@ -54,7 +57,8 @@ def spawn(
             list(argv),
             cwd=cwd,
             env={**base, "PYTHONUNBUFFERED": "1"},
-            process_group=0,
+            process_group=None if new_session else 0,
+            start_new_session=new_session,
             stdin=subprocess.DEVNULL,
             stdout=stdout,
             stderr=stderr,

@@ -33,10 +33,12 @@ from dataclasses import dataclass
 from common.errors import ConfigError
 from common.settings import service_package
 from stack.config import Config
+from stack.contracts import heartbeat_services
 
-# Services whose work loop publishes counters on every pass (their heartbeat, see above); by
-# package: every camera's process (camera, camera_<name>) beats as the camera does.
-HEARTBEAT_SERVICES = frozenset({"camera", "sim", "ros2", "detector", "controller"})
+# Services whose work loop publishes counters on every pass (their heartbeat, see above; their
+# contracts' HEARTBEAT); by package: every camera's process (camera, camera_<name>) beats as the
+# camera does.
+HEARTBEAT_SERVICES = heartbeat_services()
 # The heartbeat timeout must span this many counters periods, so that a late sample (TELEMETRY
 # is dropped under congestion) or a slow pass on a loaded machine is not taken for a hang.
 MIN_PERIODS = 2.0

@@ -21,9 +21,9 @@ service (services/detector/) and the tools are built on it.
                         ``PROBE_SHAPE``, ``BatchChoice``)
     measure_depth       each box's distance, 3D centre and extent from an aligned depth image
                         (``depth.py``, docs/depth.md: ``depth_metres``, ``Intrinsics``,
-                        ``DepthParams``, ``Mounting``, ``to_robot``, ``to_depth_pixels``,
-                        ``unknown_depth``; column names ``DEPTH_COLUMNS``, ``DEPTH_DISTANCE``,
-                        ``DEPTH_CENTRE``, ``DEPTH_SIZE``)
+                        ``DepthParams``, ``Mounting``, ``Mounted``, ``to_robot``,
+                        ``to_depth_pixels``, ``unknown_depth``; column names
+                        ``DEPTH_COLUMNS``, ``DEPTH_DISTANCE``, ``DEPTH_CENTRE``, ``DEPTH_SIZE``)
 
 The detection path: ``pipeline.py`` (``preprocess``, a runtimes/ backend, ``decode.py``,
 ``postprocess.py``) -> ``tracker.py``; ``model_info.py`` reads what a model says of itself.
@@ -52,6 +52,7 @@ if TYPE_CHECKING:
     from perception.depth import (
         DepthParams,
         Intrinsics,
+        Mounted,
         Mounting,
         depth_metres,
         to_depth_pixels,
@@ -79,6 +80,7 @@ _FROM: dict[str, tuple[str, ...]] = {
         "SIZE as DEPTH_SIZE",
         "DepthParams",
         "Intrinsics",
+        "Mounted",
         "Mounting",
         "depth_metres",
         "to_depth_pixels",
@@ -119,6 +121,7 @@ __all__ = [
     "Intrinsics",
     "Measure",
     "ModelSpec",
+    "Mounted",
     "Mounting",
     "NotPrepared",
     "Prepared",

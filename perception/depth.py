@@ -24,11 +24,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from statistics import NormalDist
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
-from common.messages import MAX_DEPTH_RANGE_M, CameraAnnouncement, DepthFrame
+from common.messages import MAX_DEPTH_RANGE_M, DepthFrame
 
 DISTANCE = "distance_m"
 CENTRE = ("x_m", "y_m", "z_m")
@@ -248,11 +249,30 @@ def _weighted_median(values: npt.NDArray[np.float64], weights: npt.NDArray[np.fl
     return float(values[order][np.searchsorted(cum, 0.5 * cum[-1])])
 
 
+class Mounted(Protocol):
+    """What says where a camera stands: its announcement (common/messages.py
+    ``CameraAnnouncement``) or its settings (the camera's ``mount_*``)."""
+
+    @property
+    def mount_x_m(self) -> float: ...
+
+    @property
+    def mount_y_m(self) -> float: ...
+
+    @property
+    def mount_height_m(self) -> float: ...
+
+    @property
+    def mount_yaw_deg(self) -> float: ...
+
+
 @dataclass(frozen=True, slots=True)
 class Mounting:
     """Where a camera stands on the robot (its CameraAnnouncement's ``mount_*``): ``x_m``
     forward and ``y_m`` left of the base's centre, ``height_m`` above the floor, looking
-    ``yaw_deg`` counter-clockwise from forward, level."""
+    ``yaw_deg`` counter-clockwise from forward, level. The one transform from a camera's
+    frame to the robot's (:func:`to_robot`): the controller, the scan, the viewer and the
+    ROS 2 bridge all place a camera with it."""
 
     x_m: float = 0.0
     y_m: float = 0.0
@@ -260,8 +280,8 @@ class Mounting:
     yaw_deg: float = 0.0
 
     @classmethod
-    def of(cls, camera: CameraAnnouncement) -> Mounting:
-        """Where an announced camera stands on the robot."""
+    def of(cls, camera: Mounted) -> Mounting:
+        """Where an announced (or configured) camera stands on the robot."""
         return cls(camera.mount_x_m, camera.mount_y_m, camera.mount_height_m, camera.mount_yaw_deg)
 
 

@@ -18,12 +18,12 @@ Imports only ``common``, and nothing heavy: the stack's config reads it through 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Annotated
 
 from common.contracts import BackendName
 from common.errors import ConfigError
 from common.limits import MAX_DETECTIONS
-from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
+from common.setting_checks import Length, Range, check_bounds, check_lengths, enum_field
 
 #: The most class names a model may have (LVIS has 1203; COCO 80, Open Images 601).
 MAX_CLASSES = 2000
@@ -55,20 +55,15 @@ class ModelSpec:
     model: str = ""
     backend: BackendName = BackendName.ONNX
     precision: str = ""
-    batch_profile: tuple[int, int, int] = (1, 1, 1)
-    imgsz: int = 0
+    batch_profile: Annotated[tuple[int, int, int], Range(1, MAX_BATCH)] = (1, 1, 1)
+    # 0 = the model's own; else a multiple of 32, checked below
+    imgsz: Annotated[int, Range(0, MAX_IMGSZ)] = 0
     calibration_dir: str = ""
     profile: str = "default"
-    fast_max_ap50_drop: float = 0.01
-
-    BOUNDS: ClassVar[Bounds] = {
-        "batch_profile": (1, MAX_BATCH),
-        "imgsz": (0, MAX_IMGSZ),  # 0 = the model's own; else a multiple of 32, checked below
-        "fast_max_ap50_drop": (0, 1),
-    }
+    fast_max_ap50_drop: Annotated[float, Range(0, 1)] = 0.01
 
     def __post_init__(self) -> None:
-        check_bounds(self, "detector", ModelSpec.BOUNDS)
+        check_bounds(self, "detector", ModelSpec)
         if self.imgsz != 0 and (self.imgsz % 32 or not MIN_IMGSZ <= self.imgsz <= MAX_IMGSZ):
             raise ConfigError(
                 f"detector.imgsz must be 0 (the model's own) or a multiple of 32 within "
@@ -102,21 +97,14 @@ class DecodeOptions:
     ``classes`` keeps only those class names, and empty keeps every class.
     """
 
-    conf: float = 0.25
-    iou: float = 0.45
-    max_det: int = 100
-    classes: tuple[str, ...] = ()
-
-    BOUNDS: ClassVar[Bounds] = {
-        "conf": (0, 1),
-        "iou": (0, 1),
-        "max_det": (1, MAX_DETECTIONS),
-    }
-    LENGTHS: ClassVar[Bounds] = {"classes": (0, MAX_CLASSES)}
+    conf: Annotated[float, Range(0, 1)] = 0.25
+    iou: Annotated[float, Range(0, 1)] = 0.45
+    max_det: Annotated[int, Range(1, MAX_DETECTIONS)] = 100
+    classes: Annotated[tuple[str, ...], Length(0, MAX_CLASSES)] = ()
 
     def __post_init__(self) -> None:
-        check_bounds(self, "detector", DecodeOptions.BOUNDS)
-        check_lengths(self, "detector", DecodeOptions.LENGTHS)
+        check_bounds(self, "detector", DecodeOptions)
+        check_lengths(self, "detector", DecodeOptions)
         if not all(self.classes):
             raise ConfigError(
                 f"detector.classes must be non-empty class names, got {list(self.classes)}"
@@ -127,9 +115,6 @@ class DecodeOptions:
 class DetectorSpec(DecodeOptions, ModelSpec):
     """A model to open and how to read its output: what opening a Detector takes (its fields
     in that order: the model's, then the decode options)."""
-
-    BOUNDS: ClassVar[Bounds] = {**ModelSpec.BOUNDS, **DecodeOptions.BOUNDS}
-    LENGTHS: ClassVar[Bounds] = dict(DecodeOptions.LENGTHS)
 
     def __post_init__(self) -> None:
         ModelSpec.__post_init__(self)
@@ -149,23 +134,14 @@ class TrackerParams:
     a frame from this host is tracked on its monotonic stamp, which cannot step.
     """
 
-    high_score: float = 0.4
-    low_score: float = 0.15
-    iou: float = 0.25
-    max_age_s: float = 1.0
-    max_stamp_jump_s: float = 0.5
-    jumps_before_reset: int = 3
-
-    BOUNDS: ClassVar[Bounds] = {
-        "high_score": (0, 1),
-        "low_score": (0, 1),
-        "iou": (0, 1),
-        "max_age_s": (0.01, 60),
-        "max_stamp_jump_s": (0.01, 60),
-        "jumps_before_reset": (1, 1000),
-    }
+    high_score: Annotated[float, Range(0, 1)] = 0.4
+    low_score: Annotated[float, Range(0, 1)] = 0.15
+    iou: Annotated[float, Range(0, 1)] = 0.25
+    max_age_s: Annotated[float, Range(0.01, 60)] = 1.0
+    max_stamp_jump_s: Annotated[float, Range(0.01, 60)] = 0.5
+    jumps_before_reset: Annotated[int, Range(1, 1000)] = 3
 
     def __post_init__(self) -> None:
-        check_bounds(self, "tracker", TrackerParams.BOUNDS)
+        check_bounds(self, "tracker", TrackerParams)
         if self.low_score > self.high_score:
             raise ConfigError("tracker.low_score must not be above tracker.high_score")

@@ -55,32 +55,20 @@ from common.security import (
     role_of,
     stack_principals,
 )
+from common.service_list import SERVICES
 from common.settings import (
     check_camera_name,
     is_detector_service,
     principal_name,
     service_package,
 )
-from services.camera import contract as camera
 from services.controller import contract as controller
-from services.detector import contract as detector
-from services.metrics import contract as metrics
 from services.recorder import contract as recorder
-from services.ros2 import contract as ros2
-from services.sim import contract as sim
-from services.viewer import contract as viewer
+from stack.contracts import contracts, live_sensors
 
 #: The packages whose services feed a live robot's sensors into the stack (their contracts'
 #: ``LIVE_SENSOR``): while one of them runs, no recording may be played onto its keys.
-LIVE_SENSORS = frozenset(
-    package
-    for package, live in (
-        ("camera", camera.LIVE_SENSOR),
-        ("sim", sim.LIVE_SENSOR),
-        ("ros2", ros2.LIVE_SENSOR),
-    )
-    if live
-)
+LIVE_SENSORS = live_sensors()
 #: A principal that may watch (subscribe, query) but publishes nothing: status lines, tests.
 OBSERVER_PRINCIPAL = "observer"
 #: The principals of the tools people run against a running stack, whatever services it runs:
@@ -204,21 +192,18 @@ def running_principals(
     return tuple(p for p in every if p in wanted)
 
 
-def access_table(shape: Shape) -> dict[str, Access]:
+def access_table(shape: Shape, services: Iterable[str] = SERVICES) -> dict[str, Access]:
     """What each principal of the stack may do, from its service's contract. Puts name each
     configured camera's key: nobody may put on a camera the stack does not have. Reads and the
     detector's info take the wildcard, so that one subscription (or queryable) for every
     camera is accepted as well as one per camera; nobody can put on an unconfigured camera's
-    key, so the wildcard reads nothing more."""
+    key, so the wildcard reads nothing more. ``services``: the one list
+    (common/service_list.py), each service's ``access`` read from its contract."""
+    table: dict[str, Access] = {}
+    for module in contracts(services).values():
+        table.update(module.access(shape))
     return {
-        **camera.access(shape),
-        **detector.access(shape),
-        **sim.access(shape),
-        **ros2.access(shape),
-        **recorder.access(shape),
-        **controller.access(shape),
-        **metrics.access(shape),
-        **viewer.access(shape),
+        **table,
         **controller.estop_access(shape),
         ROUTER_PRINCIPAL: Access(),  # its session lives inside the router: no rule applies to it
         **_observer(shape),

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar
+from typing import Annotated
 
 from common.errors import ConfigError
-from common.setting_checks import Bounds, check_bounds, check_lengths
+from common.setting_checks import Length, Range, check_bounds, check_lengths
 from common.settings import (
     MAX_CAMERAS,
     REPO_ROOT,
@@ -30,6 +30,7 @@ from services.ros2.contract import Ros2Settings, check_camera_topics
 from services.sim.contract import SimSettings
 from services.viewer.contract import ViewerSettings
 from stack.config_read import estop_file_path
+from stack.contracts import check_config_tables
 
 __all__ = ["Config", "SupervisorSettings"]
 
@@ -53,24 +54,14 @@ class SupervisorSettings:
     """
 
     services: tuple[str, ...] = ("sim", "detector", "controller", "metrics", "viewer")
-    optional: tuple[str, ...] = ("viewer", "recorder")
-    restart_backoff_s: float = 0.5
-    restart_backoff_max_s: float = 10.0
-    stop_timeout_s: float = 5.0
-    status_period_s: float = 2.0
+    optional: Annotated[tuple[str, ...], Length(0, len(SERVICES))] = ("viewer", "recorder")
+    restart_backoff_s: Annotated[float, Range(0.01, 60)] = 0.5
+    restart_backoff_max_s: Annotated[float, Range(0.01, 600)] = 10.0
+    stop_timeout_s: Annotated[float, Range(0.1, 60)] = 5.0
+    status_period_s: Annotated[float, Range(0.1, 60)] = 2.0
     lock_dir: str = ""
-    watchdog_grace_s: float = 2.0
-    watchdog_progress_s: float = 20.0
-
-    BOUNDS: ClassVar[Bounds] = {
-        "restart_backoff_s": (0.01, 60),
-        "restart_backoff_max_s": (0.01, 600),
-        "stop_timeout_s": (0.1, 60),
-        "status_period_s": (0.1, 60),
-        "watchdog_grace_s": (0.1, 60),
-        "watchdog_progress_s": (0, 600),  # 0 = off
-    }
-    LENGTHS: ClassVar[Bounds] = {"optional": (0, len(SERVICES))}
+    watchdog_grace_s: Annotated[float, Range(0.1, 60)] = 2.0
+    watchdog_progress_s: Annotated[float, Range(0, 600)] = 20.0  # 0 = off
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.services) - set(SERVICES))
@@ -79,8 +70,8 @@ class SupervisorSettings:
                 f"supervisor.services must name each of {', '.join(SERVICES)} at most once, "
                 f"got {list(self.services)}"
             )
-        check_bounds(self, "supervisor", self.BOUNDS)
-        check_lengths(self, "supervisor", self.LENGTHS)
+        check_bounds(self, "supervisor", SupervisorSettings)
+        check_lengths(self, "supervisor", SupervisorSettings)
         if set(self.optional) - set(SERVICES):
             raise ConfigError(
                 f"supervisor.optional must name services among {', '.join(SERVICES)}, "
@@ -175,3 +166,9 @@ class Config:
     def estop_path(self) -> Path:
         """Where the controller keeps the latched e-stop (one file per stack prefix)."""
         return estop_file_path(self.stack.prefix, self.controller.estop_file)
+
+
+# Each service's tables, as its contract declares them (SETTINGS_TABLES), and no other: typed
+# fields above, so that every reader is type-checked; a listed service's table missing here
+# stops the stack at import with the line to add.
+check_config_tables(Config)

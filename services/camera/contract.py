@@ -10,13 +10,13 @@ and reads nothing.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Annotated
 
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
 from common.errors import ConfigError
 from common.limits import MAX_IMAGE_SIDE
-from common.setting_checks import Bounds, check_bounds
+from common.setting_checks import Range, check_bounds
 
 FRAMES_OUT = "frames_out"
 BAD_IMAGES = "bad_images"  # a file of a folder source that is no image
@@ -44,6 +44,8 @@ PER_CAMERA: frozenset[str] = frozenset()  # each process is one camera's
 
 #: A camera feeds a live robot's sensors into the stack: no recording may be played onto it.
 LIVE_SENSOR = True
+#: Its work loop publishes counters on every pass: its heartbeat (deploy/watchdog.py).
+HEARTBEAT = True
 
 
 def access(shape: Shape) -> dict[str, Access]:
@@ -94,40 +96,30 @@ class CameraSettings:
     """
 
     source: str = "sample:cameraman"
-    rate_hz: float = 10.0
+    rate_hz: Annotated[float, Range(0.1, 1000)] = 10.0
     resize: tuple[int, int] = (0, 0)
-    jpeg_quality: int = 0
+    jpeg_quality: Annotated[int, Range(0, 100)] = 0
     frame_id: str = "camera"
     loop: bool = True
-    hfov_deg: float = 60.0
-    mount_yaw_deg: float = 0.0
-    reopen_period_s: float = 1.0
+    hfov_deg: Annotated[float, Range(1, 179)] = 60.0
+    mount_yaw_deg: Annotated[float, Range(-180, 180)] = 0.0
+    reopen_period_s: Annotated[float, Range(0.05, 60)] = 1.0
     depth_source: str = ""
-    depth_scale_m: float = 0.001
-    intrinsics: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
-    depth_min_m: float = 0.0
-    depth_max_m: float = 0.0
-    mount_height_m: float = 0.0
-    mount_x_m: float = 0.0
-    mount_y_m: float = 0.0
-
-    BOUNDS: ClassVar[Bounds] = {
-        "rate_hz": (0.1, 1000),
-        "jpeg_quality": (0, 100),
-        "hfov_deg": (1, 179),
-        "mount_yaw_deg": (-180, 180),
-        "reopen_period_s": (0.05, 60),
-        "depth_scale_m": (0.0001, 1),
-        "intrinsics": (0, 100000),
-        "depth_min_m": (0, 100),
-        "depth_max_m": (0, 1000),
-        "mount_height_m": (0, 10),
-        "mount_x_m": (-10, 10),
-        "mount_y_m": (-10, 10),
-    }
+    depth_scale_m: Annotated[float, Range(0.0001, 1)] = 0.001
+    intrinsics: Annotated[tuple[float, float, float, float], Range(0, 100000)] = (
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    )
+    depth_min_m: Annotated[float, Range(0, 100)] = 0.0
+    depth_max_m: Annotated[float, Range(0, 1000)] = 0.0
+    mount_height_m: Annotated[float, Range(0, 10)] = 0.0
+    mount_x_m: Annotated[float, Range(-10, 10)] = 0.0
+    mount_y_m: Annotated[float, Range(-10, 10)] = 0.0
 
     def __post_init__(self) -> None:
-        check_bounds(self, "camera", self.BOUNDS)
+        check_bounds(self, "camera", CameraSettings)
         if (
             min(self.resize) < 0
             or max(self.resize) > MAX_IMAGE_SIDE
@@ -148,3 +140,7 @@ class CameraSettings:
                 f"camera.depth_min_m ({self.depth_min_m:g}) must be below camera.depth_max_m "
                 f"({self.depth_max_m:g}), or depth_max_m 0 (not stated)"
             )
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"camera": CameraSettings}

@@ -99,19 +99,7 @@ def _announce(
     announcements: CameraAnnouncements, camera: str, settings: CameraSettings, *, depth: bool
 ) -> None:
     width, height = settings.resize
-    announcements.announce(
-        camera,
-        rate_hz=settings.rate_hz,
-        mount_yaw_deg=settings.mount_yaw_deg,
-        hfov_deg=settings.hfov_deg,
-        frame_id=settings.frame_id,
-        width=width,
-        height=height,
-        depth=depth,
-        mount_height_m=settings.mount_height_m,
-        mount_x_m=settings.mount_x_m,
-        mount_y_m=settings.mount_y_m,
-    )
+    announcements.announce(camera, settings, width=width, height=height, depth=depth)
 
 
 def _publish(

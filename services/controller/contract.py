@@ -7,13 +7,13 @@ Only the controller puts ``cmd_vel``; only the ``estop`` principal the e-stop.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Annotated
 
 from common.access import Access, Shape, service_access
 from common.contracts import ControllerMode, DistanceSource
 from common.counters import COMMON
 from common.errors import ConfigError
-from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
+from common.setting_checks import Length, Range, check_bounds, check_lengths, enum_field
 
 # Its inputs, each counted by its fate (:func:`input_counter`): ``detections_in``,
 # ``detections_stale`` ...; the detections' for each announced camera too.
@@ -97,12 +97,14 @@ COUNTERS = frozenset(
 )
 
 #: What ``controller.obstacle_sources`` may name: the laser's scan, the depth cameras'
-#: virtual scans (services/controller/depth_scan.py).
+#: virtual scans (depthscan/; services/controller/depth_obstacles.py).
 LASER_SOURCE = "laser"
 DEPTH_SOURCE = "depth"
 OBSTACLE_SOURCES = (LASER_SOURCE, DEPTH_SOURCE)
 
 SERVICE = "controller"
+#: Its work loop publishes counters on every pass: its heartbeat (deploy/watchdog.py).
+HEARTBEAT = True
 #: The operator's e-stop tool's principal: it puts the e-stop and reads the controller's status.
 ESTOP_PRINCIPAL = "estop"
 
@@ -115,6 +117,7 @@ def access(shape: Shape) -> dict[str, Access]:
             SERVICE,
             keys.cmd_vel(),
             keys.controller_status(),
+            keys.all_virtual_scans(),  # each depth camera's, as the depth intake makes it
             # The depth images too: the controller reads them only when its settings need
             # depth, but the rules are the shape's, not one config's.
             read=(keys.all_detections(), keys.scan(), keys.estop(), keys.all_depths()),
@@ -169,7 +172,7 @@ class ControllerSettings:
     does come is still obeyed, and a target out of view is never driven on to without one.
     ``obstacle_sources`` names what must show the way clear: ``"laser"`` (the scan, above),
     ``"depth"`` (a virtual scan made from every announced depth camera's images,
-    services/controller/depth_scan.py, under the same rules), or both. Each one listed must be
+    depthscan/, under the same rules), or both. Each one listed must be
     fresh for forward motion (depth older than ``depth_timeout_s`` is missing, as a scan
     older than ``scan_timeout_s`` is), and every fresh one is obeyed, listed or not. The
     depth images are read only when depth is needed (``needs_depth``). In a depth image, a
@@ -197,125 +200,77 @@ class ControllerSettings:
     """
 
     mode: ControllerMode = ControllerMode.FOLLOW
-    target_classes: tuple[str, ...] = ("person",)
-    min_score: float = 0.3
-    control_rate_hz: float = 20.0
-    detection_timeout_s: float = 1.0
-    scan_timeout_s: float = 0.5
-    target_lost_timeout_s: float = 1.5
-    handover_gate_deg: float = 20.0
-    handover_window_s: float = 3.0
-    bearing_kp: float = 1.5
-    bearing_ki: float = 0.0
-    bearing_kd: float = 0.05
-    max_angular: float = 1.0
-    max_linear: float = 0.5
-    max_angular_accel: float = 3.0
-    max_linear_accel: float = 1.0
-    forward_speed: float = 0.3
-    center_tolerance: float = 0.1
-    distance_source: DistanceSource = DistanceSource.LASER
-    follow_distance_m: float = 1.0
-    distance_gain: float = 0.6
-    target_height_m: float = 1.7
-    safety_distance_m: float = 0.5
-    sector_width_deg: float = 30.0
-    robot_width_m: float = 0.6
-    no_laser: bool = False
-    obstacle_sources: tuple[str, ...] = (LASER_SOURCE,)
-    depth_timeout_s: float = 0.5
-    depth_floor_margin_m: float = 0.05
-    depth_max_height_m: float = 1.5
-    depth_scan_stride_px: int = 4
-    depth_scan_resolution_deg: float = 1.0
-    depth_hfov_tolerance_deg: float = 5.0
-    depth_max_pixel_aspect: float = 1.25
-    depth_max_pixels: int = 4_194_304
-    # Issue 38: the virtual scan's holes and the depth cameras' short memory.
-    depth_hole_px: int = 12
-    depth_edge_band_px: int = 24
-    depth_creep_speed: float = 0.1
-    depth_memory_size_m: float = 8.0
-    depth_memory_resolution_m: float = 0.05
-    depth_memory_file: str = ""
-    depth_memory_save_s: float = 0.5
-    depth_memory_max_age_s: float = 10.0
-    depth_memory_coast_s: float = 0.5
-    estop_file: str = ""
-    estop_release_max_age_s: float = 2.0
-    counters_period_s: float = 1.0
-    # -- depth from the announced source only (issue 38) --
-    # Depth stamped on this host's boot (its header's boot_id and mono_ns) is read off the
-    # controller's own clocks: more than this ahead of them is forged or broken, never a clock
-    # offset, and is refused (``depth_future``); other depth keeps stack.clock_tolerance_s.
-    depth_future_tolerance_s: float = 0.02
-    # This many depth frames of one camera older than its held one, within the window: the
-    # sign of a second stream on its key (``depth_second_stream``, a WARNING).
-    depth_late_warn_count: int = 3
-    depth_late_warn_window_s: float = 2.0
-    # --
-
+    target_classes: Annotated[tuple[str, ...], Length(1, 100)] = ("person",)
+    min_score: Annotated[float, Range(0, 1)] = 0.3
     # A real base: up to 5 m/s (warehouse robots run at 2..3), 10 rad/s, about 1 g of braking.
     # Commands go out at least control_rate_hz times a second: below 1 Hz a base's own
     # command timeout would trip between them. The dead-man (detection_timeout_s) stops the
     # robot within 10 s at the very most.
-    BOUNDS: ClassVar[Bounds] = {
-        "min_score": (0, 1),
-        "control_rate_hz": (1, 1000),
-        "detection_timeout_s": (0.01, 10),
-        "scan_timeout_s": (0.01, 10),
-        "target_lost_timeout_s": (0.01, 60),
-        "handover_gate_deg": (1, 90),
-        "handover_window_s": (0.01, 60),
-        "bearing_kp": (0, 100),
-        "bearing_ki": (0, 100),
-        "bearing_kd": (0, 100),
-        "max_angular": (0.01, 10),
-        "max_linear": (0.01, 5),
-        "max_angular_accel": (0.01, 100),
-        "max_linear_accel": (0.01, 20),
-        "forward_speed": (0, 5),
-        "center_tolerance": (0, 1),
-        "follow_distance_m": (0.1, 20),
-        "distance_gain": (0, 10),
-        "target_height_m": (0.01, 10),
-        "safety_distance_m": (0.01, 10),
-        "sector_width_deg": (1, 360),
-        "robot_width_m": (0.05, 5),
-        "depth_timeout_s": (0.01, 10),
-        "depth_floor_margin_m": (0.01, 0.15),
-        "depth_max_height_m": (0.05, 5),
-        "depth_scan_stride_px": (1, 8),
-        "depth_scan_resolution_deg": (0.1, 10),
-        "depth_hfov_tolerance_deg": (0.1, 30),
-        "depth_max_pixel_aspect": (1, 2),
-        "depth_max_pixels": (1, 100_000_000),
-        "depth_hole_px": (1, 100),
-        "depth_edge_band_px": (0, 200),
-        "depth_creep_speed": (0, 1),
-        "depth_memory_size_m": (2, 40),
-        "depth_memory_resolution_m": (0.01, 0.2),
-        "depth_memory_save_s": (0.05, 60),
-        "depth_memory_max_age_s": (0, 3600),
-        "depth_memory_coast_s": (0, 10),
-        "estop_release_max_age_s": (0.1, 60),
-        "counters_period_s": (0.1, 60),
-        # depth from the announced source only (issue 38)
-        "depth_future_tolerance_s": (0.001, 1),
-        "depth_late_warn_count": (1, 1000),
-        "depth_late_warn_window_s": (0.1, 60),
-    }
-    LENGTHS: ClassVar[Bounds] = {"target_classes": (1, 100), "obstacle_sources": (1, 2)}
+    control_rate_hz: Annotated[float, Range(1, 1000)] = 20.0
+    detection_timeout_s: Annotated[float, Range(0.01, 10)] = 1.0
+    scan_timeout_s: Annotated[float, Range(0.01, 10)] = 0.5
+    target_lost_timeout_s: Annotated[float, Range(0.01, 60)] = 1.5
+    handover_gate_deg: Annotated[float, Range(1, 90)] = 20.0
+    handover_window_s: Annotated[float, Range(0.01, 60)] = 3.0
+    bearing_kp: Annotated[float, Range(0, 100)] = 1.5
+    bearing_ki: Annotated[float, Range(0, 100)] = 0.0
+    bearing_kd: Annotated[float, Range(0, 100)] = 0.05
+    max_angular: Annotated[float, Range(0.01, 10)] = 1.0
+    max_linear: Annotated[float, Range(0.01, 5)] = 0.5
+    max_angular_accel: Annotated[float, Range(0.01, 100)] = 3.0
+    max_linear_accel: Annotated[float, Range(0.01, 20)] = 1.0
+    forward_speed: Annotated[float, Range(0, 5)] = 0.3
+    center_tolerance: Annotated[float, Range(0, 1)] = 0.1
+    distance_source: DistanceSource = DistanceSource.LASER
+    follow_distance_m: Annotated[float, Range(0.1, 20)] = 1.0
+    distance_gain: Annotated[float, Range(0, 10)] = 0.6
+    target_height_m: Annotated[float, Range(0.01, 10)] = 1.7
+    safety_distance_m: Annotated[float, Range(0.01, 10)] = 0.5
+    sector_width_deg: Annotated[float, Range(1, 360)] = 30.0
+    robot_width_m: Annotated[float, Range(0.05, 5)] = 0.6
+    no_laser: bool = False
+    obstacle_sources: Annotated[tuple[str, ...], Length(1, 2)] = (LASER_SOURCE,)
+    depth_timeout_s: Annotated[float, Range(0.01, 10)] = 0.5
+    depth_floor_margin_m: Annotated[float, Range(0.01, 0.15)] = 0.05
+    depth_max_height_m: Annotated[float, Range(0.05, 5)] = 1.5
+    depth_scan_stride_px: Annotated[int, Range(1, 8)] = 4
+    depth_scan_resolution_deg: Annotated[float, Range(0.1, 10)] = 1.0
+    depth_hfov_tolerance_deg: Annotated[float, Range(0.1, 30)] = 5.0
+    depth_max_pixel_aspect: Annotated[float, Range(1, 2)] = 1.25
+    depth_max_pixels: Annotated[int, Range(1, 100_000_000)] = 4_194_304
+    # Issue 38: the virtual scan's holes and the depth cameras' short memory.
+    depth_hole_px: Annotated[int, Range(1, 100)] = 12
+    depth_edge_band_px: Annotated[int, Range(0, 200)] = 24
+    depth_creep_speed: Annotated[float, Range(0, 1)] = 0.1
+    depth_memory_size_m: Annotated[float, Range(2, 40)] = 8.0
+    depth_memory_resolution_m: Annotated[float, Range(0.01, 0.2)] = 0.05
+    depth_memory_file: str = ""
+    depth_memory_save_s: Annotated[float, Range(0.05, 60)] = 0.5
+    depth_memory_max_age_s: Annotated[float, Range(0, 3600)] = 10.0
+    depth_memory_coast_s: Annotated[float, Range(0, 10)] = 0.5
+    estop_file: str = ""
+    estop_release_max_age_s: Annotated[float, Range(0.1, 60)] = 2.0
+    counters_period_s: Annotated[float, Range(0.1, 60)] = 1.0
+    # -- depth from the announced source only (issue 38) --
+    # Depth stamped on this host's boot (its header's boot_id and mono_ns) is read off the
+    # controller's own clocks: more than this ahead of them is forged or broken, never a clock
+    # offset, and is refused (``depth_future``); other depth keeps stack.clock_tolerance_s.
+    depth_future_tolerance_s: Annotated[float, Range(0.001, 1)] = 0.02
+    # This many depth frames of one camera older than its held one, within the window: the
+    # sign of a second stream on its key (``depth_second_stream``, a WARNING).
+    depth_late_warn_count: Annotated[int, Range(1, 1000)] = 3
+    depth_late_warn_window_s: Annotated[float, Range(0.1, 60)] = 2.0
+    # --
 
     def __post_init__(self) -> None:
         enum_field(self, "mode", ControllerMode, "controller.mode")
         enum_field(self, "distance_source", DistanceSource, "controller.distance_source")
-        check_lengths(self, "controller", self.LENGTHS)
+        check_lengths(self, "controller", ControllerSettings)
         if not all(self.target_classes):
             raise ConfigError(
                 f"controller.target_classes must be class names, got {list(self.target_classes)}"
             )
-        check_bounds(self, "controller", self.BOUNDS)
+        check_bounds(self, "controller", ControllerSettings)
         if (
             self.no_laser
             and self.mode is ControllerMode.FOLLOW
@@ -366,3 +321,7 @@ class ControllerSettings:
     def laser_required(self) -> bool:
         """Whether forward motion needs a fresh laser scan."""
         return LASER_SOURCE in self.obstacle_sources and not self.no_laser
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"controller": ControllerSettings}

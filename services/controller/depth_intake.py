@@ -1,5 +1,5 @@
 """The depth cameras' images in, their virtual scans out: the controller's obstacles seen by
-depth (services/controller/depth_scan.py). Used only when the settings need depth
+depth (depthscan/, services/controller/depth_obstacles.py). Used only when the settings need depth
 (``ControllerSettings.needs_depth``).
 
 A depth image is large (600 KB at 640x480) and turning it into a scan takes a few
@@ -13,16 +13,18 @@ reads what the intake holds under a short lock.
 
 The intake drops, counted, before any conversion: the images of cameras not announced with
 depth and those put by a Zenoh session other than the one that announced the camera
-(``depth_foreign``, both at :meth:`DepthIntake.offer`, before decoding; depth_trust.py), images
+(``depth_foreign``, both at :meth:`DepthIntake.offer`, before decoding; depthscan/trust.py), images
 stamped on this host's boot more than ``depth_future_tolerance_s`` ahead of its clock
 (``depth_future``), images of more than ``depth_max_pixels``, and frames whose
-intrinsics or mounting are implausible (depth_scan.py ``implausible``): with no scan, depth
+intrinsics or mounting are implausible (depthscan/frame.py ``implausible``): with no scan, depth
 reads missing and the robot does not drive forward. A camera whose frames keep arriving older
 than the one held (a second stream on its key) is logged as a WARNING and counted in the gauge
 ``depth_second_stream``, which the metrics turn into a warning. Only every
 ``depth_scan_stride_px``-th row and column is converted to metres. A scan is kept only if the
 announcement it was made with is still the camera's. An error while making a scan is logged,
-counted and the thread goes on.
+counted and the thread goes on. Each scan held is handed on at once (``on_scan``: the
+controller publishes it on ``<prefix>/scan/virtual/<camera>`` for the viewer and the
+recorder).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from common.clock import BOOT_ID, Clock, Stamp
@@ -39,22 +41,13 @@ from common.files import atomic_write_bytes
 from common.freshness import FreshnessGate, Verdict, capture_age_s
 from common.messages import CameraAnnouncement, DepthFrame, LaserScan
 from common.node import Tally
+from depthscan.frame import Plausible, ScanParams, blind_zone, implausible, sample_frame, usable
+from depthscan.observe import observe
+from depthscan.trust import LateWatch, ahead_on_same_clock, foreign_source
 from perception import Intrinsics, Mounting
 from services.controller import contract
 from services.controller.contract import ControllerSettings
-from services.controller.depth_observe import observe
-from services.controller.depth_scan import (
-    DepthCamera,
-    DepthObstacles,
-    Plausible,
-    ScanParams,
-    blind_zone,
-    depth_obstacles,
-    implausible,
-    sample_frame,
-    usable,
-)
-from services.controller.depth_trust import LateWatch, ahead_on_same_clock, foreign_source
+from services.controller.depth_obstacles import DepthCamera, DepthObstacles, depth_obstacles
 from services.controller.local_map import LocalMap, MapParams, Odometry
 
 #: Bytes of a depth payload beyond its pixels' (header, intrinsics, framing): a payload larger
@@ -73,9 +66,12 @@ class DepthIntake:
         tolerance_s: float,
         clock: Clock,
         memory_path: Path | None = None,
+        on_scan: Callable[[str, LaserScan], None] | None = None,
     ) -> None:
         self.tally = tally
         self.clock = clock
+        # Each new virtual scan, as soon as it is held (published: ControlLoop).
+        self.on_scan = on_scan
         self.timeout_s = s.depth_timeout_s
         self.sector_width_deg = s.sector_width_deg
         self.tolerance_s = tolerance_s
@@ -122,7 +118,7 @@ class DepthIntake:
         # A gate outlives its camera's withdrawal: a replay is refused after a re-announcement.
         self._gates: dict[str, FreshnessGate] = {}
         self._told: dict[str, CameraAnnouncement] = {}  # the blind zone logged, per camera
-        # Whose depth is believed (depth_trust.py).
+        # Whose depth is believed (depthscan/trust.py).
         self.future_tolerance_s = s.depth_future_tolerance_s
         self.late_watch = LateWatch(s.depth_late_warn_count, s.depth_late_warn_window_s)
         self._unchecked: dict[str, CameraAnnouncement] = {}  # told: no zid to check, per camera
@@ -281,6 +277,8 @@ class DepthIntake:
             with self._map_lock:
                 if self.map.observe(seen, pose):
                     self._unsaved_hazard = True  # written at once: see serve
+            if self.on_scan is not None:  # after the map: a failure to publish loses nothing
+                self.on_scan(camera, scan)
         if tell:
             floor_m, below_m = blind_zone(intr, mount, self.safety_distance_m)
             tally.log.info(

@@ -16,15 +16,12 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Detections, LaserScan
-from perception import DEPTH_CENTRE, DEPTH_DISTANCE, Mounting, to_robot
+from perception import DEPTH_CENTRE, DEPTH_DISTANCE, Mounted, Mounting, to_robot
 
 
-class Mount(Protocol):
-    """Where a camera looks on the robot and how wide: a camera's announcement
+class Mount(Mounted, Protocol):
+    """Where a camera stands and looks on the robot and how wide: a camera's announcement
     (common/messages.py ``CameraAnnouncement``) or its settings."""
-
-    @property
-    def mount_yaw_deg(self) -> float: ...
 
     @property
     def hfov_deg(self) -> float: ...
@@ -89,11 +86,7 @@ def depth_distance(dets: Detections, i: int, camera: Mount | None = None) -> flo
     x, _, z = (columns[c][i : i + 1] for c in DEPTH_CENTRE)
     if not (math.isfinite(x[0]) and math.isfinite(z[0])) or z[0] <= 0:
         return math.nan
-    mount = Mounting(
-        x_m=getattr(camera, "mount_x_m", 0.0),
-        y_m=getattr(camera, "mount_y_m", 0.0),
-        yaw_deg=getattr(camera, "mount_yaw_deg", 0.0),
-    )
+    mount = Mounting() if camera is None else Mounting.of(camera)
     forward, left, _ = to_robot(x, np.zeros_like(x), z, mount)  # the height plays no part
     return float(np.hypot(forward[0], left[0]))
 

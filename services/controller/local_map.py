@@ -3,7 +3,7 @@ no bus, no clock (times are handed in).
 
 A depth camera sees the floor only from some way ahead (a level camera 0.6 m up with a 60 deg
 view: from 1.39 m), so a low box or a kerb seen on the way slips out of view as the robot
-nears it. Each frame's :class:`~services.controller.depth_scan.Observation` is written into a
+nears it. Each frame's :class:`~depthscan.observe.Observation` is written into a
 grid fixed to the odometry frame, placed by the robot's pose when the frame was captured:
 
     FREE     floor seen there
@@ -40,7 +40,7 @@ import numpy.typing as npt
 
 from common.messages import Header, LaserScan
 from common.unicycle import Pose, advance
-from services.controller.depth_observe import Observation
+from depthscan.observe import Observation
 
 UNSEEN, FREE, UNKNOWN, HAZARD = 0, 1, 2, 3
 

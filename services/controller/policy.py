@@ -73,7 +73,7 @@ class VelocityCommand:
 class Inputs:
     """The newest inputs: each camera's :class:`View` by camera name, the scan and its age in
     seconds (inf when none has arrived), and the e-stop; the depth cameras' virtual scan
-    (services/controller/depth_scan.py ``depth_obstacles``), its age, why there is none
+    (services/controller/depth_obstacles.py ``depth_obstacles``), its age, why there is none
     (``depth_missing``); what the depth cameras' map remembers round the robot
     (``depth_remembered``, services/controller/local_map.py: judged with the depth, when the
     depth is fresh) and how far ahead it knows the floor (``depth_known_m``)."""

@@ -11,7 +11,7 @@ from contextlib import ExitStack
 from typing import TYPE_CHECKING, Generic, Protocol, TypeVar
 
 from common.announce import Announced, announced_cameras
-from common.bus import Declared, Sample
+from common.bus import Declared, Publisher, QoS, Sample
 from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock, Stamp, mono_s
 from common.contracts import ControllerState, DetectorInfo
 from common.counters import per_camera
@@ -329,14 +329,17 @@ class ControlLoop:
         # The depth cameras' images, only when depth is needed: the callback only leaves each
         # in its camera's slot, and the intake's own thread (``run``) turns it into a scan.
         self.depth: DepthIntake | None = None
+        self.virtual_scans: VirtualScans | None = None
         if s.needs_depth:
             # Here, not at the top: perception loads OpenCV, which only a controller that
             # reads depth needs.
             from services.controller.depth_intake import DepthIntake
 
+            self.virtual_scans = VirtualScans(node)
             self.depth = DepthIntake(
-                s, node, config.stack.clock_tolerance_s, node.clock, config.depth_memory_path
-            )
+                s, node, config.stack.clock_tolerance_s, node.clock, config.depth_memory_path,
+                on_scan=self.virtual_scans.put,
+            )  # fmt: skip
             # The bus's own subscribe: the intake needs each sample's publisher (Sample.source).
             self._subs.append(node.bus.subscribe(keys.all_depths(), self._on_depth))
         self._cameras_lock = threading.Lock()  # one change of the camera set at a time
@@ -459,6 +462,34 @@ class ControlLoop:
             self.announced.close()
         for sub in self._subs:
             sub.undeclare()
+        if self.virtual_scans is not None:
+            self.virtual_scans.close()
+
+
+class VirtualScans:
+    """Each depth camera's virtual scan as the depth intake makes it, published on the
+    camera's own key (``<prefix>/scan/virtual/<camera>``: what the controller judged as
+    obstacles, for the viewer and the recorder). A camera's publisher is declared with its
+    first scan. Called on the intake's thread only."""
+
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        self._pubs: dict[str, Publisher] = {}
+        self._lock = threading.Lock()  # put (the intake's thread) against close
+
+    def put(self, camera: str, scan: LaserScan) -> None:
+        with self._lock:
+            pub = self._pubs.get(camera)
+            if pub is None:
+                key = self.node.keys.virtual_scan(camera)
+                pub = self._pubs[camera] = self.node.publisher(key, QoS.SENSOR)
+            pub.put(scan.encode())
+
+    def close(self) -> None:
+        with self._lock:
+            pubs, self._pubs = list(self._pubs.values()), {}
+        for pub in pubs:
+            pub.undeclare()
 
 
 def run(config: Config, stop: threading.Event) -> int:

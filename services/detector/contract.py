@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Annotated
 
 from common.access import Access, Shape, service_access
 from common.counters import BAD_INPUT, COMMON
 from common.errors import ConfigError
 from common.limits import DEFAULT_MAX_FRAME_PIXELS, MAX_IMAGE_SIDE
-from common.setting_checks import Bounds, check_bounds, check_lengths
+from common.setting_checks import Length, Range, check_bounds, check_lengths
 from perception.settings import DetectorSpec, TrackerParams
 
 #: As common/messages.py's (the contract loads no messages: a unit test checks they agree).
@@ -151,6 +151,10 @@ COUNTERS = frozenset(
 
 
 # -- the bus ---------------------------------------------------------------------------------
+#: Its work loop publishes counters on every pass: its heartbeat (deploy/watchdog.py).
+HEARTBEAT = True
+
+
 def access(shape: Shape) -> dict[str, Access]:
     """Each worker reads frames and depth images and puts detections, never frames: every
     camera's, as any worker may come to serve any camera (services/detector/pool.py); it reads
@@ -292,73 +296,44 @@ class DetectorSettings(DetectorSpec):
     (perception/depth.py's DepthParams).
     """
 
-    max_batch: int = 1
+    max_batch: Annotated[int, Range(1, MAX_SERVED_BATCH)] = 1
     batch_choice: str = "measured"
-    batch_min_gain: float = 0.2
-    batch_probe_runs: int = 3
-    max_frame_age_s: float = 1.0
-    counters_period_s: float = 1.0
-    max_frame_pixels: int = DEFAULT_MAX_FRAME_PIXELS
-    workers: int = 1
+    batch_min_gain: Annotated[float, Range(0, 0.9)] = 0.2
+    batch_probe_runs: Annotated[int, Range(1, 20)] = 3
+    max_frame_age_s: Annotated[float, Range(0.01, 60)] = 1.0
+    counters_period_s: Annotated[float, Range(0.1, 60)] = 1.0
+    # JPEG header or raw size
+    max_frame_pixels: Annotated[int, Range(1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE)] = (
+        DEFAULT_MAX_FRAME_PIXELS
+    )
+    workers: Annotated[int, Range(1, MAX_WORKERS)] = 1
     worker_id: str = ""
-    pool_balance: float = 1.0
-    pool_stall_s: float = 5.0
-    pool_alarm_s: float = 10.0
-    pool_deliver_s: float = 4.0
-    pool_readmit_s: float = 30.0
-    max_robot_cameras: int = 16
+    pool_balance: Annotated[float, Range(1, 4)] = 1.0
+    pool_stall_s: Annotated[float, Range(1, 60)] = 5.0
+    pool_alarm_s: Annotated[float, Range(1, 600)] = 10.0
+    pool_deliver_s: Annotated[float, Range(0.5, 600)] = 4.0
+    pool_readmit_s: Annotated[float, Range(1, 3600)] = 30.0
+    max_robot_cameras: Annotated[int, Range(1, 1024)] = 16
     pool_prefix: str = ""
-    prefixes: tuple[str, ...] = ()
-    capacity_hz: float = 0.0
-    capacity_step: float = 0.25
-    capacity_period_s: float = 10.0
-    capacity_smoothing: float = 0.05
+    prefixes: Annotated[tuple[str, ...], Length(0, MAX_ANNOUNCED_PREFIXES)] = ()
+    capacity_hz: Annotated[float, Range(0, MAX_CAPACITY_HZ)] = 0.0
+    capacity_step: Annotated[float, Range(0.01, 10)] = 0.25
+    capacity_period_s: Annotated[float, Range(0.5, 3600)] = 10.0
+    capacity_smoothing: Annotated[float, Range(0.01, 1)] = 0.05
     attention: bool = True
-    attention_floor_hz: float = 1.5
-    attention_floor_share: float = 0.5
-    attention_hold_s: float = 2.0
-    depth_pair_tolerance_ms: float = 20.0
-    depth_buffer: int = 4
-    depth_wait_ms: float = 10.0
-    depth_min_valid_pixels: int = 20
-    depth_min_valid_fraction: float = 0.05
-
-    #: Serving's own bounds; BOUNDS adds the library's (checked by DetectorSpec).
-    SERVING_BOUNDS: ClassVar[Bounds] = {
-        "max_batch": (1, MAX_SERVED_BATCH),
-        "batch_min_gain": (0, 0.9),
-        "batch_probe_runs": (1, 20),
-        "max_frame_age_s": (0.01, 60),
-        "counters_period_s": (0.1, 60),
-        "max_frame_pixels": (1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE),  # JPEG header or raw size
-        "workers": (1, MAX_WORKERS),
-        "pool_balance": (1, 4),
-        "pool_stall_s": (1, 60),
-        "pool_alarm_s": (1, 600),
-        "pool_deliver_s": (0.5, 600),
-        "pool_readmit_s": (1, 3600),
-        "max_robot_cameras": (1, 1024),
-        "attention_floor_hz": (0.05, 100),
-        "attention_hold_s": (0, 60),
-        "attention_floor_share": (0.05, 1),
-        "capacity_hz": (0, MAX_CAPACITY_HZ),
-        "capacity_step": (0.01, 10),
-        "capacity_period_s": (0.5, 3600),
-        "capacity_smoothing": (0.01, 1),
-        "depth_pair_tolerance_ms": (0, 1000),
-        "depth_buffer": (1, MAX_DEPTH_BUFFER),
-        "depth_wait_ms": (0, 200),
-        "depth_min_valid_pixels": (1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE),
-        "depth_min_valid_fraction": (0, 1),
-    }
-    SERVING_LENGTHS: ClassVar[Bounds] = {"prefixes": (0, MAX_ANNOUNCED_PREFIXES)}
-    BOUNDS: ClassVar[Bounds] = {**DetectorSpec.BOUNDS, **SERVING_BOUNDS}
-    LENGTHS: ClassVar[Bounds] = {**DetectorSpec.LENGTHS, **SERVING_LENGTHS}
+    attention_floor_hz: Annotated[float, Range(0.05, 100)] = 1.5
+    attention_floor_share: Annotated[float, Range(0.05, 1)] = 0.5
+    attention_hold_s: Annotated[float, Range(0, 60)] = 2.0
+    depth_pair_tolerance_ms: Annotated[float, Range(0, 1000)] = 20.0
+    depth_buffer: Annotated[int, Range(1, MAX_DEPTH_BUFFER)] = 4
+    depth_wait_ms: Annotated[float, Range(0, 200)] = 10.0
+    depth_min_valid_pixels: Annotated[int, Range(1, MAX_IMAGE_SIDE * MAX_IMAGE_SIDE)] = 20
+    depth_min_valid_fraction: Annotated[float, Range(0, 1)] = 0.05
 
     def __post_init__(self) -> None:
         DetectorSpec.__post_init__(self)
-        check_bounds(self, "detector", self.SERVING_BOUNDS)
-        check_lengths(self, "detector", self.SERVING_LENGTHS)
+        check_bounds(self, "detector", DetectorSettings)
+        check_lengths(self, "detector", DetectorSettings)
         if self.batch_choice not in BATCH_CHOICES:
             raise ConfigError(
                 f"detector.batch_choice must be one of {', '.join(BATCH_CHOICES)}, "
@@ -399,3 +374,7 @@ class TrackerSettings(TrackerParams):
     declared and checked there); ``enabled`` is the service's to read."""
 
     enabled: bool = True
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"detector": DetectorSettings, "tracker": TrackerSettings}

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Annotated
 
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
 from common.errors import ConfigError
-from common.setting_checks import Bounds, check_bounds
+from common.setting_checks import Range, check_bounds
 from services.detector import contract as detector
 
 CAMERAS_REFUSED = "cameras_refused"  # detections of cameras over max_cameras
@@ -110,28 +110,21 @@ class MetricsSettings:
     further one is refused (``metrics.refused.too_many_workers``).
     """
 
-    window_s: float = 10.0
-    report_period_s: float = 5.0
-    history_s: float = 600.0
-    prometheus_port: int = 0
+    window_s: Annotated[float, Range(0.1, 3600)] = 10.0
+    report_period_s: Annotated[float, Range(0.1, 3600)] = 5.0
+    history_s: Annotated[float, Range(1, 86400)] = 600.0
+    prometheus_port: Annotated[int, Range(0, 65535)] = 0  # 0 = off
     prometheus_host: str = "127.0.0.1"
-    max_counters_per_service: int = 256
-    max_timing_ms: float = 1e6
-    max_classes: int = 1000
-    max_workers: int = 32
-
-    BOUNDS: ClassVar[Bounds] = {
-        "window_s": (0.1, 3600),
-        "report_period_s": (0.1, 3600),
-        "history_s": (1, 86400),
-        "prometheus_port": (0, 65535),  # 0 = off
-        "max_counters_per_service": (1, 2000),
-        "max_timing_ms": (0.001, 1e9),
-        "max_classes": (1, 10000),
-        "max_workers": (0, 1000),
-    }
+    max_counters_per_service: Annotated[int, Range(1, 2000)] = 256
+    max_timing_ms: Annotated[float, Range(0.001, 1e9)] = 1e6
+    max_classes: Annotated[int, Range(1, 10000)] = 1000
+    max_workers: Annotated[int, Range(0, 1000)] = 32
 
     def __post_init__(self) -> None:
-        check_bounds(self, "metrics", self.BOUNDS)
+        check_bounds(self, "metrics", MetricsSettings)
         if not self.prometheus_host:
             raise ConfigError("metrics.prometheus_host must not be empty")
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"metrics": MetricsSettings}

@@ -6,7 +6,8 @@ dependencies), so that Foxglove, rosbags and ``ros2 bag`` read them:
 
     Frame (raw)        sensor_msgs/msg/Image              on ros2.image_topic
     Frame (jpeg)       sensor_msgs/msg/CompressedImage    on ros2.image_topic + "/compressed"
-    LaserScan          sensor_msgs/msg/LaserScan          on ros2.scan_topic
+    LaserScan          sensor_msgs/msg/LaserScan          on ros2.scan_topic; a depth
+                       camera's virtual scan on ``<scan_topic>/virtual/<camera>``
     Detections         vision_msgs/msg/Detection2DArray   on ros2.detections_topic, and
                        with depth columns vision_msgs/msg/Detection3DArray on
                        ros2.detections_3d_topic (the camera's optical frame; the boxes of
@@ -51,7 +52,7 @@ import numpy as np
 
 from common.codec import Message
 from common.fields import inline_fields
-from common.keys import camera_in_key
+from common.keys import camera_in_key, virtual_scan_camera
 from common.messages import (
     CameraAnnouncement,
     DepthFrame,
@@ -82,13 +83,16 @@ from services.recorder.depth_ros import (
     depth_to_ros,
     depth_topics,
 )
-from services.ros2.contract import CameraTopics, Ros2Settings, camera_topics
+from services.ros2.contract import CameraTopics, Ros2Settings, camera_topics, virtual_scan_topic
 
 PROFILE = "ros2"  # the MCAP profile: ros2 readers take the CDR channels as theirs
 CDR, JSON = "cdr", "json"
 ROS2MSG = "ros2msg"
 STACK_MESSAGE = "stack_message"  # channel metadata: the stack's message type
 JSON_SCHEMA = "jsonschema"  # channel metadata: the JSON schema of a JSON channel
+#: Channel metadata: the depth camera whose virtual scan the channel holds. Never played back
+#: (a replay would put it on the laser's key): the controller makes it again from the depth.
+VIRTUAL_SCAN = "virtual_scan"
 
 
 @dataclass(frozen=True, slots=True)
@@ -271,7 +275,12 @@ class Translator:
                 self._ros(depth.image, IMAGE, msg, header, image, limits),
             ]
         if isinstance(msg, LaserScan):
-            return [self._ros(r.scan_topic, LASER_SCAN, msg, header, scan_to_ros(d, msg))]
+            ros = scan_to_ros(d, msg)
+            virtual = virtual_scan_camera(key)
+            if virtual is None:
+                return [self._ros(r.scan_topic, LASER_SCAN, msg, header, ros)]
+            topic, more = virtual_scan_topic(r, virtual), ((VIRTUAL_SCAN, virtual),)
+            return [self._ros(topic, LASER_SCAN, msg, header, ros, more)]
         if isinstance(msg, Detections):
             topics = self._topics(key)
             out = [self._ros(topics.detections, DETECTION_2D_ARRAY, msg, header,

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import ClassVar
+from typing import Annotated
 
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
 from common.errors import ConfigError
-from common.setting_checks import Bounds, check_bounds, enum_field
+from common.setting_checks import Range, check_bounds, enum_field
 
 RECEIVED = "received"
 WRITTEN = "written"
@@ -84,25 +84,15 @@ class RecorderSettings:
 
     output_dir: str = "recordings"
     file_pattern: str = "stack-{time}.mcap"
-    queue_size: int = 256
-    chunk_size_kb: int = 1024
+    queue_size: Annotated[int, Range(1, 100_000)] = 256
+    chunk_size_kb: Annotated[int, Range(16, 65536)] = 1024
     compression: Compression = Compression.LZ4
-    flush_period_s: float = 1.0
-    progress_period_s: float = 5.0
-    silence_warning_s: float = 5.0
-    detector_wait_s: float = 120.0
-    nice: int = 10
+    flush_period_s: Annotated[float, Range(0.05, 60)] = 1.0
+    progress_period_s: Annotated[float, Range(0.1, 3600)] = 5.0
+    silence_warning_s: Annotated[float, Range(0.5, 3600)] = 5.0
+    detector_wait_s: Annotated[float, Range(1, 3600)] = 120.0
+    nice: Annotated[int, Range(0, 19)] = 10
     sched_idle: bool = True
-
-    BOUNDS: ClassVar[Bounds] = {
-        "queue_size": (1, 100_000),
-        "chunk_size_kb": (16, 65536),
-        "flush_period_s": (0.05, 60),
-        "progress_period_s": (0.1, 3600),
-        "silence_warning_s": (0.5, 3600),
-        "detector_wait_s": (1, 3600),
-        "nice": (0, 19),
-    }
 
     def __post_init__(self) -> None:
         enum_field(self, "compression", Compression, "recorder.compression")
@@ -113,4 +103,8 @@ class RecorderSettings:
                 f"recorder.file_pattern must be a file name ending in .mcap, "
                 f"got {self.file_pattern!r}"
             )
-        check_bounds(self, "recorder", self.BOUNDS)
+        check_bounds(self, "recorder", RecorderSettings)
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"recorder": RecorderSettings}

@@ -229,19 +229,16 @@ def announce_played(
     and field of view as recorded (its config's when no announcement was)."""
     for camera, seen in recorded.items():
         c, was = config.all_cameras[camera], seen.announced
-        announcements.announce(
-            camera,
-            rate_hz=(seen.rate_hz() or c.rate_hz) * rate,
-            mount_yaw_deg=c.mount_yaw_deg if was is None else was.mount_yaw_deg,
-            hfov_deg=c.hfov_deg if was is None else was.hfov_deg,
-            frame_id=c.frame_id,
-            width=seen.width,
-            height=seen.height,
-            depth=seen.depth,
-            mount_height_m=0.0 if was is None else was.mount_height_m,
-            mount_x_m=0.0 if was is None else was.mount_x_m,
-            mount_y_m=0.0 if was is None else was.mount_y_m,
+        # With none recorded, its config's view and no mounting: where it stood is unknown.
+        described = (
+            was
+            if was is not None
+            else dataclasses.replace(c, mount_height_m=0.0, mount_x_m=0.0, mount_y_m=0.0)
         )
+        announcements.announce(
+            camera, described, rate_hz=(seen.rate_hz() or c.rate_hz) * rate,
+            frame_id=c.frame_id, width=seen.width, height=seen.height, depth=seen.depth,
+        )  # fmt: skip
         announcements.saw(camera, seen.width, seen.height, seen.frame_id)  # the recorded id
 
 

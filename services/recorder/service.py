@@ -78,6 +78,7 @@ def subscriptions(keys: Keys, cameras: Sequence[str]) -> dict[str, type[Message]
         **{keys.depth(camera): DepthFrame for camera in cameras},
         keys.all_detections(): Detections,
         keys.scan(): LaserScan,
+        keys.all_virtual_scans(): LaserScan,  # each depth camera's, as the controller made it
         keys.cmd_vel(): Twist,
         keys.controller_status(): ControllerStatus,
         keys.estop(): EStop,

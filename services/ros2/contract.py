@@ -11,12 +11,12 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import ClassVar
+from typing import Annotated
 
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
 from common.errors import ConfigError
-from common.setting_checks import Bounds, check_bounds, check_lengths, enum_field
+from common.setting_checks import Length, Range, check_bounds, check_lengths, enum_field
 from rosmsg.distro import RosDistro
 
 DETECTIONS_OUT = "detections_out"
@@ -67,6 +67,8 @@ PER_CAMERA: frozenset[str] = frozenset()
 SERVICE = "ros2"
 #: It feeds a live robot's sensors into the stack: no recording may be played onto it.
 LIVE_SENSOR = True
+#: Its work loop publishes counters on every pass: its heartbeat (deploy/watchdog.py).
+HEARTBEAT = True
 
 
 def access(shape: Shape) -> dict[str, Access]:
@@ -141,9 +143,9 @@ class Ros2Settings:
     sends the robot zero instead and counts ``commands_out_of_range``.
     """
 
-    router: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
-    listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
-    domain_id: int = 0
+    router: Annotated[tuple[str, ...], Length(1, 16)] = ("tcp/127.0.0.1:7447",)
+    listen: Annotated[tuple[str, ...], Length(0, 16)] = ("tcp/127.0.0.1:0",)
+    domain_id: Annotated[int, Range(0, 232)] = 0  # the DDS domain ids that map to valid ports
     distro: RosDistro = RosDistro.JAZZY
     node: str = "zenoh_yolo_stack"
     namespace: str = "/"
@@ -159,8 +161,8 @@ class Ros2Settings:
     cmd_vel_out: bool = True
     debug_image_out: bool = False
     debug_image_topic: str = "/detections/image"
-    debug_image_rate_hz: float = 5.0
-    debug_jpeg_quality: int = 80
+    debug_image_rate_hz: Annotated[float, Range(0.1, 100)] = 5.0
+    debug_jpeg_quality: Annotated[int, Range(1, 100)] = 80
     camera_namespace: str = "/" + CAMERA_FIELD
     depth_in: bool = False
     depth_topic: str = "/camera/aligned_depth_to_color/image_raw"
@@ -168,23 +170,13 @@ class Ros2Settings:
     detections_3d_out: bool = True
     detections_3d_topic: str = "/detections_3d"
     detections_3d_frame: str = ""
-    router_timeout_s: float = 5.0
-    max_command_linear: float = 5.0
-    max_command_angular: float = 10.0
-
-    BOUNDS: ClassVar[Bounds] = {
-        "domain_id": (0, 232),  # the DDS domain ids that map to valid ports
-        "debug_image_rate_hz": (0.1, 100),
-        "debug_jpeg_quality": (1, 100),
-        "router_timeout_s": (0.1, 300),
-        "max_command_linear": (0.01, 100),
-        "max_command_angular": (0.01, 100),
-    }
-    LENGTHS: ClassVar[Bounds] = {"router": (1, 16), "listen": (0, 16)}
+    router_timeout_s: Annotated[float, Range(0.1, 300)] = 5.0
+    max_command_linear: Annotated[float, Range(0.01, 100)] = 5.0
+    max_command_angular: Annotated[float, Range(0.01, 100)] = 10.0
 
     def __post_init__(self) -> None:
-        check_bounds(self, "ros2", self.BOUNDS)
-        check_lengths(self, "ros2", self.LENGTHS)
+        check_bounds(self, "ros2", Ros2Settings)
+        check_lengths(self, "ros2", Ros2Settings)
         enum_field(self, "distro", RosDistro, "ros2.distro")
         enum_field(self, "image_format", ImageFormat, "ros2.image_format")
         if not self.router or not all("/" in ep for ep in self.router):
@@ -245,6 +237,12 @@ def camera_topics(settings: Ros2Settings, first: str, camera: str) -> CameraTopi
     return CameraTopics(*map(under, own))
 
 
+def virtual_scan_topic(settings: Ros2Settings, camera: str) -> str:
+    """The topic of ``camera``'s virtual scan (made from its depth images): beside the
+    laser's, ``<ros2.scan_topic>/virtual/<camera>`` (``/scan/virtual/front``)."""
+    return f"{settings.scan_topic.rstrip('/')}/virtual/{camera}"
+
+
 def check_camera_topics(settings: Ros2Settings, cameras: Sequence[str]) -> None:
     """ConfigError unless every camera's topics (``cameras``: the first camera first) are ROS 2
     topic names and no two cameras, nor the scan and cmd_vel, share one."""
@@ -267,3 +265,7 @@ def check_camera_topics(settings: Ros2Settings, cameras: Sequence[str]) -> None:
                     "camera needs topics of its own (ros2.camera_namespace)"
                 )
             seen[topic] = f"camera {camera!r}'s {what} topic"
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"ros2": Ros2Settings}

@@ -124,17 +124,7 @@ def announce_bridged(config: Config, announcements: CameraAnnouncements) -> dict
         return {}
     told: dict[str, OnFrame] = {}
     for camera, c in config.all_cameras.items():
-        announcements.announce(
-            camera,
-            rate_hz=c.rate_hz,
-            mount_yaw_deg=c.mount_yaw_deg,
-            hfov_deg=c.hfov_deg,
-            frame_id=c.frame_id,
-            depth=s.depth_in,
-            mount_height_m=c.mount_height_m,
-            mount_x_m=c.mount_x_m,
-            mount_y_m=c.mount_y_m,
-        )
+        announcements.announce(camera, c, depth=s.depth_in)
 
         def on_frame(frame: Frame, camera: str = camera) -> None:
             announcements.saw(camera, frame.width, frame.height, frame.header.frame_id)

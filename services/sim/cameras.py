@@ -30,6 +30,28 @@ class SimCamera:
     frame_id: str
     jpeg_quality: int
 
+    # Where it stands as it is rendered (what its announcement says: common/camera_announce.py
+    # ``Described``): at the base's centre, the spec's height up, looking its yaw.
+    @property
+    def mount_yaw_deg(self) -> float:
+        return self.spec.mount_yaw_deg
+
+    @property
+    def hfov_deg(self) -> float:
+        return self.spec.hfov_deg
+
+    @property
+    def mount_height_m(self) -> float:
+        return self.spec.height_m
+
+    @property
+    def mount_x_m(self) -> float:
+        return 0.0
+
+    @property
+    def mount_y_m(self) -> float:
+        return 0.0
+
 
 def sim_cameras(config: Config) -> list[SimCamera]:
     """Every configured camera, the first first (see the module's docstring for the rules)."""

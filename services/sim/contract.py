@@ -8,12 +8,12 @@ ground truth, and reads the velocity commands.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Annotated
 
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
 from common.errors import ConfigError
-from common.setting_checks import Bounds, check_bounds, check_lengths
+from common.setting_checks import Length, Range, check_bounds, check_lengths
 
 FRAMES_OUT = "frames_out"  # in all and per camera
 DEPTH_OUT = "depth_out"  # depth images (sim.depth), in all and per camera
@@ -28,6 +28,8 @@ COUNTERS = frozenset(
 SERVICE = "sim"
 #: It feeds a (simulated) robot's sensors into the stack: no recording may be played onto it.
 LIVE_SENSOR = True
+#: Its work loop publishes counters on every pass: its heartbeat (deploy/watchdog.py).
+HEARTBEAT = True
 
 
 def access(shape: Shape) -> dict[str, Access]:
@@ -75,66 +77,43 @@ class SimSettings:
     """
 
     scenario: str = "demo"
-    wait_for: tuple[str, ...] = ("detector", "controller")
-    physics_hz: float = 50.0
-    camera_rate_hz: float = 5.0
-    scan_rate_hz: float = 10.0
-    truth_rate_hz: float = 20.0
-    width: int = 640
-    height: int = 480
-    camera_height_m: float = 0.6
-    laser_fov_deg: float = 270.0
-    laser_rays: int = 541
-    laser_range_max_m: float = 12.0
-    laser_noise_m: float = 0.01
-    laser_height_m: float = 0.2
-    seed: int = 0
+    wait_for: Annotated[tuple[str, ...], Length(0, 6)] = ("detector", "controller")
+    physics_hz: Annotated[float, Range(1, 1000)] = 50.0
+    camera_rate_hz: Annotated[float, Range(0.1, 100)] = 5.0
+    scan_rate_hz: Annotated[float, Range(0.1, 100)] = 10.0
+    truth_rate_hz: Annotated[float, Range(0.1, 100)] = 20.0
+    width: Annotated[int, Range(16, 4096)] = 640
+    height: Annotated[int, Range(16, 4096)] = 480
+    camera_height_m: Annotated[float, Range(0.05, 5)] = 0.6
+    laser_fov_deg: Annotated[float, Range(1, 360)] = 270.0
+    laser_rays: Annotated[int, Range(2, 10000)] = 541  # real 2D lidars: 360..3200 rays a scan
+    laser_range_max_m: Annotated[float, Range(0.1, 100)] = 12.0
+    laser_noise_m: Annotated[float, Range(0, 1)] = 0.01
+    laser_height_m: Annotated[float, Range(0.01, 2)] = 0.2  # on the base's deck .. on a mast
+    seed: Annotated[int, Range(0, 2**32 - 1)] = 0
     ros2_robot: bool = False
-    command_sources_window_s: float = 1.0
+    command_sources_window_s: Annotated[float, Range(0.01, 60)] = 1.0
     laser: bool = True
     depth: bool = False
-    depth_range_min_m: float = 0.3
-    depth_range_max_m: float = 10.0
-    depth_noise_k: float = 0.005
-    depth_noise_corr_px: float = 4.0
-    depth_edge_px: int = 2
-    depth_edge_jump: float = 0.1
-    depth_dark_level: int = 30
-    depth_dark_dropout: float = 0.5
-    depth_dropout: float = 0.01
-
-    BOUNDS: ClassVar[Bounds] = {
-        "physics_hz": (1, 1000),
-        "camera_rate_hz": (0.1, 100),
-        "scan_rate_hz": (0.1, 100),
-        "truth_rate_hz": (0.1, 100),
-        "width": (16, 4096),
-        "height": (16, 4096),
-        "camera_height_m": (0.05, 5),
-        "laser_fov_deg": (1, 360),
-        "laser_rays": (2, 10000),  # real 2D lidars: 360..3200 rays a scan
-        "laser_range_max_m": (0.1, 100),
-        "laser_noise_m": (0, 1),
-        "laser_height_m": (0.01, 2),  # on the base's deck .. on a mast
-        "seed": (0, 2**32 - 1),
-        "command_sources_window_s": (0.01, 60),
-        "depth_range_min_m": (0, 10),
-        "depth_range_max_m": (0.1, 65),  # a 16UC1 image holds up to 65.535 m
-        "depth_noise_k": (0, 1),
-        "depth_noise_corr_px": (0, 50),
-        "depth_edge_px": (0, 50),
-        "depth_edge_jump": (0.001, 10),
-        "depth_dark_level": (0, 255),
-        "depth_dark_dropout": (0, 1),
-        "depth_dropout": (0, 1),
-    }
-    LENGTHS: ClassVar[Bounds] = {"wait_for": (0, 6)}
+    depth_range_min_m: Annotated[float, Range(0, 10)] = 0.3
+    depth_range_max_m: Annotated[float, Range(0.1, 65)] = 10.0  # a 16UC1 image holds up to 65.535 m
+    depth_noise_k: Annotated[float, Range(0, 1)] = 0.005
+    depth_noise_corr_px: Annotated[float, Range(0, 50)] = 4.0
+    depth_edge_px: Annotated[int, Range(0, 50)] = 2
+    depth_edge_jump: Annotated[float, Range(0.001, 10)] = 0.1
+    depth_dark_level: Annotated[int, Range(0, 255)] = 30
+    depth_dark_dropout: Annotated[float, Range(0, 1)] = 0.5
+    depth_dropout: Annotated[float, Range(0, 1)] = 0.01
 
     def __post_init__(self) -> None:
-        check_bounds(self, "sim", self.BOUNDS)
-        check_lengths(self, "sim", self.LENGTHS)
+        check_bounds(self, "sim", SimSettings)
+        check_lengths(self, "sim", SimSettings)
         if self.depth_range_min_m >= self.depth_range_max_m:
             raise ConfigError(
                 f"sim.depth_range_min_m ({self.depth_range_min_m:g}) must be below "
                 f"sim.depth_range_max_m ({self.depth_range_max_m:g})"
             )
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"sim": SimSettings}

@@ -202,16 +202,9 @@ def announce_cameras(
     camera at its height above the floor."""
     for c in cameras:
         announcements.announce(
-            c.name,
-            rate_hz=min(c.rate_hz, physics_hz),
-            mount_yaw_deg=c.spec.mount_yaw_deg,
-            hfov_deg=c.spec.hfov_deg,
-            frame_id=c.frame_id,
-            width=c.spec.width,
-            height=c.spec.height,
-            depth=depth,
-            mount_height_m=c.spec.height_m if depth else 0.0,
-        )
+            c.name, c, rate_hz=min(c.rate_hz, physics_hz), width=c.spec.width,
+            height=c.spec.height, depth=depth, mount_height_m=None if depth else 0.0,
+        )  # fmt: skip
 
 
 def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int:

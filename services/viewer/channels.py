@@ -2,14 +2,15 @@
 
 Typed channels (protobuf, Foxglove's own schemas) carry each camera's image and its
 annotations, the depth image of each camera announced with depth (made when it is first
-announced so), the 3D boxes of the detections with depth, the scan, the transforms and the 3D
-scene; the command, the controller's state and
-the metrics are JSON with a JSON schema, so that Foxglove's Plot panel can plot any number in
-them. The layout (layout.py) names the same topics.
+announced so), the 3D boxes of the detections with depth, the scan, each depth camera's
+virtual scan (made with its first), the transforms and the 3D scene; the command, the
+controller's state and the metrics are JSON with a JSON schema, so that Foxglove's Plot panel
+can plot any number in them. The layout (layout.py) names the same topics.
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from typing import Any
 
@@ -42,6 +43,12 @@ def camera_topics(first: str, camera: str) -> tuple[str, str]:
     if camera == first:
         return IMAGE, ANNOTATIONS
     return f"/camera/{camera}/image", f"/camera/{camera}/annotations"
+
+
+def virtual_scan_topic(camera: str) -> str:
+    """The topic of ``camera``'s virtual scan (what the controller judged as obstacles from its
+    depth): ``/scan/virtual/<camera>``, beside the laser's ``/scan``."""
+    return f"{SCAN}/virtual/{camera}"
 
 
 def depth_topic(first: str, camera: str) -> str:
@@ -128,9 +135,21 @@ class Channels:
         self.scene = SceneUpdateChannel(SCENE, context=context)
         self.boxes = SceneUpdateChannel(BOXES_3D, context=context)
         self._depth: dict[str, RawImageChannel] = {}
+        self._virtual: dict[str, LaserScanChannel] = {}
+        self._made = threading.Lock()  # channels made on first use, from any bus thread
         self.cmd_vel = foxglove.Channel(CMD_VEL, schema=CMD_VEL_SCHEMA, context=context)
         self.controller = foxglove.Channel(CONTROLLER, schema=CONTROLLER_SCHEMA, context=context)
         self.metrics = foxglove.Channel(METRICS, schema=METRICS_SCHEMA, context=context)
+
+    def virtual_scan(self, camera: str) -> LaserScanChannel:
+        """``camera``'s virtual scan channel, made (advertised) with its first scan: only the
+        depth cameras of a controller that reads depth have one."""
+        with self._made:
+            channel = self._virtual.get(camera)
+            if channel is None:
+                topic = virtual_scan_topic(camera)
+                channel = self._virtual[camera] = LaserScanChannel(topic, context=self.context)
+            return channel
 
     def depth(self, camera: str) -> RawImageChannel:
         """``camera``'s depth image channel, made (advertised) on the first call: only the

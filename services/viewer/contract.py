@@ -7,12 +7,12 @@ counters.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Annotated
 
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
 from common.errors import ConfigError
-from common.setting_checks import Bounds, check_bounds, check_lengths
+from common.setting_checks import Length, Range, check_bounds, check_lengths
 
 FRAMES_IN = "frames_in"
 DETECTIONS_UNPAIRED = "detections_unpaired"
@@ -50,6 +50,7 @@ def access(shape: Shape) -> dict[str, Access]:
                 keys.all_depths(),
                 keys.all_detections(),
                 keys.scan(),
+                keys.all_virtual_scans(),
                 keys.cmd_vel(),
                 keys.controller_status(),
                 keys.sim_truth(),
@@ -90,37 +91,27 @@ class ViewerSettings:
     """
 
     host: str = "127.0.0.1"
-    port: int = 8766  # not 8765: foxglove_bridge's default on a ROS 2 robot
-    relay_port: int = 0  # the Foxglove server's own, on 127.0.0.1; 0: any free one
-    image_rate_hz: float = 5.0
-    jpeg_quality: int = 70
-    max_image_width: int = 640
-    metrics_rate_hz: float = 1.0
-    scene_rate_hz: float = 5.0
-    path_points: int = 1000
-    allowed_origins: tuple[str, ...] = ("https://app.foxglove.dev",)
-    request_timeout_s: float = 5.0
-    boxes_lifetime_s: float = 2.0
-
-    BOUNDS: ClassVar[Bounds] = {
-        "port": (1, 65535),
-        "relay_port": (0, 65535),  # 0 = any free port
-        "image_rate_hz": (0.1, 60),
-        "jpeg_quality": (1, 100),
-        "max_image_width": (0, 8192),  # 0 keeps the frame's width; else at least 64
-        "metrics_rate_hz": (0.1, 10),
-        "scene_rate_hz": (0.1, 50),
-        "path_points": (2, 100_000),
-        "request_timeout_s": (0.1, 60),
-        "boxes_lifetime_s": (0.05, 60),
-    }
-    LENGTHS: ClassVar[Bounds] = {"allowed_origins": (0, 100)}  # () lets in native clients only
+    # Not 8765: foxglove_bridge's default on a ROS 2 robot
+    port: Annotated[int, Range(1, 65535)] = 8766
+    # The Foxglove server's own, on 127.0.0.1; 0: any free one
+    relay_port: Annotated[int, Range(0, 65535)] = 0
+    image_rate_hz: Annotated[float, Range(0.1, 60)] = 5.0
+    jpeg_quality: Annotated[int, Range(1, 100)] = 70
+    # 0 keeps the frame's width; else at least 64
+    max_image_width: Annotated[int, Range(0, 8192)] = 640
+    metrics_rate_hz: Annotated[float, Range(0.1, 10)] = 1.0
+    scene_rate_hz: Annotated[float, Range(0.1, 50)] = 5.0
+    path_points: Annotated[int, Range(2, 100_000)] = 1000
+    # () lets in native clients only
+    allowed_origins: Annotated[tuple[str, ...], Length(0, 100)] = ("https://app.foxglove.dev",)
+    request_timeout_s: Annotated[float, Range(0.1, 60)] = 5.0
+    boxes_lifetime_s: Annotated[float, Range(0.05, 60)] = 2.0
 
     def __post_init__(self) -> None:
         if not self.host:
             raise ConfigError("viewer.host must not be empty")
-        check_bounds(self, "viewer", self.BOUNDS)
-        check_lengths(self, "viewer", self.LENGTHS)
+        check_bounds(self, "viewer", ViewerSettings)
+        check_lengths(self, "viewer", ViewerSettings)
         for origin in self.allowed_origins:
             if origin == "*" or "://" not in origin:
                 raise ConfigError(
@@ -136,3 +127,7 @@ class ViewerSettings:
             raise ConfigError(
                 f"viewer.max_image_width must be 0 (keep) or 64..8192, got {self.max_image_width}"
             )
+
+
+#: The stack config's tables this service reads (stack/config.py's Config has each).
+SETTINGS_TABLES = {"viewer": ViewerSettings}

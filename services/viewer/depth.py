@@ -3,9 +3,10 @@ optical frame, and where each camera stands on the robot. Pure: messages in, Fox
 
 Frames: a camera's optical frame (REP 103: x right, y down, z forward) is named by the frame id
 its images carry (``optical_frames``); the transform from the robot's ``base_link`` (x forward,
-y left, z up) to it is the camera's announced mounting: ``mount_x_m`` forward, ``mount_y_m``
-left, ``mount_height_m`` up, turned ``mount_yaw_deg`` counter-clockwise, looking level, as
-``perception.depth.to_robot`` takes it. The depth columns' names are perception's.
+y left, z up) to it is the camera's announced mounting, ``perception.Mounting.of`` (the one
+transform the controller, the scan and the bridge use too): ``x_m`` forward, ``y_m`` left,
+``height_m`` up, turned ``yaw_deg`` counter-clockwise, looking level. The depth columns'
+names are perception's.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from perception import DEPTH_CENTRE as CENTRE
 from perception import DEPTH_COLUMNS as COLUMNS
 from perception import DEPTH_DISTANCE as DISTANCE
 from perception import DEPTH_SIZE as SIZE
-from perception import depth_metres
+from perception import Mounting, depth_metres
 from services.viewer.convert import ROBOT_FRAME, scaled_size, stamp
 
 #: The depth image as sent: 16-bit millimetres, 0 where there is no reading (as a RealSense
@@ -115,16 +116,17 @@ def camera_transforms(cameras: Mapping[str, CameraAnnouncement], stamp_ns: int) 
     unknown height, 0, is drawn on the floor)."""
     ts = stamp(stamp_ns)
     frames = optical_frames(cameras)
+    mounts = {name: Mounting.of(a) for name, a in cameras.items()}
     return FrameTransforms(
         transforms=[
             FrameTransform(
                 timestamp=ts,
                 parent_frame_id=ROBOT_FRAME,
                 child_frame_id=frames[name],
-                translation=Vector3(x=a.mount_x_m, y=a.mount_y_m, z=a.mount_height_m),
-                rotation=mount_rotation(a.mount_yaw_deg),
+                translation=Vector3(x=m.x_m, y=m.y_m, z=m.height_m),
+                rotation=mount_rotation(m.yaw_deg),
             )
-            for name, a in cameras.items()
+            for name, m in mounts.items()
         ]
     )
 

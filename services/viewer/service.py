@@ -25,6 +25,7 @@ from common.clock import SYSTEM_CLOCK, Clock, mono_s
 from common.contracts import MetricsAnswer
 from common.credential_modes import check_folder, check_secret
 from common.errors import ConfigError, ImageError
+from common.keys import virtual_scan_camera
 from common.messages import (
     CameraAnnouncement,
     ControllerStatus,
@@ -229,6 +230,20 @@ class Viewer:
             return
         self.channels.scan.log(shown, log_time=scan.header.stamp_ns)
 
+    def on_virtual_scan(self, key: str, payload: bytes) -> None:
+        """A depth camera's virtual scan (``<prefix>/scan/virtual/<camera>``), on its own
+        channel beside the laser's."""
+        camera = virtual_scan_camera(key)
+        scan = self.tally.decode(key, LaserScan.decode, payload)
+        if camera is None or scan is None:
+            return
+        try:
+            shown = convert.laser_scan(scan)
+        except ValueError as exc:
+            self.unshowable("virtual scan", exc)
+            return
+        self.channels.virtual_scan(camera).log(shown, log_time=scan.header.stamp_ns)
+
     def on_twist(self, payload: bytes) -> None:
         twist = self.tally.decode(self.tally.keys.cmd_vel(), Twist.decode, payload)
         if twist is None:
@@ -363,8 +378,8 @@ def _watch_cameras(node: Node, viewer: Viewer) -> Announced[CameraAnnouncement]:
 
 
 def _subscribe(node: Node, viewer: Viewer) -> list[Declared]:
-    """Each camera's frames and detections, the scan, the commands, the controller's status
-    and the simulator's truth, to the viewer."""
+    """Each camera's frames and detections, the scan and the depth cameras' virtual scans,
+    the commands, the controller's status and the simulator's truth, to the viewer."""
     keys = node.keys
     subs = [
         sub
@@ -376,6 +391,7 @@ def _subscribe(node: Node, viewer: Viewer) -> list[Declared]:
     ]
     subs += [
         node.subscribe(keys.scan(), viewer.on_scan),
+        node.subscribe_keyed(keys.all_virtual_scans(), viewer.on_virtual_scan),
         node.subscribe(keys.cmd_vel(), viewer.on_twist),
         node.subscribe(keys.controller_status(), viewer.on_status),
         node.subscribe(keys.sim_truth(), viewer.on_truth),

@@ -25,6 +25,7 @@ from common.images import load_sample
 from common.messages import Detections, Header
 from common.zenoh_bus import Publisher, QoS, ZenohBus
 from perception.depth import COLUMNS
+from services.camera.contract import CameraSettings
 from tests.integration.conftest import wait_for
 from tests.integration.test_detector_cameras import Detector, serve  # noqa: F401 (a fixture)
 from tests.unit.detector.depthimage import flat_depth
@@ -49,10 +50,8 @@ class DepthCamera:
         self.det = det
         self.photo = cv2.resize(load_sample("astronaut"), SIZE)
         self.announcements = CameraAnnouncements(ZenohBus(det.hub), det.keys, "camera")
-        self.announcements.announce(
-            "front", rate_hz=10.0, mount_yaw_deg=0.0, hfov_deg=60.0, frame_id="front_optical",
-            width=SIZE[0], height=SIZE[1], depth=True, mount_height_m=0.5,
-        )  # fmt: skip
+        front = CameraSettings(rate_hz=10.0, frame_id="front_optical", mount_height_m=0.5)
+        self.announcements.announce("front", front, width=SIZE[0], height=SIZE[1], depth=True)
         self.frames = Publisher(det.hub, det.keys.frame("front"), QoS.SENSOR)
         self.depths = Publisher(det.hub, det.keys.depth("front"), QoS.SENSOR)
         self.sent: dict[int, Header] = {}

@@ -23,7 +23,7 @@ from common.messages import ControllerStatus, Twist
 from perception.depth import Intrinsics
 from tests.integration.conftest import Stack, wait_for
 from tests.integration.feeder import Feeder, header, people
-from tests.unit.controller.depth_scenes import Face, at_bearing, depth_frame, scene
+from tests.unit.depthscan.depth_scenes import Face, at_bearing, depth_frame, scene
 from tools.launch import service_pids
 
 pytestmark = pytest.mark.integration

@@ -23,7 +23,7 @@ from perception.depth import Intrinsics
 from tests.integration.conftest import Stack, wait_for
 from tests.integration.feeder import PERIOD_S, Feeder, header, people
 from tests.integration.test_safety_depth import forward, statuses
-from tests.unit.controller.depth_scenes import at_bearing, depth_frame, scene
+from tests.unit.depthscan.depth_scenes import at_bearing, depth_frame, scene
 
 pytestmark = pytest.mark.integration
 

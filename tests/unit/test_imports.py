@@ -11,7 +11,8 @@ name a project module, absolutely or as a submodule of the table's own module (m
 (``python -m``, ``runpy`` in deploy/zstack.py) is not an import.
 
 Units. For package cycles and layers each module belongs to one unit: ``common``, ``stack``,
-``runtimes``, ``perception``, ``rosmsg``, ``simworld`` and ``deploy`` are one unit each; below
+``runtimes``, ``perception``, ``rosmsg``, ``simworld``, ``depthscan`` and ``deploy`` are one
+unit each; below
 ``services``, ``tools`` and ``modelprep`` each second level is one (``services.detector``,
 ``tools.evaluation``, ``modelprep.quantize``, and a module directly in the folder is its own:
 ``tools.launch``, ``modelprep.files``); a service's contract is a unit of its own
@@ -35,7 +36,9 @@ perception     common, runtimes, modelprep, perception (the detection library)
 rosmsg         common, rosmsg (the ROS 2 message library), and ``perception``'s package root
                (a camera's mounting and the depth columns of 3D detections)
 simworld       common, simworld (the simulated world)
-services.X     common, stack, runtimes, modelprep, rosmsg, simworld, its own package,
+depthscan      common, depthscan (the virtual scan of a depth camera), and ``perception``'s
+               package root (a camera's mounting, a depth image's intrinsics)
+services.X     common, stack, runtimes, modelprep, rosmsg, simworld, depthscan, its own package,
                ``perception`` (the package root: its public API, never its modules), and of
                another service only its contract (``services.Y.contract``): never its package
                root nor its other modules; never tools or deploy
@@ -44,7 +47,8 @@ tools.X        anything but deploy (a tool starts the supervisor as a process), 
 deploy         common, stack, the services' contracts, deploy
 =============  ==========================================================================
 
-So no library (``common``, ``runtimes``, ``modelprep``, ``perception``) imports ``services``:
+So no library (``common``, ``runtimes``, ``modelprep``, ``perception``, ``rosmsg``,
+``simworld``, ``depthscan``) imports ``services``:
 each declares its own settings, and takes them, or plain arguments, from its callers.
 
 Serving's load path (``perception.loading``, what the detector service opens its model with)
@@ -73,17 +77,18 @@ PACKAGES = (
     "perception",
     "rosmsg",
     "simworld",
+    "depthscan",
     "services",
     "tools",
     "deploy",
 )
 #: Units that are a whole top-level package (the others are split at the second level).
-WHOLE = ("common", "stack", "runtimes", "perception", "rosmsg", "simworld", "deploy")
+WHOLE = ("common", "stack", "runtimes", "perception", "rosmsg", "simworld", "depthscan", "deploy")
 #: The only library modules a contract may read: the ROS distributions (the bridge's setting).
 CONTRACT_READS = frozenset({"rosmsg.distro"})
 
 #: The libraries below the services: none imports anything under ``services``.
-LIBRARIES = ("common", "runtimes", "modelprep", "perception", "rosmsg", "simworld")
+LIBRARIES = ("common", "runtimes", "modelprep", "perception", "rosmsg", "simworld", "depthscan")
 #: The libraries' settings modules a service's contract may import (and compose).
 LIBRARY_SETTINGS = ("perception.settings",)
 #: Serving's load path, and the quantizer it must never reach.
@@ -312,8 +317,10 @@ def _allowed(module: str, target: str) -> bool:
         return target_top in ("common", "rosmsg") or target == "perception"
     if top == "simworld":
         return target_top in ("common", "simworld")
+    if top == "depthscan":
+        return target_top in ("common", "depthscan") or target == "perception"
     if top == "services":
-        below = ("common", "stack", "runtimes", "modelprep", "rosmsg", "simworld")
+        below = ("common", "stack", "runtimes", "modelprep", "rosmsg", "simworld", "depthscan")
         if target_top in below or is_contract(target):
             return True
         if target_top == "perception":
@@ -400,6 +407,7 @@ def test_units_are_the_whole_package_or_its_second_level() -> None:
     assert unit("stack.access") == "stack"
     assert unit("rosmsg.graph") == "rosmsg"
     assert unit("simworld.render") == "simworld"
+    assert unit("depthscan.observe") == "depthscan"
 
 
 def test_a_package_cycle_through_a_function_level_import_is_caught() -> None:
@@ -480,6 +488,14 @@ def test_the_layering_rule_refuses_what_the_table_refuses() -> None:
     assert not _allowed("simworld.depth", "perception")
     assert not _allowed("perception.depth", "rosmsg.depth")
     assert not _allowed("common.frames", "simworld.world")
+    # the virtual scan's library: for the services; it reads no service, not even a contract
+    assert _allowed("services.controller.depth_intake", "depthscan.observe")
+    assert _allowed("depthscan.frame", "perception")
+    assert not _allowed("depthscan.frame", "perception.depth")
+    assert not _allowed("depthscan.observe", "services.controller.geometry")
+    assert not _allowed("depthscan.frame", "services.controller.contract")
+    assert not _allowed("depthscan.frame", "stack.config")
+    assert not _allowed("perception.depth", "depthscan.frame")
     # a contract reads of the libraries only the ROS distributions
     assert _allowed("services.ros2.contract", "rosmsg.distro")
     assert not _allowed("services.ros2.contract", "rosmsg.typestore")

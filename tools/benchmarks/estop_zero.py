@@ -101,9 +101,7 @@ def _config(folder: Path) -> Path:
 
 @contextlib.contextmanager
 def _burners(count: int) -> Iterator[None]:
-    procs = [
-        subprocess.Popen([sys.executable, "-c", BURN], start_new_session=True) for _ in range(count)
-    ]
+    procs = [spawn([sys.executable, "-c", BURN], new_session=True) for _ in range(count)]
     try:
         yield
     finally:

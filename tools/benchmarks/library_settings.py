@@ -19,6 +19,7 @@ from typing import Annotated, Any
 
 from common.clock import perf_s
 from common.errors import ConfigError
+from common.setting_checks import declared_bounds, declared_lengths
 from common.settings import DEFAULT_CONFIG
 from stack.config import Config
 from stack.config_file import load_config
@@ -48,7 +49,7 @@ def _default_of(f: dataclasses.Field[Any]) -> Any:
 def _constrained(
     hint: Any, bound: tuple[float, float] | None, length: Any, meta: Callable[..., Any]
 ) -> Any:
-    """``hint`` with our BOUNDS (each item of a tuple) and LENGTHS as library constraints;
+    """``hint`` with our Range (each item of a tuple) and Length as library constraints;
     ``meta(ge=, le=)`` / ``meta(min_length=, max_length=)`` makes the library's annotation."""
     # Annotated made with run-time values: through Any, as mypy cannot check such a type.
     annotated: Any = Annotated
@@ -67,8 +68,8 @@ def _constrained(
 
 
 def build_pydantic_settings() -> Callable[[Path], Any]:
-    """pydantic-settings models made from our dataclasses: their types, BOUNDS as Field(ge,
-    le), LENGTHS as Field(min/max_length), unknown keys forbidden, frozen; TOML file source and
+    """pydantic-settings models made from our dataclasses: their types, Range as Field(ge,
+    le), Length as Field(min/max_length), unknown keys forbidden, frozen; TOML file source and
     STACK__TABLE__FIELD environment overrides. Our dataclasses' own cross-field checks run as
     an after-validator (constructing the dataclass), as they would stay after adopting it."""
     from pydantic import ConfigDict, Field, create_model, model_validator
@@ -82,7 +83,7 @@ def build_pydantic_settings() -> Callable[[Path], Any]:
     models: dict[str, Any] = {}
     for table, cls in _tables().items():
         hints = typing.get_type_hints(cls)
-        bounds, lengths = getattr(cls, "BOUNDS", {}), getattr(cls, "LENGTHS", {})
+        bounds, lengths = declared_bounds(cls), declared_lengths(cls)
         fields: dict[str, Any] = {}
         for f in dataclasses.fields(cls):
             hint = _constrained(hints[f.name], bounds.get(f.name), lengths.get(f.name), meta)
@@ -128,7 +129,7 @@ def build_pydantic_settings() -> Callable[[Path], Any]:
 
 
 def build_msgspec_settings() -> Callable[[Path], Any]:
-    """msgspec Structs made from our dataclasses (types, BOUNDS and LENGTHS as Meta, unknown
+    """msgspec Structs made from our dataclasses (types, Range and Length as Meta, unknown
     fields forbidden, frozen), decoded with msgspec.toml; cross-field checks as __post_init__
     constructing our dataclass. No environment overrides: msgspec has none (ours would stay)."""
     import msgspec
@@ -139,7 +140,7 @@ def build_msgspec_settings() -> Callable[[Path], Any]:
     structs: list[tuple[str, Any, Any]] = []
     for table, cls in _tables().items():
         hints = typing.get_type_hints(cls)
-        bounds, lengths = getattr(cls, "BOUNDS", {}), getattr(cls, "LENGTHS", {})
+        bounds, lengths = declared_bounds(cls), declared_lengths(cls)
         fields = [
             (
                 f.name,
@@ -284,19 +285,18 @@ def settings_section(args: argparse.Namespace) -> None:
     )
     total = code_lines(cf) + code_lines(sc)
     bounds_lines = sum(
-        len(getattr(cls, "BOUNDS", {})) + len(getattr(cls, "LENGTHS", {}))
-        for cls in _tables().values()
+        len(declared_bounds(cls)) + len(declared_lengths(cls)) for cls in _tables().values()
     )
     print(
         f"  our loader: {total} lines (config_file.py {code_lines(cf)}, setting_checks.py "
-        f"{code_lines(sc)}); BOUNDS/LENGTHS entries across the tables: {bounds_lines}"
+        f"{code_lines(sc)}); bounded fields across the tables: {bounds_lines}"
     )
     print(
         f"  lines a library would replace: pydantic-settings {pyd} (_coerce, _build, "
         f"_env_overrides, _blame, check_bounds, check_lengths); msgspec {msp} (no env source)"
     )
     print(
-        "  (the BOUNDS tables would move into the type hints, one Field/Meta per bounded "
+        "  (our Range/Length on the type hints would become one Field/Meta per bounded "
         "field: no lines saved there)"
     )
     for label, dists in (

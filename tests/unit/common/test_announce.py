@@ -14,12 +14,13 @@ from common.announce import (
     from_chunk,
     to_chunk,
 )
-from common.camera_announce import CameraAnnouncements
+from common.camera_announce import CameraAnnouncements, announcement_of
 from common.errors import DecodeError
 from common.keys import Keys
 from common.memory_bus import MemoryHub
-from common.messages import CameraAnnouncement, WorkerAnnouncement
+from common.messages import MAX_ANNOUNCED_RATE_HZ, CameraAnnouncement, WorkerAnnouncement
 from common.pool_rule import assign
+from services.camera.contract import CameraSettings
 
 KEYS = Keys("robot1")
 
@@ -161,8 +162,9 @@ def test_a_camera_source_names_its_session_in_its_announcements() -> None:
     bus = hub.join("sim")
     with CameraAnnouncements(bus, KEYS, "sim") as announcements:
         said = announcements.announce(
-            "front", rate_hz=5.0, mount_yaw_deg=0.0, hfov_deg=60.0, frame_id="cam", depth=True
+            "front", CameraSettings(rate_hz=5.0, frame_id="cam", mount_height_m=0.5), depth=True
         )
+        assert (said.rate_hz, said.frame_id, said.mount_height_m) == (5.0, "cam", 0.5)
         assert said.zid == bus.zid
         announcements.saw("front", 640, 480)
         current = announcements.current("front")
@@ -207,3 +209,27 @@ def test_a_source_that_moves_its_own_camera_is_believed_after_a_moment() -> None
     source.update(_camera(mount_yaw_deg=90.0))  # new token first, then the old withdrawn
     assert heard.current()["front"].mount_yaw_deg == 90.0
     assert len(bad) == 1  # said once, as it overlapped
+
+
+def test_one_builder_makes_a_cameras_announcement_from_its_settings() -> None:
+    # Issue 40: announcements were built field by field in four places (camera, simulator,
+    # bridge, player); every source now builds them with announcement_of.
+    settings = CameraSettings(
+        rate_hz=25.0, hfov_deg=70.0, mount_yaw_deg=90.0, frame_id="left_optical",
+        mount_height_m=0.4, mount_x_m=0.1, mount_y_m=-0.2,
+    )  # fmt: skip
+    a = announcement_of("left", settings, source="camera", zid="abc", depth=True)
+    assert (a.camera, a.source, a.zid, a.depth) == ("left", "camera", "abc", True)
+    assert (a.hfov_deg, a.mount_yaw_deg, a.frame_id) == (70.0, 90.0, "left_optical")
+    assert (a.mount_height_m, a.mount_x_m, a.mount_y_m) == (0.4, 0.1, -0.2)
+    assert a.rate_hz == 25.0
+    capped = announcement_of("left", settings, source="play", zid="", rate_hz=5000.0)
+    assert capped.rate_hz == MAX_ANNOUNCED_RATE_HZ
+    b = announcement_of(
+        "left", settings, source="sim", zid="", rate_hz=2.0, frame_id="f", width=64, height=48,
+        mount_height_m=0.0,
+    )  # fmt: skip
+    assert (b.rate_hz, b.frame_id, b.width, b.height, b.mount_height_m) == (2.0, "f", 64, 48, 0.0)
+    assert b.mount_x_m == 0.1  # what is not changed is the settings'
+    # an announcement read back describes the same camera
+    assert announcement_of("left", a, source="camera", zid="abc", depth=True) == a

@@ -13,7 +13,15 @@ from typing import Any
 import pytest
 
 from common.errors import ConfigError
-from common.setting_checks import range_text
+from common.setting_checks import (
+    Length,
+    Range,
+    check_bounds,
+    check_lengths,
+    declared_bounds,
+    declared_lengths,
+    range_text,
+)
 from common.settings import DEFAULT_CONFIG, REPO_ROOT
 from services.controller.service import STOP_POLL_S, wait_either
 from stack.config import Config
@@ -82,8 +90,7 @@ def _fields() -> list[tuple[str, str, Any]]:
     out = []
     for table in TABLES:
         for name, hint in typing.get_type_hints(HINTS[table]).items():
-            if name not in ("BOUNDS", "LENGTHS"):
-                out.append((table, name, hint))
+            out.append((table, name, hint))
     return out
 
 
@@ -94,9 +101,9 @@ def test_every_numeric_and_list_setting_has_a_declared_range() -> None:
         kind = _kind(hint)
         if f"{table}.{name}" in OWN_RULE:
             continue
-        if kind in ("number", "numbers") and name not in getattr(cls, "BOUNDS", {}):
+        if kind in ("number", "numbers") and name not in declared_bounds(cls):
             unbounded.append(f"{table}.{name}")
-        if kind == "names" and name not in getattr(cls, "LENGTHS", {}):
+        if kind == "names" and name not in declared_lengths(cls):
             unbounded.append(f"{table}.{name} (length)")
     assert unbounded == []
 
@@ -111,11 +118,11 @@ def _out_of_range(default: Any, lo: float, hi: float) -> list[Any]:
     return [hi + step, lo - max(abs(lo), 1e-3), math.nan, math.inf]
 
 
-@pytest.mark.parametrize("table", sorted(t for t in TABLES if hasattr(HINTS[t], "BOUNDS")))
+@pytest.mark.parametrize("table", sorted(t for t in TABLES if declared_bounds(HINTS[t])))
 def test_each_bound_is_enforced_and_names_the_setting_and_its_range(table: str) -> None:
     cls = HINTS[table]
     default = cls()
-    for name, (lo, hi) in cls.BOUNDS.items():
+    for name, (lo, hi) in declared_bounds(cls).items():
         value = getattr(default, name)
         assert all(lo <= v <= hi for v in (value if isinstance(value, tuple) else (value,)))
         for bad in _out_of_range(getattr(default, name), lo, hi):
@@ -171,10 +178,54 @@ def test_docs_configuration_states_every_range_as_the_code_does() -> None:
     missing = []
     for table in TABLES:
         cls = HINTS[table]
-        for name, (lo, hi) in getattr(cls, "BOUNDS", {}).items():
+        for name, (lo, hi) in declared_bounds(cls).items():
             row = f"| `{table}.{name}` | {range_text(name, lo, hi)} |"
             missing += [] if row in doc else [row]
-        for name, (lo, hi) in getattr(cls, "LENGTHS", {}).items():
+        for name, (lo, hi) in declared_lengths(cls).items():
             row = f"| `{table}.{name}` | {range_text('', lo, hi)} items |"
             missing += [] if row in doc else [row]
     assert missing == []
+
+
+def test_each_range_is_declared_on_its_field_and_no_table_repeats_it() -> None:
+    """Bounds live on the fields (``Annotated[float, Range(lo, hi)]``), once: no settings class
+    keeps a BOUNDS or LENGTHS table beside them."""
+    classes = {HINTS[t] for t in TABLES} | {c for t in TABLES for c in HINTS[t].__mro__}
+    tables = sorted(
+        f"{c.__name__}.{name}"
+        for c in classes
+        for name in vars(c)
+        if name.endswith(("BOUNDS", "LENGTHS"))
+    )
+    assert tables == []
+
+
+def test_a_setting_range_needs_both_ends_and_a_base_checks_its_own_fields() -> None:
+    @dataclasses.dataclass(frozen=True)
+    class Base:
+        rate_hz: typing.Annotated[float, Range(0.1, 10)] = 1.0
+
+        def __post_init__(self) -> None:
+            check_bounds(self, "base", Base)
+
+    @dataclasses.dataclass(frozen=True)
+    class Derived(Base):
+        names: typing.Annotated[tuple[str, ...], Length(1, 2)] = ("a",)
+
+        def __post_init__(self) -> None:
+            Base.__post_init__(self)
+            check_lengths(self, "derived", Derived)
+
+    assert declared_bounds(Derived) == {"rate_hz": (0.1, 10)}
+    assert declared_lengths(Derived) == {"names": (1, 2)}
+    with pytest.raises(ConfigError, match=r"^base\.rate_hz must be within 0\.1\.\.10 Hz, got 20"):
+        Derived(rate_hz=20)
+    with pytest.raises(ConfigError, match=r"^derived\.names must have 1\.\.2 items, got \[\]"):
+        Derived(names=())
+
+    @dataclasses.dataclass(frozen=True)
+    class HalfOpen:
+        n: typing.Annotated[int, Range(lo=0)] = 0
+
+    with pytest.raises(TypeError, match="needs both bounds"):
+        declared_bounds(HalfOpen)

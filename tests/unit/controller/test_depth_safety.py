@@ -19,21 +19,16 @@ import numpy as np
 import pytest
 
 from common.messages import DepthFrame, Header, LaserScan
+from depthscan.frame import MIN_NEAR_M, ScanParams, blind_zone
+from depthscan.observe import Observation, virtual_scan
 from perception.depth import Intrinsics, Mounting
 from services.controller import depth_intake
 from services.controller.contract import ControllerSettings
-from services.controller.depth_observe import Observation, virtual_scan
-from services.controller.depth_scan import (
-    MIN_NEAR_M,
-    DepthCamera,
-    ScanParams,
-    blind_zone,
-    depth_obstacles,
-)
+from services.controller.depth_obstacles import DepthCamera, depth_obstacles
 from services.controller.geometry import sector_clearance
 from tests.polling import wait_for
-from tests.unit.controller.depth_scenes import HFOV, INTR, Face, at_bearing, depth_frame, scene
 from tests.unit.controller.rig import Rig
+from tests.unit.depthscan.depth_scenes import HFOV, INTR, Face, at_bearing, depth_frame, scene
 
 HEADER = Header(stamp_ns=1_000, frame_id="camera", seq=1, source="test")
 PARAMS = ScanParams()
@@ -260,8 +255,8 @@ def test_the_blind_zone_is_logged_once_per_camera(
 
 
 def test_sampling_the_raw_frame_reads_what_converting_it_all_reads() -> None:
+    from depthscan.frame import sample_frame, sample_metres
     from perception.depth import depth_metres
-    from services.controller.depth_scan import sample_frame, sample_metres
 
     f = depth_frame(scene(HEIGHT, at_bearing(2.0, 5.0)), HEADER)
     raw, whole = sample_frame(f, 4), sample_metres(depth_metres(f), 4)

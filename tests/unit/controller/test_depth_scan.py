@@ -1,5 +1,5 @@
-"""The virtual scan made from a depth image (services/controller/depth_scan.py), on depth
-images of known scenes (tests/unit/controller/depth_scenes.py): the floor taken out by the
+"""The virtual scan made from a depth image (depthscan/; services/controller/depth_obstacles.py),
+images of known scenes (tests.unit.depthscan.depth_scenes.py): the floor taken out by the
 camera's height, obstacles at the right range and angle in the robot's frame, the mounting's
 yaw and position applied, what no camera sees unknown."""
 
@@ -12,19 +12,12 @@ import numpy as np
 import pytest
 
 from common.messages import Header, LaserScan
+from depthscan.frame import MIN_NEAR_M, ScanParams, usable
+from depthscan.observe import virtual_scan
 from perception.depth import DISTANCE, Mounting
-from services.controller.depth_observe import virtual_scan
-from services.controller.depth_scan import (
-    MIN_NEAR_M,
-    DepthCamera,
-    ScanParams,
-    depth_obstacles,
-    looks_ahead,
-    merge,
-    usable,
-)
+from services.controller.depth_obstacles import DepthCamera, depth_obstacles, looks_ahead, merge
 from services.controller.geometry import DISTANCE_COLUMN, sector_clearance
-from tests.unit.controller.depth_scenes import HFOV, INTR, Face, at_bearing, scene
+from tests.unit.depthscan.depth_scenes import HFOV, INTR, Face, at_bearing, scene
 
 HEADER = Header(stamp_ns=1_000, frame_id="camera", seq=1, source="test")
 PARAMS = ScanParams()  # floor margin 0.05 m, max height 1.5 m, every 4th pixel, 1 deg rays

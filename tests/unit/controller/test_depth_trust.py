@@ -15,10 +15,10 @@ import pytest
 from common.bus import QoS
 from common.memory_bus import MemoryBus
 from common.messages import CameraAnnouncement, Header
+from depthscan.trust import LateWatch, foreign_source
 from services.controller import contract
-from services.controller.depth_trust import LateWatch, foreign_source
-from tests.unit.controller.depth_scenes import HFOV, Face, at_bearing, depth_frame, scene
 from tests.unit.controller.rig import Rig
+from tests.unit.depthscan.depth_scenes import HFOV, Face, at_bearing, depth_frame, scene
 
 HEIGHT = 0.6
 FOREIGN = contract.DEPTH_FOREIGN

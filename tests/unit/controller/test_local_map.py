@@ -11,9 +11,9 @@ import pytest
 
 from common.messages import Header, LaserScan
 from common.unicycle import advance
+from depthscan.frame import ScanParams, sample_metres
+from depthscan.observe import observe
 from perception.depth import Mounting
-from services.controller.depth_observe import observe
-from services.controller.depth_scan import ScanParams, sample_metres
 from services.controller.geometry import sector_clearance
 from services.controller.local_map import (
     FREE,
@@ -24,7 +24,7 @@ from services.controller.local_map import (
     MapParams,
     Odometry,
 )
-from tests.unit.controller.depth_scenes import INTR, Face, scene
+from tests.unit.depthscan.depth_scenes import INTR, Face, scene
 
 HEADER = Header(stamp_ns=1_000, frame_id="camera", seq=1, source="test")
 PARAMS = ScanParams()

@@ -8,11 +8,12 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from common.messages import DepthFrame
-from tests.unit.controller.depth_scenes import HFOV, at_bearing, depth_frame, scene
+from common.messages import DepthFrame, LaserScan
 from tests.unit.controller.rig import Rig
+from tests.unit.depthscan.depth_scenes import HFOV, at_bearing, depth_frame, scene
 
 HEIGHT = 0.6
 
@@ -195,3 +196,24 @@ def test_a_depth_map_too_old_or_broken_is_not_taken_back(
             assert later.counters.get("depth_memory_errors", 0) == (1 if broken else 0)
         finally:
             later.close()
+
+
+def test_each_virtual_scan_is_published_on_its_cameras_key(rig: Rig) -> None:
+    # Issue 40: the scan the controller judges is published (<prefix>/scan/virtual/<camera>),
+    # so that the viewer and the recorder show what it took for obstacles.
+    heard: list[tuple[str, LaserScan]] = []
+    rig.probe.subscribe(
+        rig.keys.all_virtual_scans(), lambda s: heard.append((s.key, LaserScan.decode(s.payload)))
+    )
+    put_depth(rig, at_bearing(0.8, 0.0))
+    assert [key for key, _ in heard] == ["stack/scan/virtual/front"]
+    scan = heard[0][1]
+    assert rig.loop.depth is not None
+    held = rig.loop.depth.obstacles(rig.clock.now()).scan
+    assert held is not None and np.array_equal(held.ranges, scan.ranges, equal_nan=True)
+    ahead = float(np.nanmin(scan.ranges[np.abs(scan.angles) < 0.05]))
+    assert 0.7 < ahead < 0.9  # the box 0.8 m ahead, in the robot's frame
+    # A frame refused (stale) publishes nothing.
+    rig.clock.advance(0.05)
+    put_depth(rig, age_s=rig.config.controller.depth_timeout_s + 0.01)
+    assert len(heard) == 1

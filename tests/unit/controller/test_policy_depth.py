@@ -179,6 +179,7 @@ class Mounted:
     mount_yaw_deg: float = 0.0
     mount_x_m: float = 0.0
     mount_y_m: float = 0.0
+    mount_height_m: float = 0.0
 
 
 def test_follow_compares_the_horizontal_distance_from_the_base() -> None:

@@ -14,6 +14,7 @@ import pytest
 
 import perception
 from common.errors import ConfigError
+from common.setting_checks import declared_bounds
 from perception.settings import DecodeOptions, DetectorSpec, ModelSpec, TrackerParams
 from runtimes import BACKEND_CHOICES
 
@@ -60,7 +61,10 @@ def test_a_detector_spec_is_a_model_spec_and_decode_options() -> None:
     spec = DetectorSpec(model="m.onnx", conf=0.5)
     assert isinstance(spec, ModelSpec) and isinstance(spec, DecodeOptions)
     assert (spec.model, spec.conf, spec.iou) == ("m.onnx", 0.5, DecodeOptions().iou)
-    assert DetectorSpec.BOUNDS == {**ModelSpec.BOUNDS, **DecodeOptions.BOUNDS}
+    assert declared_bounds(DetectorSpec) == {
+        **declared_bounds(ModelSpec),
+        **declared_bounds(DecodeOptions),
+    }
 
 
 def _type_checking_imports() -> dict[str, tuple[str, str]]:

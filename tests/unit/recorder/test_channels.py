@@ -132,3 +132,35 @@ def test_each_cameras_frames_and_detections_go_on_its_own_ros_topics() -> None:
         ["/detections", "test/x/detector/front/detections"],
         ["/rear/detections", "test/x/detector/rear/detections"],
     ]
+
+
+def test_a_virtual_scan_is_recorded_on_its_own_topic_and_never_played_as_the_laser() -> None:
+    # Issue 40: each depth camera's virtual scan is published on <prefix>/scan/virtual/<camera>;
+    # the recording keeps it beside the laser's scan, not on it, and a replay (which puts
+    # every scan it plays on the laser's key) leaves it out.
+    from mcap.records import Channel as McapChannel
+    from mcap.records import Message as McapMessage
+    from mcap.records import Schema as McapSchema
+
+    from services.recorder.channels import VIRTUAL_SCAN
+    from services.recorder.reading import Input, Record, input_kind
+
+    t = Translator(Ros2Settings(), "front")
+    scan = LaserScan(header=HEADER, angle_min=-1.0, angle_increment=0.5, range_min=0.0,
+                     range_max=10.0, ranges=np.array([1.0, np.nan, 2.0], np.float32))  # fmt: skip
+    (laser,) = t.entries("stack/scan", scan)
+    (virtual,) = t.entries("stack/scan/virtual/front", scan)
+    assert laser.channel.topic == "/scan" and VIRTUAL_SCAN not in dict(laser.channel.metadata)
+    assert virtual.channel.topic == "/scan/virtual/front"
+    assert dict(virtual.channel.metadata)[VIRTUAL_SCAN] == "front"
+    assert virtual.channel.schema_name == "sensor_msgs/msg/LaserScan"
+
+    def record(entry_channel: object, metadata: dict[str, str]) -> Record:
+        schema = McapSchema(id=1, name="sensor_msgs/msg/LaserScan", encoding="ros2msg", data=b"")
+        channel = McapChannel(id=1, topic=entry_channel.topic, message_encoding="cdr",
+                              metadata=metadata, schema_id=1)  # fmt: skip
+        message = McapMessage(channel_id=1, log_time=0, data=b"", publish_time=0, sequence=0)
+        return Record(schema, channel, message)
+
+    assert input_kind(record(laser.channel, dict(laser.channel.metadata))) is Input.SCAN
+    assert input_kind(record(virtual.channel, dict(virtual.channel.metadata))) is None

@@ -88,11 +88,11 @@ def _record(path: Path) -> dict[str, list[tuple[Frame, DepthFrame]]]:
         recorder = Recorder(node, path, CONFIG).listen(node)
         sim = hub.join("sim")
         with CameraAnnouncements(sim, KEYS, "sim") as announcements:
-            announcements.announce(FRONT, rate_hz=10.0, mount_yaw_deg=0.0, hfov_deg=70.0,
-                                   frame_id="front_optical", depth=True, mount_height_m=0.42,
-                                   mount_x_m=0.1, mount_y_m=-0.05)  # fmt: skip
-            announcements.announce("rear", rate_hz=10.0, mount_yaw_deg=180.0, hfov_deg=60.0,
-                                   frame_id="rear_optical")  # fmt: skip
+            front = CameraSettings(rate_hz=10.0, hfov_deg=70.0, frame_id="front_optical",
+                                   mount_height_m=0.42, mount_x_m=0.1, mount_y_m=-0.05)  # fmt: skip
+            announcements.announce(FRONT, front, depth=True)
+            rear = CameraSettings(rate_hz=10.0, mount_yaw_deg=180.0, frame_id="rear_optical")
+            announcements.announce("rear", rear)
             for seq in range(1, FRAMES + 1):
                 for camera, encoding in ((FRONT, "16UC1"), ("rear", "32FC1")):
                     header = _header(seq, f"{camera}_optical")

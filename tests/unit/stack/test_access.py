@@ -32,8 +32,19 @@ def _case(name: str) -> tuple[dict[str, Any], Keys, Any, tuple[str, ...], bool]:
 def test_the_rules_are_those_of_before_the_contracts(name: str) -> None:
     case, keys, cameras, workers, live = _case(name)
     acl = access_control(keys, cameras, case["auth"], live_sensors=live, workers=workers)
-    # the same rules, subjects and policies, in the same order
-    assert json.dumps(acl) == json.dumps(BEFORE[name]["access_control"])
+    # the same rules, subjects and policies; each principal's in its contract's order, the
+    # principals in the one list's (common/service_list.py), which Zenoh does not read
+    assert _canonical(acl) == _canonical(BEFORE[name]["access_control"])
+
+
+def _canonical(acl: dict[str, Any]) -> str:
+    """``acl`` with its rules and subjects by id and its policies by subjects: what the router
+    enforces, whatever order the principals' rules come in."""
+    out = dict(acl)
+    out["rules"] = sorted(acl["rules"], key=lambda r: r["id"])
+    out["subjects"] = sorted(acl["subjects"], key=lambda s: s["id"])
+    out["policies"] = sorted(acl["policies"], key=lambda p: p["subjects"])
+    return json.dumps(out)
 
 
 @pytest.mark.parametrize("name", sorted(BEFORE))
@@ -48,7 +59,8 @@ def test_what_each_principal_may_do_is_as_before(name: str) -> None:
         assert list(may_announce(keys, cameras, p, workers=workers)) == before["may_announce"][p]
         assert list(may_read(keys, cameras, p)) == before["may_read"][p]
     overwritten = congestion_overwritten(keys, cameras, workers=workers)
-    assert list(overwritten) == before["congestion_overwritten"]
+    assert len(set(overwritten)) == len(overwritten)
+    assert sorted(overwritten) == sorted(before["congestion_overwritten"])
 
 
 def test_the_cases_cover_one_and_several_cameras_a_pool_and_a_replay() -> None:

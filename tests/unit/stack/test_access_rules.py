@@ -15,6 +15,7 @@ from common.keys import Keys
 from common.memory_bus import MemoryHub
 from common.security import stack_principals
 from common.settings import principal_names
+from services.camera.contract import CameraSettings
 from stack.access import access_control, access_table
 from tests.unit.heard import heard_cameras
 
@@ -100,7 +101,7 @@ def test_each_camera_source_announces_its_own_cameras_and_no_other(live_sensors:
         heard = heard_cameras(hub, KEYS, principal="observer")
         with CameraAnnouncements(hub.join(principal, principal=principal), KEYS, principal) as a:
             for camera in (*CAMERAS, "side"):
-                a.announce(camera, rate_hz=5.0, mount_yaw_deg=0.0, hfov_deg=60.0, frame_id="f")
+                a.announce(camera, CameraSettings(rate_hz=5.0, frame_id="f"))
             assert sorted(heard.current()) == own.get(principal, []), principal
             denied = {key for who, kind, key in hub.denied if kind == "liveliness_token"}
             assert len(denied) == 3 - len(own.get(principal, [])), principal

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from common.messages import DepthFrame, Header
+from depthscan.frame import ScanParams, sample_frame, sample_metres
+from depthscan.observe import Observation, observe, virtual_scan
 from perception.depth import Mounting
-from services.controller.depth_observe import Observation, observe, virtual_scan
-from services.controller.depth_scan import ScanParams, sample_frame, sample_metres
 from services.controller.geometry import sector_clearance
-from tests.unit.controller.depth_scenes import INTR, Face, at_bearing, scene
+from tests.unit.depthscan.depth_scenes import INTR, Face, at_bearing, scene
 
 HEADER = Header(stamp_ns=1_000, frame_id="camera", seq=1, source="test")
 PARAMS = ScanParams()

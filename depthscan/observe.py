@@ -1,7 +1,7 @@
 """What one depth frame shows the controller: floor, obstacles, drop-offs and holes, and the
 virtual scan made of them (issue 38's rules). Pure numpy: no bus, no clock.
 
-Each sample (services/controller/depth_scan.py) is back-projected with the image's
+Each sample (depthscan/frame.py) is back-projected with the image's
 intrinsics and placed in the robot's base frame by the camera's mounting (perception/depth.py
 ``to_robot``: forward, left, up from the floor under the base's centre). By its height ``up``:
     floor      ``|up| <= floor_margin_m``
@@ -25,8 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages import Header, LaserScan
-from perception import Intrinsics, Mounting, to_robot
-from services.controller.depth_scan import (
+from depthscan.frame import (
     MIN_NEAR_M,
     UNSTATED_RANGE_MAX_M,
     Samples,
@@ -34,6 +33,7 @@ from services.controller.depth_scan import (
     sample_metres,
     usable,
 )
+from perception import Intrinsics, Mounting, to_robot
 
 
 def virtual_scan(
