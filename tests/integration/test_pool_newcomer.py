@@ -1,5 +1,5 @@
 """A simulated robot whose detector is a pool's worker on another supervisor, set up as the
-README's two-robots example does (issue 39, items 5 and 7): no worker, the simulator says
+two-robots example of docs/pool.md does (issue 39, items 5 and 7): no worker, the simulator says
 what it waits for and nothing claims motion; the worker joins, the robot moves; the robot's
 metrics list the worker it does not run, and ``zstack pool`` shows the pool from the box."""
 
@@ -34,7 +34,7 @@ def test_a_robot_served_by_a_pool_worker_on_another_supervisor(tmp_path: Path) -
         tmp_path / "robot",
         zenoh={"mode": "client", "endpoint": f"tcp/127.0.0.1:{free_port()}"},
         stack={"prefix": robot_prefix, "camera": "front"},
-        # The README's robot: the simulator, the controller, the metrics; no worker of its own.
+        # docs/pool.md's robot: the simulator, the controller, the metrics; no worker of its own.
         supervisor={"services": ["sim", "controller", "metrics"]},
         sim={"scenario": "ahead", "width": 320, "height": 240},
         controller={"mode": "follow", "no_laser": False},

@@ -1,23 +1,24 @@
-"""The README's GPU box beside a robot, run as written on two network namespaces.
+"""The GPU box beside a robot of docs/pool.md, run as written on two network namespaces.
 
-    namespace A, the GPU box: README's gpu.toml      namespace B, the robot (10.78.0.2): robot.toml
+    namespace A, the GPU box: gpu.toml               namespace B, the robot (10.78.0.2): robot.toml
       `zstack prepare`, then `zstack run`              `zstack run`: cameras, a CPU worker,
       (one detector worker, no camera table)           controller, metrics; the test's eyes
                                                        (pool_view.py, `zstack query`)
 
-The two configs are taken from README.md's ```toml blocks named ``# robot.toml`` and
+The two configs are taken from docs/pool.md's ```toml blocks named ``# robot.toml`` and
 ``# gpu.toml`` (tests/readme.py) with only the changes :func:`tests.readme.as_tested` makes:
 the robot's address is namespace B's, the cameras' ``device:N`` are bundled photos (a person
 in front, a cat behind), the GPU backend is ONNX Runtime on the CPU (no GPU here) and, for the
-secured pair (``# robot-secure.toml``, ``# gpu-secure.toml``, which extend the plain ones),
-``zenoh.credentials_dir`` is the test's folder, the credentials made as the README says. Both
-workers join, the cameras are split as the pool's rule splits them by the capacities the
-workers announce, each camera is served (and its detections published) by exactly one worker,
-the robot's controller gets detections of every camera and targets the person, and
-`zstack query` on the robot shows what the README says it shows.
+secured pair (``# robot-secure.toml``, ``# gpu-secure.toml`` of docs/security.md, which
+extend the plain ones), ``zenoh.credentials_dir`` is the test's folder, the credentials made
+as docs/security.md says. Both workers join, the cameras are split as the pool's rule splits
+them by the capacities the workers announce, each camera is served (and its detections
+published) by exactly one worker, the robot's controller gets detections of every camera and
+targets the person, and
+`zstack query` on the robot shows what docs/pool.md says it shows.
 
-The README's several robots (``# gpu-box.toml``, ``# robot1.toml``, robot2 made from robot1 as
-the README says) run on three namespaces, the GPU box linked to each robot: its one worker
+docs/pool.md's several robots (``# gpu-box.toml``, ``# robot1.toml``, robot2 made from robot1
+as the page says) run on three namespaces, the GPU box linked to each robot: its one worker
 serves both robots' cameras, each robot's controller fresh on its own.
 """
 
@@ -57,8 +58,9 @@ pytestmark = pytest.mark.integration
 ADDR_A, ADDR_B = "10.78.0.1", "10.78.0.2"  # private namespaces: no clash with anything
 SAMPLES = ("astronaut", "chelsea")  # device:0 (front) sees a person, device:1 (rear) a cat
 PERSON_CAMERA = "front"
-WORKERS = ("detector_gpu", "detector_robot")  # README: worker_id "gpu" and "robot"
-#: README "Several robots": the GPU box linked to each robot's router, a /24 each.
+WORKERS = ("detector_gpu", "detector_robot")  # docs/pool.md: worker_id "gpu" and "robot"
+#: docs/pool.md, "Several robots on one pool": the GPU box linked to each robot's router,
+#: a /24 each.
 SITE = [("gpu", "10.79.1.1", "robot1", "10.79.1.2"), ("gpu", "10.79.2.1", "robot2", "10.79.2.2")]
 SITE_ADDRESSES = {ROBOT1_ADDRESS: "10.79.1.2", ROBOT2_ADDRESS: "10.79.2.2"}
 SETTLE_S = 2 * STARTUP_S  # two CPU workers measuring their capacity on a loaded 2-core box
@@ -72,7 +74,7 @@ class Hosts:
     ns: dict[str, str]
     #: Each host's own temporary folder (TMPDIR), as on real hosts: the supervisor's lock
     #: (deploy/lock.py) is named after the endpoint and prefix, which two tests' GPU boxes
-    #: share (README's), and namespaces share this machine's /tmp.
+    #: share (docs/pool.md's), and namespaces share this machine's /tmp.
     tmp: dict[str, str] = field(default_factory=dict)
     procs: list[subprocess.Popen[bytes]] = field(default_factory=list)
 
@@ -163,7 +165,7 @@ def _write(where: Path, name: str, credentials: Path | None = None) -> Path:
 def _configs(tmp_path: Path, secure: bool) -> tuple[Path, Path]:
     """The robot's and the GPU box's configs, each in a folder of its own. Secured: the plain
     ones beside them (they extend those), and the credentials made once, on the robot, as the
-    README says; the GPU box gets a copy of the CA, the router's and its worker's files."""
+    page says; the GPU box gets a copy of the CA, the router's and its worker's files."""
     robot, gpu = _write(tmp_path / "robot", "robot.toml"), _write(tmp_path / "gpu", "gpu.toml")
     if secure:
         made, copied = tmp_path / "secrets_robot", tmp_path / "secrets_gpu"
@@ -185,7 +187,7 @@ def _configs(tmp_path: Path, secure: bool) -> tuple[Path, Path]:
                 shutil.copy2(file, copy)
         shutil.copy2(ca_file(made), copied / ca_file(made).name)
     for path in (robot, gpu):
-        load_config(path, environ={})  # one clear line here if a README block does not load
+        load_config(path, environ={})  # one clear line here if a docs block does not load
     return robot, gpu
 
 
@@ -219,7 +221,7 @@ def _settled(view: dict[str, Any] | None, balance: float) -> bool:
 
 
 def _query(hosts: Hosts, robot: Path) -> dict[str, Any] | None:
-    """``zstack query --config robot.toml`` on the robot, as the README says to check."""
+    """``zstack query --config robot.toml`` on the robot, as docs/pool.md says to check."""
     args = ["-m", "deploy.zstack", "query", "--config", str(robot), "--timeout", "2"]
     done = hosts.call(hosts.b, args, timeout=60)
     return json.loads(done.stdout) if done.returncode == 0 else None
@@ -255,7 +257,7 @@ def test_the_readme_gpu_box_and_robot_run_as_written(
     view = wait_for(settled, SETTLE_S, lambda: f"the pool split as its rule says:\n{logs()}", 1.0)
     assert all(a["capacity_hz"] > 0 for a in view["workers"].values())
 
-    # `zstack query` on the robot, as the README says to check: both workers live, the cameras
+    # `zstack query` on the robot, as docs/pool.md says to check: both workers live, the cameras
     # split between them, each camera's one server, their capacities, and no pool warning.
     def queried() -> dict[str, Any] | None:
         answer = _query(hosts, robot)
@@ -281,7 +283,7 @@ def test_the_readme_gpu_box_and_robot_run_as_written(
 
 
 def test_the_readme_two_robots_on_one_gpu_box_run_as_written(tmp_path: Path) -> None:
-    """README's several robots: gpu-box.toml's one worker serves the cameras of robot1.toml
+    """docs/pool.md's several robots: gpu-box.toml's one worker serves the cameras of robot1.toml
     and of robot2.toml (robot1's "alike, with robot2 and 10.0.0.12"), each robot's detections
     on its own keys from that one worker, each robot's controller fresh on its camera."""
     gen = _network(SITE)

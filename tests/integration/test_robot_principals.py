@@ -2,7 +2,7 @@
 "Several robots").
 
 Two robots of one site, ``<site>/robot1`` and ``<site>/robot2``, secured with certificates
-made by ONE ``zstack credentials`` run (``--robot``: one CA for the site), as the README's
+made by ONE ``zstack credentials`` run (``--robot``: one CA for the site), as docs/security.md's
 several robots would be. Robot 2's router runs (its controller, e-stop engaged by its own
 ``estop``). Each principal robot 1 has a secret for (its estop, controller, observer,
 recorder, simulator, metrics, viewer, its local worker, and its router's key,

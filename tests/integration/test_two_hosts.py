@@ -1,4 +1,4 @@
-"""Two hosts for real: two network namespaces joined by a veth pair, as README "Two hosts" says.
+"""Two hosts for real: two network namespaces joined by a veth pair, as docs/pool.md says.
 
     namespace A ("GPU box", 10.77.0.1)            namespace B ("robot", 10.77.0.2)
     supervisor A: services = ["detector"]         supervisor B: camera, controller, metrics
@@ -9,7 +9,7 @@ Client mode: each supervisor is a Zenoh router, each service (and the probe) a c
 host's router, and the two routers link across the veth pair. Then the link is cut for longer
 than Zenoh's lease, so the session across it closes, and restored. Not peer mode: there every
 pair of processes must meet again after the cut, and one run in six left the controller without
-detections for good while the probe beside it had them (README, "Not peer mode across hosts").
+detections for good while the probe beside it had them (docs/pool.md, "Client mode on both hosts").
 
 The third test runs that pool under the secure profile: mutual TLS on every link, the two
 routers' link included, and access control on both routers (docs/security.md, "Two hosts,
@@ -53,7 +53,7 @@ ADDR_A, ADDR_B, PORT = "10.77.0.1", "10.77.0.2", 7447  # private namespaces: no 
 DEAD_MAN_S = 2.0  # controller.detection_timeout_s: inference takes ~1 s on a loaded 2-core CI box
 MARGIN_S = 1.0  # one control tick, scheduling on a loaded machine
 LEASE_S = 10.0  # Zenoh's default lease: a silent peer is dropped after it
-MODE = "client"  # routers on both hosts: README "Two hosts"
+MODE = "client"  # routers on both hosts: docs/pool.md
 
 
 @dataclass

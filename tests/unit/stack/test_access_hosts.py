@@ -277,7 +277,7 @@ def test_a_pool_under_its_own_prefix_announces_there_and_every_principal_may_wat
 
 
 def test_in_a_sites_layout_the_pools_scope_holds_no_other_robot() -> None:
-    """The README's layout: robots ``site/robot1`` and ``site/robot2``, their pool ``site``.
+    """docs/pool.md's layout: robots ``site/robot1`` and ``site/robot2``, their pool ``site``.
     Every principal may ask in the pool (its tokens and announcements), and that must not
     open ``site/**``, the other robot's prefix with it: robot 1's observer asked robot 2's
     metrics through the links (issue 39)."""

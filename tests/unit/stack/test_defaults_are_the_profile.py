@@ -34,7 +34,7 @@ def test_every_settings_default_is_the_shipped_profiles_value() -> None:
 
 
 def test_a_standalone_config_gets_the_profiles_values(tmp_path) -> None:  # type: ignore[no-untyped-def]
-    """The README's GPU-box and two-robots configs state only what they change, without
+    """docs/pool.md's GPU-box and two-robots configs state only what they change, without
     ``extends``: what they leave out is what ``make run`` has (follow by the laser, 1.0 m)."""
     path = tmp_path / "robot.toml"
     path.write_text('[zenoh]\nmode = "client"\n\n[supervisor]\nservices = ["sim", "controller"]\n')

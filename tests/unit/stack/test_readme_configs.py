@@ -1,9 +1,12 @@
-"""Every ```toml block of README.md is a config the stack loads (stack/config_file.py), so the
-README's examples cannot drift from the settings. The rule (tests/readme.py): a block is a whole
-config file saved at the repository root, beside the other named blocks; no fragments.
+"""Every ```toml block of README.md and docs/*.md is a config the stack loads
+(stack/config_file.py), so the examples cannot drift from the settings. The rule
+(tests/readme.py): a block is a whole config file saved at the repository root, beside the
+other named blocks of every page; no fragments. A block marked ``# not loadable: <why>`` must
+fail to load, so that the mark cannot outlive its reason.
 
-The pool's two (``# robot.toml``, ``# gpu.toml``; their secured forms extend them) are also held
-to what the README says of them; tests/integration/test_readme_pool.py runs them."""
+The pool's two (``# robot.toml``, ``# gpu.toml`` in docs/pool.md; their secured forms in
+docs/security.md extend them) are also held to what the pages say of them;
+tests/integration/test_readme_pool.py runs them."""
 
 from __future__ import annotations
 
@@ -14,16 +17,27 @@ import pytest
 
 from common.errors import ConfigError
 from stack.config_file import load_config
-from tests.readme import README, REPO, Block, as_tested, named_block, toml_blocks
+from tests.readme import (
+    README,
+    REPO,
+    Block,
+    all_blocks,
+    as_tested,
+    named_block,
+    pages,
+    toml_blocks,
+)
 
-BLOCKS = toml_blocks()
+BLOCKS = all_blocks()
+LOADABLE = [b for b in BLOCKS if not b.not_loadable]
+NOT_LOADABLE = [b for b in BLOCKS if b.not_loadable]
 
 
-def _save(block: Block, where: Path) -> Path:
-    """``block`` as a file at the repository root would read, beside the README's other named
+def _save(block: Block, where: Path, blocks: list[Block] = BLOCKS) -> Path:
+    """``block`` as a file at the repository root would read, beside the pages' other named
     blocks: an ``extends`` names one of those, or a file from the repository root."""
-    names = {b.name for b in BLOCKS if b.name}
-    for other in BLOCKS:
+    names = {b.name for b in blocks if b.name}
+    for other in blocks:
         if other.name and other is not block:
             (where / other.name).write_text(other.text, encoding="utf-8")
     data = tomllib.loads(block.text)  # a block that is not TOML fails here, naming itself
@@ -31,23 +45,59 @@ def _save(block: Block, where: Path) -> Path:
     base = data.get("extends")
     if isinstance(base, str) and base not in names:
         text = text.replace(f'"{base}"', f'"{(REPO / base).as_posix()}"', 1)
-    path = where / (block.name or f"readme-{block.line}.toml")
+    path = where / (block.name or f"block-{block.line}.toml")
     path.write_text(text, encoding="utf-8")
     return path
 
 
-def test_the_readme_has_toml_blocks() -> None:
-    assert len(BLOCKS) >= 6, [
-        b.line for b in BLOCKS
-    ]  # profile, pool hosts (plain, secured), cameras
+def test_the_pages_have_toml_blocks() -> None:
+    where = [b.where for b in BLOCKS]
+    assert any(b.page == "README.md" for b in BLOCKS), where  # the robot's first config
+    # The pool's hosts (plain, secured), several robots, cameras, depth, ROS 2.
+    assert len(BLOCKS) >= 10, where
+    assert {b.page for b in BLOCKS} >= {"README.md", "docs/pool.md", "docs/security.md"}, where
 
 
-@pytest.mark.parametrize("block", BLOCKS, ids=[f"README.md:{b.line}" for b in BLOCKS])
-def test_every_readme_toml_block_loads(block: Block, tmp_path: Path) -> None:
+def test_each_name_is_one_block_across_the_pages() -> None:
+    names = [b.name for b in BLOCKS if b.name]
+    assert len(names) == len(set(names)), sorted(names)
+
+
+@pytest.mark.parametrize("block", LOADABLE, ids=[b.where for b in LOADABLE])
+def test_every_toml_block_loads(block: Block, tmp_path: Path) -> None:
     try:
         load_config(_save(block, tmp_path), environ={})
     except ConfigError as exc:
-        pytest.fail(f"README.md line {block.line}: {exc}")
+        pytest.fail(f"{block.where}: {exc}")
+
+
+def test_a_block_marked_not_loadable_does_not_load(tmp_path: Path) -> None:
+    """None is marked today; a mark whose block loads after all is stale."""
+    loads = []
+    for block in NOT_LOADABLE:
+        try:
+            load_config(_save(block, tmp_path), environ={})
+        except (ConfigError, tomllib.TOMLDecodeError):
+            continue
+        loads.append(f"{block.where} ({block.not_loadable})")
+    assert loads == [], "marked not loadable, yet it loads"
+
+
+def test_the_docs_pages_are_read(tmp_path: Path) -> None:
+    """Every docs/*.md is one of the pages, and a mark is read from a block's first line."""
+    assert set(pages()) == {README, *(REPO / "docs").glob("*.md")}
+    page = tmp_path / "page.md"
+    page.write_text(
+        '```toml\n# not loadable: a misspelt field, on purpose\n[detector]\nworker = "x"\n```\n'
+        '```toml\n# a.toml: fine\n[detector]\nworker_id = "x"\n```\n',
+        encoding="utf-8",
+    )
+    marked, named = toml_blocks(page)
+    assert (marked.not_loadable, marked.name) == ("a misspelt field, on purpose", "")
+    assert (named.not_loadable, named.name, named.line) == ("", "a.toml", 6)
+    with pytest.raises(ConfigError, match="worker"):
+        load_config(_save(marked, tmp_path, [marked, named]), environ={})
+    assert named_block("a.toml", [page]) == named
 
 
 def test_the_gpu_box_needs_only_its_endpoint_backend_and_worker_id(tmp_path: Path) -> None:
@@ -87,7 +137,7 @@ def test_as_tested_changes_only_the_address_the_devices_and_the_gpu_backend() ->
 
 def test_a_bad_block_is_caught(tmp_path: Path) -> None:
     """The check can fail: a misspelt setting in a block is a ConfigError naming it."""
-    readme = tmp_path / "README.md"
+    readme = tmp_path / "page.md"
     readme.write_text(
         'text\n```toml\n# gpu.toml: x\n[detector]\nworker = "gpu"\n```\n', encoding="utf-8"
     )
