@@ -31,7 +31,7 @@ from typing import Annotated, Any
 import numpy as np
 import numpy.typing as npt
 
-from common.fields import COLUMN_DTYPES, Columns, Dim, Shape
+from common.field_types import COLUMN_DTYPES, Columns, Dim, Shape
 from common.limits import MAX_COLUMN_NAME_CHARS, MAX_COLUMNS
 from common.limits import MAX_DETECTIONS as MAX_DETECTIONS
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from common.codec import Message
-from common.fields import NonNegativeInt
+from common.field_types import NonNegativeInt
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

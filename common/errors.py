@@ -7,8 +7,11 @@
     │   └── NotPrepared          a model file serving needs that `zstack prepare` has not
     │                            made yet (perception/variants.py)
     ├── DecodeError              bytes on a Zenoh key that are not a valid message
-    │   └── ConflictError        an announcement that contradicts the one believed of its name
-    │                            (common/announce.py)
+    │   ├── ConflictError        an announcement that contradicts the one believed of its name
+    │   │                        (common/announce.py)
+    │   └── FieldMismatch        a value that does not fit its message field, inside the field
+    │                            walk, which raises a DecodeError naming the field's path
+    │                            (common/field_codecs.py)
     ├── ImageError               a missing, unreadable or corrupt image
     │   └── ImageTooLarge        an image over the pixel budget, refused before decoding
     ├── ModelError               a file that is not a usable model

@@ -40,105 +40,40 @@ was added still decodes (``Header.mono_ns``); a missing field without a default 
 Keys the class does not declare are ignored, so a newer writer's extra fields do no harm.
 
 Anything that does not fit raises :class:`common.errors.DecodeError` naming the field's path.
+
+The marks (``Range``, ``Dim``, ``Shape``, ``Columns``, ``Inline``) are common/field_types.py's;
+each kind of field's encoder and decoder is common/field_codecs.py's; this module compiles a
+class's plan from them and walks it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import sys
 import types
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import (
-    TYPE_CHECKING,
-    Annotated,
-    Any,
-    TypeVar,
-    Union,
-    get_args,
-    get_origin,
-    get_type_hints,
-)
+from typing import Annotated, Any, TypeVar, Union, get_args, get_origin, get_type_hints
 
 from common.errors import DecodeError
-
-if TYPE_CHECKING:
-    import numpy as np
+from common.field_codecs import (
+    Decoder,
+    Encoder,
+    FieldMismatch,
+    array_codec,
+    columns_codec,
+    dtype_of,
+    exact,
+    float_decoder,
+    got,
+    int_decoder,
+    is_ndarray,
+    map_decoder,
+    optional,
+    tuple_decoder,
+)
+from common.field_types import Columns, Dim, Inline, Range, Shape
 
 T = TypeVar("T")
-
-Encoder = Callable[[Any], Any]
-Decoder = Callable[[Any, Mapping[str, int]], Any]
-
-
-@dataclass(frozen=True, slots=True)
-class Range:
-    """Bounds of a number, both allowed: an int field of a message, checked on decode
-    (``Annotated[int, Range(lo=0)]``); a setting, checked when its dataclass is made
-    (``Annotated[float, Range(0.1, 1000)]``, both bounds: common/setting_checks.py)."""
-
-    lo: float | None = None
-    hi: float | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class Dim:
-    """A count that sizes arrays; it travels as its own key ``name`` (e.g. "n")."""
-
-    name: str
-    lo: int
-    hi: int
-
-
-@dataclass(frozen=True, slots=True)
-class Shape:
-    """An array field's shape: ints, Dims or one -1 (from the byte length)."""
-
-    dims: tuple[int | Dim, ...]
-
-    def __init__(self, *dims: int | Dim) -> None:
-        object.__setattr__(self, "dims", dims)
-
-
-#: The element types a column may have: what every msgpack reader can take as raw bytes and
-#: read back exactly (bool as one byte, 0 or 1). The numpy names travel on the wire.
-COLUMN_DTYPES = ("bool", "int32", "int64", "float32", "float64")
-
-
-@dataclass(frozen=True, slots=True)
-class Columns:
-    """A field of named per-row arrays, each (rows,) of a COLUMN_DTYPES type (module docstring).
-
-    ``max_columns`` and ``max_name_chars`` bound what a decoder reads; the owner's
-    ``__post_init__`` checks the rest (the names' form, the dtypes of arrays built in memory).
-    """
-
-    rows: Dim
-    max_columns: int
-    max_name_chars: int
-
-
-@dataclass(frozen=True, slots=True)
-class Inline:
-    """A dataclass field whose own fields travel as keys of its parent's body, not as a map of
-    their own: ``boxes: Annotated[Boxes, Inline()]``."""
-
-
-NonNegativeInt = Annotated[int, Range(lo=0)]
-
-
-class _Bad(DecodeError):
-    """A value that does not fit its field; the path is filled in on the way up."""
-
-    def __init__(self, reason: str, path: tuple[str, ...] = ()) -> None:
-        super().__init__(reason)
-        self.reason = reason
-        self.path = path
-
-
-def _got(v: Any) -> str:
-    return type(v).__name__
 
 
 # Counts written on the wire just before a field, from that field's shape: (dim, axis).
@@ -181,7 +116,7 @@ def decode_struct(cls: type[T], body: Mapping[str, Any], where: str) -> T:
     """Build ``cls`` from a wire body, or raise DecodeError naming ``where`` and the field."""
     try:
         return _decode(cls, body)
-    except _Bad as exc:
+    except FieldMismatch as exc:
         raise DecodeError(f"{'.'.join((where, *exc.path))}: {exc.reason}") from None
 
 
@@ -197,9 +132,9 @@ def _decode(cls: type[T], body: Mapping[str, Any], whole: bool = False) -> T:
     for dim in plan.dims:
         v = body.get(dim.name)
         if type(v) is not int:
-            raise _Bad(f"expected an int count, got {_got(v)}", (dim.name,))
+            raise FieldMismatch(f"expected an int count, got {got(v)}", (dim.name,))
         if not dim.lo <= v <= dim.hi:
-            raise _Bad(f"{v} is outside [{dim.lo}, {dim.hi}]", (dim.name,))
+            raise FieldMismatch(f"{v} is outside [{dim.lo}, {dim.hi}]", (dim.name,))
         dims[dim.name] = v
     kwargs: dict[str, Any] = {}
     for name, dec, required, inline in plan.decoders:
@@ -208,12 +143,12 @@ def _decode(cls: type[T], body: Mapping[str, Any], whole: bool = False) -> T:
             continue
         if name not in body:
             if required:
-                raise _Bad("missing field", (name,))
+                raise FieldMismatch("missing field", (name,))
             continue  # written before this field existed: the dataclass default applies
         try:
             kwargs[name] = dec(body[name], dims)
-        except _Bad as exc:
-            raise _Bad(exc.reason, (name, *exc.path)) from None
+        except FieldMismatch as exc:
+            raise FieldMismatch(exc.reason, (name, *exc.path)) from None
     return cls(**kwargs)
 
 
@@ -325,180 +260,35 @@ def _converter(hint: Any, meta: tuple[Any, ...], where: str) -> tuple[Encoder | 
     if spec is not None:
         if origin not in (Mapping, dict) or args[:1] != (str,):
             raise TypeError(f"{where}: Columns annotates a Mapping[str, NDArray], got {hint}")
-        return _columns(spec)
+        return columns_codec(spec)
     if origin in (Union, types.UnionType):
         rest = [a for a in args if a is not type(None)]
         if len(rest) != 1 or len(args) != 2:
             raise TypeError(f"{where}: only `X | None` unions are supported, got {hint}")
-        return _optional(*_converter(rest[0], meta, where))
-    if _is_ndarray(origin):
-        return _array(_dtype_of(hint, where), meta, where)
+        return optional(*_converter(rest[0], meta, where))
+    if is_ndarray(origin):
+        return array_codec(dtype_of(hint, where), meta, where)
     if hint is int:
         rng = next((m for m in meta if isinstance(m, Range)), Range())
-        return None, _int(rng)
+        return None, int_decoder(rng)
     if hint is float:
-        return None, _float(finite=False)
+        return None, float_decoder(finite=False)
     if hint in (str, bool, bytes):
-        return None, _exact(hint)
+        return None, exact(hint)
     if isinstance(hint, type) and dataclasses.is_dataclass(hint):
         _plan(hint)
         return encode_struct, _nested(hint)
     if origin is tuple:
         return list, _tuple(args, where)
     if origin is dict and args and args[0] is str:
-        return None, _map(_element(args[1], where))
+        return None, map_decoder(_element(args[1], where))
     raise TypeError(f"{where}: no wire format for {hint}")
-
-
-def _is_ndarray(origin: Any) -> bool:
-    """Whether a hint's origin is numpy's array. numpy is imported by the messages that carry
-    arrays, never here: a hint cannot name ndarray unless numpy is loaded, and the messages
-    without arrays (common/control_messages.py: the e-stop command's) must not pay for it."""
-    numpy = sys.modules.get("numpy")
-    return numpy is not None and origin is numpy.ndarray
-
-
-def _dtype_of(hint: Any, where: str) -> np.dtype[Any]:
-    """The element type of ``npt.NDArray[np.float32]``: ndarray[shape, dtype[float32]]."""
-    import numpy as np
-
-    args = get_args(hint)
-    scalar = get_args(args[1])[0] if len(args) == 2 and get_args(args[1]) else None
-    if not (isinstance(scalar, type) and issubclass(scalar, np.generic)) or scalar in (
-        np.generic,
-        np.number,
-        np.floating,
-        np.integer,
-    ):
-        raise TypeError(f"{where}: an array field needs a concrete dtype, got {hint}")
-    return np.dtype(scalar)
-
-
-def _array(dtype: np.dtype[Any], meta: tuple[Any, ...], where: str) -> tuple[Encoder, Decoder]:
-    import numpy as np
-
-    shape = next((m for m in meta if isinstance(m, Shape)), None)
-    if shape is None or list(shape.dims).count(-1) > 1:
-        raise TypeError(f"{where}: an array field needs Shape(...) with at most one -1")
-    wire = dtype.newbyteorder("<")
-    native = None if wire == dtype.newbyteorder("=") else dtype.newbyteorder("=")
-    spec = shape.dims
-
-    def encode(arr: Any) -> bytes:
-        return np.ascontiguousarray(arr, dtype=wire).tobytes()
-
-    def decode(v: Any, dims: Mapping[str, int]) -> Any:
-        if type(v) is not bytes:
-            raise _Bad(f"expected {dtype} array bytes, got {_got(v)}")
-        if len(v) % wire.itemsize:
-            raise _Bad(f"{len(v)} bytes is not a whole {dtype} array")
-        shp = tuple(dims[d.name] if isinstance(d, Dim) else d for d in spec)
-        flat = np.frombuffer(v, dtype=wire)
-        try:
-            arr = flat.reshape(shp)
-        except ValueError:
-            raise _Bad(f"{flat.size} values do not fit shape {shp}") from None
-        return arr if native is None else arr.astype(native)  # a copy on big-endian hosts only
-
-    return encode, decode
-
-
-def _columns(spec: Columns) -> tuple[Encoder, Decoder]:
-    import numpy as np
-
-    wire = {name: np.dtype(name).newbyteorder("<") for name in COLUMN_DTYPES}
-    rows, most, longest = spec.rows.name, spec.max_columns, spec.max_name_chars
-
-    def encode(columns: Mapping[str, Any]) -> dict[str, Any]:
-        return {
-            name: {
-                "dtype": arr.dtype.name,
-                "data": np.ascontiguousarray(arr, wire[arr.dtype.name]).tobytes(),
-            }
-            for name, arr in columns.items()
-        }
-
-    def decode(v: Any, dims: Mapping[str, int]) -> dict[str, Any]:
-        if type(v) is not dict:
-            raise _Bad(f"expected map, got {_got(v)}")
-        if len(v) > most:
-            raise _Bad(f"{len(v)} columns is over the limit of {most}")
-        n = dims[rows]
-        out: dict[str, Any] = {}
-        for name, column in v.items():
-            if type(name) is not str or not 0 < len(name) <= longest:
-                raise _Bad(f"a column name must be 1..{longest} characters of str")
-            if type(column) is not dict:
-                raise _Bad(f"expected map, got {_got(column)}", (name,))
-            dtype, data = column.get("dtype"), column.get("data")
-            if type(dtype) is not str or dtype not in wire:
-                raise _Bad(f"dtype must be one of {', '.join(COLUMN_DTYPES)}", (name, "dtype"))
-            if type(data) is not bytes or len(data) != n * wire[dtype].itemsize:
-                raise _Bad(f"expected {n} {dtype} values as bytes", (name, "data"))
-            if dtype == "bool":
-                raw = np.frombuffer(data, np.uint8)
-                if (raw > 1).any():
-                    raise _Bad("a bool is byte 0 or 1", (name, "data"))
-                out[name] = raw.view(np.bool_)
-            else:
-                arr = np.frombuffer(data, wire[dtype])
-                out[name] = arr if arr.dtype.isnative else arr.astype(arr.dtype.newbyteorder("="))
-        return out
-
-    return encode, decode
-
-
-def _optional(enc: Encoder | None, dec: Decoder) -> tuple[Encoder | None, Decoder]:
-    def decode(v: Any, dims: Mapping[str, int]) -> Any:
-        return None if v is None else dec(v, dims)
-
-    if enc is None:
-        return None, decode
-    inner = enc
-
-    def encode(v: Any) -> Any:
-        return None if v is None else inner(v)
-
-    return encode, decode
-
-
-def _int(rng: Range) -> Decoder:
-    lo, hi = rng.lo, rng.hi
-
-    def decode(v: Any, dims: Mapping[str, int]) -> int:
-        if type(v) is not int:
-            raise _Bad(f"expected int, got {_got(v)}")
-        if (lo is not None and v < lo) or (hi is not None and v > hi):
-            raise _Bad(f"{v} is outside [{lo}, {hi}]")
-        return v
-
-    return decode
-
-
-def _float(finite: bool) -> Decoder:
-    def decode(v: Any, dims: Mapping[str, int]) -> float:
-        if type(v) is not float and type(v) is not int:
-            raise _Bad(f"expected float, got {_got(v)}")
-        if finite and not math.isfinite(v):
-            raise _Bad(f"expected a finite number, got {v}")
-        return float(v)
-
-    return decode
-
-
-def _exact(kind: type) -> Decoder:
-    def decode(v: Any, dims: Mapping[str, int]) -> Any:
-        if type(v) is not kind:
-            raise _Bad(f"expected {kind.__name__}, got {_got(v)}")
-        return v
-
-    return decode
 
 
 def _nested(cls: type) -> Decoder:
     def decode(v: Any, dims: Mapping[str, int]) -> Any:
         if type(v) is not dict:
-            raise _Bad(f"expected map, got {_got(v)}")
+            raise FieldMismatch(f"expected map, got {got(v)}")
         return _decode(cls, v)
 
     return decode
@@ -507,7 +297,7 @@ def _nested(cls: type) -> Decoder:
 def _element(hint: Any, where: str) -> Decoder:
     """Elements of tuples and maps: floats there must be finite (a NaN vector means nothing)."""
     if hint is float:
-        return _float(finite=True)
+        return float_decoder(finite=True)
     enc, dec = _converter(hint, (), where)
     if enc is not None:
         raise TypeError(f"{where}: elements must be plain values, got {hint}")
@@ -521,38 +311,4 @@ def _tuple(args: tuple[Any, ...], where: str) -> Decoder:
         item, length = args[0], len(args)
     else:
         raise TypeError(f"{where}: tuples must be tuple[X, ...] or of one type, got {args}")
-    dec = _element(item, where)
-    expected = f"list of {length or 'any number of'} {getattr(item, '__name__', item)}"
-
-    def decode(v: Any, dims: Mapping[str, int]) -> tuple[Any, ...]:
-        if type(v) is not list:
-            raise _Bad(f"expected {expected}, got {_got(v)}")
-        if length is not None and len(v) != length:
-            raise _Bad(f"expected {expected}, got {len(v)}")
-        if item is str:  # class names: up to MAX_DETECTIONS of them, check types in one pass
-            if not all(type(x) is str for x in v):
-                raise _Bad(f"expected {expected}, got another type inside")
-            return tuple(v)
-        try:
-            return tuple(dec(x, dims) for x in v)
-        except _Bad as exc:
-            raise _Bad(f"expected {expected}: {exc.reason}") from None
-
-    return decode
-
-
-def _map(value_dec: Decoder) -> Decoder:
-    def decode(v: Any, dims: Mapping[str, int]) -> dict[str, Any]:
-        if type(v) is not dict:
-            raise _Bad(f"expected map, got {_got(v)}")
-        out: dict[str, Any] = {}
-        for k, x in v.items():
-            if type(k) is not str:
-                raise _Bad(f"expected str keys, got {_got(k)}")
-            try:
-                out[k] = value_dec(x, dims)
-            except _Bad as exc:
-                raise _Bad(exc.reason, (k, *exc.path)) from None
-        return out
-
-    return decode
+    return tuple_decoder(item, length, _element(item, where))

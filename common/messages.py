@@ -30,7 +30,7 @@ from common.codec import Message
 from common.control_messages import ControllerStatus as ControllerStatus
 from common.control_messages import EStop as EStop
 from common.control_messages import Header as Header
-from common.fields import Dim, Inline, NonNegativeInt, Shape
+from common.field_types import Dim, Inline, NonNegativeInt, Shape
 from common.limits import MAX_IMAGE_SIDE as MAX_IMAGE_SIDE
 
 # ControllerStatus, EStop and Header are declared without numpy, for the e-stop command, and

@@ -4,10 +4,10 @@ Every number a setting holds is bounded by a range a real robot could want, decl
 its field: ``rate_hz: Annotated[float, Range(0.1, 1000)] = 10.0`` (for a tuple of numbers, each
 item); a list setting's length the same way, ``Annotated[tuple[str, ...], Length(0, 16)]``.
 ``check_bounds`` and ``check_lengths`` walk those declarations at start-up (common/fields.py
-declares a wire message's bounds the same way, with the same ``Range``). A value outside (NaN
-and inf included) stops the service with one line that names the setting, the value and the
-range: ``controller.max_linear must be within 0.01..5 m/s, got 1000.0``. A unit test checks
-that every numeric and list field of every table declares one.
+bounds a wire message's ints the same way, with the same ``Range``, common/field_types.py's).
+A value outside (NaN and inf included) stops the service with one line that names the setting,
+the value and the range: ``controller.max_linear must be within 0.01..5 m/s, got 1000.0``. A
+unit test checks that every numeric and list field of every table declares one.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from common.errors import ConfigError
-from common.fields import Range
+from common.field_types import Range
 
 __all__ = [
     "Bounds",

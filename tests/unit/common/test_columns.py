@@ -14,7 +14,7 @@ import pytest
 from common.boxes import Boxes
 from common.codec import Message
 from common.errors import DecodeError
-from common.fields import COLUMN_DTYPES, Columns, Dim
+from common.field_types import COLUMN_DTYPES, Columns, Dim
 from common.limits import MAX_COLUMN_NAME_CHARS, MAX_COLUMNS
 from common.messages import Detections, Header
 

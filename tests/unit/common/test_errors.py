@@ -26,7 +26,7 @@ PACKAGES = (
 def stack_errors() -> dict[str, str]:
     """Every public subclass of StackError in the packages -> the name of its base.
 
-    A private one (``_Bad`` in common/fields.py, a detail of one module) is not drawn."""
+    A private one (``_Name``: a detail of one module) is not drawn."""
     bases: dict[str, list[str]] = {}
     for pkg in PACKAGES:
         for path in (ROOT / pkg).rglob("*.py"):

@@ -13,7 +13,8 @@ import pytest
 
 from common.codec import Message
 from common.errors import DecodeError
-from common.fields import Dim, Inline, NonNegativeInt, Range, Shape, inline_fields
+from common.field_types import Dim, Inline, NonNegativeInt, Range, Shape
+from common.fields import inline_fields
 from common.messages import Header
 
 HEADER = Header(stamp_ns=1_700_000_000_000_000_000, frame_id="x", seq=1, source="test")
