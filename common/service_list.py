@@ -5,7 +5,7 @@ A service is its folder, ``services/<name>/`` (``contract.py``, ``service.py``,
 run and the metrics service believes counters from (common/settings.py), each service's
 principal (common/security.py), the stack config's tables (each contract's ``SETTINGS_TABLES``,
 checked against stack/config.py's ``Config``), the router's access table (each contract's
-``access``, stack/access.py), which services feed live sensors (a contract's ``LIVE_SENSOR``)
+``access``, stack/access_table.py), which services feed live sensors (a contract's ``LIVE_SENSOR``)
 and which beat for the watchdog (a contract's ``HEARTBEAT``; stack/contracts.py reads them).
 
 Pure and plain: common/ imports no service, so this holds names only.

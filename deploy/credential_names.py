@@ -23,8 +23,8 @@ from common.security import (
     stack_principals,
 )
 from common.settings import is_detector_service, service_package
-from stack.access import TOOL_PRINCIPALS, running_principals, service_principals
 from stack.config import Config
+from stack.principals import TOOL_PRINCIPALS, running_principals, service_principals
 
 #: The suffixes of a principal's own files (common/security.py).
 _OWN_FILES = ("*.password", "*.key", "*.pem")
@@ -50,7 +50,7 @@ def credential_principals(
     config: Config, others: Sequence[str] = ()
 ) -> tuple[tuple[str, ...], dict[str, str]]:
     """(the principals to make secrets for, by name, {each principal of the config's stack
-    left out, by name: why}): those the config has a use for (stack.access.running_principals:
+    left out, by name: why}): those the config has a use for (stack.principals.running_principals:
     the router, the processes of ``supervisor.services``, the tools, ``zenoh.remote_principals``)
     and the other hosts' workers named in ``others`` (``--worker``), each as the config's
     (:meth:`Config.principal`). ConfigError, one line, for a bad name."""

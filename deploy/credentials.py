@@ -3,7 +3,7 @@
 
 Creates the credentials of the secure profile in DIR (default: the config's
 ``zenoh.credentials_dir``, ``secrets/``, git-ignored): a private CA, and for each principal the
-config has a use for (stack.access.running_principals) a random password, its line in the
+config has a use for (stack.principals.running_principals) a random password, its line in the
 router's ``user:password`` dictionary, and a key and certificate (common name = the principal's
 name). A principal is named by whose it is (common/security.py): ``<stack.prefix>/<role>``
 for a robot's (``stack/controller``, ``site/robot1/estop``), ``<pool>/<worker>`` for a

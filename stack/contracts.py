@@ -3,7 +3,7 @@ of services (common/service_list.py), and what the stack reads of them all: the 
 each declares (``SETTINGS_TABLES``, the stack config's tables: stack/config.py), whether it
 feeds a live robot's sensors (``LIVE_SENSOR``: no recording may be played onto its keys) and
 whether its work loop beats for the watchdog (``HEARTBEAT``: counters on every pass,
-deploy/watchdog.py). Its access (``access``) is read by stack/access.py.
+deploy/watchdog.py). Its access (``access``) is read by stack/access_table.py.
 
 Adding a service is its folder and its line in the list: nothing here names one.
 """

@@ -22,14 +22,10 @@ from common.security import (
 )
 from common.settings import is_detector_service
 from common.zenoh_bus import HUB_PRINCIPAL, open_configured, readable, zenoh_config
-from stack.access import (
-    access_control,
-    congestion_overwritten,
-    running_principals,
-    running_sensors,
-    service_principals,
-)
+from stack.access import access_control
+from stack.access_table import congestion_overwritten, running_sensors
 from stack.config import Config
+from stack.principals import running_principals, service_principals
 
 
 def hub_access(config: Config) -> dict[str, Any]:
@@ -57,7 +53,7 @@ def hub_access(config: Config) -> dict[str, Any]:
 
 def hub_drop_keys(config: Config) -> tuple[str, ...]:
     """The keys on which the supervisor's router overwrites congestion control to DROP: every
-    key of the stack but the e-stop (stack.access.congestion_overwritten)."""
+    key of the stack but the e-stop (stack.access_table.congestion_overwritten)."""
     keys = Keys(config.stack.prefix)
     remote = [p for p in config.zenoh.remote_principals if is_detector_service(p)]
     workers = (*config.detector_services, *remote)
@@ -69,7 +65,7 @@ def hub_drop_keys(config: Config) -> tuple[str, ...]:
 def check_credentials(config: Config) -> None:
     """The credentials must serve every principal this stack runs, or a process would be
     refused after the others started: with passwords the router's dictionary must name each
-    principal of stack.access.running_principals (the router, each process of
+    principal of stack.principals.running_principals (the router, each process of
     ``supervisor.services``, the tools), by its name (``<stack.prefix>/<role>``,
     common/security.py); with certificates each process the supervisor starts needs its
     certificate and key (the tools' files may live on another host). ConfigError, one line,

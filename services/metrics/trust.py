@@ -6,7 +6,7 @@ config's, or a detector worker of the pool on any host, a bounded number of thos
 :class:`PoolWorkers`), on that service's own key, naming itself, in bounded numbers and with
 counts >= 0; and a detector's stage times only when finite and within a bound. The rest is
 refused and counted (``metrics.refused.<why>``). Under the secure profile the router lets only
-a service's own principal put on its counters key (stack/access.py), so a key that names a
+a service's own principal put on its counters key (stack/access_table.py), so a key that names a
 service also names who sent it: see docs/security.md.
 """
 

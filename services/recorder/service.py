@@ -56,7 +56,7 @@ from services.recorder.play import (
     recorded_cameras,
 )
 from services.recorder.writer import Decode, McapFile, QueuedRecorder
-from stack.access import running_sensors
+from stack.access_table import running_sensors
 from stack.config import Config
 
 SERVICE = "recorder"

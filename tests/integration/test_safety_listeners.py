@@ -25,7 +25,7 @@ import zenoh
 from common.clock import BOOT_ID, now
 from common.messages import ControllerStatus, Detections, EStop, Header, LaserScan
 from common.zenoh_bus import Publisher, QoS
-from stack.access import may_read
+from stack.access_table import may_read
 from tests.integration.conftest import REPO, Stack, credentials_for, wait_for, write_config
 from tests.integration.test_safety import STACK, header, moving
 

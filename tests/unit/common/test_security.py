@@ -15,7 +15,8 @@ from common.security import PRINCIPALS, qualified, role_of, stack_principals
 from common.settings import REPO_ROOT, ZenohSettings, camera_service
 from common.zenoh_bus import QoS, open_session, zenoh_config
 from deploy.credentials import generate
-from stack.access import access_control, may_put, may_read, running_sensors
+from stack.access import access_control
+from stack.access_table import may_put, may_read, running_sensors
 from stack.config_file import load_config
 from stack.hub import hub_access
 

@@ -16,7 +16,8 @@ from common.settings import detector_service, is_detector_service, service_packa
 from deploy.processes import service_command, stack_processes
 from deploy.watchdog import Observation, judge
 from services.detector.contract import DetectorSettings
-from stack.access import access_control, may_announce, may_put
+from stack.access import access_control
+from stack.access_table import may_announce, may_put
 from stack.config import Config
 from stack.config_file import load_config
 

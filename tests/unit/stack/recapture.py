@@ -10,7 +10,8 @@ from typing import Any
 
 from common.keys import Keys
 from common.security import stack_principals
-from stack.access import access_control, congestion_overwritten, may_announce, may_put, may_read
+from stack.access import access_control
+from stack.access_table import congestion_overwritten, may_announce, may_put, may_read
 
 CAPTURE = Path(__file__).parent / "data" / "access_before.json"
 

@@ -11,13 +11,8 @@ import pytest
 
 from common.keys import Keys
 from common.security import stack_principals
-from stack.access import (
-    access_control,
-    congestion_overwritten,
-    may_announce,
-    may_put,
-    may_read,
-)
+from stack.access import access_control
+from stack.access_table import congestion_overwritten, may_announce, may_put, may_read
 
 BEFORE = json.loads((Path(__file__).parent / "data" / "access_before.json").read_text())
 

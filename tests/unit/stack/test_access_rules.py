@@ -16,7 +16,8 @@ from common.memory_bus import MemoryHub
 from common.security import stack_principals
 from common.settings import principal_names
 from services.camera.contract import CameraSettings
-from stack.access import access_control, access_table
+from stack.access import access_control
+from stack.access_table import access_table
 from tests.unit.heard import heard_cameras
 
 KEYS = Keys("stack")

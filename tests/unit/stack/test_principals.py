@@ -1,4 +1,4 @@
-"""Which principals a stack has a use for (stack/access.py::running_principals): the router,
+"""Which principals a stack has a use for (stack/principals.py::running_principals): the router,
 the processes of ``supervisor.services``, the tools and the other hosts' principals; what
 ``zstack credentials`` makes secrets for. The rules stay built for every principal."""
 
@@ -11,8 +11,9 @@ import pytest
 from common.keys import Keys
 from common.security import qualified, stack_principals
 from deploy.processes import stack_processes
-from stack.access import TOOL_PRINCIPALS, access_control, running_principals, service_principals
+from stack.access import access_control
 from stack.config_file import load_config
+from stack.principals import TOOL_PRINCIPALS, running_principals, service_principals
 
 CAMERAS = {"front": "camera", "rear": "camera_rear"}
 SIM_STACK = ("sim", "detector", "controller", "metrics", "viewer")  # deploy/stack.toml's

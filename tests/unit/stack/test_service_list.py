@@ -21,7 +21,7 @@ from common.keys import Keys
 from common.security import PRINCIPALS, ROUTER_PRINCIPAL, SERVICE_PRINCIPALS
 from common.service_list import SERVICES
 from deploy.watchdog import HEARTBEAT_SERVICES
-from stack.access import LIVE_SENSORS, access_table
+from stack.access_table import LIVE_SENSORS, access_table
 from stack.config import Config
 from stack.contracts import (
     SHARED_TABLES,
