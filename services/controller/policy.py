@@ -13,9 +13,9 @@ the next command is a stop and the target is let go of. The target is
 chosen among the fresh cameras' boxes together (services/controller/targets.py). A target far
 off the robot's heading (behind it, beside it) is turned to in place: the robot drives forward
 only while the target is centred (``center_tolerance``) and, in either mode, while the way
-ahead is known clear (``Controller._blocked``): every obstacle source the settings require
-(``obstacle_sources``: the laser's scan, the depth cameras' virtual scan) fresh, and no fresh
-one showing anything within the safety distance plus the room to brake. The follow lock is
+ahead is known clear (services/controller/way_ahead.py): every obstacle source the settings
+require (``obstacle_sources``: the laser's scan, the depth cameras' virtual scan) fresh, and no
+fresh one showing anything within the safety distance plus the room to brake. The follow lock is
 a camera's track id; when the locked target leaves that camera's view, the lock passes to a
 box of the same class in another camera within ``handover_gate_deg`` of where the target
 should be by now, for ``handover_window_s`` after it was last seen, and the robot holds its
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 from common.contracts import ControllerMode, ControllerState, DistanceSource
 from common.messages import LaserScan
-from services.controller.contract import DEPTH_SOURCE, ControllerSettings
+from services.controller.contract import ControllerSettings
 from services.controller.geometry import (
     Mount,
     box_clipped,
@@ -40,13 +40,13 @@ from services.controller.geometry import (
     depth_distance,
     in_view,
     laser_covers,
-    sector_clearance,
     sector_range,
     wrap,
 )
 from services.controller.limits import Limits, limit
 from services.controller.pid import PID, PIDGains
 from services.controller.targets import Sighting, View, sightings
+from services.controller.way_ahead import Obstacles, blocked, creep, known_clear, tick_sources
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,20 +87,6 @@ class Inputs:
     depth_missing: str = "no depth camera"
     depth_remembered: LaserScan | None = None
     depth_known_m: float = math.inf
-
-
-@dataclass(frozen=True, slots=True)
-class Obstacles:
-    """One obstacle source at this tick: its scan (None when missing or stale), whether the
-    settings require it for forward motion, the reason when it is missing, and the room the
-    robot needs to stop on what it shows (braking plus the distance covered while it aged)."""
-
-    name: str
-    scan: LaserScan | None
-    required: bool
-    missing: str
-    stopping_m: float
-    known_m: float = math.inf
 
 
 def stop(state: ControllerState, reason: str, input_stamp_ns: int = 0) -> VelocityCommand:
@@ -180,38 +166,14 @@ class Controller:
         if not fresh:
             return self._halt(stop(ControllerState.STALE, self._stale_reason(views)))
         s = self.s
-        scan = inp.scan if inp.scan_age_s <= s.scan_timeout_s else None
-        depth = inp.depth if inp.depth_age_s <= s.depth_timeout_s else None
-        # Room the robot needs to stop from the fastest this tick may command (its speed now
-        # plus what the acceleration limit allows since the last tick: after a stalled tick
-        # that is much more than now), braking at the acceleration limit, plus the distance
-        # covered while the scan ages and the next tick comes.
+        # The room to stop is from the fastest this tick may command: its speed now plus what
+        # the acceleration limit allows since the last tick (after a stalled tick that is much
+        # more than now).
         v = min(s.max_linear, max(0.0, self.previous[0]) + s.max_linear_accel * dt)
-        braking = v * v / (2 * s.max_linear_accel)
-
-        def stopping(age_s: float) -> float:
-            return braking + v * (age_s + 1.0 / s.control_rate_hz)
-
-        self.stopping_m = stopping(inp.scan_age_s if scan is not None else 0.0)
-        self.obstacles = (
-            Obstacles("laser", scan, s.laser_required, "no recent laser scan", self.stopping_m),
-            Obstacles(
-                "depth",
-                depth,
-                DEPTH_SOURCE in s.obstacle_sources,
-                inp.depth_missing if inp.depth is None else "no recent depth",
-                stopping(inp.depth_age_s if depth is not None else 0.0),
-                inp.depth_known_m,
-            ),
-            Obstacles(
-                "remembered",
-                inp.depth_remembered if depth is not None else None,
-                False,
-                "",
-                stopping(inp.depth_age_s if depth is not None else 0.0),
-            ),
-        )
-        aim = self._aim(fresh, scan, now, dt)
+        self.obstacles = tick_sources(s, inp, v)
+        laser = self.obstacles[0]
+        self.stopping_m = laser.stopping_m
+        aim = self._aim(fresh, laser.scan, now, dt)
         if aim.state == ControllerState.SEARCHING:
             return self._halt(aim)  # the target is gone: stop now, not at the braking rate
         if not (math.isfinite(aim.linear_x) and math.isfinite(aim.angular_z)):
@@ -235,55 +197,6 @@ class Controller:
             return "no detections received yet" if v.dets is None else f"detections are {age(v)}"
         ages = ", ".join(f"{c} {age(v)}" for c, v in views.items())
         return f"no camera's detections are fresh ({ages})"
-
-    def _clearance(self, scan: LaserScan) -> float:
-        return sector_clearance(scan, self.s.sector_width_deg, self.s.robot_width_m / 2)
-
-    def _blocked(self) -> str | None:
-        """Why the robot may not drive forward now, or None when the way ahead is known clear.
-
-        The rule of every mode, for every obstacle source of this tick (``self.obstacles``):
-        nothing within the safety distance plus the room to brake in the sector and corridor
-        ahead. A source the settings require (``obstacle_sources``) that is missing or stale
-        means no forward motion; one not required is obeyed when it comes (the laser with
-        ``no_laser``, the depth cameras on a robot that needs a laser).
-        """
-        for source in self.obstacles:
-            if source.scan is None:
-                if source.required:
-                    return source.missing
-                continue
-            by = "" if source.name == "laser" else f" ({source.name})"
-            if math.isnan(sector_range(source.scan, 0.0, self.s.sector_width_deg, unseen=math.nan)):
-                # No ray of the sector ahead holds a reading: blocked, and said so, not as an
-                # obstacle at 0.00 m that nobody can find (issue 39).
-                return f"nothing seen straight ahead{by}"
-            clearance = self._clearance(source.scan)
-            if clearance <= self.s.safety_distance_m + source.stopping_m:
-                return f"obstacle at {clearance:.2f} m{by}"
-        return None
-
-    def _creep(self, linear: float, reason: str) -> tuple[float, str]:
-        """``linear`` no faster than ``depth_creep_speed`` while a required obstacle source
-        knows the corridor ahead less far than the robot needs to stop (part of it never
-        seen: the depth camera's blind zone at start-up), with the reason said."""
-        for source in self.obstacles:
-            if not (source.required and source.scan is not None) or linear <= 0:
-                continue
-            if source.known_m <= self.s.safety_distance_m + source.stopping_m:
-                creep = self.s.depth_creep_speed
-                if linear > creep:
-                    return creep, (
-                        f"{reason}; creeping: the floor is known only {source.known_m:.2f} m "
-                        f"ahead ({source.name})"
-                    )
-        return linear, reason
-
-    def _known_clear(self) -> bool:
-        """Whether some obstacle source is fresh and none shows the way ahead blocked: what
-        driving on towards a target not seen needs (``no_laser`` or not)."""
-        seen = any(source.scan is not None for source in self.obstacles)
-        return seen and self._blocked() is None
 
     def _halt(self, cmd: VelocityCommand) -> VelocityCommand:
         """Zero at once (safety stops bypass the acceleration limit) and forget the target."""
@@ -392,13 +305,15 @@ class Controller:
         centred = abs(err) <= math.atan(s.center_tolerance * width / best.focal_px)
         stamp = best.dets.header.stamp_ns
         if s.mode is ControllerMode.TRACK:
-            blocked = self._blocked() if centred else None
+            stopped_by = blocked(self.obstacles, s) if centred else None
             state = ControllerState.TURNING
             if centred:
-                state = ControllerState.TRACKING if blocked is None else ControllerState.BLOCKED
-            linear, why = self._creep(
+                state = ControllerState.TRACKING if stopped_by is None else ControllerState.BLOCKED
+            linear, why = creep(
+                self.obstacles,
+                s,
                 s.forward_speed if state is ControllerState.TRACKING else 0.0,
-                blocked or f"bearing {math.degrees(err):+.1f} deg",
+                stopped_by or f"bearing {math.degrees(err):+.1f} deg",
             )
             aim = VelocityCommand(
                 linear,
@@ -435,9 +350,11 @@ class Controller:
             held = self.last_aim
             # Driving on towards a target not seen needs a scan that shows the way clear,
             # even with no_laser (which lets the robot drive only towards a target in view).
-            clear = self._known_clear()
+            clear = known_clear(self.obstacles, s)
             where = ", between the cameras" if between else ""
-            linear, why = self._creep(
+            linear, why = creep(
+                self.obstacles,
+                s,
                 held.linear_x if clear and not between else 0.0,
                 f"target unseen for {now - self.last_seen:.1f} s{where}",
             )
@@ -503,10 +420,12 @@ class Controller:
             return turn_only(ControllerState.TURNING, f"bearing {math.degrees(err):+.1f} deg")
         if distance <= s.follow_distance_m:
             return turn_only(ControllerState.ARRIVED, f"target at {distance:.2f} m")
-        blocked = self._blocked()
-        if blocked is not None:
-            return turn_only(ControllerState.BLOCKED, blocked)
-        speed, why = self._creep(
+        stopped_by = blocked(self.obstacles, s)
+        if stopped_by is not None:
+            return turn_only(ControllerState.BLOCKED, stopped_by)
+        speed, why = creep(
+            self.obstacles,
+            s,
             min(s.max_linear, s.distance_gain * (distance - s.follow_distance_m)),
             f"target at {distance:.2f} m",
         )
