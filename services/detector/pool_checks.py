@@ -2,8 +2,15 @@
 holds one): everyone's serving tokens against the rule (common/pool_audit.py), who delivers the
 detections of the cameras they are given (common/pool_delivery.py), and which announced
 cameras the pool admits (common/pool_rule.py's ``admit_cameras``). Its words (warnings, gauges)
-go out through the node. Not thread-safe: the member calls it under its own lock, but for the
-``tell_*`` functions, which log and are called outside it."""
+go out through the node, as do the member's on a change of its cameras (:func:`tell_change`).
+Not thread-safe: the member calls it under its own lock, but for the ``tell_*`` functions,
+which log and are called outside it.
+
+A member earns its cameras by delivering (common/pool_delivery.py): the worker hears every
+camera's detections of the robots it serves and drops from a robot's assignment a member none
+of whose cameras of it has had a detection for ``detector.pool_deliver_s`` (counted:
+``pool_dropped``, ``pool_drops``). Announced cameras over ``detector.max_robot_cameras`` of a
+robot, or whose counter label another's has, are refused (``cameras_refused``)."""
 
 from __future__ import annotations
 
@@ -15,7 +22,8 @@ from common.pool_delivery import Delivery, Dropped, Judged
 from common.pool_rule import PoolCamera, admit_cameras
 from services.detector import contract
 from services.detector.contract import DetectorSettings
-from services.detector.pool import PoolView
+from services.detector.counting import count_for
+from services.detector.pool import Change, PoolView
 
 AUDIT_PERIOD_S = 0.5  # how often the loop audits the pool's tokens (common/pool_audit.py)
 
@@ -89,6 +97,27 @@ def tell_drops(
         )
     for robot, worker in readmitted:
         node.log.info("pool member %s is given cameras of %s again", worker, robot)
+
+
+def tell_change(
+    node: Node, change: Change, gained: list[str], lost: list[str], handed_over: bool, told: int
+) -> None:
+    """Count the cameras ``gained`` and ``lost`` (their labels) when ``handed_over`` (the
+    first assignment, at start, is no hand-over), and log the change when a camera moved or
+    the pool's size is not the one ``told`` last."""
+    if handed_over:
+        for cam in gained:
+            count_for(node, cam, contract.CAMERAS_GAINED)
+        for cam in lost:
+            count_for(node, cam, contract.CAMERAS_LOST)
+    if change.gained or change.lost or change.members != told:
+        node.log.info(
+            "pool of %d: serving %s (gained %s, lost %s)",
+            change.members,
+            sorted(change.serving) or "no camera",
+            list(change.gained),
+            list(change.lost),
+        )
 
 
 def tell_refused(node: Node, refused: Mapping[str, str], told: Mapping[str, str]) -> None:
