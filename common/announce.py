@@ -14,6 +14,13 @@ capacity) is a new token: :class:`Announcer` declares the new one before it with
 so a listener never sees the announcer gone. :class:`Announced` is the listener's side: every
 live announcement on a key expression by name, the newest of a name when two overlap, garbage
 (a key that does not decode, or whose name differs from the message's) reported and ignored.
+:func:`announced_now` (:func:`cameras_now`, :func:`workers_now`) is one look at the tokens alive
+now, for a reader that does not stay (``zstack pool``, a benchmark, a worker's catch-up): read
+and checked by the same :func:`read_token`, garbage reported the same way.
+
+Every reader of announcements goes through these. The one exception is the recorder, which
+records each camera announcement's chunk raw as it comes, with its arrival time, and decodes it
+later on its writer thread, as it does every payload (services/recorder/service.py).
 """
 
 from __future__ import annotations
@@ -22,7 +29,7 @@ import base64
 import binascii
 import threading
 from collections.abc import Callable
-from typing import Generic, Protocol, TypeVar
+from typing import Generic, Protocol, TypeAlias, TypeVar
 
 from common.bus import Bus, Declared
 from common.errors import DecodeError
@@ -38,6 +45,10 @@ class _Announcement(Protocol):
 
 
 _A = TypeVar("_A")
+
+#: Splits a token's key into (announcer name, chunk); None for a key that is no announcement
+#: (common/keys.py's ``*_parts``).
+Parse: TypeAlias = Callable[[str], tuple[str, str] | None]
 
 
 def to_chunk(message: _Announcement) -> str:
@@ -55,6 +66,53 @@ def from_chunk(decode: Callable[[bytes], _A], chunk: str) -> _A:
     except (binascii.Error, ValueError) as exc:
         raise DecodeError(f"an announcement that is not base64url: {exc}") from exc
     return decode(raw)
+
+
+def read_token(
+    key: str, parse: Parse, decode: Callable[[bytes], _A], name_of: Callable[[_A], str]
+) -> tuple[str, _A] | None:
+    """(announcer name, announcement) of a token's ``key``; None for a key that is no
+    announcement (``parse`` gives None); DecodeError for one that does not decode, or whose
+    message names another announcer than its key does (a camera's source cannot announce
+    another camera under its own key)."""
+    parts = parse(key)
+    if parts is None:
+        return None
+    name, chunk = parts
+    message = from_chunk(decode, chunk)
+    if name_of(message) != name:
+        raise DecodeError(
+            f"an announcement under the name {name!r} names itself {name_of(message)!r}"
+        )
+    return name, message
+
+
+def announced_now(
+    bus: Bus,
+    expr: str,
+    parse: Parse,
+    decode: Callable[[bytes], _A],
+    name_of: Callable[[_A], str],
+    timeout_s: float,
+    on_bad: Callable[[str, Exception], None] | None = None,
+) -> dict[str, list[_A]]:
+    """One look at the announcements alive on ``expr`` now (the bus asked for at most
+    ``timeout_s``): every live announcement of each name, as :meth:`Announced.every` gives
+    them, each read by :func:`read_token`; ``on_bad(key, error)`` for one that does not decode,
+    which is left out. A look has no order of arrival, so no ``conflict`` rule applies: two
+    announcements of one name are both there, for the reader to choose (the highest ``seq``,
+    the lowest capacity: common/pool_rule.py's ``one_worker``)."""
+    out: dict[str, list[_A]] = {}
+    for key in bus.live_tokens(expr, timeout_s):
+        try:
+            read = read_token(key, parse, decode, name_of)
+        except DecodeError as exc:
+            if on_bad is not None:
+                on_bad(key, exc)
+            continue
+        if read is not None:
+            out.setdefault(read[0], []).append(read[1])
+    return out
 
 
 class Announcer(Generic[_A]):
@@ -112,7 +170,7 @@ class Announced(Generic[_A]):
         self,
         bus: Bus,
         expr: str,
-        parse: Callable[[str], tuple[str, str] | None],
+        parse: Parse,
         decode: Callable[[bytes], _A],
         name_of: Callable[[_A], str],
         *,
@@ -149,11 +207,11 @@ class Announced(Generic[_A]):
             return list(keys.values())[-1] if keys else None
 
     def _on_token(self, key: str, alive: bool) -> None:
-        parts = self._parse(key)
-        if parts is None:
-            return
-        name, chunk = parts
         if not alive:
+            parts = self._parse(key)
+            if parts is None:
+                return
+            name = parts[0]
             with self._lock:
                 self._refused.get(name, {}).pop(key, None)
                 keys = self._live.get(name, {})
@@ -165,16 +223,14 @@ class Announced(Generic[_A]):
                 self._on_change()
             return
         try:
-            message = from_chunk(self._decode, chunk)
-            if self._name_of(message) != name:
-                raise DecodeError(
-                    f"an announcement under the name {name!r} names itself "
-                    f"{self._name_of(message)!r}"
-                )
+            read = read_token(key, self._parse, self._decode, self._name_of)
         except DecodeError as exc:
             if self._on_bad is not None:
                 self._on_bad(key, exc)
             return
+        if read is None:
+            return
+        name, message = read
         with self._lock:
             why = self._refusal(name, message)
             if why is None:
@@ -230,6 +286,14 @@ def camera_conflict(current: CameraAnnouncement, new: CameraAnnouncement) -> str
     return f"another mounting ({said}) while the first announcement lives"
 
 
+def _camera_name(a: CameraAnnouncement) -> str:
+    return a.camera
+
+
+def _worker_name(a: WorkerAnnouncement) -> str:
+    return a.worker
+
+
 def announced_cameras(
     bus: Bus,
     keys: Keys,
@@ -242,7 +306,7 @@ def announced_cameras(
         keys.all_camera_announcements(),
         keys.camera_announcement_parts,
         CameraAnnouncement.decode,
-        lambda a: a.camera,
+        _camera_name,
         on_change=on_change,
         on_bad=on_bad,
         conflict=camera_conflict,
@@ -261,7 +325,44 @@ def announced_workers(
         keys.all_worker_announcements(),
         keys.worker_announcement_parts,
         WorkerAnnouncement.decode,
-        lambda a: a.worker,
+        _worker_name,
         on_change=on_change,
         on_bad=on_bad,
+    )
+
+
+def cameras_now(
+    bus: Bus,
+    keys: Keys,
+    timeout_s: float,
+    on_bad: Callable[[str, Exception], None] | None = None,
+) -> dict[str, list[CameraAnnouncement]]:
+    """One look at the cameras announced under ``keys``' prefix now (:func:`announced_now`)."""
+    return announced_now(
+        bus,
+        keys.all_camera_announcements(),
+        keys.camera_announcement_parts,
+        CameraAnnouncement.decode,
+        _camera_name,
+        timeout_s,
+        on_bad,
+    )
+
+
+def workers_now(
+    bus: Bus,
+    keys: Keys,
+    timeout_s: float,
+    on_bad: Callable[[str, Exception], None] | None = None,
+) -> dict[str, list[WorkerAnnouncement]]:
+    """One look at the pool workers announced under ``keys``' prefix now
+    (:func:`announced_now`)."""
+    return announced_now(
+        bus,
+        keys.all_worker_announcements(),
+        keys.worker_announcement_parts,
+        WorkerAnnouncement.decode,
+        _worker_name,
+        timeout_s,
+        on_bad,
     )

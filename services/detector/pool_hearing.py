@@ -11,7 +11,13 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from common.announce import Announced, announced_cameras, announced_workers
+from common.announce import (
+    Announced,
+    announced_cameras,
+    announced_workers,
+    cameras_now,
+    workers_now,
+)
 from common.bus import Bus
 from common.keys import Keys
 from common.messages import CameraAnnouncement
@@ -55,15 +61,15 @@ class PoolHearing:
         """Wait (at most :data:`POOL_ASK_TIMEOUT_S`) until the listeners hold every
         announcement alive on the bus now, so that the first assignment is the pool's, not
         that of a worker that believes itself alone (which would serve every camera for a
-        moment). On an in-process bus they are there at once."""
-        bus, pool = self._bus, self._pool_keys
-        expected: list[tuple[Announced[Any], set[str]]] = []
-        keys = bus.live_tokens(pool.all_worker_announcements(), POOL_ASK_TIMEOUT_S)
-        expected.append((self._workers, _names(keys, pool.worker_announcement_parts)))
+        moment). On an in-process bus they are there at once. The names to wait for are those
+        of the announcements a look at the bus reads (common/announce.py's one-shot form):
+        garbage is no name to wait for, and the listeners report it (once)."""
+        bus, timeout_s = self._bus, POOL_ASK_TIMEOUT_S
+        expected: list[tuple[Announced[Any], set[str]]] = [
+            (self._workers, set(workers_now(bus, self._pool_keys, timeout_s)))
+        ]
         for prefix, heard in self._cameras.items():
-            robot = Keys(prefix)
-            keys = bus.live_tokens(robot.all_camera_announcements(), POOL_ASK_TIMEOUT_S)
-            expected.append((heard, _names(keys, robot.camera_announcement_parts)))
+            expected.append((heard, set(cameras_now(bus, Keys(prefix), timeout_s))))
         for _ in range(CATCH_UP_CHECKS):
             if all(names <= heard.current().keys() for heard, names in expected):
                 return
@@ -104,8 +110,3 @@ class PoolHearing:
         for heard in self._cameras.values():
             heard.close()
         self._workers.close()
-
-
-def _names(keys: list[str], parse: Callable[[str], tuple[str, str] | None]) -> set[str]:
-    """The announcers' names of announcement ``keys`` (common/keys.py's ``*_parts``)."""
-    return {parts[0] for parts in map(parse, keys) if parts is not None}

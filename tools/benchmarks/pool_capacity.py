@@ -27,11 +27,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from common.announce import from_chunk
-from common.errors import DecodeError
+from common.announce import workers_now
+from common.bus import Bus
 from common.keys import Keys
 from common.messages import WorkerAnnouncement
 from common.spawn import spawn, stop_child
+from common.zenoh_bus import ZenohBus
 from stack.config import Config
 from stack.config_file import to_toml
 from tools.benchmarks.stacks import (
@@ -45,6 +46,7 @@ from tools.benchmarks.stacks import (
 )
 
 STOP_S = 30.0  # the slow worker's clean exit after a SIGINT, before it is killed
+ANNOUNCED_TIMEOUT_S = 2.0  # how long the announcements alive at the end are asked for
 EVEN_HZ = 10.0  # the capacity both workers announce in the even condition
 WORKERS = ("detector", "detector_2")  # the fast (the supervisor's) and the slow one
 #: The issue's bar: each worker's load share within 15 % (of the whole) of its capacity's.
@@ -91,22 +93,15 @@ class CapacityRun:
         }
 
 
-def announced(session: Any, keys: Keys) -> dict[str, WorkerAnnouncement]:
-    """Every worker's current announcement (the highest ``seq`` of a name)."""
-    out: dict[str, WorkerAnnouncement] = {}
-    for reply in session.liveliness().get(keys.all_worker_announcements(), timeout=2.0):
-        if reply.ok is None:
-            continue
-        parts = keys.worker_announcement_parts(str(reply.ok.key_expr))
-        if parts is None:
-            continue
-        try:
-            ann = from_chunk(WorkerAnnouncement.decode, parts[1])
-        except DecodeError:
-            continue
-        if ann.worker not in out or ann.seq > out[ann.worker].seq:
-            out[ann.worker] = ann
-    return out
+def announced(bus: Bus, keys: Keys) -> dict[str, WorkerAnnouncement]:
+    """Every worker's current announcement (the highest ``seq`` of a name); one that does not
+    decode is said (a progress line) and left out."""
+
+    def bad(key: str, error: Exception) -> None:
+        progress(f"  a bad worker announcement ignored: {key}: {error}")
+
+    heard = workers_now(bus, keys, ANNOUNCED_TIMEOUT_S, bad)
+    return {w: max(every, key=lambda a: a.seq) for w, every in heard.items()}
 
 
 def configs(
@@ -154,7 +149,8 @@ def run_condition(
         watch = Watch(stack, WORKERS)
         watch.wait_ready("sim", stop)
         result = measure(label, stack, watch, options, stop)
-        heard = announced(watch.session, watch.keys)
+        # The watch's session, borrowed: the watch closes it.
+        heard = announced(ZenohBus(watch.session), watch.keys)
     finally:
         stop_child(worker, STOP_S)
         log.close()

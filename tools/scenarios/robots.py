@@ -15,14 +15,16 @@ import dataclasses
 import subprocess
 import threading
 import uuid
+from collections.abc import Callable
 from contextlib import ExitStack
 from typing import Any, TypedDict
 
+from common.announce import workers_now
 from common.clock import mono_s
 from common.contracts import ControllerMode, ScenarioResult
 from common.errors import StackError
 from common.keys import Keys
-from common.zenoh_bus import open_session
+from common.zenoh_bus import ZenohBus, open_session
 from simworld.scenarios import SCENARIOS
 from stack.config import Config
 from stack.config_file import to_toml
@@ -100,17 +102,14 @@ def robots_plan(
     return RobotsPlan(robot_stacks, pool)
 
 
-def _workers_announced(pool: Config) -> int:
+def _workers_announced(pool: Config, on_bad: Callable[[str, Exception], None]) -> int:
+    """How many workers the pool's announcements name now (garbage to ``on_bad``)."""
     keys = Keys(pool.detector.pool_prefix or pool.stack.prefix)
-    session = open_session(pool.zenoh, pool.principal("observer"))
+    bus = ZenohBus(open_session(pool.zenoh, pool.principal("observer")))
     try:
-        replies = session.liveliness().get(
-            keys.all_worker_announcements(), timeout=POOL_ASK_TIMEOUT_S
-        )
-        parts = (keys.worker_announcement_parts(str(r.ok.key_expr)) for r in replies if r.ok)
-        return len({p[0] for p in parts if p is not None})
+        return len(workers_now(bus, keys, POOL_ASK_TIMEOUT_S, on_bad))
     finally:
-        session.close()
+        bus.close()
 
 
 def run_robots(
@@ -147,7 +146,14 @@ def run_robots(
 
         pool_proc = start(plan.pool, "pool")
         started = mono_s()
-        while _workers_announced(plan.pool) < workers:
+        told: set[str] = set()
+
+        def bad(key: str, error: Exception) -> None:
+            if log and key not in told:
+                told.add(key)
+                log(f"{name}: a bad worker announcement ignored ({key}: {error})")
+
+        while _workers_announced(plan.pool, bad) < workers:
             if pool_proc.poll() is not None:
                 raise StackError(f"the pool exited during start-up (see {workdir}/pool.log)")
             if mono_s() - started > STARTUP_TIMEOUT_S:

@@ -11,7 +11,11 @@ from pathlib import Path
 
 import pytest
 
+from common.announce import to_chunk
 from common.errors import StackError
+from common.keys import Keys
+from common.memory_bus import MemoryHub
+from common.messages import WorkerAnnouncement
 from services.detector.pool import assign, rank
 from stack.config_file import load_config
 from tools.benchmarks.__main__ import _counts
@@ -33,6 +37,7 @@ from tools.benchmarks.pool import (
     render_rules,
     to_json,
 )
+from tools.benchmarks.pool_capacity import announced
 from tools.benchmarks.stacks import CameraLoad, split, stack_config
 
 
@@ -211,3 +216,18 @@ def test_the_capacity_part_reports_each_workers_share_gap_and_the_p95_ratio() ->
     assert "gap 25% of the load (NOT within 15 %" in render([far])
     assert "200 ms by capacity vs 800 ms even (0.25x)" in text
     assert json.loads(json.dumps(measured.as_dict()))["worst_p95_ms"] == 200.0
+
+
+def test_the_capacity_part_reads_the_announcements_as_every_reader_does(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    hub = MemoryHub()
+    keys = Keys("stack")
+    worker = hub.join("w")
+    for seq in (2, 5, 3):
+        slow = WorkerAnnouncement(worker="detector_2", capacity_hz=4.0 + seq, seq=seq)
+        worker.declare_token(keys.worker_announcement("detector_2", to_chunk(slow)))
+    worker.declare_token(keys.worker_announcement("detector", "AAAA"))  # base64 of no message
+    heard = announced(hub.join("watch"), keys)
+    assert list(heard) == ["detector_2"] and heard["detector_2"].seq == 5  # the newest
+    assert "a bad worker announcement ignored" in capsys.readouterr().err
