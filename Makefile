@@ -47,7 +47,7 @@ TEST_WORKERS ?= 2
 
 test: $(DEV_STAMP) lint
 	$(PY) -m tools.detector prepare
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist worksteal
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist worksteal --durations=25
 
 unit: $(DEV_STAMP)
 	$(PY) -m pytest -q tests/unit

@@ -745,3 +745,14 @@ def test_no_production_module_reads_anything_under_tests() -> None:
         for line, what in references_to_tests(path.read_text(encoding="utf-8"))
     )
     assert found == [], "production code reaching into tests/:\n" + "\n".join(found)
+
+
+def test_every_package_is_walked_and_installed() -> None:
+    # A new top-level package left out of this table, or of pyproject's package list, would be
+    # outside every rule above, or missing from an install.
+    from tests.unit.packages import PACKAGES as FOUND
+
+    assert sorted(PACKAGES) == sorted(FOUND)
+    pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    (include,) = re.findall(r"^include = \[(.*)\]$", pyproject, re.M)
+    assert sorted(re.findall(r'"(\w+)\*"', include)) == sorted(FOUND)

@@ -9,20 +9,9 @@ no clock and is not counted.
 from __future__ import annotations
 
 import ast
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[3]
-PACKAGES = (
-    "common",
-    "perception",
-    "rosmsg",
-    "simworld",
-    "services",
-    "runtimes",
-    "modelprep",
-    "deploy",
-    "tools",
-)
+from tests.unit.packages import PACKAGES, ROOT
+
 CLOCK_MODULE = ROOT / "common" / "clock.py"
 
 #: The ``time`` functions that read a clock (the formatting ones read it when given no time).

@@ -5,22 +5,9 @@ from __future__ import annotations
 
 import ast
 import re
-from pathlib import Path
 
 import common.errors
-
-ROOT = Path(__file__).resolve().parents[3]
-PACKAGES = (
-    "common",
-    "perception",
-    "rosmsg",
-    "simworld",
-    "services",
-    "runtimes",
-    "modelprep",
-    "deploy",
-    "tools",
-)
+from tests.unit.packages import PACKAGES, ROOT
 
 
 def stack_errors() -> dict[str, str]:

@@ -8,22 +8,9 @@ import os
 import signal
 import subprocess
 import sys
-from pathlib import Path
 
 from common.spawn import spawn, stop_child, wait_or_kill
-
-ROOT = Path(__file__).resolve().parents[3]
-PACKAGES = (
-    "common",
-    "perception",
-    "rosmsg",
-    "simworld",
-    "services",
-    "runtimes",
-    "modelprep",
-    "deploy",
-    "tools",
-)
+from tests.unit.packages import PACKAGES, ROOT
 
 READY = "import signal, sys\n{setup}\nprint('ready', flush=True)\nsignal.pause()"
 
