@@ -89,6 +89,24 @@ def _summary(values: list[float]) -> dict[str, float]:
     }
 
 
+def tally(
+    times: dict[str, list[float]], lost: dict[str, int], against: str
+) -> tuple[dict[str, dict[str, Any]], float | None]:
+    """Each revision's summary (with its lost runs and its runs over 0.2 s), and the ratio of
+    this checkout's p50 to the other's (None when either has no run)."""
+    report: dict[str, dict[str, Any]] = {
+        name: {**_summary(v), "lost": lost[name], "over_200_ms": sum(t > 0.2 for t in v)}
+        for name, v in times.items()
+        if v
+    }
+    ratio = (
+        report[THIS]["p50_ms"] / report[against]["p50_ms"]
+        if len(report) == 2 and report[against]["p50_ms"] > 0
+        else None
+    )
+    return report, ratio
+
+
 def run(options: EstopOptions) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="estop-bench-", dir=temp_root()) as tmp:
         folder = Path(tmp)
@@ -145,12 +163,7 @@ def run(options: EstopOptions) -> dict[str, Any]:
         finally:
             sub.undeclare()
             hub.close()
-    report = {name: {**_summary(v), "lost": lost[name]} for name, v in times.items() if v}
-    ratio = (
-        report[THIS]["p50_ms"] / report[options.against]["p50_ms"]
-        if len(report) == 2 and report[options.against]["p50_ms"] > 0
-        else None
-    )
+    report, ratio = tally(times, lost, options.against)
     return {
         "runs": options.runs,
         "against": {"revision": options.against, "commit": commit},

@@ -40,7 +40,7 @@ from common.settings import REPO_ROOT
 from common.spawn import spawn
 from common.zenoh_bus import open_session
 from stack.config_file import load_config
-from tools.benchmarks.estop import THIS, EstopOptions, _export, _runs_from, _summary, show
+from tools.benchmarks.estop import THIS, EstopOptions, _export, _runs_from, show, tally
 from tools.launch import start_supervisor
 from tools.ports import private_endpoint
 
@@ -181,15 +181,7 @@ def run_to_zero(options: EstopOptions) -> dict[str, Any]:
                 session.close()
                 supervisor.terminate()
                 supervisor.wait(60)
-    report = {name: {**_summary(v), "lost": lost[name]} for name, v in times.items() if v}
-    for name, values in times.items():
-        if name in report:
-            report[name]["over_200_ms"] = sum(v > 0.2 for v in values)
-    ratio = (
-        report[THIS]["p50_ms"] / report[options.against]["p50_ms"]
-        if len(report) == 2 and report[options.against]["p50_ms"] > 0
-        else None
-    )
+    report, ratio = tally(times, lost, options.against)
     return {
         "runs": options.runs,
         "burners": options.burners,
