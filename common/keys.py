@@ -4,12 +4,17 @@ All keys live under a configurable prefix (default ``stack``) so that several ro
 runs can share one network without hearing each other:
 
     <prefix>/camera/<camera>/frame            Frame           camera  -> detector
-    <prefix>/camera/<camera>/depth            DepthFrame      camera  -> detector, controller
+    <prefix>/camera/<camera>/depth            DepthFrame      camera  -> detector, depthscan
     <prefix>/detector/<camera>/detections     Detections      detector -> controller, metrics
     <prefix>/detector/<camera>/info           queryable       detector -> JSON: model, classes
     <prefix>/scan                             LaserScan       robot/sim -> controller
     <prefix>/scan/virtual/<camera>            LaserScan       the depth camera's virtual scan
-                                                              (controller -> viewer, recorder)
+                                                              (depthscan -> controller, viewer,
+                                                              recorder)
+    <prefix>/scan/remembered                  LaserScan       what the depth memory holds round
+                                                              the robot (depthscan -> controller)
+    <prefix>/scan/known                       LaserScan       how far ahead the floor is known:
+                                                              one ray (depthscan -> controller)
     <prefix>/controller/cmd_vel               Twist           controller -> robot/sim, metrics
     <prefix>/controller/status                ControllerStatus
     <prefix>/controller/estop                 EStop           anyone -> controller (latching)
@@ -178,6 +183,14 @@ class Keys:
 
     def all_virtual_scans(self) -> str:
         return f"{self.prefix}/scan/virtual/*"
+
+    def remembered_scan(self) -> str:
+        """What the depth cameras' memory holds round the robot (LaserScan, robot frame)."""
+        return f"{self.prefix}/scan/remembered"
+
+    def known_floor(self) -> str:
+        """How far ahead the floor is known (a LaserScan of one ray, straight ahead)."""
+        return f"{self.prefix}/scan/known"
 
     def cmd_vel(self) -> str:
         return f"{self.prefix}/controller/cmd_vel"

@@ -13,14 +13,15 @@ Pure and plain: common/ imports no service, so this holds names only.
 
 from __future__ import annotations
 
-#: In start order: the recorder first, so that it hears the others from their start; the viewer
-#: after what it watches.
+#: In start order: the recorder first, so that it hears the others from their start; the depth
+#: scan stage before the controller, which reads its scans; the viewer after what it watches.
 SERVICES = (
     "recorder",
     "camera",
     "sim",
     "ros2",
     "detector",
+    "depthscan",
     "controller",
     "metrics",
     "viewer",

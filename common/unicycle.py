@@ -1,7 +1,7 @@
 """A unicycle's motion (a differential-drive base), exactly integrated. Pure.
 
 Used by the simulator's base (simworld/world.py) and by the controller's depth memory,
-which moves what it saw by the commands it sent (services/controller/local_map.py).
+which moves what it saw by the commands it sent (depthscan/local_map.py).
 """
 
 from __future__ import annotations

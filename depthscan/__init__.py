@@ -8,4 +8,6 @@ clock; it imports ``common`` and ``perception``'s public API, never a service.
     observe.py   what one frame shows (floor, obstacles, drop-offs, holes) and its scan
     trust.py     whose depth is believed (the announced session, not from the future, one
                  stream per camera)
+    local_map.py the depth cameras' short memory: a rolling map of the floor round the robot,
+                 moved by the commands sent (Odometry), read as a scan of what it remembers
 """

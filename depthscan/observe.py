@@ -13,7 +13,7 @@ Each column is then read from the bottom of the image up (:func:`observe`): clea
 as its run of floor goes. A ray of the scan reads the nearest obstacle, drop-off edge or end
 of a column's floor run in its direction; in view with nothing known there, the camera's
 minimum range (blocked). The frame's floor, hazards and unknown stretches go on to the
-controller's memory (services/controller/local_map.py).
+depth scan stage's memory (depthscan/local_map.py).
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ class Observation:
     close"), and ``unknown`` (k, 2): points along the stretches of floor a column should
     have seen and did not (a hole between two floor readings, no floor where the camera's
     height says it must be), where something could hide. The local map
-    (services/controller/local_map.py) remembers them."""
+    (depthscan/local_map.py) remembers them."""
 
     scan: LaserScan
     floor: npt.NDArray[np.float64]

@@ -1,5 +1,5 @@
 """Whose depth the controller believes (issue 38): pure rules for the depth intake
-(services/controller/depth_intake.py, and the scan stage), no bus, no clock of their own.
+(the depth scan stage, services/depthscan/intake.py), no bus, no clock of their own.
 
 - **The announced source only.** A camera's announcement names the Zenoh session that
   announces it (``CameraAnnouncement.zid``), which publishes its depth from that same session;

@@ -119,6 +119,12 @@ class Config:
             check_camera_name(name)
         if len(names) > 1:
             check_camera_topics(self.ros2, names)  # each camera's own ROS 2 topics
+        run = self.supervisor.services
+        if self.controller.needs_depth and "controller" in run and "depthscan" not in run:
+            raise ConfigError(
+                "the controller needs depth (controller.obstacle_sources or distance_source) "
+                'and reads it from the depth scan stage: add "depthscan" to supervisor.services'
+            )
         unknown = sorted(set(self.sim.wait_for) - set(SERVICES))
         if unknown:
             raise ConfigError(
@@ -157,7 +163,8 @@ class Config:
 
     @property
     def depth_memory_path(self) -> Path:
-        """Where the controller keeps its depth map across restarts (one file per prefix)."""
+        """Where the depth scan stage keeps its depth map across restarts (one file per
+        prefix; ``controller.depth_memory_file``)."""
         default = f"state/depth-memory-{self.stack.prefix.replace('/', '_')}.npz"
         path = Path(self.controller.depth_memory_file or default).expanduser()
         return path if path.is_absolute() else REPO_ROOT / path

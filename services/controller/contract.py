@@ -19,35 +19,18 @@ from common.setting_checks import Length, Range, check_bounds, check_lengths, en
 # ``detections_stale`` ...; the detections' for each announced camera too.
 DETECTIONS = "detections"
 SCANS = "scans"
-DEPTH = "depth"  # depth frames, when the controller needs depth (ControllerSettings.needs_depth)
+#: The depth cameras' virtual scans (services/depthscan/: one per camera), what the depth memory
+#: remembers round the robot and how far ahead it knows the floor; read when the controller
+#: needs depth (ControllerSettings.needs_depth), each judged as the laser's scan is.
+VIRTUAL_SCANS = "virtual_scans"
+REMEMBERED = "remembered"
+KNOWN_FLOOR = "known_floor"
 IN = "in"  # fresh, and the newest held
 LATE = "late"  # fresh, but older than the one held
 #: Detections from a camera with no live announcement: ignored.
 DETECTIONS_UNANNOUNCED = "detections_unannounced"
-#: Depth frames of a camera not announced, or announced without depth: ignored.
-DEPTH_UNANNOUNCED = "depth_unannounced"
-#: Depth frames of a camera whose height above the floor is unknown: no virtual scan.
-DEPTH_NO_MOUNT = "depth_no_mount"
-#: Depth frames whose intrinsics or camera mounting are implausible: no virtual scan.
-DEPTH_IMPLAUSIBLE = "depth_implausible"
-#: Depth images of more than ``depth_max_pixels``: dropped before they are converted.
-DEPTH_OVERSIZE = "depth_oversize"
-#: Errors while making a virtual scan (the intake's thread logs them and goes on).
-DEPTH_ERRORS = "depth_errors"
-#: Depth frames replaced by a newer one of their camera before they were looked at.
-DEPTH_DROPPED = "depth_dropped"
-#: The depth map could not be written to, or read from, its file (issue 38).
-DEPTH_MEMORY_ERRORS = "depth_memory_errors"
-# -- depth from the announced source only (issue 38) --
-#: Depth frames put by a Zenoh session other than the one that announced their camera
-#: (``CameraAnnouncement.zid``): dropped before they are decoded.
-DEPTH_FOREIGN = "depth_foreign"
-#: A gauge, per camera: 1 while its depth frames keep arriving older than the one held (at
-#: least ``depth_late_warn_count`` within ``depth_late_warn_window_s``), the sign of a second
-#: stream on its key; the total is how many cameras are so now. The metrics warn of it.
-DEPTH_SECOND_STREAM = "depth_second_stream"
-DEPTH_TRUST_PER_CAMERA = frozenset({DEPTH_FOREIGN, DEPTH_SECOND_STREAM})
-# --
+#: Virtual scans of a camera not announced, or announced without depth: ignored.
+VIRTUAL_SCANS_UNANNOUNCED = "virtual_scans_unannounced"
 ESTOP_RELEASE_REFUSED = "estop_release_refused"
 ESTOP_ZERO_AT_ONCE = "estop_zero_at_once"
 #: Datagrams on the local e-stop socket that were not an engage (common/estop_local.py): each
@@ -63,7 +46,7 @@ OUTCOMES = (IN, LATE, *DROP_VERDICTS)
 
 
 def input_counter(stream: str, outcome: str) -> str:
-    """The counter of ``stream``'s (DETECTIONS, SCANS) messages with ``outcome`` (IN, LATE or
+    """The counter of ``stream``'s (DETECTIONS, SCANS, VIRTUAL_SCANS ...) messages with ``outcome`` (IN, LATE or
     a freshness verdict)."""
     return f"{stream}_{outcome}"
 
@@ -71,12 +54,7 @@ def input_counter(stream: str, outcome: str) -> str:
 PER_CAMERA = frozenset(
     {
         *(input_counter(DETECTIONS, o) for o in OUTCOMES),
-        *(input_counter(DEPTH, o) for o in OUTCOMES),
-        DEPTH_NO_MOUNT,
-        DEPTH_DROPPED,
-        DEPTH_IMPLAUSIBLE,
-        DEPTH_OVERSIZE,
-        *DEPTH_TRUST_PER_CAMERA,
+        *(input_counter(VIRTUAL_SCANS, o) for o in OUTCOMES),
     }
 )
 COUNTERS = frozenset(
@@ -84,10 +62,10 @@ COUNTERS = frozenset(
         *COMMON,
         *PER_CAMERA,
         *(input_counter(SCANS, o) for o in OUTCOMES),
+        *(input_counter(REMEMBERED, o) for o in OUTCOMES),
+        *(input_counter(KNOWN_FLOOR, o) for o in OUTCOMES),
         DETECTIONS_UNANNOUNCED,
-        DEPTH_UNANNOUNCED,
-        DEPTH_ERRORS,
-        DEPTH_MEMORY_ERRORS,
+        VIRTUAL_SCANS_UNANNOUNCED,
         ESTOP_RELEASE_REFUSED,
         ESTOP_ZERO_AT_ONCE,
         ESTOP_LOCAL_BAD,
@@ -117,10 +95,16 @@ def access(shape: Shape) -> dict[str, Access]:
             SERVICE,
             keys.cmd_vel(),
             keys.controller_status(),
-            keys.all_virtual_scans(),  # each depth camera's, as the depth intake makes it
-            # The depth images too: the controller reads them only when its settings need
-            # depth, but the rules are the shape's, not one config's.
-            read=(keys.all_detections(), keys.scan(), keys.estop(), keys.all_depths()),
+            # The depth scan stage's output too: the controller reads it only when its
+            # settings need depth, but the rules are the shape's, not one config's.
+            read=(
+                keys.all_detections(),
+                keys.scan(),
+                keys.estop(),
+                keys.all_virtual_scans(),
+                keys.remembered_scan(),
+                keys.known_floor(),
+            ),
             watch=(keys.all_camera_announcements(),),  # its cameras: the announced ones
         )
     }
@@ -175,19 +159,21 @@ class ControllerSettings:
     depthscan/, under the same rules), or both. Each one listed must be
     fresh for forward motion (depth older than ``depth_timeout_s`` is missing, as a scan
     older than ``scan_timeout_s`` is), and every fresh one is obeyed, listed or not. The
-    depth images are read only when depth is needed (``needs_depth``). In a depth image, a
+    virtual scans are made by the depth scan stage (services/depthscan, which reads these
+    ``depth_*`` settings and must run when depth is needed: ``needs_depth``) and read by the
+    controller only then, each camera's judged by ``depth_timeout_s``. In a depth image, a
     hole of no readings ``depth_hole_px`` tall or more where the floor should show is
     unknown, never clear (smaller ones are a stereo camera's speckle); one beside a thing
     that fills the bottom of the image, within ``depth_edge_band_px``, is that thing's edge
     (a stereo camera's band of no readings beside a near object). What the depth cameras
     saw is kept in a rolling map ``depth_memory_size_m`` across, in cells
     ``depth_memory_resolution_m`` wide, moved by the controller's own commands
-    (services/controller/local_map.py): an obstacle or a drop-off seen stays until its place
+    (depthscan/local_map.py, kept by the stage, which hears cmd_vel): an obstacle or a drop-off seen stays until its place
     is seen clear, and with depth required the robot drives no faster than
     ``depth_creep_speed`` while the corridor ahead within the room it needs to stop has a
     part never seen (at start-up: the camera's blind zone). The map is written at once when
     it gains a hazard, and every ``depth_memory_save_s``, to ``depth_memory_file`` (relative
-    to the repo root; empty: ``state/depth-memory-<prefix>.npz``) and a controller that starts
+    to the repo root; empty: ``state/depth-memory-<prefix>.npz``) and a stage that starts
     within ``depth_memory_max_age_s`` of the last write takes back its hazards (a crash, a
     restart), placed as if the robot had gone on with its last command for
     ``depth_memory_coast_s`` (a base's own command timeout).
@@ -314,7 +300,8 @@ class ControllerSettings:
 
     @property
     def needs_depth(self) -> bool:
-        """Whether the controller reads the depth cameras' images (for their obstacles)."""
+        """Whether the controller reads the depth cameras' virtual scans (for their
+        obstacles): the depth scan stage (services/depthscan) must then run."""
         return self.distance_source is DistanceSource.DEPTH or DEPTH_SOURCE in self.obstacle_sources
 
     @property

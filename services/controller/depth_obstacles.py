@@ -1,5 +1,5 @@
 """The controller's obstacles seen by depth: every depth camera's newest virtual scan
-(depthscan/, made from its images) judged together at the control instant. Pure: no bus,
+(made by the depth scan stage, services/depthscan, from its images) judged together at the control instant. Pure: no bus,
 no clock.
 
 The scans are in the ROBOT frame (REP 103: angle 0 forward, counter-clockwise positive), 360
@@ -90,11 +90,14 @@ class DepthObstacles:
     scan: LaserScan | None
     age_s: float = math.inf
     missing: str = ""
-    #: What the map remembers round the robot (services/controller/local_map.py): its
-    #: hazard and unknown cells as a scan (None: no map), and how far ahead the corridor's
-    #: floor is known.
+    #: What the map remembers round the robot (depthscan/local_map.py, the depth scan
+    #: stage's): its hazard and unknown cells as a scan (None: no map), and how far ahead the
+    #: corridor's floor is known.
     remembered: LaserScan | None = None
     known_m: float = math.inf
+    #: Why the robot must hold still, turning included ("" when it need not): no fresh memory
+    #: from the depth scan stage (services/controller/depth_input.py).
+    halt: str = ""
 
 
 def depth_obstacles(

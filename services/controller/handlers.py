@@ -71,6 +71,34 @@ def age_of(msg: Header | None, arrival_age_s: float, at: Stamp) -> float:
     return max(arrival_age_s, capture_age_s(msg, at, BOOT_ID))
 
 
+def take_fresh(
+    tally: Tally,
+    clock: Clock,
+    msg: _S,
+    gate: FreshnessGate,
+    latest: Latest[_S],
+    name: str,
+    camera: str = "",
+) -> None:
+    """A decoded input's fate, the one path of every input the controller ages (detections,
+    the laser's scan, the virtual scans and the depth memory): judge its freshness, keep it if
+    fresh and newest, count the rest (``<name>_in``, ``<name>_stale|future|replay|late``; with
+    ``camera``, also ``<counter>.<camera>``)."""
+    verdict, age = gate.check(msg.header, clock.now())
+    of = f" from {camera}" if camera else ""
+    if verdict is not Verdict.FRESH:
+        counter = contract.input_counter(name, verdict)
+        tally.reject(counter, f"{verdict} {name}{of} ({age:.2f} s) ignored")
+    elif latest.set(msg):
+        counter = contract.input_counter(name, contract.IN)
+        tally.counters.add(counter)
+    else:
+        counter = contract.input_counter(name, contract.LATE)
+        tally.reject(counter, f"{name}{of} older than the ones held ignored")
+    if camera:
+        tally.counters.add(per_camera(counter, camera))
+
+
 def _view(latest: Latest[Detections], at: Stamp, timeout_s: float) -> View:
     """One camera's newest detections, aged at the control instant ``at``."""
     d, arrival = latest.get()
@@ -176,22 +204,7 @@ class ControllerHandlers:
     def _fresh_input(
         self, msg: _S, gate: FreshnessGate, latest: Latest[_S], name: str, camera: str = ""
     ) -> None:
-        """A decoded message's fate: judge its freshness, keep it if fresh and newest, count
-        the rest (``<name>_in``, ``<name>_stale|future|replay|late``; with ``camera``, also
-        ``<counter>.<camera>``)."""
-        verdict, age = gate.check(msg.header, self.clock.now())
-        of = f" from {camera}" if camera else ""
-        if verdict is not Verdict.FRESH:
-            counter = contract.input_counter(name, verdict)
-            self.tally.reject(counter, f"{verdict} {name}{of} ({age:.2f} s) ignored")
-        elif latest.set(msg):
-            counter = contract.input_counter(name, contract.IN)
-            self.tally.counters.add(counter)
-        else:
-            counter = contract.input_counter(name, contract.LATE)
-            self.tally.reject(counter, f"{name}{of} older than the ones held ignored")
-        if camera:
-            self.tally.counters.add(per_camera(counter, camera))
+        take_fresh(self.tally, self.clock, msg, gate, latest, name, camera)
 
     def on_local_engage(self, reason: str) -> None:
         """An engage handed over on this host (common/estop_local.py): as one on the bus,

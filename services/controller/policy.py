@@ -75,8 +75,10 @@ class Inputs:
     seconds (inf when none has arrived), and the e-stop; the depth cameras' virtual scan
     (services/controller/depth_obstacles.py ``depth_obstacles``), its age, why there is none
     (``depth_missing``); what the depth cameras' map remembers round the robot
-    (``depth_remembered``, services/controller/local_map.py: judged with the depth, when the
-    depth is fresh) and how far ahead it knows the floor (``depth_known_m``)."""
+    (``depth_remembered``, depthscan/local_map.py: judged with the depth, when the
+    depth is fresh) and how far ahead it knows the floor (``depth_known_m``); why the robot
+    must hold still, turning included (``depth_halt``: no fresh memory from the depth scan
+    stage, which would not hear the turn)."""
 
     views: Mapping[str, View]
     scan: LaserScan | None = None
@@ -87,6 +89,7 @@ class Inputs:
     depth_missing: str = "no depth camera"
     depth_remembered: LaserScan | None = None
     depth_known_m: float = math.inf
+    depth_halt: str = ""
 
 
 def stop(state: ControllerState, reason: str, input_stamp_ns: int = 0) -> VelocityCommand:
@@ -165,6 +168,8 @@ class Controller:
         fresh = {c: v for c, v in views.items() if v.fresh(timeout)}
         if not fresh:
             return self._halt(stop(ControllerState.STALE, self._stale_reason(views)))
+        if inp.depth_halt:
+            return self._halt(stop(ControllerState.BLOCKED, inp.depth_halt))
         s = self.s
         # The room to stop is from the fastest this tick may command: its speed now plus what
         # the acceleration limit allows since the last tick (after a stalled tick that is much

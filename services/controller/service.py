@@ -1,5 +1,6 @@
 """The controller service: every camera's latest detections and the scan (and, when its
-settings need depth, the depth cameras' images) in, Twist and ControllerStatus out."""
+settings need depth, the depth scan stage's virtual scans and memory) in, Twist and
+ControllerStatus out."""
 
 from __future__ import annotations
 
@@ -10,13 +11,13 @@ from contextlib import ExitStack
 from typing import TYPE_CHECKING
 
 from common.announce import Announced, announced_cameras
-from common.bus import Declared, Publisher, QoS, Sample
+from common.bus import Declared
 from common.clock import mono_s
 from common.contracts import ControllerState, DetectorInfo
 from common.errors import DecodeError
 from common.estop_local import LocalEStop, socket_path
-from common.keys import camera_in_key
-from common.messages import CameraAnnouncement, LaserScan
+from common.keys import camera_in_key, virtual_scan_camera
+from common.messages import CameraAnnouncement
 from common.node import Node
 from common.ratelimit import LogLimiter
 from services.controller import contract
@@ -29,7 +30,7 @@ from services.controller.targets import unknown_targets
 from stack.config import Config
 
 if TYPE_CHECKING:
-    from services.controller.depth_intake import DepthIntake
+    from services.controller.depth_input import DepthInput
 
 
 NO_LASER_WARNING = (
@@ -84,22 +85,19 @@ class ControlLoop:
             node.subscribe(keys.scan(), self.handlers.on_scan),
             node.subscribe(keys.estop(), self.handlers.on_estop),
         ]
-        # The depth cameras' images, only when depth is needed: the callback only leaves each
-        # in its camera's slot, and the intake's own thread (``run``) turns it into a scan.
-        self.depth: DepthIntake | None = None
-        self.virtual_scans: VirtualScans | None = None
+        # The depth scan stage's output, only when depth is needed (services/depthscan).
+        self.depth: DepthInput | None = None
         if s.needs_depth:
             # Here, not at the top: perception loads OpenCV, which only a controller that
             # reads depth needs.
-            from services.controller.depth_intake import DepthIntake
+            from services.controller.depth_input import DepthInput
 
-            self.virtual_scans = VirtualScans(node)
-            self.depth = DepthIntake(
-                s, node, config.stack.clock_tolerance_s, node.clock, config.depth_memory_path,
-                on_scan=self.virtual_scans.put,
-            )  # fmt: skip
-            # The bus's own subscribe: the intake needs each sample's publisher (Sample.source).
-            self._subs.append(node.bus.subscribe(keys.all_depths(), self._on_depth))
+            depth = self.depth = DepthInput(s, node, config.stack.clock_tolerance_s, node.clock)
+            self._subs += [
+                node.subscribe_keyed(keys.all_virtual_scans(), self._on_virtual_scan),
+                node.subscribe(keys.remembered_scan(), depth.on_remembered),
+                node.subscribe(keys.known_floor(), depth.on_known),
+            ]
         self._cameras_lock = threading.Lock()  # one change of the camera set at a time
         self.announced: Announced[CameraAnnouncement] | None = None
         self.announced = announced_cameras(
@@ -132,12 +130,12 @@ class ControlLoop:
             return
         self.handlers.on_detections(camera, payload)
 
-    def _on_depth(self, sample: Sample) -> None:
-        camera = camera_in_key(sample.key)
+    def _on_virtual_scan(self, key: str, payload: bytes) -> None:
+        camera = virtual_scan_camera(key)
         if camera is None or self.depth is None:  # unreachable: subscribed only with depth
-            self.node.bad_input(sample.key, DecodeError("not a camera's depth key"))
+            self.node.bad_input(key, DecodeError("not a camera's virtual scan key"))
             return
-        self.depth.offer(camera, sample.payload, sample.source)
+        self.depth.on_virtual_scan(camera, payload)
 
     def _on_cameras(self) -> None:
         """The set of announced cameras changed: the handlers take the new one at once."""
@@ -149,7 +147,6 @@ class ControlLoop:
             self.handlers.set_cameras(dict(sorted(now.items())))
             if self.depth is not None:
                 self.depth.set_cameras(now)
-                self.depth.keep_watching(now)
         for camera in sorted(now.keys() - before):
             a = now[camera]
             self.node.log.info(
@@ -167,8 +164,6 @@ class ControlLoop:
         estop = stop_command(ControllerState.ESTOP, self.latch.describe())
         at = self.clock.now()
         self.out.send(estop, at, estop_saved=self.latch.saved)
-        if self.depth is not None:
-            self.depth.moved(at.mono_ns / 1e9, 0.0, 0.0)
 
     def tick(self) -> float:
         """One control tick: judge every input's age at one instant, send the command and
@@ -195,13 +190,12 @@ class ControlLoop:
                     depth_missing=seen.missing,
                     depth_remembered=seen.remembered,
                     depth_known_m=seen.known_m,
+                    depth_halt=seen.halt,
                 )
             cmd = self.controller.step(inputs, tick)
             if cmd.state == ControllerState.ESTOP:
                 cmd = dataclasses.replace(cmd, reason=latch.describe())
-            out.send(cmd, at, estop_saved=latch.saved)
-            if self.depth is not None:  # the depth map moves as the robot is told to
-                self.depth.moved(tick, cmd.linear_x, cmd.angular_z)
+            out.send(cmd, at, estop_saved=latch.saved)  # the depth map moves by it too
         if cmd.state != self._last_state:
             log_state(self.node.log, self._state_log, cmd)
             self._last_state = cmd.state
@@ -220,34 +214,6 @@ class ControlLoop:
             self.announced.close()
         for sub in self._subs:
             sub.undeclare()
-        if self.virtual_scans is not None:
-            self.virtual_scans.close()
-
-
-class VirtualScans:
-    """Each depth camera's virtual scan as the depth intake makes it, published on the
-    camera's own key (``<prefix>/scan/virtual/<camera>``: what the controller judged as
-    obstacles, for the viewer and the recorder). A camera's publisher is declared with its
-    first scan. Called on the intake's thread only."""
-
-    def __init__(self, node: Node) -> None:
-        self.node = node
-        self._pubs: dict[str, Publisher] = {}
-        self._lock = threading.Lock()  # put (the intake's thread) against close
-
-    def put(self, camera: str, scan: LaserScan) -> None:
-        with self._lock:
-            pub = self._pubs.get(camera)
-            if pub is None:
-                key = self.node.keys.virtual_scan(camera)
-                pub = self._pubs[camera] = self.node.publisher(key, QoS.SENSOR)
-            pub.put(scan.encode())
-
-    def close(self) -> None:
-        with self._lock:
-            pubs, self._pubs = list(self._pubs.values()), {}
-        for pub in pubs:
-            pub.undeclare()
 
 
 def run(config: Config, stop: threading.Event) -> int:
@@ -274,19 +240,12 @@ def run(config: Config, stop: threading.Event) -> int:
             target=_check_targets, args=(node, config, stop), name="check-targets", daemon=True
         )
         checker.start()
-        if loop.depth is not None:
-            threading.Thread(
-                target=loop.depth.serve, args=(stop, STOP_POLL_S), name="depth-scan",
-                daemon=True,
-            ).start()  # fmt: skip
         node.ready()
         period = 1.0 / s.control_rate_hz
         while not stop.is_set():
             tick = loop.tick()
             wait_either(loop.handlers.arrived, stop, period - (node.clock.mono_s() - tick))
         loop.stop()  # the last word on cmd_vel: zero, before the loop and the node close
-        if loop.depth is not None:
-            loop.depth.save_memory(force=True)  # as the robot is left: still
     return 0
 
 

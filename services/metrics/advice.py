@@ -10,10 +10,10 @@ A camera its worker serves at the attention floor by design (services/detector/a
 the worker gives other cameras priority and not this one, which sees no target) is not judged:
 the controller ignores its stale detections, and it gains priority once it sees a target.
 
-``depth_second_stream``: the controller's gauge ``depth_second_stream.<camera>`` is up: that
-camera's depth frames keep arriving older than the one it holds, the sign of a second stream on
+``depth_second_stream``: the depth scan stage's gauge ``depth_second_stream.<camera>`` is up:
+that camera's depth frames keep arriving older than the one it holds, the sign of a second stream on
 its depth key stamped ahead of the real one (issue 38: a forged clear stream won that way over
-the simulator's, which showed a box). Named per camera, with the controller's counts.
+the simulator's, which showed a box). Named per camera, with the stage's counts.
 """
 
 from __future__ import annotations
@@ -21,14 +21,14 @@ from __future__ import annotations
 import math
 
 from common.contracts import CameraMetrics, MetricsAnswer
-from services.controller import contract as controller
+from services.depthscan import contract as depthscan
 from services.detector.contract import ATTENTION_PRIORITY
 from stack.config import Config
 
 #: Detections of a camera in the window before it is judged at all.
 MIN_SAMPLES = 5
 DETECTIONS_LATE = "detections_late"
-DEPTH_SECOND_STREAM = controller.DEPTH_SECOND_STREAM
+DEPTH_SECOND_STREAM = depthscan.DEPTH_SECOND_STREAM
 
 
 def advise(config: Config, answer: MetricsAnswer) -> dict[str, str]:
@@ -48,23 +48,23 @@ def advise(config: Config, answer: MetricsAnswer) -> dict[str, str]:
 
 def second_depth_stream(totals: dict[str, int]) -> str:
     """The ``depth_second_stream`` line, or "" when no camera is suspected: the cameras whose
-    controller gauge ``depth_second_stream.<camera>`` is up, with their late and foreign
+    depth scan stage's gauge ``depth_second_stream.<camera>`` is up, with their late and foreign
     depth counts."""
-    prefix = f"{controller.SERVICE}.{controller.DEPTH_SECOND_STREAM}."
+    prefix = f"{depthscan.SERVICE}.{depthscan.DEPTH_SECOND_STREAM}."
     cameras = sorted(k[len(prefix) :] for k, v in totals.items() if k.startswith(prefix) and v > 0)
     if not cameras:
         return ""
-    late = controller.input_counter(controller.DEPTH, controller.LATE)
+    late = depthscan.input_counter(depthscan.DEPTH, depthscan.LATE)
 
     def count(name: str, camera: str) -> int:
-        return totals.get(f"{controller.SERVICE}.{name}.{camera}", 0)
+        return totals.get(f"{depthscan.SERVICE}.{name}.{camera}", 0)
 
     figures = "; ".join(
-        f"{c}: {count(late, c)} late, {count(controller.DEPTH_FOREIGN, c)} foreign" for c in cameras
+        f"{c}: {count(late, c)} late, {count(depthscan.DEPTH_FOREIGN, c)} foreign" for c in cameras
     )
     return (
         f"a second depth stream on the key of camera {', '.join(cameras)}: its depth frames "
-        "keep arriving older than the one the controller holds, so its real frames are "
+        "keep arriving older than the one the depth scan stage holds, so its real frames are "
         f"ignored as late ({figures}). Something else publishes on it stamped ahead: find it "
         '(zstack query), and run the secure profile (docs/security.md, "Depth from the '
         'announced source only")'

@@ -489,7 +489,7 @@ def test_the_layering_rule_refuses_what_the_table_refuses() -> None:
     assert not _allowed("perception.depth", "rosmsg.depth")
     assert not _allowed("common.frames", "simworld.world")
     # the virtual scan's library: for the services; it reads no service, not even a contract
-    assert _allowed("services.controller.depth_intake", "depthscan.observe")
+    assert _allowed("services.depthscan.intake", "depthscan.observe")
     assert _allowed("depthscan.frame", "perception")
     assert not _allowed("depthscan.frame", "perception.depth")
     assert not _allowed("depthscan.observe", "services.controller.geometry")

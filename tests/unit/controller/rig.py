@@ -3,6 +3,10 @@ participant on the same hub that puts the inputs and hears cmd_vel and the statu
 moves only when told, and a put, a tick, an announcement return once what they put has been
 delivered (in the putting thread, or with ``threads`` on the hub's own, shuffled, then waited
 for with ``hub.drain()``): the command is on the list.
+With depth needed (``needs_depth``), the depth scan stage runs beside it on the same hub and
+clock (``stage``, services/depthscan/service.py): ``stage.intake.handle_waiting`` makes the
+scans of the images put, as its thread would, and each tick publishes its memory first (the
+live stage puts it every 0.1 s).
 Each camera of the config is announced (as its source would: common/announce.py) on a
 participant of its own, from before the controller starts; ``announce`` and ``withdraw`` change
 that at run time.
@@ -26,7 +30,9 @@ from common.node import Node
 from services.camera.contract import CameraSettings
 from services.controller.contract import ControllerSettings
 from services.controller.service import ControlLoop
-from stack.config import Config
+from services.depthscan.intake import DepthIntake
+from services.depthscan.service import DepthScanStage
+from stack.config import Config, SupervisorSettings
 from tests.unit.announced import Sources
 from tests.unit.conftest import MEMORY_BUS_SEED
 
@@ -47,13 +53,16 @@ class Rig:
         **controller: Any,
     ) -> None:
         settings = {"mode": "track", "no_laser": False, **controller}
+        s = ControllerSettings(
+            estop_file=str(tmp_path / "estop.json"),
+            depth_memory_file=str(tmp_path / "depth-memory.npz"),
+            **settings,
+        )
+        runs = ("depthscan", "controller") if s.needs_depth else ("controller",)
         self.config = Config(
-            controller=ControllerSettings(
-                estop_file=str(tmp_path / "estop.json"),
-                depth_memory_file=str(tmp_path / "depth-memory.npz"),
-                **settings,
-            ),
+            controller=s,
             cameras=tuple((cameras or {}).items()),
+            supervisor=SupervisorSettings(services=runs),
         )
         self.clock = clock or FakeClock()
         self.hub = MemoryHub(threads=threads, seed=MEMORY_BUS_SEED)
@@ -69,6 +78,13 @@ class Rig:
             bus=self.hub.join("controller"),
             clock=self.clock,
         )
+        self.stage: DepthScanStage | None = None
+        self.stage_node: Node | None = None
+        if self.config.controller.needs_depth:
+            self.stage_node = Node(
+                "depthscan", self.config, bus=self.hub.join("depthscan"), clock=self.clock
+            )
+            self.stage = DepthScanStage(self.config, self.stage_node)
         self.loop = ControlLoop(self.config, self.node)
         self.probe = self.hub.join("test")
         self.cmds: list[Twist] = []
@@ -102,6 +118,30 @@ class Rig:
     def counters(self) -> dict[str, int]:
         return self.node.counters.snapshot()
 
+    @property
+    def stage_counters(self) -> dict[str, int]:
+        assert self.stage_node is not None
+        return self.stage_node.counters.snapshot()
+
+    @property
+    def intake(self) -> DepthIntake:
+        """The depth scan stage's intake (depth needed only)."""
+        assert self.stage is not None
+        return self.stage.intake
+
+    def handle_depth(self) -> int:
+        """The stage makes the scans of the images waiting, as its thread would; what it put
+        delivered."""
+        n = self.intake.handle_waiting(0.0)
+        self.drain()
+        return n
+
+    def publish_memory(self) -> None:
+        """The stage puts its memory, as its thread does every 0.1 s."""
+        if self.stage is not None:
+            self.stage.put_memory(*self.stage.intake.memory(self.clock.now()))
+            self.drain()
+
     def put(self, key: str, payload: bytes) -> None:
         self.probe.publisher(key, QoS.SENSOR).put(payload)
         self.drain()
@@ -128,9 +168,12 @@ class Rig:
         msg = EStop(header=header, engaged=engaged, reason="test")
         self.put(self.keys.estop(), msg.encode())
 
-    def tick(self) -> tuple[Twist, ControllerStatus]:
-        """One control tick; the command and the status it sent."""
+    def tick(self, stage_alive: bool = True) -> tuple[Twist, ControllerStatus]:
+        """One control tick (the stage's memory put first while ``stage_alive``); the command
+        and the status it sent."""
         before = len(self.cmds)
+        if stage_alive:
+            self.publish_memory()
         self.loop.tick()
         self.drain()
         assert len(self.cmds) == before + 1, "a tick sends exactly one command"
@@ -138,6 +181,9 @@ class Rig:
 
     def close(self) -> None:
         self.loop.close()
+        if self.stage is not None and self.stage_node is not None:
+            self.stage.close()
+            self.stage_node.close()
         self.sources.close()
         self.probe.close()
         self.node.close()

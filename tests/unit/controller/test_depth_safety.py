@@ -22,7 +22,7 @@ from common.messages import DepthFrame, Header, LaserScan
 from depthscan.frame import MIN_NEAR_M, ScanParams, blind_zone
 from depthscan.observe import Observation, virtual_scan
 from perception.depth import Intrinsics, Mounting
-from services.controller import depth_intake
+from services.depthscan import intake as depth_intake
 from services.controller.contract import ControllerSettings
 from services.controller.depth_obstacles import DepthCamera, depth_obstacles
 from services.controller.geometry import sector_clearance
@@ -138,8 +138,8 @@ def rig(tmp_path: Path) -> Iterator[Rig]:
 
 def put(rig: Rig, frame: DepthFrame, camera: str = "front") -> int:
     rig.put(rig.keys.depth(camera), frame.encode())
-    assert rig.loop.depth is not None
-    return rig.loop.depth.handle_waiting(0.0)
+    assert rig.stage is not None
+    return rig.handle_depth()
 
 
 def frame(rig: Rig, *faces: Face, **changes: Any) -> DepthFrame:
@@ -180,24 +180,24 @@ def test_an_implausible_frame_gives_no_scan(
     assert put(rig, frame(rig, **changes)) == 1
     moving, reason = drives(rig)
     assert not moving and reason == "no depth from front yet", reason
-    assert rig.counters["depth_implausible"] == 1
-    assert rig.counters["depth_implausible.front"] == 1
-    assert rig.counters.get("depth_in", 0) == 0
+    assert rig.stage_counters["depth_implausible"] == 1
+    assert rig.stage_counters["depth_implausible.front"] == 1
+    assert rig.stage_counters.get("depth_in", 0) == 0
 
 
 def test_an_image_of_too_many_pixels_is_dropped_unconverted(rig: Rig) -> None:
     big = Intrinsics.from_hfov(1280, 960, HFOV)
     f = depth_frame(scene(HEIGHT, intr=big), rig.header(source="sim"), big)
     assert put(rig, f) == 1
-    assert rig.counters["depth_oversize"] == 1 and rig.counters.get("depth_in", 0) == 0
+    assert rig.stage_counters["depth_oversize"] == 1 and rig.stage_counters.get("depth_in", 0) == 0
     assert not drives(rig)[0]
 
 
 def test_depth_of_a_camera_not_announced_with_depth_is_not_kept(rig: Rig) -> None:
     rig.put(rig.keys.depth("side"), frame(rig).encode())
-    assert rig.loop.depth is not None
-    assert rig.loop.depth.handle_waiting(0.0) == 0  # dropped as it came, not stored
-    assert rig.counters["depth_unannounced"] == 1
+    assert rig.stage is not None
+    assert rig.handle_depth() == 0  # dropped as it came, not stored
+    assert rig.stage_counters["depth_unannounced"] == 1
 
 
 def test_a_scan_made_with_an_announcement_gone_is_not_kept(
@@ -212,12 +212,12 @@ def test_a_scan_made_with_an_announcement_gone_is_not_kept(
 
     monkeypatch.setattr(depth_intake, "observe", reannounced)
     assert put(rig, frame(rig)) == 1
-    assert rig.counters.get("depth_in", 0) == 0
+    assert rig.stage_counters.get("depth_in", 0) == 0
     assert not drives(rig)[0]
 
 
 def test_the_intake_thread_survives_an_error(rig: Rig, monkeypatch: pytest.MonkeyPatch) -> None:
-    intake = rig.loop.depth
+    intake = rig.intake
     assert intake is not None
 
     def broken(*args: Any, **kw: Any) -> LaserScan:
@@ -229,11 +229,11 @@ def test_the_intake_thread_survives_an_error(rig: Rig, monkeypatch: pytest.Monke
     thread.start()
     try:
         rig.put(rig.keys.depth("front"), frame(rig).encode())
-        wait_for(lambda: rig.counters.get("depth_errors", 0) == 1, 10.0, "the error counted")
+        wait_for(lambda: rig.stage_counters.get("depth_errors", 0) == 1, 10.0, "the error counted")
         monkeypatch.undo()
         rig.clock.advance(0.05)
         rig.put(rig.keys.depth("front"), frame(rig).encode())
-        wait_for(lambda: rig.counters.get("depth_in", 0) == 1, 10.0, "the next frame scanned")
+        wait_for(lambda: rig.stage_counters.get("depth_in", 0) == 1, 10.0, "the next frame scanned")
         assert thread.is_alive()
     finally:
         stop.set()
@@ -243,7 +243,7 @@ def test_the_intake_thread_survives_an_error(rig: Rig, monkeypatch: pytest.Monke
 def test_the_blind_zone_is_logged_once_per_camera(
     rig: Rig, caplog: pytest.LogCaptureFixture
 ) -> None:
-    with caplog.at_level(logging.INFO, logger="controller"):
+    with caplog.at_level(logging.INFO, logger="depthscan"):
         put(rig, frame(rig))
         rig.clock.advance(0.05)
         put(rig, frame(rig))

@@ -16,7 +16,7 @@ from common.bus import QoS
 from common.memory_bus import MemoryBus
 from common.messages import CameraAnnouncement, Header
 from depthscan.trust import LateWatch, foreign_source
-from services.controller import contract
+from services.depthscan import contract
 from tests.unit.controller.rig import Rig
 from tests.unit.depthscan.depth_scenes import HFOV, Face, at_bearing, depth_frame, scene
 
@@ -47,12 +47,12 @@ def put(rig: Rig, bus: MemoryBus, header: Header, *faces: Face, handle: bool = T
     frame = depth_frame(scene(HEIGHT, *faces), header)
     bus.publisher(rig.keys.depth("front"), QoS.SENSOR).put(frame.encode())
     if handle:
-        assert rig.loop.depth is not None
-        rig.loop.depth.handle_waiting(0.0)
+        assert rig.stage is not None
+        rig.handle_depth()
 
 
 def count(rig: Rig, name: str) -> int:
-    return rig.counters.get(name, 0)
+    return rig.stage_counters.get(name, 0)
 
 
 def drives(rig: Rig) -> bool:

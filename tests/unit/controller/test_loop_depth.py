@@ -30,8 +30,8 @@ def put_depth(rig: Rig, *faces: object, age_s: float = 0.0, camera: str = "front
     """A depth image of the floor (and ``faces``) from ``camera``, made into its scan."""
     frame: DepthFrame = depth_frame(scene(HEIGHT, *faces), rig.header(age_s, source="sim"))  # type: ignore[arg-type]
     rig.put(rig.keys.depth(camera), frame.encode())
-    assert rig.loop.depth is not None
-    rig.loop.depth.handle_waiting(0.0)
+    assert rig.stage is not None
+    rig.handle_depth()
     rig.drain()  # what the scan's making put (its virtual scan) delivered, on any thread
 
 
@@ -54,7 +54,7 @@ def test_fresh_clear_depth_drives_and_stale_depth_stops(rig: Rig) -> None:
     rig.detections()
     twist, status = rig.tick()
     assert status.state == "tracking" and twist.linear[0] > 0, status
-    assert rig.counters["depth_in"] == 1 and rig.counters["depth_in.front"] == 1
+    assert rig.stage_counters["depth_in"] == 1 and rig.stage_counters["depth_in.front"] == 1
     rig.clock.advance(timeout + 0.05)  # the depth stream goes quiet; detections still come
     rig.detections()
     twist, status = rig.tick()
@@ -65,7 +65,7 @@ def test_fresh_clear_depth_drives_and_stale_depth_stops(rig: Rig) -> None:
     put_depth(rig, age_s=timeout + 0.01)
     rig.detections()
     assert rig.tick()[1].state == "blocked"
-    assert rig.counters["depth_stale"] == 1
+    assert rig.stage_counters["depth_stale"] == 1
 
 
 def test_an_obstacle_in_the_depth_stops_forward_motion(rig: Rig) -> None:
@@ -93,30 +93,30 @@ def test_a_camera_of_unknown_height_is_counted_and_said(rig: Rig) -> None:
     twist, status = rig.tick()
     assert status.state == "blocked" and twist.linear[0] == 0.0
     assert status.reason == "no depth camera looks ahead (front: height above the floor unknown)"
-    assert rig.counters["depth_no_mount"] == 1 and rig.counters["depth_no_mount.front"] == 1
+    assert rig.stage_counters["depth_no_mount"] == 1 and rig.stage_counters["depth_no_mount.front"] == 1
 
 
 def test_depth_of_a_camera_announced_without_depth_is_ignored(rig: Rig) -> None:
     rig.announce("side", hfov_deg=HFOV, mount_height_m=HEIGHT)  # no depth
     put_depth(rig, camera="side")
-    assert rig.counters["depth_unannounced"] == 1
+    assert rig.stage_counters["depth_unannounced"] == 1
 
 
 def test_a_newer_depth_image_replaces_one_not_looked_at(rig: Rig) -> None:
     for _ in range(3):
         frame = depth_frame(scene(HEIGHT), rig.header(source="sim"))
         rig.put(rig.keys.depth("front"), frame.encode())
-    assert rig.loop.depth is not None
-    assert rig.loop.depth.handle_waiting(0.0) == 1
-    assert rig.counters["depth_dropped"] == 2 and rig.counters["depth_in"] == 1
+    assert rig.stage is not None
+    assert rig.handle_depth() == 1
+    assert rig.stage_counters["depth_dropped"] == 2 and rig.stage_counters["depth_in"] == 1
 
 
 def test_garbage_on_a_depth_key_is_counted_and_dropped(rig: Rig) -> None:
     rig.put(rig.keys.depth("front"), b"\x93not a depth frame")
-    assert rig.loop.depth is not None
-    rig.loop.depth.handle_waiting(0.0)
+    assert rig.stage is not None
+    rig.handle_depth()
     rig.drain()  # what the scan's making put (its virtual scan) delivered, on any thread
-    assert rig.counters["bad_input"] == 1 and rig.counters["bad_input.depth"] == 1
+    assert rig.stage_counters["bad_input"] == 1 and rig.stage_counters["bad_input.depth"] == 1
     rig.detections()
     twist, status = rig.tick()
     assert status.state == "blocked" and twist.linear[0] == 0.0
@@ -133,17 +133,17 @@ def _seen_then_gone(rig: Rig) -> None:
     assert rig.tick()[1].reason.endswith("(remembered)")
 
 
-def test_a_restarted_controller_takes_its_depth_map_back(
+def test_a_restarted_depth_scan_stage_takes_its_depth_map_back(
     tmp_path: Path, delivery_threads: int
 ) -> None:
-    # A crash: the next controller must not forget what slipped into the blind zone.
+    # A crash: the next stage must not forget what slipped into the blind zone.
     first = Rig(tmp_path, threads=delivery_threads, announced=False, obstacle_sources=("depth",))
     first.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
     try:
         _seen_then_gone(first)
-        assert first.loop.depth is not None
-        first.loop.depth.save_memory(force=True)
-        assert first.counters.get("depth_memory_errors", 0) == 0
+        assert first.stage is not None
+        first.intake.save_memory(force=True)
+        assert first.stage_counters.get("depth_memory_errors", 0) == 0
     finally:
         first.close()
     clock = first.clock
@@ -172,8 +172,8 @@ def test_a_depth_map_too_old_or_broken_is_not_taken_back(
     first.announce("front", hfov_deg=HFOV, depth=True, mount_height_m=HEIGHT)
     try:
         _seen_then_gone(first)
-        assert first.loop.depth is not None
-        first.loop.depth.save_memory(force=True)
+        assert first.stage is not None
+        first.intake.save_memory(force=True)
     finally:
         first.close()
     clock = first.clock
@@ -195,7 +195,7 @@ def test_a_depth_map_too_old_or_broken_is_not_taken_back(
             twist, status = later.tick()
             # Nothing remembered: the floor not yet seen ahead makes it creep.
             assert twist.linear[0] > 0 and "creeping" in status.reason, status
-            assert later.counters.get("depth_memory_errors", 0) == (1 if broken else 0)
+            assert later.stage_counters.get("depth_memory_errors", 0) == (1 if broken else 0)
         finally:
             later.close()
 

@@ -81,18 +81,18 @@ def test_a_camera_at_the_attention_floor_is_not_judged_late() -> None:
 
 def test_a_second_depth_stream_on_a_cameras_key_is_warned_of_by_name() -> None:
     agg = Aggregator(10.0, cameras=["front", "rear"])
-    header = Header(stamp_ns=1, frame_id="", seq=1, source="controller")
+    header = Header(stamp_ns=1, frame_id="", seq=1, source="depthscan")
     counters = {
         "depth_second_stream": 1, "depth_second_stream.front": 1,
         "depth_second_stream.rear": 0, "depth_late.front": 143, "depth_foreign.front": 7,
     }  # fmt: skip
-    agg.on_counters(ServiceCounters(header=header, service="controller", counters=counters), 1.0)
+    agg.on_counters(ServiceCounters(header=header, service="depthscan", counters=counters), 1.0)
     answer = agg.answer(Header(stamp_ns=2, frame_id="", seq=2, source="metrics"), 2.0)
     text = advise(Config(), answer)[DEPTH_SECOND_STREAM]
     assert "camera front:" in text and "rear" not in text, text
     assert "143 late, 7 foreign" in text, text
     # The gauge back to 0 (the second stream gone): no warning.
     counters |= {"depth_second_stream": 0, "depth_second_stream.front": 0}
-    agg.on_counters(ServiceCounters(header=header, service="controller", counters=counters), 2.0)
+    agg.on_counters(ServiceCounters(header=header, service="depthscan", counters=counters), 2.0)
     answer = agg.answer(Header(stamp_ns=3, frame_id="", seq=3, source="metrics"), 3.0)
     assert DEPTH_SECOND_STREAM not in advise(Config(), answer)

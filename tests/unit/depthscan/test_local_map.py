@@ -1,4 +1,4 @@
-"""The depth cameras' short memory (services/controller/local_map.py): what was seen stays
+"""The depth cameras' short memory (depthscan/local_map.py): what was seen stays
 until its place is seen clear, a low box that slips into the blind zone stays an obstacle, the
 blind zone at start-up is not known clear, and the map moves with the robot's commands."""
 
@@ -15,7 +15,7 @@ from depthscan.frame import ScanParams, sample_metres
 from depthscan.observe import observe
 from perception.depth import Mounting
 from services.controller.geometry import sector_clearance
-from services.controller.local_map import (
+from depthscan.local_map import (
     FREE,
     HAZARD,
     UNKNOWN,

@@ -1,54 +1,54 @@
-"""The depth cameras' images in, their virtual scans out: the controller's obstacles seen by
-depth (depthscan/, services/controller/depth_obstacles.py). Used only when the settings need depth
-(``ControllerSettings.needs_depth``).
+"""The depth cameras' images in, their virtual scans and the depth memory out: the depth scan
+stage's work (services/depthscan/service.py is its bus side), over depthscan/.
 
 A depth image is large (600 KB at 640x480) and turning it into a scan takes a few
-milliseconds, so nothing of it happens on a bus thread nor in the control tick. The bus
-callback only leaves the payload in its camera's latest-only slot (:meth:`DepthIntake.offer`:
-a newer image replaces one not yet looked at, counted ``depth_dropped``); a thread of the
-intake's own (:meth:`DepthIntake.serve`) decodes, judges freshness and makes the scan; the
-tick only merges the scans held (:meth:`DepthIntake.obstacles`). A stop (the e-stop, a stale
-input) never waits behind a depth image: the e-stop has its own subscription, and the tick
-reads what the intake holds under a short lock.
+milliseconds, so nothing of it happens on a bus thread. The bus callback only leaves the
+payload in its camera's latest-only slot (:meth:`DepthIntake.offer`: a newer image replaces
+one not yet looked at, counted ``depth_dropped``); the stage's thread
+(:meth:`DepthIntake.serve`) decodes, judges freshness, makes the scan and hands it on at once
+(``on_scan``: published on ``<prefix>/scan/virtual/<camera>``), then what the memory holds
+(``on_memory``: :meth:`DepthIntake.memory`).
 
 The intake drops, counted, before any conversion: the images of cameras not announced with
 depth and those put by a Zenoh session other than the one that announced the camera
 (``depth_foreign``, both at :meth:`DepthIntake.offer`, before decoding; depthscan/trust.py), images
 stamped on this host's boot more than ``depth_future_tolerance_s`` ahead of its clock
 (``depth_future``), images of more than ``depth_max_pixels``, and frames whose
-intrinsics or mounting are implausible (depthscan/frame.py ``implausible``): with no scan, depth
-reads missing and the robot does not drive forward. A camera whose frames keep arriving older
-than the one held (a second stream on its key) is logged as a WARNING and counted in the gauge
-``depth_second_stream``, which the metrics turn into a warning. Only every
+intrinsics or mounting are implausible (depthscan/frame.py ``implausible``): with no scan, the
+controller reads depth missing and the robot does not drive forward. A camera whose frames keep
+arriving older than the one held (a second stream on its key) is logged as a WARNING and
+counted in the gauge ``depth_second_stream``, which the metrics turn into a warning. Only every
 ``depth_scan_stride_px``-th row and column is converted to metres. A scan is kept only if the
 announcement it was made with is still the camera's. An error while making a scan is logged,
-counted and the thread goes on. Each scan held is handed on at once (``on_scan``: the
-controller publishes it on ``<prefix>/scan/virtual/<camera>`` for the viewer and the
-recorder).
+counted and the thread goes on.
+
+The memory (depthscan/local_map.py) is moved by the controller's commands (:meth:`moved`, from
+cmd_vel), written to its file at once when it gains a hazard and every ``depth_memory_save_s``,
+and taken back by a stage that starts within ``depth_memory_max_age_s`` of the last write.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import threading
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
+import numpy as np
+
 from common.clock import BOOT_ID, Clock, Stamp
 from common.counters import per_camera
 from common.files import atomic_write_bytes
 from common.freshness import FreshnessGate, Verdict, capture_age_s
-from common.messages import CameraAnnouncement, DepthFrame, LaserScan
+from common.messages import CameraAnnouncement, DepthFrame, Header, LaserScan
 from common.node import Tally
 from depthscan.frame import Plausible, ScanParams, blind_zone, implausible, sample_frame, usable
+from depthscan.local_map import LocalMap, MapParams, Odometry
 from depthscan.observe import observe
 from depthscan.trust import LateWatch, ahead_on_same_clock, foreign_source
 from perception import Intrinsics, Mounting
-from services.controller import contract
 from services.controller.contract import ControllerSettings
-from services.controller.depth_obstacles import DepthCamera, DepthObstacles, depth_obstacles
-from services.controller.local_map import LocalMap, MapParams, Odometry
+from services.depthscan import contract
 
 #: Bytes of a depth payload beyond its pixels' (header, intrinsics, framing): a payload larger
 #: than ``depth_max_pixels`` 4-byte pixels and this is dropped before it is decoded.
@@ -56,8 +56,8 @@ PAYLOAD_OVERHEAD_BYTES = 64 * 1024
 
 
 class DepthIntake:
-    """Every announced depth camera's newest virtual scan (thread-safe: a bus thread offers,
-    the intake's thread makes the scans, the control loop reads them)."""
+    """Every announced depth camera's newest virtual scan and the depth memory (thread-safe: a
+    bus thread offers, the stage's thread makes the scans)."""
 
     def __init__(
         self,
@@ -67,13 +67,15 @@ class DepthIntake:
         clock: Clock,
         memory_path: Path | None = None,
         on_scan: Callable[[str, LaserScan], None] | None = None,
+        on_memory: Callable[[LaserScan, LaserScan], None] | None = None,
     ) -> None:
         self.tally = tally
         self.clock = clock
-        # Each new virtual scan, as soon as it is held (published: ControlLoop).
+        # Each new virtual scan, as soon as it is held (published: the stage's service).
         self.on_scan = on_scan
+        # What the memory holds, after each batch of images (published: the stage's service).
+        self.on_memory = on_memory
         self.timeout_s = s.depth_timeout_s
-        self.sector_width_deg = s.sector_width_deg
         self.tolerance_s = tolerance_s
         self.params = ScanParams(
             floor_margin_m=s.depth_floor_margin_m,
@@ -83,7 +85,7 @@ class DepthIntake:
             hole_px=s.depth_hole_px,
             edge_band_px=s.depth_edge_band_px,
         )
-        # The short memory (services/controller/local_map.py), moved by the commands sent.
+        # The short memory (depthscan/local_map.py), moved by the controller's commands.
         self.odometry = Odometry()
         self.map = LocalMap(
             MapParams(
@@ -171,21 +173,25 @@ class DepthIntake:
             self._cond.notify()
 
     def handle_waiting(self, timeout_s: float) -> int:
-        """Make the scans of the images waiting (waiting up to ``timeout_s`` for one);
-        how many were looked at."""
+        """Make the scans of the images waiting (waiting up to ``timeout_s`` for one), then
+        hand on what the memory holds (``on_memory``: also when no image came, so that the
+        controller knows the stage alive); how many images were looked at."""
         with self._cond:
-            waiting = self._cond.wait_for(lambda: bool(self._waiting), timeout_s)
-            if not waiting:
-                return 0
+            self._cond.wait_for(lambda: bool(self._waiting), timeout_s)
             taken, self._waiting = self._waiting, {}
         for camera, payload in taken.items():
             self._handle(camera, payload)
+        if self.on_memory is not None:
+            self.on_memory(*self.memory(self.clock.now()))
         return len(taken)
 
-    def serve(self, stop: threading.Event, poll_s: float) -> None:
-        """The intake's thread: make scans until ``stop`` is set (looked at every ``poll_s``).
-        An error is logged (rate-limited), counted ``depth_errors``, and the thread goes on:
-        the scans it did not make age, and depth goes missing as a stale stream does."""
+    def serve(
+        self, stop: threading.Event, poll_s: float, beat: Callable[[], None] | None = None
+    ) -> None:
+        """The stage's thread: make scans until ``stop`` is set (looked at every ``poll_s``),
+        ``beat`` called on every pass (the counters: the stage's heartbeat). An error is
+        logged (rate-limited), counted ``depth_errors``, and the thread goes on: the scans it
+        did not make age, and depth goes missing as a stale stream does."""
         while not stop.is_set():
             try:
                 self.handle_waiting(poll_s)
@@ -196,6 +202,8 @@ class DepthIntake:
                 self.tally.reject(
                     contract.DEPTH_ERRORS, f"making a virtual scan failed: {exc!r:.200}"
                 )
+            if beat is not None:
+                beat()
 
     def _unannounced(self, camera: str) -> None:
         self.tally.reject(
@@ -339,7 +347,7 @@ class DepthIntake:
         self.tally.counters.add(per_camera(counter, camera))
 
     def _restore(self, path: Path, max_age_s: float) -> None:
-        """Take back the hazards of the map a controller before this one wrote, if it wrote
+        """Take back the hazards of the map a stage before this one wrote, if it wrote
         it within ``max_age_s`` (a crash or a restart: the robot has not gone far)."""
         log = self.tally.log
         try:
@@ -371,7 +379,7 @@ class DepthIntake:
     def save_memory(self, force: bool = False) -> None:
         """Write the map to its file (at most every ``depth_memory_save_s``, or now with
         ``force``), with the pose the robot would reach if its last command went on for
-        ``depth_memory_coast_s``: what a controller taking it back after a crash must assume.
+        ``depth_memory_coast_s``: what a stage taking it back after a crash must assume.
         A write that fails is logged and counted; nothing waits on it."""
         if self.memory_path is None:
             return
@@ -396,27 +404,25 @@ class DepthIntake:
         """The command sent at monotonic ``mono_s``: the robot moves so from then on."""
         self.odometry.command(mono_s, linear, angular)
 
-    def obstacles(self, at: Stamp) -> DepthObstacles:
-        """The depth cameras' obstacles at the control instant ``at`` (each scan aged as the
-        dead-man ages detections: the later of its capture and its arrival), with what the
-        map remembers round the robot and how far ahead the floor is known."""
-        now = self._obstacles(at)
-        if now.scan is None:
-            return now
+    def memory(self, at: Stamp) -> tuple[LaserScan, LaserScan]:
+        """What the memory holds round the robot at ``at`` (its pose then, by the commands
+        heard), stamped with ``at``: the remembered scan (its hazard and unknown cells) and the
+        known floor (one ray straight ahead: how far the corridor ahead is known, inf: all of
+        it within the map's reach)."""
+        header = Header(
+            stamp_ns=at.wall_ns, frame_id="base_link", seq=0, source=contract.SERVICE,
+            mono_ns=at.mono_ns, boot_id=BOOT_ID,
+        )  # fmt: skip
         pose = self.odometry.pose_at(at.mono_ns / 1e9)
         with self._map_lock:
             self.map.stand(pose)
-            held = self.map.read(pose, now.scan.header)
-        return dataclasses.replace(now, remembered=held.scan, known_m=held.known_m)
-
-    def _obstacles(self, at: Stamp) -> DepthObstacles:
-        mono = at.mono_ns / 1e9
-        with self._lock:
-            cameras = {}
-            for camera, announced in self._cameras.items():
-                scan, age = None, float("inf")
-                if camera in self._scans:
-                    scan, arrived = self._scans[camera]
-                    age = max(mono - arrived, capture_age_s(scan.header, at, BOOT_ID))
-                cameras[camera] = DepthCamera(Mounting.of(announced), announced.hfov_deg, scan, age)
-        return depth_obstacles(cameras, self.timeout_s, self.sector_width_deg)
+            held = self.map.read(pose, header)
+        known = LaserScan(
+            header=header,
+            angle_min=0.0,
+            angle_increment=math.tau,
+            range_min=0.0,
+            range_max=held.scan.range_max,
+            ranges=np.array([held.known_m], np.float32),
+        )
+        return held.scan, known
