@@ -1,5 +1,6 @@
 """A robot with a depth camera and no laser (``obstacle_sources = ["depth"]``) obeys the
-forward-safety rules on real processes: the controller alone, the test's own session
+forward-safety rules on real processes: the depth scan stage and the controller alone, the
+test's own session
 publishing a centred person and the camera's depth images (a level floor seen from the
 camera's announced height, and an obstacle when asked), and never a laser scan. Fresh depth
 that shows the way clear: forward motion. The depth stream gone quiet: no forward motion once
@@ -19,6 +20,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from common.clock import now
 from common.messages import ControllerStatus, Twist
 from perception.depth import Intrinsics
 from tests.integration.conftest import Stack, wait_for
@@ -49,14 +51,15 @@ def on_fresh_depth(raw: list[bytes], start: int = 0) -> list[str]:
 
 
 def depth_robot(make_stack) -> tuple[Stack, list[bytes], list[bytes]]:  # type: ignore[no-untyped-def]
-    """A controller alone in track mode whose obstacles are the depth camera's, the camera
+    """A controller in track mode whose obstacles are the depth camera's (made into virtual
+    scans by the depth scan stage beside it), the camera
     announced with depth by the test's session (which stands in for the camera, the detector
     and a robot with no laser); its commands and statuses as they come."""
     stack: Stack = make_stack(
-        supervisor={"services": ["controller"]},
+        supervisor={"services": ["depthscan", "controller"]},
         controller={"mode": "track", "no_laser": False, "obstacle_sources": ["depth"]},
     )
-    stack.wait_ready({"controller"})
+    stack.wait_ready({"depthscan", "controller"})
     stack.announce(depth=True, mount_height_m=HEIGHT, hfov_deg=60.0)
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
     _, status_raw = stack.subscribe(stack.keys.controller_status())
@@ -67,11 +70,11 @@ def test_without_a_laser_the_depth_camera_shows_the_way_or_nothing_moves_forward
     make_stack,
 ) -> None:  # type: ignore[no-untyped-def]
     stack: Stack = make_stack(
-        supervisor={"services": ["controller"]},
+        supervisor={"services": ["depthscan", "controller"]},
         controller={"mode": "track", "no_laser": False, "obstacle_sources": ["depth"]},
     )
     s = stack.config.controller
-    stack.wait_ready({"controller"})
+    stack.wait_ready({"depthscan", "controller"})
     # The test stands in for the camera (with depth), the detector, and a robot with no laser.
     stack.announce(depth=True, mount_height_m=HEIGHT, hfov_deg=60.0)
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
@@ -195,26 +198,35 @@ def test_what_the_depth_camera_cannot_see_is_not_clear(make_stack, case: str) ->
     assert stack.stop() == 0, stack.log()
 
 
-def test_a_controller_restarted_after_a_crash_remembers_what_it_saw(make_stack) -> None:  # type: ignore[no-untyped-def]
-    # A stop is not lost by a crash: what slipped into the blind zone stays an obstacle for
-    # the controller the supervisor starts in place of a killed one (its depth map on disk).
-    stack, cmds, status_raw = depth_robot(make_stack)
+def _seen_into_the_blind_zone(stack: Stack, status_raw: list[bytes]) -> Feeder:
+    """A box 0.4 m ahead (within the safety distance) seen, then gone from view into the
+    blind zone: remembered. The feeder goes on with the clear floor and a centred person."""
     front, depth = stack.keys.detections("front"), stack.keys.depth("front")
-    image = scene(HEIGHT, at_bearing(0.4, 0.0), intr=INTR)  # within the safety distance
+    image = scene(HEIGHT, at_bearing(0.4, 0.0), intr=INTR)
 
     def person_and_depth() -> dict[str, bytes]:
         return {front: people(1), depth: depth_frame(image, header(), INTR).encode()}
 
-    def said(start: int, end: str) -> list[ControllerStatus]:
-        return [x for x in statuses(status_raw, start) if x.reason.endswith(end)]
-
     feeder = Feeder(stack)
+    feeder.feed(person_and_depth)
+    wait_for(lambda: said(status_raw, 0, "(depth)"), 30, "the obstacle seen in the depth")
+    image = scene(HEIGHT, intr=INTR)
+    since = len(status_raw)
+    wait_for(lambda: said(status_raw, since, "(remembered)"), 30, "the obstacle remembered")
+    return feeder
+
+
+def said(raw: list[bytes], start: int, end: str) -> list[ControllerStatus]:
+    return [x for x in statuses(raw, start) if x.reason.endswith(end)]
+
+
+def test_a_controller_restarted_after_a_crash_remembers_what_it_saw(make_stack) -> None:  # type: ignore[no-untyped-def]
+    # A stop is not lost by a crash: what slipped into the blind zone stays an obstacle for
+    # the controller the supervisor starts in place of a killed one (the depth scan stage,
+    # which remembers it, runs on).
+    stack, cmds, status_raw = depth_robot(make_stack)
+    feeder = _seen_into_the_blind_zone(stack, status_raw)
     try:
-        feeder.feed(person_and_depth)
-        wait_for(lambda: said(0, "(depth)"), 30, "the obstacle seen in the depth")
-        image = scene(HEIGHT, intr=INTR)  # gone from view into the blind zone
-        since = len(status_raw)
-        wait_for(lambda: said(since, "(remembered)"), 30, "the obstacle remembered")
         [pid] = service_pids("controller", stack.config_path)
         os.kill(pid, signal.SIGKILL)
         killed = len(status_raw)
@@ -242,4 +254,72 @@ def test_a_controller_restarted_after_a_crash_remembers_what_it_saw(make_stack) 
     finally:
         feeder.close()
     assert stack.stop() == 0, stack.log()
+
+
+def test_a_depth_scan_stage_restarted_after_a_crash_remembers_what_it_saw(make_stack) -> None:  # type: ignore[no-untyped-def]
+    # The stage killed: the controller holds still while it is gone, and the stage the
+    # supervisor starts in its place takes back what it remembered (its depth map on disk):
+    # the box in the blind zone stays an obstacle, never seen clear since.
+    stack, cmds, status_raw = depth_robot(make_stack)
+    feeder = _seen_into_the_blind_zone(stack, status_raw)
+    try:
+        [pid] = service_pids("depthscan", stack.config_path)
+        since_cmds = len(cmds)
+        os.kill(pid, signal.SIGKILL)
+        killed = len(status_raw)
+        wait_for(
+            lambda: [p for p in service_pids("depthscan", stack.config_path) if p != pid],
+            30,
+            "the supervisor to restart the depth scan stage",
+        )
+        # The new stage's first memory back: remembered again, and from then on only that.
+        back = lambda: said(status_raw, killed, "(remembered)")  # noqa: E731
+        wait_for(back, 60, "the restarted stage's memory")
+        start = killed + statuses(status_raw, killed).index(back()[0])
+        wait_for(lambda: len(status_raw) > start + 2 * TICKS, 60, "ticks after the restart")
+        settled = statuses(status_raw, start + TICKS)
+        reasons = {x.reason for x in settled}
+        assert all(r.endswith("(remembered)") for r in reasons), reasons
+        assert forward(cmds, since_cmds) == [], "drove forward after the stage was killed"
+    finally:
+        feeder.close()
+    assert stack.stop() == 0, stack.log()
     assert "depth map" in stack.log() and "taken back" in stack.log(), stack.log()
+
+
+@pytest.mark.parametrize("how", ["killed", "hung"])
+def test_the_depth_scan_stage_gone_stops_the_robot_at_once(make_stack, how: str) -> None:  # type: ignore[no-untyped-def]
+    # The stage killed (SIGKILL) or hung (SIGSTOP) while the robot drives on clear depth: no
+    # command stamped later than depth_timeout_s after it went drives or turns (its virtual
+    # scans and memory stale: the controller holds still at once, turning included).
+    stack, cmds, status_raw = depth_robot(make_stack)
+    timeout_ns = int(stack.config.controller.depth_timeout_s * 1e9)
+    front, depth = stack.keys.detections("front"), stack.keys.depth("front")
+    clear = scene(HEIGHT, intr=INTR)
+    feeder = Feeder(stack)
+    [pid] = service_pids("depthscan", stack.config_path)
+    try:
+        feeder.feed(lambda: {front: people(1), depth: depth_frame(clear, header(), INTR).encode()})
+        wait_for(lambda: forward(cmds), 30, "forward motion with the depth showing the way clear")
+        gone_ns = now().wall_ns
+        os.kill(pid, signal.SIGKILL if how == "killed" else signal.SIGSTOP)
+        since = len(status_raw)
+
+        def after() -> list[ControllerStatus]:
+            late = gone_ns + timeout_ns
+            return [x for x in statuses(status_raw, since) if x.header.stamp_ns > late]
+
+        wait_for(lambda: len(after()) > TICKS, 30, "ticks after the stage went")
+        moving = [
+            t for t in map(Twist.decode, list(cmds))
+            if t.header.stamp_ns > gone_ns + timeout_ns and (t.linear[0] != 0 or t.angular[2] != 0)
+        ]  # fmt: skip
+        assert moving == [], f"{len(moving)} commands moved the robot with the stage {how}"
+        quiet = after()
+        assert {x.state for x in quiet} == {"blocked"}, [(x.state, x.reason) for x in quiet]
+        assert all("depth" in x.reason for x in quiet), {x.reason for x in quiet}
+    finally:
+        if how == "hung":
+            os.kill(pid, signal.SIGCONT)
+        feeder.close()
+    assert stack.stop() == 0, stack.log()

@@ -1,5 +1,6 @@
-"""Depth from the announced source only (issue 38), on real processes: the controller alone,
-with ``obstacle_sources = ["depth"]``; the test's session stands in for the camera (it announces
+"""Depth from the announced source only (issue 38), on real processes: the depth scan stage
+(which reads the depth and counts what it drops) and the controller, with
+``obstacle_sources = ["depth"]``; the test's session stands in for the camera (it announces
 it with depth and its own session id, and publishes a level floor with a box 0.4 m ahead,
 within the safety distance) and the detector (a centred person). A second session forges the
 camera's depth: a clear floor, 20 Hz, stamped 0.09 s ahead (within the cross-host clock
@@ -58,15 +59,15 @@ def test_a_forged_clear_depth_stream_stamped_ahead_does_not_hide_the_real_box(
     make_stack,
 ) -> None:  # type: ignore[no-untyped-def]
     stack: Stack = make_stack(
-        supervisor={"services": ["controller"]},
+        supervisor={"services": ["depthscan", "controller"]},
         controller={"mode": "track", "no_laser": False, "obstacle_sources": ["depth"]},
     )
-    stack.wait_ready({"controller"})
+    stack.wait_ready({"depthscan", "controller"})
     zid = str(stack.session.info.zid())
     stack.announce(depth=True, mount_height_m=HEIGHT, hfov_deg=60.0, zid=zid)
     _, cmds = stack.subscribe(stack.keys.cmd_vel())
     _, status_raw = stack.subscribe(stack.keys.controller_status())
-    _, counters_raw = stack.subscribe(stack.keys.counters("controller"))
+    _, counters_raw = stack.subscribe(stack.keys.counters("depthscan"))
     depth_key = stack.keys.depth(stack.config.stack.camera)
     boxed = scene(HEIGHT, at_bearing(0.4, 0.0), intr=INTR)
     clear = scene(HEIGHT, intr=INTR)

@@ -93,11 +93,13 @@ def robots_plan(
         )
 
     pool = stack(f"pool-{run}", ("detector",), pool_endpoint)
+    # A robot that needs depth runs its depth scan stage (its virtual scans) beside its controller.
+    stage = ("depthscan",) if pool.controller.needs_depth else ()
     pool = dataclasses.replace(
         pool, detector=dataclasses.replace(pool.detector, workers=workers, prefixes=prefixes)
     )
     robot_stacks = tuple(
-        stack(p, ("sim", "controller", "metrics"), private_endpoint()) for p in prefixes
+        stack(p, ("sim", *stage, "controller", "metrics"), private_endpoint()) for p in prefixes
     )
     return RobotsPlan(robot_stacks, pool)
 

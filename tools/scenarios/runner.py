@@ -81,6 +81,7 @@ def scenario_config(
         **changes,
     )
     bridge = ("ros2",) if ros2 else ()
+    stage = ("depthscan",) if controller.needs_depth else ()  # its virtual scans
     # A simulated ROS 2 robot with depth: the bridge takes its depth in, and announces its
     # camera at the height the simulator renders from (the virtual scan takes the floor out
     # by it), as the simulator does on the stack's keys.
@@ -114,7 +115,8 @@ def scenario_config(
             depth_in=base.ros2.depth_in or depth_over_ros2,
         ),
         supervisor=dataclasses.replace(
-            base.supervisor, services=("sim", *bridge, "detector", "controller", "metrics")
+            base.supervisor,
+            services=("sim", *bridge, "detector", *stage, "controller", "metrics"),
         ),
     )
 
@@ -125,7 +127,7 @@ RUNNER_REASONS = {
     "controller.mode": "a scenario runs in the mode asked: --mode, default follow",
     "controller.target_classes": "every scenario's target is a person",
     "supervisor.services": "a scenario runs its own stack: the simulator, detector, controller "
-    "and metrics",
+    "(with the depth scan stage when it needs depth) and metrics",
 }
 
 

@@ -62,7 +62,7 @@ def test_config_has_exactly_the_tables_the_listed_services_declare() -> None:
 
 def test_the_live_sensors_and_heartbeats_come_from_the_contracts() -> None:
     assert {"camera", "sim", "ros2"} == LIVE_SENSORS
-    assert {"camera", "sim", "ros2", "detector", "controller"} == HEARTBEAT_SERVICES
+    assert {"camera", "sim", "ros2", "detector", "depthscan", "controller"} == HEARTBEAT_SERVICES
 
 
 def _lists_of_services(tree: ast.AST, exempt: set[int]) -> Iterator[tuple[int, list[str]]]:
