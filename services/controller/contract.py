@@ -46,8 +46,8 @@ OUTCOMES = (IN, LATE, *DROP_VERDICTS)
 
 
 def input_counter(stream: str, outcome: str) -> str:
-    """The counter of ``stream``'s (DETECTIONS, SCANS, VIRTUAL_SCANS ...) messages with ``outcome`` (IN, LATE or
-    a freshness verdict)."""
+    """The counter of ``stream``'s (DETECTIONS, SCANS, VIRTUAL_SCANS ...) messages with
+    ``outcome`` (IN, LATE or a freshness verdict)."""
     return f"{stream}_{outcome}"
 
 
@@ -168,15 +168,15 @@ class ControllerSettings:
     (a stereo camera's band of no readings beside a near object). What the depth cameras
     saw is kept in a rolling map ``depth_memory_size_m`` across, in cells
     ``depth_memory_resolution_m`` wide, moved by the controller's own commands
-    (depthscan/local_map.py, kept by the stage, which hears cmd_vel): an obstacle or a drop-off seen stays until its place
-    is seen clear, and with depth required the robot drives no faster than
-    ``depth_creep_speed`` while the corridor ahead within the room it needs to stop has a
-    part never seen (at start-up: the camera's blind zone). The map is written at once when
-    it gains a hazard, and every ``depth_memory_save_s``, to ``depth_memory_file`` (relative
-    to the repo root; empty: ``state/depth-memory-<prefix>.npz``) and a stage that starts
-    within ``depth_memory_max_age_s`` of the last write takes back its hazards (a crash, a
-    restart), placed as if the robot had gone on with its last command for
-    ``depth_memory_coast_s`` (a base's own command timeout).
+    (depthscan/local_map.py, kept by the stage, which hears cmd_vel): an obstacle or a drop-off
+    seen stays until its place is seen clear, and with depth required the robot drives no faster
+    than ``depth_creep_speed`` while the corridor ahead within the room it needs to stop has a
+    part never seen (at start-up: the camera's blind zone). The map is written at once when it
+    gains a hazard, and every ``depth_memory_save_s``, to ``depth_memory_file`` (relative to the
+    repo root; empty: ``state/depth-memory-<prefix>.npz``) and a stage that starts within
+    ``depth_memory_max_age_s`` of the last write takes back its hazards (a crash, a restart),
+    placed as if the robot had gone on with its last command for ``depth_memory_coast_s`` (a
+    base's own command timeout).
     Both turn with a PID on the bearing error (rad -> rad/s) and obey the speed and
     acceleration limits. Stale detections (captured or received longer than
     ``detection_timeout_s`` ago) and the e-stop command zero at once, bypassing the

@@ -80,7 +80,8 @@ class DepthInput:
             take_fresh(self.tally, self.clock, msg, gate, latest, contract.VIRTUAL_SCANS, camera)
 
     def on_remembered(self, payload: bytes) -> None:
-        self._memory(contract.REMEMBERED, self.tally.keys.remembered_scan(), self.remembered, payload)
+        key = self.tally.keys.remembered_scan()
+        self._memory(contract.REMEMBERED, key, self.remembered, payload)
 
     def on_known(self, payload: bytes) -> None:
         self._memory(contract.KNOWN_FLOOR, self.tally.keys.known_floor(), self.known, payload)

@@ -1,6 +1,6 @@
 """The controller's obstacles seen by depth: every depth camera's newest virtual scan
-(made by the depth scan stage, services/depthscan, from its images) judged together at the control instant. Pure: no bus,
-no clock.
+(made by the depth scan stage, services/depthscan, from its images) judged together at the
+control instant. Pure: no bus, no clock.
 
 The scans are in the ROBOT frame (REP 103: angle 0 forward, counter-clockwise positive), 360
 deg round, NaN outside a camera's field of view, so that the controller's obstacle rules

@@ -74,7 +74,7 @@ def test_the_virtual_scans_and_memory_are_counted_as_every_input(rig: Rig) -> No
 
 def test_a_config_that_needs_depth_runs_the_depth_scan_stage() -> None:
     depth = ControllerSettings(obstacle_sources=("depth",))
-    with pytest.raises(ConfigError, match='add "depthscan" to supervisor.services'):
+    with pytest.raises(ConfigError, match=r'add "depthscan" to supervisor\.services'):
         Config(controller=depth, supervisor=SupervisorSettings(services=("sim", "controller")))
     Config(controller=depth, supervisor=SupervisorSettings(services=("depthscan", "controller")))
     # A host that runs no controller needs no stage; a controller without depth neither.
@@ -86,14 +86,15 @@ def test_the_controller_reads_no_depth_image() -> None:
     # The depth images are the stage's to read: the controller's access reads none, and no
     # module of it imports what makes a scan from one or the memory.
     keys = Keys("stack")
-    access = contract.access(Shape(keys=keys, cameras={"front": "camera"}, workers=()))["controller"]
+    shape = Shape(keys=keys, cameras={"front": "camera"}, workers=())
+    access = contract.access(shape)["controller"]
     assert keys.all_depths() not in access.read
     assert keys.all_virtual_scans() in access.read and keys.remembered_scan() in access.read
     for path in (REPO / "services" / "controller").glob("*.py"):
         tree = ast.parse(path.read_text())
-        names = {
-            n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
-        } | {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        names = {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)} | {
+            a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names
+        }
         made = {"depthscan.observe", "depthscan.local_map", "depthscan.trust"} & names
         assert not made, f"{path.name} imports {made}"
         assert not any(n.startswith("services.depthscan") for n in names), path.name

@@ -22,10 +22,10 @@ from common.messages import DepthFrame, Header, LaserScan
 from depthscan.frame import MIN_NEAR_M, ScanParams, blind_zone
 from depthscan.observe import Observation, virtual_scan
 from perception.depth import Intrinsics, Mounting
-from services.depthscan import intake as depth_intake
 from services.controller.contract import ControllerSettings
 from services.controller.depth_obstacles import DepthCamera, depth_obstacles
 from services.controller.geometry import sector_clearance
+from services.depthscan import intake as depth_intake
 from tests.polling import wait_for
 from tests.unit.controller.rig import Rig
 from tests.unit.depthscan.depth_scenes import HFOV, INTR, Face, at_bearing, depth_frame, scene

@@ -93,7 +93,8 @@ def test_a_camera_of_unknown_height_is_counted_and_said(rig: Rig) -> None:
     twist, status = rig.tick()
     assert status.state == "blocked" and twist.linear[0] == 0.0
     assert status.reason == "no depth camera looks ahead (front: height above the floor unknown)"
-    assert rig.stage_counters["depth_no_mount"] == 1 and rig.stage_counters["depth_no_mount.front"] == 1
+    counted = rig.stage_counters
+    assert counted["depth_no_mount"] == 1 and counted["depth_no_mount.front"] == 1
 
 
 def test_depth_of_a_camera_announced_without_depth_is_ignored(rig: Rig) -> None:

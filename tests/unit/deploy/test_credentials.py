@@ -295,7 +295,9 @@ def test_cli_makes_a_principal_per_worker_and_for_other_hosts_workers(
     users = _roles(creds)
     workers = ("detector_b", "detector_b_2", "detector_a")
     assert users == [
-        p for p in stack_principals("front", workers) if p not in ("sim", "ros2", "depthscan", "viewer")
+        p
+        for p in stack_principals("front", workers)
+        if p not in ("sim", "ros2", "depthscan", "viewer")
     ]
     assert "detector" not in users
     ca = _cert(ca_file(creds))

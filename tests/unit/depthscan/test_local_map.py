@@ -12,9 +12,6 @@ import pytest
 from common.messages import Header, LaserScan
 from common.unicycle import advance
 from depthscan.frame import ScanParams, sample_metres
-from depthscan.observe import observe
-from perception.depth import Mounting
-from services.controller.geometry import sector_clearance
 from depthscan.local_map import (
     FREE,
     HAZARD,
@@ -24,6 +21,9 @@ from depthscan.local_map import (
     MapParams,
     Odometry,
 )
+from depthscan.observe import observe
+from perception.depth import Mounting
+from services.controller.geometry import sector_clearance
 from tests.unit.depthscan.depth_scenes import INTR, Face, scene
 
 HEADER = Header(stamp_ns=1_000, frame_id="camera", seq=1, source="test")
