@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from common.clock import now
-from common.messages import ControllerStatus, Twist
+from common.messages import ControllerStatus, LaserScan, Twist
 from perception.depth import Intrinsics
 from tests.integration.conftest import Stack, wait_for
 from tests.integration.feeder import Feeder, header, people
@@ -33,6 +33,8 @@ pytestmark = pytest.mark.integration
 HEIGHT = 0.6  # the camera's optical centre above the floor, as announced
 INTR = Intrinsics.from_hfov(320, 240, 60.0)  # a small image: 150 KB a frame
 TICKS = 30  # statuses judged in a case: a second and a half at 20 Hz
+#: The supervisor's wait before it restarts a killed depth scan stage, in the test of its death.
+RESTART_S = 5.0
 
 
 def forward(raw: list[bytes], start: int = 0) -> list[Twist]:
@@ -50,13 +52,18 @@ def on_fresh_depth(raw: list[bytes], start: int = 0) -> list[str]:
     return [x.reason for x in statuses(raw, start) if not x.reason.startswith("no recent depth")]
 
 
-def depth_robot(make_stack) -> tuple[Stack, list[bytes], list[bytes]]:  # type: ignore[no-untyped-def]
+def depth_robot(  # type: ignore[no-untyped-def]
+    make_stack, restart_backoff_s: float = 0.2
+) -> tuple[Stack, list[bytes], list[bytes]]:
     """A controller in track mode whose obstacles are the depth camera's (made into virtual
     scans by the depth scan stage beside it), the camera
     announced with depth by the test's session (which stands in for the camera, the detector
     and a robot with no laser); its commands and statuses as they come."""
     stack: Stack = make_stack(
-        supervisor={"services": ["depthscan", "controller"]},
+        supervisor={
+            "services": ["depthscan", "controller"],
+            "restart_backoff_s": restart_backoff_s,
+        },
         controller={"mode": "track", "no_laser": False, "obstacle_sources": ["depth"]},
     )
     stack.wait_ready({"depthscan", "controller"})
@@ -292,32 +299,49 @@ def test_the_depth_scan_stage_gone_stops_the_robot_at_once(make_stack, how: str)
     # The stage killed (SIGKILL) or hung (SIGSTOP) while the robot drives on clear depth: no
     # command stamped later than depth_timeout_s after it went drives or turns (its virtual
     # scans and memory stale: the controller holds still at once, turning included).
-    stack, cmds, status_raw = depth_robot(make_stack)
+    # The killed stage is restarted only after RESTART_S: the ticks between are what is judged.
+    stack, cmds, status_raw = depth_robot(make_stack, restart_backoff_s=RESTART_S)
     timeout_ns = int(stack.config.controller.depth_timeout_s * 1e9)
     front, depth = stack.keys.detections("front"), stack.keys.depth("front")
     clear = scene(HEIGHT, intr=INTR)
     feeder = Feeder(stack)
     [pid] = service_pids("depthscan", stack.config_path)
+    # The stage's memory as it is published: the first one stamped after the kill comes from
+    # the stage the supervisor restarts (restart_backoff_s later), whose fresh scans may move
+    # the robot again. What is judged is the time between: the stage gone, not yet back.
+    _, memories = stack.subscribe(stack.keys.remembered_scan())
     try:
         feeder.feed(lambda: {front: people(1), depth: depth_frame(clear, header(), INTR).encode()})
         wait_for(lambda: forward(cmds), 30, "forward motion with the depth showing the way clear")
         gone_ns = now().wall_ns
         os.kill(pid, signal.SIGKILL if how == "killed" else signal.SIGSTOP)
         since = len(status_raw)
+        late = gone_ns + timeout_ns
+
+        def back_ns() -> int:
+            """When the stage was back (its first memory stamped after the kill), or never."""
+            stamps = [LaserScan.decode(m).header.stamp_ns for m in list(memories)]
+            return min((t for t in stamps if t > gone_ns), default=2**63 - 1)
 
         def after() -> list[ControllerStatus]:
-            late = gone_ns + timeout_ns
-            return [x for x in statuses(status_raw, since) if x.header.stamp_ns > late]
+            return [x for x in statuses(status_raw, since) if late < x.header.stamp_ns < back_ns()]
 
-        wait_for(lambda: len(after()) > TICKS, 30, "ticks after the stage went")
+        wait_for(
+            lambda: len(after()) > TICKS or back_ns() < 2**63 - 1,
+            30,
+            "ticks after the stage went, or its restart",
+        )
+        quiet = after()
+        assert len(quiet) >= 2, "no tick judged between the stage's going and its restart"
         moving = [
             t for t in map(Twist.decode, list(cmds))
-            if t.header.stamp_ns > gone_ns + timeout_ns and (t.linear[0] != 0 or t.angular[2] != 0)
+            if late < t.header.stamp_ns < back_ns() and (t.linear[0] != 0 or t.angular[2] != 0)
         ]  # fmt: skip
         assert moving == [], f"{len(moving)} commands moved the robot with the stage {how}"
-        quiet = after()
         assert {x.state for x in quiet} == {"blocked"}, [(x.state, x.reason) for x in quiet]
         assert all("depth" in x.reason for x in quiet), {x.reason for x in quiet}
+        if how == "killed":  # and the supervisor brings it back: the stop ends a whole stack
+            wait_for(lambda: back_ns() < 2**63 - 1, RESTART_S + 30, "the restarted stage")
     finally:
         if how == "hung":
             os.kill(pid, signal.SIGCONT)
