@@ -210,7 +210,8 @@ def run_main(main: Callable[[], int], prog: str, *, skip_finalizing: bool = Fals
     model), flush the logs and standard streams and end the process at once, without the
     interpreter's finalization. The detector, its Python done, was seen to hang there for
     more than the supervisor's stop_timeout_s on a loaded machine (its stacks, dumped after
-    3 s: one thread, no Python frame: native runtimes' teardown) and be killed (issue 39).
+    3 s: one thread, no Python frame: native runtimes' teardown) and be killed (issue 39);
+    the controller too, and later the camera (OpenCV), in CI runs beside CPU burners.
     """
     if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _interrupt)

@@ -57,4 +57,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    run_main(main, "camera")
+    run_main(main, "camera", skip_finalizing=True)
