@@ -16,6 +16,25 @@ PAYLOAD_TOO_LARGE = "payload_too_large"
 #: What every service may count, whatever it is.
 COMMON = frozenset({BAD_INPUT, PAYLOAD_TOO_LARGE})
 
+# -- inputs judged for freshness (common/freshness.py), each counted by its fate ------------------
+IN = "in"  # fresh, and the newest held
+LATE = "late"  # fresh, but older than the one held
+#: The freshness verdicts an input is dropped for (common/freshness.py ``Verdict`` but fresh;
+#: named here so that a contract loads no messages: a unit test checks they agree).
+DROP_VERDICTS = ("stale", "future", "replay")
+OUTCOMES = (IN, LATE, *DROP_VERDICTS)
+
+
+def input_counter(stream: str, outcome: str) -> str:
+    """The counter of ``stream``'s messages (``detections``, ``depth`` ...) with ``outcome``
+    (IN, LATE or a freshness verdict): ``detections_stale``."""
+    return f"{stream}_{outcome}"
+
+
+def input_counters(stream: str) -> frozenset[str]:
+    """Every fate's counter of ``stream`` (:data:`OUTCOMES`)."""
+    return frozenset(input_counter(stream, o) for o in OUTCOMES)
+
 
 class Counters:
     """Monotonic counts such as ``frames_in``, ``dropped`` or ``bad_input``.

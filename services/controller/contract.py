@@ -11,11 +11,11 @@ from typing import Annotated
 
 from common.access import Access, Shape, service_access
 from common.contracts import ControllerMode, DistanceSource
-from common.counters import COMMON
+from common.counters import COMMON, input_counters
 from common.errors import ConfigError
 from common.setting_checks import Length, Range, check_bounds, check_lengths, enum_field
 
-# Its inputs, each counted by its fate (:func:`input_counter`): ``detections_in``,
+# Its inputs, each counted by its fate (common/counters.py ``input_counter``): ``detections_in``,
 # ``detections_stale`` ...; the detections' for each announced camera too.
 DETECTIONS = "detections"
 SCANS = "scans"
@@ -25,8 +25,6 @@ SCANS = "scans"
 VIRTUAL_SCANS = "virtual_scans"
 REMEMBERED = "remembered"
 KNOWN_FLOOR = "known_floor"
-IN = "in"  # fresh, and the newest held
-LATE = "late"  # fresh, but older than the one held
 #: Detections from a camera with no live announcement: ignored.
 DETECTIONS_UNANNOUNCED = "detections_unannounced"
 #: Virtual scans of a camera not announced, or announced without depth: ignored.
@@ -39,31 +37,19 @@ ESTOP_LOCAL_BAD = "estop_local_bad"
 COMMANDS_OUT = "commands_out"
 COMMANDS_NONZERO = "commands_nonzero"
 
-#: The freshness verdicts an input is dropped for (common/freshness.py ``Verdict`` but fresh;
-#: named here so that the contract loads no messages: a unit test checks they agree).
-DROP_VERDICTS = ("stale", "future", "replay")
-OUTCOMES = (IN, LATE, *DROP_VERDICTS)
-
-
-def input_counter(stream: str, outcome: str) -> str:
-    """The counter of ``stream``'s (DETECTIONS, SCANS, VIRTUAL_SCANS ...) messages with
-    ``outcome`` (IN, LATE or a freshness verdict)."""
-    return f"{stream}_{outcome}"
-
-
 PER_CAMERA = frozenset(
     {
-        *(input_counter(DETECTIONS, o) for o in OUTCOMES),
-        *(input_counter(VIRTUAL_SCANS, o) for o in OUTCOMES),
+        *input_counters(DETECTIONS),
+        *input_counters(VIRTUAL_SCANS),
     }
 )
 COUNTERS = frozenset(
     {
         *COMMON,
         *PER_CAMERA,
-        *(input_counter(SCANS, o) for o in OUTCOMES),
-        *(input_counter(REMEMBERED, o) for o in OUTCOMES),
-        *(input_counter(KNOWN_FLOOR, o) for o in OUTCOMES),
+        *input_counters(SCANS),
+        *input_counters(REMEMBERED),
+        *input_counters(KNOWN_FLOOR),
         DETECTIONS_UNANNOUNCED,
         VIRTUAL_SCANS_UNANNOUNCED,
         ESTOP_RELEASE_REFUSED,

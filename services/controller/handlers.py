@@ -9,7 +9,7 @@ from collections.abc import Callable, Mapping
 from typing import Generic, Protocol, TypeVar
 
 from common.clock import BOOT_ID, SYSTEM_CLOCK, Clock, Stamp
-from common.counters import per_camera
+from common.counters import IN, LATE, input_counter, per_camera
 from common.errors import DecodeError
 from common.freshness import FreshnessGate, Verdict, capture_age_s, judge_age
 from common.messages import CameraAnnouncement, Detections, EStop, Header, LaserScan
@@ -87,13 +87,13 @@ def take_fresh(
     verdict, age = gate.check(msg.header, clock.now())
     of = f" from {camera}" if camera else ""
     if verdict is not Verdict.FRESH:
-        counter = contract.input_counter(name, verdict)
+        counter = input_counter(name, verdict)
         tally.reject(counter, f"{verdict} {name}{of} ({age:.2f} s) ignored")
     elif latest.set(msg):
-        counter = contract.input_counter(name, contract.IN)
+        counter = input_counter(name, IN)
         tally.counters.add(counter)
     else:
-        counter = contract.input_counter(name, contract.LATE)
+        counter = input_counter(name, LATE)
         tally.reject(counter, f"{name}{of} older than the ones held ignored")
     if camera:
         tally.counters.add(per_camera(counter, camera))

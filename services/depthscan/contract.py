@@ -15,13 +15,11 @@ scans are made and judged by one set of figures, declared once (services/control
 from __future__ import annotations
 
 from common.access import Access, Shape, service_access
-from common.counters import COMMON
+from common.counters import COMMON, input_counters
 
-# Its input, each counted by its fate (:func:`input_counter`): ``depth_in``, ``depth_stale`` ...,
-# for each announced camera too.
+# Its input, each counted by its fate (common/counters.py ``input_counter``): ``depth_in``,
+# ``depth_stale`` ..., for each announced camera too.
 DEPTH = "depth"
-IN = "in"  # fresh, and the newest held
-LATE = "late"  # fresh, but older than the one held
 #: Depth frames of a camera not announced, or announced without depth: ignored.
 DEPTH_UNANNOUNCED = "depth_unannounced"
 #: Depth frames of a camera whose height above the floor is unknown: no virtual scan.
@@ -52,20 +50,9 @@ COMMANDS_IN = "commands_in"
 SCANS_OUT = "scans_out"
 MEMORY_OUT = "memory_out"
 
-#: The freshness verdicts an input is dropped for (common/freshness.py ``Verdict`` but fresh).
-DROP_VERDICTS = ("stale", "future", "replay")
-OUTCOMES = (IN, LATE, *DROP_VERDICTS)
-
-
-def input_counter(stream: str, outcome: str) -> str:
-    """The counter of ``stream``'s (DEPTH) messages with ``outcome`` (IN, LATE or a freshness
-    verdict)."""
-    return f"{stream}_{outcome}"
-
-
 PER_CAMERA = frozenset(
     {
-        *(input_counter(DEPTH, o) for o in OUTCOMES),
+        *input_counters(DEPTH),
         DEPTH_NO_MOUNT,
         DEPTH_DROPPED,
         DEPTH_IMPLAUSIBLE,

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from common.clock import BOOT_ID, Clock, Stamp
-from common.counters import per_camera
+from common.counters import IN, LATE, input_counter, per_camera
 from common.files import atomic_write_bytes
 from common.freshness import FreshnessGate, Verdict, capture_age_s
 from common.messages import CameraAnnouncement, DepthFrame, Header, LaserScan
@@ -232,14 +232,14 @@ class DepthIntake:
         ahead = ahead_on_same_clock(msg.header, now, BOOT_ID, self.future_tolerance_s)
         if ahead:  # before the gate, which would remember its stamp as the source's newest
             self._refuse(
-                contract.input_counter(contract.DEPTH, Verdict.FUTURE), camera,
+                input_counter(contract.DEPTH, Verdict.FUTURE), camera,
                 f"stamped on this host {ahead:.3f} s ahead of its clock (at most "
                 f"{self.future_tolerance_s:g} s, controller.depth_future_tolerance_s)",
             )  # fmt: skip
             return
         verdict, age = gate.check(msg.header, now)
         if verdict is not Verdict.FRESH:
-            counter = contract.input_counter(contract.DEPTH, verdict)
+            counter = input_counter(contract.DEPTH, verdict)
             tally.reject(counter, f"{verdict} depth from {camera} ({age:.2f} s) ignored")
             tally.counters.add(per_camera(counter, camera))
             return
@@ -300,7 +300,7 @@ class DepthIntake:
                 f"depth from {camera} made with an announcement no longer current, ignored",
             )
             return
-        counter = contract.input_counter(contract.DEPTH, contract.IN if newer else contract.LATE)
+        counter = input_counter(contract.DEPTH, IN if newer else LATE)
         if newer:
             tally.counters.add(counter)
         else:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Annotated
 
 from common.access import Access, Shape, service_access
-from common.counters import BAD_INPUT, COMMON
+from common.counters import BAD_INPUT, COMMON, DROP_VERDICTS
 from common.errors import ConfigError
 from common.limits import DEFAULT_MAX_FRAME_PIXELS, MAX_IMAGE_SIDE
 from common.setting_checks import Length, Range, check_bounds, check_lengths
@@ -97,9 +97,6 @@ def frames_judged(verdict: str) -> str:
     return f"frames_{verdict}"
 
 
-#: The freshness verdicts a message is dropped for (common/freshness.py ``Verdict`` but fresh;
-#: named here so that the contract loads no messages: a unit test checks they agree).
-DROP_VERDICTS = ("stale", "future", "replay")
 _JUDGED = tuple(frames_judged(v) for v in DROP_VERDICTS)
 
 #: Counted for each camera too, as ``<name>.<camera>``.

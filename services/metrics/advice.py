@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 
 from common.contracts import CameraMetrics, MetricsAnswer
+from common.counters import LATE, input_counter
 from services.depthscan import contract as depthscan
 from services.detector.contract import ATTENTION_PRIORITY
 from stack.config import Config
@@ -54,7 +55,7 @@ def second_depth_stream(totals: dict[str, int]) -> str:
     cameras = sorted(k[len(prefix) :] for k, v in totals.items() if k.startswith(prefix) and v > 0)
     if not cameras:
         return ""
-    late = depthscan.input_counter(depthscan.DEPTH, depthscan.LATE)
+    late = input_counter(depthscan.DEPTH, LATE)
 
     def count(name: str, camera: str) -> int:
         return totals.get(f"{depthscan.SERVICE}.{name}.{camera}", 0)
