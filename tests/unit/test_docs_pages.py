@@ -5,6 +5,8 @@
 - Its map ("## The docs") names every docs/*.md page, one line each.
 - Every relative link of the README and the docs reaches a file, and a ``#anchor`` a heading
   of that page (GitHub's slugs), so moving a section cannot leave a link behind.
+- Every module path they name (``common/keys.py``, ``services/detector/rounds.py::Rounds``) is a
+  file of the tree, so moving or renaming a module cannot leave its old path in a page.
 """
 
 from __future__ import annotations
@@ -21,6 +23,10 @@ README_MAX_LINES = 250
 #: A markdown link's target: ``[text](target)``.
 _LINK = re.compile(r"\]\(([^)\s]+)\)")
 _HEADING = re.compile(r"^#{1,6}\s+(.*?)\s*#*\s*$")
+#: A module path from the repository's root: folders, then a ``.py`` file. Not a template
+#: (``services/<name>/contract.py``), a glob (``test_pool_*.py``), a path under ``~`` or ``$X``,
+#: nor the tail of a longer path or of a URL.
+_MODULE_PATH = re.compile(r"(?<![\w./<>*$~-])((?:[\w.-]+/)+[\w-]+\.py)(?![\w*<>/-])")
 
 
 def slug(heading: str) -> str:
@@ -54,6 +60,16 @@ def broken_links(page: Path) -> list[str]:
             out.append(f"{target}: no such file")
         elif anchor and path.suffix == ".md" and anchor not in anchors(path):
             out.append(f"{target}: no heading #{anchor} in {path.name}")
+    return out
+
+
+def dead_module_paths(page: Path) -> list[str]:
+    """Each module path ``page`` names that is no file of the tree, with its line."""
+    out = []
+    for n, line in enumerate(page.read_text(encoding="utf-8").splitlines(), 1):
+        for m in _MODULE_PATH.finditer(line):
+            if not (REPO / m.group(1)).is_file():
+                out.append(f"line {n}: {m.group(1)}")
     return out
 
 
@@ -96,3 +112,23 @@ def test_a_broken_link_is_caught(tmp_path: Path) -> None:
         "[web](https://example.com/x#y)\n"
     )
     assert [b.split(":")[0] for b in broken_links(page)] == ["missing.md", "other.md#nowhere"]
+
+
+@pytest.mark.parametrize("page", pages(), ids=lambda p: p.relative_to(REPO).as_posix())
+def test_every_module_path_named_is_a_file(page: Path) -> None:
+    assert dead_module_paths(page) == []
+
+
+def test_a_dead_module_path_is_caught(tmp_path: Path) -> None:
+    """The check can fail: a made-up module is named; a real one, a template, a glob, a
+    function after ``::`` and a URL's path are not."""
+    page = tmp_path / "page.md"
+    page.write_text(
+        "`common/keys.py::Keys` and `common/no_such_module.py`\n"
+        "`services/<name>/contract.py`, `tests/unit/detector/test_pool_*.py`,\n"
+        "https://example.com/a/b.py and `perception/gone.py`.\n"
+    )
+    assert dead_module_paths(page) == [
+        "line 1: common/no_such_module.py",
+        "line 3: perception/gone.py",
+    ]
