@@ -53,6 +53,19 @@ def _check_chunks(what: str, value: str) -> str:
     return value
 
 
+#: The depth memory's scans (Keys.remembered_scan, Keys.known_floor), by their key's last chunk.
+MEMORY_SCANS = ("remembered", "known")
+
+
+def memory_scan(key: str) -> str | None:
+    """Which of the depth memory's scans (:data:`MEMORY_SCANS`) ``key`` carries, under any
+    prefix; None for any other key."""
+    parts = key.split("/")
+    if len(parts) >= 3 and parts[-2] == "scan" and parts[-1] in MEMORY_SCANS:
+        return parts[-1]
+    return None
+
+
 def virtual_scan_camera(key: str) -> str | None:
     """The depth camera whose virtual scan ``key`` carries, under any prefix; None for any
     other key."""

@@ -4,7 +4,7 @@ The detections themselves are a :class:`common.boxes.Boxes` (the one struct of a
 there); a DetectionResult adds the model's class names, the image size and the stage timing.
 Boxes are in the pixels of the original image (before letterboxing), ``x1, y1, x2, y2`` with
 the origin at the top-left corner. The post-processing settings are
-``common.settings.DetectorSettings``.
+``perception.settings.DecodeOptions``.
 """
 
 from __future__ import annotations

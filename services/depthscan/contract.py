@@ -1,12 +1,12 @@
 """The depth scan stage's contract: its counters and what it puts and reads. Imports only
-``common`` (and the controller's contract, whose ``depth_*`` settings it runs on).
+``common``.
 
 The stage (services/depthscan/service.py, a thin node over the depthscan/ library) turns each
 announced depth camera's images into that camera's virtual scan, the way depthimage_to_laserscan
 does, and keeps the depth cameras' short memory (depthscan/local_map.py), moved by the
 controller's commands. It puts the virtual scans, the remembered scan and how far ahead the
-floor is known; only the controller reads them to decide (the viewer and the recorder show and
-keep the virtual scans).
+floor is known; only the controller reads them to decide (the viewer shows the virtual scans,
+the recorder keeps all three and the ROS 2 bridge publishes them).
 
 Its settings are the controller's ``depth_*`` settings ([controller] in the stack config): the
 scans are made and judged by one set of figures, declared once (services/controller/contract.py).

@@ -7,7 +7,8 @@ dependencies), so that Foxglove, rosbags and ``ros2 bag`` read them:
     Frame (raw)        sensor_msgs/msg/Image              on ros2.image_topic
     Frame (jpeg)       sensor_msgs/msg/CompressedImage    on ros2.image_topic + "/compressed"
     LaserScan          sensor_msgs/msg/LaserScan          on ros2.scan_topic; a depth
-                       camera's virtual scan on ``<scan_topic>/virtual/<camera>``
+                       camera's virtual scan on ``<scan_topic>/virtual/<camera>``, the
+                       depth memory's on ``<scan_topic>/remembered`` and ``/known``
     Detections         vision_msgs/msg/Detection2DArray   on ros2.detections_topic, and
                        with depth columns vision_msgs/msg/Detection3DArray on
                        ros2.detections_3d_topic (the camera's optical frame; the boxes of
@@ -52,7 +53,7 @@ import numpy as np
 
 from common.codec import Message
 from common.fields import inline_fields
-from common.keys import camera_in_key, virtual_scan_camera
+from common.keys import camera_in_key, memory_scan, virtual_scan_camera
 from common.messages import (
     CameraAnnouncement,
     DepthFrame,
@@ -83,7 +84,14 @@ from services.recorder.depth_ros import (
     depth_to_ros,
     depth_topics,
 )
-from services.ros2.contract import CameraTopics, Ros2Settings, camera_topics, virtual_scan_topic
+from services.ros2.contract import (
+    CameraTopics,
+    Ros2Settings,
+    camera_topics,
+    known_floor_topic,
+    remembered_scan_topic,
+    virtual_scan_topic,
+)
 
 PROFILE = "ros2"  # the MCAP profile: ros2 readers take the CDR channels as theirs
 CDR, JSON = "cdr", "json"
@@ -93,6 +101,9 @@ JSON_SCHEMA = "jsonschema"  # channel metadata: the JSON schema of a JSON channe
 #: Channel metadata: the depth camera whose virtual scan the channel holds. Never played back
 #: (a replay would put it on the laser's key): the controller makes it again from the depth.
 VIRTUAL_SCAN = "virtual_scan"
+#: Channel metadata: which of the depth memory's scans (``remembered``, ``known``) the channel
+#: holds. Never played back either: the depth scan stage remembers again from the depth.
+MEMORY_SCAN = "memory_scan"
 
 
 @dataclass(frozen=True, slots=True)
@@ -276,10 +287,14 @@ class Translator:
             ]
         if isinstance(msg, LaserScan):
             ros = scan_to_ros(d, msg)
-            virtual = virtual_scan_camera(key)
-            if virtual is None:
+            virtual, memory = virtual_scan_camera(key), memory_scan(key)
+            if virtual is not None:
+                topic, more = virtual_scan_topic(r, virtual), ((VIRTUAL_SCAN, virtual),)
+            elif memory is not None:
+                topic = remembered_scan_topic(r) if memory == "remembered" else known_floor_topic(r)
+                more = ((MEMORY_SCAN, memory),)
+            else:
                 return [self._ros(r.scan_topic, LASER_SCAN, msg, header, ros)]
-            topic, more = virtual_scan_topic(r, virtual), ((VIRTUAL_SCAN, virtual),)
             return [self._ros(topic, LASER_SCAN, msg, header, ros, more)]
         if isinstance(msg, Detections):
             topics = self._topics(key)

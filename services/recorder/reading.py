@@ -32,7 +32,7 @@ from rosmsg.convert import LASER_SCAN, cdr_decode, scan_from_ros
 from rosmsg.depth import CAMERA_INFO
 from rosmsg.distro import RosDistro
 from rosmsg.images import COMPRESSED_IMAGE, IMAGE, frame_from_compressed_image, frame_from_image
-from services.recorder.channels import CDR, JSON, STACK_MESSAGE, VIRTUAL_SCAN
+from services.recorder.channels import CDR, JSON, MEMORY_SCAN, STACK_MESSAGE, VIRTUAL_SCAN
 from services.recorder.depth_ros import (
     RANGE_MAX,
     RANGE_MIN,
@@ -156,8 +156,8 @@ def input_kind(record: Record) -> Input | None:
     CameraInfo."""
     if record.schema is None or record.channel.message_encoding != CDR:
         return None
-    if VIRTUAL_SCAN in record.channel.metadata:
-        return None  # what the controller made of the depth, never the laser: not played
+    if VIRTUAL_SCAN in record.channel.metadata or MEMORY_SCAN in record.channel.metadata:
+        return None  # what the depth scan stage made of the depth, never the laser: not played
     name = record.schema.name
     if name == CAMERA_INFO:
         return Input.DEPTH_INFO

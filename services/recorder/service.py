@@ -78,7 +78,9 @@ def subscriptions(keys: Keys, cameras: Sequence[str]) -> dict[str, type[Message]
         **{keys.depth(camera): DepthFrame for camera in cameras},
         keys.all_detections(): Detections,
         keys.scan(): LaserScan,
-        keys.all_virtual_scans(): LaserScan,  # each depth camera's, as the controller made it
+        keys.all_virtual_scans(): LaserScan,  # each depth camera's, as the depth stage made it
+        keys.remembered_scan(): LaserScan,  # the depth memory's, round the robot
+        keys.known_floor(): LaserScan,  # how far ahead the floor is known
         keys.cmd_vel(): Twist,
         keys.controller_status(): ControllerStatus,
         keys.estop(): EStop,

@@ -36,6 +36,9 @@ DEPTH_SIZE_MISMATCH = "depth_size_mismatch"
 DETECTIONS_3D_OUT = "detections_3d_out"
 DETECTIONS_3D_UNKNOWN = "detections_3d_unknown"
 DETECTIONS_3D_UNMOUNTED = "detections_3d_unmounted"
+#: The depth scan stage's scans out (``ros2.depth_scans_out``): each camera's virtual scan,
+#: the remembered one and the known floor, as sensor_msgs/LaserScan.
+DEPTH_SCANS_OUT = "depth_scans_out"
 
 
 def topic_in(ros_type: str) -> str:
@@ -60,6 +63,7 @@ COUNTERS = frozenset(
         DETECTIONS_3D_OUT,
         DETECTIONS_3D_UNKNOWN,
         DETECTIONS_3D_UNMOUNTED,
+        DEPTH_SCANS_OUT,
     }
 )
 PER_CAMERA: frozenset[str] = frozenset()
@@ -85,6 +89,10 @@ def access(shape: Shape) -> dict[str, Access]:
                 keys.all_detections(),
                 keys.cmd_vel(),
                 keys.controller_status(),
+                # What the depth scan stage judged as obstacles, out to ROS 2.
+                keys.all_virtual_scans(),
+                keys.remembered_scan(),
+                keys.known_floor(),
             ),
             token=(keys.health(SERVICE), *map(keys.camera_announcements_of, shape.cameras)),
             # The cameras' mountings, for 3D detections in the robot's frame.
@@ -141,6 +149,10 @@ class Ros2Settings:
     faster than ``max_command_linear`` (m/s) or ``max_command_angular`` (rad/s), the most
     the controller's own settings allow, is no command a sane controller sends: the bridge
     sends the robot zero instead and counts ``commands_out_of_range``.
+    ``depth_scans_out`` publishes what the depth scan stage (services/depthscan) made, when
+    the controller needs depth: each camera's virtual scan on ``<scan_topic>/virtual/<camera>``,
+    what the depth memory holds round the robot on ``<scan_topic>/remembered`` and how far
+    ahead the floor is known on ``<scan_topic>/known`` (sensor_msgs/LaserScan, robot frame).
     """
 
     router: Annotated[tuple[str, ...], Length(1, 16)] = ("tcp/127.0.0.1:7447",)
@@ -170,6 +182,7 @@ class Ros2Settings:
     detections_3d_out: bool = True
     detections_3d_topic: str = "/detections_3d"
     detections_3d_frame: str = ""
+    depth_scans_out: bool = True
     router_timeout_s: Annotated[float, Range(0.1, 300)] = 5.0
     max_command_linear: Annotated[float, Range(0.01, 100)] = 5.0
     max_command_angular: Annotated[float, Range(0.01, 100)] = 10.0
@@ -241,6 +254,16 @@ def virtual_scan_topic(settings: Ros2Settings, camera: str) -> str:
     """The topic of ``camera``'s virtual scan (made from its depth images): beside the
     laser's, ``<ros2.scan_topic>/virtual/<camera>`` (``/scan/virtual/front``)."""
     return f"{settings.scan_topic.rstrip('/')}/virtual/{camera}"
+
+
+def remembered_scan_topic(settings: Ros2Settings) -> str:
+    """The depth memory's scan: ``<ros2.scan_topic>/remembered`` (``/scan/remembered``)."""
+    return f"{settings.scan_topic.rstrip('/')}/remembered"
+
+
+def known_floor_topic(settings: Ros2Settings) -> str:
+    """How far ahead the floor is known: ``<ros2.scan_topic>/known`` (``/scan/known``)."""
+    return f"{settings.scan_topic.rstrip('/')}/known"
 
 
 def check_camera_topics(settings: Ros2Settings, cameras: Sequence[str]) -> None:

@@ -8,7 +8,10 @@ Out: Detections -> vision_msgs/Detection2DArray (``ros2.detections_topic``), and
      depth columns -> vision_msgs/Detection3DArray (``ros2.detections_3d_topic``);
      the controller's Twist -> geometry_msgs/Twist or TwistStamped (``ros2.cmd_vel_topic``),
      only fresh, in order and from the controller; zero while its status says the e-stop is
-     engaged or it is silent (common/command_gate.py).
+     engaged or it is silent (common/command_gate.py);
+     with ``ros2.depth_scans_out``, the depth scan stage's LaserScans (each camera's virtual
+     scan, the remembered one, the known floor) -> sensor_msgs/LaserScan under
+     ``ros2.scan_topic``.
 
 Those image and detections topics are the first camera's (stack.camera); each further camera
 has its own, under ``ros2.camera_namespace`` (services/ros2/contract.py::camera_topics), each mapped
@@ -33,7 +36,14 @@ from common.camera_announce import CameraAnnouncements
 from common.clock import BOOT_ID, mono_s, now
 from common.command_gate import CommandGate, Outcome
 from common.errors import DecodeError, ImageError
-from common.messages import CameraAnnouncement, ControllerStatus, Detections, Frame, Twist
+from common.messages import (
+    CameraAnnouncement,
+    ControllerStatus,
+    Detections,
+    Frame,
+    LaserScan,
+    Twist,
+)
 from common.node import Node, Put, Tally
 from rosmsg.convert import (
     DETECTION_2D_ARRAY,
@@ -44,6 +54,7 @@ from rosmsg.convert import (
     cdr_encode,
     detections_to_ros,
     scan_from_ros,
+    scan_to_ros,
     twist_to_ros,
 )
 from rosmsg.depth import CAMERA_INFO, DETECTION_3D_ARRAY
@@ -57,7 +68,13 @@ from rosmsg.images import (
 )
 from rosmsg.wire import SENSOR_DATA_QOS
 from services.ros2 import contract
-from services.ros2.contract import ImageFormat, camera_topics
+from services.ros2.contract import (
+    ImageFormat,
+    camera_topics,
+    known_floor_topic,
+    remembered_scan_topic,
+    virtual_scan_topic,
+)
 from services.ros2.debug_image import FrameCache, debug_image
 from services.ros2.depth_handlers import AnnouncementOf, DepthInbound, Detections3DToRos
 from stack.config import Config
@@ -246,6 +263,42 @@ class DebugImages:
         self.tally.counters.add(contract.DEBUG_IMAGES_OUT)
 
 
+class ScansToRos:
+    """One of the stack's LaserScans (``key``) out as sensor_msgs/LaserScan CDR, through
+    ``put``: what the depth scan stage judged as obstacles, for rviz and the robot's own
+    nodes."""
+
+    def __init__(self, config: Config, tally: Tally, put: Put, key: str) -> None:
+        self.distro = config.ros2.distro
+        self.tally = tally
+        self.put = put
+        self.key = key
+
+    def on_scan(self, payload: bytes) -> None:
+        scan = self.tally.decode(self.key, LaserScan.decode, payload)
+        if scan is None:
+            return
+        self.put(cdr_encode(self.distro, LASER_SCAN, scan_to_ros(self.distro, scan)))
+        self.tally.counters.add(contract.DEPTH_SCANS_OUT)
+
+
+def _bridge_depth_scans(config: Config, node: Node, graph: RosGraph) -> list[Declared]:
+    """Map the depth scan stage's scans out, each on its own ROS topic: every camera's virtual
+    scan (published by the stage for the depth cameras alone; a camera without depth leaves
+    its topic silent), the remembered scan and the known floor."""
+    s, keys = config.ros2, node.keys
+    routes = [(keys.virtual_scan(c), virtual_scan_topic(s, c)) for c in config.all_cameras]
+    routes += [
+        (keys.remembered_scan(), remembered_scan_topic(s)),
+        (keys.known_floor(), known_floor_topic(s)),
+    ]
+    subs: list[Declared] = []
+    for key, topic in routes:
+        out = ScansToRos(config, node, graph.publisher(topic, LASER_SCAN).put_cdr, key)
+        subs.append(node.subscribe(key, out.on_scan))
+    return subs
+
+
 def _bridge_camera(
     config: Config,
     node: Node,
@@ -318,6 +371,8 @@ def run(config: Config, stop: threading.Event) -> int:
             announced = cameras.get
         for camera in config.all_cameras:
             subs += _bridge_camera(config, node, graph, camera, told.get(camera), announced)
+        if s.depth_scans_out and config.controller.needs_depth:
+            subs += _bridge_depth_scans(config, node, graph)
         if s.scan_in:
             scans = node.publisher(keys.scan(), QoS.SENSOR)
             scan_in = RosInbound(config, node, LASER_SCAN, s.scan_topic, scans.put)

@@ -21,7 +21,7 @@ from common.messages import CameraAnnouncement, DepthFrame, Detections, Frame, H
 from common.zenoh_bus import ZenohBus
 from services.sim.cameras import sim_cameras
 from tests.integration.conftest import Stack, free_port, wait_for
-from tests.integration.test_ros2 import RobotSide
+from tests.integration.test_ros2 import RobotSide, _typestore, _zenoh
 
 pytestmark = pytest.mark.integration
 
@@ -158,14 +158,34 @@ def test_the_simulator_as_a_ros2_robot_with_a_depth_camera(make_stack) -> None: 
     # The whole path over ROS 2: the simulator's depth image (16UC1) and CameraInfo on the ROS
     # topics, the bridge (depth_in) making DepthFrames of them with the simulator's intrinsics,
     # the detector pairing them with the colour frames the bridge brought in: a person 4 m
-    # ahead (the "ahead" world, standing still without a controller) gets a distance.
+    # ahead (the "ahead" world, standing still without a controller) gets a distance. The
+    # depth scan stage's virtual scan of those depth images goes back out to the ROS 2 graph
+    # (ros2.depth_scans_out), where the robot's nodes see what was judged an obstacle.
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     stack: Stack = make_stack(
-        supervisor={"services": ["sim", "ros2", "detector"]},
+        supervisor={"services": ["sim", "ros2", "detector", "depthscan"]},
         sim={"ros2_robot": True, "depth": True, "laser": False, "scenario": "ahead"},
         ros2={"router": [endpoint], "scan_in": False, "depth_in": True},
+        controller={"obstacle_sources": ["depth"], "no_laser": False},
+        camera={"mount_height_m": 0.6},  # the bridge announces the mounting it is told
     )  # fmt: skip
     camera = stack.config.stack.camera
+    virtual: list[Any] = []
+    ts = _typestore()
+    scan_type = "sensor_msgs/msg/LaserScan"
+    listener = _zenoh("peer", connect=[endpoint])
+    try:
+        listener.declare_subscriber(
+            f"0/scan/virtual/{camera}/sensor_msgs::msg::dds_::LaserScan_/"
+            + ts.hash_rihs01(scan_type),
+            lambda s: virtual.append(ts.deserialize_cdr(s.payload.to_bytes(), scan_type)),
+        )
+        _see_it_all(stack, camera, virtual)
+    finally:
+        listener.close()
+
+
+def _see_it_all(stack: Stack, camera: str, virtual: list[Any]) -> None:
     _, depths = stack.subscribe(stack.keys.depth(camera))
     _, frames = stack.subscribe(stack.keys.frame(camera))
     _, dets = stack.subscribe(stack.keys.detections(camera))
@@ -194,4 +214,11 @@ def test_the_simulator_as_a_ros2_robot_with_a_depth_camera(make_stack) -> None: 
             assert frame.header.frame_id == colour[frame.header.stamp_ns].frame_id
             paired += 1
     assert paired > 0, "no depth image under its colour image's stamp"
+    wait_for(lambda: virtual, 60, lambda: f"a virtual scan on ROS 2:\n{stack.log()}")
+    scan = virtual[-1]
+    ranges = np.asarray(scan.ranges)
+    # The person's front, 3.75 m straight ahead, on the ray that looks there.
+    straight = round(-scan.angle_min / scan.angle_increment)
+    assert 3.4 < float(np.nanmin(ranges[straight - 1 : straight + 2])) < 4.2, ranges
+    assert scan.header.frame_id, "a scan with no frame"
     assert stack.stop() == 0, stack.log()

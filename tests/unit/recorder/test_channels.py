@@ -164,3 +164,28 @@ def test_a_virtual_scan_is_recorded_on_its_own_topic_and_never_played_as_the_las
 
     assert input_kind(record(laser.channel, dict(laser.channel.metadata))) is Input.SCAN
     assert input_kind(record(virtual.channel, dict(virtual.channel.metadata))) is None
+
+
+def test_the_depth_memorys_scans_are_recorded_on_their_topics_and_never_played() -> None:
+    from mcap.records import Channel as McapChannel
+    from mcap.records import Message as McapMessage
+    from mcap.records import Schema as McapSchema
+
+    from services.recorder.channels import MEMORY_SCAN
+    from services.recorder.reading import Record, input_kind
+
+    t = Translator(Ros2Settings(), "front")
+    scan = LaserScan(header=HEADER, angle_min=0.0, angle_increment=0.1, range_min=0.0,
+                     range_max=10.0, ranges=np.array([1.5], np.float32))  # fmt: skip
+    (remembered,) = t.entries("stack/scan/remembered", scan)
+    (known,) = t.entries("stack/scan/known", scan)
+    assert remembered.channel.topic == "/scan/remembered"
+    assert known.channel.topic == "/scan/known"
+    assert dict(remembered.channel.metadata)[MEMORY_SCAN] == "remembered"
+    assert dict(known.channel.metadata)[MEMORY_SCAN] == "known"
+    for entry in (remembered, known):
+        schema = McapSchema(id=1, name="sensor_msgs/msg/LaserScan", encoding="ros2msg", data=b"")
+        channel = McapChannel(id=1, topic=entry.channel.topic, message_encoding="cdr",
+                              metadata=dict(entry.channel.metadata), schema_id=1)  # fmt: skip
+        message = McapMessage(channel_id=1, log_time=0, data=b"", publish_time=0, sequence=0)
+        assert input_kind(Record(schema, channel, message)) is None
