@@ -35,7 +35,9 @@ def world_for(s: SimSettings, world: World) -> World:
     """The world the simulator runs: the scenario's ``world`` as built ("hard"), or today's
     ("simple": people drawn flat). The one place the world's hardness changes the world."""
     if s.world is SimWorld.SIMPLE:
-        return world  # MERGE(bodies): return flat_world(world)  (from simworld.body)
+        # MERGE(bodies): this line becomes `return flat_world(world)` (the bodies branch's
+        # simworld flat_world: every person the flat card of today), with its import.
+        return world
     return world
 
 

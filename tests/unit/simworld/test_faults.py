@@ -22,12 +22,16 @@ from simworld.faults import (
     motion_blur,
 )
 from simworld.render import MIRROR_BGR, OBSTACLE_BGR, CameraSpec, render
-from simworld.scenarios import person
-from simworld.world import Material, Obstacle, Robot, World
+from simworld.world import Material, Obstacle, Robot, Target, World
 
 #: Every older fault off: what is left is the one under test, and mm quantisation.
 QUIET = DepthNoise(noise_k=0.0, edge_px=0, dark_dropout=0.0, dropout=0.0)
 BRIGHT = np.full((120, 160, 3), 200, np.uint8)
+
+
+def card(id: str, x: float, y: float) -> Target:
+    """Today's person: the flat photo cut-out, 1.7 m tall, standing at (x, y)."""
+    return Target(id=id, name="person", sprite="person", height_m=1.7, path=((0.0, x, y),))
 
 
 def _box_on_plane(near: float = 2.0, far: float = 4.0) -> np.ndarray:
@@ -107,7 +111,7 @@ def test_a_mirror_reads_farther_than_its_face_and_is_drawn_bright_steel() -> Non
     np.testing.assert_array_equal(read[~face], truth[~face])
     assert mirror_reads(world, spec, truth, 1.0) is truth
     # A person in front of the mirror keeps their own depth (0.95 m: 1.2 m less 0.25 m).
-    world.targets.append(person("p", (0.0, 1.2, 0.5)))
+    world.targets.append(card("p", 1.2, 0.5))
     before = render_depth(world, spec)
     after = mirror_reads(world, spec, before, 2.0)
     them = before == np.float32(0.95)
@@ -169,7 +173,7 @@ def test_with_the_newer_faults_off_the_depth_camera_is_today_s_bit_for_bit() -> 
     spec = CameraSpec(width=96, height=72)
     world = World(
         Robot(),
-        targets=[person("p", (0.0, 3.0, 0.3)), person("q", (0.0, 6.0, -1.5))],
+        targets=[card("p", 3.0, 0.3), card("q", 6.0, -1.5)],
         obstacles=[Obstacle(2.0, -0.6, 0.2), Obstacle(2.5, 0.9, 0.2, material=Material.DARK)],
     )
     truth, image = render_depth(world, spec), render(world, spec)
