@@ -224,6 +224,7 @@ class ScenarioResult(TypedDict, total=False):
     reason: str
     scenario: str
     mode: str  # the controller's
+    world: str  # the simulator's world and faults: "world=hard faults=..." (services/sim/worlds.py)
     duration_s: float
     time_to_reach_s: float | None
     final_distance_m: float | None

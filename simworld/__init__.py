@@ -6,6 +6,7 @@ node over it) and the tools (tools/scenarios, tools/benchmarks) import its modul
     scenarios.py  ``SCENARIOS``: the named worlds (``python -m tools.scenarios list``)
     render.py     a camera's colour image of the world (``CameraSpec``, ``layout``)
     depth.py      the aligned depth image of the same instant, and its noise (``DepthNoise``)
+    faults.py     the harder world's camera faults: flying pixels, bias, mirrors, blur, exposure
     floor.py      where the floor drops away (a drop is seen, never lasered)
     laser.py      the laser's scan (``LaserSpec``, ``cast``)
 

@@ -41,6 +41,7 @@ import numpy.typing as npt
 
 from common.images import Image
 from common.messages import DepthFrame, Header
+from simworld.faults import edge_faults, range_bias
 from simworld.floor import drop_scale
 from simworld.render import CameraSpec, Placed, layout
 from simworld.world import Material, World
@@ -125,15 +126,27 @@ def targets_in_camera(
 @dataclass(frozen=True, slots=True)
 class DepthNoise:
     """A stereo depth camera's faults (the ``sim.depth_*`` settings); zeros turn each off.
+    ``DepthNoise()`` is today's camera (the "simple" world's): the newer faults (``bias_k``,
+    ``flying_share``, ``mirror_scale``) default off here; the harder world's figures are the
+    ``sim.depth_*`` settings' defaults (services/sim/contract.py). The camera named is
+    Intel's RealSense D435 (active IR stereo, baseline b = 50 mm, about 90 deg hfov), whose
+    datasheet (Intel RealSense D400 Series Product Family Datasheet, "Depth Quality
+    Specification"; at 2 m, 848x480, 80 % of the field) allows an RMS error (spatial noise)
+    and an absolute error (Z-accuracy) of up to 2 % each, a temporal noise of up to 1 %.
 
-    ``range_min_m``/``range_max_m``: readings outside are no readings (a D435 sees from about
-    0.3 m; beyond ~10 m its depth is noise).
+    ``range_min_m``/``range_max_m``: readings outside are no readings (0 in the 16UC1 image).
+    The D4 matcher searches a fixed number of disparities, so its minimum range (the
+    datasheet's Min-Z) scales with the resolution: about 0.28 m at 1280x720, less at lower
+    ones; 0.3 m is the conservative figure a robot should assume. Beyond ~10 m its depth is
+    noise.
 
     ``noise_k``: the reading's noise, sigma = ``noise_k`` * z^2 (metres). A stereo camera
     measures disparity d = f * b / z with a roughly constant sub-pixel error e, so its depth
-    error is z^2 * e / (f * b). Intel's D435: baseline b = 50 mm, f about 430 px at 848x480,
-    sub-pixel error 0.08..0.1 px: 0.0037..0.0047 per metre; its datasheet allows up to 2 % at
-    2 m. 0.005 gives 1 % at 2 m (2 cm), 2.5 % at 5 m, 5 % at 10 m.
+    error is z^2 * e / (f * b) (Grunnet-Jepsen et al., "Tuning depth cameras for best
+    performance", Intel white paper: RMS error = z^2 x subpixel / (f x b), subpixel typically
+    0.08 px). The D435 at the 640x480 the simulator streams: f = 320 px (90 deg), b = 50 mm,
+    e = 0.08 px: 0.005 per metre, 1 % at 2 m (2 cm), 2.5 % at 5 m, 5 % at 10 m; within the
+    datasheet's 2 % RMS at 2 m (``noise_k`` 0.01 is that bound), at its 1 % temporal noise.
 
     ``noise_corr_px``: the noise's correlation length in pixels, 0 = independent pixels. A
     stereo matcher finds each pixel's disparity by comparing a window of pixels round it (a
@@ -145,9 +158,33 @@ class DepthNoise:
     pixels d apart then correlate exp(-d^2 / (4 sigma^2)). 4 px: a neighbour 0.98, half at
     6.7 px (about the matcher's window), 0.37 at 8 px.
 
+    ``bias_k``: a systematic error, ``bias_k`` * z^2 metres added to every reading (positive:
+    it reads farther; noise has zero mean, this does not, and no average removes it). A
+    stereo camera whose calibration is off by a constant disparity offset delta reads f b /
+    (f b / z + delta), about z - delta z^2 / (f b): a bias growing with the square of the
+    range, as its noise does. The datasheet bounds it at 2 % at 2 m (``bias_k`` 0.01); one
+    D435 measured out of the box read 980.7 mm at 1 m (M. Calvert, "Improving the depth map
+    accuracy of RealSense cameras", 2018). The harder world's 0.0025 (0.5 % at 2 m, 1.25 %
+    at 5 m, 2.5 % at 10 m; delta = 0.04 px at 640x480) is a well-calibrated unit at a quarter
+    of the bound.
+
     ``edge_px``: pixels within this many pixels of a depth discontinuity (neighbours whose z
     differ by more than ``edge_jump`` of the nearer, or a reading next to none) read nothing,
-    as stereo matching fails where one eye sees what the other does not.
+    as stereo matching fails where one eye sees what the other does not. ``flying_share``:
+    of those between two readings (not beside a pixel of no reading), this share read a value
+    between the near and the far surface instead (simworld/faults.py
+    :func:`~simworld.faults.edge_faults`): flying pixels, as a matching window that straddles
+    the edge finds a disparity between the two surfaces' (the "foreground fattening" and
+    mixed matches of window-based stereo, Scharstein & Szeliski, IJCV 47, 2002; a
+    time-of-flight camera's mixed pixels do the same). 0: today's holes alone; 1: no holes
+    between two surfaces, only flying pixels. The harder world's 0.5 is a choice, not a
+    datasheet figure: the D4's left-right check removes some edge pixels, not all.
+
+    ``mirror_scale``: a ``Material.MIRROR`` face (simworld/world.py) reads this many times its
+    depth (:func:`~simworld.faults.mirror_reads`): the projector's dots and the texture seen
+    there are the reflection's, so the matcher finds what the mirror shows, farther than the
+    face. 1: it reads its face as a solid one does. The harder world's 2: a mirror facing the
+    camera shows the camera's side of the room at about twice its own distance.
 
     ``dark_level``/``dark_dropout``: colour pixels whose grey level is below ``dark_level``
     (0..255) read nothing with probability ``dark_dropout`` (little texture, little reflected
@@ -165,6 +202,9 @@ class DepthNoise:
     dark_level: int = 30
     dark_dropout: float = 0.5
     dropout: float = 0.01
+    bias_k: float = 0.0
+    flying_share: float = 0.0
+    mirror_scale: float = 1.0
 
 
 #: A perfect depth camera (still range-limited and quantised to mm).
@@ -215,18 +255,31 @@ def unit_noise(shape: tuple[int, ...], corr_px: float, rng: np.random.Generator)
 
 
 def apply(truth: Depth, colour_bgr: Image, noise: DepthNoise, rng: np.random.Generator) -> Depth:
-    """``truth`` as the depth camera reads it: noise, holes at edges, on dark surfaces and at
-    random, millimetre quantisation, and the range limits. float32 metres, NaN = no reading;
-    ``colour_bgr`` is the aligned colour image (same size)."""
+    """``truth`` as the depth camera reads it: flying pixels, noise, bias, holes at edges, on
+    dark surfaces and at random, millimetre quantisation, and the range limits. float32
+    metres, NaN = no reading; ``colour_bgr`` is the aligned colour image (same size). A fault
+    that is off draws nothing from ``rng``: with the newer faults off, today's output bit for
+    bit."""
     z = truth.astype(np.float32, copy=True)
+    edge_hole = None
+    if noise.edge_px > 0 and noise.flying_share > 0:
+        edge_hole, flying, values = edge_faults(
+            truth, noise.edge_px, noise.edge_jump, noise.flying_share, rng
+        )
+        z[flying] = values[flying]
+    shift = range_bias(z, noise.bias_k) if noise.bias_k != 0 else None
     if noise.noise_k > 0:
         sigma = noise.noise_k * np.nan_to_num(z, nan=0.0) ** 2
         z += (unit_noise(z.shape, noise.noise_corr_px, rng) * sigma).astype(np.float32)
+    if shift is not None:
+        z += shift
     z *= 1000.0
     np.round(z, out=z)
     z /= 1000.0
     hole = ~((z >= noise.range_min_m) & (z <= min(noise.range_max_m, MAX_MM / 1000.0)))
-    if noise.edge_px > 0:
+    if edge_hole is not None:
+        hole |= edge_hole
+    elif noise.edge_px > 0:
         edges = depth_edges(truth, noise.edge_jump).astype(np.uint8)
         size = 2 * noise.edge_px + 1
         hole |= cv2.dilate(edges, np.ones((size, size), np.uint8)).astype(bool)

@@ -2,8 +2,9 @@
 
 Each target is a billboard: a cut-out of a real photo (scikit-image samples), scaled by its
 distance and placed by its bearing, standing on the floor. Obstacles are drawn as boxes of their
-own height, grey (solid), near-black (dark) or faintly tinted over what is behind them (glass);
-the floor beyond a drop-off is a little darker (simworld/floor.py finds its pixels).
+own height, grey (solid), near-black (dark), bright steel (mirror) or faintly tinted over what
+is behind them (glass); the floor beyond a drop-off is a little darker (simworld/floor.py finds
+its pixels).
 Nearer things are drawn over farther ones. The camera stands at the robot's centre,
 ``height_m`` above the floor, and looks ``mount_yaw_deg`` counter-clockwise from the robot's +x
 (0 the front camera, 180 the rear one), with square pixels and the configured horizontal field
@@ -39,6 +40,10 @@ OBSTACLE_HEIGHT_M = 0.5
 OBSTACLE_BGR = (90, 90, 95)
 #: A dark obstacle's colour: below sim.depth_dark_level (30), as black plastic or rubber is.
 DARK_BGR = (14, 14, 16)
+#: A mirror obstacle: bright steel, well apart from the grey solid one and the near-black one.
+MIRROR_BGR = (205, 200, 196)
+#: The colour of an obstacle's box by its material (a solid one's is OBSTACLE_BGR).
+MATERIAL_BGR = {Material.DARK: DARK_BGR, Material.MIRROR: MIRROR_BGR}
 #: A glass obstacle: this much of a pale blue-green tint over what is behind it, so a person
 #: sees a pane is there and the detector still sees through it.
 GLASS_BGR = (200, 215, 190)
@@ -176,7 +181,7 @@ def render(world: World, spec: CameraSpec) -> Image:
                 tint = np.array(GLASS_BGR, np.float32)
                 canvas[cy0:cy1, cx0:cx1] = (patch + GLASS_ALPHA * (tint - patch)).astype(np.uint8)
             else:
-                canvas[cy0:cy1, cx0:cx1] = DARK_BGR if p.material == Material.DARK else OBSTACLE_BGR
+                canvas[cy0:cy1, cx0:cx1] = MATERIAL_BGR.get(p.material, OBSTACLE_BGR)
             continue
         x0, y0, x1, y1 = p.full
         w, h = x1 - x0, y1 - y0

@@ -64,7 +64,8 @@ class Material(StrEnum):
     """What an obstacle's surface does to the robot's sensors.
 
     The two sensors a small robot carries fail on different things, and a world where every
-    obstacle is seen by both proves nothing about either alone.
+    obstacle is seen by both proves nothing about either alone. A depth camera reads nothing
+    on some (dark, glass) and reads wrong on others (mirror).
     """
 
     SOLID = "solid"  # the depth camera reads its face; the laser sees it (if tall enough)
@@ -74,6 +75,12 @@ class Material(StrEnum):
     # A glass pane or door: a lidar's beam passes through, a depth camera reads nothing on it
     # (or what is behind); the colour image shows what is behind it.
     GLASS = "glass"
+    # A mirror or polished steel (a lift door, a stainless bin): it reads WRONG. A depth
+    # camera finds there what the mirror reflects, farther than the face (sim.depth_mirror_scale
+    # times its depth; simworld/faults.py mirror_reads), so its face seems to stand back or to
+    # be a hole in the floor; the laser still sees it (a real lidar may lose a mirror at a
+    # glancing angle: not modelled). The colour image shows a bright steel box.
+    MIRROR = "mirror"
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,12 +8,13 @@ ground truth, and reads the velocity commands.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Annotated
 
 from common.access import Access, Shape, service_access
 from common.counters import COMMON
 from common.errors import ConfigError
-from common.setting_checks import Length, Range, check_bounds, check_lengths
+from common.setting_checks import Length, Range, check_bounds, check_lengths, enum_field
 
 FRAMES_OUT = "frames_out"  # in all and per camera
 DEPTH_OUT = "depth_out"  # depth images (sim.depth), in all and per camera
@@ -51,6 +52,25 @@ def access(shape: Shape) -> dict[str, Access]:
 
 
 # -- settings -------------------------------------------------------------------------------------
+class SimWorld(StrEnum):
+    """How hard the simulated world is (``sim.world``)."""
+
+    HARD = "hard"  # the newer camera faults on, with their settings (the default)
+    SIMPLE = "simple"  # today's world and camera: the newer fault settings are ignored
+
+
+#: What ``sim.world = "simple"`` sets each newer fault setting to, whatever the config says:
+#: off, today's camera. The setting's own default is the harder world's.
+SIMPLE_FAULTS: dict[str, float] = {
+    "depth_bias_k": 0.0,
+    "depth_flying_share": 0.0,
+    "depth_mirror_scale": 1.0,
+    "colour_exposure_ms": 0.0,
+    "colour_light_change": 0.0,
+    "colour_drift": 0.0,
+}
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SimSettings:
     """The simulated robot and world (services/sim), standing in for a camera and a base.
@@ -74,6 +94,16 @@ class SimSettings:
     (``depth_range_min_m`` below ``depth_range_max_m``); as a ROS 2 robot, a 16UC1
     ``sensor_msgs/Image`` and its ``CameraInfo`` on ``ros2.depth_topic`` and
     ``ros2.depth_info_topic`` instead.
+
+    ``world``: ``"hard"`` (the default) runs the newer faults, each its own setting with its
+    source in simworld/depth.py's ``DepthNoise`` and simworld/faults.py: the depth camera's
+    range bias (``depth_bias_k``), flying pixels at depth edges (``depth_flying_share``),
+    mirrors that read too far (``depth_mirror_scale``), and the colour camera's motion blur
+    (``colour_exposure_ms``) and exposure changes (``colour_light_*``, ``colour_drift*``).
+    ``"simple"`` is today's world: it sets those fault settings off (:data:`SIMPLE_FAULTS`)
+    whatever the config says, keeps the older ``depth_*`` settings, and draws people flat.
+    The simulator's log says at start which world and which faults run (one line,
+    services/sim/worlds.py ``world_line``).
     """
 
     scenario: str = "demo"
@@ -104,10 +134,20 @@ class SimSettings:
     depth_dark_level: Annotated[int, Range(0, 255)] = 30
     depth_dark_dropout: Annotated[float, Range(0, 1)] = 0.5
     depth_dropout: Annotated[float, Range(0, 1)] = 0.01
+    world: SimWorld = SimWorld.HARD
+    depth_bias_k: Annotated[float, Range(-0.05, 0.05)] = 0.0025  # 0.5 % at 2 m (D435: <= 2 %)
+    depth_flying_share: Annotated[float, Range(0, 1)] = 0.5
+    depth_mirror_scale: Annotated[float, Range(1, 10)] = 2.0
+    colour_exposure_ms: Annotated[float, Range(0, 100)] = 20.0
+    colour_light_change: Annotated[float, Range(0, 2)] = 0.3
+    colour_light_tau_s: Annotated[float, Range(0.01, 60)] = 1.0
+    colour_drift: Annotated[float, Range(0, 1)] = 0.05
+    colour_drift_tau_s: Annotated[float, Range(0.1, 600)] = 10.0
 
     def __post_init__(self) -> None:
         check_bounds(self, "sim", SimSettings)
         check_lengths(self, "sim", SimSettings)
+        enum_field(self, "world", SimWorld, "sim.world")
         if self.depth_range_min_m >= self.depth_range_max_m:
             raise ConfigError(
                 f"sim.depth_range_min_m ({self.depth_range_min_m:g}) must be below "

@@ -41,7 +41,8 @@ from services.ros2.contract import camera_topics
 from services.sim import contract
 from services.sim.cameras import SimCamera, sim_cameras
 from services.sim.waiting import WARN_PERIOD_S, Waiting, waiting_line
-from simworld.depth import DepthNoise, apply, depth_frame, render_depth
+from services.sim.worlds import Faults, world_for, world_line
+from simworld.depth import depth_frame
 from simworld.laser import LaserSpec, cast
 from simworld.render import render
 from simworld.scenarios import SCENARIOS
@@ -214,7 +215,7 @@ def run(config: Config, stop: threading.Event, *, bus: Bus | None = None) -> int
     common/camera_announce.py) while it runs; as a ROS 2 robot (``sim.ros2_robot``) it puts
     none there, and the ``ros2`` bridge that does announces them."""
     s = config.sim
-    world = build_world(config)
+    world = world_for(s, build_world(config))
     cameras = sim_cameras(config)
     if s.ros2_robot:
         cameras = cameras[:1]  # one image topic (the supervisor warns of the others)
@@ -287,6 +288,7 @@ def _say_setup(node: Node, config: Config, cameras: list[SimCamera]) -> None:
     """The scenario, the cameras and what the robot lacks, in the log."""
     s = config.sim
     node.log.info("scenario %r: %s", s.scenario, SCENARIOS[s.scenario].description)
+    node.log.info("%s", world_line(s))  # which world and faults run (worlds.parse_world_line)
     for c in cameras:
         node.log.info(
             "camera %r: %dx%d at %.1f Hz, hfov %.0f deg, looking %+.0f deg",
@@ -320,9 +322,7 @@ def _simulate(
         s.laser_fov_deg, s.laser_rays, 0.05, s.laser_range_max_m, s.laser_noise_m, s.laser_height_m
     )
     rng = np.random.default_rng(s.seed)
-    depth = depth_noise(s) if s.depth else None
-    # Its own stream, so that the laser's noise is the same with depth or without.
-    depth_rng = np.random.default_rng([s.seed, 1])
+    faults = Faults(s, cameras)  # the cameras' faults, each on a random stream of its own
 
     def new_clocks() -> dict[str, Clock]:
         return {
@@ -357,7 +357,7 @@ def _simulate(
                 world.advance(dt)
             t = world.t if started else now - boot
             _publish_due(
-                node, world, t, clocks, out, truth_pub, cameras, laser, rng, depth, depth_rng,
+                node, world, t, clocks, out, truth_pub, cameras, laser, rng, faults,
             )  # fmt: skip
         node.publish_counters()
         next_tick = max(next_tick + dt, mono_s() - dt)
@@ -374,24 +374,23 @@ def _publish_due(
     cameras: list[SimCamera],
     laser: LaserSpec,
     rng: np.random.Generator,
-    depth: DepthNoise | None = None,
-    depth_rng: np.random.Generator | None = None,
+    faults: Faults,
 ) -> None:
-    """Put what is due at scenario time ``t``: each camera's frame (and, with ``depth``, its
-    depth image under the same header), the scan (when it has a clock: a laser) and the
-    truth."""
+    """Put what is due at scenario time ``t``: each camera's frame with its colour faults
+    (and, with ``sim.depth``, its depth image under the same header, its faults drawn against
+    the clean image), the scan (when it has a clock: a laser) and the truth."""
     r = world.robot
     pose = (r.x, r.y, r.theta)
     for camera in cameras:
         if clocks[f"frame:{camera.name}"].due(t):
             header = node.header(frame_id=camera.frame_id)
             image = render(world, camera.spec)
-            out.frame(camera.name, image_to_frame(image, header, jpeg_quality=camera.jpeg_quality))
+            shown = faults.colour(camera, image, world, t)
+            out.frame(camera.name, image_to_frame(shown, header, jpeg_quality=camera.jpeg_quality))
             _count(node, contract.FRAMES_OUT, camera.name, len(cameras))
-            if depth is not None:
-                rng_d = depth_rng if depth_rng is not None else rng
-                noisy = apply(render_depth(world, camera.spec), image, depth, rng_d)
-                out.depth(camera.name, depth_frame(noisy, camera.spec, header, depth))
+            if faults.depth is not None:
+                noisy = faults.depth_image(camera, image, world)
+                out.depth(camera.name, depth_frame(noisy, camera.spec, header, faults.depth))
                 _count(node, contract.DEPTH_OUT, camera.name, len(cameras))
     if "scan" in clocks and clocks["scan"].due(t):
         scan = LaserScan(
@@ -421,18 +420,3 @@ def _count(node: Node, counter: str, camera: str, cameras: int) -> None:
     node.counters.add(counter)
     if cameras > 1:  # the total above, and each camera's (common/counters.py)
         node.counters.add(per_camera(counter, camera))
-
-
-def depth_noise(s: contract.SimSettings) -> DepthNoise:
-    """The depth camera's faults, from the ``sim.depth_*`` settings."""
-    return DepthNoise(
-        range_min_m=s.depth_range_min_m,
-        range_max_m=s.depth_range_max_m,
-        noise_k=s.depth_noise_k,
-        noise_corr_px=s.depth_noise_corr_px,
-        edge_px=s.depth_edge_px,
-        edge_jump=s.depth_edge_jump,
-        dark_level=s.depth_dark_level,
-        dark_dropout=s.depth_dark_dropout,
-        dropout=s.depth_dropout,
-    )

@@ -30,6 +30,8 @@ def _print_text(r: ScenarioResult) -> None:
 
     mode = f" ({r['mode']} mode)" if r.get("mode") else ""
     print(f"scenario {r['scenario']}{mode}: {'PASS' if r['success'] else 'FAIL'}")
+    if r.get("world"):
+        print(f"  {r['world']}")
     for key in (
         "time_to_reach_s",
         "final_distance_m",

@@ -27,6 +27,7 @@ from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, GroundTruth, Twist
 from common.zenoh_bus import open_session
+from services.sim.worlds import world_line
 from simworld.scenarios import SCENARIOS, Scenario
 from stack.config import Config
 from stack.config_file import to_toml
@@ -261,6 +262,9 @@ def run_scenario(
         log(f"{name}: the stack on {config.zenoh.endpoint}, its files in {workdir}")
     config_path = workdir / "stack.toml"
     config_path.write_text(to_toml(config))
+    world = world_line(config.sim)  # which world and camera faults the simulator runs
+    if log is not None:
+        log(f"{name}: {world}")
     rec = ScenarioLog() if rec is None else rec
     with (workdir / "stack.log").open("wb") as stack_log:
         proc = start_supervisor(config_path, stack_log)
@@ -281,6 +285,7 @@ def run_scenario(
             stop_supervisor(proc, STOP_TIMEOUT_S)  # whatever happened, never leave it running
     result = score(scenario, rec, scenario.build(), config.controller, config.camera.hfov_deg)
     result["mode"] = str(config.controller.mode)
+    result["world"] = world
     result["log"] = str(workdir / "stack.log")
     result["supervisor_exit_code"] = proc.returncode
     return result

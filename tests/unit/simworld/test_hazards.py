@@ -32,8 +32,9 @@ def test_positional_obstacle_is_a_solid_half_metre_box_and_material_names_are_ch
     ob = Obstacle(2.0, 0.5, 0.3)
     assert (ob.height_m, ob.material) == (0.5, Material.SOLID)
     assert Obstacle(1, 0, 0.1, material="glass").material is Material.GLASS  # type: ignore[arg-type]
+    assert Obstacle(1, 0, 0.1, material="mirror").material is Material.MIRROR  # type: ignore[arg-type]
     with pytest.raises(ValueError):
-        Obstacle(1, 0, 0.1, material="mirror")  # type: ignore[arg-type]
+        Obstacle(1, 0, 0.1, material="velvet")  # type: ignore[arg-type]
 
 
 def test_an_obstacle_is_drawn_at_its_own_height_in_colour_and_depth() -> None:

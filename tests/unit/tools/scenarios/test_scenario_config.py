@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from common.contracts import DistanceSource
 from common.settings import REPO_ROOT
 from services.camera.contract import CameraSettings
@@ -76,3 +78,18 @@ def test_a_depth_config_keeps_following_by_depth_in_every_scenario() -> None:
     assert scenario_config(Config(), SCENARIOS["obstacle"]).controller.distance_source is (
         DistanceSource.BOX
     )
+
+
+def test_a_scenario_runs_in_the_user_s_world_and_its_result_says_which(capsys) -> None:  # type: ignore[no-untyped-def]
+    """The runner leaves ``sim.world`` as the config has it (hard by default) and prints the
+    world and faults the simulator ran (services/sim/worlds.py's line)."""
+    from services.sim.contract import SimSettings, SimWorld
+    from services.sim.worlds import world_line
+    from tools.scenarios.__main__ import _print_text
+
+    assert scenario_config(BASE, SCENARIOS["ahead"]).sim.world is SimWorld.HARD
+    simple = dataclasses.replace(BASE, sim=SimSettings(world=SimWorld.SIMPLE))
+    config = scenario_config(simple, SCENARIOS["ahead"])
+    assert world_line(config.sim) == "world=simple faults=none"
+    _print_text({"scenario": "ahead", "success": True, "log": "x", "world": world_line(config.sim)})
+    assert "  world=simple faults=none\n" in capsys.readouterr().out
