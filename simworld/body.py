@@ -30,6 +30,7 @@ metre, so the error is that of a flat scale across that depth, under 4 % of the 
 
 from __future__ import annotations
 
+import itertools
 import math
 import zlib
 from dataclasses import dataclass
@@ -134,14 +135,15 @@ def people(n: int, seed: int = 0) -> list[Body]:
 
 def walked_m(path: tuple[tuple[float, float, float], ...], loop: bool, t: float) -> float:
     """How far a target on ``path`` (world.Target's (t, x, y) waypoints) has walked by ``t``."""
-    lengths = [math.hypot(x1 - x0, y1 - y0) for (_, x0, y0), (_, x1, y1) in zip(path, path[1:])]
+    pairs = list(itertools.pairwise(path))
+    lengths = [math.hypot(x1 - x0, y1 - y0) for (_, x0, y0), (_, x1, y1) in pairs]
     t0, t_end = path[0][0], path[-1][0]
     laps = 0.0
     if loop and t > t0 and t_end > t0:
         laps, t = divmod(t - t0, t_end - t0)
         t += t0
     done = laps * sum(lengths)
-    for ((ta, _, _), (tb, _, _)), seg in zip(zip(path, path[1:]), lengths):
+    for ((ta, _, _), (tb, _, _)), seg in zip(pairs, lengths, strict=True):
         if t >= tb:
             done += seg
         elif t > ta:
@@ -210,6 +212,30 @@ def _cloth(tile_px: int, shape: tuple[int, int]) -> Floats:
     light = 1.0 + CLOTH_CONTRAST * (tile - tile.mean()) / tile.mean()
     reps = (shape[0] // light.shape[0] + 1, shape[1] // light.shape[1] + 1)
     out: Floats = np.clip(np.tile(light, reps)[: shape[0], : shape[1]], 0.3, 1.8)
+    out.setflags(write=False)
+    return out
+
+
+def coat(size: tuple[int, int]) -> Floats:
+    """The light of a real coat's front (the cameraman's: lapels, buttons, folds), ``size``
+    (w, h), around 1: a torso's clothes as the detector knows clothes."""
+    x0, y0, x1, y1 = COAT_FRONT
+    grey = _grey_sample()[y0:y1, x0:x1]
+    tile = cv2.resize(grey, size, interpolation=cv2.INTER_AREA)
+    out: Floats = np.clip(1.0 + COAT_CONTRAST * (tile - tile.mean()) / tile.mean(), 0.3, 1.8)
+    return out
+
+
+#: The coat's front in the cameraman photo (x0, y0, x1, y1), and how much of its light shows.
+COAT_FRONT = (0, 150, 250, 512)
+COAT_CONTRAST = 0.5
+
+
+@lru_cache(maxsize=1)
+def _grey_sample() -> Floats:
+    from common.images import load_sample
+
+    out: Floats = load_sample("cameraman")[..., 0].astype(np.float32)
     out.setflags(write=False)
     return out
 

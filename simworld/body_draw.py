@@ -19,19 +19,19 @@ from functools import lru_cache
 import numpy as np
 
 from common.images import Image
-
 from simworld.body import (
     ARM_SWING_DEG,
-    CACHE_SIZE,
-    PHASES,
     BGR,
+    CACHE_SIZE,
     CANON_PX,
     LEG_SWING_DEG,
+    PHASES,
     SHOES,
     Body,
     Floats,
     Silhouette,
     cloth,
+    coat,
     face_texture,
     shade,
 )
@@ -83,9 +83,12 @@ def _cols(g: Grid, x0: float, x1: float) -> slice:
     return slice(a, b)
 
 
-def _put(cv: Canvas, g: Grid, rs: slice, cs: slice, dz: Floats, colour: BGR) -> None:
+def _put(
+    cv: Canvas, g: Grid, rs: slice, cs: slice, dz: Floats, colour: BGR, tex: Floats | None = None
+) -> None:
     """Lay a part's surface ``dz`` (inf: not on the part) over the canvas where it is nearer,
-    in ``colour`` shaded by how squarely the surface faces the camera (its slopes)."""
+    in ``colour`` shaded by how squarely the surface faces the camera (its slopes) and by
+    the cloth's folds (``tex``, the light per pixel of ``dz``'s box; None: the tiled cloth)."""
     old = cv.dz[rs, cs]
     near = dz < old
     if not near.any():
@@ -99,14 +102,16 @@ def _put(cv: Canvas, g: Grid, rs: slice, cs: slice, dz: Floats, colour: BGR) -> 
         nz = 1.0 / np.sqrt(1.0 + (gx * g.ppm) ** 2 + (gy * g.ppm) ** 2)
     # a rim pixel (its neighbour off the part) has no slope: as dark as a steep surface
     light = np.nan_to_num(nz, nan=0.2).astype(np.float32)
-    if colour != SHOES:
+    if tex is not None:
+        light *= tex
+    elif colour != SHOES:
         light *= cloth(g.ppm, cv.dz.shape)[rs, cs]
     cv.colour[rs, cs][near] = shade(colour, light)[near]
 
 
 def _cylinder(
     cv: Canvas, g: Grid, yaw: float, y0: float, y1: float, ra: float | Profile, rb: float,
-    off: float, colour: BGR,
+    off: float, colour: BGR, coated: bool = False,
 ) -> None:  # fmt: skip
     """A vertical elliptic cylinder between heights y0 and y1, half-axes ``ra`` across the
     person (a float, or a function of height) and ``rb`` front to back, its axis ``off``
@@ -126,7 +131,8 @@ def _cylinder(
     disc = qb * qb - qa * qc
     with np.errstate(invalid="ignore"):
         dz = np.where(disc >= 0, (-qb - np.sqrt(disc)) / qa - off * c, np.inf)
-    _put(cv, g, rs, cs, dz.astype(np.float32), colour)
+    tex = coat((dz.shape[1], dz.shape[0])) if coated else None
+    _put(cv, g, rs, cs, dz.astype(np.float32), colour, tex)
 
 
 def _ellipsoid(
@@ -176,7 +182,6 @@ def silhouette(body: Body, yaw_deg: float, phase: int | None) -> Silhouette:
     return draw(body, yaw_deg, None if phase is None else phase / PHASES)
 
 
-
 def draw(body: Body, yaw_deg: float, phase: float | None) -> Silhouette:
     """The silhouette of ``body`` at ``yaw_deg`` and ``phase`` (0..1; None: standing)."""
     g = _grid(body)
@@ -213,11 +218,13 @@ def draw(body: Body, yaw_deg: float, phase: float | None) -> Silhouette:
         w = np.where(up < 0.4, hips + (waist - hips) * up / 0.4,
                      waist + (sh - waist) * (up - 0.4) / 0.6)  # fmt: skip
         over = np.clip((y - shoulder_y) / (top_y - shoulder_y), 0.0, 1.0)
-        return (w * np.sqrt(np.clip(1.0 - 0.75 * over**2, 0.0, 1.0)) * 0.85 + 0.15 * w * (
-            1.0 - over
-        )).astype(np.float32)
+        out: Floats = (
+            w * np.sqrt(np.clip(1.0 - 0.75 * over**2, 0.0, 1.0)) * 0.85 + 0.15 * w * (1.0 - over)
+        ).astype(np.float32)
+        return out
 
-    _cylinder(cv, g, yaw, hip_y - 0.04 * h, top_y, half_width, half_d, 0.0, body.top)
+    _cylinder(cv, g, yaw, hip_y - 0.04 * h, top_y, half_width, half_d, 0.0, body.top,
+              coated=abs(yaw_deg) <= FACE_MAX_YAW_DEG + 30)  # fmt: skip
     arm_len = 0.36 * h
     arm = -math.radians(ARM_SWING_DEG) * swing
     for side in (1.0, -1.0):
@@ -264,7 +271,7 @@ def _face_on(
     if h < 2 or w < 2:
         return
     tex = face_texture((w, h), body.skin)
-    on = (cv.dz[rs, cs] < before[rs, cs])
+    on = cv.dz[rs, cs] < before[rs, cs]
     cv.colour[rs, cs][on] = tex[on]
 
 

@@ -112,4 +112,4 @@ def drawn_area(sil: Silhouette, full: tuple[int, int, int, int]) -> float:
     """How many pixels the whole person covers at ``full``'s size (in the image or not)."""
     x0, y0, x1, y1 = full
     h, w = sil.alpha.shape
-    return sil.area * (x1 - x0) / w * (y1 - y0) / h
+    return float(sil.area * (x1 - x0) / w * (y1 - y0) / h)

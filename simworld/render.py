@@ -1,7 +1,10 @@
-"""A pinhole camera that renders the world from the robot: real photo cut-outs on a floor.
+"""A pinhole camera that renders the world from the robot: people and photo cut-outs on a floor.
 
-Each target is a billboard: a cut-out of a real photo (scikit-image samples), scaled by its
-distance and placed by its bearing, standing on the floor. Obstacles are drawn as boxes of their
+A person with a body (world.Target's ``body``) is drawn as their silhouette (simworld/body.py,
+people.py): only their own pixels, the floor showing between their legs and around them, scaled
+by their distance and placed by their bearing, standing on the floor. Any other target (and a
+person in the simple world, world.flat_world) is a billboard: a cut-out of a real photo
+(scikit-image samples) drawn the same way, its whole rectangle. Obstacles are drawn as boxes of their
 own height, grey (solid), near-black (dark) or faintly tinted over what is behind them (glass);
 the floor beyond a drop-off is a little darker (simworld/floor.py finds its pixels).
 Nearer things are drawn over farther ones. The camera stands at the robot's centre,
@@ -135,8 +138,8 @@ def layout(world: World, spec: CameraSpec) -> list[Placed]:
             cut = sprite(tg.sprite, tg.mirror)
             w_m = tg.height_m * cut.shape[1] / cut.shape[0]
         else:
-            bodies[i] = sil = body_silhouette(world, i, heading)
-            w_m = sil.alpha.shape[1] / sil.px_per_m
+            bodies[i] = body_silhouette(world, i, heading)
+            w_m = bodies[i].alpha.shape[1] / bodies[i].px_per_m
         items.append((z, lateral, i, None, tg.radius, tg.height_m, w_m, Material.SOLID))
     for j, ob in enumerate(world.obstacles):
         z, lateral = _to_camera(ob.x - r.x, ob.y - r.y, c, s)
@@ -148,7 +151,8 @@ def layout(world: World, spec: CameraSpec) -> list[Placed]:
         u = cx - f * lateral / z
         bottom = cy + f * spec.height_m / z
         hp, wp = f * h_m / z, f * w_m / z
-        img, sil = None, bodies.get(ti) if ti is not None else None
+        img: Image | None = None
+        sil: Silhouette | None = None if ti is None else bodies.get(ti)
         if ti is None:
             # A filled box from corner to corner, both included (as cv2.rectangle fills).
             x0, x1 = round(u - wp / 2), round(u + wp / 2) + 1

@@ -136,7 +136,7 @@ def test_people_differ_and_each_id_keeps_its_look() -> None:
     assert crowd == people(40, seed=1)
     assert body_for("alice") == body_for("alice") != body_for("bob")
     heights = [b.height_m for b in crowd]
-    assert 1.5 <= min(heights) and max(heights) <= 1.95 and max(heights) - min(heights) > 0.3
+    assert min(heights) >= 1.5 and max(heights) <= 1.95 and max(heights) - min(heights) > 0.3
     assert len({b.shoulder_m for b in crowd}) > 30
     dark = [b for b in crowd if b.dark_parts(30)]
     assert 0 < len(dark) < len(crowd)  # some wear clothes a stereo camera loses
