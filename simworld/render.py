@@ -4,9 +4,9 @@ A person with a body (world.Target's ``body``) is drawn as their silhouette (sim
 people.py): only their own pixels, the floor showing between their legs and around them, scaled
 by their distance and placed by their bearing, standing on the floor. Any other target (and a
 person in the simple world, world.flat_world) is a billboard: a cut-out of a real photo
-(scikit-image samples) drawn the same way, its whole rectangle. Obstacles are drawn as boxes of their
-own height, grey (solid), near-black (dark) or faintly tinted over what is behind them (glass);
-the floor beyond a drop-off is a little darker (simworld/floor.py finds its pixels).
+(scikit-image samples) drawn the same way, its whole rectangle. Obstacles are drawn as boxes of
+their own height, grey (solid), near-black (dark) or faintly tinted over what is behind them
+(glass); the floor beyond a drop-off is a little darker (simworld/floor.py finds its pixels).
 Nearer things are drawn over farther ones. The camera stands at the robot's centre,
 ``height_m`` above the floor, and looks ``mount_yaw_deg`` counter-clockwise from the robot's +x
 (0 the front camera, 180 the rear one), with square pixels and the configured horizontal field
