@@ -1,12 +1,12 @@
-"""The drawing of a body's silhouette (simworld/body.py :func:`~simworld.body.silhouette`). Pure.
+"""The drawing of a body's silhouette (:func:`silhouette`, cached per pose). Pure.
 
 Each part is a solid whose front surface is computed per pixel over its own bounding box, in
 metres on the canonical canvas: the torso and the neck elliptic cylinders (their exact front
 surface for the yaw), the head an ellipsoid, arms and legs tapered capsules. Where parts
 overlap the nearest surface wins, as a camera sees it. The person faces the camera at yaw 0;
-a point (a to the person's left, b forward) of the person's frame is at
-``x = a cos(yaw) + b sin(yaw)`` to the camera's right of the axis... (x, right in the image)
-and ``dz = a sin(yaw) - b cos(yaw)`` along the optical axis.
+a point (a to the person's left, b forward) of the person's frame is
+``x = a cos(yaw) + b sin(yaw)`` right of the body's axis in the image and
+``dz = a sin(yaw) - b cos(yaw)`` behind it along the optical axis.
 """
 
 from __future__ import annotations
@@ -176,9 +176,10 @@ def _capsule(
 
 @lru_cache(maxsize=CACHE_SIZE)
 def silhouette(body: Body, yaw_deg: float, phase: int | None) -> Silhouette:
-    """The person drawn facing ``yaw_deg`` from the camera (0: facing it, 90: their left
-    side to it... their right side at -90, 180: their back), at ``phase`` of :data:`PHASES`
-    of their stride (None: standing); pass a :func:`pose_key`."""
+    """The person drawn at ``yaw_deg`` (0: facing the camera; 90: facing the image's right,
+    their right side to the camera; -90: facing its left; 180: their back to it), at
+    ``phase`` of :data:`PHASES` of their stride (None: standing); pass a
+    :func:`~simworld.body.pose_key`."""
     return draw(body, yaw_deg, None if phase is None else phase / PHASES)
 
 
