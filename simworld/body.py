@@ -4,10 +4,10 @@ A :class:`Body` describes one person: height, shoulder width, front-to-back thic
 colours of their clothes and skin, where they face and how long their stride is. From it
 :func:`simworld.body_draw.silhouette` draws, for a yaw relative to the camera and a phase of
 the walk, the person as the camera sees them at a canonical scale (:data:`CANON_PX` pixels
-tall): which pixels are the person (head, neck, torso, two arms with hands, two legs with feet, the floor
-visible between the legs and around them), their colour (each part in its clothes, shaded by
-how its surface turns from the camera) and the depth of the front surface at each pixel
-relative to the body's axis (metres along the camera's optical axis; negative: nearer).
+tall): which pixels are the person (head, neck, torso, two arms with hands, two legs with feet,
+the floor visible between the legs and around them), their colour (each part in its clothes,
+shaded by how its surface turns from the camera) and the depth of the front surface at each
+pixel relative to the body's axis (metres along the camera's optical axis; negative: nearer).
 simworld/render.py scales it by the person's distance as it did the flat photo cut-out, and
 simworld/depth.py adds the person's z to the depth offsets (simworld/body_draw.py draws it,
 simworld/people.py finds the pose and scales it).
