@@ -5,6 +5,9 @@ node over it) and the tools (tools/scenarios, tools/benchmarks) import its modul
     world.py      ``World``: the robot (a unicycle base), targets, obstacles, drops, stepped
     scenarios.py  ``SCENARIOS``: the named worlds (``python -m tools.scenarios list``)
     render.py     a camera's colour image of the world (``CameraSpec``, ``layout``)
+    body.py       a person's body (``Body``: build, clothes, facing, gait; ``body_for``, ``people``)
+    body_draw.py  a body's silhouette, colour and front surface at a yaw and a phase of the walk
+    people.py     a body's pose before a camera, and its silhouette scaled to the image
     depth.py      the aligned depth image of the same instant, and its noise (``DepthNoise``)
     faults.py     the harder world's camera faults: flying pixels, bias, mirrors, blur, exposure
     floor.py      where the floor drops away (a drop is seen, never lasered)

@@ -43,6 +43,7 @@ from common.images import Image
 from common.messages import DepthFrame, Header
 from simworld.faults import edge_faults, range_bias
 from simworld.floor import drop_scale
+from simworld.people import drawn_area, stamp
 from simworld.render import CameraSpec, Placed, layout
 from simworld.world import Material, World
 
@@ -69,49 +70,83 @@ UNREAD = frozenset({Material.DARK, Material.GLASS})
 
 
 def placed_depth(p: Placed) -> float:
-    """The z one drawn thing reads: its front face's, ``z - radius``, target or obstacle;
-    NaN for a material a depth camera reads nothing on (:data:`UNREAD`)."""
-    return math.nan if p.material in UNREAD else p.z - p.radius
+    """The z one drawn thing reads on the ray through its centre at half its height: a flat
+    thing's front face, ``z - radius``, target or obstacle; a person with a body, their
+    front surface there (the body's ``truth_dz`` from its axis); NaN for a material a depth
+    camera reads nothing on (:data:`UNREAD`)."""
+    if p.material in UNREAD:
+        return math.nan
+    return p.z - p.radius if p.body is None else p.z + p.body.truth_dz
 
 
 def render_depth(world: World, spec: CameraSpec) -> Depth:
     """The true depth image (``spec.height``, ``spec.width``) float32 metres of ``world`` from
     the camera ``spec``, aligned pixel for pixel with ``render(world, spec)``; NaN: no reading
-    (the wall at infinity, a dark or glass face)."""
+    (the wall at infinity, a dark or glass face). A person with a body reads their front
+    surface over their silhouette, and what is behind them around it and between their legs."""
     scale = drop_scale(world, spec)
     out = floor_depth(spec).copy() if scale is None else floor_depth(spec) * scale
     for p in layout(world, spec):
-        if p.rect is not None:
-            x0, y0, x1, y1 = p.rect
+        if p.rect is None:
+            continue
+        x0, y0, x1, y1 = p.rect
+        if p.body is None:
             out[y0:y1, x0:x1] = placed_depth(p)
+        else:
+            st = stamp(p.body, p.full, p.rect)
+            on = st.alpha > 0
+            out[y0:y1, x0:x1][on] = np.float32(p.z) + st.dz[on]
     return out
+
+
+def owners(world: World, spec: CameraSpec) -> tuple[npt.NDArray[np.int32], list[Placed]]:
+    """Which drawn thing each pixel shows (its index in the list, -1: none: the floor, the
+    wall), and the drawn things (:func:`~simworld.render.layout`), as the colour image draws
+    them: a flat thing over its whole rectangle, a person with a body over their silhouette."""
+    placed = layout(world, spec)
+    owner = np.full((spec.height, spec.width), -1, np.int32)
+    for k, p in enumerate(placed):
+        if p.rect is None:
+            continue
+        x0, y0, x1, y1 = p.rect
+        if p.body is None:
+            owner[y0:y1, x0:x1] = k
+        else:
+            owner[y0:y1, x0:x1][stamp(p.body, p.full, p.rect).alpha > 0] = k
+    return owner, placed
+
+
+def _drawn_area(p: Placed) -> float:
+    """How many pixels ``p`` covers whole, in the image or out of it."""
+    if p.body is not None:
+        return drawn_area(p.body, p.full)
+    x0, y0, x1, y1 = p.full
+    return float((x1 - x0) * (y1 - y0))
 
 
 def targets_in_camera(
     world: World, spec: CameraSpec, min_visible: float = 0.0
 ) -> list[tuple[str, str, float, float, float]]:
-    """Each target the camera sees, as (target id, name, x, y, z): the point of its front face
-    that a depth camera sees on the ray through its drawn centre, in the camera's optical frame
-    (metres: x right, y down, z forward). That is the target's centre at half its height
-    (x, y, z) back-projected at its front face's depth ``z - radius``: (x, y, z) scaled by
-    ``(z - radius) / z``. Its norm is the distance a depth camera can observe, about the
-    centre's less the radius; the hidden middle of the target is no camera's truth.
+    """Each target the camera sees, as (target id, name, x, y, z): the point of its surface
+    that a depth camera sees on the ray through its centre at half its height, in the camera's
+    optical frame (metres: x right, y down, z forward). That is the target's centre at half
+    its height (x, y, z) back-projected at the depth :func:`placed_depth` reads there:
+    (x, y, z) scaled by ``depth / z``. A flat target's is its front face, ``z - radius``; a
+    person with a body's, the front of their torso on their axis at half their height (the
+    hips; about the centre's less half the body's thickness front-on, less half its width
+    side-on), what a depth method reading the middle of the person's box should find. The
+    hidden middle of the target is no camera's truth.
 
-    A target is seen when more than ``min_visible`` of its whole drawn rectangle (cut by the
-    image's edges or hidden by nearer things counts as not seen) shows in the image."""
-    placed = layout(world, spec)
-    owner = np.full((spec.height, spec.width), -1, np.int32)
-    for k, p in enumerate(placed):
-        if p.rect is not None:
-            x0, y0, x1, y1 = p.rect
-            owner[y0:y1, x0:x1] = k
+    A target is seen when more than ``min_visible`` of it (its whole drawn rectangle, or a
+    body's whole silhouette; cut by the image's edges or hidden by nearer things counts as not
+    seen) shows in the image."""
+    owner, placed = owners(world, spec)
     shown = np.bincount(owner[owner >= 0].ravel(), minlength=len(placed))
     out = []
     for k, p in enumerate(placed):
         if p.target is None or p.rect is None:
             continue
-        x0, y0, x1, y1 = p.full
-        if shown[k] <= min_visible * (x1 - x0) * (y1 - y0):
+        if shown[k] <= min_visible * _drawn_area(p):
             continue
         tg = world.targets[p.target]
         face = placed_depth(p)

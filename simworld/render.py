@@ -1,10 +1,13 @@
-"""A pinhole camera that renders the world from the robot: real photo cut-outs on a floor.
+"""A pinhole camera that renders the world from the robot: people and photo cut-outs on a floor.
 
-Each target is a billboard: a cut-out of a real photo (scikit-image samples), scaled by its
-distance and placed by its bearing, standing on the floor. Obstacles are drawn as boxes of their
-own height, grey (solid), near-black (dark), bright steel (mirror) or faintly tinted over what
-is behind them (glass); the floor beyond a drop-off is a little darker (simworld/floor.py finds
-its pixels).
+A person with a body (world.Target's ``body``) is drawn as their silhouette (simworld/body.py,
+people.py): only their own pixels, the floor showing between their legs and around them, scaled
+by their distance and placed by their bearing, standing on the floor. Any other target (and a
+person in the simple world, world.flat_world) is a billboard: a cut-out of a real photo
+(scikit-image samples) drawn the same way, its whole rectangle. Obstacles are drawn as boxes of
+their own height, grey (solid), near-black (dark), bright steel (mirror) or faintly tinted over
+what is behind them (glass); the floor beyond a drop-off is a little darker (simworld/floor.py
+finds its pixels).
 Nearer things are drawn over farther ones. The camera stands at the robot's centre,
 ``height_m`` above the floor, and looks ``mount_yaw_deg`` counter-clockwise from the robot's +x
 (0 the front camera, 180 the rear one), with square pixels and the configured horizontal field
@@ -22,7 +25,9 @@ import cv2
 import numpy as np
 
 from common.images import Image, load_sample
+from simworld.body import Silhouette
 from simworld.floor import drop_scale
+from simworld.people import body_silhouette, stamp
 from simworld.world import Material, World
 
 # Crops (x1, y1, x2, y2) of the scikit-image photos, around the object each one shows.
@@ -104,7 +109,9 @@ class Placed:
     height, and ``rect`` (x0, y0, x1, y1, end-exclusive) the pixels it covers, clipped to the
     image (None: not drawn at all). ``full`` is its whole unclipped rectangle, same convention.
     ``img`` is its cut-out (None for an obstacle's box); ``material`` what its surface is
-    (a target's is solid)."""
+    (a target's is solid). ``body``: a person with a body (world.Target's ``body``) drawn as
+    this silhouette (``full`` its canvas's rectangle, ``img`` its colour); None: a flat
+    cut-out or an obstacle."""
 
     target: int | None
     obstacle: int | None
@@ -116,6 +123,7 @@ class Placed:
     full: tuple[int, int, int, int]
     img: Image | None
     material: Material = Material.SOLID
+    body: Silhouette | None = None
 
 
 def layout(world: World, spec: CameraSpec) -> list[Placed]:
@@ -128,10 +136,15 @@ def layout(world: World, spec: CameraSpec) -> list[Placed]:
     c, s = math.cos(heading), math.sin(heading)
     f, cx, cy = spec.focal_px, spec.width / 2, spec.height / 2
     items: list[tuple[float, float, int | None, int | None, float, float, float, Material]] = []
+    bodies: dict[int, Silhouette] = {}
     for i, (tg, (tx, ty)) in enumerate(zip(world.targets, world.target_positions(), strict=True)):
-        cut = sprite(tg.sprite, tg.mirror)
         z, lateral = _to_camera(tx - r.x, ty - r.y, c, s)
-        w_m = tg.height_m * cut.shape[1] / cut.shape[0]
+        if tg.body is None:
+            cut = sprite(tg.sprite, tg.mirror)
+            w_m = tg.height_m * cut.shape[1] / cut.shape[0]
+        else:
+            bodies[i] = body_silhouette(world, i, heading)
+            w_m = bodies[i].alpha.shape[1] / bodies[i].px_per_m
         items.append((z, lateral, i, None, tg.radius, tg.height_m, w_m, Material.SOLID))
     for j, ob in enumerate(world.obstacles):
         z, lateral = _to_camera(ob.x - r.x, ob.y - r.y, c, s)
@@ -143,7 +156,8 @@ def layout(world: World, spec: CameraSpec) -> list[Placed]:
         u = cx - f * lateral / z
         bottom = cy + f * spec.height_m / z
         hp, wp = f * h_m / z, f * w_m / z
-        img = None
+        img: Image | None = None
+        sil: Silhouette | None = None if ti is None else bodies.get(ti)
         if ti is None:
             # A filled box from corner to corner, both included (as cv2.rectangle fills).
             x0, x1 = round(u - wp / 2), round(u + wp / 2) + 1
@@ -151,16 +165,17 @@ def layout(world: World, spec: CameraSpec) -> list[Placed]:
             drawn = True
         else:
             tg = world.targets[ti]
-            img = sprite(tg.sprite, tg.mirror)
+            img = sprite(tg.sprite, tg.mirror) if sil is None else sil.colour
             w, h = round(wp), round(hp)
-            x0, y0 = round(u - wp / 2), round(bottom - hp)
+            left = wp / 2 if sil is None else sil.axis_px * f / z / sil.px_per_m
+            x0, y0 = round(u - left), round(bottom - hp)
             x1, y1 = x0 + w, y0 + h
             drawn = 2 <= w <= 8 * spec.width and 2 <= h <= 8 * spec.height
         cx0, cy0 = max(x0, 0), max(y0, 0)
         cx1, cy1 = min(x1, spec.width), min(y1, spec.height)
         rect = (cx0, cy0, cx1, cy1) if drawn and cx1 > cx0 and cy1 > cy0 else None
         full = (x0, y0, x1, y1)
-        out.append(Placed(ti, oi, z, lateral, radius, h_m, rect, full, img, material))
+        out.append(Placed(ti, oi, z, lateral, radius, h_m, rect, full, img, material, sil))
     return out
 
 
@@ -182,6 +197,11 @@ def render(world: World, spec: CameraSpec) -> Image:
                 canvas[cy0:cy1, cx0:cx1] = (patch + GLASS_ALPHA * (tint - patch)).astype(np.uint8)
             else:
                 canvas[cy0:cy1, cx0:cx1] = MATERIAL_BGR.get(p.material, OBSTACLE_BGR)
+            continue
+        if p.body is not None:
+            st = stamp(p.body, p.full, p.rect)
+            view = canvas[cy0:cy1, cx0:cx1]
+            cv2.copyTo(st.colour, st.alpha, view)
             continue
         x0, y0, x1, y1 = p.full
         w, h = x1 - x0, y1 - y0

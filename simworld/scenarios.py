@@ -26,11 +26,30 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from simworld.world import Drop, Material, Obstacle, Robot, Target, World
+from simworld.body import Body, body_for
+from simworld.world import CARD_HEIGHT_M, Drop, Material, Obstacle, Robot, Target, World
 
 
-def person(id: str, *path: tuple[float, float, float], mirror: bool = False) -> Target:
-    return Target(id=id, name="person", sprite="person", height_m=1.7, path=path, mirror=mirror)
+def person(
+    id: str,
+    *path: tuple[float, float, float],
+    mirror: bool = False,
+    body: Body | None = None,
+    flat: bool = False,
+) -> Target:
+    """A person walking ``path`` (world.Target's waypoints). By default they have a body of
+    their own look, the same for the same ``id`` (simworld/body.py :func:`body_for`), or
+    ``body``; ``flat``: the flat photo cut-out of :data:`CARD_HEIGHT_M` (``mirror``: flipped
+    left-right), as in the simple world."""
+    if flat:
+        return Target(id, "person", "person", CARD_HEIGHT_M, path, mirror=mirror)
+    b = body_for(id) if body is None else body
+    return Target(id, "person", "person", b.height_m, path, mirror=mirror, body=b)
+
+
+def card(id: str, *path: tuple[float, float, float], mirror: bool = False) -> Target:
+    """A flat-card person (:func:`person` with ``flat``)."""
+    return person(id, *path, mirror=mirror, flat=True)
 
 
 DEMO_CENTRE = (4.0, 3.5)  # the demo's walk: a circle the person walks round, anticlockwise
@@ -49,7 +68,8 @@ def demo_walker(points: int = 24) -> Target:
          cy + DEMO_RADIUS_M * math.sin(-math.pi / 2 + 2 * math.pi * i / points))
         for i in range(points + 1)
     )  # fmt: skip
-    return Target(id="alice", name="person", sprite="person", height_m=1.7, path=path, loop=True)
+    body = body_for("alice")
+    return Target("alice", "person", "person", body.height_m, path, loop=True, body=body)
 
 
 @dataclass(frozen=True, slots=True)

@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
 import numpy.typing as npt
 
 from common.unicycle import advance
+from simworld.body import Body
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,6 +122,10 @@ class Drop:
         return math.hypot(max(dx, 0.0), max(dy, 0.0))
 
 
+#: A flat-card person's height (m): the simple world's, every person's before bodies.
+CARD_HEIGHT_M = 1.7
+
+
 @dataclass(frozen=True, slots=True)
 class Target:
     """Something the camera can see: a class, a cut-out, a size, and a scripted path.
@@ -128,6 +133,11 @@ class Target:
     ``path`` is a list of (t, x, y) waypoints; the target moves linearly between them and stays
     at the last. One waypoint means it stands still. With ``loop`` the path repeats: its last
     waypoint should equal its first.
+
+    ``body``: a person's body (simworld/body.py), drawn as their silhouette with a rounded
+    depth, facing and walking; its height is the target's. None: the flat photo cut-out
+    ``sprite``, one depth over its whole rectangle (the simple world, :func:`flat_world`).
+    ``radius`` is the footprint the laser sees either way.
     """
 
     id: str
@@ -138,6 +148,13 @@ class Target:
     radius: float = 0.25
     mirror: bool = False
     loop: bool = False
+    body: Body | None = None
+
+    def __post_init__(self) -> None:
+        if self.body is not None and self.body.height_m != self.height_m:
+            raise ValueError(
+                f"target {self.id}: height {self.height_m} m, its body's {self.body.height_m} m"
+            )
 
     def position(self, t: float) -> tuple[float, float]:
         pts = self.path
@@ -214,3 +231,19 @@ class World:
             return math.inf
         r = self.robot
         return min(math.hypot(o.x - r.x, o.y - r.y) - o.radius - r.radius for o in self.obstacles)
+
+
+def flat_world(world: World) -> World:
+    """``world`` with every person's body taken away: each the flat photo cut-out of
+    :data:`CARD_HEIGHT_M` (the simple world, as the simulator drew every person before
+    bodies). A new world (its robot a copy); ``world`` is left as it was."""
+    return replace(
+        world,
+        robot=replace(world.robot),
+        targets=[
+            tg if tg.body is None else replace(tg, body=None, height_m=CARD_HEIGHT_M)
+            for tg in world.targets
+        ],
+        obstacles=list(world.obstacles),
+        drops=list(world.drops),
+    )

@@ -22,7 +22,7 @@ from services.sim.cameras import SimCamera
 from services.sim.contract import SIMPLE_FAULTS, SimSettings, SimWorld
 from simworld.depth import Depth, DepthNoise, apply, render_depth
 from simworld.faults import ColourFaults, Exposure, colour_faults, mirror_reads
-from simworld.world import World
+from simworld.world import World, flat_world
 
 
 def in_effect(s: SimSettings) -> SimSettings:
@@ -35,9 +35,7 @@ def world_for(s: SimSettings, world: World) -> World:
     """The world the simulator runs: the scenario's ``world`` as built ("hard"), or today's
     ("simple": people drawn flat). The one place the world's hardness changes the world."""
     if s.world is SimWorld.SIMPLE:
-        # MERGE(bodies): this line becomes `return flat_world(world)` (the bodies branch's
-        # simworld flat_world: every person the flat card of today), with its import.
-        return world
+        return flat_world(world)  # every person the flat card of before
     return world
 
 

@@ -20,7 +20,7 @@ from simworld.depth import (
     unit_noise,
 )
 from simworld.render import OBSTACLE_HEIGHT_M, CameraSpec, background, render
-from simworld.scenarios import person
+from simworld.scenarios import card
 from simworld.world import Obstacle, Robot, Target, World
 
 SPEC = CameraSpec(width=320, height=240, hfov_deg=60.0, height_m=0.6)
@@ -48,7 +48,7 @@ def test_the_floor_reads_its_distance_row_by_row_and_above_the_horizon_nothing()
 
 
 def test_a_target_reads_its_front_face_over_exactly_the_pixels_it_is_drawn_on() -> None:
-    world = World(Robot(), targets=[person("p", (0.0, 3.0, 0.4))])
+    world = World(Robot(), targets=[card("p", (0.0, 3.0, 0.4))])
     depth = render_depth(world, SPEC)
     drawn = _thing(world)
     assert drawn.sum() > 500
@@ -66,7 +66,7 @@ def test_an_obstacle_reads_its_front_face_and_nearer_things_hide_farther_ones() 
     world = World(
         Robot(),
         obstacles=[Obstacle(2.0, 0.0, 0.3)],
-        targets=[person("p", (0.0, 4.0, 0.0))],
+        targets=[card("p", (0.0, 4.0, 0.0))],
     )
     depth = render_depth(world, SPEC)
     f, cy = SPEC.focal_px, SPEC.height / 2
@@ -81,7 +81,7 @@ def test_an_obstacle_reads_its_front_face_and_nearer_things_hide_farther_ones() 
     world = World(
         Robot(),
         obstacles=[Obstacle(4.0, 0.0, 0.3)],
-        targets=[person("p", (0.0, 2.0, 0.0))],
+        targets=[card("p", (0.0, 2.0, 0.0))],
     )
     depth = render_depth(world, SPEC)
     assert depth[SPEC.height // 2 :, col][depth[SPEC.height // 2 :, col] < 3.0].size > 0
@@ -113,9 +113,9 @@ def test_targets_in_camera_are_their_front_faces_on_the_centre_ray_in_the_optica
     world = World(
         Robot(theta=0.1),
         targets=[
-            person("near", (0.0, 3.0, 0.5)),
+            card("near", (0.0, 3.0, 0.5)),
             Target(id="cup", name="cup", sprite="cup", height_m=0.3, path=((0.0, 5.0, -1.0),)),
-            person("gone", (0.0, -2.0, 0.0)),  # behind the camera
+            card("gone", (0.0, -2.0, 0.0)),  # behind the camera
         ],
     )
     seen = {t[0]: t for t in targets_in_camera(world, SPEC)}
@@ -140,10 +140,10 @@ def test_targets_in_camera_are_their_front_faces_on_the_centre_ray_in_the_optica
 
 def test_a_target_hidden_by_a_nearer_one_is_not_in_camera() -> None:
     cup = Target(id="cup", name="cup", sprite="cup", height_m=0.3, path=((0.0, 5.0, 0.0),))
-    world = World(Robot(), targets=[person("p", (0.0, 2.0, 0.0)), cup])
+    world = World(Robot(), targets=[card("p", (0.0, 2.0, 0.0)), cup])
     assert [t[0] for t in targets_in_camera(world, SPEC)] == ["p"]
     # Beside the person it is seen; with most of it to be seen asked, still.
-    world = World(Robot(), targets=[person("p", (0.0, 3.0, 1.0)), cup])
+    world = World(Robot(), targets=[card("p", (0.0, 3.0, 1.0)), cup])
     assert [t[0] for t in targets_in_camera(world, SPEC, min_visible=0.9)] == ["cup", "p"]
 
 

@@ -13,13 +13,13 @@ from services.controller.contract import ControllerSettings
 from simworld.depth import floor_depth, render_depth
 from simworld.laser import LaserSpec, cast
 from simworld.render import DARK_BGR, CameraSpec, background, layout, render
-from simworld.scenarios import HAZARDS, SCENARIOS, person
+from simworld.scenarios import HAZARDS, SCENARIOS, card
 from simworld.world import Drop, Material, Obstacle, Robot, World
 from tools.scenarios.score import HAZARD_MARGIN_M, ScenarioLog, score, verdict
 
 SPEC = CameraSpec(width=320, height=240, hfov_deg=60.0, height_m=0.6)
 HDR = Header(stamp_ns=1, frame_id="world", seq=0, source="sim")
-ALICE = person("alice", (0.0, 6.5, 0.0))
+ALICE = card("alice", (0.0, 6.5, 0.0))
 
 
 def _box_rows(spec: CameraSpec, z: float, height_m: float) -> tuple[int, int]:

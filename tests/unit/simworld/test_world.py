@@ -11,7 +11,7 @@ from common.messages import GroundTruth, Header, Twist
 from services.controller.contract import ControllerSettings
 from simworld.laser import LaserSpec, cast
 from simworld.render import CameraSpec, render
-from simworld.scenarios import SCENARIOS, person
+from simworld.scenarios import SCENARIOS, card
 from simworld.world import BaseLimits, Obstacle, Robot, World
 from tools.scenarios.score import ScenarioLog, score, stale_commands
 
@@ -63,7 +63,7 @@ def test_laser_hits_the_nearest_surface() -> None:
 
 def test_person_is_rendered_where_the_pinhole_model_says() -> None:
     spec = CameraSpec(width=640, height=480, hfov_deg=60.0, height_m=0.6)
-    world = World(Robot(), targets=[person("a", (0, 3.0, 0.0))])
+    world = World(Robot(), targets=[card("a", (0, 3.0, 0.0))])
     img = render(world, spec)
     empty = render(World(Robot()), spec)
     changed = np.any(img != empty, axis=2)

@@ -11,7 +11,7 @@ import pytest
 
 from perception.depth import Intrinsics
 from simworld.render import CameraSpec
-from simworld.scenarios import person
+from simworld.scenarios import card
 from simworld.world import Robot, World
 from tools.benchmarks.depth import (
     BANDS,
@@ -38,9 +38,10 @@ def test_bands_cover_up_to_the_maximum() -> None:
 
 
 def test_the_depth_truth_is_the_visible_front_face_and_the_box_s_the_centre() -> None:
-    """A person 3 m ahead (0.25 m radius) and one 4 m ahead off to the left: the depth methods
-    are scored against the face the camera sees, the box height against the drawn centre."""
-    world = World(Robot(), targets=[person("a", (0.0, 3.0, 0.0)), person("b", (0.0, 4.0, 1.0))])
+    """A flat-card person 3 m ahead (0.25 m radius) and one 4 m ahead off to the left: the
+    depth methods are scored against the face the camera sees, the box height against the
+    drawn centre."""
+    world = World(Robot(), targets=[card("a", (0.0, 3.0, 0.0)), card("b", (0.0, 4.0, 1.0))])
     spec = CameraSpec(640, 480, 60.0, 0.6)
     got = truths(world, spec, min_visible=0.3)
     a = got["a"]
