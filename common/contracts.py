@@ -217,6 +217,17 @@ class DetectorInfo(TypedDict):
     note: str
 
 
+class DepthError(TypedDict):
+    """The live depth figures of a run (``zstack scenario NAME --json``'s ``depth_error``)."""
+
+    rows: int  # matched person detections with a depth
+    unknown: int  # matched person detections without one
+    median_pct: float  # median |horizontal range error| as % of the true range
+    p95_pct: float
+    median_signed_m: float  # the median signed error (estimate - truth), metres
+    range_m: tuple[float, float]  # the true ranges' span
+
+
 class ScenarioResult(TypedDict, total=False):
     """A scenario's figures (``zstack scenario NAME --json``); see tools/scenarios/score.py."""
 
@@ -244,6 +255,7 @@ class ScenarioResult(TypedDict, total=False):
     checks: dict[str, bool]
     log: str
     supervisor_exit_code: int | None
+    depth_error: DepthError  # with depth columns: the detections' range against the truth
 
 
 class BackendInfo(TypedDict):

@@ -51,6 +51,13 @@ def _print_text(r: ScenarioResult) -> None:
         ("seen_per_camera", r.get("seen_per_camera", {})),
     ):
         print(f"  {key:24} " + " ".join(f"{c}={n}" for c, n in per_camera.items()))
+    if "depth_error" in r:
+        e = r["depth_error"]
+        print(
+            f"  {'depth_error':24} median {e['median_pct']:.2f} % p95 {e['p95_pct']:.2f} % of "
+            f"the range ({e['rows']} detections, {e['unknown']} unknown, "
+            f"{e['range_m'][0]:.1f}-{e['range_m'][1]:.1f} m; median {e['median_signed_m']:+.3f} m)"
+        )
     for check, ok in r.get("checks", {}).items():
         print(f"  [{'x' if ok else ' '}] {check}")
     print(f"  log: {r['log']}")

@@ -39,6 +39,7 @@ from tools.launch import (
     stop_supervisor,
 )
 from tools.ports import private_endpoint
+from tools.scenarios.depth_truth import depth_error
 from tools.scenarios.score import ScenarioLog, score
 
 STARTUP_TIMEOUT_S = 180.0  # model load and warm-up on a busy 2-core machine
@@ -288,6 +289,9 @@ def run_scenario(
     result["world"] = world
     result["log"] = str(workdir / "stack.log")
     result["supervisor_exit_code"] = proc.returncode
+    live = depth_error(scenario.build(), config, rec.truths, rec.detections)
+    if live is not None:
+        result["depth_error"] = live
     return result
 
 
