@@ -100,7 +100,7 @@ def _measure(world: World, spec: CameraSpec, d: Detections, rows: _Rows) -> None
     seen = [t for t in targets_in_camera(world, spec, MIN_VISIBLE) if t[1] == PERSON]
     if not seen:
         return
-    names = np.asarray(d.class_names)[d.boxes.class_ids] if len(d.boxes) else np.zeros(0, str)
+    names = np.asarray(d.class_names, dtype=object)  # one per box
     xs, zs = d.boxes.columns[X], d.boxes.columns[Z]
     x1, x2 = d.boxes.xyxy[:, 0], d.boxes.xyxy[:, 2]
     f, cx = spec.focal_px, spec.width / 2
