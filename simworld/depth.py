@@ -45,6 +45,7 @@ from simworld.faults import edge_faults, range_bias
 from simworld.floor import drop_scale
 from simworld.people import drawn_area, stamp
 from simworld.render import CameraSpec, Placed, layout
+from simworld.walls import in_front, wall_view
 from simworld.world import Material, World
 
 Depth = npt.NDArray[np.float32]  # (h, w) metres, NaN = no reading
@@ -83,36 +84,59 @@ def render_depth(world: World, spec: CameraSpec) -> Depth:
     """The true depth image (``spec.height``, ``spec.width``) float32 metres of ``world`` from
     the camera ``spec``, aligned pixel for pixel with ``render(world, spec)``; NaN: no reading
     (the wall at infinity, a dark or glass face). A person with a body reads their front
-    surface over their silhouette, and what is behind them around it and between their legs."""
+    surface over their silhouette, and what is behind them around it and between their legs.
+    A wall (simworld/walls.py) reads its depth per pixel (a dark one nothing), and hides what
+    is farther; a glass wall reads nothing where it is nearer than what is behind it."""
     scale = drop_scale(world, spec)
     out = floor_depth(spec).copy() if scale is None else floor_depth(spec) * scale
+    view = wall_view(world, spec)
+    scene_z = None
+    if view is not None:
+        scene_z = np.minimum(np.nan_to_num(out, nan=np.inf), view.z)
+        out[view.opaque] = view.z[view.opaque]
+        out[view.dark(world)] = np.nan
     for p in layout(world, spec):
         if p.rect is None:
             continue
         x0, y0, x1, y1 = p.rect
-        if p.body is None:
-            out[y0:y1, x0:x1] = placed_depth(p)
-        else:
-            st = stamp(p.body, p.full, p.rect)
-            on = st.alpha > 0
-            out[y0:y1, x0:x1][on] = np.float32(p.z) + st.dz[on]
+        st = None if p.body is None else stamp(p.body, p.full, p.rect)
+        z: float | Depth = p.z - p.radius if st is None else np.float32(p.z) + st.dz
+        on = in_front(view, p.rect, z)
+        if st is not None:
+            on = st.alpha > 0 if on is None else on & (st.alpha > 0)
+        value = np.float32(placed_depth(p)) if st is None else z
+        reading = np.broadcast_to(value, (y1 - y0, x1 - x0))
+        if on is None:
+            out[y0:y1, x0:x1] = reading
+            continue
+        out[y0:y1, x0:x1][on] = reading[on]
+        if scene_z is not None:
+            scene_z[y0:y1, x0:x1][on] = np.broadcast_to(np.float32(z), reading.shape)[on]
+    if view is not None and scene_z is not None and view.glass:
+        out[view.glass_z < scene_z] = np.nan
     return out
 
 
 def owners(world: World, spec: CameraSpec) -> tuple[npt.NDArray[np.int32], list[Placed]]:
-    """Which drawn thing each pixel shows (its index in the list, -1: none: the floor, the
+    """Which drawn thing each pixel shows (its index in the list, -1: none: the floor, a
     wall), and the drawn things (:func:`~simworld.render.layout`), as the colour image draws
-    them: a flat thing over its whole rectangle, a person with a body over their silhouette."""
+    them: a flat thing over its whole rectangle, a person with a body over their silhouette,
+    each only where it is nearer than an opaque wall (a glass one hides nothing)."""
     placed = layout(world, spec)
+    view = wall_view(world, spec)
     owner = np.full((spec.height, spec.width), -1, np.int32)
     for k, p in enumerate(placed):
         if p.rect is None:
             continue
         x0, y0, x1, y1 = p.rect
-        if p.body is None:
+        st = None if p.body is None else stamp(p.body, p.full, p.rect)
+        on = in_front(view, p.rect, p.z - p.radius if st is None else np.float32(p.z) + st.dz)
+        if st is not None:
+            on = st.alpha > 0 if on is None else on & (st.alpha > 0)
+        if on is None:
             owner[y0:y1, x0:x1] = k
         else:
-            owner[y0:y1, x0:x1][stamp(p.body, p.full, p.rect).alpha > 0] = k
+            owner[y0:y1, x0:x1][on] = k
     return owner, placed
 
 

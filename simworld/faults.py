@@ -32,6 +32,7 @@ import numpy.typing as npt
 
 from common.images import Image
 from simworld.render import CameraSpec, layout
+from simworld.walls import in_front, wall_view
 from simworld.world import Material, World
 
 Depth = npt.NDArray[np.float32]  # (h, w) metres, NaN = no reading
@@ -109,10 +110,15 @@ def mirror_reads(world: World, spec: CameraSpec, truth: Depth, scale: float) -> 
     if scale == 1.0 or not any(o.material == Material.MIRROR for o in world.obstacles):
         return truth
     mirror = np.zeros(truth.shape, bool)
+    view = wall_view(world, spec)
     for p in layout(world, spec):  # drawing order: a nearer thing covers the mirror
         if p.rect is not None:
             x0, y0, x1, y1 = p.rect
-            mirror[y0:y1, x0:x1] = p.material == Material.MIRROR
+            shown = in_front(view, p.rect, p.z - p.radius)  # a nearer wall covers it too
+            if shown is None:
+                mirror[y0:y1, x0:x1] = p.material == Material.MIRROR
+            else:
+                mirror[y0:y1, x0:x1][shown] = p.material == Material.MIRROR
     out = truth.copy()
     out[mirror] *= np.float32(scale)
     return out

@@ -48,7 +48,7 @@ class Pinhole(Hashable, Protocol):
 
 
 @cache
-def _rays(spec: Pinhole) -> tuple[int, Floats, Floats]:
+def floor_rays(spec: Pinhole) -> tuple[int, Floats, Floats]:
     """The first row below the horizon, each such row's floor z (rows,), and each column's
     lateral offset per metre of z, ``(cx - u - 0.5) / f`` (width,). Read-only."""
     f, cx, cy = spec.focal_px, spec.width / 2, spec.height / 2
@@ -68,7 +68,7 @@ def drop_scale(world: World, spec: Pinhole) -> Floats | None:
     drop-off is in the world (the flat floor, cached elsewhere, is then the answer)."""
     if not world.drops:
         return None
-    first, z, k = _rays(spec)
+    first, z, k = floor_rays(spec)
     r = world.robot
     heading = r.theta + math.radians(spec.mount_yaw_deg)
     c, s = math.cos(heading), math.sin(heading)

@@ -7,7 +7,8 @@ person in the simple world, world.flat_world) is a billboard: a cut-out of a rea
 (scikit-image samples) drawn the same way, its whole rectangle. Obstacles are drawn as boxes of
 their own height, grey (solid), near-black (dark), bright steel (mirror) or faintly tinted over
 what is behind them (glass); the floor beyond a drop-off is a little darker (simworld/floor.py
-finds its pixels).
+finds its pixels). Walls are quads in perspective (simworld/walls.py), in front of the floor,
+hiding whatever is farther in each pixel (glass ones tint it).
 Nearer things are drawn over farther ones. The camera stands at the robot's centre,
 ``height_m`` above the floor, and looks ``mount_yaw_deg`` counter-clockwise from the robot's +x
 (0 the front camera, 180 the rear one), with square pixels and the configured horizontal field
@@ -20,14 +21,26 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cache
+from typing import Any
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from common.images import Image, load_sample
 from simworld.body import Silhouette
 from simworld.floor import drop_scale
 from simworld.people import body_silhouette, stamp
+from simworld.walls import (
+    GLASS_ALPHA,
+    GLASS_BGR,
+    Floats,
+    WallView,
+    floor_z,
+    in_front,
+    tint_glass,
+    wall_view,
+)
 from simworld.world import Material, World
 
 # Crops (x1, y1, x2, y2) of the scikit-image photos, around the object each one shows.
@@ -49,10 +62,8 @@ DARK_BGR = (14, 14, 16)
 MIRROR_BGR = (205, 200, 196)
 #: The colour of an obstacle's box by its material (a solid one's is OBSTACLE_BGR).
 MATERIAL_BGR = {Material.DARK: DARK_BGR, Material.MIRROR: MIRROR_BGR}
-#: A glass obstacle: this much of a pale blue-green tint over what is behind it, so a person
-#: sees a pane is there and the detector still sees through it.
-GLASS_BGR = (200, 215, 190)
-GLASS_ALPHA = 0.12
+# A glass obstacle (or wall) is GLASS_ALPHA of a pale blue-green tint GLASS_BGR over what is
+# behind it (simworld/walls.py holds both).
 #: The lower floor beyond a drop-off is drawn this much as bright as the upper floor: in shadow
 #: but still well above sim.depth_dark_level, so its depth is not lost to dark dropout.
 DROP_SHADE = 0.8
@@ -180,36 +191,64 @@ def layout(world: World, spec: CameraSpec) -> list[Placed]:
 
 
 def render(world: World, spec: CameraSpec) -> Image:
-    """The image of ``world`` from a camera on the robot (its pose, plus the mounting yaw)."""
+    """The image of ``world`` from a camera on the robot (its pose, plus the mounting yaw).
+    Walls (simworld/walls.py) are drawn in front of the floor, and every other thing only
+    where it is nearer than a wall; a glass wall tints what is behind it."""
     canvas = background(spec).copy()
     scale = drop_scale(world, spec)
     if scale is not None:
         # cv2's masked copy: numpy's (copyto with where=, boolean indexing) took ~3 ms here.
         cv2.copyTo(_shaded_background(spec), (scale > 1.0).view(np.uint8), canvas)
+    view = wall_view(world, spec)
+    scene_z = None
+    if view is not None:
+        cv2.copyTo(view.colour, view.opaque.view(np.uint8), canvas)
+        scene_z = np.minimum(floor_z(spec) if scale is None else floor_z(spec) * scale, view.z)
     for p in layout(world, spec):
-        if p.rect is None:
-            continue
-        cx0, cy0, cx1, cy1 = p.rect
-        if p.img is None:
-            if p.material == Material.GLASS:
-                patch = canvas[cy0:cy1, cx0:cx1].astype(np.float32)
-                tint = np.array(GLASS_BGR, np.float32)
-                canvas[cy0:cy1, cx0:cx1] = (patch + GLASS_ALPHA * (tint - patch)).astype(np.uint8)
-            else:
-                canvas[cy0:cy1, cx0:cx1] = MATERIAL_BGR.get(p.material, OBSTACLE_BGR)
-            continue
-        if p.body is not None:
-            st = stamp(p.body, p.full, p.rect)
-            view = canvas[cy0:cy1, cx0:cx1]
-            cv2.copyTo(st.colour, st.alpha, view)
-            continue
+        if p.rect is not None:
+            _draw(canvas, p, view, scene_z)
+    if view is not None and scene_z is not None:
+        tint_glass(canvas, view, scene_z)
+    return canvas
+
+
+def _draw(canvas: Image, p: Placed, view: WallView | None, scene_z: Floats | None) -> None:
+    """Draw one placed thing on ``canvas`` where it is nearer than the walls (``view``; None:
+    everywhere), lowering ``scene_z`` (the depth each pixel shows) where it is drawn."""
+    assert p.rect is not None
+    cx0, cy0, cx1, cy1 = p.rect
+    view_px = canvas[cy0:cy1, cx0:cx1]
+    st = None if p.body is None else stamp(p.body, p.full, p.rect)
+    z: float | Floats = p.z - p.radius if st is None else np.float32(p.z) + st.dz
+    shown = in_front(view, p.rect, z)
+    if st is not None:
+        alpha = st.alpha if shown is None else st.alpha * shown.view(np.uint8)
+        cv2.copyTo(st.colour, alpha, view_px)
+        shown = alpha > 0 if shown is not None else None
+    elif p.img is None and p.material == Material.GLASS:
+        patch = view_px.astype(np.float32)
+        tint = np.array(GLASS_BGR, np.float32)
+        _put(view_px, (patch + GLASS_ALPHA * (tint - patch)).astype(np.uint8), shown)
+    elif p.img is None:
+        _put(view_px, np.array(MATERIAL_BGR.get(p.material, OBSTACLE_BGR), np.uint8), shown)
+    else:
         x0, y0, x1, y1 = p.full
         w, h = x1 - x0, y1 - y0
-        scaled = cv2.resize(
-            p.img, (w, h), interpolation=cv2.INTER_AREA if w < p.img.shape[1] else cv2.INTER_LINEAR
-        )
-        canvas[cy0:cy1, cx0:cx1] = scaled[cy0 - y0 : cy1 - y0, cx0 - x0 : cx1 - x0]
-    return canvas
+        inter = cv2.INTER_AREA if w < p.img.shape[1] else cv2.INTER_LINEAR
+        scaled = cv2.resize(p.img, (w, h), interpolation=inter)
+        _put(view_px, scaled[cy0 - y0 : cy1 - y0, cx0 - x0 : cx1 - x0], shown)
+    if scene_z is not None and shown is not None:
+        zs = scene_z[cy0:cy1, cx0:cx1]
+        zs[shown] = np.broadcast_to(np.asarray(z, np.float32), zs.shape)[shown]
+
+
+def _put(dst: Image, src: npt.NDArray[Any], where: npt.NDArray[np.bool_] | None) -> None:
+    """``dst[...] = src`` (an image of ``dst``'s shape, or one colour), only ``where`` (None:
+    everywhere)."""
+    if where is None:
+        dst[...] = src
+    else:
+        dst[where] = np.broadcast_to(src, dst.shape)[where]
 
 
 def _to_camera(dx: float, dy: float, c: float, s: float) -> tuple[float, float]:

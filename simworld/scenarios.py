@@ -26,31 +26,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from simworld.body import Body, body_for
-from simworld.world import CARD_HEIGHT_M, Drop, Material, Obstacle, Robot, Target, World
-
-
-def person(
-    id: str,
-    *path: tuple[float, float, float],
-    mirror: bool = False,
-    body: Body | None = None,
-    flat: bool = False,
-) -> Target:
-    """A person walking ``path`` (world.Target's waypoints). By default they have a body of
-    their own look, the same for the same ``id`` (simworld/body.py :func:`body_for`), or
-    ``body``; ``flat``: the flat photo cut-out of :data:`CARD_HEIGHT_M` (``mirror``: flipped
-    left-right), as in the simple world."""
-    if flat:
-        return Target(id, "person", "person", CARD_HEIGHT_M, path, mirror=mirror)
-    b = body_for(id) if body is None else body
-    return Target(id, "person", "person", b.height_m, path, mirror=mirror, body=b)
-
-
-def card(id: str, *path: tuple[float, float, float], mirror: bool = False) -> Target:
-    """A flat-card person (:func:`person` with ``flat``)."""
-    return person(id, *path, mirror=mirror, flat=True)
-
+from simworld import crowds, rooms
+from simworld.body import body_for
+from simworld.cast import card as card
+from simworld.cast import person as person
+from simworld.world import Drop, Material, Obstacle, Robot, Target, World
 
 DEMO_CENTRE = (4.0, 3.5)  # the demo's walk: a circle the person walks round, anticlockwise
 DEMO_RADIUS_M = 3.5
@@ -231,6 +211,63 @@ HAZARDS: tuple[Scenario, ...] = (
                Obstacle(HAZARD_X_M, 0.0, 0.3, height_m=1.0, material=Material.GLASS),))),
 )  # fmt: skip
 
+#: How long the rooms' and the crowds' runs last, and when their worlds stop changing (the run
+#: may end SETTLE_S after): alice's last waypoint, or the last person's.
+ROOMS_DURATION_S, ROOMS_SETTLE_FROM_S = 45.0, 23.0
+STEP_ROOM_DURATION_S, STEP_ROOM_SETTLE_FROM_S = 40.0, 22.0
+CROWD_DURATION_S = 35.0
+
+
+def _crowd(
+    name: str,
+    description: str,
+    build: Callable[[], World],
+    settle_from_s: float,
+    duration_s: float = CROWD_DURATION_S,
+) -> Scenario:
+    """A crowd scenario: the robot must end at its stop distance from alice, facing her."""
+    return Scenario(name, description, build, duration_s, must_face=True, settle_s=SETTLE_S,
+                    settle_from_s=settle_from_s)  # fmt: skip
+
+
+#: Rooms (issue 41, simworld/rooms.py): alice walks through rooms among walls, people and
+#: every hazard kind; the robot follows her where the way is clear and never hits, nor goes
+#: over, one.
+ROOM_SCENARIOS: tuple[Scenario, ...] = (
+    Scenario("rooms",
+             "two rooms joined by a 2 m doorway: alice walks through both and stands by the "
+             "second's far corner; bob and carol about; a low box, a thin pole, a black bin, a "
+             "glass pane, a steel bin (a mirror) and a 0.3 m step down off her path: follow "
+             "her, touch nothing, never go over the step",
+             rooms.rooms, ROOMS_DURATION_S, must_face=True, settle_s=SETTLE_S,
+             settle_from_s=ROOMS_SETTLE_FROM_S),
+    Scenario("step_room",
+             "a room and, through a doorway, a sunken room a 0.2 m step down: alice walks "
+             "down the step and stands 1.5 m beyond its edge; bob and carol about; a low box, a "
+             "black pole, a glass pane and a steel bin in the first room: follow her to the "
+             "edge and stop there",
+             rooms.step_room, STEP_ROOM_DURATION_S, must_reach=False, settle_s=SETTLE_S,
+             settle_from_s=STEP_ROOM_SETTLE_FROM_S),
+)  # fmt: skip
+
+#: Crowds and occlusion (issue 41, simworld/crowds.py): 3 to 5 people; the robot must end
+#: following alice, facing her, whoever passed in front.
+CROWD_SCENARIOS: tuple[Scenario, ...] = (
+    _crowd("passing", "alice 5 m ahead walks on; bob crosses between her and the robot at "
+           "1 m/s; carol stands by: the lock stays on alice", crowds.passing, 13.0),
+    _crowd("swap", "alice and bob side by side 6 m ahead swap places, bob passing in front of "
+           "her, then step apart; carol stands between them: follow alice", crowds.swap, 9.0),
+    _crowd("pillar", "alice walks across behind a pillar 7 m ahead, hidden 1-2 s; bob and "
+           "carol stand by: find her again, go round nothing, follow her", crowds.pillar,
+           crowds.PILLAR_END_S),
+    _crowd("fast_turn", "alice 2.5 m ahead strides 3.7 m left at 1.5 m/s, out of view unless "
+           "the robot turns at once; bob and carol stand farther on: turn, follow alice",
+           crowds.fast_turn, 7.0, duration_s=25.0),
+    _crowd("crowd", "five people: alice walks on to the left while bob and carol cross her "
+           "path, dave stands beyond and erin walks down the side: follow alice",
+           crowds.crowd, 15.0),
+)  # fmt: skip
+
 SCENARIOS: dict[str, Scenario] = {
     s.name: s
     for s in (
@@ -281,5 +318,7 @@ SCENARIOS: dict[str, Scenario] = {
                  _appears, 32.0, cameras={"left": LEFT_CAMERA, "rear": REAR_CAMERA},
                  settle_s=SETTLE_S, settle_from_s=APPEARS_AT_S[-1] + 3.0),
         *HAZARDS,
+        *ROOM_SCENARIOS,
+        *CROWD_SCENARIOS,
     )
 }  # fmt: skip

@@ -1,4 +1,5 @@
-"""The simulated world: a unicycle robot, static obstacles, drop-offs and scripted targets. Pure.
+"""The simulated world: a unicycle robot, static obstacles, walls, drop-offs and scripted targets.
+Pure.
 
 World frame: x forward at the start, y to the left, theta counter-clockwise (REP 103). The
 robot integrates the latest Twist under its own speed and acceleration limits, like a real
@@ -6,7 +7,9 @@ base, and stops by itself when commands stop arriving (its watchdog).
 
 The hazards are as hard as a real floor's for a robot that sees by depth: an obstacle has a
 height and a material (:class:`Material`: what a laser and a depth camera make of it), and the
-floor may drop away (:class:`Drop`: a kerb, a step), which no planar laser sees.
+floor may drop away (:class:`Drop`: a kerb, a step), which no planar laser sees. A room is
+walls (:class:`Wall`: straight segments of a height and a material) that hide what is behind
+them from the cameras and the laser.
 """
 
 from __future__ import annotations
@@ -122,6 +125,36 @@ class Drop:
         return math.hypot(max(dx, 0.0), max(dy, 0.0))
 
 
+@dataclass(frozen=True, slots=True)
+class Wall:
+    """A straight wall from (x0, y0) to (x1, y1) (metres, world frame), standing on the floor,
+    ``height_m`` tall, of no thickness, its surface a :class:`Material` (solid, dark or glass;
+    a mirror wall is not modelled: a mirror is a round :class:`Obstacle`). The laser sees it
+    where it is taller than the laser's plane and not glass; the cameras draw it as a quad in
+    perspective (simworld/walls.py), hiding what is behind it unless it is glass."""
+
+    x0: float
+    y0: float
+    x1: float
+    y1: float
+    height_m: float = 2.5
+    material: Material = Material.SOLID
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "material", Material(self.material))
+        if self.material == Material.MIRROR:
+            raise ValueError("a mirror wall is not modelled: use a round Obstacle of MIRROR")
+        if (self.x0, self.y0) == (self.x1, self.y1) or self.height_m <= 0:
+            raise ValueError(f"a wall needs a length and a height: {self}")
+
+    def distance(self, x: float, y: float) -> float:
+        """From the point (x, y) to the nearest point of the wall (metres)."""
+        ex, ey = self.x1 - self.x0, self.y1 - self.y0
+        a = ((x - self.x0) * ex + (y - self.y0) * ey) / (ex * ex + ey * ey)
+        a = min(max(a, 0.0), 1.0)
+        return math.hypot(x - (self.x0 + a * ex), y - (self.y0 + a * ey))
+
+
 #: A flat-card person's height (m): the simple world's, every person's before bodies.
 CARD_HEIGHT_M = 1.7
 
@@ -181,6 +214,7 @@ class World:
     t: float = 0.0
     last_cmd: tuple[float, float] = (0.0, 0.0)
     last_cmd_t: float = -math.inf
+    walls: list[Wall] = field(default_factory=list)
 
     def command(self, v: float, w: float) -> bool:
         """A Twist arrived; False (and the base stops) when it is beyond what the base takes."""
@@ -225,12 +259,24 @@ class World:
         rows += [(*tg.position(self.t), tg.radius) for tg in self.targets]
         return np.array(rows, np.float64).reshape(-1, 3)
 
+    def laser_walls(self, laser_height_m: float) -> npt.NDArray[np.float64]:
+        """The walls a planar laser ``laser_height_m`` above the floor sees, as (x0, y0, x1, y1)
+        rows: those taller than its plane and not glass."""
+        rows = [
+            (w.x0, w.y0, w.x1, w.y1)
+            for w in self.walls
+            if w.height_m > laser_height_m and w.material != Material.GLASS
+        ]
+        return np.array(rows, np.float64).reshape(-1, 4)
+
     def clearance(self) -> float:
-        """Distance from the robot's edge to the nearest obstacle's edge (inf if none)."""
-        if not self.obstacles:
-            return math.inf
+        """Distance from the robot's edge to the nearest obstacle's edge or wall (inf if none)."""
         r = self.robot
-        return min(math.hypot(o.x - r.x, o.y - r.y) - o.radius - r.radius for o in self.obstacles)
+        return min(
+            [math.hypot(o.x - r.x, o.y - r.y) - o.radius - r.radius for o in self.obstacles]
+            + [w.distance(r.x, r.y) - r.radius for w in self.walls],
+            default=math.inf,
+        )
 
 
 def flat_world(world: World) -> World:
@@ -246,4 +292,5 @@ def flat_world(world: World) -> World:
         ],
         obstacles=list(world.obstacles),
         drops=list(world.drops),
+        walls=list(world.walls),
     )

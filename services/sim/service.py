@@ -399,7 +399,13 @@ def _publish_due(
             angle_increment=laser.angle_increment,
             range_min=laser.range_min,
             range_max=laser.range_max,
-            ranges=cast(pose, world.laser_circles(laser.height_m), laser, rng),
+            ranges=cast(
+                pose,
+                world.laser_circles(laser.height_m),
+                laser,
+                rng,
+                segments=world.laser_walls(laser.height_m),
+            ),
         )
         out.scan(scan)
     if clocks["truth"].due(t):

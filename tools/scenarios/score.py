@@ -6,8 +6,9 @@ Figures:
                             follow distance + tolerance (None if never)
     final_distance_m        robot centre to the followed target's surface at the end (what a
                             laser reads)
-    min_clearance_m         least distance from the robot centre to an obstacle's surface,
-                            as the laser measures it (None without obstacles)
+    min_clearance_m         least distance from the robot centre to an obstacle's surface or
+                            a wall, as the laser measures it (None without obstacles and
+                            walls)
     min_edge_clearance_m    least distance from the robot's circle to a drop-off's rectangle:
                             centre to rectangle less the robot's radius; negative: over the
                             edge (None without drop-offs)
@@ -94,9 +95,12 @@ def score(
         return {"success": False, "reason": "no simulation time elapsed"}
     clearance = min(
         (
-            math.hypot(o.x - t.robot[0], o.y - t.robot[1]) - o.radius
-            for t in truths
-            for o in world.obstacles
+            *(
+                math.hypot(o.x - t.robot[0], o.y - t.robot[1]) - o.radius
+                for t in truths
+                for o in world.obstacles
+            ),
+            *(w.distance(t.robot[0], t.robot[1]) for t in truths for w in world.walls),
         ),
         default=None,
     )
