@@ -297,18 +297,23 @@ def test_a_depth_scan_stage_restarted_after_a_crash_remembers_what_it_saw(make_s
         # after the kill: the killed stage's last memory stays fresh for depth_timeout_s, and a
         # stage slow to start (seconds on a loaded machine) is not back within the ticks judged.
         restarted_ns = now().wall_ns
-        new = lambda: [m for m in stamps(memories) if m > restarted_ns]  # noqa: E731
+
+        def new() -> list[int]:
+            return [m for m in stamps(memories) if m > restarted_ns]
+
         wait_for(new, 60, "the restarted stage's first memory")
-        # The new stage's first memory back: remembered again, and from then on only that.
-        back = lambda: [  # noqa: E731
-            i for i, x in enumerate(statuses(status_raw))
-            if x.header.stamp_ns > min(new()) and x.reason.endswith("(remembered)")
-        ]  # fmt: skip
+
+        def back() -> list[int]:
+            """The new stage's memory back: remembered again, and from then on only that."""
+            return [
+                i for i, x in enumerate(statuses(status_raw))
+                if x.header.stamp_ns > min(new()) and x.reason.endswith("(remembered)")
+            ]  # fmt: skip
+
         wait_for(back, 60, "the restarted stage's memory")
-        start = back()[0]
-        seen = lambda: on_fresh_scans(status_raw, start + TICKS)  # noqa: E731
-        wait_for(lambda: len(seen()) >= TICKS, 60, "ticks after the restart")
-        reasons = set(seen())
+        start = back()[0] + TICKS
+        wait_for(lambda: len(on_fresh_scans(status_raw, start)) >= TICKS, 60, "ticks after it")
+        reasons = set(on_fresh_scans(status_raw, start))
         assert all(r.endswith("(remembered)") for r in reasons), reasons
         assert forward(cmds, since_cmds) == [], "drove forward after the stage was killed"
     finally:
