@@ -33,9 +33,13 @@ laser the nearest point of the circle (``Target.radius``) the simulator's laser 
 not (its horizontal range minus the radius). Extras (:data:`EXTRA`): ``depth_3d``, ours' 3D
 distance against the point's; ``box``, box_distance for a ``target_height_m`` person against
 the distance to the target's axis at half its height (boxes cut by the image's top or bottom
-counted unknown). Bands by the depth truth's horizontal range, every method scored on the same
-rows. Per method and band: median and p95 of the absolute error (m and % of the truth's range)
-and the share of rows it called unknown. Ctrl-C stops it at once; ``--json`` prints one object.
+counted unknown); ``surface``, an oracle: ours' statistic over the target's own pixels in the
+box read from the fault-free depth (depth_methods.py ``surface``), which tells the body's shape
+from the camera's faults. Bands by the depth truth's horizontal range, every method scored on
+the same rows. Per method and band: median and p95 of the absolute error (m and % of the
+truth's range), the share of rows it called unknown, and the median over every row with an
+unknown counted as a miss (``median_all_pct``; None where that is a miss). Ctrl-C stops it at
+once; ``--json`` prints one object.
 """
 
 from __future__ import annotations
