@@ -9,9 +9,10 @@ the model alone) with the choice the detector would make; attention runs three c
 on one CPU worker with attention on and off (frames per camera, time to find a person stepping
 into an empty camera); estop times ``zstack estop
 engage``'s start to its first put against another revision; depth measures the distance to
-detected targets against the simulator's truth (the depth method, a yolo_ros-like one, the
-laser, the box height) and the depth stage's time per frame. (The detector's own benchmark is
-``python -m tools.detector benchmark``.)
+detected people against the simulator's truth in its hard world (``--world simple``: today's)
+by five methods side by side (ours, a yolo_ros-like one, the box's centre pixel, ours without
+background rejection, the laser) and the depth stage's time per frame. (The detector's own
+benchmark is ``python -m tools.detector benchmark``.)
 """
 
 from __future__ import annotations
@@ -310,6 +311,13 @@ def _depth_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=2, help="the detector's threads (default 2)")
     p.add_argument("--models-dir", help="where the default model is (default: the stack's)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--world",
+        choices=("hard", "simple"),
+        default="hard",
+        help="the simulator's world: hard (people with bodies, the D435-like camera's faults; "
+        "the default) or simple (flat cards, today's camera)",
+    )
 
 
 def depth(args: argparse.Namespace) -> int:
@@ -336,8 +344,9 @@ COMMANDS = [
             _attention_arguments, attention),
     Command("estop", "how soon zstack estop puts its first EStop, against another revision",
             _estop_arguments, estop),
-    Command("depth", "distance to detected targets against the simulator's truth: the depth "
-            "method, a yolo_ros-like one, the laser and the box height; the depth stage's time",
+    Command("depth", "distance to detected people against the simulator's truth (hard world by "
+            "default): ours, a yolo_ros-like one, the centre pixel, ours without background "
+            "rejection, the laser; the depth stage's time",
             _depth_arguments, depth),
 ]  # fmt: skip
 
