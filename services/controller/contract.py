@@ -132,7 +132,9 @@ class ControllerSettings:
             camera's view, the lock passes to a box of its class in another camera within
             ``handover_gate_deg`` of its expected bearing, up to ``handover_window_s`` after it
             was last seen; while it is expected between the cameras' fields of view the robot
-            keeps turning towards it (without driving) for that long.
+            keeps turning towards it (without driving) for that long, and longer while it
+            still turns towards a camera's view (at most the half turn ``max_angular`` takes
+            more): the camera it turns into then has ``target_lost_timeout_s`` to see it.
     Forward safety, in both modes: forward only while the laser sector of ``sector_width_deg``
     straight ahead and the corridor ``robot_width_m`` wide are clear beyond
     ``safety_distance_m`` plus the room needed to brake. A missing scan, or one older than

@@ -128,6 +128,9 @@ class Controller:
         self.obstacles: tuple[Obstacles, ...] = ()
         self.turns: deque[tuple[float, float]] = deque(maxlen=1024)  # (time, w) commanded
         self.last_bearing: tuple[float, float] | None = None  # (bearing, when captured)
+        # While the target is predicted between the cameras: the newest tick's time plus
+        # target_lost_timeout_s (see _handover_until).
+        self.between_until = -math.inf
 
     def set_cameras(self, cameras: Mapping[str, Mount], withdrawn: Iterable[str] = ()) -> None:
         """The cameras announced now, with their geometry, and those withdrawn since the last
@@ -208,6 +211,7 @@ class Controller:
         self.previous = (0.0, 0.0)
         self.pid.reset()
         self.locked, self.last_aim, self.last_bearing = None, None, None
+        self.between_until = -math.inf
         self.turns.clear()
         return cmd
 
@@ -261,6 +265,19 @@ class Controller:
                 return self._handover(found, now)
         return max(found, key=lambda x: x.angular_area)
 
+    def _handover_until(self) -> float:
+        """Until when a target not seen may be held and handed to another camera:
+        ``handover_window_s`` after it was last seen, and, once it has been predicted between the
+        cameras since, ``target_lost_timeout_s`` after the last tick it was (the camera the
+        robot turned it into has that long to see it), up to the half turn at ``max_angular``
+        more: a slow turn (its acceleration, a blurred image losing the target early) does not
+        end the hold while the target is still out of every view."""
+        s = self.s
+        window = self.last_seen + s.handover_window_s
+        if self.between_until <= self.last_seen:
+            return window
+        return max(window, min(self.between_until, window + math.pi / s.max_angular))
+
     def _handover(self, found: list[Sighting], now: float) -> Sighting | None:
         """The locked target as another camera sees it: the box of the same class nearest to
         where it should be now, within ``handover_gate_deg``, for ``handover_window_s`` after
@@ -270,7 +287,7 @@ class Controller:
             self.locked is None
             or self.last_aim is None
             or predicted is None
-            or now - self.last_seen > s.handover_window_s
+            or now > self._handover_until()
         ):
             return None
         gate = math.radians(s.handover_gate_deg)
@@ -347,11 +364,16 @@ class Controller:
         the target was, net of our own turning since; drive on only while a scan shows the way
         clear (with ``no_laser`` too).
         A target predicted between the cameras is held up to ``handover_window_s``, turning
-        in place. Then stop and unlock."""
+        in place, and on while the robot still turns towards a camera's view
+        (:meth:`_handover_until`). Then stop and unlock."""
         s = self.s
         between = self._between_cameras(now, fresh)
-        hold_s = max(s.target_lost_timeout_s, s.handover_window_s if between else 0.0)
-        if self.last_aim is not None and now - self.last_seen <= hold_s:
+        if between:
+            self.between_until = now + s.target_lost_timeout_s
+        until = self.last_seen + s.target_lost_timeout_s
+        if between or self.between_until > self.last_seen:
+            until = max(until, self._handover_until())
+        if self.last_aim is not None and now <= until:
             held = self.last_aim
             # Driving on towards a target not seen needs a scan that shows the way clear,
             # even with no_laser (which lets the robot drive only towards a target in view).

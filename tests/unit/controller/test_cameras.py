@@ -315,3 +315,43 @@ def test_an_engage_halts_from_the_handler_then_reports(tmp_path: Path) -> None:
     assert calls == ["halt engaged=True", "halted saved=True"]
     handlers.on_estop(b"garbage")  # fails safe: a press, acted on at once all the same
     assert calls[2:] == ["halt engaged=True", "halted saved=True"]
+
+
+class BlurredTurntable(Turntable):
+    """A turntable whose cameras see nothing while the robot turns faster than ``blur_rad_s``
+    (motion blur: the hard world's colour fault, sim.colour_exposure_ms)."""
+
+    def __init__(self, *args: object, blur_rad_s: float) -> None:
+        super().__init__(*args)  # type: ignore[arg-type]
+        self.blur_rad_s, self.w = blur_rad_s, 0.0
+
+    def inputs(self, t: float) -> Inputs:
+        if abs(self.w) <= self.blur_rad_s:
+            return super().inputs(t)
+        stamp = int(t * 1e9) + 1
+        blind = dataclasses.replace(nobody(), header=dataclasses.replace(HEADER, stamp_ns=stamp))
+        found = {cam: blind for cam in self.cameras}
+        return Inputs(views(**found), laser({self.bearing(): self.distance}, 360.0), 0.0)
+
+    def run(self, ctl: Controller, seconds: float, dt: float = 0.05) -> list[VelocityCommand]:
+        cmds = []
+        for k in range(int(seconds / dt)):
+            cmd = ctl.step(self.inputs(k * dt), k * dt)
+            cmds.append(cmd)
+            self.w = cmd.angular_z
+            self.heading += cmd.angular_z * dt
+        return cmds
+
+
+def test_a_turn_blind_with_blur_goes_on_until_a_camera_can_see_the_target() -> None:
+    # Issue 41's hard world (test_scenarios' behind, a CI run): the person behind, the robot
+    # turns round, and its images blur so that no camera sees anyone while it turns fast. The
+    # hold through the blind arc ran out (handover_window_s) with the target still between the
+    # cameras, so the robot stopped there, seeing no one, for good. It now turns on until the
+    # target is predicted in a camera's view, and that camera gets target_lost_timeout_s.
+    table = BlurredTurntable(TWO, math.radians(-172.0), 4.0, blur_rad_s=0.3)
+    ctl = Controller(FOLLOW, TWO)
+    cmds = table.run(ctl, 12.0)
+    assert cmds[0].camera == "rear"
+    assert abs(table.bearing()) < math.radians(HFOV / 2), math.degrees(table.bearing())
+    assert cmds[-1].camera == "front" and cmds[-1].state == "following", cmds[-1]
