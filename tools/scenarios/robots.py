@@ -25,6 +25,7 @@ from common.contracts import ControllerMode, ScenarioResult
 from common.errors import StackError
 from common.keys import Keys
 from common.zenoh_bus import ZenohBus, open_session
+from services.sim.worlds import world_line
 from simworld.scenarios import SCENARIOS
 from stack.config import Config
 from stack.config_file import to_toml
@@ -195,6 +196,7 @@ def run_robots(
     for i, (config, rec, proc) in enumerate(zip(plan.robots, recs, procs[1:], strict=True), 1):
         result = score(scenario, rec, scenario.build(), config.controller, config.camera.hfov_deg)
         result["mode"] = str(config.controller.mode)
+        result["world"] = world_line(config.sim)  # which world and faults each robot's sim ran
         result["log"] = str(workdir / f"robot{i}.log")
         result["supervisor_exit_code"] = proc.returncode
         results.append(result)
