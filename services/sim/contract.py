@@ -20,10 +20,20 @@ FRAMES_OUT = "frames_out"  # in all and per camera
 DEPTH_OUT = "depth_out"  # depth images (sim.depth), in all and per camera
 COMMANDS_OUT_OF_RANGE = "commands_out_of_range"  # beyond what the base takes: it stops
 COMMANDS_FROM_SEVERAL_SOURCES = "commands_from_several_sources"
+#: Milliseconds the world fell behind the wall clock beyond ``sim.catch_up_max_s`` a pass and
+#: did not make up (services/sim/pacing.py): a CPU so starved that the world ran slow.
+PHYSICS_BEHIND_MS = "physics_behind_ms"
 
 PER_CAMERA = frozenset({FRAMES_OUT, DEPTH_OUT})
 COUNTERS = frozenset(
-    {*COMMON, FRAMES_OUT, DEPTH_OUT, COMMANDS_OUT_OF_RANGE, COMMANDS_FROM_SEVERAL_SOURCES}
+    {
+        *COMMON,
+        FRAMES_OUT,
+        DEPTH_OUT,
+        COMMANDS_OUT_OF_RANGE,
+        COMMANDS_FROM_SEVERAL_SOURCES,
+        PHYSICS_BEHIND_MS,
+    }
 )
 
 SERVICE = "sim"
@@ -85,6 +95,10 @@ class SimSettings:
     carries every frame, scan and command. Commands from more
     than one publisher within ``command_sources_window_s`` are counted and warned about.
 
+    ``catch_up_max_s``: the world keeps the wall clock's time (services/sim/pacing.py): a
+    pass slower than a physics step takes the steps it owes, up to this much time a pass (the
+    rest counted ``physics_behind_ms``), so that a starved simulator does not slow the base.
+
     ``laser``: false plays a robot with no laser (no scan at all). ``laser_height_m``: the
     height of its scan plane above the floor (0.2 m: a 2D lidar on a small base); it sees only
     obstacles taller than that, never a glass one and never a drop-off (simworld/world.py).
@@ -109,6 +123,7 @@ class SimSettings:
     scenario: str = "demo"
     wait_for: Annotated[tuple[str, ...], Length(0, 6)] = ("detector", "controller")
     physics_hz: Annotated[float, Range(1, 1000)] = 50.0
+    catch_up_max_s: Annotated[float, Range(0, 5)] = 0.2
     camera_rate_hz: Annotated[float, Range(0.1, 100)] = 5.0
     scan_rate_hz: Annotated[float, Range(0.1, 100)] = 10.0
     truth_rate_hz: Annotated[float, Range(0.1, 100)] = 20.0

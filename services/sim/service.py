@@ -40,6 +40,7 @@ from rosmsg.wire import SENSOR_DATA_QOS
 from services.ros2.contract import camera_topics
 from services.sim import contract
 from services.sim.cameras import SimCamera, sim_cameras
+from services.sim.pacing import Pace
 from services.sim.waiting import WARN_PERIOD_S, Waiting, waiting_line
 from services.sim.worlds import Faults, world_for, world_line
 from simworld.depth import depth_frame
@@ -333,6 +334,8 @@ def _simulate(
 
     clocks = new_clocks()
     dt = 1.0 / s.physics_hz
+    pace = Pace(dt, max(1, round(s.catch_up_max_s / dt)))
+    behind_ms = 0
     started = False
     boot = next_tick = next_check = mono_s()
     next_warning = boot + WARN_PERIOD_S
@@ -348,13 +351,22 @@ def _simulate(
             started = not missing
             if started:
                 clocks = new_clocks()
+                pace.start(now)
                 node.log.info("scenario clock started")
             elif now >= next_warning:
                 next_warning = now + WARN_PERIOD_S
                 node.log.warning("%s", waiting_line(missing, now - boot))
         with lock:
             if started:
-                world.advance(dt)
+                # The world keeps the wall clock's time (pacing.py): a slow pass takes the
+                # steps it is owed, so a starved simulator does not slow the robot's base.
+                for _ in range(pace.due(now)):
+                    world.advance(dt)
+                if int(pace.given_up_s * 1000) > behind_ms:
+                    node.counters.add(
+                        contract.PHYSICS_BEHIND_MS, int(pace.given_up_s * 1000) - behind_ms
+                    )
+                    behind_ms = int(pace.given_up_s * 1000)
             t = world.t if started else now - boot
             _publish_due(
                 node, world, t, clocks, out, truth_pub, cameras, laser, rng, faults,
