@@ -79,7 +79,9 @@ class DepthParams:
     ``gap_fraction``: a run of bins holding less than this fraction of the box's weight
     separates two clusters. ``min_cluster_fraction``: the nearest cluster with at least this
     fraction of the weight is the object. ``extent_percentile``: the extent runs from this
-    percentile to its complement of the object's points."""
+    percentile to its complement of the object's points. ``reject_background`` false takes
+    every valid reading in the box as the object's (no clusters): only to measure what the
+    rejection buys (tools/benchmarks/depth_methods.py)."""
 
     min_valid_pixels: int = 20
     min_valid_fraction: float = 0.05
@@ -90,6 +92,7 @@ class DepthParams:
     gap_fraction: float = 0.005
     min_cluster_fraction: float = 0.2
     extent_percentile: float = 2.0
+    reject_background: bool = True
 
 
 def depth_metres(frame: DepthFrame) -> Depth:
@@ -188,8 +191,11 @@ def _measure_box(
     hist = np.bincount(idx, weight, int(idx.max()) + 1)
     smooth = np.convolve(hist, np.full(3, 1 / 3), mode="same")
     total = float(hist.sum())
-    first, last = _object_bins(smooth, total, p)
-    sel = (idx >= first) & (idx <= last)
+    if p.reject_background:
+        first, last = _object_bins(smooth, total, p)
+        sel = (idx >= first) & (idx <= last)
+    else:
+        sel = np.ones(len(z), bool)
     if int(np.count_nonzero(sel)) < p.min_valid_pixels:
         return None
     zs, ws, us, vs = z[sel], weight[sel], u[sel], v[sel]

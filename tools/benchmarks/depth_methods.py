@@ -27,12 +27,14 @@ pixel at the box's centre (with bodies that pixel often shows the floor between 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import numpy.typing as npt
 
 from perception import DepthParams, Intrinsics, iou_matrix
+from perception import measure_depth as measure
 from perception import unknown_depth as unknown
 
 Depth = npt.NDArray[np.float32]  # (h, w) metres, NaN where there is no reading
@@ -98,13 +100,9 @@ def no_rejection(
     xyxy: npt.NDArray[np.float32],
     params: DepthParams = OURS,
 ) -> Columns:
-    """Each box measured as ours is, its background rejection left out (module docstring)."""
-    out = unknown(len(xyxy))
-    for i, box in enumerate(np.asarray(xyxy, np.float64).reshape(-1, 4)):
-        row = _no_rejection_box(depth, intr, box, params)
-        if row is not None:
-            _set(out, i, *row)
-    return out
+    """Each box measured as ours is, its background rejection left out (module docstring):
+    ours with ``DepthParams.reject_background`` off."""
+    return measure(depth, intr, xyxy, dataclasses.replace(params, reject_background=False))
 
 
 def surface(
@@ -120,36 +118,3 @@ def surface(
     masked = np.where(owner == index, truth, np.float32(np.nan)).astype(np.float32)
     out = no_rejection(masked, intr, np.asarray(box, np.float32).reshape(1, 4), params)
     return float(out["x_m"][0]), float(out["z_m"][0])
-
-
-def _no_rejection_box(
-    depth: Depth, intr: Intrinsics, box: npt.NDArray[np.float64], p: DepthParams
-) -> tuple[float, float, float] | None:
-    x1, y1, x2, y2 = (float(b) for b in box)
-    if not np.isfinite(box).all() or x2 <= x1 or y2 <= y1:
-        return None
-    h, w = depth.shape
-    c0, c1 = max(0, int(np.floor(x1))), min(w, int(np.ceil(x2)))
-    r0, r1 = max(0, int(np.floor(y1))), min(h, int(np.ceil(y2)))
-    if c1 <= c0 or r1 <= r0:
-        return None
-    step = max(1, int(np.ceil(np.sqrt((c1 - c0) * (r1 - r0) / p.max_samples))))
-    patch = depth[r0:r1:step, c0:c1:step]
-    valid = np.isfinite(patch) & (patch > 0)
-    count = int(np.count_nonzero(valid))
-    if count < p.min_valid_pixels or count < p.min_valid_fraction * patch.size:
-        return None
-    rows, cols = np.nonzero(valid)
-    z = patch[rows, cols].astype(np.float64)
-    u, v = c0 + cols * step + 0.5, r0 + rows * step + 0.5
-    du = (u - (x1 + x2) / 2) / max((x2 - x1) / 2, 0.5)
-    dv = (v - (y1 + y2) / 2) / max((y2 - y1) / 2, 0.5)
-    weight = np.exp(-0.5 * (du * du + dv * dv) / (p.centre_sigma * p.centre_sigma))
-    order = np.argsort(z)
-    cum = np.cumsum(weight[order])
-    zc = float(z[order][np.searchsorted(cum, 0.5 * cum[-1])])
-    q = (p.extent_percentile, 100.0 - p.extent_percentile)
-    (xlo, ylo), (xhi, yhi) = np.percentile(
-        np.stack(((u - intr.cx) * z / intr.fx, (v - intr.cy) * z / intr.fy)), q, axis=1
-    )
-    return float(xlo + xhi) / 2, float(ylo + yhi) / 2, zc
