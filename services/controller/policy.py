@@ -45,7 +45,7 @@ from services.controller.geometry import (
 )
 from services.controller.limits import Limits, limit
 from services.controller.pid import PID, PIDGains
-from services.controller.targets import Sighting, View, sightings
+from services.controller.targets import Sighting, View, sightings, stale_reason
 from services.controller.way_ahead import Obstacles, blocked, creep, known_clear, tick_sources
 
 
@@ -170,7 +170,7 @@ class Controller:
         timeout = self.s.detection_timeout_s
         fresh = {c: v for c, v in views.items() if v.fresh(timeout)}
         if not fresh:
-            return self._halt(stop(ControllerState.STALE, self._stale_reason(views)))
+            return self._halt(stop(ControllerState.STALE, stale_reason(views)))
         if inp.depth_halt:
             return self._halt(stop(ControllerState.BLOCKED, inp.depth_halt))
         s = self.s
@@ -193,18 +193,6 @@ class Controller:
         self.previous = (v, w)
         self.turns.append((now, w))
         return dataclasses.replace(aim, linear_x=v, angular_z=w)
-
-    def _stale_reason(self, views: dict[str, View]) -> str:
-        def age(v: View) -> str:
-            return "none received yet" if v.dets is None else f"{v.age_s:.2f} s old"
-
-        if not views:
-            return "no camera announced"
-        if len(views) == 1:
-            [v] = views.values()
-            return "no detections received yet" if v.dets is None else f"detections are {age(v)}"
-        ages = ", ".join(f"{c} {age(v)}" for c, v in views.items())
-        return f"no camera's detections are fresh ({ages})"
 
     def _halt(self, cmd: VelocityCommand) -> VelocityCommand:
         """Zero at once (safety stops bypass the acceleration limit) and forget the target."""

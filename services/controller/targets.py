@@ -108,3 +108,19 @@ def sightings(
                 )
             )  # fmt: skip
     return found
+
+
+def stale_reason(views: Mapping[str, View]) -> str:
+    """Why no camera's detections are fresh: none announced, none received yet, or each
+    camera's age."""
+
+    def age(v: View) -> str:
+        return "none received yet" if v.dets is None else f"{v.age_s:.2f} s old"
+
+    if not views:
+        return "no camera announced"
+    if len(views) == 1:
+        [v] = views.values()
+        return "no detections received yet" if v.dets is None else f"detections are {age(v)}"
+    ages = ", ".join(f"{c} {age(v)}" for c, v in views.items())
+    return f"no camera's detections are fresh ({ages})"
