@@ -186,12 +186,13 @@ def targets_in_camera(
 class DepthNoise:
     """A stereo depth camera's faults (the ``sim.depth_*`` settings); zeros turn each off.
     ``DepthNoise()`` is today's camera (the "simple" world's): the newer faults (``bias_k``,
-    ``flying_share``, ``mirror_scale``) default off here; the harder world's figures are the
-    ``sim.depth_*`` settings' defaults (services/sim/contract.py). The camera named is
-    Intel's RealSense D435 (active IR stereo, baseline b = 50 mm, about 90 deg hfov), whose
-    datasheet (Intel RealSense D400 Series Product Family Datasheet, "Depth Quality
-    Specification"; at 2 m, 848x480, 80 % of the field) allows an RMS error (spatial noise)
-    and an absolute error (Z-accuracy) of up to 2 % each, a temporal noise of up to 1 %.
+    ``flying_share``, ``mirror_scale``, ``in_disparity``) default off here; the harder
+    world's figures are the ``sim.depth_*`` settings' defaults (services/sim/contract.py).
+    The camera named is Intel's RealSense D435 (active IR stereo, baseline b = 50 mm, about
+    90 deg hfov), whose datasheet (Intel RealSense D400 Series Product Family Datasheet,
+    "Depth Quality Specification"; at 2 m, 848x480, 80 % of the field) allows an RMS error
+    (spatial noise) and an absolute error (Z-accuracy) of up to 2 % each, a temporal noise of
+    up to 1 %.
 
     ``range_min_m``/``range_max_m``: readings outside are no readings (0 in the 16UC1 image).
     The D4 matcher searches a fixed number of disparities, so its minimum range (the
@@ -245,6 +246,14 @@ class DepthNoise:
     face. 1: it reads its face as a solid one does. The harder world's 2: a mirror facing the
     camera shows the camera's side of the room at about twice its own distance.
 
+    ``in_disparity``: the noise and the bias are added to the inverse depth (the disparity
+    over f b, what a stereo camera measures: ``1 / (1 / z - bias_k + noise_k * n)``), not
+    to the range (``z + bias_k z^2 + noise_k z^2 n``). The two agree to first order where the
+    error is small; far away they do not: in range space a floor pixel just under the horizon
+    (truth 60 m, sigma 18 m) can read 0.5 m, a phantom obstacle at the camera's feet, where a
+    real camera's disparity error (sigma 0.005 m^-1 here) leaves it far or no reading at all
+    (a disparity at or below zero). The harder world's true; false: today's.
+
     ``dark_level``/``dark_dropout``: colour pixels whose grey level is below ``dark_level``
     (0..255) read nothing with probability ``dark_dropout`` (little texture, little reflected
     pattern). ``dropout``: any pixel reads nothing with this probability.
@@ -264,6 +273,7 @@ class DepthNoise:
     bias_k: float = 0.0
     flying_share: float = 0.0
     mirror_scale: float = 1.0
+    in_disparity: bool = False
 
 
 #: A perfect depth camera (still range-limited and quantised to mm).
@@ -313,6 +323,25 @@ def unit_noise(shape: tuple[int, ...], corr_px: float, rng: np.random.Generator)
     return out
 
 
+def _in_disparity(z: Depth, noise: DepthNoise, rng: np.random.Generator) -> Depth:
+    """``z`` with its noise and bias added where a stereo camera makes them, to the inverse
+    depth (disparity over f b): ``1 / (1 / z - bias_k + noise_k * n)``, n correlated unit
+    noise; to first order the range-space ``z + bias_k z^2 + noise_k z^2 n``. Where the
+    inverse depth comes out at or below zero (a far pixel, its disparity lost in the noise)
+    there is no reading. A far reading's error is then lopsided and unbounded only towards
+    far, as a real one's: near the horizon (truth 60 m, range-space sigma 18 m) a pixel can
+    read 0.5 m in range space, never here (that would be a disparity error of ~380 sigma)."""
+    with np.errstate(divide="ignore"):
+        inv = np.float32(1.0) / z  # NaN stays NaN
+    if noise.bias_k != 0:
+        inv -= np.float32(noise.bias_k)
+    if noise.noise_k > 0:
+        inv += unit_noise(z.shape, noise.noise_corr_px, rng) * np.float32(noise.noise_k)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out: Depth = np.where(inv > 0, np.float32(1.0) / inv, np.float32(np.nan)).astype(np.float32)
+    return out
+
+
 def apply(truth: Depth, colour_bgr: Image, noise: DepthNoise, rng: np.random.Generator) -> Depth:
     """``truth`` as the depth camera reads it: flying pixels, noise, bias, holes at edges, on
     dark surfaces and at random, millimetre quantisation, and the range limits. float32
@@ -326,12 +355,15 @@ def apply(truth: Depth, colour_bgr: Image, noise: DepthNoise, rng: np.random.Gen
             truth, noise.edge_px, noise.edge_jump, noise.flying_share, rng
         )
         z[flying] = values[flying]
-    shift = range_bias(z, noise.bias_k) if noise.bias_k != 0 else None
-    if noise.noise_k > 0:
-        sigma = noise.noise_k * np.nan_to_num(z, nan=0.0) ** 2
-        z += (unit_noise(z.shape, noise.noise_corr_px, rng) * sigma).astype(np.float32)
-    if shift is not None:
-        z += shift
+    if noise.in_disparity:
+        z = _in_disparity(z, noise, rng)
+    else:
+        shift = range_bias(z, noise.bias_k) if noise.bias_k != 0 else None
+        if noise.noise_k > 0:
+            sigma = noise.noise_k * np.nan_to_num(z, nan=0.0) ** 2
+            z += (unit_noise(z.shape, noise.noise_corr_px, rng) * sigma).astype(np.float32)
+        if shift is not None:
+            z += shift
     z *= 1000.0
     np.round(z, out=z)
     z /= 1000.0

@@ -36,24 +36,51 @@ def walking(tg: Target, t: float) -> tuple[float, float] | None:
     return (vx, vy) if math.hypot(vx, vy) > WALKING_MPS else None
 
 
+def facing(tg: Target, t: float, robot_xy: tuple[float, float]) -> float:
+    """The world yaw (radians) a target with a body faces at ``t``: its ``facing_deg``, else
+    where it walks, else (standing) the robot at ``robot_xy``."""
+    body = tg.body
+    assert body is not None
+    if body.facing_deg is not None:
+        return math.radians(body.facing_deg)
+    v = walking(tg, t)
+    if v is not None:
+        return math.atan2(v[1], v[0])
+    tx, ty = tg.position(t)
+    return math.atan2(robot_xy[1] - ty, robot_xy[0] - tx)
+
+
+#: The torso's half-width at the hips, a share of the shoulders' width (simworld/body_draw.py
+#: draws the hips 0.4 x the shoulders wide each side of the axis).
+HIPS_HALF_SHARE = 0.4
+
+
+def surface_m(tg: Target, t: float, robot_xy: tuple[float, float]) -> float:
+    """How far the target's surface is from its centre on the line towards ``robot_xy``:
+    a flat target's or an obstacle-like one's ``radius``; a body's torso at half its height,
+    an ellipse ``HIPS_HALF_SHARE`` x its shoulders wide each side and half its ``depth_m``
+    deep, turned by where it faces (front-on: half its depth; side-on: half its hips). What a
+    depth camera reads, and a tape measure would, from the robot to the person."""
+    if tg.body is None:
+        return tg.radius
+    tx, ty = tg.position(t)
+    rel = math.atan2(robot_xy[1] - ty, robot_xy[0] - tx) - facing(tg, t, robot_xy)
+    across, deep = HIPS_HALF_SHARE * tg.body.shoulder_m, tg.body.depth_m / 2
+    return 1.0 / math.hypot(math.sin(rel) / across, math.cos(rel) / deep)
+
+
 def body_silhouette(world: World, i: int, heading: float) -> Silhouette:
     """Target ``i``'s silhouette (it has a body) seen by a camera looking along ``heading``
     (radians, world frame) from the robot: the yaw its facing makes with the camera and the
     phase of its walk. A body with no ``facing_deg`` faces where it walks, and the robot when
-    it stands."""
+    it stands (:func:`facing`)."""
     tg = world.targets[i]
     body = tg.body
     assert body is not None
     v = walking(tg, world.t)
-    if body.facing_deg is not None:
-        facing = math.radians(body.facing_deg)
-    elif v is not None:
-        facing = math.atan2(v[1], v[0])
-    else:
-        tx, ty = tg.position(world.t)
-        facing = math.atan2(world.robot.y - ty, world.robot.x - tx)
+    facing_yaw = facing(tg, world.t, (world.robot.x, world.robot.y))
     # yaw 0 faces the camera: the person faces the camera's heading turned round
-    yaw = math.degrees(facing - heading) + 180.0
+    yaw = math.degrees(facing_yaw - heading) + 180.0
     phase = None if v is None else walked_m(tg.path, tg.loop, world.t) / body.stride_m % 1.0
     yaw_key, phase_key = pose_key(yaw, phase)
     return silhouette(body, yaw_key, phase_key)

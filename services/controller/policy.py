@@ -107,7 +107,10 @@ class Controller:
     on a CPU detector is a few hundred milliseconds ago. The robot has turned since, by the
     turn rates this controller itself commanded. Subtracting that rotation from the measured
     bearing keeps the turn from overshooting; without it a slow detector makes the robot
-    swing past its target and lose it. Each camera's frames have their own capture time.
+    swing past its target and lose it. Each camera's frames have their own capture time. A
+    distance measured on the frame (from depth, or the box's height) is likewise net of how
+    far the robot drove since: else a follower on a slow detector stops short of nothing and
+    ends nearer than ``follow_distance_m`` by its speed times the latency.
     """
 
     def __init__(self, s: ControllerSettings, cameras: Mapping[str, Mount]) -> None:
@@ -126,7 +129,7 @@ class Controller:
         self.last_step: float | None = None
         self.stopping_m = 0.0
         self.obstacles: tuple[Obstacles, ...] = ()
-        self.turns: deque[tuple[float, float]] = deque(maxlen=1024)  # (time, w) commanded
+        self.turns: deque[tuple[float, float, float]] = deque(maxlen=1024)  # (time, v, w)
         self.last_bearing: tuple[float, float] | None = None  # (bearing, when captured)
         # While the target is predicted between the cameras: the newest tick's time plus
         # target_lost_timeout_s (see _handover_until).
@@ -191,7 +194,7 @@ class Controller:
             )
         v, w = limit(self.previous, (aim.linear_x, aim.angular_z), dt, self.limits)
         self.previous = (v, w)
-        self.turns.append((now, w))
+        self.turns.append((now, v, w))
         return dataclasses.replace(aim, linear_x=v, angular_z=w)
 
     def _halt(self, cmd: VelocityCommand) -> VelocityCommand:
@@ -203,19 +206,25 @@ class Controller:
         self.turns.clear()
         return cmd
 
-    def rotation_since(self, t0: float, now: float) -> float:
-        """How far the robot turned (rad) from ``t0`` to ``now``, by the rates it commanded.
-
-        Each command holds until the next one; the newest holds until ``now``.
-        """
+    def _since(self, t0: float, now: float, which: int) -> float:
+        """The integral from ``t0`` to ``now`` of the commanded speed ``which`` (1: linear, 2:
+        angular). Each command holds until the next one; the newest holds until ``now``."""
         total = 0.0
         entries = list(self.turns)
-        ends = [t for t, _ in entries[1:]] + [now]
-        for (t, w), end_t in zip(entries, ends[: len(entries)], strict=True):
-            start, end = max(t, t0), min(end_t, now)
+        ends = [e[0] for e in entries[1:]] + [now]
+        for entry, end_t in zip(entries, ends[: len(entries)], strict=True):
+            start, end = max(entry[0], t0), min(end_t, now)
             if end > start:
-                total += w * (end - start)
+                total += entry[which] * (end - start)
         return total
+
+    def rotation_since(self, t0: float, now: float) -> float:
+        """How far the robot turned (rad) from ``t0`` to ``now``, by the rates it commanded."""
+        return self._since(t0, now, 2)
+
+    def travel_since(self, t0: float, now: float) -> float:
+        """How far the robot drove forward (m) from ``t0`` to ``now``, by its commands."""
+        return self._since(t0, now, 1)
 
     def _bearing_now(self, bearing: float, captured: float, now: float) -> float:
         """A bearing measured at ``captured``, net of the robot's turning since."""
@@ -336,7 +345,7 @@ class Controller:
                 best.camera,
             )
         else:
-            aim = self._follow(best, scan, err, angular, centred)
+            aim = self._follow(best, scan, err, angular, centred, now)
         self.last_aim = aim
         return aim
 
@@ -390,7 +399,13 @@ class Controller:
         return stop(ControllerState.SEARCHING, f"no {'/'.join(classes)} in view", stamp)
 
     def _follow(
-        self, x: Sighting, scan: LaserScan | None, err: float, angular: float, centred: bool
+        self,
+        x: Sighting,
+        scan: LaserScan | None,
+        err: float,
+        angular: float,
+        centred: bool,
+        now: float,
     ) -> VelocityCommand:
         s = self.s
         dets, i = x.dets, x.i
@@ -400,6 +415,7 @@ class Controller:
             return VelocityCommand(0.0, angular, state, reason, x.name, x.track_id, stamp, x.camera)
 
         distance = math.inf
+        on_frame = s.distance_source is not DistanceSource.LASER  # measured at its capture
         if s.distance_source is DistanceSource.DEPTH:
             distance = depth_distance(dets, i, self.cameras.get(x.camera))
             if not math.isfinite(distance):
@@ -431,6 +447,9 @@ class Controller:
                 # be overestimated. Close enough to fill the frame is close enough.
                 return turn_only(ControllerState.ARRIVED, "target fills the image height")
             distance = box_distance(dets, i, x.hfov_deg, s.target_height_m)
+            on_frame = True
+        if on_frame:  # net of how far the robot drove since the frame was captured
+            distance -= self.travel_since(x.captured, now)
         if not centred:
             return turn_only(ControllerState.TURNING, f"bearing {math.degrees(err):+.1f} deg")
         if distance <= s.follow_distance_m:

@@ -200,7 +200,9 @@ class ControlLoop:
             log_state(self.node.log, self._state_log, cmd)
             self._last_state = cmd.state
         for line in self._state_log.due():
-            self.node.log.info("%s", line)
+            # The summary says what the changes were; a person reading the log after the robot
+            # stood still for a while needs what it is doing now, and why.
+            self.node.log.info("%s; now %s: %s", line, cmd.state, cmd.reason)
         self.node.publish_counters()
         return tick
 

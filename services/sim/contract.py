@@ -75,6 +75,7 @@ SIMPLE_FAULTS: dict[str, float] = {
     "depth_bias_k": 0.0,
     "depth_flying_share": 0.0,
     "depth_mirror_scale": 1.0,
+    "depth_noise_in_disparity": False,
     "colour_exposure_ms": 0.0,
     "colour_light_change": 0.0,
     "colour_drift": 0.0,
@@ -112,7 +113,8 @@ class SimSettings:
     ``world``: ``"hard"`` (the default) runs the newer faults, each its own setting with its
     source in simworld/depth.py's ``DepthNoise`` and simworld/faults.py: the depth camera's
     range bias (``depth_bias_k``), flying pixels at depth edges (``depth_flying_share``),
-    mirrors that read too far (``depth_mirror_scale``), and the colour camera's motion blur
+    mirrors that read too far (``depth_mirror_scale``), noise and bias in disparity, not
+    range (``depth_noise_in_disparity``), and the colour camera's motion blur
     (``colour_exposure_ms``) and exposure changes (``colour_light_*``, ``colour_drift*``).
     ``"simple"`` is today's world: it sets those fault settings off (:data:`SIMPLE_FAULTS`)
     whatever the config says, keeps the older ``depth_*`` settings, and draws people flat.
@@ -153,6 +155,7 @@ class SimSettings:
     depth_bias_k: Annotated[float, Range(-0.05, 0.05)] = 0.0025  # 0.5 % at 2 m (D435: <= 2 %)
     depth_flying_share: Annotated[float, Range(0, 1)] = 0.5
     depth_mirror_scale: Annotated[float, Range(1, 10)] = 2.0
+    depth_noise_in_disparity: bool = True
     colour_exposure_ms: Annotated[float, Range(0, 100)] = 20.0
     colour_light_change: Annotated[float, Range(0, 2)] = 0.3
     colour_light_tau_s: Annotated[float, Range(0.01, 60)] = 1.0

@@ -1,8 +1,9 @@
 """How hard the simulated world is (``sim.world``), and the camera faults that run in it.
 
 The rule: ``sim.world = "hard"`` (the default) runs every newer fault with its own setting
-(``depth_bias_k``, ``depth_flying_share``, ``depth_mirror_scale``, ``colour_*``; each set to
-0, or 1 for the mirror's scale, turns that one off). ``"simple"`` is today's world and camera:
+(``depth_bias_k``, ``depth_flying_share``, ``depth_mirror_scale``,
+``depth_noise_in_disparity``, ``colour_*``; each set to 0, false, or 1 for the mirror's scale,
+turns that one off). ``"simple"`` is today's world and camera:
 it sets those settings off (contract.SIMPLE_FAULTS) whatever the config says, keeps the older
 ``depth_*`` settings (today's noise, holes, dropout), and draws the people flat
 (:func:`world_for`). The start-up log's :func:`world_line` says which world and faults run.
@@ -55,6 +56,7 @@ def depth_noise(s: SimSettings) -> DepthNoise:
         bias_k=e.depth_bias_k,
         flying_share=e.depth_flying_share,
         mirror_scale=e.depth_mirror_scale,
+        in_disparity=e.depth_noise_in_disparity,
     )
 
 

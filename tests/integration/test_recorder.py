@@ -20,6 +20,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as BagWriter
 
+from common.coco import COCO80
 from common.errors import RecordingError
 from common.frames import image_to_frame
 from common.images import load_sample
@@ -75,12 +76,18 @@ def _written(folder: Path, topic: str) -> int:
 def _check_with_foreign_readers(path: Path) -> None:
     """mcap + mcap_ros2 and rosbags find frames, detections and commands, stamps increasing."""
     stamps: dict[str, list[int]] = {t: [] for t in TOPICS}
+    # Each /detections message's class ids as mcap_ros2 decodes them. The hard world's person has
+    # a body and its camera's faults: the model may add another class (a traffic light once, in
+    # a CI run), so the check is names the model has and a person in most messages.
+    classes: list[set[str]] = []
     with path.open("rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         for _, channel, _, msg in reader.iter_decoded_messages(topics=sorted(TOPICS)):
             stamps[channel.topic].append(_stamp(msg))
             if channel.topic == "/detections" and msg.detections:
-                assert msg.detections[0].results[0].hypothesis.class_id == "person"
+                classes.append({d.results[0].hypothesis.class_id for d in msg.detections})
+    assert classes and set().union(*classes) <= set(COCO80), classes
+    assert sum("person" in c for c in classes) * 2 > len(classes), classes
     with AnyReader([path]) as bag:
         ros_types = {c.topic: c.msgtype for c in bag.connections if c.topic in TOPICS}
         assert ros_types["/detections"] == "vision_msgs/msg/Detection2DArray"

@@ -25,7 +25,7 @@ from common.contracts import ControllerMode, ScenarioResult
 from common.errors import StackError
 from common.keys import Keys
 from common.zenoh_bus import ZenohBus, open_session
-from services.sim.worlds import world_line
+from services.sim.worlds import world_for, world_line
 from simworld.scenarios import SCENARIOS
 from stack.config import Config
 from stack.config_file import to_toml
@@ -194,7 +194,10 @@ def run_robots(
             pause.wait(0.05)
     results = []
     for i, (config, rec, proc) in enumerate(zip(plan.robots, recs, procs[1:], strict=True), 1):
-        result = score(scenario, rec, scenario.build(), config.controller, config.camera.hfov_deg)
+        result = score(
+            scenario, rec, world_for(config.sim, scenario.build()), config.controller,
+            config.camera.hfov_deg,
+        )  # fmt: skip
         result["mode"] = str(config.controller.mode)
         result["world"] = world_line(config.sim)  # which world and faults each robot's sim ran
         result["log"] = str(workdir / f"robot{i}.log")

@@ -27,7 +27,7 @@ from common.errors import DecodeError, StackError
 from common.keys import Keys
 from common.messages import Detections, GroundTruth, Twist
 from common.zenoh_bus import open_session
-from services.sim.worlds import world_line
+from services.sim.worlds import world_for, world_line
 from simworld.scenarios import SCENARIOS, Scenario
 from stack.config import Config
 from stack.config_file import to_toml
@@ -284,7 +284,10 @@ def run_scenario(
                 session.close()
         finally:
             stop_supervisor(proc, STOP_TIMEOUT_S)  # whatever happened, never leave it running
-    result = score(scenario, rec, scenario.build(), config.controller, config.camera.hfov_deg)
+    result = score(
+            scenario, rec, world_for(config.sim, scenario.build()), config.controller,
+            config.camera.hfov_deg,
+        )  # fmt: skip
     result["mode"] = str(config.controller.mode)
     result["world"] = world
     result["log"] = str(workdir / "stack.log")
@@ -306,7 +309,7 @@ class Settle:
     def __init__(self, scenario: Scenario, config: Config, hold_s: float) -> None:
         self.scenario, self.config, self.hold_s = scenario, config, hold_s
         self._since: float | None = None
-        self._world = scenario.build()
+        self._world = world_for(config.sim, scenario.build())  # as the simulator runs it
 
     def done(self, rec: ScenarioLog, sim_time_s: float) -> bool:
         if sim_time_s < self.scenario.settle_from_s:

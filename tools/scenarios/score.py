@@ -4,8 +4,9 @@ Figures:
     success                 the scenario's pass conditions all hold (see ``verdict``)
     time_to_reach_s         scenario time when the followed target was first within
                             follow distance + tolerance (None if never)
-    final_distance_m        robot centre to the followed target's surface at the end (what a
-                            laser reads)
+    final_distance_m        robot centre to the followed target's surface at the end, on the
+                            line between them: a flat target's radius, a body's torso (what a
+                            depth camera reads; the laser sees a body as its 0.25 m circle)
     min_clearance_m         least distance from the robot centre to an obstacle's surface or
                             a wall, as the laser measures it (None without obstacles and
                             walls)
@@ -35,8 +36,9 @@ from dataclasses import dataclass, field
 from common.contracts import ScenarioResult
 from common.messages import Detections, GroundTruth, Twist
 from services.controller.contract import ControllerSettings
+from simworld.people import surface_m
 from simworld.scenarios import Scenario
-from simworld.world import World
+from simworld.world import Target, World
 
 REACH_TOLERANCE_M = 0.4  # box-height ranging is coarse: +-0.4 m around the follow distance
 STOP_MARGIN_S = 0.5  # detector_dies: allowed on top of the detection timeout
@@ -64,10 +66,12 @@ def _bearing_deg(truth: GroundTruth, i: int) -> float:
     return math.degrees(math.atan2(math.sin(b), math.cos(b)))
 
 
-def _distance(truth: GroundTruth, i: int, radius: float) -> float:
+def _distance(truth: GroundTruth, i: int, target: Target) -> float:
+    """Robot centre to the target's surface on the line between them (a body's torso, a flat
+    one's radius: simworld/people.py :func:`~simworld.people.surface_m`)."""
     x, y, _ = truth.robot
     tx, ty = truth.targets_xy[i]
-    return math.hypot(tx - x, ty - y) - radius
+    return math.hypot(tx - x, ty - y) - surface_m(target, truth.sim_time_s, (x, y))
 
 
 def stale_commands(rec: ScenarioLog, timeout_s: float) -> int:
@@ -135,12 +139,12 @@ def score(
     }
     if scenario.followed is not None:
         i = truths[-1].target_ids.index(scenario.followed)
-        radius = world.targets[i].radius
+        target = world.targets[i]
         reach = s.follow_distance_m + REACH_TOLERANCE_M
         out["time_to_reach_s"] = next(
-            (t.sim_time_s for t in truths if _distance(t, i, radius) <= reach), None
+            (t.sim_time_s for t in truths if _distance(t, i, target) <= reach), None
         )
-        out["final_distance_m"] = _distance(truths[-1], i, radius)
+        out["final_distance_m"] = _distance(truths[-1], i, target)
         out["final_bearing_deg"] = _bearing_deg(truths[-1], i)
         in_view = [
             abs(_bearing_deg(t, i)) for t in truths if abs(_bearing_deg(t, i)) <= hfov_deg / 2

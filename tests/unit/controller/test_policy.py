@@ -316,20 +316,38 @@ def test_corridor_catches_what_the_sector_misses() -> None:
 
 def test_rotation_since_integrates_the_commanded_turns() -> None:
     ctl = Controller(TRACK, FRONT)
-    ctl.turns.extend([(0.0, 0.5), (1.0, -0.2), (2.0, 0.0)])
+    ctl.turns.extend([(0.0, 0.3, 0.5), (1.0, 0.1, -0.2), (2.0, 0.0, 0.0)])
     assert ctl.rotation_since(0.0, 3.0) == pytest.approx(0.5 - 0.2)
     assert ctl.rotation_since(0.5, 1.5) == pytest.approx(0.25 - 0.1)
+    assert ctl.travel_since(0.0, 3.0) == pytest.approx(0.3 + 0.1)
+    assert ctl.travel_since(0.5, 1.5) == pytest.approx(0.15 + 0.05)
 
 
 def test_bearing_is_compensated_for_the_turn_since_capture() -> None:
     ctl = Controller(TRACK, FRONT)
-    ctl.turns.append((0.0, 0.5))  # turning left at 0.5 rad/s for the last second
+    ctl.turns.append((0.0, 0.0, 0.5))  # turning left at 0.5 rad/s for the last second
     d = dets(("person", 0.9, 200, 240, 50, 100))  # seen left of centre a second ago
     measured = bearing(d, 0, HFOV)
     assert measured > 0
     cmd = ctl.step(one(d, 0.0, capture_age_s=1.0), now=1.0)
     # The robot already turned 0.5 rad left: the target is now to the right.
     assert cmd.angular_z == pytest.approx(TRACK.bearing_kp * (measured - 0.5), abs=1e-6)
+
+
+def test_a_distance_measured_on_the_frame_is_net_of_the_drive_since_its_capture() -> None:
+    """The box says 2.5 m on a frame captured a second ago; the robot drove 0.4 m since. The
+    command's distance is 2.1 m: without the drive a slow detector's follower ends nearer than
+    follow_distance_m by its speed times the latency."""
+    seen = dets(("person", 0.9, 320, 240, 60, FAR))
+    fresh = Controller(FOLLOW, FRONT).step(one(seen, 0.0, scan(8.0), 0.0), now=1.0)
+    assert "target at 2.50 m" in fresh.reason
+    ctl = Controller(FOLLOW, FRONT)
+    ctl.turns.append((0.0, 0.4, 0.0))  # driving at 0.4 m/s for the last second
+    late = ctl.step(one(seen, 0.0, scan(8.0), 0.0, capture_age_s=1.0), now=1.0)
+    assert "target at 2.10 m" in late.reason
+    ctl = Controller(FOLLOW, FRONT)
+    ctl.turns.append((0.0, 1.6, 0.0))  # it drove 1.6 m: 0.9 m left, within follow_distance_m
+    assert ctl.step(one(seen, 0.0, scan(8.0), 0.0, capture_age_s=1.0), now=1.0).state == "arrived"
 
 
 def test_losing_the_target_stops_at_once_after_the_hold() -> None:

@@ -142,3 +142,48 @@ def test_a_thing_filling_the_bottom_reads_at_its_range_from_a_camera_ahead_of_th
     depth = scene(HEIGHT, Face(1.0, -0.3, 0.3, 0.0, 1.7))
     s = virtual_scan(depth, INTR, mount, PARAMS, HEADER, 10.0, range_min_m=RANGE_MIN)
     assert sector_clearance(s, SECTOR, HALF_WIDTH) == pytest.approx(1.2, abs=0.05)
+
+
+def _dropped(depth: np.ndarray, rows: tuple[int, ...], cols: tuple[int, ...]) -> np.ndarray:
+    out = depth.copy()
+    out[np.ix_(rows, cols)] = np.nan
+    return out
+
+
+def test_pixels_dropped_here_and_there_are_no_hole_but_a_hole_three_pixels_wide_is() -> None:
+    """The case a live run caught (a depth-only follower stood blocked for good): a stereo
+    camera's scattered dropped pixels fell on three of one column's samples at the bottom of
+    the image (rows 470, 474, 478 of column 318), which read as a hole of hole_px where the
+    floor must show: blocked at the camera's nearest range. Filled from its row's neighbours,
+    each reads the floor; three pixels wide, the same hole still blocks, from the raw frame
+    as from metres."""
+    floor = scene(HEIGHT)
+    assert ahead(floor) > 9.0
+    sampled = (470, 474, 478)
+    speckled = _dropped(floor, sampled, (318,))
+    assert ahead(speckled) > 9.0
+    assert seen(speckled).unknown.size == 0
+    hole = _dropped(floor, sampled, (317, 318, 319))
+    assert ahead(hole) == pytest.approx(RANGE_MIN, abs=0.02)
+
+    def from_frame(depth: np.ndarray) -> float:
+        mm = np.nan_to_num(np.round(depth * 1000), nan=0).astype("<u2")
+        frame = DepthFrame(header=HEADER, encoding="16UC1", width=INTR.width, height=INTR.height,
+                           data=mm.tobytes(), fx=INTR.fx, fy=INTR.fy, cx=INTR.cx, cy=INTR.cy,
+                           range_min_m=RANGE_MIN, range_max_m=10.0)  # fmt: skip
+        s = observe(sample_frame(frame, PARAMS.stride_px), INTR, LEVEL, PARAMS, HEADER, 10.0,
+                    RANGE_MIN).scan  # fmt: skip
+        return sector_clearance(s, SECTOR, HALF_WIDTH)
+
+    # (The frame's floor ends where it passes 10 m, its stated range: clear as far as that.)
+    assert from_frame(speckled) == from_frame(floor) > 1.5
+    assert from_frame(hole) == pytest.approx(RANGE_MIN, abs=0.02)
+
+
+def test_one_percent_of_pixels_dropped_at_random_never_blocks_an_empty_floor() -> None:
+    rng = np.random.default_rng(0)
+    floor = scene(HEIGHT)
+    for _ in range(50):
+        depth = floor.copy()
+        depth[rng.random(depth.shape) < 0.01] = np.nan
+        assert ahead(depth) > 9.0

@@ -64,6 +64,7 @@ def test_the_world_line_says_which_world_and_faults_run_and_parses_back() -> Non
             "depth_bias_k": 0.0025,
             "depth_flying_share": 0.5,
             "depth_mirror_scale": 2.0,
+            "depth_noise_in_disparity": 1.0,  # on: true, said as 1
             "colour_exposure_ms": 20.0,
             "colour_light_change": 0.3,
             "colour_drift": 0.05,

@@ -97,6 +97,45 @@ def test_the_hard_camera_s_noise_at_2_m_is_its_setting_and_within_the_d435_datas
     assert np.sqrt(np.mean(errors**2)) / 2.0 < 0.02
 
 
+def test_in_disparity_the_bias_and_noise_are_the_range_space_ones_to_first_order() -> None:
+    """1 / (1 / z - bias_k + noise_k n): at 2 m the same bias (1 cm) and sigma (2 cm) as in
+    range space, the bias a hair more (its second order: z^3 k^2)."""
+    noise = DepthNoise(
+        noise_k=0.005, bias_k=0.0025, edge_px=0, dark_dropout=0.0, dropout=0.0, in_disparity=True
+    )
+    truth = np.full((240, 320), 2.0, np.float32)
+    rng = np.random.default_rng(3)
+    errors = np.stack([apply(truth, BRIGHT, noise, rng) - 2.0 for _ in range(8)])
+    assert errors.mean() == pytest.approx(0.0025 * 4.0, abs=0.003)
+    assert errors.std() == pytest.approx(0.005 * 4.0, rel=0.1)
+    quiet = dataclasses.replace(QUIET, bias_k=0.0025, in_disparity=True)
+    for z in (1.0, 2.0, 5.0):
+        got = apply(np.full((8, 8), z, np.float32), BRIGHT[:8, :8], quiet, rng)
+        assert np.all(np.abs(got - 1.0 / (1.0 / z - 0.0025)) <= 0.0005 + 1e-6)
+
+
+@pytest.mark.parametrize("in_disparity", [False, True])
+def test_a_floor_far_away_never_reads_near_in_disparity_space(in_disparity: bool) -> None:
+    """The hard camera looking at an empty floor: its rows just under the horizon are tens of
+    metres away, and flying pixels keep readings there. Noise in range space (sigma = k z^2,
+    18 m at 60 m) makes some of them read a metre or two: a phantom obstacle at the robot's
+    feet (a depth-only follower stood blocked by one). In disparity space none reads under
+    half its truth; range space is the control that the test can see it."""
+    spec = CameraSpec(width=320, height=240, hfov_deg=87.0, height_m=0.3)
+    world = World(robot=Robot(0.0, 0.0, 0.0))
+    truth = render_depth(world, spec)
+    noise = DepthNoise(bias_k=0.0025, flying_share=0.5, in_disparity=in_disparity)
+    rng = np.random.default_rng(0)
+    near = 0
+    for _ in range(100):
+        got = apply(truth, render(world, spec), noise, rng)
+        near += int(np.sum(np.isfinite(got) & (got < truth / 2)))
+    if in_disparity:
+        assert near == 0
+    else:
+        assert near > 0
+
+
 def test_a_mirror_reads_farther_than_its_face_and_is_drawn_bright_steel() -> None:
     spec = CameraSpec(width=160, height=120)
     mirror = Obstacle(2.0, 0.0, 0.3, material=Material.MIRROR)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -9,10 +10,12 @@ import pytest
 
 from common.messages import GroundTruth, Header, Twist
 from services.controller.contract import ControllerSettings
+from simworld.body import Body
 from simworld.laser import LaserSpec, cast
+from simworld.people import HIPS_HALF_SHARE, surface_m
 from simworld.render import CameraSpec, render
 from simworld.scenarios import SCENARIOS, card
-from simworld.world import BaseLimits, Obstacle, Robot, World
+from simworld.world import BaseLimits, Obstacle, Robot, Target, World, flat_world
 from tools.scenarios.score import ScenarioLog, score, stale_commands
 
 FREE = BaseLimits(max_linear=9, max_angular=9, max_linear_accel=1e9, max_angular_accel=1e9)
@@ -117,8 +120,14 @@ def test_score_reach_and_verdict() -> None:
         )
         for t, x in ((0.5, 0.0), (5.0, 2.0), (9.0, 2.8))
     ]
+    # The flat card's surface is its radius; a body's its torso on the line to the robot
+    # (alice stands facing the robot: half her depth).
+    flat = score(sc, ScenarioLog(truths=truths), flat_world(sc.build()), s, 60.0)
+    assert flat["final_distance_m"] == pytest.approx(4.0 - 2.8 - 0.25)
     result = score(sc, ScenarioLog(truths=truths), sc.build(), s, 60.0)
-    assert result["final_distance_m"] == pytest.approx(4.0 - 2.8 - 0.25)
+    body = sc.build().targets[0].body
+    assert body is not None
+    assert result["final_distance_m"] == pytest.approx(4.0 - 2.8 - body.depth_m / 2)
     assert result["time_to_reach_s"] == 9.0
     assert result["success"] and result["checks"]["reached the stop distance"]
     far = score(sc, ScenarioLog(truths=truths[:2]), sc.build(), s, 60.0)
@@ -197,3 +206,13 @@ def test_in_appears_bob_is_in_no_cameras_view_but_the_rears_while_he_steps_in() 
             assert seen_by(t + APPEARS_STEP_S + APPEARS_STAY_S, x) == {"rear"}
             assert seen_by(t + 2 * APPEARS_STEP_S + APPEARS_STAY_S, x) == set()
     assert sc.duration_s > APPEARS_AT_S[-1] + APPEARS_STEP_S + APPEARS_STAY_S
+
+
+def test_a_body_s_surface_is_half_its_depth_front_on_and_half_its_hips_side_on() -> None:
+    body = Body(shoulder_m=0.5, depth_m=0.3, facing_deg=180.0)  # faces -x: the robot at origin
+    tg = Target("p", "person", "person", 1.75, path=((0.0, 3.0, 0.0),), body=body)
+    assert surface_m(tg, 0.0, (0.0, 0.0)) == pytest.approx(0.15)
+    assert surface_m(tg, 0.0, (3.0, -2.0)) == pytest.approx(HIPS_HALF_SHARE * 0.5)  # side-on
+    between = surface_m(tg, 0.0, (1.0, -2.0))
+    assert 0.15 < between < HIPS_HALF_SHARE * 0.5
+    assert surface_m(dataclasses.replace(tg, body=None), 0.0, (0.0, 0.0)) == tg.radius
