@@ -158,6 +158,8 @@ class Detections(Message):
     keys of the message body itself (docs/messages.md).
     ``timing_ms`` holds the detector's stages (preprocess, inference, postprocess);
     ``received_ns`` and ``published_ns`` are when the detector took and sent the frame.
+    ``worker``: the detector worker that made them (its pool name; "" from a writer before
+    it existed): the pool judges each member by its own detections (common/pool_delivery.py).
     """
 
     TAG: ClassVar[str] = "Detections"
@@ -172,6 +174,7 @@ class Detections(Message):
     backend: str = ""
     received_ns: NonNegativeInt = 0
     published_ns: NonNegativeInt = 0
+    worker: str = ""
 
     def __post_init__(self) -> None:
         n = len(self.boxes)
@@ -184,8 +187,8 @@ class Detections(Message):
         longest = max((len(name) for name in self.class_names), default=0)
         if longest > MAX_NAME_CHARS:
             raise ValueError(f"a class name of {longest} characters (at most {MAX_NAME_CHARS})")
-        if max(len(self.model), len(self.backend)) > 2 * MAX_NAME_CHARS:
-            raise ValueError(f"model or backend name over {2 * MAX_NAME_CHARS} characters")
+        if max(len(self.model), len(self.backend), len(self.worker)) > 2 * MAX_NAME_CHARS:
+            raise ValueError(f"model, backend or worker name over {2 * MAX_NAME_CHARS} characters")
 
     def __len__(self) -> int:
         return len(self.boxes)

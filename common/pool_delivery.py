@@ -3,8 +3,11 @@ cameras by their detections arriving, not by the capacity it claims or the servi
 holds. Pure: no bus, no clock (times are given).
 
 Everyone who audits or computes the pool (each worker, each robot's metrics service) hears every
-camera's detections on the bus (``<robot>/detector/<camera>/detections``), whoever put them,
-and notes each one's arrival (:meth:`Delivery.saw`). A member is **not delivering** when none
+camera's detections on the bus (``<robot>/detector/<camera>/detections``) and notes each
+one's arrival and the worker it names (:meth:`Delivery.saw`): a member is judged on the
+detections it made, not on any of its cameras' (a judge that heard the member given a camera
+later than the others did would otherwise take the real worker's, once it took the camera
+back, for the member's). A member is **not delivering** when none
 of the cameras the rule gives it has had a detection for ``detector.pool_deliver_s`` since the
 member was given it (or since that camera's last detection, whichever is later). Such a member
 is **dropped**, robot by robot (a member given cameras of two robots is judged on each robot's
@@ -66,21 +69,34 @@ class Delivery:
         self.deliver_s = deliver_s
         self.readmit_s = readmit_s
         self._last: dict[str, float] = {}  # camera -> its last detection heard at
+        self._anon: dict[str, float] = {}  # camera -> its last detection naming no worker
+        # (camera, worker) -> the last detection of a camera given to it that it made
+        self._by: dict[tuple[str, str], float] = {}
         self._given: dict[tuple[str, str], float] = {}  # (camera, worker) -> given since
         self._strikes: dict[Judged, int] = {}
         self._asked: dict[str, float] = {}  # camera -> first asked about (undelivered)
         self.dropped: dict[Judged, Dropped] = {}
 
-    def saw(self, camera: str, now: float) -> None:
-        """A detection of ``camera`` (its pool name) arrived at ``now``."""
+    def saw(self, camera: str, now: float, worker: str = "") -> None:
+        """A detection of ``camera`` (its pool name) arrived at ``now``, made by ``worker``
+        (its Detections' ``worker``; "": a writer that names none, which counts for whoever
+        is given the camera, as every detection did before). A named one counts only for
+        that worker, and only while it is given the camera: the last detection of the
+        camera's former owner, still on its way, or a real worker's taking a camera back from
+        a member that holds it and delivers nothing, is no evidence for that member."""
         self._last[camera] = now
+        if not worker:
+            self._anon[camera] = now
+        elif (camera, worker) in self._given:
+            self._by[camera, worker] = now
 
     def forget(self, cameras: Iterable[str]) -> None:
         """Only ``cameras`` are announced now: forget the others' detections (bounded)."""
         keep = set(cameras)
-        for known in (self._last, self._asked):
+        for known in (self._last, self._asked, self._anon):
             for camera in [c for c in known if c not in keep]:
                 del known[camera]
+        self._by = {pair: at for pair, at in self._by.items() if pair[0] in keep}
 
     def left(self, worker: str) -> None:
         """``worker``'s pool token went (it exited, was killed, resigned or its lease ran
@@ -108,6 +124,7 @@ class Delivery:
         self._given = {
             (c, w): self._given.get((c, w), now) for c, w in owners.items() if c in cameras
         }  # fmt: skip
+        self._by = {pair: at for pair, at in self._by.items() if pair in self._given}
 
     def judge(
         self,
@@ -126,7 +143,8 @@ class Delivery:
         given: dict[Judged, list[str]] = {}
         for (camera, worker), since in self._given.items():
             judged = (cameras[camera].prefix, worker)
-            last = self._last.get(camera, -math.inf)
+            last = max(self._by.get((camera, worker), -math.inf),
+                       self._anon.get(camera, -math.inf))  # fmt: skip
             evidence[judged] = max(evidence.get(judged, -math.inf), since, last)
             given.setdefault(judged, []).append(camera)
             if last > since:

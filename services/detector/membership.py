@@ -14,8 +14,9 @@ from functools import partial
 from common.announce import Announcer
 from common.bus import Declared
 from common.counters import per_camera
+from common.errors import DecodeError
 from common.keys import Keys, camera_in_key
-from common.messages import WorkerAnnouncement
+from common.messages import Detections, WorkerAnnouncement
 from common.node import Node
 from common.pool_audit import MAX_LINES, Report, lines
 from common.pool_rule import label, one_worker, pool_name
@@ -197,8 +198,8 @@ class PoolMember:
         for key in members:
             self._member(key, joined=True)
         watches.append(bus.watch_tokens(keys.all_pool_serving(), self._on_serving))
-        # Every camera's detections, whoever puts them: a camera is served when they arrive
-        # (common/pool_delivery.py). Not decoded: their arrival is all that is noted.
+        # Every camera's detections, whoever puts them: a camera is served when they arrive,
+        # by the worker they name (common/pool_delivery.py).
         for prefix in self.prefixes:
             on_detections = partial(self._on_detections, prefix)
             watches.append(self.node.subscribe_keyed(Keys(prefix).all_detections(), on_detections))
@@ -269,14 +270,19 @@ class PoolMember:
             )
         return stalled
 
-    def _on_detections(self, prefix: str, key: str, _payload: bytes) -> None:
+    def _on_detections(self, prefix: str, key: str, payload: bytes) -> None:
         camera = camera_in_key(key)
         if camera is None:
+            return
+        try:
+            worker = Detections.decode(payload).worker
+        except (DecodeError, ValueError) as exc:
+            self.node.bad_input(key, exc)
             return
         name = pool_name(prefix, camera, self.pool_keys.prefix)
         with self._lock:
             if name in self.view.cameras:  # a made-up name grows nothing
-                self._checks.delivery.saw(name, self.clock.mono_s())
+                self._checks.delivery.saw(name, self.clock.mono_s(), worker)
 
     def _on_serving(self, key: str, alive: bool) -> None:
         parts = self.pool_keys.pool_serving_parts(key)

@@ -157,10 +157,10 @@ class LivePool:
             )
         return self.report
 
-    def saw(self, camera: str, now: float) -> None:
-        """A detection of this robot's ``camera`` arrived at ``now``."""
+    def saw(self, camera: str, now: float, worker: str = "") -> None:
+        """A detection of this robot's ``camera`` made by ``worker`` arrived at ``now``."""
         if self.delivery is not None and self.cameras is not None and camera in self.cameras:
-            self.delivery.saw(self.pool_name(camera), now)
+            self.delivery.saw(self.pool_name(camera), now, worker)
 
     def served_by(self, camera: str) -> str:
         """The live workers serving ``camera`` (", "-joined when two do: a warning)."""

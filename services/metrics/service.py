@@ -148,7 +148,7 @@ class MetricsHandlers:
         """An accepted Detections of ``camera`` (the caller holds ``lock``)."""
         now = self.clock.mono_s()
         self.agg.on_detections(message, now, camera=camera)
-        self.pool.saw(camera, now)
+        self.pool.saw(camera, now, message.worker)
 
     def on_pool_member(self, key: str, live: bool) -> None:
         """A detector worker's pool token came (``live``) or went."""

@@ -238,7 +238,7 @@ WIRE_KEYS = {
     "Detections": {
         "header", "image_width", "image_height", "n", "class_ids", "class_names", "scores",
         "xyxy", "center_size", "track_ids", "columns", "timing_ms", "model", "backend",
-        "received_ns", "published_ns",
+        "received_ns", "published_ns", "worker",
     },
     "Twist": {"header", "linear", "angular", "input_stamp_ns"},
     "LaserScan": {

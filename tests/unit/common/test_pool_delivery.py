@@ -171,3 +171,34 @@ def test_a_dropped_member_left_alone_serves_every_camera() -> None:
     d.left("detector")
     assert set(owners(d, DELIVER_S + 1.0, alone).values()) == {"liar"}
     assert set(owners(d, DELIVER_S + 1.0, alone)) == set(CAMERAS)
+
+
+def test_a_member_is_judged_on_the_detections_it_made_not_on_its_cameras() -> None:
+    """The race a loaded CI run lost: the metrics service heard the liar given the cameras a
+    moment after the workers did, so by its deadline the real worker, which had dropped the
+    liar and taken its cameras back, was delivering them, and the liar looked as if it
+    delivered: never dropped in the metrics answer. Named detections count only for the worker
+    that made them; one that names no worker (an older writer) still counts for the camera's
+    owner."""
+    members = {"detector": HONEST, "liar": LIAR}
+    late = Delivery(DELIVER_S, READMIT_S)  # a judge that heard the liar's claim at t = 2
+    given = owners(late, 2.0, members)
+    assert set(given.values()) == {"liar"}
+    assert late.judge(2.0, given, CAMERAS, members) == []
+    for t in (3.0, 4.0, 5.0, 6.0):  # the real worker has the cameras back and delivers
+        for cam in CAMERAS:
+            late.saw(cam, t, "detector")
+    [drop] = late.judge(2.0 + DELIVER_S + 0.1, given, CAMERAS, members)
+    assert drop.worker == "liar"
+    # The same judge with detections that name no worker takes them as the liar's.
+    anonymous = Delivery(DELIVER_S, READMIT_S)
+    anonymous.judge(2.0, given, CAMERAS, members)
+    for t in (3.0, 4.0, 5.0, 6.0):
+        for cam in CAMERAS:
+            anonymous.saw(cam, t)
+    assert anonymous.judge(2.0 + DELIVER_S + 0.1, given, CAMERAS, members) == []
+    # The member's own named detections count.
+    own = Delivery(DELIVER_S, READMIT_S)
+    own.judge(2.0, given, CAMERAS, members)
+    own.saw(next(iter(CAMERAS)), 5.0, "liar")
+    assert own.judge(2.0 + DELIVER_S + 0.1, given, CAMERAS, members) == []

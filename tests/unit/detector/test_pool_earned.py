@@ -12,11 +12,12 @@ from collections.abc import Iterator
 import pytest
 
 from common.announce import to_chunk
+from common.boxes import Boxes
 from common.bus import QoS
 from common.clock import FakeClock
 from common.keys import Keys
 from common.memory_bus import MemoryHub
-from common.messages import WorkerAnnouncement
+from common.messages import Detections, Header, WorkerAnnouncement
 from services.detector import contract
 from services.detector.contract import MAX_CAPACITY_HZ
 from services.detector.pool_checks import AUDIT_PERIOD_S
@@ -37,12 +38,15 @@ def hub(delivery_threads: int) -> Iterator[MemoryHub]:
     hub.close()
 
 
-def detections(hub: MemoryHub, cameras: frozenset[str]) -> None:
-    """One (empty) Detections on each of ``cameras``' keys, as their worker puts them."""
+def detections(hub: MemoryHub, cameras: frozenset[str], worker: str = "detector") -> None:
+    """One (empty) Detections on each of ``cameras``' keys, made by ``worker``."""
     bus = hub.join("worker_output")
     keys = Keys("stack")
     for cam in sorted(cameras):
-        bus.publisher(keys.detections(cam), QoS.SENSOR).put(b"detections of " + cam.encode())
+        header = Header(stamp_ns=1, frame_id=cam, seq=0, source="camera")
+        msg = Detections(header=header, image_width=64, image_height=48, boxes=Boxes(),
+                         class_names=(), worker=worker)  # fmt: skip
+        bus.publisher(keys.detections(cam), QoS.SENSOR).put(msg.encode())
     hub.drain()  # heard before the bus goes
     bus.close()
 
