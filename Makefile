@@ -19,8 +19,12 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 # What the tests need on top.
+# TrackEval (the tracking metrics of tools/tracking) without its requirements: they name
+# opencv-python, whose cv2 would clash with opencv-python-headless's; its metrics need only
+# numpy and scipy (docs/library-decisions.md).
 $(DEV_STAMP): $(STAMP)
 	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install --quiet --no-deps 'trackeval==1.3.0'
 	touch $(DEV_STAMP)
 
 setup: $(STAMP) model

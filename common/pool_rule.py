@@ -62,6 +62,7 @@ class PoolCamera:
     prefix: str
     camera: str
     rate_hz: float
+    hfov_deg: float = 0.0  # its announced field of view (0: not known); the rule ignores it
 
 
 @dataclass(frozen=True, slots=True)

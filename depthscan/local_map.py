@@ -16,9 +16,10 @@ later frame that sees floor there and no hazard), so a thing that enters the bli
 an obstacle. In one frame a hazard wins over unknown, and unknown over floor. The cells under
 the robot's own footprint are floor (the robot stands on them).
 
-The pose comes from :class:`Odometry`: the controller's own commands, integrated. A base that
-does not move as commanded (a wheel slipping, pushed by hand) moves the memory wrongly; one
-that moves less than commanded brings remembered things nearer, which errs towards stopping.
+The pose comes from :class:`~common.odometry.Odometry`: the controller's own commands,
+integrated. A base that does not move as commanded (a wheel slipping, pushed by hand) moves
+the memory wrongly; one that moves less than commanded brings remembered things nearer,
+which errs towards stopping.
 
 What the controller reads (:meth:`LocalMap.read`): the HAZARD and UNKNOWN cells as a scan of
 ranges round the robot (merged with the cameras' own virtual scans and judged by the same
@@ -30,16 +31,14 @@ from __future__ import annotations
 
 import io
 import math
-import threading
 import zipfile
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from common.messages import Header, LaserScan
-from common.unicycle import Pose, advance
+from common.unicycle import Pose
 from depthscan.observe import Observation
 
 UNSEEN, FREE, UNKNOWN, HAZARD = 0, 1, 2, 3
@@ -54,45 +53,6 @@ class MapParams:
     corridor_half_width_m: float = 0.3
     footprint_half_m: float = 0.3
     known_ahead_m: float = 3.0
-
-
-class Odometry:
-    """The robot's pose by its own commands (thread-safe): each command holds until the next.
-    ``history_s`` of commands are kept, so a frame captured that long ago is placed. It
-    starts at ``start`` (a pose restored with the map: :meth:`LocalMap.restore`)."""
-
-    def __init__(self, history_s: float = 10.0, start: Pose = (0.0, 0.0, 0.0)) -> None:
-        self._lock = threading.Lock()
-        self._history_s = history_s
-        # (time, pose at that time, v, w from then on); the first holds still from -inf.
-        self._log: deque[tuple[float, Pose, float, float]] = deque()
-        self._log.append((-math.inf, start, 0.0, 0.0))
-
-    def coasted(self, t: float, coast_s: float) -> Pose:
-        """Where the robot would be ``coast_s`` after ``t`` if the command in force at ``t``
-        went on (as a base does until its own command timeout when the controller dies)."""
-        with self._lock:
-            _, _, v, w = self._log[-1]
-        return advance(self.pose_at(t), v, w, coast_s)
-
-    def command(self, t: float, v: float, w: float) -> None:
-        """From monotonic time ``t`` on the robot moves at (``v``, ``w``)."""
-        with self._lock:
-            t0, pose, v0, w0 = self._log[-1]
-            if t < t0:
-                return  # out of order: the clock never goes back, a caller might
-            self._log.append((t, advance(pose, v0, w0, t - t0 if t0 > -math.inf else 0), v, w))
-            while len(self._log) > 2 and self._log[1][0] < t - self._history_s:
-                self._log.popleft()
-
-    def pose_at(self, t: float) -> Pose:
-        """The pose at monotonic time ``t`` (before the history: its oldest pose)."""
-        with self._lock:
-            entries = list(self._log)
-        for t0, pose, v, w in reversed(entries):
-            if t0 <= t:
-                return advance(pose, v, w, t - t0) if t0 > -math.inf else pose
-        return entries[0][1]
 
 
 def _to_odom(pose: Pose, pts: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

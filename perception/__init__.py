@@ -11,7 +11,11 @@ service (services/detector/) and the tools are built on it.
                         what to keep of its output, the tracker's thresholds; the detector
                         service's settings (services/detector/contract.py) are these and more
     DetectionResult     what ``Detector.detect`` returns (``StageTiming``: its stage times)
-    Tracker             track ids across frames (``tracker_clock``, ``iou_matrix``)
+    Tracker             track ids across frames (``tracker_clock``, ``iou_matrix``);
+                        ``KalmanTracker`` the Kalman one (``kalman_tracker.py``), which also
+                        takes the robot's turn and each box's colour (``appearance``,
+                        ``appearance_similarity``); ``new_tracker`` either, by
+                        ``TrackerParams.kind`` (``TrackerKind``)
     Variant             ``backend:precision:imgsz``; ``variant_of(detector)`` says what one runs
     prepare_for         every preparation a spec needs, ahead of serving (``zstack prepare``)
     load                open what was prepared, building nothing; NotPrepared says what to run
@@ -45,6 +49,9 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from perception.batching import PROBE_SHAPE, BatchChoice, probe_sizes
     from perception.batching import measure as measure_batch
+    from perception.colour_cue import FEATURES as APPEARANCE_FEATURES
+    from perception.colour_cue import Features, appearance
+    from perception.colour_cue import similarity as appearance_similarity
     from perception.depth import CENTRE as DEPTH_CENTRE
     from perception.depth import COLUMNS as DEPTH_COLUMNS
     from perception.depth import DISTANCE as DEPTH_DISTANCE
@@ -61,10 +68,17 @@ if TYPE_CHECKING:
     from perception.depth import measure as measure_depth
     from perception.depth import unknown as unknown_depth
     from perception.fast_profile import TIMED_RUNS, Figures, Measure, choose_fast
+    from perception.kalman_tracker import KalmanTracker, new_tracker
     from perception.loading import load
     from perception.pipeline import Detector
     from perception.preparing import open_prepared, prepare, prepare_for, sized_model
-    from perception.settings import DecodeOptions, DetectorSpec, ModelSpec, TrackerParams
+    from perception.settings import (
+        DecodeOptions,
+        DetectorSpec,
+        ModelSpec,
+        TrackerKind,
+        TrackerParams,
+    )
     from perception.tracker import Tracker, iou_matrix, tracker_clock
     from perception.types import DetectionResult, StageTiming
     from perception.variants import PREPARE_COMMAND, NotPrepared, Prepared, Variant, variant_of
@@ -92,7 +106,14 @@ _FROM: dict[str, tuple[str, ...]] = {
     "loading": ("load",),
     "pipeline": ("Detector",),
     "preparing": ("open_prepared", "prepare", "prepare_for", "sized_model"),
-    "settings": ("DecodeOptions", "DetectorSpec", "ModelSpec", "TrackerParams"),
+    "settings": ("DecodeOptions", "DetectorSpec", "ModelSpec", "TrackerKind", "TrackerParams"),
+    "colour_cue": (
+        "FEATURES as APPEARANCE_FEATURES",
+        "Features",
+        "appearance",
+        "similarity as appearance_similarity",
+    ),
+    "kalman_tracker": ("KalmanTracker", "new_tracker"),
     "tracker": ("Tracker", "iou_matrix", "tracker_clock"),
     "types": ("DetectionResult", "StageTiming"),
     "variants": ("PREPARE_COMMAND", "NotPrepared", "Prepared", "Variant", "variant_of"),
@@ -104,6 +125,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     for alias in names
 }
 __all__ = [
+    "APPEARANCE_FEATURES",
     "DEPTH_CENTRE",
     "DEPTH_COLUMNS",
     "DEPTH_DISTANCE",
@@ -117,8 +139,10 @@ __all__ = [
     "DetectionResult",
     "Detector",
     "DetectorSpec",
+    "Features",
     "Figures",
     "Intrinsics",
+    "KalmanTracker",
     "Measure",
     "ModelSpec",
     "Mounted",
@@ -127,14 +151,18 @@ __all__ = [
     "Prepared",
     "StageTiming",
     "Tracker",
+    "TrackerKind",
     "TrackerParams",
     "Variant",
+    "appearance",
+    "appearance_similarity",
     "choose_fast",
     "depth_metres",
     "iou_matrix",
     "load",
     "measure_batch",
     "measure_depth",
+    "new_tracker",
     "open_prepared",
     "prepare",
     "prepare_for",

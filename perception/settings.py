@@ -18,6 +18,7 @@ Imports only ``common``, and nothing heavy: the stack's config reads it through 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Annotated
 
 from common.contracts import BackendName
@@ -121,6 +122,13 @@ class DetectorSpec(DecodeOptions, ModelSpec):
         DecodeOptions.__post_init__(self)
 
 
+class TrackerKind(StrEnum):
+    """Which tracker (``tracker.kind``)."""
+
+    IOU = "iou"  # perception/tracker.py: greedy IoU, constant-velocity corners
+    KALMAN = "kalman"  # perception/kalman_tracker.py: Kalman, ego-rotation, re-identification
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class TrackerParams:
     """The tracker's thresholds (tracker.py).
@@ -132,6 +140,12 @@ class TrackerParams:
     after ``jumps_before_reset`` such frames in a row the stamps are believed and the tracks
     restart (a camera clock that really stepped). Only frames from another host are checked:
     a frame from this host is tracked on its monotonic stamp, which cannot step.
+
+    ``kind``: ``"iou"`` (perception/tracker.py) or ``"kalman"``
+    (perception/kalman_tracker.py), which also reads: ``appearance_weight`` (how much a
+    colour that disagrees lowers a match's IoU), ``reid_age_s`` (a lost track may be taken
+    back this long), ``reid_similarity`` (the least colour likeness to take one back) and
+    ``reid_gate`` (how far from its prediction, in box heights).
     """
 
     high_score: Annotated[float, Range(0, 1)] = 0.4
@@ -140,8 +154,14 @@ class TrackerParams:
     max_age_s: Annotated[float, Range(0.01, 60)] = 1.0
     max_stamp_jump_s: Annotated[float, Range(0.01, 60)] = 0.5
     jumps_before_reset: Annotated[int, Range(1, 1000)] = 3
+    kind: TrackerKind = TrackerKind.IOU
+    appearance_weight: Annotated[float, Range(0, 1)] = 0.3
+    reid_age_s: Annotated[float, Range(0.01, 60)] = 4.0
+    reid_similarity: Annotated[float, Range(0, 1)] = 0.8
+    reid_gate: Annotated[float, Range(0, 20)] = 1.5
 
     def __post_init__(self) -> None:
         check_bounds(self, "tracker", TrackerParams)
+        enum_field(self, "kind", TrackerKind, "tracker.kind")
         if self.low_score > self.high_score:
             raise ConfigError("tracker.low_score must not be above tracker.high_score")

@@ -86,13 +86,14 @@ def tracker_clock(
     return stamp_ns / 1e9, arrival_ns / 1e9
 
 
-class Tracker:
-    """Assigns a track id to each detection of a stream of frames of one camera."""
+class StampGuard:
+    """The stamp checks every tracker of a camera's stream makes (``settings``'
+    ``max_stamp_jump_s`` and ``jumps_before_reset``): a frame whose stamp jumped is ignored,
+    counted in ``ignored_frames``; after ``jumps_before_reset`` in a row the stamps are
+    believed, the tracks restart (:meth:`restart`) and ``resets`` counts it."""
 
     def __init__(self, settings: TrackerParams | None = None) -> None:
         self.settings = settings if settings is not None else TrackerParams()
-        self._tracks: list[_Track] = []
-        self._next_id = 1
         self._last: tuple[float, float] | None = None  # (stamp, arrival) of the last frame used
         self._jumps_in_a_row = 0
         self.ignored_frames = 0  # frames ignored for a stamp jump
@@ -109,25 +110,50 @@ class Tracker:
             return False
         return abs((now - stamp) - (arrival - arrived)) > self.settings.max_stamp_jump_s
 
+    def admit(self, now: float, arrival: float | None) -> bool:
+        """Whether the frame stamped ``now`` (arrived at ``arrival``) is tracked: False for
+        one ignored for its stamp."""
+        if self._stamp_jumped(now, arrival):
+            self._jumps_in_a_row += 1
+            if self._jumps_in_a_row < self.settings.jumps_before_reset:
+                self.ignored_frames += 1
+                return False
+            self.restart()
+            self.resets += 1
+        self._jumps_in_a_row = 0
+        self._last = (now, now if arrival is None else arrival)
+        return True
+
+    def restart(self) -> None:
+        """Forget every track (the stamps jumped for good)."""
+        raise NotImplementedError
+
+
+class Tracker(StampGuard):
+    """Assigns a track id to each detection of a stream of frames of one camera."""
+
+    def __init__(self, settings: TrackerParams | None = None) -> None:
+        super().__init__(settings)
+        self._tracks: list[_Track] = []
+        self._next_id = 1
+
+    def restart(self) -> None:
+        self._tracks = []
+
     def update(
-        self, boxes: Boxes, now: float, arrival: float | None = None
+        self, boxes: Boxes, now: float, arrival: float | None = None, **_: object
     ) -> npt.NDArray[np.int32]:
         """Track ids (n,) for this frame's ``boxes``; -1 for weak unmatched ones, and for
         every detection of a frame ignored for its stamp. ``boxes.track_ids`` is not read.
 
         ``now`` is the frame's capture time in seconds (any monotonic origin); ``arrival``, on
         the receiver's own clock in seconds, is when the frame arrived (None: not checked).
+        Keyword arguments (a turn, features: perception/kalman_tracker.py's) are not used.
         """
         p = self.settings
         xyxy, scores, class_ids = boxes.xyxy, boxes.scores, boxes.class_ids
-        if self._stamp_jumped(now, arrival):
-            self._jumps_in_a_row += 1
-            if self._jumps_in_a_row < p.jumps_before_reset:
-                self.ignored_frames += 1
-                return np.full(len(scores), -1, np.int32)
-            self._tracks, self.resets = [], self.resets + 1
-        self._jumps_in_a_row = 0
-        self._last = (now, now if arrival is None else arrival)
+        if not self.admit(now, arrival):
+            return np.full(len(scores), -1, np.int32)
         self._tracks = [t for t in self._tracks if now - t.last_seen <= p.max_age_s]
         ids = np.full(len(scores), -1, np.int32)
         free_tracks = list(range(len(self._tracks)))

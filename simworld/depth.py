@@ -140,7 +140,7 @@ def owners(world: World, spec: CameraSpec) -> tuple[npt.NDArray[np.int32], list[
     return owner, placed
 
 
-def _drawn_area(p: Placed) -> float:
+def placed_area(p: Placed) -> float:
     """How many pixels ``p`` covers whole, in the image or out of it."""
     if p.body is not None:
         return drawn_area(p.body, p.full)
@@ -170,7 +170,7 @@ def targets_in_camera(
     for k, p in enumerate(placed):
         if p.target is None or p.rect is None:
             continue
-        if shown[k] <= min_visible * _drawn_area(p):
+        if shown[k] <= min_visible * placed_area(p):
             continue
         tg = world.targets[p.target]
         face = placed_depth(p)

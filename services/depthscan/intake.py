@@ -42,8 +42,9 @@ from common.files import atomic_write_bytes
 from common.freshness import FreshnessGate, Verdict, capture_age_s
 from common.messages import CameraAnnouncement, DepthFrame, Header, LaserScan
 from common.node import Tally
+from common.odometry import Odometry
 from depthscan.frame import Plausible, ScanParams, blind_zone, implausible, sample_frame, usable
-from depthscan.local_map import LocalMap, MapParams, Odometry
+from depthscan.local_map import LocalMap, MapParams
 from depthscan.observe import observe
 from depthscan.trust import LateWatch, ahead_on_same_clock, foreign_source
 from perception import Intrinsics, Mounting

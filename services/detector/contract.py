@@ -156,7 +156,8 @@ def access(shape: Shape) -> dict[str, Access]:
     """Each worker reads frames and depth images and puts detections, never frames: every
     camera's, as any worker may come to serve any camera (services/detector/pool.py); it reads
     the controller's status too, for the camera that sees the target and the target classes
-    (services/detector/attention.py), and every camera's detections, whoever puts them: a
+    (services/detector/attention.py), the robot's commands (its turn, for the tracker:
+    services/detector/motion.py), and every camera's detections, whoever puts them: a
     pool member earns its cameras by their detections arriving (common/pool_delivery.py). Its
     tokens are its own only: its health, its pool
     membership, its announcement and its serving tokens under its own name (those of the pool
@@ -165,7 +166,9 @@ def access(shape: Shape) -> dict[str, Access]:
     key. A pool serving further robots (``shape.prefixes``) reads each one's frames, depth
     images and detections and puts its detections, and serves its info, on every camera under
     its prefix (their cameras come and go with their announcements), and reads its
-    controller's status (attention), and nothing else of theirs: no command."""
+    controller's status (attention) and commands (the tracker takes the robot's turn out of
+    its predictions: services/detector/motion.py), and puts nothing else of theirs: no
+    command."""
     keys, pool = shape.keys, shape.pool_keys()
     robots = shape.other_robots()
     return {
@@ -179,6 +182,7 @@ def access(shape: Shape) -> dict[str, Access]:
                 keys.all_depths(),
                 keys.all_detections(),
                 keys.controller_status(),
+                keys.cmd_vel(),
                 *(
                     k
                     for r in robots
@@ -187,6 +191,7 @@ def access(shape: Shape) -> dict[str, Access]:
                         r.all_depths(),
                         r.all_detections(),
                         r.controller_status(),
+                        r.cmd_vel(),
                     )
                 ),
             ),

@@ -96,7 +96,7 @@ class PoolHearing:
             for cam, a in announced.current().items()
         ]
         announced = {
-            pool_name(prefix, cam, pool): PoolCamera(prefix, cam, a.rate_hz)
+            pool_name(prefix, cam, pool): PoolCamera(prefix, cam, a.rate_hz, a.hfov_deg)
             for prefix, cam, a in heard
         }
         depth = {

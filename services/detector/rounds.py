@@ -4,6 +4,7 @@ read from an injected clock (the freshness gate's ``now``, ``published_ns``)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -21,11 +22,20 @@ from common.keys import Keys
 from common.messages import ControllerStatus, Detections, Frame, Header
 from common.node import Node, Put, Tally
 from common.pool_rule import label, pool_name, robot_label
-from perception import DetectionResult, Detector, Tracker, tracker_clock
+from perception import (
+    DetectionResult,
+    Detector,
+    KalmanTracker,
+    Tracker,
+    appearance,
+    new_tracker,
+    tracker_clock,
+)
 from services.detector import contract
 from services.detector.attention import Attention
 from services.detector.counting import count_for, reject_for
 from services.detector.depth_stage import DepthStage
+from services.detector.motion import RobotTurns
 from services.detector.schedule import Waiting
 from stack.config import Config
 
@@ -38,6 +48,7 @@ def to_message(
     boxes: Boxes,
     published_ns: int,
     depth_ms: float | None = None,
+    worker: str = "",
 ) -> Detections:
     """The Detections message for ``frame``: its header, the result (its ``boxes`` with their
     track ids and any depth columns), the detector's stamps; ``depth_ms``: the depth stage's
@@ -61,6 +72,7 @@ def to_message(
         backend=f"{det.backend.name}/{det.backend.device}/{det.backend.precision}",
         received_ns=received_ns,
         published_ns=published_ns,
+        worker=worker,
     )
 
 
@@ -72,23 +84,35 @@ class CameraOutput:
     camera: str
     frame_key: str
     gate: FreshnessGate
-    tracker: Tracker | None
+    tracker: Tracker | KalmanTracker | None
     put: Put
+    # The camera's robot (its key prefix) and field of view: the Kalman tracker takes that
+    # robot's turn out of its predictions (0: not known, no turn taken out).
+    prefix: str = ""
+    hfov_deg: float = 0.0
+    last_at: float | None = None  # the capture time of the last frame tracked (s)
 
 
 def camera_outputs(
-    config: Config, frame_keys: Mapping[str, str], put_for: Callable[[str], Put]
+    config: Config,
+    frame_keys: Mapping[str, str],
+    put_for: Callable[[str], Put],
+    prefix: str = "",
+    hfov_deg: float = 0.0,
 ) -> dict[str, CameraOutput]:
-    """Each camera's output: a freshness gate, a tracker when ``tracker.enabled``, and
-    ``put_for(camera)`` to publish its detections with."""
+    """Each camera's output: a freshness gate, a tracker of ``tracker.kind`` when
+    ``tracker.enabled``, and ``put_for(camera)`` to publish its detections with; ``prefix``
+    and ``hfov_deg``: the cameras' robot and field of view (for the tracker's ego-rotation)."""
     s = config.detector
     return {
         cam: CameraOutput(
             camera=cam,
             frame_key=key,
             gate=FreshnessGate(s.max_frame_age_s, config.stack.clock_tolerance_s, BOOT_ID),
-            tracker=Tracker(config.tracker) if config.tracker.enabled else None,
+            tracker=new_tracker(config.tracker) if config.tracker.enabled else None,
             put=put_for(cam),
+            prefix=prefix,
+            hfov_deg=hfov_deg,
         )
         for cam, key in frame_keys.items()
     }
@@ -114,8 +138,12 @@ class Rounds:
         clock: Clock = SYSTEM_CLOCK,
         attention: Attention | None = None,
         depth: DepthStage | None = None,
+        worker: str = "",
+        turns: RobotTurns | None = None,
     ) -> None:
         self.settings = config.detector
+        self.worker = worker  # named in every Detections (the pool judges members by it)
+        self.turns = turns  # each robot's turn by its commands (the Kalman tracker's)
         self.tally = tally
         self.detector = detector
         self.outputs = outputs
@@ -178,11 +206,16 @@ class Rounds:
         results = self.detector.detect_batch([image for *_, image in ready])
         self.tally.counters.add(contract.BATCHES)
         self.tally.counters.add(contract.BATCHED_FRAMES, len(ready))
-        for (out, frame, received_ns, _), result in zip(ready, results, strict=True):
-            self._publish(out, frame, received_ns, result)
+        for (out, frame, received_ns, image), result in zip(ready, results, strict=True):
+            self._publish(out, frame, received_ns, result, image)
 
     def _publish(
-        self, out: CameraOutput, frame: Frame, received_ns: int, result: DetectionResult
+        self,
+        out: CameraOutput,
+        frame: Frame,
+        received_ns: int,
+        result: DetectionResult,
+        image: npt.NDArray[np.uint8],
     ) -> None:
         if not result.output_sane:
             # Zero boxes from a broken model are no verdict: publish nothing, so that the
@@ -199,15 +232,16 @@ class Rounds:
         track_ids = (
             None
             if out.tracker is None
-            else _track(self.tally, out, result, frame.header, received_ns)
+            else _track(self.tally, out, result, frame.header, received_ns, image, self.turns)
         )
         boxes, depth_ms = result.boxes.with_track_ids(track_ids), None
         if self.depth is not None:
             size = (frame.width, frame.height)
             boxes, depth_ms = self.depth.measure(out.camera, frame.header, size, boxes)
         msg = to_message(
-            frame, result, self.detector, received_ns, boxes, self.clock.wall_ns(), depth_ms
-        )
+            frame, result, self.detector, received_ns, boxes, self.clock.wall_ns(), depth_ms,
+            self.worker,
+        )  # fmt: skip
         out.put(msg.encode())
         count_for(self.tally, out.camera, contract.DETECTIONS_OUT)
         if self.attention is not None:
@@ -254,16 +288,32 @@ def _track(
     result: DetectionResult,
     header: Header,
     received_ns: int,
+    image: npt.NDArray[np.uint8],
+    turns: RobotTurns | None,
 ) -> npt.NDArray[np.int32]:
     """Track ids for ``result`` from its camera's tracker; a frame whose stamp jumped is
-    counted, its ids left at -1."""
+    counted, its ids left at -1. The Kalman tracker also gets each box's colour (from
+    ``image``) and how far the camera's robot turned since its last frame (by ``turns``: a
+    frame from this host only, tracked on its monotonic stamp)."""
     tracker = out.tracker
     assert tracker is not None
     ignored, resets = tracker.ignored_frames, tracker.resets
     at, arrival = tracker_clock(
         header.stamp_ns, header.mono_ns, header.boot_id, received_ns, BOOT_ID
     )
-    ids = tracker.update(result.boxes, at, arrival)
+    if isinstance(tracker, KalmanTracker):
+        turned = 0.0
+        if turns is not None and arrival is None and out.last_at is not None:
+            turned = turns.turned(out.prefix, out.last_at, at)
+        width = image.shape[1]
+        focal = width / 2 / math.tan(math.radians(out.hfov_deg) / 2) if out.hfov_deg > 0 else 0.0
+        ids = tracker.update(
+            result.boxes, at, arrival, turned_rad=turned, focal_px=focal,
+            image_width=width, features=appearance(image, result.boxes.xyxy),
+        )  # fmt: skip
+    else:
+        ids = tracker.update(result.boxes, at, arrival)
+    out.last_at = at
     if tracker.ignored_frames > ignored:
         reject_for(
             tally,

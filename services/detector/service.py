@@ -30,6 +30,7 @@ from services.detector.contract import BATCHED_FRAMES, DetectorSettings
 from services.detector.fairness import RobotFair
 from services.detector.handlers import DetectorHandlers
 from services.detector.membership import PoolMember
+from services.detector.motion import RobotTurns, heed_commands
 from services.detector.pool import PoolCamera
 from services.detector.rounds import CameraOutput, Rounds, camera_outputs, heed_controllers
 from stack.config import Config
@@ -167,7 +168,14 @@ def _serve(
     )
     status_subs = heed_controllers(node, config, attention)  # each robot's controller
     closing.callback(undeclare_all, status_subs)
-    rounds = Rounds(config, node, detector, cameras.outputs, node.clock, attention, handlers.depth)
+    # Each robot's turn by its commands, for the Kalman tracker (services/detector/motion.py).
+    turns = RobotTurns()
+    command_subs = heed_commands(node, config, turns)
+    closing.callback(undeclare_all, command_subs)
+    rounds = Rounds(
+        config, node, detector, cameras.outputs, node.clock, attention, handlers.depth, worker,
+        turns,
+    )  # fmt: skip
     capacity = _warm_up(detector, per_round, s, node, stop)
     pool = PoolMember(
         node,
@@ -245,7 +253,9 @@ class ServedCameras:
         if name not in self.outputs:
             put = self.node.publisher(robot.detections(cam.camera), QoS.PERCEPTION).put
             frame_keys = {name: self.handlers.frame_keys[name]}
-            self.outputs.update(camera_outputs(self.config, frame_keys, lambda _: put))
+            self.outputs.update(
+                camera_outputs(self.config, frame_keys, lambda _: put, cam.prefix, cam.hfov_deg)
+            )
         key = robot.detector_info(cam.camera)
         self.queryables[name] = _info_queryable(self.node, key, self.info)
 

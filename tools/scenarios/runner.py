@@ -25,7 +25,7 @@ from common.clock import mono_s, wall_ns
 from common.contracts import ControllerMode, DistanceSource, ScenarioResult
 from common.errors import DecodeError, StackError
 from common.keys import Keys
-from common.messages import Detections, GroundTruth, Twist
+from common.messages import ControllerStatus, Detections, Frame, GroundTruth, Twist
 from common.zenoh_bus import open_session
 from services.sim.worlds import world_for, world_line
 from simworld.scenarios import SCENARIOS, Scenario
@@ -191,11 +191,18 @@ def config_changes(base: Config, config: Config, scenario: Scenario) -> list[str
 
 
 def record_into(
-    session: zenoh.Session, keys: Keys, cameras: list[str], rec: ScenarioLog, *, frames: bool
+    session: zenoh.Session,
+    keys: Keys,
+    cameras: list[str],
+    rec: ScenarioLog,
+    *,
+    frames: bool,
+    images: bool = False,
 ) -> list[Any]:
-    """Subscribe to the truth, the commands and each camera's detections, appending each to
-    ``rec``; with ``frames``, count each camera's frames too (heard, not decoded; a copy of
-    every frame is sent to this subscriber, which a soak does not want)."""
+    """Subscribe to the truth, the commands, the controller's status and each camera's
+    detections, appending each to ``rec``; with ``frames``, count each camera's frames too
+    (heard, not decoded; a copy of every frame is sent to this subscriber, which a soak does
+    not want); with ``images``, keep them (``rec.images``, by capture stamp)."""
     lock = threading.Lock()
 
     def recorder(decode: Any, into: list[Any]) -> Any:
@@ -210,22 +217,36 @@ def record_into(
         return on_sample
 
     def frame_counter(camera: str) -> Any:
-        def on_frame(_sample: zenoh.Sample) -> None:
+        kept = rec.images.setdefault(camera, {}) if images else None
+
+        def on_frame(sample: zenoh.Sample) -> None:
+            payload = sample.payload.to_bytes() if kept is not None else b""
+            stamp = None
+            if kept is not None:
+                try:
+                    stamp = Frame.decode(payload).header.stamp_ns
+                except DecodeError:
+                    stamp = None  # garbage is the services' to count
             with lock:
                 rec.frames[camera] = rec.frames.get(camera, 0) + 1
+                if kept is not None and stamp is not None:
+                    kept[stamp] = payload
 
         return on_frame
 
     subs = [
         session.declare_subscriber(keys.sim_truth(), recorder(GroundTruth.decode, rec.truths)),
         session.declare_subscriber(keys.cmd_vel(), recorder(Twist.decode, rec.twists)),
+        session.declare_subscriber(
+            keys.controller_status(), recorder(ControllerStatus.decode, rec.statuses)
+        ),
     ]
     for camera in cameras:
         into = rec.detections.setdefault(camera, [])
         subs.append(
             session.declare_subscriber(keys.detections(camera), recorder(Detections.decode, into))
         )
-        if frames:
+        if frames or images:
             subs.append(session.declare_subscriber(keys.frame(camera), frame_counter(camera)))
     return subs
 
@@ -239,6 +260,7 @@ def run_scenario(
     full_length: bool = False,
     variant: Scenario | None = None,
     rec: ScenarioLog | None = None,
+    images: bool = False,
 ) -> ScenarioResult:
     """Run scenario ``name`` on the real stack with the controller in ``mode`` (``ros2``:
     through the ROS 2 bridge, the simulator playing a ROS 2 robot); returns its figures (see
@@ -246,7 +268,7 @@ def run_scenario(
     (after ``settle_from_s``), unless ``full_length``. A benchmark may run a ``variant`` of
     the scenario (further cameras, detector settings, another world: it keeps the name and
     the simulator plays ``name``'s world unless the variant's ``world`` is one of SCENARIOS)
-    and keep what was heard in ``rec``."""
+    and keep what was heard in ``rec`` (with ``images``, every camera's frames too)."""
     if name not in SCENARIOS or name == "demo":
         known = ", ".join(n for n in SCENARIOS if n != "demo")
         raise StackError(f"unknown scenario {name!r}; choose one of {known}")
@@ -273,7 +295,9 @@ def run_scenario(
             session = open_session(config.zenoh, config.principal("observer"))
             try:
                 cameras = list(config.all_cameras)
-                subs = record_into(session, Keys(config.stack.prefix), cameras, rec, frames=True)
+                subs = record_into(
+                    session, Keys(config.stack.prefix), cameras, rec, frames=True, images=images
+                )
                 settled = None
                 if scenario.settle_s is not None and not full_length:
                     settled = Settle(scenario, config, scenario.settle_s)

@@ -34,7 +34,7 @@ import math
 from dataclasses import dataclass, field
 
 from common.contracts import ScenarioResult
-from common.messages import Detections, GroundTruth, Twist
+from common.messages import ControllerStatus, Detections, GroundTruth, Twist
 from services.controller.contract import ControllerSettings
 from simworld.people import surface_m
 from simworld.scenarios import Scenario
@@ -57,6 +57,10 @@ class ScenarioLog:
     detections: dict[str, list[Detections]] = field(default_factory=dict)  # by camera
     frames: dict[str, int] = field(default_factory=dict)  # frames heard, by camera
     kill_ns: int | None = None
+    statuses: list[ControllerStatus] = field(default_factory=list)
+    # Each camera's frames as heard (their payloads, by capture stamp): only when a run
+    # keeps them (a tracker's appearance is scored on them: tools/tracking).
+    images: dict[str, dict[int, bytes]] = field(default_factory=dict)
 
 
 def _bearing_deg(truth: GroundTruth, i: int) -> float:

@@ -208,13 +208,17 @@ def test_each_camera_principal_puts_only_its_own_frames(names: tuple[str, ...]) 
     detector = {*(KEYS.detections(c) for c in names), KEYS.counters("detector")}
     assert _allowed(acl, "detector", "put") == detector
     # It reads every camera's frames and depth images, the controller's status (attention: the
-    # camera that sees the target first) and every camera's detections (who delivers).
+    # camera that sees the target first), its commands (the robot's turn, which the tracker
+    # takes out of its predictions; read, never put) and every camera's detections (who
+    # delivers).
     assert _allowed(acl, "detector", "declare_subscriber") == {
         KEYS.all_frames(),
         KEYS.all_depths(),
         KEYS.all_detections(),
         KEYS.controller_status(),
+        KEYS.cmd_vel(),
     }
+    assert {p for p in principals if _may(acl, p, "put", KEYS.cmd_vel())} == {"controller"}
     # A camera the stack does not have: nobody may put its frames or its detections.
     assert not [p for p in principals if _may(acl, p, "put", KEYS.frame("ghost"))]
     assert not [p for p in principals if _may(acl, p, "put", KEYS.detections("ghost"))]

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from common.messages import Header, LaserScan
+from common.odometry import Odometry
 from common.unicycle import advance
 from depthscan.frame import ScanParams, sample_metres
 from depthscan.local_map import (
@@ -19,7 +20,6 @@ from depthscan.local_map import (
     UNSEEN,
     LocalMap,
     MapParams,
-    Odometry,
 )
 from depthscan.observe import observe
 from perception.depth import Mounting

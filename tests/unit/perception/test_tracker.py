@@ -1,18 +1,30 @@
-"""The tracker keeps ids across frames, across a weak frame, and apart for two people."""
+"""The trackers keep ids across frames, across a weak frame, and apart for two people; both
+the IoU tracker (perception/tracker.py) and the Kalman one (perception/kalman_tracker.py)."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 
 from common.boxes import Boxes
 from common.errors import ConfigError
+from perception.kalman_tracker import KalmanTracker
 from perception.settings import TrackerParams
 from perception.tracker import Tracker, iou_matrix, tracker_clock
 
+Make = Callable[..., Tracker | KalmanTracker]
+
+
+@pytest.fixture(params=[Tracker, KalmanTracker], ids=["iou", "kalman"])
+def make(request: pytest.FixtureRequest) -> Make:
+    out: Make = request.param
+    return out
+
 
 def _frame(
-    tracker: Tracker,
+    tracker: Tracker | KalmanTracker,
     boxes: list[list[float]],
     scores: list[float],
     t: float,
@@ -37,14 +49,14 @@ def test_iou_matrix_against_hand_values() -> None:
     assert iou_matrix(a[:0], b).shape == (0, 3)
 
 
-def test_ids_persist_while_the_box_moves() -> None:
-    tr = Tracker()
+def test_ids_persist_while_the_box_moves(make: Make) -> None:
+    tr = make()
     ids = [_frame(tr, [[10 + 8 * i, 10, 60 + 8 * i, 110]], [0.9], t=0.1 * i)[0] for i in range(20)]
     assert len(set(ids)) == 1 and ids[0] > 0
 
 
-def test_two_people_crossing_keep_their_ids() -> None:
-    tr = Tracker()
+def test_two_people_crossing_keep_their_ids(make: Make) -> None:
+    tr = make()
     left, right = [], []
     for i in range(25):  # two boxes approach each other and pass; velocity keeps them apart
         a = [50 + 10 * i, 100, 110 + 10 * i, 250]
@@ -55,28 +67,28 @@ def test_two_people_crossing_keep_their_ids() -> None:
     assert len(set(left)) == 1 and len(set(right)) == 1 and left[0] != right[0]
 
 
-def test_weak_detection_extends_but_never_starts_a_track() -> None:
-    tr = Tracker(TrackerParams(high_score=0.5, low_score=0.1))
+def test_weak_detection_extends_but_never_starts_a_track(make: Make) -> None:
+    tr = make(TrackerParams(high_score=0.5, low_score=0.1))
     first = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0)[0]
     assert _frame(tr, [[2, 0, 52, 100]], [0.2], t=0.1) == [first]  # a dip keeps the id
     assert _frame(tr, [[300, 0, 350, 100]], [0.2], t=0.2) == [-1]  # weak and new: no track
 
 
-def test_lost_track_expires_and_a_new_id_is_given() -> None:
-    tr = Tracker(TrackerParams(max_age_s=0.5))
+def test_lost_track_expires_and_a_new_id_is_given(make: Make) -> None:
+    tr = make(TrackerParams(max_age_s=0.5))
     first = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0)[0]
     assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.4) == [first]
     assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=1.5) != [first]
 
 
-def test_classes_never_share_a_track() -> None:
-    tr = Tracker()
+def test_classes_never_share_a_track(make: Make) -> None:
+    tr = make()
     person = _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.0, classes=[0])[0]
     assert _frame(tr, [[0, 0, 50, 100]], [0.9], t=0.1, classes=[15]) != [person]
 
 
-def test_a_frame_whose_stamp_jumps_is_ignored_and_tracks_survive() -> None:
-    tr = Tracker(TrackerParams(max_stamp_jump_s=0.5))
+def test_a_frame_whose_stamp_jumps_is_ignored_and_tracks_survive(make: Make) -> None:
+    tr = make(TrackerParams(max_stamp_jump_s=0.5))
     box = Boxes(
         xyxy=np.array([[100, 100, 200, 300]], np.float32),
         scores=np.array([0.9], np.float32),
@@ -92,8 +104,8 @@ def test_a_frame_whose_stamp_jumps_is_ignored_and_tracks_survive() -> None:
     assert (tr.update(box, now=10.4, arrival=1.4) == first).all()
 
 
-def test_a_clock_that_really_stepped_restarts_the_tracks() -> None:
-    tr = Tracker(TrackerParams(max_stamp_jump_s=0.5, jumps_before_reset=3))
+def test_a_clock_that_really_stepped_restarts_the_tracks(make: Make) -> None:
+    tr = make(TrackerParams(max_stamp_jump_s=0.5, jumps_before_reset=3))
     box = Boxes(
         xyxy=np.array([[100, 100, 200, 300]], np.float32),
         scores=np.array([0.9], np.float32),
@@ -106,11 +118,11 @@ def test_a_clock_that_really_stepped_restarts_the_tracks() -> None:
     assert (ids > 0).all() and tr.resets == 1
 
 
-def test_the_tracker_takes_the_stack_tracker_settings() -> None:
+def test_the_tracker_takes_the_stack_tracker_settings(make: Make) -> None:
     settings = TrackerParams(max_stamp_jump_s=0.5, jumps_before_reset=1)
-    tr = Tracker(settings)
+    tr = make(settings)
     assert tr.settings is settings
-    assert Tracker().settings == TrackerParams()  # one default, the settings' own
+    assert make().settings == TrackerParams()  # one default, the settings' own
     box = Boxes(
         xyxy=np.array([[100, 100, 200, 300]], np.float32),
         scores=np.array([0.9], np.float32),
@@ -135,7 +147,7 @@ def test_frames_from_this_host_are_tracked_on_their_monotonic_stamp() -> None:
     assert tracker_clock(7_000_000_000, 0, "", 8_000_000_000, "boot-a") == (7.0, 8.0)
 
 
-def test_late_deliveries_at_start_up_restart_nothing_on_one_host() -> None:
+def test_late_deliveries_at_start_up_restart_nothing_on_one_host(make: Make) -> None:
     """The start-up seen under the secure profile: the first frame the detector used was
     delivered 0.6 s late (every service loading on two cores), the next ones promptly. On wall
     stamps and arrivals that looked like a clock that stepped three times in a row; on
@@ -147,11 +159,11 @@ def test_late_deliveries_at_start_up_restart_nothing_on_one_host() -> None:
     )
     captures = [1.0, 1.8, 2.0, 2.2]
     arrivals = [1.6, 1.81, 2.01, 2.21]  # the first 0.6 s late, then 10 ms
-    on_wall = Tracker(TrackerParams())
+    on_wall = make(TrackerParams())
     for c, a in zip(captures, arrivals, strict=True):
         on_wall.update(box, now=c, arrival=a)
     assert on_wall.resets == 1  # what the wall-clock check made of it
-    on_mono = Tracker(TrackerParams())
+    on_mono = make(TrackerParams())
     ids = []
     for c, a in zip(captures, arrivals, strict=True):
         at, arrival = tracker_clock(int(c * 1e9) + 10**18, int(c * 1e9), "b", int(a * 1e9), "b")
