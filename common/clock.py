@@ -73,6 +73,12 @@ def perf_ns() -> int:
     return time.perf_counter_ns()
 
 
+def cpu_s() -> float:
+    """This process's CPU time in seconds (every thread's): a benchmark's measure of work
+    that other processes' load does not lengthen; only differences mean anything."""
+    return time.process_time()
+
+
 def ms_since(start_perf_s: float) -> float:
     """Milliseconds since ``start_perf_s``, a :func:`perf_s` reading."""
     return (time.perf_counter() - start_perf_s) * 1e3

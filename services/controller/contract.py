@@ -36,6 +36,10 @@ ESTOP_ZERO_AT_ONCE = "estop_zero_at_once"
 ESTOP_LOCAL_BAD = "estop_local_bad"
 COMMANDS_OUT = "commands_out"
 COMMANDS_NONZERO = "commands_nonzero"
+#: Follow mode's lock: the lost target's track taken back, or another track locked after one
+#: was lost (a switch: perhaps to someone else).
+LOCK_REGAINED = "lock_regained"
+LOCK_SWITCHED = "lock_switched"
 
 PER_CAMERA = frozenset(
     {
@@ -57,6 +61,8 @@ COUNTERS = frozenset(
         ESTOP_LOCAL_BAD,
         COMMANDS_OUT,
         COMMANDS_NONZERO,
+        LOCK_REGAINED,
+        LOCK_SWITCHED,
     }
 )
 
@@ -135,6 +141,11 @@ class ControllerSettings:
             keeps turning towards it (without driving) for that long, and longer while it
             still turns towards a camera's view (at most the half turn ``max_angular`` takes
             more): the camera it turns into then has ``target_lost_timeout_s`` to see it.
+            A target dropped (searching) is waited for ``relock_window_s``: its track (its
+            camera and track id; the Kalman tracker gives a person back their id after an
+            occlusion) is locked again when it shows, and nobody else is locked meanwhile;
+            after the window the largest is locked (counted: ``lock_switched``, a lock taken
+            on another track after one was lost; ``lock_regained``, the lost one taken back).
     Forward safety, in both modes: forward only while the laser sector of ``sector_width_deg``
     straight ahead and the corridor ``robot_width_m`` wide are clear beyond
     ``safety_distance_m`` plus the room needed to brake. A missing scan, or one older than
@@ -186,6 +197,7 @@ class ControllerSettings:
     target_lost_timeout_s: Annotated[float, Range(0.01, 60)] = 1.5
     handover_gate_deg: Annotated[float, Range(1, 90)] = 20.0
     handover_window_s: Annotated[float, Range(0.01, 60)] = 3.0
+    relock_window_s: Annotated[float, Range(0, 60)] = 3.0
     bearing_kp: Annotated[float, Range(0, 100)] = 1.5
     bearing_ki: Annotated[float, Range(0, 100)] = 0.0
     bearing_kd: Annotated[float, Range(0, 100)] = 0.05

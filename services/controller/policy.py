@@ -123,6 +123,14 @@ class Controller:
         )
         self.limits = Limits(s.max_linear, s.max_angular, s.max_linear_accel, s.max_angular_accel)
         self.locked: tuple[str, int] | None = None  # (camera, track id) in follow mode
+        # The lock dropped when the target was lost (camera, track id, when): waited for
+        # relock_window_s (see _pick). How often the lost lock was taken back, and how often
+        # another track was locked after one was lost (a switch, perhaps to someone else).
+        self.lost: tuple[str, int, float] | None = None
+        self._regained = False
+        self._ever_locked = False
+        self.locks_regained = 0
+        self.locks_switched = 0
         self.last_seen = -math.inf
         self.last_aim: VelocityCommand | None = None
         self.previous = (0.0, 0.0)
@@ -260,6 +268,15 @@ class Controller:
                 # Out of its camera's view: never jump to another target, but follow this
                 # one into another camera's view.
                 return self._handover(found, now)
+        if self.lost is not None:
+            cam, track_id, when = self.lost
+            back = [x for x in found if x.camera == cam and x.track_id == track_id >= 0]
+            if back:
+                self.lost, self._regained = None, True
+                return back[0]
+            if now - when <= self.s.relock_window_s:
+                return None  # wait for the lost one: nobody else is locked meanwhile
+            self.lost = None
         return max(found, key=lambda x: x.angular_area)
 
     def _handover_until(self) -> float:
@@ -314,6 +331,11 @@ class Controller:
             return self._hold(fresh, now, dt, stamp, classes)
         if s.mode is ControllerMode.FOLLOW and self.locked is None and best.track_id >= 0:
             self.locked = (best.camera, best.track_id)
+            if self._regained:
+                self.locks_regained += 1
+            elif self._ever_locked:
+                self.locks_switched += 1
+            self._regained, self._ever_locked, self.lost = False, True, None
         self.last_seen = now
         self.last_bearing = (best.bearing, best.captured)
         err = self._bearing_now(best.bearing, best.captured, now)
@@ -394,6 +416,8 @@ class Controller:
                 stamp,
                 held.camera,
             )
+        if self.locked is not None:
+            self.lost = (*self.locked, now)
         self.locked, self.last_aim = None, None
         self.pid.reset()
         return stop(ControllerState.SEARCHING, f"no {'/'.join(classes)} in view", stamp)

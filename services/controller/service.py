@@ -122,6 +122,7 @@ class ControlLoop:
         # second: the first changes are logged, then a summary each period (the metrics
         # service's detections_late warning says why and what to change).
         self._state_log = LogLimiter(clock=self.clock.mono_s)
+        self._locks_counted: dict[str, int] = {}  # the policy's lock events counted so far
 
     def _on_detections(self, key: str, payload: bytes) -> None:
         camera = camera_in_key(key)
@@ -199,12 +200,25 @@ class ControlLoop:
         if cmd.state != self._last_state:
             log_state(self.node.log, self._state_log, cmd)
             self._last_state = cmd.state
+        self._count_locks()
         for line in self._state_log.due():
             # The summary says what the changes were; a person reading the log after the robot
             # stood still for a while needs what it is doing now, and why.
             self.node.log.info("%s; now %s: %s", line, cmd.state, cmd.reason)
         self.node.publish_counters()
         return tick
+
+    def _count_locks(self) -> None:
+        """The policy's lock events since the last tick, as counters."""
+        c = self.controller
+        for name, now in (
+            (contract.LOCK_REGAINED, c.locks_regained),
+            (contract.LOCK_SWITCHED, c.locks_switched),
+        ):
+            seen = self._locks_counted.get(name, 0)
+            if now > seen:
+                self.node.counters.add(name, now - seen)
+                self._locks_counted[name] = now
 
     def stop(self) -> None:
         """Leave the robot still: the last word on cmd_vel is always a stop."""

@@ -1,4 +1,4 @@
-"""python -m tools.benchmarks recorder|ros2|scale|pool|batch|attention|estop|depth [options]
+"""python -m tools.benchmarks recorder|ros2|scale|pool|batch|attention|estop|depth|tracker [options]
 
 recorder runs the default stack with and without the recorder, side by side; ros2 measures
 what the ROS 2 bridge adds against the direct path; scale runs 1, 2, 4, 8 cameras on one
@@ -12,7 +12,8 @@ engage``'s start to its first put against another revision; depth measures the d
 detected people against the simulator's truth in its hard world (``--world simple``: today's)
 by five methods side by side (ours, a yolo_ros-like one, the box's centre pixel, ours without
 background rejection, the laser) and the depth stage's time per frame. (The detector's own
-benchmark is ``python -m tools.detector benchmark``.)
+benchmark is ``python -m tools.detector benchmark``.) tracker times the trackers per frame
+for 1 to 20 people.
 """
 
 from __future__ import annotations
@@ -328,6 +329,18 @@ def depth(args: argparse.Namespace) -> int:
     return main(options_from(DepthBenchOptions, args, as_json=args.json))
 
 
+def _tracker_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--people", type=_counts(1, 100), default=(1, 5, 10, 20),
+                   help="people per frame, e.g. 1,5,10,20 (the default)")  # fmt: skip
+    p.add_argument("--frames", type=int, default=300, help="frames per row (default 300)")
+
+
+def tracker(args: argparse.Namespace) -> int:
+    from tools.benchmarks import tracker_cost as bench
+
+    return bench.main(args.people, args.frames)
+
+
 COMMANDS = [
     Command("recorder", "the stack's FPS and latency with and without the recorder",
             _recorder_arguments, recorder),
@@ -348,6 +361,8 @@ COMMANDS = [
             "default): ours, a yolo_ros-like one, the centre pixel, ours without background "
             "rejection, the laser; the depth stage's time",
             _depth_arguments, depth),
+    Command("tracker", "the trackers' cost per frame for 1 to 20 people: IoU, Kalman, Kalman "
+            "with colours", _tracker_arguments, tracker),
 ]  # fmt: skip
 
 

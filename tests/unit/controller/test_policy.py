@@ -246,12 +246,30 @@ def test_lost_target_is_held_briefly_then_dropped() -> None:
     assert held.state == "holding" and held.linear_x > 0
     lost = ctl.step(one(empty, 0.0, scan(5.0), 0.0), now=FOLLOW.target_lost_timeout_s + 0.1)
     assert lost.is_zero and lost.state == "searching"
-    # unlocked: a new person is followed
-    other = ctl.step(
-        one(dets(("person", 0.9, 320, 240, 60, FAR), tracks=[9]), 0.0, scan(5.0), 0.0),
-        now=FOLLOW.target_lost_timeout_s + 0.2,
-    )
-    assert other.track_id == 9
+    # unlocked: after the relock window a new person is followed (a switch, counted)
+    other = dets(("person", 0.9, 320, 240, 60, FAR), tracks=[9])
+    later = FOLLOW.target_lost_timeout_s + 0.2 + FOLLOW.relock_window_s
+    assert ctl.step(one(other, 0.0, scan(5.0), 0.0), now=later).track_id == 9
+    assert (ctl.locks_switched, ctl.locks_regained) == (1, 0)
+
+
+def test_a_lost_target_is_waited_for_and_nobody_else_is_locked_meanwhile() -> None:
+    """alice (track 3) is hidden past the lost timeout while bob (track 9) stands in view: the
+    robot searches, standing still, instead of following bob; alice's track shows again
+    (the Kalman tracker gives her back her id) and the lock is hers again."""
+    ctl = Controller(FOLLOW, FRONT)
+    alice = ("person", 0.9, 320, 240, 80, FAR * 1.2)
+    bob = ("person", 0.9, 500, 240, 60, FAR)
+    first = ctl.step(one(dets(alice, bob, tracks=[3, 9]), 0.0, scan(5.0), 0.0), now=0.0)
+    assert first.track_id == 3  # the larger
+    t = FOLLOW.target_lost_timeout_s + 0.1
+    only_bob = dets(bob, tracks=[9])
+    assert ctl.step(one(only_bob, 0.0, scan(5.0), 0.0), now=t).state == "searching"
+    waiting = ctl.step(one(only_bob, 0.0, scan(5.0), 0.0), now=t + 1.0)
+    assert waiting.is_zero and waiting.state == "searching" and waiting.track_id != 9
+    back = ctl.step(one(dets(alice, bob, tracks=[3, 9]), 0.0, scan(5.0), 0.0), now=t + 1.5)
+    assert back.track_id == 3 and back.state != "searching"
+    assert (ctl.locks_regained, ctl.locks_switched) == (1, 0)
 
 
 def test_held_target_does_not_drive_into_an_obstacle() -> None:
