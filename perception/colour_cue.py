@@ -38,7 +38,9 @@ def appearance(image: Image, xyxy: npt.NDArray[np.floating]) -> Features:
         cy1 = int(np.clip(y0 + CROP[3] * bh, 0, h))
         if cx1 <= cx0 or cy1 <= cy0:
             continue
-        hsv = cv2.cvtColor(np.ascontiguousarray(image[cy0:cy1, cx0:cx1]), cv2.COLOR_BGR2HSV)
+        # Every other pixel each way: a quarter of the work, the same colours in proportion.
+        crop = image[cy0:cy1:2, cx0:cx1:2]
+        hsv = cv2.cvtColor(np.ascontiguousarray(crop), cv2.COLOR_BGR2HSV)
         hist = cv2.calcHist([hsv], [0, 1, 2], None, list(BINS), [0, 180, 0, 256, 0, 256])
         total = float(hist.sum())
         if total > 0:

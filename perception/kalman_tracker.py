@@ -83,32 +83,13 @@ class _KTrack:
         p = np.diag(np.r_[np.full(4, (2 * MEASURE_SIGMA * h) ** 2), np.full(4, (h) ** 2)])
         return cls(track_id, class_id, x, p, now, now, feature)
 
-    def predict(self, now: float) -> None:
-        dt = now - self.at
-        if dt <= 0:
-            return
-        f = np.eye(8)
-        f[:4, 4:] = np.eye(4) * dt
-        h = max(self.x[3], 1.0)
-        q = np.diag(
-            np.r_[
-                np.full(4, (POSITION_SIGMA_PER_S * h) ** 2 * dt),
-                np.full(4, (RATE_SIGMA_PER_S * h) ** 2 * dt),
-            ]
-        )
-        self.x = f @ self.x
-        self.p = f @ self.p @ f.T + q
-        self.at = now
-
     def correct(self, xyxy: Vec, now: float, feature: Features | None) -> None:
         z = _cxcywh(xyxy)
         h = max(z[3], 1.0)
-        r = np.eye(4) * (MEASURE_SIGMA * h) ** 2
-        hm = np.eye(4, 8)
-        s = hm @ self.p @ hm.T + r
-        k = self.p @ hm.T @ np.linalg.inv(s)
-        self.x = self.x + k @ (z - hm @ self.x)
-        self.p = (np.eye(8) - k @ hm) @ self.p
+        s = self.p[:4, :4] + np.eye(4) * (MEASURE_SIGMA * h) ** 2  # H P H^T + R
+        k = self.p[:, :4] @ np.linalg.inv(s)  # P H^T S^-1
+        self.x = self.x + k @ (z - self.x[:4])
+        self.p = self.p - k @ self.p[:4, :]  # (I - K H) P
         self.last_seen, self.hits = now, self.hits + 1
         if feature is not None:
             old = self.feature
@@ -121,6 +102,31 @@ class _KTrack:
         bearing = math.atan((cx0 - self.x[0]) / focal_px) - turned_rad
         bearing = max(-1.5, min(1.5, bearing))
         self.x[0] = cx0 - focal_px * math.tan(bearing)
+
+
+def _predict(tracks: list[_KTrack], now: float) -> None:
+    """Every track's state and covariance carried to ``now`` by the constant-velocity model,
+    all at once: x' = F x, P' = F P F^T + Q with F = [[I, dt I], [0, I]] (by its 4x4 blocks),
+    Q diagonal, in proportion to each box's height."""
+    if not tracks:
+        return
+    dt = np.array([max(now - t.at, 0.0) for t in tracks])
+    x = np.stack([t.x for t in tracks])
+    p = np.stack([t.p for t in tracks])
+    x[:, :4] += x[:, 4:] * dt[:, None]
+    a, b, c, d = p[:, :4, :4], p[:, :4, 4:], p[:, 4:, :4], p[:, 4:, 4:]
+    k = dt[:, None, None]
+    out = np.empty_like(p)
+    out[:, :4, :4] = a + k * (b + c) + k * k * d
+    out[:, :4, 4:] = b + k * d
+    out[:, 4:, :4] = c + k * d
+    out[:, 4:, 4:] = d
+    h2 = np.maximum(x[:, 3], 1.0) ** 2 * dt
+    idx = np.arange(4)
+    out[:, idx, idx] += (POSITION_SIGMA_PER_S**2 * h2)[:, None]
+    out[:, idx + 4, idx + 4] += (RATE_SIGMA_PER_S**2 * h2)[:, None]
+    for t, xi, pi in zip(tracks, x, out, strict=True):
+        t.x, t.p, t.at = xi, pi, max(t.at, now)
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,9 +171,9 @@ class KalmanTracker(StampGuard):
         frame = _Frame(boxes.xyxy.astype(np.float64), boxes.scores, boxes.class_ids, features)
         keep = p.reid_age_s if features is not None else p.max_age_s
         self._tracks = [t for t in self._tracks if now - t.last_seen <= keep]
-        for t in self._tracks:
-            t.predict(now)
-            if turned_rad and focal_px > 0 and image_width > 0:
+        _predict(self._tracks, now)
+        if turned_rad and focal_px > 0 and image_width > 0:
+            for t in self._tracks:
                 t.turn(turned_rad, focal_px, image_width / 2)
         ids = np.full(n, -1, np.int32)
         live = [k for k, t in enumerate(self._tracks) if now - t.last_seen <= p.max_age_s]
