@@ -13,6 +13,8 @@ every tick, not whom the robot follows: tools/scenarios/score.py judges by where
 - :func:`pillar`: alice walks behind a pillar: hidden for 1-2 s (:data:`PILLAR`).
 - :func:`fast_turn`: alice strides fast across the view and out of it: the robot must turn fast.
 - :func:`crowd`: five people, three walking across each other's paths and alice's.
+- :func:`handover`: alice strides out of the front camera's view into the left camera's, where
+  bob stands near the bearing she is expected at: the lock must pass to her, not to him.
 """
 
 from __future__ import annotations
@@ -100,3 +102,30 @@ def crowd() -> World:
     dave = person("dave", (0.0, 9.5, -1.0))
     erin = person("erin", (0.0, 10.0, 2.0), (15.0, 4.0, 3.0))
     return World(Robot(), targets=[alice, bob, carol, dave, erin])
+
+
+#: handover: alice strides from ahead into the left camera's view at this speed (m/s), from
+#: HANDOVER_START_S, then walks on at HANDOVER_WALK_MPS; bob stands where the left camera sees
+#: him within the controller's hand-over gate (20 deg) of her bearing as she arrives.
+HANDOVER_SPEED_MPS, HANDOVER_WALK_MPS, HANDOVER_START_S = 1.5, 0.5, 4.0
+HANDOVER_FROM, HANDOVER_MID, HANDOVER_TO = (2.2, 0.3), (0.4, 2.0), (-1.5, 3.5)
+HANDOVER_BOB = (1.2, 2.6)
+
+
+def handover_end_s() -> float:
+    """When alice stands still at her last place in :func:`handover`."""
+    stride = math.dist(HANDOVER_FROM, HANDOVER_MID) / HANDOVER_SPEED_MPS
+    return HANDOVER_START_S + stride + math.dist(HANDOVER_MID, HANDOVER_TO) / HANDOVER_WALK_MPS
+
+
+def handover() -> World:
+    """Alice stands 2.2 m ahead; at 4 s she strides up and to the left, out of the front
+    camera's view (faster than the robot turns) into the left camera's, and walks on to
+    stand behind and to the left. Bob stands in the left camera's view, 10 deg or so from her
+    bearing as she comes into it; carol stands far ahead in the front camera's view."""
+    mid_s = HANDOVER_START_S + math.dist(HANDOVER_FROM, HANDOVER_MID) / HANDOVER_SPEED_MPS
+    alice = person("alice", (0.0, *HANDOVER_FROM), (HANDOVER_START_S, *HANDOVER_FROM),
+                   (mid_s, *HANDOVER_MID), (handover_end_s(), *HANDOVER_TO))  # fmt: skip
+    bob = person("bob", (0.0, *HANDOVER_BOB))
+    carol = person("carol", (0.0, 5.5, -1.5))
+    return World(Robot(), targets=[alice, bob, carol])

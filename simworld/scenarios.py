@@ -21,6 +21,7 @@ each of them (services/sim/cameras.py).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -266,6 +267,13 @@ CROWD_SCENARIOS: tuple[Scenario, ...] = (
     _crowd("crowd", "five people: alice walks on to the left while bob and carol cross her "
            "path, dave stands beyond and erin walks down the side: follow alice",
            crowds.crowd, 15.0),
+    dataclasses.replace(
+        _crowd("handover", "alice strides out of the front camera's view into the left one's, "
+               "where bob stands near her bearing; carol stands far ahead: the lock passes to "
+               "alice, not bob", crowds.handover, crowds.handover_end_s()),
+        cameras={"left": LEFT_CAMERA}, detector={"imgsz": 320},
+        why="two cameras double the detector's work; at 320 each round of detections stays "
+            "fresh on a 2-core CPU"),
 )  # fmt: skip
 
 SCENARIOS: dict[str, Scenario] = {

@@ -1,11 +1,11 @@
 """python -m tools.tracking [SCENARIO ...] [--runs N] [--config FILE] [--mode follow|track]
 
 The tracking evaluation (tools/tracking/bench.py): each scenario (default: the crowds'
-``passing``, ``swap``, ``pillar``, ``fast_turn``, ``crowd``) run on the real stack with each
-tracker, every run's detections replayed through every tracker, and one table of HOTA, IDF1,
-MOTA and identity switches (TrackEval) beside the controller's lock: the share of the time it
-was on the followed person while they showed, its switches to someone else and the time to
-take them back after they reappeared. Progress goes to stderr; Ctrl-C stops at once.
+``passing``, ``swap``, ``pillar``, ``fast_turn``, ``crowd``, ``handover``) run on the real
+stack with each tracker, every run's detections replayed through every tracker, and one table
+of HOTA, IDF1, MOTA and identity switches (TrackEval) beside the controller's lock: the share
+of the time it was on the followed person while they showed, its switches to someone else and
+the time to take them back after they reappeared. Progress goes to stderr; Ctrl-C stops at once.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from simworld.scenarios import SCENARIOS
 from stack.config_file import load_config
 from tools.ports import add_port, use_ports
 
-DEFAULT_SCENARIOS = ("passing", "swap", "pillar", "fast_turn", "crowd")
+DEFAULT_SCENARIOS = ("passing", "swap", "pillar", "fast_turn", "crowd", "handover")
 
 
 def _interrupt(signum: int, _frame: object) -> None:

@@ -32,7 +32,9 @@ def _times(end_s: float, step_s: float = 0.1) -> np.ndarray:
 
 
 def test_the_rooms_and_crowds_are_scenarios_of_three_to_six_different_people() -> None:
-    assert NEW == ["rooms", "step_room", "passing", "swap", "pillar", "fast_turn", "crowd"]
+    assert NEW == [
+        "rooms", "step_room", "passing", "swap", "pillar", "fast_turn", "crowd", "handover",
+    ]  # fmt: skip
     for name in NEW:
         sc = SCENARIOS[name]
         world = sc.build()
@@ -152,3 +154,23 @@ def test_fast_turn_alice_sweeps_out_of_the_view_faster_than_thirty_degrees_a_sec
     b1 = math.degrees(math.atan2(*reversed(alice.position(t1))))
     assert b0 < -20 and b1 > 30  # from the right of the view to beyond its left edge
     assert (b1 - b0) / (t1 - t0) > 30
+
+
+def test_handover_alice_leaves_the_front_view_for_the_left_one_near_bob() -> None:
+    """From the robot's start: alice in the front camera's view (within 30 deg) before she
+    strides, in the left one's (60 to 120 deg) after, sweeping faster than 30 deg/s; bob in the
+    left one's, within the hand-over gate (20 deg) of her bearing as she comes into it."""
+    alice, bob, _ = crowds.handover().targets
+
+    def bearing(t: Target, at: float) -> float:
+        x, y = t.position(at)
+        return math.degrees(math.atan2(y, x))
+
+    start = crowds.HANDOVER_START_S
+    mid = start + math.dist(crowds.HANDOVER_FROM, crowds.HANDOVER_MID) / crowds.HANDOVER_SPEED_MPS
+    assert abs(bearing(alice, start)) < 30 and 60 < bearing(alice, mid) < 120
+    assert (bearing(alice, mid) - bearing(alice, start)) / (mid - start) > 30
+    assert 60 < bearing(bob, 0.0) < 120
+    entering = next(t for t in np.arange(start, mid, 0.05) if bearing(alice, t) >= 60)
+    assert abs(bearing(bob, 0.0) - bearing(alice, entering)) <= 20
+    assert 60 < bearing(alice, crowds.handover_end_s()) < 120
