@@ -154,7 +154,7 @@ class TrackerParams:
     max_age_s: Annotated[float, Range(0.01, 60)] = 1.0
     max_stamp_jump_s: Annotated[float, Range(0.01, 60)] = 0.5
     jumps_before_reset: Annotated[int, Range(1, 1000)] = 3
-    kind: TrackerKind = TrackerKind.IOU
+    kind: TrackerKind = TrackerKind.KALMAN
     appearance_weight: Annotated[float, Range(0, 1)] = 0.3
     reid_age_s: Annotated[float, Range(0.01, 60)] = 4.0
     reid_similarity: Annotated[float, Range(0, 1)] = 0.8
