@@ -146,6 +146,10 @@ class ControllerSettings:
             occlusion) is locked again when it shows, and nobody else is locked meanwhile;
             after the window the largest is locked (counted: ``lock_switched``, a lock taken
             on another track after one was lost; ``lock_regained``, the lost one taken back).
+            A target held unseen is predicted to go on moving across the world at the rate
+            its bearing was moving (smoothed, the robot's own turn taken out; at most
+            ``hold_bearing_rate`` rad/s, 0: where it was last seen), for up to
+            ``target_lost_timeout_s``: the robot turns after a person who strode out of view.
     Forward safety, in both modes: forward only while the laser sector of ``sector_width_deg``
     straight ahead and the corridor ``robot_width_m`` wide are clear beyond
     ``safety_distance_m`` plus the room needed to brake. A missing scan, or one older than
@@ -198,6 +202,7 @@ class ControllerSettings:
     handover_gate_deg: Annotated[float, Range(1, 90)] = 20.0
     handover_window_s: Annotated[float, Range(0.01, 60)] = 3.0
     relock_window_s: Annotated[float, Range(0, 60)] = 3.0
+    hold_bearing_rate: Annotated[float, Range(0, 10)] = 1.0
     bearing_kp: Annotated[float, Range(0, 100)] = 1.5
     bearing_ki: Annotated[float, Range(0, 100)] = 0.0
     bearing_kd: Annotated[float, Range(0, 100)] = 0.05

@@ -96,6 +96,11 @@ def stop(state: ControllerState, reason: str, input_stamp_ns: int = 0) -> Veloci
     return VelocityCommand(0.0, 0.0, state, reason, input_stamp_ns=input_stamp_ns)
 
 
+#: The least time between two sightings of the target for the rate its bearing moves at (s):
+#: two frames of one round are no measure of motion.
+BEARING_RATE_MIN_DT_S = 0.05
+
+
 class Controller:
     """Turns the newest inputs into one command per control tick, with memory.
 
@@ -139,6 +144,7 @@ class Controller:
         self.obstacles: tuple[Obstacles, ...] = ()
         self.turns: deque[tuple[float, float, float]] = deque(maxlen=1024)  # (time, v, w)
         self.last_bearing: tuple[float, float] | None = None  # (bearing, when captured)
+        self.bearing_rate = 0.0  # rad/s the followed target's bearing moves across the world
         # While the target is predicted between the cameras: the newest tick's time plus
         # target_lost_timeout_s (see _handover_until).
         self.between_until = -math.inf
@@ -210,6 +216,7 @@ class Controller:
         self.previous = (0.0, 0.0)
         self.pid.reset()
         self.locked, self.last_aim, self.last_bearing = None, None, None
+        self.bearing_rate = 0.0
         self.between_until = -math.inf
         self.turns.clear()
         return cmd
@@ -239,10 +246,30 @@ class Controller:
         return wrap(bearing - self.rotation_since(captured, now))
 
     def _predicted(self, now: float) -> float | None:
-        """Where the last seen target should be now, if it stood still."""
+        """Where the last seen target should be now: its last bearing, net of the robot's turn
+        since, moved on (follow mode) at the rate its bearing was changing across the world
+        (``bearing_rate``, at most ``hold_bearing_rate`` rad/s) for up to
+        ``target_lost_timeout_s``: a person striding out of the view is turned after, not
+        looked for where they were."""
         if self.last_bearing is None:
             return None
-        return self._bearing_now(*self.last_bearing, now)
+        bearing, captured = self.last_bearing
+        s = self.s
+        rate = max(-s.hold_bearing_rate, min(s.hold_bearing_rate, self.bearing_rate))
+        ahead = min(max(now - captured, 0.0), s.target_lost_timeout_s)
+        return wrap(self._bearing_now(bearing, captured, now) + rate * ahead)
+
+    def _note_bearing(self, x: Sighting) -> None:
+        """Keep ``x`` as the last sighting of the target and, in follow mode, the rate its
+        bearing moves at across the world (the robot's own turn taken out), smoothed."""
+        last = self.last_bearing
+        if self.s.mode is ControllerMode.FOLLOW and last is not None:
+            dt = x.captured - last[1]
+            if dt >= BEARING_RATE_MIN_DT_S:
+                moved = wrap(x.bearing + self.rotation_since(last[1], x.captured) - last[0])
+                self.bearing_rate = 0.5 * self.bearing_rate + 0.5 * moved / dt
+        if last is None or x.captured >= last[1]:
+            self.last_bearing = (x.bearing, x.captured)
 
     def _between_cameras(self, now: float, fresh: Mapping[str, View]) -> bool:
         """Whether, with several cameras, the target is predicted in none of the fresh ones'
@@ -336,8 +363,9 @@ class Controller:
             elif self._ever_locked:
                 self.locks_switched += 1
             self._regained, self._ever_locked, self.lost = False, True, None
+            self.bearing_rate, self.last_bearing = 0.0, None  # a new target's motion is its own
         self.last_seen = now
-        self.last_bearing = (best.bearing, best.captured)
+        self._note_bearing(best)
         err = self._bearing_now(best.bearing, best.captured, now)
         angular = self.pid.update(err, dt)
         # Centred: within center_tolerance of the image width of the camera that sees it, as

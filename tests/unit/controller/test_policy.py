@@ -417,3 +417,21 @@ def test_after_a_stalled_tick_the_room_to_brake_is_for_the_speed_it_may_now_comm
     ctl.previous = (0.0, 0.0)  # at rest
     late = ctl.step(one(d, 0.0, scan(0.55), 0.0), now=0.6)
     assert late.linear_x == 0.0 and late.state == "blocked", late
+
+
+def test_a_target_striding_out_of_view_is_turned_after_not_looked_for_where_it_was() -> None:
+    """alice crosses the view leftwards, then is lost: holding, the robot turns towards where
+    she should be by now (her bearing's rate, the robot's own turn taken out), further left
+    than where she was last seen; with hold_bearing_rate 0 it turns to where she was."""
+
+    def holding_turn(rate_max: float) -> float:
+        s = dataclasses.replace(FOLLOW, hold_bearing_rate=rate_max)
+        ctl = Controller(s, FRONT)
+        for k in range(5):
+            seen = dets(("person", 0.9, 320 - 50 * k, 240, 60, FAR), tracks=[4])
+            ctl.step(one(seen, 0.0, scan(5.0), 0.0), now=0.2 * k)
+        held = ctl.step(one(dets(), 0.0, scan(5.0), 0.0), now=1.2)
+        assert held.state == "holding"
+        return held.angular_z
+
+    assert holding_turn(1.0) > holding_turn(0.0) > 0
