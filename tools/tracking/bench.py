@@ -28,13 +28,46 @@ from tools.tracking.evaluate import LockFigures, lock_figures, replay
 from tools.tracking.frames import label
 from tools.tracking.mot import MotFrame, MotScores, mot_metrics
 
-#: The trackers replayed: (row name, kind, whether it sees the frames' colours).
+#: The trackers run live and replayed: (row name, kind, whether it sees the frames' colours).
 REPLAYED = (("iou", TrackerKind.IOU, False), ("kalman", TrackerKind.KALMAN, True))
+#: The library's row, replayed only (where Roboflow's ``trackers`` is importable: it is no
+#: dependency of the stack, see docs/library-decisions.md section 1).
+BYTETRACK = "bytetrack"
 
 
 def make_tracker(kind: TrackerKind, params: TrackerParams) -> Callable[..., Any]:
     """A fresh tracker's ``update`` of ``kind``."""
     return new_tracker(dataclasses.replace(params, kind=kind)).update
+
+
+def bytetrack(params: TrackerParams, rate_hz: float) -> Callable[..., Any] | None:
+    """A fresh ``trackers.ByteTrackTracker`` (2.6) with the stack's thresholds (activation and
+    high score ``high_score``, IoU ``iou``, lost after ``max_age_s``: its buffer counts frames
+    at 30 fps whatever ``frame_rate`` is), as our trackers' ``update``; None where the package
+    is not importable."""
+    try:
+        import numpy as np
+        import supervision as sv
+        from trackers import ByteTrackTracker
+    except ImportError:
+        return None
+    tr = ByteTrackTracker(
+        frame_rate=rate_hz, track_activation_threshold=params.high_score,
+        high_conf_det_threshold=params.high_score, minimum_iou_threshold=params.iou,
+        lost_track_buffer=round(30 * params.max_age_s), minimum_consecutive_frames=1,
+    )  # fmt: skip
+
+    def update(boxes: Any, now: float, **_: Any) -> Any:
+        n = len(boxes.scores)
+        dets = sv.Detections(xyxy=boxes.xyxy.reshape(-1, 4), confidence=boxes.scores,
+                             class_id=boxes.class_ids, data={"row": np.arange(n)})  # fmt: skip
+        out = tr.update(dets, timestamp=now)
+        ids = np.full(n, -1, np.int64)
+        if len(out):
+            ids[out.data["row"]] = out.tracker_id
+        return ids
+
+    return update
 
 
 @dataclass(slots=True)
@@ -63,6 +96,9 @@ def run_table(
     for name in scenarios:
         scenario = SCENARIOS[name]
         rows = table.setdefault(name, {n: Row() for n, _, _ in REPLAYED})
+        rate = base.sim.camera_rate_hz
+        if bytetrack(base.tracker, rate) is not None:
+            rows.setdefault(BYTETRACK, Row())
         for tracker_name, kind, _ in REPLAYED:
             for k in range(runs):
                 log(f"{name}: {tracker_name} live, run {k + 1} of {runs}")
@@ -79,16 +115,20 @@ def run_table(
                     rows[tracker_name].locks.append(
                         lock_figures(rec.statuses, frames, scenario.followed)
                     )
-                for other, other_kind, colours in REPLAYED:
-                    for camera, seq in frames.items():
-                        if not seq:
-                            continue
+                for camera, seq in frames.items():
+                    if not seq:
+                        continue
+                    for other, other_kind, colours in REPLAYED:
                         tracker = make_tracker(other_kind, config.tracker)
                         images = rec.images.get(camera) if colours else None
                         mot: list[MotFrame] = replay(
                             seq, tracker, rec.twists, specs[camera].focal_px, images
                         )
                         rows[other].mot.append(mot_metrics(mot))
+                    library = bytetrack(config.tracker, rate)
+                    if library is not None:
+                        mot = replay(seq, library, rec.twists, specs[camera].focal_px)
+                        rows[BYTETRACK].mot.append(mot_metrics(mot))
     return table
 
 
