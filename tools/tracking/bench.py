@@ -44,28 +44,22 @@ def bytetrack(params: TrackerParams, rate_hz: float) -> Callable[..., Any] | Non
     """A fresh ``trackers.ByteTrackTracker`` (2.6) with the stack's thresholds (activation and
     high score ``high_score``, IoU ``iou``, lost after ``max_age_s``: its buffer counts frames
     at 30 fps whatever ``frame_rate`` is), as our trackers' ``update``; None where the package
-    is not importable."""
+    is not importable. The adapter is the library comparison's
+    (tools/benchmarks/library_tracker.py)."""
     try:
-        import numpy as np
-        import supervision as sv
-        from trackers import ByteTrackTracker
+        import trackers  # noqa: F401
     except ImportError:
         return None
-    tr = ByteTrackTracker(
-        frame_rate=rate_hz, track_activation_threshold=params.high_score,
+    from tools.benchmarks.library_tracker import bytetrack_tracker
+
+    track = bytetrack_tracker(
+        rate_hz, track_activation_threshold=params.high_score,
         high_conf_det_threshold=params.high_score, minimum_iou_threshold=params.iou,
         lost_track_buffer=round(30 * params.max_age_s), minimum_consecutive_frames=1,
     )  # fmt: skip
 
     def update(boxes: Any, now: float, **_: Any) -> Any:
-        n = len(boxes.scores)
-        dets = sv.Detections(xyxy=boxes.xyxy.reshape(-1, 4), confidence=boxes.scores,
-                             class_id=boxes.class_ids, data={"row": np.arange(n)})  # fmt: skip
-        out = tr.update(dets, timestamp=now)
-        ids = np.full(n, -1, np.int64)
-        if len(out):
-            ids[out.data["row"]] = out.tracker_id
-        return ids
+        return track(boxes.xyxy, boxes.scores, boxes.class_ids, now)
 
     return update
 
